@@ -1,0 +1,123 @@
+"""The `twin` command: the only place that parses argv, configures logging and prints.
+
+Each command group lives in its own module here with a `register(subparsers, common)` function
+that adds its parser(s) and sets `func(args) -> int`. `main(argv)` returns the exit code: 0 on
+success, the `exit_code` of a `TwinError`, 130 on Ctrl-C, 70 on an internal error. A traceback is
+printed only with `--debug`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+from twin import __version__
+from twin.core.errors import TwinError
+
+__all__ = ["main", "run"]
+
+_log = logging.getLogger("twin")
+
+# Command-group modules under twin.cli, in the order `twin --help` lists them.
+_COMMAND_MODULES: tuple[str, ...] = ("scenario",)
+
+_EPILOG = """\
+examples:
+  twin simulate                         run the default scenario, write a bag to bags/
+  twin simulate scenarios/house.yaml --duration 60 --out /tmp/run1
+  twin scenario check scenarios/house.yaml
+  twin world info ../shared/fixtures/gazebo_classic/worlds/turtlebot3_house.world \\
+      --model-path ../shared/fixtures/gazebo_classic/models
+  twin <command> --help                 more on one command
+"""
+
+
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    pass
+
+
+def _common_parser() -> argparse.ArgumentParser:
+    common = argparse.ArgumentParser(add_help=False)
+    group = common.add_argument_group("output")
+    group.add_argument("--debug", action="store_true", help="show tracebacks and debug logs")
+    group.add_argument("-v", "--verbose", action="store_true", help="show info logs")
+    group.add_argument("-q", "--quiet", action="store_true", help="show only errors")
+    return common
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the full argument parser (used by `main` and by the docs)."""
+    common = _common_parser()
+    parser = argparse.ArgumentParser(
+        prog="twin",
+        description=(
+            "A headless digital twin of a TurtleBot3: SDF worlds, FMU drivetrains, an EKF, "
+            "BehaviorTree.CPP missions, ROS 2 bags. No ROS, no Gazebo, no display."
+        ),
+        epilog=_EPILOG,
+        formatter_class=_Formatter,
+        parents=[common],
+    )
+    parser.add_argument("--version", action="version", version=f"twin {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in _COMMAND_MODULES:
+        module = importlib.import_module(f"twin.cli.{name}")
+        module.register(subparsers, common)
+    return parser
+
+
+def _configure_logging(args: argparse.Namespace) -> None:
+    level = logging.WARNING
+    if getattr(args, "verbose", False):
+        level = logging.INFO
+    if getattr(args, "debug", False):
+        level = logging.DEBUG
+    if getattr(args, "quiet", False):
+        level = logging.ERROR
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("twin: %(levelname)s: %(message)s"))
+    root = logging.getLogger()
+    for old in list(root.handlers):
+        root.removeHandler(old)
+    root.addHandler(handler)
+    root.setLevel(level)
+    logging.captureWarnings(True)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line and return its exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _configure_logging(args)
+    debug = bool(getattr(args, "debug", False))
+    try:
+        code: int = args.func(args)
+    except TwinError as err:
+        if debug:
+            _log.exception("%s", err)
+        else:
+            print(f"twin: error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        print("twin: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    except Exception as err:
+        if debug:
+            _log.exception("internal error")
+        else:
+            print(
+                f"twin: internal error: {type(err).__name__}: {err} (run again with --debug for the traceback)",
+                file=sys.stderr,
+            )
+        return 70
+    return code
+
+
+def run() -> None:
+    """Console-script entry point."""
+    sys.exit(main())

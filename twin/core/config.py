@@ -1,0 +1,303 @@
+"""Config files: YAML in, frozen dataclasses out, every error naming file, line and key.
+
+`load_config(Spec, path, defaults=...)` reads a YAML file, lays it over a packaged defaults file
+(mappings merge key by key; a mapping whose `type:` changes, lists and scalars replace), and builds
+`Spec` from the result by its type hints. Supported field types: `bool`, `int`, `float`, `str`,
+`Path` (relative to the file that set it), `Literal[...]`, `Enum`, `X | None`, `tuple[X, ...]`,
+fixed tuples, `list[X]`, `Mapping[str, X]` / `dict[str, X]`, nested dataclasses, and unions of
+dataclasses told apart by a `type: Literal["name"]` field (the variant registry).
+
+Unknown keys fail with a "did you mean" suggestion. Nothing past the loader sees a raw dict.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import enum
+import os
+import types
+import typing
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+from twin.core.errors import ConfigError
+
+__all__ = ["ConfigNode", "build", "load_config", "load_yaml", "location", "suggest"]
+
+T = TypeVar("T")
+
+ConfigNode = yaml.Node
+
+_CONSTRUCTOR = yaml.constructor.SafeConstructor()
+
+
+def suggest(word: str, choices: Sequence[str]) -> str:
+    """Return `; did you mean 'x'?` for the closest choice, or a list of the valid ones."""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    if close:
+        return f"; did you mean {close[0]!r}?"
+    if choices:
+        return f"; valid: {', '.join(sorted(choices))}"
+    return ""
+
+
+def location(node: yaml.Node) -> str:
+    """Return `file:line` of a node (1-based line)."""
+    mark = node.start_mark
+    return f"{mark.name}:{mark.line + 1}"
+
+
+def load_yaml(path: Path) -> yaml.Node:
+    """Read a YAML file into a node tree that keeps file and line of every value.
+
+    Raises:
+        ConfigError: If the file cannot be read or is not valid YAML.
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        msg = f"{path}: file not found"
+        raise ConfigError(msg) from None
+    except OSError as err:
+        msg = f"{path}: cannot read ({err.strerror})"
+        raise ConfigError(msg) from None
+    loader = yaml.SafeLoader(text)
+    loader.name = str(path)
+    try:
+        node = loader.get_single_node()
+    except yaml.MarkedYAMLError as err:
+        mark = err.problem_mark or err.context_mark
+        where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark else str(path)
+        msg = f"{where}: invalid YAML: {err.problem or err.context}"
+        raise ConfigError(msg) from None
+    finally:
+        loader.dispose()
+    if node is None:
+        node = yaml.MappingNode("tag:yaml.org,2002:map", [])
+        node.start_mark = yaml.Mark(str(path), 0, 0, 0, "", 0)
+    return node
+
+
+def _get(node: yaml.MappingNode, key: str) -> yaml.Node | None:
+    for k, v in node.value:
+        if k.value == key:
+            found: yaml.Node = v
+            return found
+    return None
+
+
+def _merge(base: yaml.Node, over: yaml.Node) -> yaml.Node:
+    """Lay `over` on `base`: mappings merge unless their `type:` differs; anything else replaces."""
+    if not (isinstance(base, yaml.MappingNode) and isinstance(over, yaml.MappingNode)):
+        return over
+    base_type, over_type = _get(base, "type"), _get(over, "type")
+    if over_type is not None and (base_type is None or base_type.value != over_type.value):
+        return over
+    merged: list[tuple[yaml.Node, yaml.Node]] = []
+    over_keys = {k.value: (k, v) for k, v in over.value}
+    for k, v in base.value:
+        if k.value in over_keys:
+            ok, ov = over_keys.pop(k.value)
+            merged.append((ok, _merge(v, ov)))
+        else:
+            merged.append((k, v))
+    merged.extend(over_keys.values())
+    out = yaml.MappingNode(over.tag, merged)
+    out.start_mark, out.end_mark = over.start_mark, over.end_mark
+    return out
+
+
+def load_config(cls: type[T], path: Path, *, defaults: Path | None = None) -> T:
+    """Load `cls` from a YAML file laid over an optional defaults file.
+
+    Raises:
+        ConfigError: With file, line and key, if the file is unreadable, invalid or does not fit `cls`.
+    """
+    node = load_yaml(path)
+    if defaults is not None:
+        node = _merge(load_yaml(defaults), node)
+    value: T = build(cls, node, key="")
+    return value
+
+
+def _fail(node: yaml.Node, key: str, problem: str) -> typing.NoReturn:
+    where = location(node)
+    msg = f"{where}: {key}: {problem}" if key else f"{where}: {problem}"
+    raise ConfigError(msg)
+
+
+def _describe(tp: Any) -> str:
+    if isinstance(tp, type):
+        return tp.__name__
+    return str(tp).replace("typing.", "")
+
+
+def _scalar(node: yaml.Node, key: str) -> Any:
+    if not isinstance(node, yaml.ScalarNode):
+        kind = "a mapping" if isinstance(node, yaml.MappingNode) else "a list"
+        _fail(node, key, f"expected a single value, got {kind}")
+    return _CONSTRUCTOR.construct_object(node, deep=True)
+
+
+def _is_dataclass_type(tp: Any) -> bool:
+    return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+
+
+def _variant_tag(cls: type) -> tuple[str, ...]:
+    hints = typing.get_type_hints(cls)
+    tp = hints.get("type")
+    if tp is None or typing.get_origin(tp) is not typing.Literal:
+        return ()
+    return tuple(str(a) for a in typing.get_args(tp))
+
+
+def build(tp: Any, node: yaml.Node, *, key: str) -> Any:
+    """Build a value of type `tp` from a YAML node (see the module docstring for the types).
+
+    Raises:
+        ConfigError: If the node does not fit `tp`; the message names file, line and key.
+    """
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if tp is Any:
+        return _CONSTRUCTOR.construct_object(node, deep=True)
+    if origin in (typing.Union, types.UnionType):
+        return _build_union(args, node, key)
+    if origin is typing.Literal:
+        value = _scalar(node, key)
+        if value not in args:
+            _fail(node, key, f"{value!r} is not allowed{suggest(str(value), [str(a) for a in args])}")
+        return value
+    if _is_dataclass_type(tp):
+        return _build_dataclass(tp, node, key)
+    if origin in (tuple, list, Sequence) or tp in (tuple, list):
+        return _build_sequence(tp, origin, args, node, key)
+    if origin in (dict, Mapping) or tp is dict:
+        return _build_mapping(args, node, key)
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        value = _scalar(node, key)
+        names = [m.value for m in tp]
+        if value not in names:
+            _fail(node, key, f"{value!r} is not one of the choices{suggest(str(value), [str(n) for n in names])}")
+        return tp(value)
+    return _build_plain(tp, node, key)
+
+
+def _build_plain(tp: Any, node: yaml.Node, key: str) -> Any:
+    value = _scalar(node, key)
+    if tp is bool:
+        if not isinstance(value, bool):
+            _fail(node, key, f"expected true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            _fail(node, key, f"expected a whole number, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            _fail(node, key, f"expected a number, got {value!r}")
+        return float(value)
+    if tp is str:
+        if value is None or isinstance(value, bool | dict | list):
+            _fail(node, key, f"expected text, got {value!r}")
+        return str(value)
+    if tp is Path:
+        if not isinstance(value, str) or not value:
+            _fail(node, key, f"expected a path, got {value!r}")
+        path = Path(value).expanduser()
+        if not path.is_absolute():
+            path = Path(node.start_mark.name).parent / path
+        return Path(os.path.normpath(path))
+    if tp is type(None):
+        if value is not None:
+            _fail(node, key, f"expected null, got {value!r}")
+        return None
+    msg = f"config type {_describe(tp)} is not supported (key {key})"
+    raise TypeError(msg)
+
+
+def _build_union(args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
+    if type(None) in args and isinstance(node, yaml.ScalarNode) and node.tag == "tag:yaml.org,2002:null":
+        return None
+    members = [a for a in args if a is not type(None)]
+    if len(members) == 1:
+        return build(members[0], node, key=key)
+    if all(_is_dataclass_type(m) for m in members):
+        tags: dict[str, Any] = {}
+        for member in members:
+            for tag in _variant_tag(member):
+                if tag in tags:
+                    msg = f"variant tag {tag!r} is registered twice ({tags[tag].__name__}, {member.__name__})"
+                    raise TypeError(msg)
+                tags[tag] = member
+        if not isinstance(node, yaml.MappingNode):
+            _fail(node, key, f"expected a mapping with a 'type:' key ({', '.join(tags)})")
+        tag_node = _get(node, "type")
+        if tag_node is None:
+            _fail(node, key, f"missing 'type:' (one of {', '.join(tags)})")
+        tag = str(_scalar(tag_node, f"{key}.type"))
+        if tag not in tags:
+            _fail(tag_node, f"{key}.type", f"unknown type {tag!r}{suggest(tag, list(tags))}")
+        return _build_dataclass(tags[tag], node, key)
+    errors: list[str] = []
+    for member in members:
+        try:
+            return build(member, node, key=key)
+        except ConfigError as err:
+            errors.append(str(err))
+    _fail(node, key, f"expected {' or '.join(_describe(m) for m in members)}")
+
+
+def _build_sequence(tp: Any, origin: Any, args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
+    if not isinstance(node, yaml.SequenceNode):
+        _fail(node, key, "expected a list")
+    items = node.value
+    if origin is tuple and args and not (len(args) == 2 and args[1] is Ellipsis):
+        if len(items) != len(args):
+            _fail(node, key, f"expected a list of {len(args)} values, got {len(items)}")
+        return tuple(build(a, n, key=f"{key}[{i}]") for i, (a, n) in enumerate(zip(args, items, strict=True)))
+    item_tp = args[0] if args else Any
+    values = [build(item_tp, n, key=f"{key}[{i}]") for i, n in enumerate(items)]
+    return tuple(values) if origin is tuple or tp is tuple else values
+
+
+def _build_mapping(args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
+    if not isinstance(node, yaml.MappingNode):
+        _fail(node, key, "expected a mapping")
+    value_tp = args[1] if len(args) == 2 else Any
+    out: dict[str, Any] = {}
+    for k, v in node.value:
+        name = str(_scalar(k, key))
+        out[name] = build(value_tp, v, key=f"{key}.{name}" if key else name)
+    return types.MappingProxyType(out)
+
+
+def _build_dataclass(cls: type, node: yaml.Node, key: str) -> Any:
+    if not isinstance(node, yaml.MappingNode):
+        _fail(node, key, f"expected a mapping of {cls.__name__} settings")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    kwargs: dict[str, Any] = {}
+    for k, v in node.value:
+        name = str(_scalar(k, key))
+        sub = f"{key}.{name}" if key else name
+        if name not in fields:
+            _fail(k, sub, f"unknown key{suggest(name, list(fields))}")
+        if name in kwargs:
+            _fail(k, sub, "key given twice")
+        kwargs[name] = build(hints[name], v, key=sub)
+    missing = [
+        n
+        for n, f in fields.items()
+        if n not in kwargs and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
+    if missing:
+        _fail(node, key, f"missing required key(s): {', '.join(missing)}")
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError) as err:
+        _fail(node, key, str(err))

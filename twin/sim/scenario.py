@@ -1,0 +1,155 @@
+"""The scenario: one YAML file per run, laid over the packaged defaults, loaded into frozen dataclasses.
+
+Paths in a scenario are relative to the file that names them. `recording.out_dir` is relative to
+the working directory, like a shell's output path.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from twin.core.config import load_config
+
+__all__ = ["Scenario", "default_scenario_path", "load_scenario"]
+
+_DATA = Path(__file__).resolve().parent.parent / "data"
+DEFAULTS_PATH = _DATA / "scenario_defaults.yaml"
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class WorldSection:
+    """Which world to load and where `model://` URIs resolve."""
+
+    sdf: Path
+    model_path: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class InitialPose:
+    """The robot's spawn pose in the world frame."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    yaw_rad: float = 0.0
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RobotSection:
+    """The robot: an SDF model by name (`model://NAME` on the model path) or a file, and its spawn pose."""
+
+    model: str
+    initial_pose: InitialPose = field(default_factory=InitialPose)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class LidarSection:
+    """Lidar settings; a null value keeps what the robot's SDF says."""
+
+    rate_hz: float | None = None
+    samples: int | None = None
+    angle_min_rad: float | None = None
+    angle_max_rad: float | None = None
+    range_min_m: float | None = None
+    range_max_m: float | None = None
+    noise_std_m: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RateSection:
+    """A publication rate."""
+
+    rate_hz: float
+
+    def __post_init__(self) -> None:
+        if not (self.rate_hz > 0.0 and math.isfinite(self.rate_hz)):
+            msg = f"rate_hz must be a positive number, got {self.rate_hz}"
+            raise ValueError(msg)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class SensorsSection:
+    """Sensor and publication rates."""
+
+    lidar: LidarSection = field(default_factory=LidarSection)
+    odom: RateSection = field(default_factory=lambda: RateSection(rate_hz=30.0))
+    clock: RateSection = field(default_factory=lambda: RateSection(rate_hz=100.0))
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class PhysicsSection:
+    """The fixed physics step."""
+
+    step_s: float = 0.001
+
+    def __post_init__(self) -> None:
+        if not 1e-5 <= self.step_s <= 0.05:
+            msg = f"step_s must be between 1e-05 and 0.05 s, got {self.step_s}"
+            raise ValueError(msg)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class KinematicDrive:
+    """Ideal wheels: wheel speeds follow the command, limited in acceleration like Gazebo's diff drive."""
+
+    type: Literal["kinematic"] = "kinematic"
+    max_wheel_acceleration_mps2: float = 1.0
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class CmdVelSegment:
+    """Hold one velocity command for a duration."""
+
+    duration_s: float
+    linear_mps: float = 0.0
+    angular_radps: float = 0.0
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class CmdVelScriptMission:
+    """A scripted list of timed `cmd_vel` segments, published at `rate_hz`; the run ends after the last."""
+
+    type: Literal["cmd_vel_script"] = "cmd_vel_script"
+    rate_hz: float = 10.0
+    segments: tuple[CmdVelSegment, ...] = ()
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RecordingSection:
+    """Where and how the bag is written."""
+
+    out_dir: str = "bags"
+    storage: Literal["mcap", "sqlite3"] = "mcap"
+    distro: Literal["humble", "iron", "jazzy", "kilted", "rolling"] = "humble"
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Scenario:
+    """One run: world, robot, sensors, drive, mission, recording, seed and maximum duration."""
+
+    name: str
+    world: WorldSection
+    robot: RobotSection
+    sensors: SensorsSection = field(default_factory=SensorsSection)
+    physics: PhysicsSection = field(default_factory=PhysicsSection)
+    drive: KinematicDrive = field(default_factory=KinematicDrive)
+    mission: CmdVelScriptMission = field(default_factory=CmdVelScriptMission)
+    recording: RecordingSection = field(default_factory=RecordingSection)
+    seed: int = 0
+    max_duration_s: float = 600.0
+
+
+def default_scenario_path() -> Path:
+    """Return the shipped default scenario (the thesis's house mission)."""
+    return Path(__file__).resolve().parent.parent.parent / "scenarios" / "default.yaml"
+
+
+def load_scenario(path: Path) -> Scenario:
+    """Load a scenario file laid over the packaged defaults.
+
+    Raises:
+        ConfigError: Naming file, line and key, if the file is unreadable or any key is wrong.
+    """
+    return load_config(Scenario, path, defaults=DEFAULTS_PATH)
