@@ -106,6 +106,11 @@ class CmdVelSegment:
     linear_mps: float = 0.0
     angular_radps: float = 0.0
 
+    def __post_init__(self) -> None:
+        if not (self.duration_s > 0.0 and math.isfinite(self.duration_s)):
+            msg = f"duration_s must be a positive number of seconds, got {self.duration_s}"
+            raise ValueError(msg)
+
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class CmdVelScriptMission:
