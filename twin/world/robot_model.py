@@ -12,6 +12,7 @@ Scenario values override what the SDF says: build the spec, then `dataclasses.re
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -30,6 +31,7 @@ from twin.world.types import (
     Collision,
     Cylinder,
     Ellipsoid,
+    Joint,
     JointType,
     Link,
     Model,
@@ -411,32 +413,51 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
         raise WorldError(msg)
     warnings: list[str] = []
     joints = {j.child: j for j in model.joints if j.parent != "world"}
-    root = base_frame if base_frame in links else model.links[0].name if model.links else next(iter(links))
-
-    def frame_of(name: str) -> Mat4:
+    # Every frame of the tree in the model frame: links at their parent joint's frame (URDF style),
+    # explicit <frame>s at their own pose. Edges: joint child -> parent, frame -> attached_to.
+    T_model: dict[str, Mat4] = {}
+    parent_of: dict[str, str] = {}
+    edge_joint: dict[str, Joint] = {}
+    for name, link in links.items():
         joint = joints.get(name)
-        return np.asarray(joint.T_model) if joint is not None else np.asarray(links[name].T_model)
-
-    T_base_model = _inv(frame_of(root))
+        T_model[name] = np.asarray(joint.T_model if joint is not None else link.T_model)
+        if joint is not None and joint.parent in links:
+            parent_of[name] = joint.parent
+            edge_joint[name] = joint
+    for frame in model.frames:
+        T_model.setdefault(frame.name, np.asarray(frame.T_model))
+        if frame.attached_to in links or frame.attached_to in {f.name for f in model.frames}:
+            parent_of[frame.name] = frame.attached_to
+    root = base_frame if base_frame in T_model else model.links[0].name if model.links else next(iter(links))
+    # Make `root` the top of the tree: reverse the edges on its path up (e.g. a base_footprint
+    # frame attached to base_link becomes base_link's parent).
+    path = [root]
+    while path[-1] in parent_of and parent_of[path[-1]] not in path:
+        path.append(parent_of[path[-1]])
+    for child, parent in itertools.pairwise(path):
+        del parent_of[child]
+        parent_of[parent] = child
+        edge_joint.pop(parent, None)
+    T_base_model = _inv(T_model[root])
     frames: list[FrameSpec] = []
-    for name in links:
+    for name, T_name in T_model.items():
         if name == root:
             continue
-        joint = joints.get(name)
-        parent = joint.parent if joint is not None and joint.parent in links else root
-        T_parent = _inv(frame_of(parent)) @ frame_of(name)
+        parent = parent_of.get(name, root)
+        if name not in parent_of and name in links:
+            warnings.append(f"link {name!r} has no joint to a parent; it is fixed to {root!r}")
+        joint = edge_joint.get(name)
         frames.append(
             FrameSpec(
                 name=name,
                 parent=parent,
-                T_parent=frozen_matrix(T_parent),
+                T_parent=frozen_matrix(_inv(T_model[parent]) @ T_name),
                 joint=joint.name if joint is not None else "",
                 joint_type=joint.type if joint is not None else JointType.FIXED,
                 axis=joint.axis_xyz if joint is not None else (0.0, 0.0, 1.0),
             )
         )
-        if joint is None:
-            warnings.append(f"link {name!r} has no joint to a parent; it is fixed to {root!r}")
+    frames = _topological(frames, root)
 
     cache = MeshCache()
     collisions = []
@@ -496,6 +517,23 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
         source=model.source,
         warnings=tuple(warnings),
     )
+
+
+def _topological(frames: list[FrameSpec], root: str) -> list[FrameSpec]:
+    """Order frames so every parent comes before its children (TF publishers like that)."""
+    done = {root}
+    out: list[FrameSpec] = []
+    pending = list(frames)
+    while pending:
+        ready = [f for f in pending if f.parent in done]
+        if not ready:  # a cycle: leave the rest in file order
+            out.extend(pending)
+            break
+        for frame in ready:
+            out.append(frame)
+            done.add(frame.name)
+        pending = [f for f in pending if f.name not in done]
+    return out
 
 
 def _remapped(plugin: Plugin) -> str | None:
