@@ -220,6 +220,8 @@ class RobotModelSpec:
     collisions: tuple[Collision, ...]
     """Collision shapes; each `T_world` is the pose in the base frame."""
     model: Model
+    T_base_model: Mat4
+    """Pose of the SDF model frame in the base frame (to place the model's links and visuals)."""
     source: Path | None = None
     warnings: tuple[str, ...] = ()
 
@@ -514,6 +516,7 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
         inertias=tuple(inertias),
         collisions=tuple(collisions),
         model=model,
+        T_base_model=frozen_matrix(T_base_model),
         source=model.source,
         warnings=tuple(warnings),
     )
