@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.world.robot_model import LidarSpec, RobotModelSpec
-from twin.world.scene import RayCaster, Scene
+from twin.world.scene import RayCaster, Scene, mask_ranges
 
 __all__ = ["Lidar", "ScanGeometry"]
 
@@ -125,24 +125,30 @@ class Lidar:
         ox = x_m + c * self._mx - s * self._my
         oy = y_m + s * self._mx + c * self._my
         heading = yaw_rad + self._myaw
-        if self._sweep > 0.0:
-            ranges = self._caster.cast_fan(
-                (ox, oy), heading + self._start, self._ray_step, spec.samples, spec.range_max_m,
-                min_range_m=spec.range_min_m,
-            )  # fmt: skip
-        else:  # mirrored: beam i points at heading - (start + i * step); cast in increasing order
-            first = heading - self._start - self._ray_step * (spec.samples - 1)
-            ranges = self._caster.cast_fan(
-                (ox, oy), first, self._ray_step, spec.samples, spec.range_max_m, min_range_m=spec.range_min_m
-            )[::-1].copy()
-        if spec.count != spec.samples:
-            raw = np.minimum(ranges, spec.range_max_m)
-            ranges = (1.0 - self._frac) * raw[self._lo] + self._frac * raw[self._hi]
-            ranges[ranges >= spec.range_max_m] = np.inf
-        ranges[ranges <= spec.range_min_m] = -np.inf
+        noise = None
         if self._noisy:
             assert self._rng is not None
             noise = self._rng.normal(spec.noise_mean_m, spec.noise_std_m, spec.count)
-            noisy = np.clip(ranges + noise, spec.range_min_m, spec.range_max_m)
-            ranges = np.where(np.isfinite(ranges), noisy, ranges)
-        return ranges.astype(np.float32)
+        if self._sweep > 0.0:
+            first = heading + self._start
+        else:  # mirrored: beam i points at heading - (start + i * step); cast in increasing order
+            first = heading - self._start - self._ray_step * (spec.samples - 1)
+        if spec.count == spec.samples and self._sweep > 0.0:
+            return self._caster.cast_scan(
+                (ox, oy),
+                first,
+                self._ray_step,
+                spec.samples,
+                range_min_m=spec.range_min_m,
+                range_max_m=spec.range_max_m,
+                noise_m=noise,
+            )
+        ranges = self._caster.cast_fan(
+            (ox, oy), first, self._ray_step, spec.samples, spec.range_max_m, min_range_m=spec.range_min_m
+        )
+        if self._sweep < 0.0:
+            ranges = ranges[::-1].copy()
+        if spec.count != spec.samples:
+            raw = np.minimum(ranges, spec.range_max_m)
+            ranges = (1.0 - self._frac) * raw[self._lo] + self._frac * raw[self._hi]
+        return mask_ranges(ranges, spec.range_min_m, spec.range_max_m, noise)

@@ -112,6 +112,34 @@ int twin_cast_fan(const double *seg, const long *seg_idx, long n_seg,
     return 0;
 }
 
+/* A lidar scan: the fan above, then REP 117 masking (+inf at or beyond tmax, -inf at or below
+   tmin) and, when noise is given, noise added to the in-range values, clamped to [tmin, tmax]. */
+int twin_scan(const double *seg, const long *seg_idx, long n_seg,
+              const double *circ, const long *circ_idx, long n_circ,
+              double ox, double oy, double start, double inc, int n,
+              double tmin, double tmax, const double *noise, float *out) {
+    double *raw = malloc((size_t)n * sizeof(double));
+    if (!raw) return -1;
+    if (twin_cast_fan(seg, seg_idx, n_seg, circ, circ_idx, n_circ, ox, oy, start, inc, n,
+                      tmin, tmax, raw) != 0) {
+        free(raw);
+        return -1;
+    }
+    for (int i = 0; i < n; ++i) {
+        double r = raw[i];
+        if (r >= tmax) { out[i] = INFINITY; continue; }
+        if (r <= tmin) { out[i] = -INFINITY; continue; }
+        if (noise) {
+            r += noise[i];
+            if (r < tmin) r = tmin;
+            if (r > tmax) r = tmax;
+        }
+        out[i] = (float)r;
+    }
+    free(raw);
+    return 0;
+}
+
 /* Arbitrary beam angles: every beam against every candidate. */
 void twin_cast_rays(const double *seg, const long *seg_idx, long n_seg,
                     const double *circ, const long *circ_idx, long n_circ,
@@ -192,6 +220,12 @@ def load_kernel() -> ctypes.CDLL | None:
         ptr, ptr, ctypes.c_long, ptr, ptr, ctypes.c_long,
         ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_int,
         ctypes.c_double, ctypes.c_double, ptr,
+    ]  # fmt: skip
+    lib.twin_scan.restype = ctypes.c_int
+    lib.twin_scan.argtypes = [
+        ptr, ptr, ctypes.c_long, ptr, ptr, ctypes.c_long,
+        ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_int,
+        ctypes.c_double, ctypes.c_double, ptr, ptr,
     ]  # fmt: skip
     lib.twin_cast_rays.restype = None
     lib.twin_cast_rays.argtypes = [

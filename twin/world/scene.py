@@ -344,6 +344,43 @@ class RayCaster:
             (ox, oy), None, (start_rad, increment_rad, count, (np.cos(beam), np.sin(beam))), max_range_m, min_range_m
         )
 
+    def cast_scan(
+        self,
+        origin_xy: tuple[float, float],
+        start_rad: float,
+        increment_rad: float,
+        count: int,
+        *,
+        range_min_m: float,
+        range_max_m: float,
+        noise_m: F64 | None = None,
+    ) -> NDArray[np.float32]:
+        """Return a lidar scan: `cast_fan` ranges masked as REP 117 says, optionally noisy.
+
+        A range at or beyond `range_max_m` (nothing hit) is `+inf`, one at or below `range_min_m`
+        is `-inf`; `noise_m` (shape (count,)) is added to the others, which are then clamped to
+        [`range_min_m`, `range_max_m`]. float32, as LaserScan carries ranges. One compiled call
+        when the kernel is available.
+        """
+        if self._lib is not None and increment_rad > 0.0 and count >= 1:
+            ox, oy = float(origin_xy[0]), float(origin_xy[1])
+            block = self._candidates(ox, oy, range_max_m)
+            out = np.empty(count, dtype=np.float32)
+            noise_ptr = None
+            if noise_m is not None:
+                noise_m = np.ascontiguousarray(noise_m, dtype=np.float64)
+                noise_ptr = noise_m.ctypes.data
+            status = self._lib.twin_scan(
+                self._seg_ptr, block.seg_ptr, len(block.seg_idx), self._circ_ptr, block.circ_ptr, len(block.circ_idx),
+                ox, oy, float(start_rad), float(increment_rad), int(count), range_min_m, range_max_m,
+                noise_ptr, out.ctypes.data,
+            )  # fmt: skip
+            if status != 0:
+                raise MemoryError("ray caster kernel could not allocate its beam buffer")
+            return out
+        ranges = self.cast_fan(origin_xy, start_rad, increment_rad, count, range_max_m, min_range_m=range_min_m)
+        return mask_ranges(ranges, range_min_m, range_max_m, noise_m)
+
     def _cast(
         self,
         origin_xy: tuple[float, float],
@@ -415,6 +452,17 @@ class RayCaster:
                 ok = (disc >= 0.0) & (t >= min_range_m) & (t <= max_range_m)
                 np.minimum.at(ranges, beams[ok], t[ok])
         return ranges
+
+
+def mask_ranges(ranges: F64, range_min_m: float, range_max_m: float, noise_m: F64 | None = None) -> NDArray[np.float32]:
+    """Mask raw ranges as REP 117 says and add clamped noise to the in-range ones (float32 out)."""
+    out = np.array(ranges, dtype=np.float64)
+    out[out >= range_max_m] = np.inf
+    out[out <= range_min_m] = -np.inf
+    if noise_m is not None:
+        noisy = np.clip(out + noise_m, range_min_m, range_max_m)
+        out = np.where(np.isfinite(out), noisy, out)
+    return out.astype(np.float32)
 
 
 def _overlapping(

@@ -144,3 +144,14 @@ def test_lidar_in_the_project_house_sees_walls_all_round() -> None:
     ranges = lidar.scan(0.0, 0.0, 0.0)
     assert np.isfinite(ranges).sum() > 100
     assert np.nanmin(np.where(np.isfinite(ranges), ranges, np.nan)) > 0.5
+
+
+def test_compiled_and_numpy_scans_are_the_same() -> None:
+    robot = load_robot("turtlebot3_waffle", model_path=[REPO / "sdf" / "models"])
+    assert robot.lidar is not None
+    scene = build_scene(load_world(REPO / "sdf" / "worlds" / "house.sdf"))
+    height = robot.base_height_m + robot.lidar.mount.z_m
+    native = Lidar(robot.lidar, scene.ray_caster(height), np.random.default_rng(5))
+    plain = Lidar(robot.lidar, scene.ray_caster(height, native=False), np.random.default_rng(5))
+    for x, y, yaw in [(0.0, 0.0, 0.0), (2.75, 2.5, -1.571), (4.0, 0.5, 1.571), (-1.0, -0.5, -2.25)]:
+        assert np.array_equal(native.scan(x, y, yaw), plain.scan(x, y, yaw))
