@@ -39,6 +39,7 @@ from twin.world.types import (
     Sensor,
     Sphere,
     frozen_matrix,
+    inverse,
 )
 
 __all__ = [
@@ -66,13 +67,6 @@ _JOINT_STATE_PLUGINS = (
     "gz-sim-joint-state-publisher-system",
     "ignition-gazebo-joint-state-publisher-system",
 )
-
-
-def _inv(mat: Mat4) -> Mat4:
-    out = np.eye(4)
-    out[:3, :3] = mat[:3, :3].T
-    out[:3, 3] = -mat[:3, :3].T @ mat[:3, 3]
-    return out
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -269,15 +263,14 @@ def _noise(node: XmlNode | None) -> NoiseSpec:
 
 
 def _plugin_topic(element: XmlNode) -> str | None:
-    for plugin in element.findall("plugin"):
-        ros = plugin.find("ros")
-        if ros is not None:
-            for remap in ros.findall("remapping"):
-                if "~/out:=" in remap.text:
-                    return remap.text.split(":=", 1)[1].strip()
+    for node in element.findall("plugin"):
+        plugin = Plugin(name=node.get("name") or "", filename=node.get("filename") or "", element=node)
+        remapped = _remapped(plugin)
+        if remapped:
+            return remapped
         for tag in ("topicName", "topic_name"):
-            if plugin.text_at(tag):
-                return plugin.text_at(tag)
+            if node.text_at(tag):
+                return node.text_at(tag)
     return element.text_at("topic")
 
 
@@ -440,7 +433,7 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
         del parent_of[child]
         parent_of[parent] = child
         edge_joint.pop(parent, None)
-    T_base_model = _inv(T_model[root])
+    T_base_model = inverse(T_model[root])
     frames: list[FrameSpec] = []
     for name, T_name in T_model.items():
         if name == root:
@@ -453,7 +446,7 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
             FrameSpec(
                 name=name,
                 parent=parent,
-                T_parent=frozen_matrix(_inv(T_model[parent]) @ T_name),
+                T_parent=frozen_matrix(inverse(T_model[parent]) @ T_name),
                 joint=joint.name if joint is not None else "",
                 joint_type=joint.type if joint is not None else JointType.FIXED,
                 axis=joint.axis_xyz if joint is not None else (0.0, 0.0, 1.0),

@@ -66,6 +66,7 @@ from twin.world.types import (
     Visual,
     World,
     frozen_matrix,
+    inverse,
 )
 
 __all__ = ["MissingIncludes", "load_model", "load_world"]
@@ -225,14 +226,6 @@ def _norm_model_name(text: str) -> str:
     return text.strip().rstrip("/").rsplit("/", 1)[-1].lower().replace(" ", "_").replace("-", "_")
 
 
-def _inv(mat: Mat4) -> Mat4:
-    out = np.eye(4)
-    rot = mat[:3, :3].T
-    out[:3, :3] = rot
-    out[:3, 3] = -rot @ mat[:3, 3]
-    return out
-
-
 # --- raw (unresolved) structures -----------------------------------------------------------------
 
 
@@ -314,7 +307,7 @@ class _Scope:
             relative_to = (pose_node.get("relative_to") if pose_node is not None else None) or "__model__"
             result = self.T(relative_to, where) @ parse_pose(pose_node)
             if raw.placement_frame:
-                result = result @ _inv(self.nested(name).T(raw.placement_frame, raw.node.where))
+                result = result @ inverse(self.nested(name).T(raw.placement_frame, raw.node.where))
         else:
             pose_node = raw.find("pose")
             relative_to = (pose_node.get("relative_to") if pose_node is not None else None) or ""
@@ -566,7 +559,7 @@ class _Loader:
             T_model_link = scope.T(name, node.where)
             link_scoped = f"{scoped}::{name}"
             T_world_link = state.links.get(link_scoped, T_world_model @ T_model_link)
-            T_model_link = _inv(T_world_model) @ T_world_link
+            T_model_link = inverse(T_world_model) @ T_world_link
             link_world[name] = T_world_link
             links.append(
                 self.build_link(
@@ -587,14 +580,14 @@ class _Loader:
             attached = node.get("attached_to") or ""
             T_model_frame = scope.T(name, node.where)
             if attached in link_world:
-                T_world = link_world[attached] @ _inv(scope.T(attached, node.where)) @ T_model_frame
+                T_world = link_world[attached] @ inverse(scope.T(attached, node.where)) @ T_model_frame
             else:
                 T_world = T_world_model @ T_model_frame
             frames.append(
                 Frame(
                     name=name,
                     attached_to=attached or "__model__",
-                    T_model=frozen_matrix(_inv(T_world_model) @ T_world),
+                    T_model=frozen_matrix(inverse(T_world_model) @ T_world),
                     T_world=frozen_matrix(T_world),
                 )
             )
@@ -633,7 +626,7 @@ class _Loader:
         if not relative_to or relative_to == link_name:
             return parse_pose(pose_node)
         assert pose_node is not None
-        return _inv(T_model_link) @ scope.T(relative_to, pose_node.where) @ parse_pose(pose_node)
+        return inverse(T_model_link) @ scope.T(relative_to, pose_node.where) @ parse_pose(pose_node)
 
     def build_link(
         self,
@@ -747,7 +740,7 @@ class _Loader:
             raise WorldError(msg)
         T_model_joint = scope.T(name, node.where)
         if child in link_world:
-            T_world = link_world[child] @ _inv(scope.T(child, node.where)) @ T_model_joint
+            T_world = link_world[child] @ inverse(scope.T(child, node.where)) @ T_model_joint
         else:
             T_world = T_world_model @ T_model_joint
         axis_node = node.find("axis")
@@ -781,7 +774,7 @@ class _Loader:
             type=joint_type,
             parent=parent,
             child=child,
-            T_model=frozen_matrix(_inv(T_world_model) @ T_world),
+            T_model=frozen_matrix(inverse(T_world_model) @ T_world),
             T_world=frozen_matrix(T_world),
             axis_xyz=axis,
             lower=lower,

@@ -53,6 +53,14 @@ def frozen_matrix(mat: Mat4) -> Mat4:
 _IDENTITY = frozen_matrix(np.eye(4))
 
 
+def inverse(mat: Mat4) -> Mat4:
+    """Return the inverse of a rigid 4x4 transform (rotation transposed, translation rotated back)."""
+    out = np.eye(4)
+    out[:3, :3] = mat[:3, :3].T
+    out[:3, 3] = -mat[:3, :3].T @ mat[:3, 3]
+    return out
+
+
 # --- geometry -------------------------------------------------------------------------------------
 
 

@@ -16,16 +16,9 @@ import numpy as np
 
 from twin.core.geometry import Mat4, rpy_from_matrix
 from twin.world.robot_model import FrameSpec, RobotModelSpec
-from twin.world.types import Box, Capsule, Cylinder, Ellipsoid, Geometry, JointType, Mesh, Sphere
+from twin.world.types import Box, Capsule, Cylinder, Ellipsoid, Geometry, JointType, Mesh, Sphere, inverse
 
 __all__ = ["urdf_from_robot"]
-
-
-def _inv(mat: Mat4) -> Mat4:
-    out = np.eye(4)
-    out[:3, :3] = mat[:3, :3].T
-    out[:3, 3] = -mat[:3, :3].T @ mat[:3, 3]
-    return out
 
 
 def _num(value: float) -> str:
@@ -69,7 +62,7 @@ def urdf_from_robot(robot: RobotModelSpec) -> str:
     T_base_model = np.asarray(robot.T_base_model)
     for link in robot.model.all_links():
         host = owner.get(link.name, robot.base_frame)
-        T_frame_link = _inv(T_base[host]) @ T_base_model @ np.asarray(link.T_model)
+        T_frame_link = inverse(T_base[host]) @ T_base_model @ np.asarray(link.T_model)
         if link.inertial is not None:
             ixx, iyy, izz, ixy, ixz, iyz = link.inertial.inertia_kgm2
             body[host].append(
