@@ -1,0 +1,189 @@
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from twin.world import load_world
+from twin.world.robot_model import load_robot
+from twin.world.scene import CollisionMonitor, RayCaster, Scene, build_scene
+
+REPO = Path(__file__).resolve().parents[3]
+FIXTURES = REPO.parent / "shared" / "fixtures"
+BEAMS = np.linspace(-math.pi, math.pi, 721)
+
+
+def _world(tmp_path: Path, body: str, version: str = "1.7") -> Scene:
+    path = tmp_path / "w.sdf"
+    path.write_text(f'<sdf version="{version}"><world name="w">{body}</world></sdf>')
+    return build_scene(load_world(path))
+
+
+def _static(name: str, pose: str, geometry: str, *, height: float = 0.0) -> str:
+    return (
+        f'<model name="{name}"><static>1</static><pose>{pose}</pose><link name="l">'
+        f'<collision name="c"><pose>0 0 {height} 0 0 0</pose><geometry>{geometry}</geometry></collision></link></model>'
+    )
+
+
+def _casters(scene: Scene, z: float) -> list[RayCaster]:
+    return [scene.ray_caster(z), scene.ray_caster(z, native=False)]
+
+
+def _ray_box(origin: np.ndarray, angle: float, centre: np.ndarray, yaw: float, half: np.ndarray) -> float:
+    """Slab test in the box frame: distance to the first face hit, inf if missed."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, s], [-s, c]])
+    o = rot @ (origin - centre)
+    d = rot @ np.array([math.cos(angle), math.sin(angle)])
+    lo, hi = -math.inf, math.inf
+    for i in range(2):
+        if abs(d[i]) < 1e-15:
+            if abs(o[i]) > half[i]:
+                return math.inf
+            continue
+        t1, t2 = (-half[i] - o[i]) / d[i], (half[i] - o[i]) / d[i]
+        lo, hi = max(lo, min(t1, t2)), min(hi, max(t1, t2))
+    if lo > hi or hi < 0:
+        return math.inf
+    return lo if lo >= 0 else hi
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.3, 1.0, -2.2])
+def test_rays_hit_rotated_boxes_at_the_analytic_distance(tmp_path: Path, yaw: float) -> None:
+    centre = np.array([2.0, -1.0])
+    scene = _world(tmp_path, _static("b", f"2 -1 0.5 0 0 {yaw}", "<box><size>1.2 0.4 1</size></box>"))
+    origin = np.array([0.3, 0.2])
+    expected = np.array([_ray_box(origin, a, centre, yaw, np.array([0.6, 0.2])) for a in BEAMS])
+    assert np.isfinite(expected).sum() > 20
+    for caster in _casters(scene, 0.3):
+        got = caster.cast_rays(tuple(origin), BEAMS, 10.0)
+        assert np.array_equal(np.isfinite(got), np.isfinite(expected))
+        hit = np.isfinite(expected)
+        assert np.max(np.abs(got[hit] - expected[hit])) < 1e-6
+
+
+def test_rays_hit_upright_cylinders_at_the_analytic_distance(tmp_path: Path) -> None:
+    scene = _world(
+        tmp_path,
+        _static("c", "1.5 0.5 0 0 0 0.7", "<cylinder><radius>0.3</radius><length>1</length></cylinder>", height=0.5),
+    )
+    origin = np.array([-0.2, 0.1])
+    q = np.array([1.5, 0.5]) - origin
+    for caster in _casters(scene, 0.4):
+        got = caster.cast_rays(tuple(origin), BEAMS, 10.0)
+        d = np.stack([np.cos(BEAMS), np.sin(BEAMS)], axis=1)
+        b = d @ q
+        disc = b * b - (q @ q - 0.09)
+        expected = np.where(disc >= 0, b - np.sqrt(np.maximum(disc, 0)), np.inf)
+        expected[b < 0] = np.inf
+        assert np.array_equal(np.isfinite(got), np.isfinite(expected))
+        hit = np.isfinite(expected)
+        assert hit.sum() > 10
+        assert np.max(np.abs(got[hit] - expected[hit])) < 1e-6
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.9, -2.5])
+def test_rays_hit_rotated_meshes_at_the_analytic_distance(tmp_path: Path, yaw: float) -> None:
+    # A triangulated box written as STL, placed by a rotated pose: its slice must be exact.
+    mesh = trimesh.creation.box(extents=(0.8, 0.5, 1.0))
+    mesh.apply_translation((0, 0, 0.5))
+    (tmp_path / "crate.stl").write_bytes(mesh.export(file_type="stl"))
+    scene = _world(tmp_path, _static("m", f"-1 2 0 0 0 {yaw}", "<mesh><uri>crate.stl</uri></mesh>"))
+    origin = np.array([0.5, 0.5])
+    expected = np.array([_ray_box(origin, a, np.array([-1.0, 2.0]), yaw, np.array([0.4, 0.25])) for a in BEAMS])
+    for caster in _casters(scene, 0.37):
+        got = caster.cast_rays(tuple(origin), BEAMS, 10.0)
+        hit = np.isfinite(expected)
+        assert hit.sum() > 10
+        assert np.array_equal(np.isfinite(got), hit)
+        assert np.max(np.abs(got[hit] - expected[hit])) < 1e-6
+
+
+def test_slice_height_decides_what_is_seen(tmp_path: Path) -> None:
+    scene = _world(
+        tmp_path,
+        _static("low", "2 0 0.05 0 0 0", "<box><size>0.2 2 0.1</size></box>")
+        + _static("ball", "0 2 0.5 0 0 0", "<sphere><radius>0.5</radius></sphere>"),
+    )
+    at_low = scene.ray_caster(0.05).cast_rays((0.0, 0.0), np.array([0.0, math.pi / 2]), 10.0)
+    assert at_low == pytest.approx([1.9, 2.0 - math.sqrt(0.25 - 0.45**2)])
+    at_high = scene.ray_caster(0.5).cast_rays((0.0, 0.0), np.array([0.0, math.pi / 2]), 10.0)
+    assert at_high[0] == math.inf and at_high[1] == pytest.approx(1.5)
+
+
+def test_min_range_skips_near_surfaces_and_reports_the_exit_from_inside(tmp_path: Path) -> None:
+    scene = _world(tmp_path, _static("wall", "0.1 0 0.5 0 0 0", "<box><size>0.1 4 1</size></box>"))
+    for caster in _casters(scene, 0.2):
+        # The wall spans x in [0.05, 0.15]; rays start 0.12 m out, inside it, so they report its far face.
+        got = caster.cast_fan((0.0, 0.0), 0.0, 0.1, 1, 3.5, min_range_m=0.12)
+        assert got[0] == pytest.approx(0.15)
+        assert caster.cast_fan((0.0, 0.0), 0.0, 0.1, 1, 3.5, min_range_m=0.2)[0] == math.inf
+
+
+def test_fan_and_arbitrary_rays_agree_in_a_real_world() -> None:
+    world = load_world(
+        FIXTURES / "gazebo_classic" / "worlds" / "turtlebot3_world.world",
+        model_path=[FIXTURES / "gazebo_classic" / "models"],
+    )
+    scene = build_scene(world)
+    rng = np.random.default_rng(3)
+    step = 6.28 / 359
+    for caster in _casters(scene, 0.18):
+        for _ in range(20):
+            x, y, yaw = rng.uniform(-2, 2), rng.uniform(-2, 2), rng.uniform(-math.pi, math.pi)
+            fan = caster.cast_fan((x, y), yaw, step, 360, 3.5, min_range_m=0.12)
+            rays = caster.cast_rays((x, y), yaw + step * np.arange(360), 3.5, min_range_m=0.12)
+            assert np.array_equal(np.isfinite(fan), np.isfinite(rays))
+            hit = np.isfinite(fan)
+            assert np.max(np.abs(fan[hit] - rays[hit]), initial=0.0) < 1e-9
+
+
+def test_planes_and_floor_slabs_are_not_obstacles(tmp_path: Path) -> None:
+    scene = _world(
+        tmp_path,
+        _static("floor", "0 0 -0.05 0 0 0", "<box><size>10 10 0.1</size></box>")
+        + _static("ground", "0 0 0 0 0 0", "<plane><normal>0 0 1</normal></plane>"),
+    )
+    assert scene.obstacles == ()
+    assert scene.bounds is None
+
+
+def _robot_scene(tmp_path: Path) -> tuple[Scene, CollisionMonitor]:
+    robot = load_robot("turtlebot3_waffle", model_path=[REPO / "sdf" / "models"])
+    scene = _world(tmp_path, _static("wall", "1 0 0.5 0 0 0", "<box><size>0.1 4 1</size></box>"))
+    body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
+    return scene, CollisionMonitor(scene, body)
+
+
+def test_robot_contact_names_the_obstacle_and_points_away_from_it(tmp_path: Path) -> None:
+    scene, monitor = _robot_scene(tmp_path)
+    body = monitor.body
+    # The waffle reaches x = 0.073 m ahead of base_footprint (the R200 camera box); the wall face is at x = 0.95.
+    assert scene.collides(body, 0.85, 0.0, 0.0) == ()
+    contacts = scene.collides(body, 0.9, 0.0, 0.0)
+    assert contacts
+    deepest = contacts[0]
+    assert deepest.model == "wall" and deepest.link == "wall::l" and deepest.collision == "c"
+    assert deepest.robot_link.startswith("turtlebot3_waffle::")
+    assert deepest.normal[0] == pytest.approx(-1.0, abs=1e-6)
+    assert deepest.depth_m == pytest.approx(0.9 + 0.073 - 0.95, abs=2e-3)
+
+
+def test_clearance_is_a_lower_bound_and_the_monitor_skips_far_checks(tmp_path: Path) -> None:
+    scene, monitor = _robot_scene(tmp_path)
+    clearance = scene.clearance(monitor.body, 0.0, 0.0, 0.0)
+    assert 0.0 < clearance <= 0.95 - 0.073
+    assert clearance >= 0.95 - monitor.body.radius_m - 1e-6
+    assert monitor.check(0.0, 0.0, 0.0) == ()
+    queries = monitor.queries
+    for k in range(100):  # 1 mm steps: no query until the free distance is used up
+        monitor.check(0.001 * k, 0.0, 0.0)
+    assert monitor.queries <= queries + 2
+    x = 0.0
+    while not monitor.check(x, 0.0, 0.0):
+        x += 0.001
+    assert x == pytest.approx(0.95 - 0.073, abs=2e-3)

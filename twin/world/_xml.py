@@ -1,0 +1,245 @@
+"""XML reading for SDF: lxml in, a small immutable node tree out, every error naming file:line.
+
+`XmlNode` keeps what the loader and later readers need (tag, attributes, text, children and the
+source line) so plugins, sensors and unknown elements can be kept as data without lxml leaking out
+of this module.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from lxml import etree
+
+from twin.core.errors import WorldError
+from twin.core.geometry import Mat4, Pose, matrix_from_pose
+
+__all__ = ["XmlNode", "parse_file", "parse_string"]
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class XmlNode:
+    """One XML element: tag, attributes, stripped text, children, and where it came from."""
+
+    tag: str
+    attrib: tuple[tuple[str, str], ...] = ()
+    text: str = ""
+    children: tuple[XmlNode, ...] = ()
+    file: Path | None = None
+    line: int = 0
+
+    @property
+    def where(self) -> str:
+        """Return `file:line` of this element (for messages)."""
+        return f"{self.file}:{self.line}" if self.file is not None else f"<string>:{self.line}"
+
+    def get(self, name: str, default: str | None = None) -> str | None:
+        """Return an attribute's value, or `default`."""
+        for key, value in self.attrib:
+            if key == name:
+                return value
+        return default
+
+    def find(self, tag: str) -> XmlNode | None:
+        """Return the first child with this tag, or None."""
+        for child in self.children:
+            if child.tag == tag:
+                return child
+        return None
+
+    def findall(self, tag: str) -> Iterator[XmlNode]:
+        """Yield every child with this tag, in document order."""
+        return (child for child in self.children if child.tag == tag)
+
+    def path(self, path: str) -> XmlNode | None:
+        """Return the element at a slash-separated path of child tags, or None."""
+        node: XmlNode | None = self
+        for part in path.split("/"):
+            if node is None:
+                return None
+            node = node.find(part)
+        return node
+
+    def text_at(self, path: str, default: str | None = None) -> str | None:
+        """Return the text of the element at `path`, or `default` if it is absent."""
+        node = self.path(path)
+        return node.text if node is not None else default
+
+    def float_at(self, path: str, default: float) -> float:
+        """Return the number at `path`, or `default` if absent.
+
+        Raises:
+            WorldError: If the element exists but is not a number.
+        """
+        node = self.path(path)
+        if node is None or node.text == "":
+            return default
+        return node.as_float()
+
+    def bool_at(self, path: str, default: bool) -> bool:
+        """Return the SDF boolean at `path` (`1`/`true` or `0`/`false`), or `default`."""
+        node = self.path(path)
+        if node is None or node.text == "":
+            return default
+        return node.as_bool()
+
+    def as_float(self) -> float:
+        """Return this element's text as a number.
+
+        Raises:
+            WorldError: If it is not one.
+        """
+        try:
+            return float(self.text)
+        except ValueError:
+            msg = f"{self.where}: <{self.tag}> must be a number, got {self.text!r}"
+            raise WorldError(msg) from None
+
+    def as_bool(self) -> bool:
+        """Return this element's text as an SDF boolean.
+
+        Raises:
+            WorldError: If it is not `true`, `false`, `1` or `0`.
+        """
+        value = self.text.strip().lower()
+        if value in ("1", "true"):
+            return True
+        if value in ("0", "false"):
+            return False
+        msg = f"{self.where}: <{self.tag}> must be true/false or 1/0, got {self.text!r}"
+        raise WorldError(msg)
+
+    def as_floats(self, count: int | None = None) -> tuple[float, ...]:
+        """Return this element's text as whitespace-separated numbers.
+
+        Raises:
+            WorldError: If a value is not a number or the count is wrong.
+        """
+        try:
+            values = tuple(float(v) for v in self.text.split())
+        except ValueError:
+            msg = f"{self.where}: <{self.tag}> must be numbers, got {self.text!r}"
+            raise WorldError(msg) from None
+        if count is not None and len(values) != count:
+            msg = f"{self.where}: <{self.tag}> needs {count} numbers, got {len(values)} ({self.text!r})"
+            raise WorldError(msg)
+        return values
+
+    def to_xml(self, indent: str = "") -> str:
+        """Return the element as XML text (for plugins and unknown elements kept as data)."""
+        attrs = "".join(f' {k}="{_escape(v)}"' for k, v in self.attrib)
+        if not self.children:
+            if self.text:
+                return f"{indent}<{self.tag}{attrs}>{_escape(self.text)}</{self.tag}>"
+            return f"{indent}<{self.tag}{attrs}/>"
+        inner = "\n".join(child.to_xml(indent + "  ") for child in self.children)
+        text = f"{_escape(self.text)}" if self.text else ""
+        return f"{indent}<{self.tag}{attrs}>{text}\n{inner}\n{indent}</{self.tag}>"
+
+
+def _escape(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
+
+
+def _convert(elem: etree._Element, file: Path | None) -> XmlNode:
+    children = tuple(_convert(child, file) for child in elem if isinstance(child.tag, str))
+    return XmlNode(
+        tag=str(elem.tag),
+        attrib=tuple((str(k), str(v)) for k, v in elem.attrib.items()),
+        text=(elem.text or "").strip(),
+        children=children,
+        file=file,
+        line=elem.sourceline or 0,
+    )
+
+
+_PARSER = etree.XMLParser(remove_comments=True, remove_pis=True, resolve_entities=False, huge_tree=True)
+
+
+def parse_file(path: Path) -> XmlNode:
+    """Read an XML file into an `XmlNode` tree.
+
+    Raises:
+        WorldError: If the file cannot be read or is not well-formed XML (with line and column).
+    """
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        msg = f"{path}: cannot read: {err.strerror or err}"
+        raise WorldError(msg) from None
+    return _parse(data, path)
+
+
+def parse_string(text: str, source: Path | None = None) -> XmlNode:
+    """Parse XML text into an `XmlNode` tree (for tests and generated SDF).
+
+    Raises:
+        WorldError: If the text is not well-formed XML.
+    """
+    return _parse(text.encode(), source)
+
+
+def _parse(data: bytes, path: Path | None) -> XmlNode:
+    where = str(path) if path is not None else "<string>"
+    if not data.strip():
+        msg = f"{where}: the file is empty; expected an SDF document (<sdf version=...>)"
+        raise WorldError(msg)
+    try:
+        root = etree.fromstring(data, _PARSER)
+    except etree.XMLSyntaxError as err:
+        line, column = err.position if err.position else (err.lineno or 0, 0)
+        reason = (err.msg or str(err)).split(", line ")[0]
+        msg = f"{where}:{line}:{column}: malformed XML: {reason}"
+        raise WorldError(msg) from None
+    return _convert(root, path)
+
+
+def parse_pose(node: XmlNode | None) -> Mat4:
+    """Return the 4x4 matrix of an SDF `<pose>` (identity when absent or empty).
+
+    Accepts `x y z roll pitch yaw` (radians, or degrees with `degrees="true"`) and, from SDF 1.9,
+    `rotation_format="quat_xyzw"` with `x y z qx qy qz qw`.
+
+    Raises:
+        WorldError: If the numbers are malformed.
+    """
+    if node is None or not node.text:
+        return np.eye(4)
+    values = node.as_floats()
+    if not all(math.isfinite(v) for v in values):
+        msg = f"{node.where}: <pose> has a non-finite number: {node.text!r}"
+        raise WorldError(msg)
+    fmt = node.get("rotation_format", "euler_rpy")
+    if fmt == "quat_xyzw":
+        if len(values) != 7:
+            msg = (
+                f"{node.where}: <pose rotation_format='quat_xyzw'> needs 7 numbers (x y z qx qy qz qw), "
+                f"got {len(values)}"
+            )
+            raise WorldError(msg)
+        return _matrix_from_quat(values[:3], values[3:])
+    if len(values) != 6:
+        msg = f"{node.where}: <pose> needs 6 numbers (x y z roll pitch yaw), got {len(values)}: {node.text!r}"
+        raise WorldError(msg)
+    x, y, z, roll, pitch, yaw = values
+    if (node.get("degrees", "false") or "").lower() in ("true", "1"):
+        roll, pitch, yaw = math.radians(roll), math.radians(pitch), math.radians(yaw)
+    return matrix_from_pose(Pose(x, y, z, roll, pitch, yaw))
+
+
+def _matrix_from_quat(xyz: tuple[float, ...], q: tuple[float, ...]) -> Mat4:
+    qx, qy, qz, qw = q
+    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) or 1.0
+    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
+    out = np.eye(4)
+    out[:3, :3] = [
+        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
+        [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
+        [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)],
+    ]
+    out[:3, 3] = xyz
+    return out

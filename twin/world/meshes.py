@@ -1,0 +1,217 @@
+"""Triangle meshes for geometry: mesh files through trimesh, primitives tessellated.
+
+Mesh files are read as Gazebo reads them: COLLADA's `<unit meter=...>` scales the vertices (its
+`<up_axis>` is ignored, as Gazebo ignores it), `<submesh>` selects the geometry under the named
+COLLADA node (or the named OBJ/STL object) and may centre it, and `<scale>` applies last.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from lxml import etree
+
+from twin.core.errors import WorldError
+from twin.world.types import (
+    Box,
+    Capsule,
+    Cylinder,
+    Ellipsoid,
+    Geometry,
+    Mesh,
+    Polyline,
+    Sphere,
+)
+
+__all__ = ["MeshCache", "geometry_mesh"]
+
+_log = logging.getLogger(__name__)
+
+# Tessellation of curved primitives where an exact shape is not needed (bounds, viewers, slices of
+# tilted shapes). Ray casting and collision use the exact shapes where they can.
+_SECTIONS = 48
+
+
+class MeshCache:
+    """Loads each mesh file once per world (the same file is often used by many collisions)."""
+
+    def __init__(self) -> None:
+        self._files: dict[Path, trimesh.Scene] = {}
+        self._units: dict[Path, float] = {}
+
+    def scene(self, path: Path, where: str) -> tuple[trimesh.Scene, float]:
+        """Return the file's meshes as a trimesh Scene and its unit scale (metres per unit).
+
+        Raises:
+            WorldError: If the file cannot be read as a mesh.
+        """
+        if path not in self._files:
+            try:
+                loaded = trimesh.load(str(path), force="scene", process=False)
+            except Exception as err:  # trimesh raises many kinds; all mean "not a mesh we can read"
+                msg = f"{where}: cannot read mesh {path}: {type(err).__name__}: {err}"
+                raise WorldError(msg) from None
+            if not isinstance(loaded, trimesh.Scene) or not loaded.geometry:
+                msg = f"{where}: mesh {path} holds no triangles"
+                raise WorldError(msg)
+            self._files[path] = loaded
+            self._units[path] = _collada_unit(path) if path.suffix.lower() == ".dae" else 1.0
+        return self._files[path], self._units[path]
+
+    def mesh(self, geometry: Mesh, where: str) -> trimesh.Trimesh:
+        """Return the mesh of a `<mesh>` geometry in its own frame (unit, submesh and scale applied).
+
+        Raises:
+            WorldError: If the file is missing or unreadable, or the submesh does not exist.
+        """
+        if geometry.path is None:
+            msg = f"{where}: mesh {geometry.uri!r} was not found"
+            raise WorldError(msg)
+        scene, unit = self.scene(geometry.path, where)
+        if geometry.submesh:
+            wanted = _submesh_geometry_names(geometry.path, geometry.submesh)
+            nodes = [
+                node
+                for node in scene.graph.nodes_geometry
+                if (
+                    scene.graph[node][1] in wanted
+                    or node == geometry.submesh
+                    or scene.graph[node][1] == geometry.submesh
+                )
+            ]
+            if not nodes:
+                names = sorted(scene.geometry)
+                msg = f"{where}: submesh {geometry.submesh!r} not found in {geometry.path} (it has: {', '.join(names)})"
+                raise WorldError(msg)
+            parts = []
+            for node in nodes:
+                transform, name = scene.graph[node]
+                part = scene.geometry[name].copy()
+                part.apply_transform(transform)
+                parts.append(part)
+            merged: Any = trimesh.util.concatenate(parts)
+        else:
+            merged = scene.to_geometry() if hasattr(scene, "to_geometry") else scene.dump(concatenate=True)
+        mesh = trimesh.Trimesh(
+            vertices=np.asarray(merged.vertices) * unit, faces=np.asarray(merged.faces), process=False
+        )
+        if geometry.submesh and geometry.center_submesh:
+            mesh.apply_translation(-mesh.bounds.mean(axis=0))
+        if geometry.scale != (1.0, 1.0, 1.0):
+            mesh.apply_scale(np.asarray(geometry.scale, dtype=float))  # type: ignore[no-untyped-call]
+        return mesh
+
+
+def _collada_unit(path: Path) -> float:
+    """Return COLLADA's `<asset><unit meter=...>` (1.0 when absent)."""
+    try:
+        for _event, elem in etree.iterparse(str(path), events=("end",), tag="{*}unit"):
+            value = elem.get("meter")
+            return float(value) if value else 1.0
+    except (etree.XMLSyntaxError, ValueError, OSError):
+        return 1.0
+    return 1.0
+
+
+def _submesh_geometry_names(path: Path, name: str) -> set[str]:
+    """Return the COLLADA geometry ids instanced under nodes called `name`."""
+    if path.suffix.lower() != ".dae":
+        return {name}
+    try:
+        tree = etree.parse(str(path))
+    except (etree.XMLSyntaxError, OSError):
+        return {name}
+    out: set[str] = set()
+    for node in tree.iter("{*}node"):
+        if name in (node.get("name"), node.get("id")):
+            for inst in node.iter("{*}instance_geometry"):
+                url = inst.get("url") or ""
+                out.add(url.lstrip("#"))
+    return out or {name}
+
+
+def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trimesh.Trimesh | None:
+    """Return a triangle mesh of a geometry in its own frame (None for infinite planes).
+
+    Raises:
+        WorldError: If a mesh file cannot be used.
+    """
+    out: Any = None
+    match geometry:
+        case Box(size_m=size):
+            out = trimesh.creation.box(extents=size)
+        case Cylinder(radius_m=r, length_m=length):
+            out = trimesh.creation.cylinder(radius=r, height=length, sections=_SECTIONS)
+        case Sphere(radius_m=r):
+            out = trimesh.creation.icosphere(subdivisions=3, radius=r)
+        case Capsule(radius_m=r, length_m=length):
+            out = trimesh.creation.capsule(height=length, radius=r, count=[_SECTIONS, _SECTIONS // 2])
+        case Ellipsoid(radii_m=radii):
+            out = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+            out.apply_scale(np.asarray(radii))
+        case Polyline():
+            out = polyline_mesh(geometry)
+        case Mesh():
+            out = cache.mesh(geometry, where)
+    return out if isinstance(out, trimesh.Trimesh) else None
+
+
+def polyline_mesh(geometry: Polyline) -> trimesh.Trimesh:
+    """Return the extruded polygons of a polyline as a closed triangle mesh (ear-clipped caps)."""
+    vertices: list[tuple[float, float, float]] = []
+    faces: list[tuple[int, int, int]] = []
+    h = geometry.height_m
+    for polygon in geometry.polygons:
+        pts = _ccw(polygon)
+        n = len(pts)
+        base = len(vertices)
+        vertices.extend((x, y, 0.0) for x, y in pts)
+        vertices.extend((x, y, h) for x, y in pts)
+        for i in range(n):
+            j = (i + 1) % n
+            faces.append((base + i, base + j, base + n + j))
+            faces.append((base + i, base + n + j, base + n + i))
+        for a, b, c in _ear_clip(pts):
+            faces.append((base + a, base + c, base + b))
+            faces.append((base + n + a, base + n + b, base + n + c))
+    return trimesh.Trimesh(vertices=np.array(vertices), faces=np.array(faces), process=False)
+
+
+def _ccw(points: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
+    area = sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(points, [*points[1:], points[0]], strict=True))
+    return list(points) if area >= 0 else list(reversed(points))
+
+
+def _ear_clip(points: Sequence[tuple[float, float]]) -> list[tuple[int, int, int]]:
+    """Triangulate a simple counter-clockwise polygon by ear clipping (O(n^2); polygons are small)."""
+    index = list(range(len(points)))
+    out: list[tuple[int, int, int]] = []
+
+    def cross(o: int, a: int, b: int) -> float:
+        (ox, oy), (ax, ay), (bx, by) = points[o], points[a], points[b]
+        return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
+
+    def inside(p: int, a: int, b: int, c: int) -> bool:
+        return cross(a, b, p) >= 0 and cross(b, c, p) >= 0 and cross(c, a, p) >= 0
+
+    guard = 0
+    while len(index) > 3 and guard < 10_000:
+        guard += 1
+        for k in range(len(index)):
+            a, b, c = index[k - 1], index[k], index[(k + 1) % len(index)]
+            if cross(a, b, c) <= 0:
+                continue
+            if any(inside(p, a, b, c) for p in index if p not in (a, b, c)):
+                continue
+            out.append((a, b, c))
+            index.pop(k)
+            break
+        else:  # degenerate (self-intersecting) polygon: fan the rest
+            break
+    out.extend((index[0], index[i], index[i + 1]) for i in range(1, len(index) - 1))
+    return out

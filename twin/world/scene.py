@@ -1,0 +1,793 @@
+"""The Scene: the world's obstacles as trimesh meshes, FCL objects and 2D slices for ray casting.
+
+Built once from a `World` at start-up:
+
+- every collision except infinite planes and floor-level slabs becomes an obstacle, with a
+  trimesh mesh in the world frame and a python-fcl collision object (primitives stay primitives);
+- `ray_caster(height_m)` cuts the obstacles with a horizontal plane into 2D segments and circles,
+  analytic where the shape allows (upright boxes, cylinders, spheres, capsules, polylines; any mesh
+  by exact plane intersection), and answers vectorised ray casts over all beams at once;
+- `robot_body(...)`, `clearance(...)`, `collides(...)` and `CollisionMonitor` give the simulation
+  loop a contact check whose per-step cost is a few arithmetic operations while the robot is
+  far from obstacles.
+
+Models that are not static are obstacles too: nothing but the robot moves in the twin.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import fcl
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from twin.core.errors import WorldError
+from twin.core.geometry import Mat4
+from twin.world._native import load_kernel
+from twin.world.meshes import MeshCache, geometry_mesh
+from twin.world.types import (
+    Box,
+    Capsule,
+    Collision,
+    Cylinder,
+    Ellipsoid,
+    Geometry,
+    Plane,
+    Polyline,
+    Sphere,
+    World,
+    geometry_kind,
+)
+
+__all__ = ["CollisionMonitor", "Contact", "RayCaster", "RobotBody", "Scene", "build_scene"]
+
+_log = logging.getLogger(__name__)
+
+F64 = NDArray[np.float64]
+_TWO_PI = 2.0 * math.pi
+_UPRIGHT_TOL = 1e-9
+
+
+class Contact(NamedTuple):
+    """One contact between the robot and an obstacle.
+
+    `normal` is a unit vector in the world frame pointing from the obstacle towards the robot
+    (the direction that separates them); `depth_m` is the penetration depth (>= 0).
+    """
+
+    model: str
+    link: str
+    collision: str
+    robot_link: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    depth_m: float
+
+
+@dataclass(frozen=True, kw_only=True, slots=True, eq=False)
+class _Obstacle:
+    collision: Collision
+    mesh: trimesh.Trimesh
+    fcl_object: fcl.CollisionObject
+    fcl_geometry: fcl.CollisionGeometry
+
+
+# --- construction helpers -------------------------------------------------------------------------
+
+
+def _fcl_transform(mat: Mat4) -> fcl.Transform:
+    return fcl.Transform(np.ascontiguousarray(mat[:3, :3]), np.ascontiguousarray(mat[:3, 3]))
+
+
+def _fcl_geometry(geometry: Geometry, mesh: trimesh.Trimesh | None) -> fcl.CollisionGeometry | None:
+    match geometry:
+        case Box(size_m=size):
+            return fcl.Box(*size)
+        case Cylinder(radius_m=r, length_m=length):
+            return fcl.Cylinder(r, length)
+        case Sphere(radius_m=r):
+            return fcl.Sphere(r)
+        case Capsule(radius_m=r, length_m=length):
+            return fcl.Capsule(r, length)
+        case Ellipsoid(radii_m=radii):
+            return fcl.Ellipsoid(*radii)
+        case Plane():
+            return None
+    if mesh is None:
+        return None
+    model = fcl.BVHModel()
+    model.beginModel(len(mesh.vertices), len(mesh.faces))
+    model.addSubModel(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int32))
+    model.endModel()
+    return model
+
+
+def _is_upright(T: Mat4) -> bool:
+    """True when the shape's local z axis is the world's (so horizontal slices are analytic)."""
+    return abs(abs(float(T[2, 2])) - 1.0) < _UPRIGHT_TOL
+
+
+class _Block(NamedTuple):
+    seg_idx: NDArray[np.int64]
+    circ_idx: NDArray[np.int64]
+    seg_ptr: int
+    circ_ptr: int
+
+
+class _Slice(NamedTuple):
+    segments: F64  # (M, 4): x0, y0, x1, y1
+    circles: F64  # (K, 3): cx, cy, r
+    segment_owner: NDArray[np.int64]
+    circle_owner: NDArray[np.int64]
+
+
+def _box_section(T: Mat4, size: tuple[float, float, float], z: float) -> list[tuple[float, float, float, float]]:
+    half = np.asarray(size) / 2.0
+    if _is_upright(T):
+        if abs(z - T[2, 3]) > half[2]:
+            return []
+        corners = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
+        pts = [T[:2, 3] + T[:2, 0] * sx * half[0] + T[:2, 1] * sy * half[1] for sx, sy in corners]
+        return [(*pts[i], *pts[(i + 1) % 4]) for i in range(4)]
+    # Tilted box: intersect the plane with the 12 edges; the section is a convex polygon.
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+    verts = (T[:3, :3] @ (signs * half).T).T + T[:3, 3]
+    points = []
+    for i in range(8):
+        for j in range(i + 1, 8):
+            if np.count_nonzero(signs[i] != signs[j]) != 1:
+                continue
+            za, zb = verts[i, 2], verts[j, 2]
+            if (za - z) * (zb - z) > 0 or za == zb:
+                continue
+            s = (z - za) / (zb - za)
+            points.append(verts[i, :2] + s * (verts[j, :2] - verts[i, :2]))
+    if len(points) < 3:
+        return []
+    arr = np.array(points)
+    centre = arr.mean(axis=0)
+    order = np.argsort(np.arctan2(arr[:, 1] - centre[1], arr[:, 0] - centre[0]))
+    arr = arr[order]
+    keep = [arr[0]]
+    for p in arr[1:]:
+        if np.hypot(*(p - keep[-1])) > 1e-12:
+            keep.append(p)
+    return [(*keep[i], *keep[(i + 1) % len(keep)]) for i in range(len(keep))] if len(keep) >= 3 else []
+
+
+def _section(
+    obstacle: _Obstacle, z: float
+) -> tuple[list[tuple[float, float, float, float]], list[tuple[float, float, float]]]:
+    """Return the segments and circles where the plane at height z cuts one obstacle."""
+    geometry, T = obstacle.collision.geometry, obstacle.collision.T_world
+    bounds = obstacle.mesh.bounds
+    if not (bounds[0, 2] - 1e-9 <= z <= bounds[1, 2] + 1e-9) and not isinstance(geometry, (Sphere, Capsule, Cylinder)):
+        return [], []
+    dz = z - float(T[2, 3])
+    upright = _is_upright(T)
+    match geometry:
+        case Box(size_m=size):
+            return _box_section(T, size, z), []
+        case Cylinder(radius_m=r, length_m=length) if upright:
+            return ([], [(float(T[0, 3]), float(T[1, 3]), r)]) if abs(dz) <= length / 2 else ([], [])
+        case Sphere(radius_m=r):
+            return ([], [(float(T[0, 3]), float(T[1, 3]), math.sqrt(r * r - dz * dz))]) if abs(dz) < r else ([], [])
+        case Capsule(radius_m=r, length_m=length) if upright:
+            reach = abs(dz) - length / 2
+            if reach <= 0:
+                return [], [(float(T[0, 3]), float(T[1, 3]), r)]
+            return ([], [(float(T[0, 3]), float(T[1, 3]), math.sqrt(r * r - reach * reach))]) if reach < r else ([], [])
+        case Ellipsoid(radii_m=(rx, ry, rz)) if upright and rx == ry:
+            frac = 1.0 - (dz / rz) ** 2
+            return ([], [(float(T[0, 3]), float(T[1, 3]), rx * math.sqrt(frac))]) if frac > 0 else ([], [])
+        case Polyline(polygons=polygons, height_m=h) if upright:
+            # Extruded from the frame's z = 0 along its z axis (which may point down).
+            lo, hi = sorted((float(T[2, 3]), float(T[2, 3] + T[2, 2] * h)))
+            if not lo <= z <= hi:
+                return [], []
+            segs: list[tuple[float, float, float, float]] = []
+            for polygon in polygons:
+                pts = [T[:2, :2] @ np.array(p) + T[:2, 3] for p in polygon]
+                segs.extend((*pts[i], *pts[(i + 1) % len(pts)]) for i in range(len(pts)))
+            return segs, []
+    lines = trimesh.intersections.mesh_plane(obstacle.mesh, [0.0, 0.0, 1.0], [0.0, 0.0, z])  # type: ignore[no-untyped-call]
+    return [(float(a[0]), float(a[1]), float(b[0]), float(b[1])) for a, b in lines], []
+
+
+# --- ray casting ---------------------------------------------------------------------------------
+
+
+class RayCaster:
+    """Casts horizontal rays against the scene's cross-section at one height.
+
+    Rays start at `origin_xy` and report the distance to the first surface they cross at or beyond
+    `min_range_m` (a ray that starts inside a shape reports where it leaves it, as Gazebo's ODE
+    rays do), or `inf` when nothing is crossed within `max_range_m`. All beams are handled in one
+    vectorised pass: for each nearby segment and circle the beams inside its angular extent are
+    paired with it, and only those pairs are intersected.
+
+    A uniform grid indexes the segments and circles; a cast looks only at the cells within
+    `max_range_m` of the origin (the union for each cell is computed once and memoised).
+    """
+
+    def __init__(
+        self, section: _Slice, height_m: float, labels: Sequence[str], cell_m: float = 1.0, *, native: bool = True
+    ) -> None:
+        self.height_m = height_m
+        self._lib = load_kernel() if native else None
+        self._labels = tuple(labels)
+        seg = np.ascontiguousarray(section.segments, dtype=np.float64).reshape(-1, 4)
+        keep = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) > 1e-12
+        self._seg = seg[keep]
+        self._seg_owner = section.segment_owner[keep]
+        self._ex = self._seg[:, 2] - self._seg[:, 0]
+        self._ey = self._seg[:, 3] - self._seg[:, 1]
+        self._circ = np.ascontiguousarray(section.circles, dtype=np.float64).reshape(-1, 3)
+        self._circ_owner = section.circle_owner
+        self._cell_m = float(cell_m)
+        self._blocks: dict[tuple[int, int, int], _Block] = {}
+        self._seg_ptr = self._seg.ctypes.data
+        self._circ_ptr = self._circ.ctypes.data
+        if len(self._seg) or len(self._circ):
+            lo_seg = np.minimum(self._seg[:, :2], self._seg[:, 2:])
+            hi_seg = np.maximum(self._seg[:, :2], self._seg[:, 2:])
+            lo_c = self._circ[:, :2] - self._circ[:, 2:3]
+            hi_c = self._circ[:, :2] + self._circ[:, 2:3]
+            self._seg_cells = (
+                np.floor(lo_seg / self._cell_m).astype(np.int64),
+                np.floor(hi_seg / self._cell_m).astype(np.int64),
+            )
+            self._circ_cells = (
+                np.floor(lo_c / self._cell_m).astype(np.int64),
+                np.floor(hi_c / self._cell_m).astype(np.int64),
+            )
+
+    @property
+    def segments(self) -> F64:
+        """The slice's segments, shape (M, 4): x0, y0, x1, y1 in the world frame (read-only view)."""
+        view = self._seg.view()
+        view.flags.writeable = False
+        return view
+
+    @property
+    def circles(self) -> F64:
+        """The slice's circles, shape (K, 3): centre x, y and radius (read-only view)."""
+        view = self._circ.view()
+        view.flags.writeable = False
+        return view
+
+    def _candidates(self, x: float, y: float, max_range_m: float) -> _Block:
+        reach = max(1, math.ceil(max_range_m / self._cell_m))
+        key = (math.floor(x / self._cell_m), math.floor(y / self._cell_m), reach)
+        found = self._blocks.get(key)
+        if found is None:
+            cx, cy, _ = key
+            lo = np.array([cx - reach, cy - reach])
+            hi = np.array([cx + reach, cy + reach])
+            if len(self._seg) or len(self._circ):
+                seg_idx = _overlapping(self._seg_cells, lo, hi)
+                circ_idx = _overlapping(self._circ_cells, lo, hi)
+            else:
+                seg_idx = circ_idx = np.empty(0, dtype=np.int64)
+            found = _Block(seg_idx, circ_idx, seg_idx.ctypes.data, circ_idx.ctypes.data)
+            if len(self._blocks) > 100_000:
+                self._blocks.clear()
+            self._blocks[key] = found
+        return found
+
+    def cast_rays(
+        self, origin_xy: tuple[float, float], angles_rad: F64, max_range_m: float, *, min_range_m: float = 0.0
+    ) -> F64:
+        """Return the range along each beam (world-frame angles), `inf` where nothing is hit.
+
+        Args:
+            origin_xy: Ray origin in the world frame (m).
+            angles_rad: Beam directions in the world frame, any order, shape (N,).
+            max_range_m: Hits beyond this are not reported.
+            min_range_m: Rays start this far from the origin; nearer surfaces are not seen.
+        """
+        angles = np.ascontiguousarray(angles_rad, dtype=np.float64)
+        if self._lib is not None:
+            block = self._candidates(float(origin_xy[0]), float(origin_xy[1]), max_range_m)
+            out = np.empty(len(angles))
+            self._lib.twin_cast_rays(
+                self._seg_ptr, block.seg_ptr, len(block.seg_idx), self._circ_ptr, block.circ_ptr, len(block.circ_idx),
+                float(origin_xy[0]), float(origin_xy[1]), len(angles), angles.ctypes.data,
+                min_range_m, max_range_m, out.ctypes.data,
+            )  # fmt: skip
+            return out
+        wrapped = np.mod(angles, _TWO_PI)
+        order = np.argsort(wrapped, kind="stable")
+        sorted_angles = wrapped[order]
+        ranges_sorted = self._cast(origin_xy, sorted_angles, None, max_range_m, min_range_m)
+        out = np.empty_like(ranges_sorted)
+        out[order] = ranges_sorted
+        return out
+
+    def cast_fan(
+        self,
+        origin_xy: tuple[float, float],
+        start_rad: float,
+        increment_rad: float,
+        count: int,
+        max_range_m: float,
+        *,
+        min_range_m: float = 0.0,
+    ) -> F64:
+        """Return ranges for `count` beams at `start_rad + i * increment_rad` (world frame).
+
+        The same ranges as `cast_rays` on those angles, faster: each shape is paired only with the
+        beams inside its angular extent.
+        """
+        if increment_rad <= 0.0 or count < 1:
+            angles = start_rad + increment_rad * np.arange(count, dtype=np.float64)
+            return self.cast_rays(origin_xy, angles, max_range_m, min_range_m=min_range_m)
+        ox, oy = float(origin_xy[0]), float(origin_xy[1])
+        if self._lib is not None:
+            block = self._candidates(ox, oy, max_range_m)
+            out = np.empty(count)
+            status = self._lib.twin_cast_fan(
+                self._seg_ptr, block.seg_ptr, len(block.seg_idx), self._circ_ptr, block.circ_ptr, len(block.circ_idx),
+                ox, oy, float(start_rad), float(increment_rad), int(count), min_range_m, max_range_m, out.ctypes.data,
+            )  # fmt: skip
+            if status != 0:
+                raise MemoryError("ray caster kernel could not allocate its beam buffer")
+            return out
+        beam = start_rad + increment_rad * np.arange(count)
+        return self._cast(
+            (ox, oy), None, (start_rad, increment_rad, count, (np.cos(beam), np.sin(beam))), max_range_m, min_range_m
+        )
+
+    def cast_scan(
+        self,
+        origin_xy: tuple[float, float],
+        start_rad: float,
+        increment_rad: float,
+        count: int,
+        *,
+        range_min_m: float,
+        range_max_m: float,
+        noise_m: F64 | None = None,
+    ) -> NDArray[np.float32]:
+        """Return a lidar scan: `cast_fan` ranges masked as REP 117 says, optionally noisy.
+
+        A range at or beyond `range_max_m` (nothing hit) is `+inf`, one at or below `range_min_m`
+        is `-inf`; `noise_m` (shape (count,)) is added to the others, which are then clamped to
+        [`range_min_m`, `range_max_m`]. float32, as LaserScan carries ranges. One compiled call
+        when the kernel is available.
+        """
+        if self._lib is not None and increment_rad > 0.0 and count >= 1:
+            ox, oy = float(origin_xy[0]), float(origin_xy[1])
+            block = self._candidates(ox, oy, range_max_m)
+            out = np.empty(count, dtype=np.float32)
+            noise_ptr = None
+            if noise_m is not None:
+                noise_m = np.ascontiguousarray(noise_m, dtype=np.float64)
+                noise_ptr = noise_m.ctypes.data
+            status = self._lib.twin_scan(
+                self._seg_ptr, block.seg_ptr, len(block.seg_idx), self._circ_ptr, block.circ_ptr, len(block.circ_idx),
+                ox, oy, float(start_rad), float(increment_rad), int(count), range_min_m, range_max_m,
+                noise_ptr, out.ctypes.data,
+            )  # fmt: skip
+            if status != 0:
+                raise MemoryError("ray caster kernel could not allocate its beam buffer")
+            return out
+        ranges = self.cast_fan(origin_xy, start_rad, increment_rad, count, range_max_m, min_range_m=range_min_m)
+        return mask_ranges(ranges, range_min_m, range_max_m, noise_m)
+
+    def _cast(
+        self,
+        origin_xy: tuple[float, float],
+        sorted_angles: F64 | None,
+        fan: tuple[float, float, int, tuple[F64, F64]] | None,
+        max_range_m: float,
+        min_range_m: float,
+    ) -> F64:
+        ox, oy = float(origin_xy[0]), float(origin_xy[1])
+        if fan is not None:
+            n, (cos_b, sin_b) = fan[2], fan[3]
+        else:
+            assert sorted_angles is not None
+            n = len(sorted_angles)
+            cos_b, sin_b = np.cos(sorted_angles), np.sin(sorted_angles)
+        ranges = np.full(n, np.inf)
+        if n == 0 or (not len(self._seg) and not len(self._circ)):
+            return ranges
+        block = self._candidates(ox, oy, max_range_m)
+        seg_idx, circ_idx = block.seg_idx, block.circ_idx
+
+        if len(seg_idx):
+            seg = self._seg[seg_idx]
+            wx0 = seg[:, 0] - ox
+            wy0 = seg[:, 1] - oy
+            ex = self._ex[seg_idx]
+            ey = self._ey[seg_idx]
+            a0 = np.arctan2(wy0, wx0)
+            a1 = np.arctan2(wy0 + ey, wx0 + ex)
+            span = np.mod(a1 - a0, _TWO_PI)
+            flip = span > math.pi
+            lo_angle = np.where(flip, a1, a0) - 1e-9
+            span = np.where(flip, _TWO_PI - span, span) + 2e-9
+            beams, owners = _pairs(lo_angle, span, sorted_angles, fan)
+            if len(beams):
+                c = cos_b[beams]
+                s = sin_b[beams]
+                pex = ex[owners]
+                pey = ey[owners]
+                pwx = wx0[owners]
+                pwy = wy0[owners]
+                denom = c * pey - s * pex
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    inv = 1.0 / denom
+                    t = (pwx * pey - pwy * pex) * inv
+                    u = (pwx * s - pwy * c) * inv
+                ok = (u >= -1e-12) & (u <= 1.0 + 1e-12) & (t >= min_range_m) & (t <= max_range_m)
+                np.minimum.at(ranges, beams[ok], t[ok])
+
+        if len(circ_idx):
+            circ = self._circ[circ_idx]
+            qx = circ[:, 0] - ox
+            qy = circ[:, 1] - oy
+            r = circ[:, 2]
+            dist = np.hypot(qx, qy)
+            inside = dist <= r
+            centre = np.arctan2(qy, qx)
+            with np.errstate(invalid="ignore"):
+                half = np.where(inside, math.pi, np.arcsin(np.minimum(1.0, r / np.maximum(dist, 1e-300))))
+            beams, owners = _pairs(centre - half - 1e-9, 2.0 * half + 2e-9, sorted_angles, fan)
+            if len(beams):
+                b = cos_b[beams] * qx[owners] + sin_b[beams] * qy[owners]
+                cc = (dist * dist - r * r)[owners]
+                disc = b * b - cc
+                with np.errstate(invalid="ignore"):
+                    root = np.sqrt(disc)
+                t1 = b - root
+                t = np.where(t1 >= min_range_m, t1, b + root)
+                ok = (disc >= 0.0) & (t >= min_range_m) & (t <= max_range_m)
+                np.minimum.at(ranges, beams[ok], t[ok])
+        return ranges
+
+
+def mask_ranges(ranges: F64, range_min_m: float, range_max_m: float, noise_m: F64 | None = None) -> NDArray[np.float32]:
+    """Mask raw ranges as REP 117 says and add clamped noise to the in-range ones (float32 out)."""
+    out = np.array(ranges, dtype=np.float64)
+    out[out >= range_max_m] = np.inf
+    out[out <= range_min_m] = -np.inf
+    if noise_m is not None:
+        noisy = np.clip(out + noise_m, range_min_m, range_max_m)
+        out = np.where(np.isfinite(out), noisy, out)
+    return out.astype(np.float32)
+
+
+def _overlapping(
+    cells: tuple[NDArray[np.int64], NDArray[np.int64]], lo: NDArray[np.int64], hi: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    cmin, cmax = cells
+    mask = (cmax[:, 0] >= lo[0]) & (cmin[:, 0] <= hi[0]) & (cmax[:, 1] >= lo[1]) & (cmin[:, 1] <= hi[1])
+    return np.ascontiguousarray(np.flatnonzero(mask), dtype=np.int64)
+
+
+def _pairs(
+    lo_angle: F64, span: F64, sorted_angles: F64 | None, fan: tuple[float, float, int, tuple[F64, F64]] | None
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Pair each shape with the beams inside its angular interval [lo, lo + span].
+
+    Returns (beam index, shape index) arrays. Intervals are tried at three turns (-1, 0, +1)
+    so wrap-around at 2*pi and fans wider than a full turn are covered.
+    """
+    k = len(lo_angle)
+    starts = []
+    stops = []
+    if fan is not None:
+        start, inc, n, _ = fan
+        u = np.mod(lo_angle - start, _TWO_PI)
+        for turn in (-_TWO_PI, 0.0, _TWO_PI):
+            first = np.ceil((u + turn) / inc)
+            last = np.floor((u + span + turn) / inc)
+            starts.append(np.clip(first, 0, n))
+            stops.append(np.clip(last + 1, 0, n))
+    else:
+        assert sorted_angles is not None
+        n = len(sorted_angles)
+        u = np.mod(lo_angle, _TWO_PI)
+        for turn in (-_TWO_PI, 0.0):
+            starts.append(np.searchsorted(sorted_angles, u + turn, side="left"))
+            stops.append(np.searchsorted(sorted_angles, u + span + turn, side="right"))
+    first_all = np.concatenate(starts).astype(np.intp)
+    last_all = np.concatenate(stops).astype(np.intp)
+    counts = np.maximum(last_all - first_all, 0)
+    total = int(counts.sum())
+    if total == 0:
+        empty = np.empty(0, dtype=np.intp)
+        return empty, empty
+    owners = np.repeat(np.tile(np.arange(k, dtype=np.intp), len(starts)), counts)
+    offsets = np.repeat(np.cumsum(counts) - counts - first_all, counts)
+    beams = np.arange(total, dtype=np.intp) - offsets
+    return beams, owners
+
+
+# --- the robot against the scene ------------------------------------------------------------------
+
+
+class RobotBody:
+    """The robot's collision shapes as FCL objects, posed by a planar (x, y, yaw).
+
+    Args:
+        collisions: The robot's collision shapes; each `T_world` is its pose in the robot's
+            base frame (`base_footprint`).
+        base_height_m: Height of the base frame above the floor (the robot stands on z = 0).
+    """
+
+    def __init__(self, collisions: Iterable[Collision], *, base_height_m: float = 0.0) -> None:
+        cache = MeshCache()
+        self._local: list[Mat4] = []
+        self._objects: list[fcl.CollisionObject] = []
+        self._owner: dict[int, Collision] = {}
+        radius = 0.0
+        z_lo, z_hi = math.inf, -math.inf
+        self.base_height_m = base_height_m
+        for collision in collisions:
+            mesh = geometry_mesh(collision.geometry, cache, collision.where)
+            geometry = _fcl_geometry(collision.geometry, mesh)
+            if geometry is None or mesh is None:
+                continue
+            T = np.array(collision.T_world)
+            T[2, 3] += base_height_m
+            pts = mesh.vertices @ T[:3, :3].T + T[:3, 3]
+            radius = max(radius, float(np.max(np.hypot(pts[:, 0], pts[:, 1]))))
+            z_lo, z_hi = min(z_lo, float(pts[:, 2].min())), max(z_hi, float(pts[:, 2].max()))
+            obj = fcl.CollisionObject(geometry, _fcl_transform(T))
+            self._local.append(T)
+            self._objects.append(obj)
+            self._owner[id(geometry)] = collision
+        if not self._objects:
+            msg = "the robot has no collision shapes to check against the world"
+            raise WorldError(msg)
+        self.radius_m = radius
+        """Largest horizontal distance of any collision point from the base frame's z axis."""
+        self.z_range_m = (z_lo, z_hi)
+        self._manager = fcl.DynamicAABBTreeCollisionManager()
+        self._manager.registerObjects(self._objects)
+        self._manager.setup()
+        height = max(z_hi - z_lo, 1e-6)
+        self._bound_geometry = fcl.Cylinder(radius, height)
+        self._bound = fcl.CollisionObject(
+            self._bound_geometry, fcl.Transform(np.eye(3), np.array([0.0, 0.0, (z_lo + z_hi) / 2]))
+        )
+        self._bound_z = (z_lo + z_hi) / 2
+
+    def _place(self, x: float, y: float, yaw: float) -> None:
+        c, s = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        offset = np.array([x, y, 0.0])
+        for obj, T in zip(self._objects, self._local, strict=True):
+            obj.setTransform(fcl.Transform(rot @ T[:3, :3], rot @ T[:3, 3] + offset))
+        self._manager.update()
+
+    def _place_bound(self, x: float, y: float) -> None:
+        self._bound.setTranslation(np.array([x, y, self._bound_z]))
+
+    def owner(self, geometry: object) -> Collision | None:
+        """Return the robot collision an FCL geometry belongs to."""
+        return self._owner.get(id(geometry))
+
+
+class Scene:
+    """The world's obstacles, ready for ray casting and collision checks. Build with `build_scene`."""
+
+    def __init__(self, obstacles: Sequence[_Obstacle], *, world_name: str = "") -> None:
+        self.world_name = world_name
+        self._obstacles = tuple(obstacles)
+        self._owner = {id(o.fcl_geometry): o.collision for o in self._obstacles}
+        self._manager = fcl.DynamicAABBTreeCollisionManager()
+        if self._obstacles:
+            self._manager.registerObjects([o.fcl_object for o in self._obstacles])
+        self._manager.setup()
+        self._casters: dict[float, RayCaster] = {}
+
+    @property
+    def obstacles(self) -> tuple[Collision, ...]:
+        """The collisions the robot and the lidar can meet, in the world frame."""
+        return tuple(o.collision for o in self._obstacles)
+
+    def meshes(self) -> tuple[trimesh.Trimesh, ...]:
+        """The obstacles as triangle meshes in the world frame (copies)."""
+        return tuple(o.mesh.copy() for o in self._obstacles)
+
+    @property
+    def bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
+        """Axis-aligned bounds of all obstacles ((xmin, ymin, zmin), (xmax, ymax, zmax)), or None."""
+        if not self._obstacles:
+            return None
+        lo = np.min([o.mesh.bounds[0] for o in self._obstacles], axis=0)
+        hi = np.max([o.mesh.bounds[1] for o in self._obstacles], axis=0)
+        return (float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]), float(hi[2]))
+
+    def ray_caster(self, height_m: float, *, cell_m: float = 1.0, native: bool = True) -> RayCaster:
+        """Return a ray caster for the horizontal plane at `height_m` (built once per height).
+
+        `native=False` forces the numpy implementation (the compiled kernel is used otherwise
+        when a C compiler is available).
+        """
+        key = round(float(height_m), 9)
+        caster = self._casters.get(key) if native else None
+        if caster is None:
+            segments: list[tuple[float, float, float, float]] = []
+            circles: list[tuple[float, float, float]] = []
+            seg_owner: list[int] = []
+            circ_owner: list[int] = []
+            for index, obstacle in enumerate(self._obstacles):
+                segs, circs = _section(obstacle, key)
+                segments.extend(segs)
+                circles.extend(circs)
+                seg_owner.extend([index] * len(segs))
+                circ_owner.extend([index] * len(circs))
+            section = _Slice(
+                segments=np.array(segments, dtype=np.float64).reshape(-1, 4),
+                circles=np.array(circles, dtype=np.float64).reshape(-1, 3),
+                segment_owner=np.array(seg_owner, dtype=np.int64),
+                circle_owner=np.array(circ_owner, dtype=np.int64),
+            )
+            labels = [f"{o.collision.link}::{o.collision.name}" for o in self._obstacles]
+            caster = RayCaster(section, key, labels, cell_m=cell_m, native=native)
+            if native:
+                self._casters[key] = caster
+        return caster
+
+    def clearance(self, body: RobotBody, x_m: float, y_m: float, yaw_rad: float = 0.0) -> float:
+        """Return a lower bound on the distance between the robot and every obstacle (m).
+
+        Uses one upright cylinder bounding all of the robot's shapes, so it is cheap (one FCL
+        distance query) and never larger than the true distance; 0 when the bound touches
+        something. `yaw_rad` does not matter to the bound and is accepted for symmetry.
+        """
+        if not self._obstacles:
+            return math.inf
+        body._place_bound(x_m, y_m)
+        data = fcl.DistanceData()
+        self._manager.distance(body._bound, data, fcl.defaultDistanceCallback)
+        return max(0.0, float(data.result.min_distance))
+
+    def collides(
+        self, body: RobotBody, x_m: float, y_m: float, yaw_rad: float, *, max_contacts: int = 8
+    ) -> tuple[Contact, ...]:
+        """Return the contacts of the robot at (x, y, yaw) with the obstacles, deepest first (empty if none)."""
+        if not self._obstacles:
+            return ()
+        body._place_bound(x_m, y_m)
+        quick = fcl.CollisionData(request=fcl.CollisionRequest())
+        self._manager.collide(body._bound, quick, fcl.defaultCollisionCallback)
+        if not quick.result.is_collision:
+            return ()
+        body._place(x_m, y_m, yaw_rad)
+        request = fcl.CollisionRequest(num_max_contacts=max_contacts, enable_contact=True)
+        data = fcl.CollisionData(request=request)
+        self._manager.collide(body._manager, data, fcl.defaultCollisionCallback)
+        contacts = []
+        for contact in data.result.contacts:
+            robot_part = body.owner(contact.o1)
+            obstacle = self._owner.get(id(contact.o2))
+            normal = np.asarray(contact.normal, dtype=float)
+            if robot_part is None:  # o1 is the obstacle: FCL's normal points from o1 to o2 (the robot)
+                robot_part = body.owner(contact.o2)
+                obstacle = self._owner.get(id(contact.o1))
+            else:
+                normal = -normal
+            if robot_part is None or obstacle is None:
+                continue
+            contacts.append(
+                Contact(
+                    model=obstacle.model,
+                    link=obstacle.link,
+                    collision=obstacle.name,
+                    robot_link=robot_part.link,
+                    point=(float(contact.pos[0]), float(contact.pos[1]), float(contact.pos[2])),
+                    normal=(float(normal[0]), float(normal[1]), float(normal[2])),
+                    depth_m=max(0.0, float(contact.penetration_depth)),
+                )
+            )
+        contacts.sort(key=lambda c: -c.depth_m)
+        return tuple(contacts)
+
+    def robot_body(self, collisions: Iterable[Collision], *, base_height_m: float = 0.0) -> RobotBody:
+        """Return the robot's collision body (see `RobotBody`)."""
+        return RobotBody(collisions, base_height_m=base_height_m)
+
+
+class CollisionMonitor:
+    """Checks the robot against the scene every step, paying for FCL only near obstacles.
+
+    After each clearance query the monitor knows a distance `d` the robot can move before it may
+    touch anything; while the motion since then (translation plus the body radius times the
+    rotation) stays below `d`, `check` returns no contacts after a few float operations.
+    """
+
+    def __init__(self, scene: Scene, body: RobotBody, *, margin_m: float = 0.005) -> None:
+        self.scene = scene
+        self.body = body
+        self.margin_m = margin_m
+        self._x = math.nan
+        self._y = math.nan
+        self._yaw = 0.0
+        self._free_m = -1.0
+        self.queries = 0
+        """How many FCL queries were made (for benchmarks)."""
+
+    def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
+        """Return the contacts at this pose (empty tuple when free)."""
+        moved = math.hypot(x_m - self._x, y_m - self._y) + self.body.radius_m * abs(yaw_rad - self._yaw)
+        if moved < self._free_m:
+            return ()
+        self.queries += 1
+        free = self.scene.clearance(self.body, x_m, y_m, yaw_rad) - self.margin_m
+        self._x, self._y, self._yaw = x_m, y_m, yaw_rad
+        if free > 0.0:
+            self._free_m = free
+            return ()
+        self._free_m = -1.0
+        self.queries += 1
+        return self.scene.collides(self.body, x_m, y_m, yaw_rad)
+
+
+def build_scene(world: World, *, exclude_models: Iterable[str] = (), floor_height_m: float = 0.01) -> Scene:
+    """Build the Scene of a world.
+
+    Args:
+        world: The loaded world.
+        exclude_models: Model names (or scoped names) left out, e.g. a robot the world already
+            holds.
+        floor_height_m: Obstacles whose top is at or below this height are part of the floor
+            (a ground slab, a road marking) and are left out, like infinite planes.
+
+    Raises:
+        WorldError: If a collision mesh cannot be read.
+    """
+    excluded = set(exclude_models)
+    cache = MeshCache()
+    obstacles: list[_Obstacle] = []
+    skipped_floor = 0
+    for model in world.all_models():
+        if (
+            model.name in excluded
+            or model.scoped_name in excluded
+            or any(model.scoped_name.startswith(f"{name}::") for name in excluded)
+        ):
+            continue
+        for link in model.links:
+            for collision in link.collisions:
+                if isinstance(collision.geometry, Plane):
+                    continue
+                local = geometry_mesh(collision.geometry, cache, collision.where)
+                if local is None:
+                    continue
+                mesh = local.copy()
+                mesh.apply_transform(np.asarray(collision.T_world))
+                if mesh.bounds[1, 2] <= floor_height_m:
+                    skipped_floor += 1
+                    continue
+                geometry = _fcl_geometry(collision.geometry, local)
+                if geometry is None:
+                    continue
+                obstacles.append(
+                    _Obstacle(
+                        collision=collision,
+                        mesh=mesh,
+                        fcl_object=fcl.CollisionObject(geometry, _fcl_transform(collision.T_world)),
+                        fcl_geometry=geometry,
+                    )
+                )
+    if skipped_floor:
+        _log.debug("%d floor-level collisions left out of the scene", skipped_floor)
+    _log.debug(
+        "scene of %s: %d obstacles (%s)",
+        world.name,
+        len(obstacles),
+        ", ".join(sorted({geometry_kind(o.collision.geometry) for o in obstacles})),
+    )
+    return Scene(obstacles, world_name=world.name)
