@@ -1,0 +1,714 @@
+"""MCAP files: a streaming, crash-tolerant chunked writer, and the scanner that recovers killed files.
+
+The layout (https://mcap.dev/spec) is magic, Header, a data section of records, DataEnd, a
+summary section (schemas, channels, statistics, chunk and metadata indexes, summary offsets),
+Footer, magic. The writer appends schema and channel records as topics appear and one Chunk
+(uncompressed, as rosbag2's default) followed by its MessageIndex records per flush, each in a
+single write, so a killed process leaves a file whose every complete record is valid. The
+summary is only written by `finish()`; `recover_mcap()` rebuilds it from what a kill left.
+
+Message records inside a chunk are built for a whole batch at once with numpy: the per-message
+Python work is one tuple appended to a list by the recorder.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+import struct
+import zlib
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["MAGIC", "McapRecovery", "McapScan", "McapWriter", "recover_mcap", "scan_mcap"]
+
+_log = logging.getLogger(__name__)
+
+MAGIC = b"\x89MCAP0\r\n"
+
+OP_HEADER = 0x01
+OP_FOOTER = 0x02
+OP_SCHEMA = 0x03
+OP_CHANNEL = 0x04
+OP_MESSAGE = 0x05
+OP_CHUNK = 0x06
+OP_MESSAGE_INDEX = 0x07
+OP_CHUNK_INDEX = 0x08
+OP_STATISTICS = 0x0B
+OP_METADATA = 0x0C
+OP_METADATA_INDEX = 0x0D
+OP_SUMMARY_OFFSET = 0x0E
+OP_DATA_END = 0x0F
+
+_RECORD = struct.Struct("<BQ")
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+_CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
+_FOOTER = struct.Struct("<BQQQI")
+
+# A Message record's fixed part: opcode, record length, channel, sequence, log and publish time.
+_MESSAGE_HEAD = np.dtype(
+    [("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"), ("log", "<u8"), ("publish", "<u8")]
+)
+_MESSAGE_HEAD_SIZE = _MESSAGE_HEAD.itemsize  # 31
+_INDEX_ENTRY = np.dtype([("time", "<u8"), ("offset", "<u8")])
+
+
+def _string(text: str) -> bytes:
+    raw = text.encode()
+    return _U32.pack(len(raw)) + raw
+
+
+def _map(items: Mapping[str, str]) -> bytes:
+    body = b"".join(_string(k) + _string(v) for k, v in items.items())
+    return _U32.pack(len(body)) + body
+
+
+def _record(op: int, content: bytes) -> bytes:
+    return _RECORD.pack(op, len(content)) + content
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class SchemaRecord:
+    """A Schema record's fields."""
+
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+    def encode(self) -> bytes:
+        """The full record."""
+        return _record(
+            OP_SCHEMA,
+            _U16.pack(self.id) + _string(self.name) + _string(self.encoding) + _U32.pack(len(self.data)) + self.data,
+        )
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class ChannelRecord:
+    """A Channel record's fields."""
+
+    id: int
+    schema_id: int
+    topic: str
+    message_encoding: str
+    metadata: Mapping[str, str]
+
+    def encode(self) -> bytes:
+        """The full record."""
+        return _record(
+            OP_CHANNEL,
+            _U16.pack(self.id)
+            + _U16.pack(self.schema_id)
+            + _string(self.topic)
+            + _string(self.message_encoding)
+            + _map(self.metadata),
+        )
+
+
+@dataclass(kw_only=True, slots=True)
+class _Stats:
+    """Running totals for the Statistics record and rosbag2's metadata."""
+
+    message_count: int = 0
+    start_ns: int = 2**64 - 1
+    end_ns: int = 0
+    channel_counts: dict[int, int] = field(default_factory=dict)
+    channel_start_ns: dict[int, int] = field(default_factory=dict)
+    channel_end_ns: dict[int, int] = field(default_factory=dict)
+
+    def add(self, channels: NDArray[np.uint16], times: NDArray[np.uint64]) -> None:
+        if channels.size == 0:
+            return
+        self.message_count += int(channels.size)
+        self.start_ns = min(self.start_ns, int(times.min()))
+        self.end_ns = max(self.end_ns, int(times.max()))
+        for ch in np.unique(channels).tolist():
+            mask = channels == ch
+            sel = times[mask]
+            self.channel_counts[ch] = self.channel_counts.get(ch, 0) + int(sel.size)
+            self.channel_start_ns[ch] = min(self.channel_start_ns.get(ch, 2**64 - 1), int(sel.min()))
+            self.channel_end_ns[ch] = max(self.channel_end_ns.get(ch, 0), int(sel.max()))
+
+
+def _chunk_index(
+    *,
+    start_ns: int,
+    end_ns: int,
+    chunk_offset: int,
+    chunk_length: int,
+    index_offsets: Mapping[int, int],
+    index_length: int,
+    size: int,
+) -> bytes:
+    offsets = b"".join(_U16.pack(ch) + _U64.pack(off) for ch, off in index_offsets.items())
+    content = (
+        struct.pack("<QQQQ", start_ns, end_ns, chunk_offset, chunk_length)
+        + _U32.pack(len(offsets))
+        + offsets
+        + _U64.pack(index_length)
+        + _string("")
+        + _U64.pack(size)
+        + _U64.pack(size)
+    )
+    return _record(OP_CHUNK_INDEX, content)
+
+
+def _message_indexes(
+    channels: NDArray[np.uint16], times: NDArray[np.uint64], offsets: NDArray[np.uint64], base: int
+) -> tuple[bytes, dict[int, int]]:
+    """MessageIndex records for one chunk (one per channel) and each record's file offset."""
+    parts: list[bytes] = []
+    where: dict[int, int] = {}
+    pos = base
+    order = np.argsort(channels, kind="stable")
+    sorted_channels = channels[order]
+    bounds = np.flatnonzero(np.diff(sorted_channels)) + 1
+    for group in np.split(order, bounds):
+        if group.size == 0:
+            continue
+        ch = int(channels[group[0]])
+        entries = np.empty(group.size, dtype=_INDEX_ENTRY)
+        entries["time"] = times[group]
+        entries["offset"] = offsets[group]
+        body = entries.tobytes()
+        record = _record(OP_MESSAGE_INDEX, _U16.pack(ch) + _U32.pack(len(body)) + body)
+        where[ch] = pos
+        pos += len(record)
+        parts.append(record)
+    return b"".join(parts), where
+
+
+class McapWriter:
+    """Writes an MCAP file in chunks, each chunk on disk as soon as it is written.
+
+    Not thread-safe; one writer per file. Every method that touches the file may raise
+    `OSError` (e.g. ENOSPC); `truncate_to_good_end()` then cuts the file back to its last complete
+    record, which keeps it recoverable.
+    """
+
+    def __init__(self, path: Path, *, library: str, profile: str = "ros2", fsync: bool = False) -> None:
+        """Create `path` (it must not exist) and write the magic and the Header record."""
+        self.path = path
+        self._fsync = fsync
+        self._file = open(path, "xb", buffering=0)  # noqa: SIM115 - closed by finish()/close()
+        self._pos = 0
+        self._data_crc = 0
+        self.good_end = 0  #: file offset just after the last complete record
+        self.schemas: dict[int, SchemaRecord] = {}
+        self.channels: dict[int, ChannelRecord] = {}
+        self._chunk_indexes: list[bytes] = []
+        self._metadata_indexes: list[bytes] = []
+        self.stats = _Stats()
+        self._closed = False
+        self._write_data(MAGIC + _record(OP_HEADER, _string(profile) + _string(library)))
+
+    # -- low level -------------------------------------------------------------------------
+
+    def _write_raw(self, data: bytes | memoryview) -> None:
+        view = memoryview(data)
+        while view:
+            written = self._file.write(view)
+            if written is None or written <= 0:  # pragma: no cover - a regular file never returns 0
+                raise OSError(f"short write to {self.path}")
+            view = view[written:]
+        self._pos += len(data)
+
+    def _write_data(self, data: bytes) -> None:
+        """Append complete data-section records; the file is consistent after it returns."""
+        self._write_raw(data)
+        self._data_crc = zlib.crc32(data, self._data_crc)
+        self.good_end = self._pos
+        if self._fsync:
+            os.fsync(self._file.fileno())
+
+    def truncate_to_good_end(self) -> None:
+        """Drop a partially written record (after a failed write), keeping the file recoverable."""
+        if self._closed:
+            return
+        self._file.truncate(self.good_end)
+        self._file.seek(self.good_end)
+        self._pos = self.good_end
+
+    # -- records ---------------------------------------------------------------------------
+
+    def add_schema(self, name: str, encoding: str, data: bytes) -> int:
+        """Write a Schema record; return its id."""
+        schema = SchemaRecord(id=len(self.schemas) + 1, name=name, encoding=encoding, data=data)
+        self._write_data(schema.encode())
+        self.schemas[schema.id] = schema
+        return schema.id
+
+    def add_channel(self, topic: str, schema_id: int, message_encoding: str, metadata: Mapping[str, str]) -> int:
+        """Write a Channel record; return its id."""
+        channel = ChannelRecord(
+            id=len(self.channels) + 1,
+            schema_id=schema_id,
+            topic=topic,
+            message_encoding=message_encoding,
+            metadata=dict(metadata),
+        )
+        self._write_data(channel.encode())
+        self.channels[channel.id] = channel
+        return channel.id
+
+    def add_metadata(self, name: str, values: Mapping[str, str]) -> None:
+        """Write a Metadata record (and remember its index for the summary)."""
+        offset = self._pos
+        record = _record(OP_METADATA, _string(name) + _map(values))
+        self._write_data(record)
+        self._metadata_indexes.append(
+            _record(OP_METADATA_INDEX, _U64.pack(offset) + _U64.pack(len(record)) + _string(name))
+        )
+
+    def write_batch(self, batch: Sequence[tuple[int, int, bytes]]) -> None:
+        """Write `(channel_id, log_time_ns, data)` messages as one chunk and its message indexes.
+
+        Raises:
+            ValueError: If a channel id is unknown or a time is negative (nothing is written).
+            OSError: If the file cannot be written.
+        """
+        n = len(batch)
+        if n == 0:
+            return
+        ids, stamps, datas = zip(*batch, strict=True)
+        try:
+            channels = np.array(ids, dtype=np.int64)
+            times = np.array(stamps, dtype=np.int64)
+        except (OverflowError, TypeError, ValueError) as err:
+            msg = f"message handles and times must be integers: {err}"
+            raise ValueError(msg) from None
+        if channels.min() < 1 or channels.max() > len(self.channels):
+            bad = int(channels[(channels < 1) | (channels > len(self.channels))][0])
+            msg = f"unknown topic handle {bad}"
+            raise ValueError(msg)
+        if times.min() < 0:
+            msg = f"negative message time {int(times.min())} ns"
+            raise ValueError(msg)
+        try:
+            lengths = np.fromiter(map(len, datas), dtype=np.int64, count=n)
+        except TypeError:
+            msg = "message data must be bytes"
+            raise ValueError(msg) from None
+        if np.any(times[1:] < times[:-1]):  # keep chunks in time order, ties in write order
+            order = np.argsort(times, kind="stable")
+            channels, times, lengths = channels[order], times[order], lengths[order]
+            datas = tuple(datas[i] for i in order.tolist())
+        heads = np.zeros(n, dtype=_MESSAGE_HEAD)
+        heads["op"] = OP_MESSAGE
+        heads["length"] = lengths + (_MESSAGE_HEAD_SIZE - 9)
+        heads["channel"] = channels
+        heads["log"] = times
+        heads["publish"] = times
+        parts: list[bytes] = [b""] * (2 * n)
+        parts[0::2] = heads.view(f"V{_MESSAGE_HEAD_SIZE}").tolist()
+        parts[1::2] = datas
+        records = b"".join(parts)
+        sizes = lengths + _MESSAGE_HEAD_SIZE
+        offsets = (np.cumsum(sizes) - sizes).astype(np.uint64)
+        start_ns, end_ns = int(times[0]), int(times[-1])
+        chunk = _record(
+            OP_CHUNK,
+            _CHUNK_HEAD.pack(start_ns, end_ns, len(records), zlib.crc32(records))
+            + _string("")
+            + _U64.pack(len(records))
+            + records,
+        )
+        chunk_offset = self._pos
+        ch16 = channels.astype(np.uint16)
+        t64 = times.astype(np.uint64)
+        indexes, index_offsets = _message_indexes(ch16, t64, offsets, chunk_offset + len(chunk))
+        self._write_data(chunk + indexes)
+        self.stats.add(ch16, t64)
+        self._chunk_indexes.append(
+            _chunk_index(
+                start_ns=start_ns,
+                end_ns=end_ns,
+                chunk_offset=chunk_offset,
+                chunk_length=len(chunk),
+                index_offsets=index_offsets,
+                index_length=len(indexes),
+                size=len(records),
+            )
+        )
+
+    # -- closing ---------------------------------------------------------------------------
+
+    def finish(self) -> None:
+        """Write DataEnd, the summary section, the Footer and the closing magic; close the file."""
+        if self._closed:
+            return
+        self._write_raw(_record(OP_DATA_END, _U32.pack(self._data_crc)))
+        summary = _summary_section(
+            start=self._pos,
+            schemas=list(self.schemas.values()),
+            channels=list(self.channels.values()),
+            stats=self.stats,
+            chunk_indexes=self._chunk_indexes,
+            metadata_indexes=self._metadata_indexes,
+        )
+        self._write_raw(summary)
+        if self._fsync:
+            os.fsync(self._file.fileno())
+        self.close()
+
+    def close(self) -> None:
+        """Close the file as it is (without a summary if `finish()` was not called)."""
+        if not self._closed:
+            self._closed = True
+            self._file.close()
+
+
+def _summary_section(
+    *,
+    start: int,
+    schemas: Sequence[SchemaRecord],
+    channels: Sequence[ChannelRecord],
+    stats: _Stats,
+    chunk_indexes: Sequence[bytes],
+    metadata_indexes: Sequence[bytes],
+) -> bytes:
+    """The summary section, summary offsets, Footer and closing magic, for a summary at `start`."""
+    groups: list[tuple[int, bytes]] = [
+        (OP_SCHEMA, b"".join(s.encode() for s in schemas)),
+        (OP_CHANNEL, b"".join(c.encode() for c in channels)),
+        (OP_STATISTICS, _statistics(stats, len(schemas), len(channels), len(chunk_indexes), len(metadata_indexes))),
+        (OP_CHUNK_INDEX, b"".join(chunk_indexes)),
+        (OP_METADATA_INDEX, b"".join(metadata_indexes)),
+    ]
+    body = bytearray()
+    offsets = bytearray()
+    for op, group in groups:
+        if group:
+            offsets += _record(OP_SUMMARY_OFFSET, struct.pack("<BQQ", op, start + len(body), len(group)))
+            body += group
+    offset_start = start + len(body)
+    summary = bytes(body + offsets)
+    footer_head = _RECORD.pack(OP_FOOTER, 20) + struct.pack("<QQ", start, offset_start)
+    crc = zlib.crc32(footer_head, zlib.crc32(summary))
+    return summary + footer_head + _U32.pack(crc) + MAGIC
+
+
+def _statistics(stats: _Stats, schemas: int, channels: int, chunks: int, metadata: int) -> bytes:
+    counts = b"".join(_U16.pack(ch) + _U64.pack(n) for ch, n in sorted(stats.channel_counts.items()))
+    start = stats.start_ns if stats.message_count else 0
+    content = (
+        struct.pack("<QHIIII", stats.message_count, schemas, channels, 0, metadata, chunks)
+        + struct.pack("<QQ", start, stats.end_ns)
+        + _U32.pack(len(counts))
+        + counts
+    )
+    return _record(OP_STATISTICS, content)
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading what a (possibly killed) writer left
+
+
+class _Cursor:
+    """Reads little-endian fields from a bytes object, raising ValueError past its end."""
+
+    __slots__ = ("data", "pos")
+
+    def __init__(self, data: bytes | memoryview, pos: int = 0) -> None:
+        self.data = data
+        self.pos = pos
+
+    def take(self, n: int) -> bytes:
+        end = self.pos + n
+        if end > len(self.data):
+            raise ValueError("record truncated")
+        out = bytes(self.data[self.pos : end])
+        self.pos = end
+        return out
+
+    def u16(self) -> int:
+        return int(_U16.unpack(self.take(2))[0])
+
+    def u32(self) -> int:
+        return int(_U32.unpack(self.take(4))[0])
+
+    def u64(self) -> int:
+        return int(_U64.unpack(self.take(8))[0])
+
+    def string(self) -> str:
+        return self.take(self.u32()).decode()
+
+    def mapping(self) -> dict[str, str]:
+        end = self.pos + self.u32()
+        out: dict[str, str] = {}
+        while self.pos < end:
+            key = self.string()
+            out[key] = self.string()
+        return out
+
+
+@dataclass(kw_only=True, slots=True)
+class _ChunkInfo:
+    offset: int
+    length: int
+    start_ns: int
+    end_ns: int
+    size: int
+    compression: str
+    channels: NDArray[np.uint16]
+    times: NDArray[np.uint64]
+    offsets: NDArray[np.uint64]
+    index_offsets: dict[int, int] = field(default_factory=dict)
+    index_length: int = 0
+
+
+@dataclass(kw_only=True, slots=True)
+class McapScan:
+    """What a pass over an MCAP file's data section found."""
+
+    library: str = ""
+    schemas: dict[int, SchemaRecord] = field(default_factory=dict)
+    channels: dict[int, ChannelRecord] = field(default_factory=dict)
+    metadata: list[tuple[int, int, str, dict[str, str]]] = field(default_factory=list)  # offset, length, name, map
+    chunks: list[_ChunkInfo] = field(default_factory=list)
+    loose_messages: int = 0  #: Message records outside chunks (counted, not indexed)
+    data_end: int = 0  #: offset just after the last complete data record
+    data_crc: int = 0
+    complete: bool = False  #: DataEnd, summary and Footer all present
+    file_size: int = 0
+
+    def stats(self) -> _Stats:
+        """Message totals per channel over all complete chunks."""
+        stats = _Stats()
+        for chunk in self.chunks:
+            stats.add(chunk.channels, chunk.times)
+        return stats
+
+
+def _decompress(compression: str, data: bytes, size: int) -> bytes:
+    if compression == "":
+        return data
+    # Other writers' chunks; zstd comes with rosbags (Python < 3.14) or the standard library.
+    if compression == "zstd":
+        try:
+            zstd = importlib.import_module("compression.zstd")
+        except ImportError:
+            zstd = importlib.import_module("backports.zstd")
+        return bytes(zstd.decompress(data))
+    if compression == "lz4":
+        return bytes(importlib.import_module("lz4.frame").decompress(data))
+    msg = f"unsupported chunk compression {compression!r}"
+    raise ValueError(msg)
+
+
+def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
+    cur = _Cursor(view, offset + 9)
+    start_ns, end_ns, size = cur.u64(), cur.u64(), cur.u64()
+    cur.u32()  # crc, checked by readers that want to
+    compression = cur.string()
+    records = _decompress(compression, cur.take(cur.u64()), size)
+    channels: list[int] = []
+    times: list[int] = []
+    offsets: list[int] = []
+    inner = _Cursor(records)
+    while inner.pos < len(records):
+        rec_start = inner.pos
+        op = inner.take(1)[0]
+        rec_len = inner.u64()
+        body = _Cursor(inner.take(rec_len))
+        if op == OP_MESSAGE:
+            channels.append(body.u16())
+            body.u32()
+            times.append(body.u64())
+            offsets.append(rec_start)
+    return _ChunkInfo(
+        offset=offset,
+        length=length,
+        start_ns=start_ns,
+        end_ns=end_ns,
+        size=size,
+        compression=compression,
+        channels=np.array(channels, dtype=np.uint16),
+        times=np.array(times, dtype=np.uint64),
+        offsets=np.array(offsets, dtype=np.uint64),
+    )
+
+
+def _records(view: memoryview, pos: int) -> Iterator[tuple[int, int, int]]:
+    """Yield `(opcode, offset, length)` of complete records from `pos` until the first incomplete one."""
+    size = len(view)
+    while pos + 9 <= size:
+        op, length = _RECORD.unpack_from(view, pos)
+        if pos + 9 + length > size:
+            return
+        yield op, pos, length
+        pos += 9 + length
+
+
+def scan_mcap(path: Path) -> McapScan:
+    """Scan an MCAP file that may end anywhere (a killed writer).
+
+    Raises:
+        ValueError: If the file is not MCAP (bad magic or header).
+    """
+    data = path.read_bytes()
+    view = memoryview(data)
+    if data[:8] != MAGIC:
+        msg = "not an MCAP file (bad magic)"
+        raise ValueError(msg)
+    scan = McapScan(file_size=len(data))
+    pos = 8
+    last_chunk: _ChunkInfo | None = None
+    data_end = 0
+    for op, offset, length in _records(view, pos):
+        cur = _Cursor(view, offset + 9)
+        try:
+            if op == OP_HEADER:
+                cur.string()
+                scan.library = cur.string()
+            elif op == OP_SCHEMA:
+                sid = cur.u16()
+                name, encoding = cur.string(), cur.string()
+                scan.schemas[sid] = SchemaRecord(id=sid, name=name, encoding=encoding, data=cur.take(cur.u32()))
+            elif op == OP_CHANNEL:
+                cid, sid = cur.u16(), cur.u16()
+                topic, encoding = cur.string(), cur.string()
+                scan.channels[cid] = ChannelRecord(
+                    id=cid, schema_id=sid, topic=topic, message_encoding=encoding, metadata=cur.mapping()
+                )
+            elif op == OP_CHUNK:
+                last_chunk = _parse_chunk(view, offset, 9 + length)
+                scan.chunks.append(last_chunk)
+            elif op == OP_MESSAGE_INDEX and last_chunk is not None:
+                ch = cur.u16()
+                last_chunk.index_offsets[ch] = offset
+                last_chunk.index_length += 9 + length
+            elif op == OP_METADATA:
+                name = cur.string()
+                scan.metadata.append((offset, 9 + length, name, cur.mapping()))
+            elif op == OP_MESSAGE:
+                scan.loose_messages += 1
+            elif op == OP_DATA_END:
+                scan.data_end = offset
+                scan.data_crc = zlib.crc32(view[:offset])
+                scan.complete = _has_footer(view)
+                return scan
+        except (ValueError, UnicodeDecodeError):
+            _log.warning("%s: record at byte %d is damaged; keeping what precedes it", path, offset)
+            if op == OP_CHUNK and scan.chunks and scan.chunks[-1].offset == offset:
+                scan.chunks.pop()
+            break
+        data_end = offset + 9 + length
+    # No DataEnd: a killed writer. Keep whole chunks with their (complete) message indexes.
+    scan.data_end = data_end
+    scan.data_crc = zlib.crc32(view[:data_end])
+    return scan
+
+
+def _has_footer(view: memoryview) -> bool:
+    if len(view) < 8 + _FOOTER.size + 8 or bytes(view[-8:]) != MAGIC:
+        return False
+    op, length, *_ = _FOOTER.unpack_from(view, len(view) - 8 - _FOOTER.size)
+    return bool(op == OP_FOOTER and length == 20)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class McapRecovery:
+    """The outcome of `recover_mcap`."""
+
+    scan: McapScan  #: the file as it is now (complete)
+    was_complete: bool  #: it already had its summary and footer
+    dropped_bytes: int  #: bytes of partial records cut off its end
+
+
+def recover_mcap(path: Path) -> McapRecovery:
+    """Make a killed writer's MCAP file complete, in place.
+
+    Keeps every complete record of the data section, drops a trailing partial record, writes
+    message indexes for the last chunk if they were cut off, then DataEnd, a rebuilt summary
+    (schemas, channels, statistics, chunk and metadata indexes) and the Footer. A file that is
+    already complete is left as it is.
+
+    Raises:
+        ValueError: If the file is not MCAP.
+        OSError: If the file cannot be rewritten.
+    """
+    scan = scan_mcap(path)
+    if scan.complete:
+        return McapRecovery(scan=scan, was_complete=True, dropped_bytes=0)
+    if scan.data_end == 0:
+        msg = "the file ends before its header: nothing was recorded"
+        raise ValueError(msg)
+    end = scan.data_end
+    tail = b""
+    if scan.chunks:
+        last = scan.chunks[-1]
+        chunk_end = last.offset + last.length
+        expected = len(np.unique(last.channels))
+        if len(last.index_offsets) != expected or end < chunk_end + last.index_length:
+            # The indexes after the last chunk were cut off: rewrite them after the chunk.
+            end = chunk_end
+            tail, last.index_offsets = _message_indexes(last.channels, last.times, last.offsets, chunk_end)
+            last.index_length = len(tail)
+        for meta in [m for m in scan.metadata if m[0] >= end]:
+            scan.metadata.remove(meta)
+    with open(path, "r+b") as out:
+        out.truncate(end)
+        out.seek(end)
+        data_crc = scan.data_crc if not tail and end == scan.data_end else _crc_of(out, end)
+        data_crc = zlib.crc32(tail, data_crc)
+        out.write(tail)
+        pos = end + len(tail)
+        data_end = _record(OP_DATA_END, _U32.pack(data_crc))
+        out.write(data_end)
+        pos += len(data_end)
+        metadata_indexes = [
+            _record(OP_METADATA_INDEX, _U64.pack(off) + _U64.pack(length) + _string(name))
+            for off, length, name, _ in scan.metadata
+        ]
+        chunk_indexes = [
+            _chunk_index(
+                start_ns=c.start_ns,
+                end_ns=c.end_ns,
+                chunk_offset=c.offset,
+                chunk_length=c.length,
+                index_offsets=c.index_offsets,
+                index_length=c.index_length,
+                size=c.size,
+            )
+            for c in scan.chunks
+        ]
+        out.write(
+            _summary_section(
+                start=pos,
+                schemas=list(scan.schemas.values()),
+                channels=list(scan.channels.values()),
+                stats=scan.stats(),
+                chunk_indexes=chunk_indexes,
+                metadata_indexes=metadata_indexes,
+            )
+        )
+        out.flush()
+        os.fsync(out.fileno())
+    return McapRecovery(scan=scan_mcap(path), was_complete=False, dropped_bytes=scan.file_size - end)
+
+
+def _crc_of(handle: object, end: int) -> int:
+    """CRC32 of the first `end` bytes of an open binary file."""
+    import io
+
+    assert isinstance(handle, io.BufferedRandom)
+    handle.seek(0)
+    crc = 0
+    remaining = end
+    while remaining:
+        block = handle.read(min(remaining, 1 << 20))
+        if not block:
+            break
+        crc = zlib.crc32(block, crc)
+        remaining -= len(block)
+    handle.seek(end)
+    return crc

@@ -1,0 +1,466 @@
+"""The recorder: a rosbag2 folder (`<name>_0.mcap` or `.db3` plus `metadata.yaml`) written as it streams.
+
+```python
+from twin.bag import Recorder, ClockEncoder, ImuEncoder
+
+with Recorder("bags/run1") as rec:               # MCAP, Humble-readable metadata (version 8)
+    clock = rec.add_topic("/clock", ClockEncoder.msgtype)
+    imu = rec.add_topic("/imu", ImuEncoder.msgtype)
+    clock_enc, imu_enc = ClockEncoder(), ImuEncoder("imu_link")
+    for k in range(1000):
+        t_ns = k * 5_000_000
+        rec.write(imu, t_ns, imu_enc.encode(t_ns, 0, 0, 0, 1, 0, 0, 0, 0, 0, 9.81))
+        if k % 2 == 0:
+            rec.write(clock, t_ns, clock_enc.encode(t_ns))
+```
+
+`write()` only appends to a list. Every `flush_interval_s` of wall time (checked on writes, see
+`poll()`), or every `chunk_messages` messages, the batch goes to disk: one MCAP chunk with its
+indexes in a single write, or one committed sqlite3 transaction. A killed process therefore loses
+at most the last interval; `twin bag recover` makes what it left a complete bag. Closing (also on
+an exception inside the `with` block) writes the summary and `metadata.yaml`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import logging
+import os
+import sqlite3
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, NewType, NoReturn, Protocol
+
+from twin import __version__
+from twin.bag.mcap_file import McapWriter
+from twin.bag.metadata import BagMetadata, FileInformation, TopicMetadata, render_metadata, write_metadata
+from twin.bag.profiles import DistroProfile, distro_profile
+from twin.bag.qos import QosProfile, default_qos, qos_profiles_to_yaml
+from twin.bag.sqlite_file import Sqlite3Writer, sqlite_topic_stats
+from twin.bag.typesys import MessageDefinition, TypeRegistry
+from twin.core.errors import BagError
+
+__all__ = ["STORAGES", "Recorder", "TopicHandle"]
+
+_log = logging.getLogger(__name__)
+
+#: Handle of a recorded topic, returned by `Recorder.add_topic` and passed to `Recorder.write`.
+TopicHandle = NewType("TopicHandle", int)
+
+STORAGES = ("mcap", "sqlite3")
+_EXTENSIONS = {"mcap": ".mcap", "sqlite3": ".db3"}
+_CHECK_EVERY = 32  # writes between clock checks when the loop is fast
+_DISK_FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class _Topic:
+    name: str
+    definition: MessageDefinition
+    qos: tuple[QosProfile, ...]
+
+
+class _Storage(Protocol):
+    """What the recorder needs from a storage backend."""
+
+    def write_batch(self, batch: Sequence[tuple[int, int, bytes]]) -> None: ...
+
+
+def _qos_text(profile: DistroProfile, qos: Sequence[QosProfile]) -> str:
+    """The QoS string a storage keeps per topic (sqlite3 `topics` row, MCAP channel metadata)."""
+    return qos_profiles_to_yaml(qos, named=profile.named_qos)
+
+
+class Recorder:
+    """Records messages into a new rosbag2 folder. Use as a context manager.
+
+    Not thread-safe: call it from the simulation loop's thread.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        storage: str = "mcap",
+        distro: str = "humble",
+        flush_interval_s: float = 0.25,
+        chunk_messages: int = 4096,
+        fsync: bool = False,
+        custom_data: dict[str, str] | None = None,
+    ) -> None:
+        """Create the bag folder and its storage file.
+
+        Args:
+            path: The bag folder to create; it must not exist or be empty. The storage file is
+                `<folder name>_0.mcap` (or `.db3`) inside it, as `ros2 bag record` names it.
+            storage: `mcap` (default) or `sqlite3`.
+            distro: Whose rosbag2 the bag imitates: `humble` (default; metadata version 8, read by
+                every distro from Humble on), `iron`, or `jazzy`/`kilted`/`rolling` (version 9).
+            flush_interval_s: Longest wall time a written message waits before reaching the disk.
+            chunk_messages: Most messages per MCAP chunk / sqlite3 transaction.
+            fsync: Also fsync each flush (survives power loss, not just a killed process).
+            custom_data: `custom_data` entries for `metadata.yaml` (version >= 6).
+
+        Raises:
+            BagError: If the folder exists and is not empty, the storage or distro is unknown, or
+                the folder cannot be created.
+        """
+        if storage not in STORAGES:
+            msg = f"unknown bag storage {storage!r}; use one of {', '.join(STORAGES)}"
+            raise BagError(msg)
+        if not flush_interval_s > 0:
+            msg = f"flush_interval_s must be positive, got {flush_interval_s}"
+            raise BagError(msg)
+        self.profile = distro_profile(distro)
+        self.path = Path(path)
+        self.storage_id = storage
+        self._interval_s = flush_interval_s
+        self._chunk_messages = max(1, chunk_messages)
+        self._custom_data = dict(custom_data or {})
+        self._registry = TypeRegistry()
+        self._topics: dict[int, _Topic] = {}
+        self._topic_names: dict[str, int] = {}
+        self._pending: list[tuple[int, int, bytes]] = []
+        self._next_check = _CHECK_EVERY
+        self._closed = False
+        self._failed = False
+        self._written = 0
+        if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
+            msg = f"{self.path}: the bag folder exists and is not empty; choose a new output folder"
+            raise BagError(msg)
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            msg = f"{self.path}: cannot create the bag folder: {err.strerror}"
+            raise BagError(msg) from None
+        self.file_name = f"{self.path.name}_0{_EXTENSIONS[storage]}"
+        self.file_path = self.path / self.file_name
+        self._mcap: McapWriter | None = None
+        self._sqlite: Sqlite3Writer | None = None
+        try:
+            if storage == "mcap":
+                self._mcap = McapWriter(self.file_path, library=f"twin {__version__}", fsync=fsync)
+                # Read back by `twin bag recover` to rebuild metadata of the same distro.
+                self._mcap.add_metadata("twin", {"ros_distro": self.profile.name})
+                self._storage: _Storage = self._mcap
+            else:
+                self._sqlite = Sqlite3Writer(
+                    self.file_path,
+                    ros_distro=self.profile.name,
+                    schema_version=self.profile.sqlite_schema_version,
+                    fsync=fsync,
+                )
+                self._storage = self._sqlite
+        except (OSError, sqlite3.Error) as err:
+            msg = f"{self.file_path}: cannot create the bag file: {_reason(err)}"
+            raise BagError(msg) from None
+        now = time.monotonic()
+        self._deadline = now + self._interval_s
+        self._last_check = now
+
+    # -- context manager ----------------------------------------------------------------------
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        # Close also on errors and Ctrl-C: what was recorded becomes a complete bag.
+        if exc_type is None:
+            self.close()
+            return
+        try:
+            self.close()
+        except BagError as err:
+            _log.error("%s", err)
+
+    # -- topics ---------------------------------------------------------------------------------
+
+    def add_topic(
+        self,
+        topic: str,
+        msgtype: str,
+        *,
+        qos: Sequence[QosProfile] | None = None,
+        msgdef: str | None = None,
+    ) -> TopicHandle:
+        """Register a topic and return the handle to write its messages with.
+
+        Args:
+            topic: Topic name, e.g. `/scan`.
+            msgtype: Message type, e.g. `sensor_msgs/msg/LaserScan` (or an encoder's `msgtype`).
+            qos: Offered QoS profiles; by default what a TB3 + Nav2 system offers on `topic`
+                (transient local for `/tf_static`, `/map`, `/robot_description`, …).
+            msgdef: The `.msg` text of a type the registry does not know.
+
+        Raises:
+            BagError: If the topic exists, the type is unknown, or the bag is closed.
+        """
+        self._check_open()
+        if topic in self._topic_names:
+            msg = f"topic {topic} is already recorded in {self.path}"
+            raise BagError(msg)
+        if msgdef is not None:
+            self._registry.register(msgtype, msgdef)
+        definition = self._registry.definition(msgtype)
+        profiles = tuple(qos) if qos is not None else default_qos(topic)
+        qos_text = _qos_text(self.profile, profiles)
+        try:
+            if self._mcap is not None:
+                schema_id = next(
+                    (sid for sid, s in self._mcap.schemas.items() if s.name == msgtype),
+                    0,
+                ) or self._mcap.add_schema(msgtype, definition.encoding, definition.text.encode())
+                metadata = {"offered_qos_profiles": qos_text}
+                if self.profile.mcap_type_hash:
+                    metadata["topic_type_hash"] = definition.type_hash
+                handle = self._mcap.add_channel(topic, schema_id, "cdr", metadata)
+            else:
+                assert self._sqlite is not None
+                handle = self._sqlite.add_topic(
+                    name=topic,
+                    msgtype=msgtype,
+                    serialization_format="cdr",
+                    qos=qos_text,
+                    type_hash=definition.type_hash,
+                    encoding=definition.encoding,
+                    definition=definition.text,
+                )
+        except (OSError, sqlite3.Error) as err:
+            self._fail(err)
+        self._topics[handle] = _Topic(name=topic, definition=definition, qos=profiles)
+        self._topic_names[topic] = handle
+        return TopicHandle(handle)
+
+    @property
+    def topics(self) -> dict[str, TopicHandle]:
+        """Recorded topic names and their handles."""
+        return {name: TopicHandle(h) for name, h in self._topic_names.items()}
+
+    # -- writing --------------------------------------------------------------------------------
+
+    def write(self, handle: TopicHandle, t_ns: int, data: bytes) -> None:
+        """Record one serialized message (CDR bytes from an encoder) at integer time `t_ns`.
+
+        Handles and types are checked when the batch is written (at the next flush), which
+        raises `BagError` for an unknown handle or a negative time.
+        """
+        pending = self._pending
+        pending.append((handle, t_ns, data))
+        if len(pending) >= self._next_check:
+            self._check(len(pending))
+
+    def poll(self) -> None:
+        """Flush if the flush interval has passed; call it when the loop goes long without writing."""
+        if self._pending:
+            self._check(len(self._pending), force_clock=True)
+
+    def _check(self, n: int, *, force_clock: bool = False) -> None:
+        now = time.monotonic()
+        if n >= self._chunk_messages or now >= self._deadline:
+            self.flush()
+            return
+        # A slow loop checks the clock on every write, a fast one every few dozen.
+        step = _CHECK_EVERY if now - self._last_check < self._interval_s / 8 else 1
+        self._last_check = now
+        if not force_clock:
+            self._next_check = n + step
+
+    def flush(self) -> None:
+        """Write the pending messages to disk now.
+
+        Raises:
+            BagError: If a handle or time is invalid, or the disk is full (the bag is then closed
+                with what fit, or left for `twin bag recover`).
+        """
+        self._check_open()
+        batch, self._pending = self._pending, []
+        now = time.monotonic()
+        self._deadline = now + self._interval_s
+        self._last_check = now
+        self._next_check = _CHECK_EVERY
+        if not batch:
+            return
+        try:
+            self._storage.write_batch(batch)
+        except ValueError as err:
+            msg = f"{self.file_path}: {self._describe_bad_batch(batch, err)}"
+            raise BagError(msg) from None
+        except (OSError, sqlite3.Error) as err:
+            self._fail(err)
+        self._written += len(batch)
+
+    def _describe_bad_batch(self, batch: Sequence[tuple[Any, Any, Any]], err: ValueError) -> str:
+        """Name the first bad `write()` call of a batch the storage refused."""
+        for handle, t_ns, data in batch:
+            name = self._topics.get(handle) if isinstance(handle, int) else None
+            if name is None:
+                return f"write() got an unknown topic handle {handle!r}; use the handle add_topic() returned"
+            if not isinstance(t_ns, int) or t_ns < 0:
+                return f"write() on {name.name} got time {t_ns!r}; times are non-negative integer nanoseconds"
+            if not isinstance(data, bytes | bytearray | memoryview):
+                return f"write() on {name.name} got {type(data).__name__} data; pass the bytes an encoder returns"
+        return str(err)
+
+    # -- closing --------------------------------------------------------------------------------
+
+    @property
+    def closed(self) -> bool:
+        """Whether the bag is closed (after `close()` or a storage failure)."""
+        return self._closed
+
+    @property
+    def message_count(self) -> int:
+        """Messages handed to the storage so far (pending ones excluded)."""
+        return self._written
+
+    def close(self) -> None:
+        """Flush, finish the storage file and write `metadata.yaml`. Safe to call more than once.
+
+        Raises:
+            BagError: If the disk is full or the bag cannot be finished.
+        """
+        if self._closed:
+            return
+        try:
+            self.flush()
+        finally:
+            if not self._closed:
+                self._finish()
+
+    def _finish(self) -> None:
+        self._closed = True
+        self._pending = _ClosedBatch(self.path)
+        try:
+            meta = self.metadata()
+            if self._mcap is not None:
+                if self.profile.mcap_serialized_metadata:
+                    self._mcap.add_metadata("rosbag2", {"serialized_metadata": render_metadata(meta, root=False)})
+                else:
+                    self._mcap.add_metadata("rosbag2", {"ROS_DISTRO": self.profile.name})
+                self._mcap.finish()
+            elif self._sqlite is not None:
+                try:  # a copy of metadata.yaml, as Iron and later keep it; readers do not need it
+                    self._sqlite.set_metadata(meta.version, render_metadata(meta, root=False))
+                except sqlite3.Error as err:
+                    _log.warning("%s: metadata table not updated: %s", self.file_path, err)
+                self._sqlite.close()
+            write_metadata(self.path, meta)
+        except (OSError, sqlite3.Error) as err:
+            self._close_quietly()
+            msg = (
+                f"{self.path}: cannot finish the bag: {_reason(err)}; "
+                f"after fixing that, `twin bag recover {self.path}` completes it"
+            )
+            raise BagError(msg) from None
+
+    def metadata(self) -> BagMetadata:
+        """The bag's metadata as of the messages written to disk so far."""
+        counts: dict[int, int] = {}
+        start_ns, end_ns = 0, 0
+        if self._mcap is not None:
+            stats = self._mcap.stats
+            counts = dict(stats.channel_counts)
+            if stats.message_count:
+                start_ns, end_ns = stats.start_ns, stats.end_ns
+        elif self._sqlite is not None and not self._sqlite_closed():
+            rows = sqlite_topic_stats(self._sqlite_db())
+            counts = {r.topic_id: r.count for r in rows}
+            live = [r for r in rows if r.count]
+            if live:
+                start_ns, end_ns = min(r.start_ns for r in live), max(r.end_ns for r in live)
+        total = sum(counts.values())
+        topics = tuple(
+            TopicMetadata(
+                name=topic.name,
+                msgtype=topic.definition.msgtype,
+                serialization_format="cdr",
+                offered_qos_profiles=topic.qos,
+                type_description_hash=topic.definition.type_hash,
+                message_count=counts.get(handle, 0),
+            )
+            for handle, topic in self._topics.items()
+        )
+        return BagMetadata(
+            version=self.profile.metadata_version,
+            storage_identifier=self.storage_id,
+            relative_file_paths=(self.file_name,),
+            starting_time_ns=start_ns,
+            duration_ns=end_ns - start_ns,
+            message_count=total,
+            topics=topics,
+            files=(
+                FileInformation(
+                    path=self.file_name, starting_time_ns=start_ns, duration_ns=end_ns - start_ns, message_count=total
+                ),
+            ),
+            custom_data=tuple(self._custom_data.items()),
+            ros_distro=self.profile.name,
+        )
+
+    def _sqlite_db(self) -> sqlite3.Connection:
+        assert self._sqlite is not None
+        return self._sqlite._db
+
+    def _sqlite_closed(self) -> bool:
+        assert self._sqlite is not None
+        return self._sqlite._closed
+
+    def _check_open(self) -> None:
+        if self._closed:
+            state = "stopped after a storage error" if self._failed else "closed"
+            msg = f"{self.path}: the recorder is {state}; no more messages can be written"
+            raise BagError(msg)
+
+    def _close_quietly(self) -> None:
+        if self._mcap is not None:
+            self._mcap.close()
+        if self._sqlite is not None:
+            self._sqlite.close()
+
+    def _fail(self, err: OSError | sqlite3.Error) -> NoReturn:
+        """Handle a storage write failure: keep what is on disk readable, then raise one BagError."""
+        self._failed = True
+        if self._mcap is not None:
+            with contextlib.suppress(OSError):
+                self._mcap.truncate_to_good_end()
+        disk_full = _is_disk_full(err)
+        try:
+            self._finish()
+            outcome = f"the bag was closed with the {self.message_count} messages that fit"
+        except BagError:
+            outcome = f"free space, then `twin bag recover {self.path}` completes it"
+        self._closed = True
+        self._pending = _ClosedBatch(self.path)
+        what = "the disk is full" if disk_full else _reason(err)
+        msg = f"{self.file_path}: cannot write: {what}; {outcome}"
+        raise BagError(msg) from None
+
+
+class _ClosedBatch(list[tuple[int, int, bytes]]):
+    """Stands in for the pending batch once the recorder is closed: writing raises at once."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__()
+        self._path = path
+
+    def append(self, item: tuple[int, int, bytes]) -> None:
+        msg = f"{self._path}: the recorder is closed; no more messages can be written"
+        raise BagError(msg)
+
+
+def _is_disk_full(err: BaseException) -> bool:
+    if isinstance(err, OSError):
+        return err.errno in _DISK_FULL
+    return isinstance(err, sqlite3.Error) and "full" in str(err).lower()
+
+
+def _reason(err: BaseException) -> str:
+    if isinstance(err, OSError):
+        return f"{err.strerror or err}" + (" (disk full)" if err.errno in _DISK_FULL else "")
+    return str(err)

@@ -1,0 +1,286 @@
+"""`twin bag recover`: turn what a killed recording left into a complete, indexed bag.
+
+A killed recorder leaves the storage file without its end (MCAP: no summary or footer, maybe a
+partial chunk; sqlite3: maybe a hot journal) and no `metadata.yaml`. Recovery completes the
+storage file in place, keeping every complete record, and rebuilds `metadata.yaml` from it, in
+the distro form the recording used. Running it on a complete bag only rewrites `metadata.yaml`.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sqlite3
+from dataclasses import dataclass
+from pathlib import Path
+
+from twin.bag.mcap_file import recover_mcap
+from twin.bag.metadata import (
+    METADATA_FILE,
+    BagMetadata,
+    FileInformation,
+    TopicMetadata,
+    parse_metadata,
+    render_metadata,
+    write_metadata,
+)
+from twin.bag.profiles import DISTROS, distro_profile
+from twin.bag.qos import parse_qos_profiles
+from twin.bag.sqlite_file import recover_sqlite
+from twin.core.errors import BagError
+
+__all__ = ["RecoveryReport", "recover_bag"]
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RecoveryReport:
+    """What `recover_bag` found and did."""
+
+    path: Path
+    storage: str
+    files: tuple[str, ...]
+    message_count: int
+    topic_counts: tuple[tuple[str, int], ...]
+    was_complete: bool  #: the storage files were already complete (only metadata.yaml was written)
+    dropped_bytes: int  #: bytes of partial records cut off the end
+    metadata: BagMetadata
+
+
+def _previous_metadata(bag: Path) -> BagMetadata | None:
+    path = bag / METADATA_FILE
+    if not path.exists():
+        return None
+    try:
+        return parse_metadata(path.read_text(encoding="utf-8"), path)
+    except (BagError, OSError) as err:
+        _log.warning("%s: ignoring unreadable metadata (%s)", path, err)
+        return None
+
+
+def _distro(name: str) -> str:
+    return name if name in DISTROS else "humble"
+
+
+def recover_bag(path: str | os.PathLike[str]) -> RecoveryReport:
+    """Complete the bag in folder `path` and rewrite its `metadata.yaml`.
+
+    Raises:
+        BagError: If the folder holds no storage file, mixes storages, or a file is not a bag.
+    """
+    bag = Path(path)
+    if not bag.is_dir():
+        msg = f"{bag}: no such bag folder"
+        raise BagError(msg)
+    mcaps = sorted(bag.glob("*.mcap"))
+    dbs = sorted(bag.glob("*.db3"))
+    if mcaps and dbs:
+        msg = f"{bag}: holds both .mcap and .db3 files; recover one storage per folder"
+        raise BagError(msg)
+    if not mcaps and not dbs:
+        msg = f"{bag}: no .mcap or .db3 storage file to recover"
+        raise BagError(msg)
+    previous = _previous_metadata(bag)
+    if mcaps:
+        return _recover_mcap_bag(bag, mcaps, previous)
+    return _recover_sqlite_bag(bag, dbs, previous)
+
+
+def _file_info(name: str, start: int, end: int, count: int) -> FileInformation:
+    return FileInformation(path=name, starting_time_ns=start, duration_ns=end - start, message_count=count)
+
+
+def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None) -> RecoveryReport:
+    topics: dict[str, TopicMetadata] = {}
+    counts: dict[str, int] = {}
+    infos: list[FileInformation] = []
+    distro = previous.ros_distro if previous else ""
+    was_complete = True
+    dropped = 0
+    starts: list[int] = []
+    ends: list[int] = []
+    for file in files:
+        try:
+            outcome = recover_mcap(file)
+        except ValueError as err:
+            msg = f"{file}: cannot recover: {err}"
+            raise BagError(msg) from None
+        except OSError as err:
+            msg = f"{file}: cannot rewrite: {err.strerror}; free space or fix permissions and run again"
+            raise BagError(msg) from None
+        scan = outcome.scan
+        was_complete = was_complete and outcome.was_complete
+        dropped += outcome.dropped_bytes
+        for _, _, name, values in scan.metadata:
+            if name == "twin" and values.get("ros_distro") and not distro:
+                distro = values["ros_distro"]
+            if name == "rosbag2" and values.get("ROS_DISTRO") and not distro:
+                distro = values["ROS_DISTRO"]
+        stats = scan.stats()
+        for cid, channel in scan.channels.items():
+            schema = scan.schemas.get(channel.schema_id)
+            n = stats.channel_counts.get(cid, 0)
+            counts[channel.topic] = counts.get(channel.topic, 0) + n
+            if channel.topic not in topics:
+                try:
+                    qos = parse_qos_profiles(channel.metadata.get("offered_qos_profiles", ""))
+                except ValueError:
+                    qos = ()
+                topics[channel.topic] = TopicMetadata(
+                    name=channel.topic,
+                    msgtype=schema.name if schema else "",
+                    serialization_format=channel.message_encoding,
+                    offered_qos_profiles=qos,
+                    type_description_hash=channel.metadata.get("topic_type_hash", ""),
+                )
+        if stats.message_count:
+            starts.append(stats.start_ns)
+            ends.append(stats.end_ns)
+            infos.append(_file_info(file.name, stats.start_ns, stats.end_ns, stats.message_count))
+        else:
+            infos.append(_file_info(file.name, 0, 0, 0))
+    return _finish(
+        bag=bag,
+        storage="mcap",
+        files=files,
+        topics=topics,
+        counts=counts,
+        infos=infos,
+        starts=starts,
+        ends=ends,
+        distro=distro,
+        previous=previous,
+        was_complete=was_complete,
+        dropped=dropped,
+    )
+
+
+def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | None) -> RecoveryReport:
+    topics: dict[str, TopicMetadata] = {}
+    counts: dict[str, int] = {}
+    infos: list[FileInformation] = []
+    distro = previous.ros_distro if previous else ""
+    starts: list[int] = []
+    ends: list[int] = []
+    was_complete = True
+    for file in files:
+        journal = file.with_name(file.name + "-journal")
+        wal = file.with_name(file.name + "-wal")
+        if journal.exists() or wal.exists():
+            was_complete = False
+        try:
+            rows, file_distro = recover_sqlite(file)
+        except sqlite3.Error as err:
+            msg = f"{file}: cannot recover: {err}"
+            raise BagError(msg) from None
+        distro = distro or file_distro
+        live = [r for r in rows if r.count]
+        for r in rows:
+            counts[r.name] = counts.get(r.name, 0) + r.count
+            if r.name not in topics:
+                try:
+                    qos = parse_qos_profiles(r.qos)
+                except ValueError:
+                    qos = ()
+                topics[r.name] = TopicMetadata(
+                    name=r.name,
+                    msgtype=r.msgtype,
+                    serialization_format=r.serialization_format,
+                    offered_qos_profiles=qos,
+                    type_description_hash=r.type_hash,
+                )
+        if live:
+            start, end = min(r.start_ns for r in live), max(r.end_ns for r in live)
+            starts.append(start)
+            ends.append(end)
+            infos.append(_file_info(file.name, start, end, sum(r.count for r in live)))
+        else:
+            infos.append(_file_info(file.name, 0, 0, 0))
+    report = _finish(
+        bag=bag,
+        storage="sqlite3",
+        files=files,
+        topics=topics,
+        counts=counts,
+        infos=infos,
+        starts=starts,
+        ends=ends,
+        distro=distro,
+        previous=previous,
+        was_complete=was_complete,
+        dropped=0,
+    )
+    for file in files:  # keep the metadata table in step with metadata.yaml, as rosbag2 does on close
+        try:
+            db = sqlite3.connect(file, isolation_level=None)
+            try:
+                db.execute(
+                    "INSERT INTO metadata (metadata_version, metadata) VALUES (?, ?)",
+                    (report.metadata.version, render_metadata(report.metadata, root=False)),
+                )
+            finally:
+                db.close()
+        except sqlite3.Error as err:
+            _log.info("%s: metadata table not updated: %s", file, err)
+    return report
+
+
+def _finish(
+    *,
+    bag: Path,
+    storage: str,
+    files: list[Path],
+    topics: dict[str, TopicMetadata],
+    counts: dict[str, int],
+    infos: list[FileInformation],
+    starts: list[int],
+    ends: list[int],
+    distro: str,
+    previous: BagMetadata | None,
+    was_complete: bool,
+    dropped: int,
+) -> RecoveryReport:
+    profile = distro_profile(_distro(distro))
+    version = previous.version if previous and previous.version >= 8 else profile.metadata_version
+    start = min(starts) if starts else 0
+    end = max(ends) if ends else 0
+    total = sum(counts.values())
+    full_topics = tuple(
+        TopicMetadata(
+            name=t.name,
+            msgtype=t.msgtype,
+            serialization_format=t.serialization_format,
+            offered_qos_profiles=t.offered_qos_profiles,
+            type_description_hash=t.type_description_hash,
+            message_count=counts.get(t.name, 0),
+        )
+        for t in topics.values()
+    )
+    meta = BagMetadata(
+        version=version,
+        storage_identifier=storage,
+        relative_file_paths=tuple(f.name for f in files),
+        starting_time_ns=start,
+        duration_ns=end - start,
+        message_count=total,
+        topics=full_topics,
+        files=tuple(infos),
+        custom_data=previous.custom_data if previous else (),
+        ros_distro=profile.name,
+    )
+    try:
+        write_metadata(bag, meta)
+    except OSError as err:
+        msg = f"{bag}: cannot write {METADATA_FILE}: {err.strerror}"
+        raise BagError(msg) from None
+    return RecoveryReport(
+        path=bag,
+        storage=storage,
+        files=tuple(f.name for f in files),
+        message_count=total,
+        topic_counts=tuple((t.name, t.message_count) for t in full_topics),
+        was_complete=was_complete,
+        dropped_bytes=dropped,
+        metadata=meta,
+    )
