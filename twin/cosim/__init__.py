@@ -5,7 +5,7 @@ that imports fmpy.
 """
 
 from twin.cosim.build import build_all, build_fmu, resolve_fmu
-from twin.cosim.contract import Binding, FmuMapping, Profile, RoleBinding, bind, check_contract, load_mapping
+from twin.cosim.contract import Binding, FmuMapping, Profile, RoleBinding, RoleMap, bind, check_contract, load_mapping
 from twin.cosim.fmu import FmuFile, FmuInfo, Stepper, read_fmu_info
 
 __all__ = [
@@ -15,6 +15,7 @@ __all__ = [
     "FmuMapping",
     "Profile",
     "RoleBinding",
+    "RoleMap",
     "Stepper",
     "bind",
     "build_all",

@@ -43,6 +43,7 @@ __all__ = [
     "FmuSourceSpec",
     "build_all",
     "build_fmu",
+    "build_shim",
     "builtin_variants",
     "cache_dir",
     "load_source_spec",
@@ -218,6 +219,35 @@ def build_fmu(model_dir: Path, variant: str, *, fmi_version: FmiVersion = 2, for
             zf.write(library, f"binaries/{platform_dir}/{variant}.so")
         os.replace(staged, target)
     return BuiltFmu(variant=variant, fmi_version=fmi_version, path=target, rebuilt=True)
+
+
+def build_shim() -> Path:
+    """Build (or reuse) the stepping shim `fmus/common/step_shim.c` as a shared library in the cache.
+
+    Raises:
+        FmuError: If no C compiler is found or compilation fails.
+    """
+    source = FMUS_DIR / "common" / "step_shim.c"
+    compiler = _compiler("step shim")
+    digest = _digest([source], compiler, "step_shim", 0)
+    target = cache_dir() / "fmus" / f"step_shim-{digest[:16]}.so"
+    if target.is_file():
+        return target
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="twin-shim-", dir=target.parent) as tmp_text:
+        staged = Path(tmp_text) / "step_shim.so"
+        cmd = [compiler[0], *CFLAGS, str(source), "-o", str(staged)]
+        try:
+            result = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
+        except OSError as err:
+            msg = f"cannot build the step shim: {compiler[0]} did not run ({err.strerror})"
+            raise FmuError(msg) from None
+        if result.returncode != 0:
+            first = (result.stderr.strip().splitlines() or ["?"])[0]
+            msg = f"cannot build the step shim: {first}"
+            raise FmuError(msg)
+        os.replace(staged, target)
+    return target
 
 
 # --- inputs and hashing ------------------------------------------------------------------------

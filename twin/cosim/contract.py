@@ -40,6 +40,7 @@ __all__ = [
     "FmuMapping",
     "Profile",
     "RoleBinding",
+    "RoleMap",
     "RoleReport",
     "RoleSpec",
     "bind",
@@ -99,22 +100,36 @@ class RoleBinding:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class RoleMap:
+    """Role → variable (a name, or a name and unit); a role left out binds to the variable of its name."""
+
+    voltage: RoleBinding | str | None = None
+    speed_setpoint: RoleBinding | str | None = None
+    load_torque: RoleBinding | str | None = None
+    wheel_speed: RoleBinding | str | None = None
+    wheel_angle: RoleBinding | str | None = None
+    current: RoleBinding | str | None = None
+    motor_torque: RoleBinding | str | None = None
+    applied_voltage: RoleBinding | str | None = None
+
+    def given(self) -> tuple[str, ...]:
+        """The roles this map names."""
+        return tuple(r for r in ROLES if getattr(self, r) is not None)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class FmuMapping:
     """How an FMU's variables meet the contract; written inline in a drive or in a mapping file."""
 
-    roles: Mapping[str, RoleBinding | str] = field(default_factory=lambda: MappingProxyType({}))
+    roles: RoleMap = field(default_factory=RoleMap)
     parameters: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
     start_values: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
-    def __post_init__(self) -> None:
-        unknown = [r for r in self.roles if r not in ROLES]
-        if unknown:
-            msg = f"unknown role {unknown[0]!r}{suggest(unknown[0], list(ROLES))}"
-            raise ValueError(msg)
-
     def binding(self, role: str) -> RoleBinding:
         """The binding for `role` (by the role's own name when the mapping has none)."""
-        value = self.roles.get(role, role)
+        value = getattr(self.roles, role)
+        if value is None:
+            return RoleBinding(name=role)
         return RoleBinding(name=value) if isinstance(value, str) else value
 
     def start(self) -> dict[str, float]:
@@ -208,7 +223,7 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
         problem: str | None = None
         unit_name = bind_to.unit
         if var is None:
-            hint = suggest(bind_to.name, list(info.variables)) if role in mapping.roles else ""
+            hint = suggest(bind_to.name, list(info.variables)) if role in mapping.roles.given() else ""
             problem = f"no variable {bind_to.name!r}{hint if hint.startswith('; did') else ''}"
         else:
             unit_name = bind_to.unit or var.unit

@@ -34,7 +34,7 @@ from fmpy.model_description import read_model_description
 from twin.core.errors import FmuError
 from twin.cosim.units import Unit
 
-__all__ = ["Api", "FmuFile", "FmuInfo", "Stepper", "VariableInfo", "read_fmu_info"]
+__all__ = ["Api", "FmuFile", "FmuInfo", "StepGroup", "Stepper", "VariableInfo", "read_fmu_info"]
 
 _log = logging.getLogger(__name__)
 
@@ -150,21 +150,103 @@ class Stepper(Protocol):
         """Terminate and free the instance (idempotent)."""
 
 
+class _Slot(ctypes.Structure):
+    """One instance for the stepping shim (`TwinSlot` in fmus/common/step_shim.c)."""
+
+    _fields_ = (
+        ("fmi_version", ctypes.c_int),
+        ("instance", ctypes.c_void_p),
+        ("set", ctypes.c_void_p),
+        ("get", ctypes.c_void_p),
+        ("step", ctypes.c_void_p),
+        ("in_vr", ctypes.c_void_p),
+        ("n_in", ctypes.c_size_t),
+        ("inputs", ctypes.c_void_p),
+        ("out_vr", ctypes.c_void_p),
+        ("n_out", ctypes.c_size_t),
+        ("outputs", ctypes.c_void_p),
+        ("status", ctypes.c_int * 3),
+        ("terminate", ctypes.c_int),
+    )
+
+
+class StepGroup:
+    """Steps several instances with one call per communication step.
+
+    With the low-level API the calls go through a small compiled shim (one C call sets the inputs,
+    steps and reads the outputs of every instance); with the convenience API, or when the shim
+    cannot be built, the instances are stepped one after the other from Python.
+    """
+
+    def __init__(self, steppers: Sequence[Stepper]) -> None:
+        """Group `steppers` (all created by this module) in stepping order."""
+        self._steppers = tuple(steppers)
+        self._shim: Any = None
+        adapters = [s for s in self._steppers if isinstance(s, _Base) and s.slot_fields() is not None]
+        if len(adapters) == len(self._steppers) and adapters:
+            from twin.cosim.build import build_shim
+
+            try:
+                library = ctypes.CDLL(str(build_shim()))
+            except (FmuError, OSError) as err:
+                _log.warning("stepping FMUs from Python: %s", err)
+            else:
+                self._slots = (_Slot * len(adapters))()
+                for slot, adapter in zip(self._slots, adapters, strict=True):
+                    for name, value in (adapter.slot_fields() or {}).items():
+                        setattr(slot, name, value)
+                shim = library.twin_step_slots
+                shim.argtypes = (ctypes.POINTER(_Slot), ctypes.c_int, ctypes.c_double, ctypes.c_double)
+                shim.restype = ctypes.c_int
+                self._shim = shim
+                self._n = len(adapters)
+                self._h = adapters[0].step_s
+                self._library = library
+        self.step = self._step_shim if self._shim is not None else self._step_each  # type: ignore[method-assign]
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the shim steps the group."""
+        return self._shim is not None
+
+    def step(self, t_s: float) -> None:
+        """Step every instance from `t_s` by its communication step."""
+
+    def _step_each(self, t_s: float) -> None:
+        for stepper in self._steppers:
+            stepper.step(t_s)
+
+    def _step_shim(self, t_s: float) -> None:
+        failed = self._shim(self._slots, self._n, t_s, self._h)
+        if failed >= 0:
+            slot = self._slots[failed]
+            adapter = self._steppers[failed]
+            assert isinstance(adapter, _Base)
+            adapter.fail_slot(tuple(slot.status), bool(slot.terminate), t_s)
+
+
 class _Messages:
     """Keeps an instance's last log messages for error reports and forwards them to logging."""
 
     def __init__(self, label: str) -> None:
         self.label = label
-        self.recent: collections.deque[str] = collections.deque(maxlen=4)
+        self.recent: collections.deque[str] = collections.deque(maxlen=8)
+        self._unread = 0
 
     def add(self, status: int, category: str, message: str) -> None:
         text = message.strip()
         self.recent.append(text)
+        self._unread = min(self._unread + 1, len(self.recent))
         level = logging.WARNING if status >= 1 else logging.DEBUG
         _log.log(level, "%s: [%s] %s", self.label, category, text)
 
     def last(self) -> str:
-        return self.recent[-1] if self.recent else ""
+        """The first message since the last call: the one the failing call logged."""
+        if not self._unread:
+            return ""
+        text = self.recent[-self._unread]
+        self._unread = 0
+        return text
 
 
 def _decode(value: bytes | None) -> str:
@@ -288,6 +370,7 @@ class _Base:
         api: Api,
     ) -> None:
         self.name = label
+        self.step_s = float(step_s)
         self._fmu = fmu
         self._messages = messages
         self._h = float(step_s)
@@ -306,6 +389,51 @@ class _Base:
         detail = self._messages.last()
         msg = f"{self.name} failed at t = {t_s:.6f} s: {function} returned {text}" + (f" ({detail})" if detail else "")
         raise FmuError(msg)
+
+    step_s: float = 0.0
+    _version: int = 0
+    # Set by the adapters' `initialize`.
+    _c_ptr: ctypes.c_void_p
+    _set: Any
+    _get: Any
+    _do: Any
+    _in_refs: Any
+    _out_refs: Any
+    _n_in: int
+    _n_out: int
+
+    def step(self, t_s: float) -> None:
+        raise NotImplementedError
+
+    def read_outputs(self) -> None:
+        raise NotImplementedError
+
+    _FUNCTIONS: tuple[str, str, str] = ("set", "doStep", "get")
+
+    def slot_fields(self) -> dict[str, Any] | None:
+        """The values of a `_Slot` for this instance, or None on the convenience API."""
+        if self._api != "lowlevel":
+            return None
+        return {
+            "fmi_version": self._version,
+            "instance": self._c_ptr.value,
+            "set": ctypes.cast(self._set, ctypes.c_void_p).value,
+            "get": ctypes.cast(self._get, ctypes.c_void_p).value,
+            "step": ctypes.cast(self._do, ctypes.c_void_p).value,
+            "in_vr": ctypes.addressof(self._in_refs),
+            "n_in": self._n_in,
+            "inputs": ctypes.addressof(self.inputs),
+            "out_vr": ctypes.addressof(self._out_refs),
+            "n_out": self._n_out,
+            "outputs": ctypes.addressof(self.outputs),
+        }
+
+    def fail_slot(self, statuses: tuple[int, ...], terminate: bool, t_s: float) -> None:
+        """Raise for what the shim reported."""
+        if terminate and max(statuses) <= 1:
+            self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+            statuses = (statuses[0], 3, statuses[2])
+        self._raise_first(self._FUNCTIONS, statuses, t_s)
 
     def _raise_first(self, functions: tuple[str, ...], statuses: tuple[int, ...], t_s: float) -> None:
         for function, status in zip(functions, statuses, strict=True):
@@ -357,6 +485,9 @@ class _Base:
 
 class _Fmi2(_Base):
     """FMI 2.0 Co-Simulation adapter."""
+
+    _version = 2
+    _FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         fmu = self._fmu
@@ -455,6 +586,9 @@ class _Fmi2(_Base):
 class _Fmi3(_Base):
     """FMI 3.0 Co-Simulation adapter."""
 
+    _version = 3
+    _FUNCTIONS = ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")
+
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         fmu = self._fmu
         messages = self._messages
@@ -547,7 +681,7 @@ class _Fmi3(_Base):
         get_status = self._get(c, self._out_refs, self._n_out, self.outputs, self._n_out)
         if (set_status | step_status | get_status) > 1 or self._terminate.value:
             if self._terminate.value and step_status <= 1:
-                self._messages.recent.append("the FMU asked to terminate the simulation")
+                self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
                 step_status = 3
             self._raise_first(
                 ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"), (set_status, step_status, get_status), t_s

@@ -122,8 +122,12 @@ def verify_speed_pi(motor: MotorConstants, *, kp: float, ki: float, step_s: floa
     loop = pi * plant * delay
     gm, pm, _, wcp = control.margin(loop)
     closed = control.feedback(pi * plant, 1.0)
-    info = control.step_info(closed)
     bandwidth = float(control.bandwidth(closed))
+    horizon = np.linspace(0.0, 20.0 / bandwidth, 2000) if bandwidth > 0 and np.isfinite(bandwidth) else None
+    try:
+        info = control.step_info(control.step_response(closed, T=horizon))
+    except (IndexError, ValueError):  # no 10 %-90 % crossing inside the horizon
+        info = {"RiseTime": math.nan, "Overshoot": math.nan}
     return SpeedLoop(
         kp_v_per_radps=kp,
         ki_v_per_rad=ki,
@@ -134,3 +138,27 @@ def verify_speed_pi(motor: MotorConstants, *, kp: float, ki: float, step_s: floa
         rise_time_s=float(info["RiseTime"]),
         overshoot_pct=float(info["Overshoot"]),
     )
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class StepComparison:
+    """An FMU's no-load voltage step response next to the linear model's (python-control)."""
+
+    t_s: np.ndarray
+    fmu_speed_radps: np.ndarray
+    model_speed_radps: np.ndarray
+    current_a: np.ndarray  # NaN when the FMU has no current output
+    voltage_v: float
+    step_s: float
+
+    @property
+    def rms_relative(self) -> float:
+        """RMS of the difference divided by the model's final speed."""
+        diff = self.fmu_speed_radps - self.model_speed_radps
+        return float(np.sqrt(np.mean(diff * diff)) / abs(self.model_speed_radps[-1]))
+
+
+def linear_step_response(motor: MotorConstants, *, voltage_v: float, t_s: np.ndarray) -> np.ndarray:
+    """Wheel speed of the linear model after a voltage step at t = 0, at the times `t_s`."""
+    response = control.forced_response(motor_transfer_function(motor), T=t_s, U=np.full_like(t_s, voltage_v), X0=0.0)
+    return np.asarray(response.outputs, dtype=np.float64)

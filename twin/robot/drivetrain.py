@@ -25,7 +25,7 @@ from typing import Literal, NamedTuple, Protocol, Self
 from twin.core.errors import ConfigError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
-from twin.cosim.fmu import Api, FmuFile, FmuInfo, Stepper
+from twin.cosim.fmu import Api, FmuFile, FmuInfo, StepGroup, Stepper
 from twin.robot.chassis import Chassis, ChassisParams, ChassisState, ContactFn, SlipModel
 from twin.robot.drive_control import MotorConstants, SpeedLoop, design_speed_pi
 
@@ -37,6 +37,7 @@ __all__ = [
     "MotorModel",
     "SpeedLoopTargets",
     "WheelState",
+    "motor_constants",
     "wheel_setpoints",
 ]
 
@@ -121,7 +122,8 @@ class FmuDrive:
     """Drive section `type: fmu`: wheels stepped as FMUs (one instance per wheel)."""
 
     type: Literal["fmu"] = "fmu"
-    fmu: str = "builtin:xm430_w210"  # builtin:NAME or a path to a .fmu (relative to the scenario)
+    fmu: str = "builtin:xm430_w210"  # a built-in (builtin:NAME), used when `fmu_file` is null
+    fmu_file: Path | None = None  # a .fmu file (relative to the scenario); overrides `fmu`
     fmi_version: Literal[2, 3] = 2  # for built-ins
     profile: Literal["voltage", "velocity-servo"] = "voltage"
     mapping: FmuMapping | Path = field(default_factory=FmuMapping)  # inline, or a mapping file
@@ -132,7 +134,14 @@ class FmuDrive:
     limits: CommandLimits = field(default_factory=CommandLimits)
     slip: SlipModel = field(default_factory=SlipModel)
     api: Literal["lowlevel", "convenience"] = "lowlevel"
-    base_dir: Path | None = None  # where a relative `fmu` path resolves; null: the working directory
+
+    def __post_init__(self) -> None:
+        if self.fmu_file is None and not self.fmu.startswith("builtin:"):
+            msg = f"fmu: {self.fmu!r} is not builtin:NAME; give a file as fmu_file"
+            raise ValueError(msg)
+        if self.communication_step_s is not None and not self.communication_step_s > 0.0:
+            msg = f"communication_step_s must be positive, got {self.communication_step_s}"
+            raise ValueError(msg)
 
     def resolved_mapping(self) -> FmuMapping:
         """The mapping, read from its file if it is a path.
@@ -164,7 +173,12 @@ def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits
 _OUTPUT_ORDER = ("wheel_speed", "wheel_angle", "current", "motor_torque", "applied_voltage")
 
 
-def _motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]) -> MotorConstants:
+def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]) -> MotorConstants:
+    """Resolve a motor model against an FMU: numbers as given, names from the start values or the FMU.
+
+    Raises:
+        ConfigError: If a named parameter is missing or the constants are not physical.
+    """
     values: dict[str, float] = {}
     for name in MotorModel.__dataclass_fields__:
         ref = getattr(model, name)
@@ -230,7 +244,7 @@ class FmuDrivetrain:
         self.drive = drive
         self.params = chassis
         self.profile = Profile(drive.profile)
-        path = resolve_fmu(drive.fmu, fmi_version=drive.fmi_version, base_dir=drive.base_dir)
+        path = resolve_fmu(drive.fmu_file or drive.fmu, fmi_version=drive.fmi_version)
         self._file = FmuFile(path)
         try:
             self._setup(drive, chassis, pose, contact)
@@ -249,7 +263,7 @@ class FmuDrivetrain:
         self.speed_loop: SpeedLoop | None = None
         if drive.motor is not None and (self.profile is Profile.VOLTAGE or drive.wheel_inertia_kgm2 is None):
             try:
-                self.motor = _motor_constants(drive.motor, info, binding.start)
+                self.motor = motor_constants(drive.motor, info, binding.start)
             except ConfigError:
                 if self.profile is Profile.VOLTAGE:
                     raise
@@ -280,6 +294,7 @@ class FmuDrivetrain:
         self._right: Stepper = self._file.instantiate(
             "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
         )
+        self._group = StepGroup((self._left, self._right))
         self.chassis = Chassis(
             chassis, step_s=self._h, wheel_inertia_kgm2=wheel_inertia, pose=pose, contact=contact, slip=drive.slip
         )
@@ -379,8 +394,7 @@ class FmuDrivetrain:
         inputs = right.inputs
         inputs[0] = (cmd_right - co) * cs
         inputs[1] = (chassis.load_right_nm - lo) * ls
-        left.step(t_s)
-        right.step(t_s)
+        self._group.step(t_s)
         self._k += 1
         sf, so = self._speed_factor, self._speed_offset
         w_left = sf * left.outputs[0] + so
