@@ -52,3 +52,12 @@ int twin_step_slots(TwinSlot *slots, int n, double t, double h) {
     }
     return -1;
 }
+
+/* Step every slot from t = *step_index * h by h and count the step; the hot path of twin's loop,
+ * called with prebuilt arguments only. Returns as twin_step_slots; *step_index is not advanced on a
+ * failure, so the failing step's start time is *step_index * h. */
+int twin_step_next(TwinSlot *slots, int n, long long *step_index, const double *h) {
+    const int failed = twin_step_slots(slots, n, (double)*step_index * *h, *h);
+    if (failed < 0) ++*step_index;
+    return failed;
+}

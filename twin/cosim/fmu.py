@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import collections
 import ctypes
+import functools
 import logging
 import shutil
 import zipfile
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType, TracebackType
@@ -171,17 +172,23 @@ class _Slot(ctypes.Structure):
 
 
 class StepGroup:
-    """Steps several instances with one call per communication step.
+    """Steps several instances together, one communication step at a time.
 
-    With the low-level API the calls go through a small compiled shim (one C call sets the inputs,
-    steps and reads the outputs of every instance); with the convenience API, or when the shim
+    With the low-level API a small compiled shim (fmus/common/step_shim.c) sets the inputs, steps and
+    reads the outputs of every instance in one C call; with the convenience API, or when the shim
     cannot be built, the instances are stepped one after the other from Python.
+
+    The hot path is `step_next()`: it steps from `index * step_s` and counts the step, and returns -1,
+    or the position of the instance that failed (then call `raise_failure`). Step loops bind it once.
     """
 
-    def __init__(self, steppers: Sequence[Stepper]) -> None:
-        """Group `steppers` (all created by this module) in stepping order."""
+    def __init__(self, steppers: Sequence[Stepper], *, step_s: float, start_index: int = 0) -> None:
+        """Group `steppers` (all created by this module, with communication step `step_s`)."""
         self._steppers = tuple(steppers)
+        self._h = step_s
+        self._index = ctypes.c_longlong(start_index)
         self._shim: Any = None
+        self.step_next: Callable[[], int] = self._step_next_each
         adapters = [s for s in self._steppers if isinstance(s, _Base) and s.slot_fields() is not None]
         if len(adapters) == len(self._steppers) and adapters:
             from twin.cosim.build import build_shim
@@ -191,38 +198,52 @@ class StepGroup:
             except (FmuError, OSError) as err:
                 _log.warning("stepping FMUs from Python: %s", err)
             else:
+                self._library = library
                 self._slots = (_Slot * len(adapters))()
                 for slot, adapter in zip(self._slots, adapters, strict=True):
                     for name, value in (adapter.slot_fields() or {}).items():
                         setattr(slot, name, value)
-                shim = library.twin_step_slots
-                shim.argtypes = (ctypes.POINTER(_Slot), ctypes.c_int, ctypes.c_double, ctypes.c_double)
-                shim.restype = ctypes.c_int
+                self._h_c = ctypes.c_double(step_s)
+                shim = library.twin_step_next
+                shim.restype = ctypes.c_int  # no argtypes: every argument is prebuilt below
                 self._shim = shim
-                self._n = len(adapters)
-                self._h = adapters[0].step_s
-                self._library = library
-        self.step = self._step_shim if self._shim is not None else self._step_each  # type: ignore[method-assign]
+                self.step_next = functools.partial(
+                    shim, self._slots, len(adapters), ctypes.byref(self._index), ctypes.byref(self._h_c)
+                )
 
     @property
     def compiled(self) -> bool:
-        """Whether the shim steps the group."""
+        """Whether the compiled shim steps the group."""
         return self._shim is not None
 
-    def step(self, t_s: float) -> None:
-        """Step every instance from `t_s` by its communication step."""
+    @property
+    def index(self) -> int:
+        """Communication steps taken so far."""
+        return int(self._index.value)
 
-    def _step_each(self, t_s: float) -> None:
-        for stepper in self._steppers:
-            stepper.step(t_s)
+    def step(self) -> None:
+        """Take one communication step (not the hot path: it checks and raises itself).
 
-    def _step_shim(self, t_s: float) -> None:
-        failed = self._shim(self._slots, self._n, t_s, self._h)
+        Raises:
+            FmuError: If an instance fails.
+        """
+        failed = self.step_next()
         if failed >= 0:
-            slot = self._slots[failed]
-            adapter = self._steppers[failed]
-            assert isinstance(adapter, _Base)
-            adapter.fail_slot(tuple(slot.status), bool(slot.terminate), t_s)
+            self.raise_failure(failed)
+
+    def _step_next_each(self) -> int:
+        t_s = self._index.value * self._h
+        for stepper in self._steppers:
+            stepper.step(t_s)  # raises itself
+        self._index.value += 1
+        return -1
+
+    def raise_failure(self, failed: int) -> None:
+        """Raise the FmuError for the instance at position `failed` after `step_next` reported it."""
+        slot = self._slots[failed]
+        adapter = self._steppers[failed]
+        assert isinstance(adapter, _Base)
+        adapter.fail_slot(tuple(slot.status), bool(slot.terminate), self._index.value * self._h)
 
 
 class _Messages:
@@ -338,7 +359,8 @@ class FmuFile:
             else:
                 fmu = fmpy.fmi3.FMU3Slave(**kwargs)
         except Exception as err:
-            msg = f"{label}: cannot load the binary for {fmpy.platform}: {err}"
+            platform = fmpy.platform if self.info.major_version == 2 else fmpy.platform_tuple
+            msg = f"{label}: cannot load the binary for {platform}: {err}"
             raise FmuError(msg) from None
         stepper: _Base
         try:

@@ -9,7 +9,8 @@ Load torques (wheel side, per wheel) for the next step are
   mode's next acceleration is predicted from the drive torque estimated from the last step, with
   the wheels' own inertia `wheel_inertia_kgm2` (J_w): α = d / (J_w + M), τ = M α. This stays
   stable whatever the ratio M / J_w, and is exact for a steady drive torque when J_w is right.
-- rolling resistance: c_rr m g / 2 per wheel at the rim, against the wheel's motion (smoothed sign).
+- rolling resistance: c_rr m g / 2 per wheel at the rim, against the wheel's motion (a linear ramp
+  through ±5 mm/s instead of a sign).
 - contact: the loop's callable says whether a pose would penetrate the world. A step whose pose
   would penetrate is refused: if turning alone is free the chassis only turns (translation blocked),
   else it stays. A blocked mode gets a holding torque (the estimated drive torque plus damping), so
@@ -145,6 +146,10 @@ class Chassis:
         self._m_common = m * r * r / 2.0  # per wheel, common (forward) mode
         self._m_diff = 2.0 * params.yaw_inertia_kgm2 * r * r / (b * b)  # per wheel, differential mode
         self._j = max(wheel_inertia_kgm2, 1e-12)
+        self._j_over_h = self._j / step_s
+        # Share of a mode's drive torque the chassis takes: M / (J + M) (see the module docstring).
+        self._k_common = self._m_common / (self._j + self._m_common)
+        self._k_diff = self._m_diff / (self._j + self._m_diff)
         self._roll_nm = params.rolling_resistance * m * params.gravity_mps2 / 2.0 * r
         self._roll_gain = r / _ROLL_SPEED_EPS_MPS
         self._contact = contact
@@ -156,6 +161,7 @@ class Chassis:
         self._block_common = 0.0  # sign of the blocked forward motion, 0 when free
         self._block_diff = 0.0
         self._wl = self._wr = 0.0
+        self.wheel_angle_left_rad = self.wheel_angle_right_rad = 0.0  # integrated wheel speeds
         self.load_left_nm = self.load_right_nm = 0.0
 
     def state(self) -> ChassisState:
@@ -175,16 +181,21 @@ class Chassis:
     def update(self, w_left: float, w_right: float) -> None:
         """Advance one step with the wheels at these speeds (rad/s); set the next load torques."""
         h = self._h
-        scale = 1.0 if self._slip is None else 1.0 - self._slip.at(self.x_m, self.y_m)
-        v = scale * self._half_r * (w_left + w_right)
-        w = scale * self._r_over_b * (w_right - w_left)
-        if self._block_common:
-            v = 0.0
-        if self._block_diff:
-            w = 0.0
+        self.wheel_angle_left_rad += w_left * h
+        self.wheel_angle_right_rad += w_right * h
+        if self._slip is None:
+            scale = 1.0
+            k_common, k_diff = self._k_common, self._k_diff
+        else:
+            scale = 1.0 - self._slip.at(self.x_m, self.y_m)
+            m_common, m_diff = self._m_common * scale * scale, self._m_diff * scale * scale
+            k_common, k_diff = m_common / (self._j + m_common), m_diff / (self._j + m_diff)
+        v = 0.0 if self._block_common else scale * self._half_r * (w_left + w_right)
+        w = 0.0 if self._block_diff else scale * self._r_over_b * (w_right - w_left)
         x, y, yaw = self.x_m, self.y_m, self.yaw_rad
+        vh = v * h
         mid = yaw + 0.5 * w * h
-        nx, ny, nyaw = x + v * h * math.cos(mid), y + v * h * math.sin(mid), yaw + w * h
+        nx, ny, nyaw = x + vh * math.cos(mid), y + vh * math.sin(mid), yaw + w * h
         blocked = False
         contact = self._contact
         if contact is not None and (v or w) and contact(nx, ny, nyaw):
@@ -205,35 +216,29 @@ class Chassis:
         self.yaw_accel_radps2 = (w - self.yaw_rate_radps) / h
         self.ay_mps2 = v * w
         self.v_mps, self.yaw_rate_radps = v, w
-        self.blocked = blocked or bool(self._block_common or self._block_diff)
-        self._loads(w_left, w_right, scale)
 
-    def _loads(self, w_left: float, w_right: float, scale: float) -> None:
-        h, j = self._h, self._j
-        # Drive torque of each wheel, estimated from its acceleration over the last step.
-        d_left = j * (w_left - self._wl) / h + self.load_left_nm
-        d_right = j * (w_right - self._wr) / h + self.load_right_nm
+        # Load torques for the next step. Drive torque of each wheel, estimated from its
+        # acceleration over the last step: J dω/dt = drive - load.
+        j_h = self._j_over_h
+        d_left = j_h * (w_left - self._wl) + self.load_left_nm
+        d_right = j_h * (w_right - self._wr) + self.load_right_nm
         self._wl, self._wr = w_left, w_right
+        # Rolling resistance against the rim speed (a ramp through zero instead of a sign).
         roll, gain = self._roll_nm, self._roll_gain
-        ext_left = roll * math.tanh(w_left * gain)
-        ext_right = roll * math.tanh(w_right * gain)
-        d_common = 0.5 * (d_left + d_right) - 0.5 * (ext_left + ext_right)
-        d_diff = 0.5 * (d_right - d_left) - 0.5 * (ext_right - ext_left)
-        if self._block_common:
-            if d_common * self._block_common < 0.0:  # the drive pulls away from the obstacle
-                self._block_common = 0.0
-            else:
-                t_common = d_common + _HOLD_DAMPING * j * 0.5 * (w_left + w_right) / h
-        if not self._block_common:
-            m = self._m_common * scale * scale
-            t_common = m * d_common / (j + m)
-        if self._block_diff:
-            if d_diff * self._block_diff < 0.0:
-                self._block_diff = 0.0
-            else:
-                t_diff = d_diff + _HOLD_DAMPING * j * 0.5 * (w_right - w_left) / h
-        if not self._block_diff:
-            m = self._m_diff * scale * scale
-            t_diff = m * d_diff / (j + m)
+        a = w_left * gain
+        ext_left = roll * (1.0 if a > 1.0 else (-1.0 if a < -1.0 else a))
+        a = w_right * gain
+        ext_right = roll * (1.0 if a > 1.0 else (-1.0 if a < -1.0 else a))
+        d_common = 0.5 * (d_left + d_right - ext_left - ext_right)
+        d_diff = 0.5 * (d_right - d_left - ext_right + ext_left)
+        block = self._block_common
+        if block and d_common * block < 0.0:  # the drive pulls away from the obstacle
+            block = self._block_common = 0.0
+        t_common = d_common + _HOLD_DAMPING * j_h * 0.5 * (w_left + w_right) if block else k_common * d_common
+        block = self._block_diff
+        if block and d_diff * block < 0.0:
+            block = self._block_diff = 0.0
+        t_diff = d_diff + _HOLD_DAMPING * j_h * 0.5 * (w_right - w_left) if block else k_diff * d_diff
         self.load_left_nm = t_common - t_diff + ext_left
         self.load_right_nm = t_common + t_diff + ext_right
+        self.blocked = blocked or bool(self._block_common or self._block_diff)

@@ -125,7 +125,7 @@ def verify_speed_pi(motor: MotorConstants, *, kp: float, ki: float, step_s: floa
     bandwidth = float(control.bandwidth(closed))
     horizon = np.linspace(0.0, 20.0 / bandwidth, 2000) if bandwidth > 0 and np.isfinite(bandwidth) else None
     try:
-        info = control.step_info(control.step_response(closed, T=horizon))
+        info = control.step_info(closed, T=horizon)
     except (IndexError, ValueError):  # no 10 %-90 % crossing inside the horizon
         info = {"RiseTime": math.nan, "Overshoot": math.nan}
     return SpeedLoop(

@@ -240,7 +240,6 @@ class FmuDrivetrain:
         self._ratio = round(ratio)
         self._pending = 0
         self._h = comm_s
-        self._k = 0  # communication steps taken
         self.drive = drive
         self.params = chassis
         self.profile = Profile(drive.profile)
@@ -294,7 +293,7 @@ class FmuDrivetrain:
         self._right: Stepper = self._file.instantiate(
             "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
         )
-        self._group = StepGroup((self._left, self._right))
+        self._group = StepGroup((self._left, self._right), step_s=self._h)
         self.chassis = Chassis(
             chassis, step_s=self._h, wheel_inertia_kgm2=wheel_inertia, pose=pose, contact=contact, slip=drive.slip
         )
@@ -306,16 +305,15 @@ class FmuDrivetrain:
         self._ref_left = self._ref_right = 0.0
         self._int_left = self._int_right = 0.0
         self._volt_left = self._volt_right = 0.0
-        self._angle_left = self._angle_right = 0.0  # integrated when the FMU has no angle output
         self._w_left = self._speed(self._left)
         self._w_right = self._speed(self._right)
         if self.speed_loop is not None:
             self._kp = self.speed_loop.kp_v_per_radps
             self._ki = self.speed_loop.ki_v_per_rad
             self._v_max = drive.speed_loop.voltage_limit_v
-            self._step = self._step_voltage
+            self._run = self._run_voltage
         else:
-            self._step = self._step_servo
+            self._run = self._run_servo
 
     def _probe(self, binding: Binding) -> float:
         """Estimate the drive's inertia at the wheel from one step under a small load torque."""
@@ -346,7 +344,7 @@ class FmuDrivetrain:
     @property
     def t_ns(self) -> int:
         """Time of the last communication point, ns."""
-        return round(self._k * self._h * 1e9)
+        return round(self._group.index * self._h * 1e9)
 
     def set_cmd_vel(self, v_mps: float, w_radps: float) -> None:
         """Take a body velocity command; the wheels' setpoints follow with the firmware's clamps."""
@@ -361,48 +359,77 @@ class FmuDrivetrain:
         self._pending += n_steps
         count = self._pending // self._ratio
         self._pending -= count * self._ratio
-        step = self._step
-        for _ in range(count):
-            step()
+        if count:
+            self._run(count)
 
-    def _step_voltage(self) -> None:
+    # The two step loops below are the per-step hot path: everything they need is bound to locals
+    # once per batch, and the loop body is straight-line code (one compiled call steps both FMUs).
+
+    def _run_voltage(self, count: int) -> None:
         h, kp, ki, v_max = self._h, self._kp, self._ki, self._v_max
-        left, right, chassis = self._left, self._right, self.chassis
-        # PI per wheel with conditional integration (no wind-up while saturated).
-        e_left = self._ref_left - self._w_left
-        u = kp * e_left + ki * self._int_left
-        v_left = v_max if u > v_max else (-v_max if u < -v_max else u)
-        if v_left == u or (u > 0.0) != (e_left > 0.0):
-            self._int_left += e_left * h
-        e_right = self._ref_right - self._w_right
-        u = kp * e_right + ki * self._int_right
-        v_right = v_max if u > v_max else (-v_max if u < -v_max else u)
-        if v_right == u or (u > 0.0) != (e_right > 0.0):
-            self._int_right += e_right * h
-        self._volt_left, self._volt_right = v_left, v_right
-        self._exchange(v_left, v_right, left, right, chassis)
-
-    def _step_servo(self) -> None:
-        self._exchange(self._ref_left, self._ref_right, self._left, self._right, self.chassis)
-
-    def _exchange(self, cmd_left: float, cmd_right: float, left: Stepper, right: Stepper, chassis: Chassis) -> None:
-        t_s = self._k * self._h
         cs, co, ls, lo = self._cmd_scale, self._cmd_offset, self._load_scale, self._load_offset
-        inputs = left.inputs
-        inputs[0] = (cmd_left - co) * cs
-        inputs[1] = (chassis.load_left_nm - lo) * ls
-        inputs = right.inputs
-        inputs[0] = (cmd_right - co) * cs
-        inputs[1] = (chassis.load_right_nm - lo) * ls
-        self._group.step(t_s)
-        self._k += 1
         sf, so = self._speed_factor, self._speed_offset
-        w_left = sf * left.outputs[0] + so
-        w_right = sf * right.outputs[0] + so
-        self._angle_left += w_left * self._h
-        self._angle_right += w_right * self._h
-        self._w_left, self._w_right = w_left, w_right
-        chassis.update(w_left, w_right)
+        in_left, in_right = self._left.inputs, self._right.inputs
+        out_left, out_right = self._left.outputs, self._right.outputs
+        group = self._group
+        step_next, chassis = group.step_next, self.chassis
+        update = chassis.update
+        ref_left, ref_right = self._ref_left, self._ref_right
+        w_left, w_right = self._w_left, self._w_right
+        int_left, int_right = self._int_left, self._int_right
+        v_left = self._volt_left
+        v_right = self._volt_right
+        try:
+            for _ in range(count):
+                # PI per wheel with conditional integration (no wind-up while saturated).
+                e = ref_left - w_left
+                u = kp * e + ki * int_left
+                v_left = v_max if u > v_max else (-v_max if u < -v_max else u)
+                if v_left == u or (u > 0.0) != (e > 0.0):
+                    int_left += e * h
+                e = ref_right - w_right
+                u = kp * e + ki * int_right
+                v_right = v_max if u > v_max else (-v_max if u < -v_max else u)
+                if v_right == u or (u > 0.0) != (e > 0.0):
+                    int_right += e * h
+                in_left[0] = (v_left - co) * cs
+                in_left[1] = (chassis.load_left_nm - lo) * ls
+                in_right[0] = (v_right - co) * cs
+                in_right[1] = (chassis.load_right_nm - lo) * ls
+                failed = step_next()
+                if failed >= 0:
+                    group.raise_failure(failed)
+                w_left = sf * out_left[0] + so
+                w_right = sf * out_right[0] + so
+                update(w_left, w_right)
+        finally:
+            self._w_left, self._w_right = w_left, w_right
+            self._int_left, self._int_right = int_left, int_right
+            self._volt_left, self._volt_right = v_left, v_right
+
+    def _run_servo(self, count: int) -> None:
+        cs, co, ls, lo = self._cmd_scale, self._cmd_offset, self._load_scale, self._load_offset
+        sf, so = self._speed_factor, self._speed_offset
+        in_left, in_right = self._left.inputs, self._right.inputs
+        out_left, out_right = self._left.outputs, self._right.outputs
+        group = self._group
+        step_next, chassis = group.step_next, self.chassis
+        update = chassis.update
+        in_left[0] = (self._ref_left - co) * cs
+        in_right[0] = (self._ref_right - co) * cs
+        w_left, w_right = self._w_left, self._w_right
+        try:
+            for _ in range(count):
+                in_left[1] = (chassis.load_left_nm - lo) * ls
+                in_right[1] = (chassis.load_right_nm - lo) * ls
+                failed = step_next()
+                if failed >= 0:
+                    group.raise_failure(failed)
+                w_left = sf * out_left[0] + so
+                w_right = sf * out_right[0] + so
+                update(w_left, w_right)
+        finally:
+            self._w_left, self._w_right = w_left, w_right
 
     def chassis_state(self) -> ChassisState:
         """Pose, rates and accelerations of the chassis now."""
@@ -426,7 +453,9 @@ class FmuDrivetrain:
         else:
             volts = self._signal("applied_voltage", nan, nan)
         return WheelState(
-            angle_rad=self._signal("wheel_angle", self._angle_left, self._angle_right),
+            angle_rad=self._signal(
+                "wheel_angle", self.chassis.wheel_angle_left_rad, self.chassis.wheel_angle_right_rad
+            ),
             speed_radps=(self._w_left, self._w_right),
             effort_nm=self._signal("motor_torque", nan, nan),
             voltage_v=volts,

@@ -65,6 +65,8 @@ def test_pi_design_meets_its_targets_by_python_control() -> None:
     assert loop is not None and motor is not None and info_path.exists()
     assert loop.phase_margin_deg == pytest.approx(60.0, abs=1.0)
     assert loop.crossover_hz == pytest.approx(15.0, rel=0.02)
+    assert loop.gain_margin_db > 6.0
+    assert 0.0 < loop.rise_time_s < 0.05  # closed-loop step, python-control's step_info
     # Independent check of the plant: its DC gain is the no-load speed per volt.
     assert control.dcgain(motor_transfer_function(motor)) * 12.0 == pytest.approx(77.0 * RPM, rel=0.01)
 
