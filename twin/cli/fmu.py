@@ -187,7 +187,7 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _step_response(args: argparse.Namespace) -> int:
-    from twin.robot.step_response import fmu_step_response
+    from twin.robot.drivetrain import fmu_step_response
 
     path = resolve_fmu(args.fmu, fmi_version=args.fmi)
     comparison, motor = fmu_step_response(

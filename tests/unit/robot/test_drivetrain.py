@@ -15,8 +15,14 @@ from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import load_mapping
 from twin.robot.chassis import ChassisParams
 from twin.robot.drive_control import MotorConstants, design_speed_pi, motor_transfer_function
-from twin.robot.drivetrain import CommandLimits, FmuDrive, FmuDrivetrain, MotorModel, wheel_setpoints
-from twin.robot.step_response import fmu_step_response
+from twin.robot.drivetrain import (
+    CommandLimits,
+    FmuDrive,
+    FmuDrivetrain,
+    MotorModel,
+    fmu_step_response,
+    wheel_setpoints,
+)
 
 REPO = Path(__file__).resolve().parents[3]
 RPM = 2 * math.pi / 60
@@ -188,3 +194,18 @@ def test_coarser_communication_step_advances_the_same_time() -> None:
             dt.advance(3)
         assert dt.t_ns == 1200 * MS
         assert dt.chassis_state().v_mps == pytest.approx(0.2, rel=0.01)
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_compiled_and_python_stepping_give_the_same_run(fmi_version: int) -> None:
+    runs = []
+    for api in ("lowlevel", "convenience"):
+        drive = FmuDrive(fmi_version=fmi_version, api=api)  # type: ignore[arg-type]
+        with FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS) as dt:
+            assert dt._group.compiled == (api == "lowlevel")
+            dt.set_cmd_vel(0.1, 0.4)
+            for _ in range(100):
+                dt.advance(5)
+            runs.append((dt.chassis_state(), dt.wheel_state(), dt.t_ns))
+    assert runs[0] == runs[1]
+    assert runs[0][2] == 500 * MS
