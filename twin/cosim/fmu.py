@@ -481,6 +481,25 @@ class _Base:
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         raise NotImplementedError
 
+    def _call(self, function: str, t_s: float, action: Any) -> None:
+        try:
+            action()
+        except fmpy.fmi1.FMICallException as err:
+            self.fail(function, int(err.status), t_s)
+
+    def _step_convenience(self, t_s: float) -> None:
+        """The same step through FMPy's wrappers (list building and checks in Python on every call)."""
+        fmu = self._fmu
+        setter, getter = (fmu.setReal, fmu.getReal) if self._version == 2 else (fmu.setFloat64, fmu.getFloat64)
+        try:
+            setter(self._in_vr, list(self.inputs)[: self._n_in])
+            fmu.doStep(t_s, self._h)
+            values = getter(self._out_vr)
+        except fmpy.fmi1.FMICallException as err:
+            self.fail(err.function, int(err.status), t_s)
+        for k, value in enumerate(values):
+            self.outputs[k] = value
+
     def close(self) -> None:
         if not self._open:
             return
@@ -560,12 +579,6 @@ class _Fmi2(_Base):
             self.step = self._step_convenience  # type: ignore[method-assign]
         self.read_outputs()
 
-    def _call(self, function: str, t_s: float, action: Any) -> None:
-        try:
-            action()
-        except fmpy.fmi1.FMICallException as err:
-            self.fail(function, int(err.status), t_s)
-
     def _set_one(self, var: VariableInfo, value: float) -> None:
         fmu = self._fmu
         vr = [var.value_reference]
@@ -587,17 +600,6 @@ class _Fmi2(_Base):
         get_status = self._get(c, self._out_refs, self._n_out, self.outputs)
         if (set_status | step_status | get_status) > 1:
             self._raise_first(("fmi2SetReal", "fmi2DoStep", "fmi2GetReal"), (set_status, step_status, get_status), t_s)
-
-    def _step_convenience(self, t_s: float) -> None:
-        fmu = self._fmu
-        try:
-            fmu.setReal(self._in_vr, list(self.inputs)[: self._n_in])
-            fmu.doStep(t_s, self._h)
-            values = fmu.getReal(self._out_vr)
-        except fmpy.fmi1.FMICallException as err:
-            self.fail(err.function, int(err.status), t_s)
-        for k, value in enumerate(values):
-            self.outputs[k] = value
 
     def read_outputs(self) -> None:
         status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs)
@@ -662,12 +664,6 @@ class _Fmi3(_Base):
             self.step = self._step_convenience  # type: ignore[method-assign]
         self.read_outputs()
 
-    def _call(self, function: str, t_s: float, action: Any) -> None:
-        try:
-            action()
-        except fmpy.fmi1.FMICallException as err:
-            self.fail(function, int(err.status), t_s)
-
     _SETTERS: Mapping[str, tuple[str, type]] = MappingProxyType(
         {
             "Float64": ("setFloat64", float),
@@ -708,17 +704,6 @@ class _Fmi3(_Base):
             self._raise_first(
                 ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"), (set_status, step_status, get_status), t_s
             )
-
-    def _step_convenience(self, t_s: float) -> None:
-        fmu = self._fmu
-        try:
-            fmu.setFloat64(self._in_vr, list(self.inputs)[: self._n_in])
-            fmu.doStep(t_s, self._h)
-            values = fmu.getFloat64(self._out_vr)
-        except fmpy.fmi1.FMICallException as err:
-            self.fail(err.function, int(err.status), t_s)
-        for k, value in enumerate(values):
-            self.outputs[k] = value
 
     def read_outputs(self) -> None:
         status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs, self._n_out)

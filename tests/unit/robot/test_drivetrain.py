@@ -29,6 +29,17 @@ RPM = 2 * math.pi / 60
 # Datasheet at 12 V (TB3_FACTS.md §3.1): no-load speed, stall current.
 DATASHEET = {"xm430_w210": (77.0 * RPM, 2.3), "xl430_w250": (61.0 * RPM, 1.4)}
 MS = 1_000_000
+# The stand-in vendor FMU's linear model, by its own parameter names (it has no inductance).
+ACME_MOTOR = MotorModel(
+    resistance_ohm="Rw",
+    inductance_h=1e-6,
+    torque_constant_nm_per_a="k_m",
+    back_emf_vs_per_rad="k_m",
+    rotor_inertia_kgm2="J_total",
+    rotor_friction_nms_per_rad="d_visc",
+    gear_ratio=1.0,
+    load_inertia_kgm2=0.0,
+)
 
 
 @pytest.mark.parametrize("step_ms", [1.0, 5.0])
@@ -107,16 +118,7 @@ def test_vendor_fmu_with_other_names_and_units_drives_through_the_mapping() -> N
     drive = FmuDrive(
         fmu_file=acme(),
         mapping=REPO / "fmus" / "maps" / "acme_drive.yaml",
-        motor=MotorModel(
-            resistance_ohm="Rw",
-            inductance_h=1e-6,
-            torque_constant_nm_per_a="k_m",
-            back_emf_vs_per_rad="k_m",
-            rotor_inertia_kgm2="J_total",
-            rotor_friction_nms_per_rad="d_visc",
-            gear_ratio=1.0,
-            load_inertia_kgm2=0.0,
-        ),
+        motor=ACME_MOTOR,
     )
     with FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS) as dt:
         dt.set_cmd_vel(0.15, 0.0)
@@ -145,16 +147,7 @@ def test_fmu_error_mid_run_raises_fmu_error_naming_time_and_status() -> None:
     drive = FmuDrive(
         fmu_file=acme(fmi_version=3),
         mapping=type(mapping)(roles=mapping.roles, parameters={"fault_time": 0.25}),
-        motor=MotorModel(
-            resistance_ohm="Rw",
-            inductance_h=1e-6,
-            torque_constant_nm_per_a="k_m",
-            back_emf_vs_per_rad="k_m",
-            rotor_inertia_kgm2="J_total",
-            rotor_friction_nms_per_rad="d_visc",
-            gear_ratio=1.0,
-            load_inertia_kgm2=0.0,
-        ),
+        motor=ACME_MOTOR,
     )
     with FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS) as dt:
         dt.set_cmd_vel(0.1, 0.0)
