@@ -1,6 +1,7 @@
-"""Layer 2: the robot: drivetrain, sensors (lidar, IMU, encoders, ground truth), description.
+"""Layer 2: the robot: drivetrains (ideal and FMU), chassis and contact, sensors (lidar, IMU, encoders).
 
-Import the modules directly, e.g. `twin.robot.lidar`.
+Import the modules directly: `twin.robot.drivetrain`, `twin.robot.chassis`, `twin.robot.kinematic`,
+`twin.robot.lidar`, `twin.robot.drive_control`.
 """
 
 __all__: list[str] = []

@@ -1,0 +1,116 @@
+"""Loading and stepping FMUs: independent instances, both APIs, FMU errors as FmuError."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from tests.unit.cosim.helpers import acme
+from twin.core.errors import FmuError
+from twin.cosim.build import resolve_fmu
+from twin.cosim.fmu import FmuFile, read_fmu_info
+
+
+def _vrs(fmu: FmuFile, *names: str) -> list[int]:
+    return [fmu.info.variables[n].value_reference for n in names]
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_two_instances_of_one_fmu_keep_independent_states(fmi_version: int) -> None:
+    path = resolve_fmu("builtin:xm430_w210", fmi_version=fmi_version)  # type: ignore[arg-type]
+    with FmuFile(path) as fmu:
+        ins, outs = _vrs(fmu, "voltage", "load_torque"), _vrs(fmu, "wheel_speed", "current")
+        a = fmu.instantiate("a", step_s=0.001, inputs=ins, outputs=outs)
+        b = fmu.instantiate("b", step_s=0.001, inputs=ins, outputs=outs)
+        a.inputs[0] = 12.0
+        b.inputs[0] = -6.0
+        for k in range(200):
+            a.step(k * 0.001)
+            b.step(k * 0.001)
+        assert a.outputs[0] == pytest.approx(8.06, rel=0.01)
+        assert b.outputs[0] == pytest.approx(-4.03, rel=0.01)
+        b.inputs[0] = 0.0
+        for k in range(200, 600):
+            b.step(k * 0.001)
+        assert a.outputs[0] == pytest.approx(8.06, rel=0.01)  # untouched by b's steps
+        assert abs(b.outputs[0]) < 0.01
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_lowlevel_and_convenience_paths_agree(fmi_version: int) -> None:
+    path = resolve_fmu("builtin:xl430_w250", fmi_version=fmi_version)  # type: ignore[arg-type]
+    results = []
+    with FmuFile(path) as fmu:
+        ins, outs = _vrs(fmu, "voltage", "load_torque"), _vrs(fmu, "wheel_speed", "wheel_angle", "current")
+        for api in ("lowlevel", "convenience"):
+            s = fmu.instantiate(api, step_s=0.002, inputs=ins, outputs=outs, api=api)  # type: ignore[arg-type]
+            s.inputs[0], s.inputs[1] = 9.0, 0.2
+            for k in range(100):
+                s.step(k * 0.002)
+            results.append(list(s.outputs))
+    assert results[0] == results[1]
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_fmu_error_mid_run_raises_with_name_time_and_status(fmi_version: int) -> None:
+    with FmuFile(acme(fmi_version=fmi_version)) as fmu:  # type: ignore[arg-type]
+        s = fmu.instantiate(
+            "left", step_s=0.001, inputs=_vrs(fmu, "U_motor"), outputs=_vrs(fmu, "n_out"), start={"fault_time": 0.05}
+        )
+        s.inputs[0] = 12.0
+        with pytest.raises(FmuError) as err:
+            for k in range(1000):
+                s.step(k * 0.001)
+    message = str(err.value)
+    assert "AcmeWheelDrive" in message and "'left'" in message
+    assert "t = 0.050000 s" in message
+    assert f"fmi{fmi_version}DoStep returned Error" in message
+    assert "simulated drive fault" in message  # the FMU's own log message
+
+
+def test_fixed_parameter_cannot_change_after_initialisation_is_reported() -> None:
+    with FmuFile(resolve_fmu("builtin:xm430_w210")) as fmu:
+        s = fmu.instantiate("x", step_s=0.001, inputs=_vrs(fmu, "R"), outputs=_vrs(fmu, "wheel_speed"))
+        s.inputs[0] = 1.0
+        with pytest.raises(FmuError, match=r"fmi2SetReal returned Error.*fixed parameter"):
+            s.step(0.0)
+
+
+def test_invalid_parameter_fails_initialisation_with_the_reason() -> None:
+    with (
+        FmuFile(resolve_fmu("builtin:xm430_w210", fmi_version=3)) as fmu,
+        pytest.raises(FmuError, match=r"fmi3ExitInitializationMode returned Error.*R = -1 must be positive"),
+    ):
+        fmu.instantiate("x", step_s=0.001, inputs=[], outputs=[], start={"R": -1.0})
+
+
+def test_not_a_zip_is_refused(tmp_path: Path) -> None:
+    bad = tmp_path / "motor.fmu"
+    bad.write_text("not an FMU")
+    with pytest.raises(FmuError, match=r"motor\.fmu: not an FMU"):
+        read_fmu_info(bad)
+
+
+def test_broken_model_description_is_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.fmu"
+    with zipfile.ZipFile(bad, "w") as zf:
+        zf.writestr("modelDescription.xml", "<fmiModelDescription fmiVersion='2.0'><oops")
+    with pytest.raises(FmuError, match=r"broken\.fmu: invalid modelDescription\.xml") as err:
+        read_fmu_info(bad)
+    assert "\n" not in str(err.value)
+
+
+def test_model_exchange_only_fmu_is_refused_for_stepping(tmp_path: Path) -> None:
+    source = resolve_fmu("builtin:xl430_w250")
+    me_only = tmp_path / "me.fmu"
+    with zipfile.ZipFile(source) as src, zipfile.ZipFile(me_only, "w") as dst:
+        for item in src.namelist():
+            data = src.read(item)
+            if item == "modelDescription.xml":
+                data = data.replace(b"<CoSimulation", b"<ModelExchange")
+            dst.writestr(item, data)
+    assert read_fmu_info(me_only).co_simulation is None
+    with pytest.raises(FmuError, match=r"no Co-Simulation interface"):
+        FmuFile(me_only)

@@ -1,0 +1,257 @@
+"""`twin fmu build|check|step-response`: the drivetrain FMUs from the command line.
+
+Build the project's FMUs, check any FMU against the drive contract, compare an FMU's step response
+with the linear motor model.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from twin.cosim.build import build_all, cache_dir, resolve_fmu
+from twin.cosim.contract import FmuMapping, Profile, check_contract, load_mapping
+from twin.cosim.fmu import read_fmu_info
+
+_BUILD_EPILOG = """\
+examples:
+  twin fmu build                 build (or reuse) every built-in FMU, FMI 2.0 and 3.0
+  twin fmu build --force         rebuild even if the cache is current
+  TWIN_CACHE_DIR=/tmp/c twin fmu build
+"""
+
+_CHECK_EPILOG = """\
+examples:
+  twin fmu check builtin:xm430_w210
+  twin fmu check builtin:xm430_w210_servo --profile velocity-servo
+  twin fmu check vendor_motor.fmu --map fmus/maps/vendor_rpm.yaml --json
+exit status: 0 when the FMU satisfies the contract, 4 when it does not or cannot be read.
+"""
+
+_STEP_EPILOG = """\
+examples:
+  twin fmu step-response builtin:xl430_w250
+  twin fmu step-response builtin:xm430_w210 --fmi 3 --step-ms 5 --out /tmp/step.png
+"""
+
+
+def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
+    """Add the `fmu` command group."""
+    parser = subparsers.add_parser(
+        "fmu",
+        help="build, check and step FMUs (drivetrain co-simulation)",
+        description="Drive FMUs: the project's DC motor FMUs and vendor FMUs that swap in through a mapping.",
+        parents=[common],
+    )
+    sub = parser.add_subparsers(dest="fmu_command", metavar="SUBCOMMAND", required=True)
+
+    build = sub.add_parser(
+        "build",
+        help="compile fmus/ into .fmu files in the cache",
+        description=(
+            "Compile every model under fmus/ with the system C compiler ($CC, cc or gcc) into FMI 2.0 and 3.0 "
+            "Co-Simulation FMUs in the cache ($TWIN_CACHE_DIR, $XDG_CACHE_HOME/twin or ~/.cache/twin). "
+            "A build is reused until one of its sources, headers or flags changes."
+        ),
+        epilog=_BUILD_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[common],
+    )
+    build.add_argument("--force", action="store_true", help="rebuild even when the cache is current")
+    build.add_argument("--json", action="store_true", help="print the built files as JSON")
+    build.set_defaults(func=_build)
+
+    check = sub.add_parser(
+        "check",
+        help="list an FMU's variables and check it against the drive contract",
+        description=(
+            "List the FMU's variables (causality, variability, unit) and say whether it satisfies the drive "
+            "contract of a profile, naming each missing role. FMU is a .fmu file or builtin:NAME."
+        ),
+        epilog=_CHECK_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[common],
+    )
+    check.add_argument("fmu", metavar="FMU", help=".fmu file or builtin:NAME")
+    check.add_argument("--profile", choices=[p.value for p in Profile], default=Profile.VOLTAGE.value)
+    check.add_argument("--map", type=Path, metavar="FILE", help="mapping file (roles, parameters, start_values)")
+    check.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built-in (default 2)")
+    check.add_argument("--json", action="store_true", help="print the report as JSON")
+    check.set_defaults(func=_check)
+
+    step = sub.add_parser(
+        "step-response",
+        help="compare an FMU's no-load voltage step with the linear motor model",
+        description=(
+            "Step the FMU with a constant voltage and no load torque and print, next to it, python-control's "
+            "response of the analytic transfer function w(s)/V(s) built from the FMU's parameters "
+            "(R, L, Kt, Ke, J_rotor, b_rotor, N, J_wheel)."
+        ),
+        epilog=_STEP_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[common],
+    )
+    step.add_argument("fmu", metavar="FMU", help=".fmu file or builtin:NAME")
+    step.add_argument("--voltage", type=float, default=12.0, help="step voltage, V (default 12)")
+    step.add_argument("--step-ms", type=float, default=1.0, help="communication step, ms (default 1)")
+    step.add_argument("--duration-s", type=float, default=None, help="length (default 8 mechanical time constants)")
+    step.add_argument("--map", type=Path, metavar="FILE", help="mapping file for a vendor FMU")
+    step.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built-in (default 2)")
+    step.add_argument("--out", type=Path, metavar="PNG", help="also plot both responses to this PNG")
+    step.add_argument("--json", action="store_true", help="print the summary as JSON")
+    step.set_defaults(func=_step_response)
+
+
+def _build(args: argparse.Namespace) -> int:
+    built = build_all(force=args.force)
+    if args.json:
+        rows = [{"name": b.variant, "fmi": b.fmi_version, "path": str(b.path), "rebuilt": b.rebuilt} for b in built]
+        print(json.dumps(rows, indent=2))
+        return 0
+    for b in built:
+        print(f"{b.variant:<20} FMI {b.fmi_version}  {'built ' if b.rebuilt else 'cached'}  {b.path}")
+    print(f"{len(built)} FMUs in {cache_dir() / 'fmus'}")
+    return 0
+
+
+def _mapping(path: Path | None) -> FmuMapping:
+    return load_mapping(path) if path is not None else FmuMapping()
+
+
+def _check(args: argparse.Namespace) -> int:
+    path = resolve_fmu(args.fmu, fmi_version=args.fmi)
+    info = read_fmu_info(path)
+    report = check_contract(info, _mapping(args.map), Profile(args.profile))
+    if args.json:
+        doc = {
+            "fmu": str(path),
+            "fmi_version": info.fmi_version,
+            "model_name": info.model_name,
+            "generation_tool": info.generation_tool,
+            "co_simulation": info.co_simulation,
+            "model_exchange": info.model_exchange,
+            "variables": [
+                {
+                    "name": v.name,
+                    "value_reference": v.value_reference,
+                    "type": v.type,
+                    "causality": v.causality,
+                    "variability": v.variability,
+                    "unit": v.unit,
+                    "start": v.start,
+                }
+                for v in info.variables.values()
+            ],
+            "profile": report.profile.value,
+            "ok": report.ok,
+            "missing_roles": list(report.missing),
+            "roles": [
+                {"role": r.role, "required": r.required, "variable": r.variable, "unit": r.unit, "problem": r.problem}
+                for r in report.roles
+            ],
+            "problems": list(report.problems),
+        }
+        print(json.dumps(doc, indent=2))
+        return 0 if report.ok else 4
+    interfaces = [n for n, v in (("Co-Simulation", info.co_simulation), ("Model Exchange", info.model_exchange)) if v]
+    print(f"{path}")
+    print(f"  FMI {info.fmi_version}, {info.model_name!r}, {' + '.join(interfaces) or 'no interface'}")
+    if info.generation_tool:
+        print(f"  generated by {info.generation_tool}")
+    print(f"  {len(info.variables)} variables:")
+    width = max((len(n) for n in info.variables), default=4)
+    print(f"    {'name':<{width}}  {'type':<8} {'causality':<12} {'variability':<11} {'unit':<10} start")
+    for v in info.variables.values():
+        print(
+            f"    {v.name:<{width}}  {v.type:<8} {v.causality:<12} {v.variability:<11} "
+            f"{v.unit or '-':<10} {v.start if v.start is not None else ''}"
+        )
+    print(f"  contract ({report.profile.value}):")
+    for r in report.roles:
+        kind = "required" if r.required else "optional"
+        if r.problem is None:
+            print(f"    {r.role:<16} {kind:<9} -> {r.variable} [{r.unit or 'SI'}]")
+        else:
+            print(f"    {r.role:<16} {kind:<9} -- {r.problem}")
+    for problem in report.problems:
+        print(f"    problem: {problem}")
+    if report.ok:
+        print(f"  satisfies the {report.profile.value} contract")
+        return 0
+    missing = ", ".join(report.missing) or "none"
+    print(f"  does NOT satisfy the {report.profile.value} contract; missing roles: {missing}")
+    return 4
+
+
+def _step_response(args: argparse.Namespace) -> int:
+    from twin.robot.drivetrain import fmu_step_response
+
+    path = resolve_fmu(args.fmu, fmi_version=args.fmi)
+    comparison, motor = fmu_step_response(
+        path,
+        voltage_v=args.voltage,
+        step_s=args.step_ms * 1e-3,
+        duration_s=args.duration_s,
+        mapping=_mapping(args.map),
+    )
+    c = comparison
+    final_model = float(c.model_speed_radps[-1])
+    summary = {
+        "fmu": str(path),
+        "voltage_v": c.voltage_v,
+        "step_s": c.step_s,
+        "rms_relative": c.rms_relative,
+        "final_speed_fmu_radps": float(c.fmu_speed_radps[-1]),
+        "final_speed_model_radps": final_model,
+        "no_load_speed_model_rpm": motor.no_load_speed_radps(args.voltage) * 60.0 / (2.0 * math.pi),
+        "stall_current_model_a": motor.stall_current_a(args.voltage),
+    }
+    if args.out is not None:
+        _plot(c, args.out, path.name)
+        summary["png"] = str(args.out)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    print(f"{path.name}: {c.voltage_v:g} V step, no load, {c.step_s * 1e3:g} ms steps")
+    print(f"  {'t_s':>8}  {'fmu_radps':>10}  {'model_radps':>11}  {'diff_%':>7}  {'current_a':>9}")
+    rows = sorted({round(k) for k in _spread(len(c.t_s), 12)})
+    for k in rows:
+        diff = 100.0 * (c.fmu_speed_radps[k] - c.model_speed_radps[k]) / abs(final_model)
+        print(
+            f"  {c.t_s[k]:8.4f}  {c.fmu_speed_radps[k]:10.4f}  {c.model_speed_radps[k]:11.4f}  {diff:7.3f}  "
+            f"{c.current_a[k]:9.4f}"
+        )
+    print(f"  RMS difference: {100.0 * c.rms_relative:.4f} % of the final speed")
+    print(
+        f"  model: no-load {summary['no_load_speed_model_rpm']:.2f} rpm, stall {summary['stall_current_model_a']:.3f} A"
+    )
+    if args.out is not None:
+        print(f"  plot: {args.out}")
+    return 0
+
+
+def _spread(n: int, count: int) -> list[float]:
+    return [k * (n - 1) / (count - 1) for k in range(count)]
+
+
+def _plot(c: Any, out: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(c.t_s, c.model_speed_radps, label="linear model (python-control)", linewidth=2.5, alpha=0.6)
+    ax.plot(c.t_s, c.fmu_speed_radps, "--", label="FMU", linewidth=1.5)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("wheel speed [rad/s]")
+    ax.set_title(f"{title}: {c.voltage_v:g} V step, RMS diff {100 * c.rms_relative:.3g} %")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)

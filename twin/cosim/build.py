@@ -1,0 +1,472 @@
+"""Build FMUs from C sources into a cache outside git, rebuilding when any input changes.
+
+A model directory holds `fmu.yaml` (model name, C sources, variables, variants) and its C files.
+Each variant is built for FMI 2.0 or 3.0 Co-Simulation: the model description and a header of value
+references and start values are generated from `fmu.yaml`, the sources are compiled with the system
+C compiler (`$CC`, else `cc`, else `gcc`) together with the FMI layer of `fmus/common`, and the
+result is zipped into `<cache>/fmus/<variant>-fmi<N>-<hash>.fmu`. The hash covers every source,
+header and build setting, so a changed input gives a new file and an unchanged one is reused.
+
+The cache is `$TWIN_CACHE_DIR`, else `$XDG_CACHE_HOME/twin`, else `~/.cache/twin`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import logging
+import os
+import shutil
+import subprocess
+import tempfile
+import uuid
+import xml.etree.ElementTree as ET
+import zipfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Literal
+
+import fmpy
+
+from twin.core.config import load_config
+from twin.core.errors import FmuError
+from twin.cosim.units import BASE_NAMES, find_unit
+
+__all__ = [
+    "BUILTIN_PREFIX",
+    "FMUS_DIR",
+    "BuiltFmu",
+    "FmiVersion",
+    "FmuSourceSpec",
+    "build_all",
+    "build_fmu",
+    "build_shim",
+    "builtin_variants",
+    "cache_dir",
+    "load_source_spec",
+    "resolve_fmu",
+]
+
+_log = logging.getLogger(__name__)
+
+FmiVersion = Literal[2, 3]
+
+FMUS_DIR = Path(__file__).resolve().parent.parent.parent / "fmus"
+BUILTIN_PREFIX = "builtin:"
+CFLAGS: tuple[str, ...] = ("-O2", "-shared", "-fPIC", "-std=c11", "-Wall")
+_BUILDER_VERSION = "1"  # bump when the generated files change shape
+_TIME_VR = 4096  # MODEL_TIME_VR in fmus/common/model.h
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class VariableSpec:
+    """One Float64 variable of a model, as `fmu.yaml` declares it."""
+
+    name: str
+    vr: int
+    causality: Literal["input", "output", "parameter"]
+    unit: str = "1"
+    start: float | None = None
+    description: str = ""
+    only: str | None = None  # present only when this define is set
+    unless: str | None = None  # absent when this define is set
+
+    def __post_init__(self) -> None:
+        if self.vr < 0 or self.vr > 4095:
+            msg = f"vr must be between 0 and 4095, got {self.vr}"
+            raise ValueError(msg)
+        if self.causality != "output" and self.start is None:
+            msg = f"variable {self.name!r} ({self.causality}) needs a start value"
+            raise ValueError(msg)
+        if find_unit(self.unit) is None:
+            msg = f"unit {self.unit!r} of {self.name!r} is not in twin.cosim.units"
+            raise ValueError(msg)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class VariantSpec:
+    """One FMU built from the model: compile-time defines and parameter start values."""
+
+    description: str = ""
+    defines: tuple[str, ...] = ()
+    start: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class FmuSourceSpec:
+    """A model directory's `fmu.yaml`."""
+
+    model_name: str
+    description: str = ""
+    sources: tuple[str, ...]
+    variables: tuple[VariableSpec, ...]
+    variants: Mapping[str, VariantSpec]
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class BuiltFmu:
+    """A built FMU in the cache."""
+
+    variant: str
+    fmi_version: FmiVersion
+    path: Path
+    rebuilt: bool
+
+
+def cache_dir() -> Path:
+    """Return the cache root (`$TWIN_CACHE_DIR`, `$XDG_CACHE_HOME/twin` or `~/.cache/twin`)."""
+    if root := os.environ.get("TWIN_CACHE_DIR"):
+        return Path(root).expanduser()
+    if xdg := os.environ.get("XDG_CACHE_HOME"):
+        return Path(xdg).expanduser() / "twin"
+    return Path.home() / ".cache" / "twin"
+
+
+def load_source_spec(model_dir: Path) -> FmuSourceSpec:
+    """Read `model_dir/fmu.yaml`.
+
+    Raises:
+        ConfigError: Naming file, line and key, if the file is missing or wrong.
+    """
+    spec = load_config(FmuSourceSpec, model_dir / "fmu.yaml")
+    names = [v.name for v in spec.variables]
+    for variant, vspec in spec.variants.items():
+        unknown = sorted(set(vspec.start) - set(names))
+        if unknown:
+            msg = f"{model_dir / 'fmu.yaml'}: variants.{variant}.start: unknown variable(s) {', '.join(unknown)}"
+            raise FmuError(msg)
+    return spec
+
+
+def builtin_variants(fmus_dir: Path = FMUS_DIR) -> dict[str, Path]:
+    """Return every variant of the project's models, by name, with its model directory."""
+    found: dict[str, Path] = {}
+    for yaml_path in sorted(fmus_dir.glob("*/fmu.yaml")):
+        for name in load_source_spec(yaml_path.parent).variants:
+            found[name] = yaml_path.parent
+    return found
+
+
+def resolve_fmu(ref: str | Path, *, fmi_version: FmiVersion = 2, base_dir: Path | None = None) -> Path:
+    """Return the `.fmu` file a drive names: `builtin:NAME` (built on first use) or a path.
+
+    Raises:
+        FmuError: If the built-in is unknown, cannot be built, or the file does not exist.
+    """
+    text = str(ref)
+    if text.startswith(BUILTIN_PREFIX):
+        name = text[len(BUILTIN_PREFIX) :]
+        variants = builtin_variants()
+        if name not in variants:
+            msg = f"unknown built-in FMU {name!r}; built-ins: {', '.join(sorted(variants))}"
+            raise FmuError(msg)
+        return build_fmu(variants[name], name, fmi_version=fmi_version).path
+    path = Path(text).expanduser()
+    if base_dir is not None and not path.is_absolute():
+        path = base_dir / path
+    if not path.is_file():
+        msg = f"{path}: FMU file not found (give a .fmu path or builtin:NAME)"
+        raise FmuError(msg)
+    return path
+
+
+def build_all(fmus_dir: Path = FMUS_DIR, *, force: bool = False) -> list[BuiltFmu]:
+    """Build every variant of every model under `fmus_dir` for FMI 2 and FMI 3.
+
+    Raises:
+        FmuError: On the first variant that cannot be built.
+    """
+    built = []
+    for name, model_dir in builtin_variants(fmus_dir).items():
+        for version in (2, 3):
+            built.append(build_fmu(model_dir, name, fmi_version=version, force=force))
+    return built
+
+
+def build_fmu(model_dir: Path, variant: str, *, fmi_version: FmiVersion = 2, force: bool = False) -> BuiltFmu:
+    """Build one variant of the model in `model_dir`, or return the cached build.
+
+    Raises:
+        FmuError: If the variant is unknown, no C compiler is found, or compilation fails.
+    """
+    spec = load_source_spec(model_dir)
+    if variant not in spec.variants:
+        msg = f"{model_dir / 'fmu.yaml'}: no variant {variant!r}; variants: {', '.join(spec.variants)}"
+        raise FmuError(msg)
+    compiler = _compiler(variant)
+    inputs = _input_files(model_dir, spec)
+    digest = _digest(inputs, compiler, variant, fmi_version)
+    target = cache_dir() / "fmus" / f"{variant}-fmi{fmi_version}-{digest[:16]}.fmu"
+    if target.is_file() and not force:
+        return BuiltFmu(variant=variant, fmi_version=fmi_version, path=target, rebuilt=False)
+    _log.info("building %s (FMI %d) into %s", variant, fmi_version, target)
+    token = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"twin-fmu:{digest}")) + "}"
+    variables = _variables(spec, spec.variants[variant])
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="twin-fmu-", dir=target.parent) as tmp_text:
+        tmp = Path(tmp_text)
+        (tmp / "model_vars.h").write_text(_header(variables, spec.variants[variant]), encoding="utf-8")
+        library = tmp / f"{variant}.so"
+        _compile(compiler, model_dir, spec, spec.variants[variant], fmi_version, token, tmp, library, variant)
+        description = _model_description(spec, variant, variables, fmi_version, token)
+        staged = tmp / "out.fmu"
+        platform_dir = fmpy.platform if fmi_version == 2 else fmpy.platform_tuple
+        with zipfile.ZipFile(staged, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("modelDescription.xml", description)
+            zf.write(library, f"binaries/{platform_dir}/{variant}.so")
+        os.replace(staged, target)
+    return BuiltFmu(variant=variant, fmi_version=fmi_version, path=target, rebuilt=True)
+
+
+def build_shim() -> Path:
+    """Build (or reuse) the stepping shim `fmus/common/step_shim.c` as a shared library in the cache.
+
+    Raises:
+        FmuError: If no C compiler is found or compilation fails.
+    """
+    source = FMUS_DIR / "common" / "step_shim.c"
+    compiler = _compiler("step shim")
+    digest = _digest([source], compiler, "step_shim", 0)
+    target = cache_dir() / "fmus" / f"step_shim-{digest[:16]}.so"
+    if target.is_file():
+        return target
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="twin-shim-", dir=target.parent) as tmp_text:
+        staged = Path(tmp_text) / "step_shim.so"
+        cmd = [compiler[0], *CFLAGS, str(source), "-o", str(staged)]
+        try:
+            result = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
+        except OSError as err:
+            msg = f"cannot build the step shim: {compiler[0]} did not run ({err.strerror})"
+            raise FmuError(msg) from None
+        if result.returncode != 0:
+            first = (result.stderr.strip().splitlines() or ["?"])[0]
+            msg = f"cannot build the step shim: {first}"
+            raise FmuError(msg)
+        os.replace(staged, target)
+    return target
+
+
+# --- inputs and hashing ------------------------------------------------------------------------
+
+
+def _input_files(model_dir: Path, spec: FmuSourceSpec) -> list[Path]:
+    files = [model_dir / "fmu.yaml", *(model_dir / s for s in spec.sources)]
+    for folder in (FMUS_DIR / "common", FMUS_DIR / "include"):
+        files.extend(sorted(p for p in folder.iterdir() if p.suffix in {".c", ".h"}))
+    for path in files:
+        if not path.is_file():
+            msg = f"{model_dir / 'fmu.yaml'}: source file {path} not found"
+            raise FmuError(msg)
+    return files
+
+
+def _digest(files: list[Path], compiler: tuple[str, str], variant: str, fmi_version: int) -> str:
+    h = hashlib.sha256()
+    for part in (_BUILDER_VERSION, *compiler, *CFLAGS, variant, str(fmi_version), fmpy.platform_tuple):
+        h.update(part.encode() + b"\0")
+    for path in files:
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=8)
+def _compiler_version(path: str) -> str:
+    try:
+        out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=30, check=False)
+    except OSError:
+        return "unknown"
+    return out.stdout.splitlines()[0] if out.stdout else "unknown"
+
+
+def _compiler(variant: str) -> tuple[str, str]:
+    candidates = [c for c in (os.environ.get("CC"), "cc", "gcc") if c]
+    for candidate in candidates:
+        path = shutil.which(candidate)
+        if path:
+            return path, _compiler_version(path)
+    msg = (
+        f"cannot build FMU {variant!r}: no C compiler found (tried {', '.join(candidates)}); "
+        "install one (e.g. apt-get install gcc) or set CC"
+    )
+    raise FmuError(msg)
+
+
+def _compile(  # noqa: PLR0917 - one private call site
+    compiler: tuple[str, str],
+    model_dir: Path,
+    spec: FmuSourceSpec,
+    variant_spec: VariantSpec,
+    fmi_version: int,
+    token: str,
+    gen_dir: Path,
+    library: Path,
+    variant: str,
+) -> None:
+    common = FMUS_DIR / "common"
+    layer = common / ("fmi2_layer.c" if fmi_version == 2 else "fmi3_layer.c")
+    cmd = [
+        compiler[0],
+        *CFLAGS,
+        f'-DMODEL_GUID="{token}"',
+        *(f"-D{d}=1" for d in variant_spec.defines),
+        f"-I{gen_dir}",
+        f"-I{model_dir}",
+        f"-I{common}",
+        f"-I{FMUS_DIR / 'include'}",
+        *(str(model_dir / s) for s in spec.sources),
+        str(layer),
+        str(common / "linsys.c"),
+        "-o",
+        str(library),
+        "-lm",
+    ]
+    try:
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False)
+    except OSError as err:
+        msg = f"cannot build FMU {variant!r}: {compiler[0]} did not run ({err.strerror})"
+        raise FmuError(msg) from None
+    if result.returncode != 0:
+        lines = [ln for ln in result.stderr.splitlines() if "error" in ln] or result.stderr.splitlines() or ["?"]
+        msg = f"cannot build FMU {variant!r}: {Path(compiler[0]).name} failed: {lines[0].strip()}"
+        raise FmuError(msg)
+    for line in result.stderr.splitlines():
+        _log.debug("%s: %s", variant, line)
+
+
+# --- generated files ---------------------------------------------------------------------------
+
+
+def _variables(spec: FmuSourceSpec, variant: VariantSpec) -> list[VariableSpec]:
+    chosen = []
+    for var in spec.variables:
+        if var.only is not None and var.only not in variant.defines:
+            continue
+        if var.unless is not None and var.unless in variant.defines:
+            continue
+        start = variant.start.get(var.name, var.start)
+        chosen.append(dataclasses.replace(var, start=start))
+    return sorted(chosen, key=lambda v: v.vr)
+
+
+_KIND = {"parameter": 1, "input": 2, "output": 3}
+
+
+def _header(variables: list[VariableSpec], variant: VariantSpec) -> str:
+    nvr = max(v.vr for v in variables) + 1
+    start = ["0.0"] * nvr
+    kind = ["0"] * nvr
+    names = ['""'] * nvr
+    lines = ["/* Generated by twin.cosim.build from fmu.yaml: do not edit. */", f"#define MODEL_NVR {nvr}"]
+    for var in variables:
+        lines.append(f"#define VR_{var.name} {var.vr}")
+        start[var.vr] = repr(float(var.start if var.start is not None else 0.0))
+        kind[var.vr] = str(_KIND[var.causality])
+        names[var.vr] = f'"{var.name}"'
+    lines.append(f"static const double MODEL_START[MODEL_NVR] = {{{', '.join(start)}}};")
+    lines.append(f"static const unsigned char MODEL_KIND[MODEL_NVR] = {{{', '.join(kind)}}};")
+    lines.append(f"static const char *const MODEL_NAME[MODEL_NVR] = {{{', '.join(names)}}};")
+    return "\n".join(lines) + "\n"
+
+
+def _unit_elements(parent: ET.Element, variables: list[VariableSpec]) -> None:
+    used = sorted({v.unit for v in variables})
+    if not used:
+        return
+    defs = ET.SubElement(parent, "UnitDefinitions")
+    for name in used:
+        unit = find_unit(name)
+        assert unit is not None  # checked by VariableSpec
+        element = ET.SubElement(defs, "Unit", name=name)
+        base = {b: str(e) for b, e in zip(BASE_NAMES, unit.dims, strict=True) if e}
+        if unit.factor != 1.0:
+            base["factor"] = repr(unit.factor)
+        if unit.offset != 0.0:
+            base["offset"] = repr(unit.offset)
+        ET.SubElement(element, "BaseUnit", base)
+
+
+def _model_description(
+    spec: FmuSourceSpec, variant: str, variables: list[VariableSpec], fmi_version: int, token: str
+) -> bytes:
+    vspec = spec.variants[variant]
+    description = vspec.description or spec.description
+    common: dict[str, str] = {
+        "modelName": spec.model_name,
+        "description": description,
+        "generationTool": "twin fmu build",
+    }
+    if fmi_version == 2:
+        root = ET.Element(
+            "fmiModelDescription",
+            {"fmiVersion": "2.0", **common, "guid": token, "variableNamingConvention": "flat"},
+        )
+        root.set("numberOfEventIndicators", "0")
+        ET.SubElement(
+            root,
+            "CoSimulation",
+            modelIdentifier=variant,
+            canHandleVariableCommunicationStepSize="true",
+            canNotUseMemoryManagementFunctions="true",
+        )
+    else:
+        root = ET.Element("fmiModelDescription", {"fmiVersion": "3.0", **common, "instantiationToken": token})
+        ET.SubElement(
+            root,
+            "CoSimulation",
+            modelIdentifier=variant,
+            canHandleVariableCommunicationStepSize="true",
+            providesIntermediateUpdate="false",
+            canReturnEarlyAfterIntermediateUpdate="false",
+            hasEventMode="false",
+        )
+    _unit_elements(root, variables)
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime="1.0", stepSize="0.001")
+    model_vars = ET.SubElement(root, "ModelVariables")
+    if fmi_version == 3:
+        ET.SubElement(
+            model_vars,
+            "Float64",
+            name="time",
+            valueReference=str(_TIME_VR),
+            causality="independent",
+            variability="continuous",
+            description="simulation time",
+        )
+    outputs: list[tuple[int, VariableSpec]] = []
+    for index, var in enumerate(variables, start=1):
+        attrs = {"name": var.name, "valueReference": str(var.vr), "causality": var.causality}
+        attrs["variability"] = "fixed" if var.causality == "parameter" else "continuous"
+        if var.description:
+            attrs["description"] = var.description
+        typed = {"unit": var.unit}
+        if var.causality == "output":
+            attrs["initial"] = "calculated"
+        else:
+            typed["start"] = repr(float(var.start if var.start is not None else 0.0))
+        if fmi_version == 2:
+            element = ET.SubElement(model_vars, "ScalarVariable", attrs)
+            ET.SubElement(element, "Real", typed)
+        else:
+            ET.SubElement(model_vars, "Float64", {**attrs, **typed})
+        if var.causality == "output":
+            outputs.append((index, var))
+    structure = ET.SubElement(root, "ModelStructure")
+    if fmi_version == 2:
+        out_el = ET.SubElement(structure, "Outputs")
+        for index, _ in outputs:
+            ET.SubElement(out_el, "Unknown", index=str(index))
+        init_el = ET.SubElement(structure, "InitialUnknowns")
+        for index, _ in outputs:
+            ET.SubElement(init_el, "Unknown", index=str(index))
+    else:
+        for _, var in outputs:
+            ET.SubElement(structure, "Output", valueReference=str(var.vr))
+        for _, var in outputs:
+            ET.SubElement(structure, "InitialUnknown", valueReference=str(var.vr))
+    ET.indent(root)
+    text: bytes = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    return text

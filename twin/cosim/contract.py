@@ -1,0 +1,292 @@
+"""The drive contract: roles an FMU must play, and the mapping from roles to its variables.
+
+Roles and their units (SI, as twin uses them):
+
+| role | direction | unit | meaning |
+|---|---|---|---|
+| voltage | input | V | motor voltage command (profile `voltage`) |
+| speed_setpoint | input | rad/s | wheel-speed setpoint (profile `velocity-servo`) |
+| load_torque | input | N.m | torque the chassis and ground apply against the wheel |
+| wheel_speed | output | rad/s | wheel speed |
+| wheel_angle | output | rad | wheel angle (twin integrates the speed if absent) |
+| current | output | A | motor current |
+| motor_torque | output | N.m | drive torque at the wheel |
+| applied_voltage | output | V | voltage actually applied (after the FMU's own limits) |
+
+A mapping binds each role to a variable name and, optionally, the unit that variable is in (when the
+FMU declares none or declares it wrongly). A role not in the mapping binds to the variable named as
+the role, if there is one. Parameters and start values are set by variable name, in the FMU's units.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from types import MappingProxyType
+
+from twin.core.config import load_config, suggest
+from twin.core.errors import FmuError
+from twin.cosim.fmu import FmuInfo
+from twin.cosim.units import UNITS, Unit, find_unit
+
+__all__ = [
+    "OPTIONAL_ROLES",
+    "ROLES",
+    "Binding",
+    "BoundVariable",
+    "ContractReport",
+    "FmuMapping",
+    "Profile",
+    "RoleBinding",
+    "RoleMap",
+    "RoleReport",
+    "RoleSpec",
+    "bind",
+    "check_contract",
+    "load_mapping",
+]
+
+
+class Profile(Enum):
+    """How the twin drives the FMU."""
+
+    VOLTAGE = "voltage"  # the FMU takes a voltage; the twin closes the speed loop
+    VELOCITY_SERVO = "velocity-servo"  # the FMU takes a speed setpoint and closes its own loop
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RoleSpec:
+    """A role of the drive contract."""
+
+    name: str
+    direction: str  # "input" or "output" (of the FMU)
+    unit: str  # twin's unit for the role
+    description: str
+
+
+ROLES: Mapping[str, RoleSpec] = MappingProxyType(
+    {
+        r.name: r
+        for r in (
+            RoleSpec(name="voltage", direction="input", unit="V", description="motor voltage command"),
+            RoleSpec(name="speed_setpoint", direction="input", unit="rad/s", description="wheel-speed setpoint"),
+            RoleSpec(name="load_torque", direction="input", unit="N.m", description="load torque at the wheel"),
+            RoleSpec(name="wheel_speed", direction="output", unit="rad/s", description="wheel speed"),
+            RoleSpec(name="wheel_angle", direction="output", unit="rad", description="wheel angle"),
+            RoleSpec(name="current", direction="output", unit="A", description="motor current"),
+            RoleSpec(name="motor_torque", direction="output", unit="N.m", description="drive torque at the wheel"),
+            RoleSpec(name="applied_voltage", direction="output", unit="V", description="voltage applied"),
+        )
+    }
+)
+
+_REQUIRED: Mapping[Profile, tuple[str, ...]] = MappingProxyType(
+    {
+        Profile.VOLTAGE: ("voltage", "load_torque", "wheel_speed"),
+        Profile.VELOCITY_SERVO: ("speed_setpoint", "load_torque", "wheel_speed"),
+    }
+)
+OPTIONAL_ROLES: tuple[str, ...] = ("wheel_angle", "current", "motor_torque", "applied_voltage")
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RoleBinding:
+    """The FMU variable that plays a role, and the unit it is in (default: as the FMU declares)."""
+
+    name: str
+    unit: str | None = None
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RoleMap:
+    """Role → variable (a name, or a name and unit); a role left out binds to the variable of its name."""
+
+    voltage: RoleBinding | str | None = None
+    speed_setpoint: RoleBinding | str | None = None
+    load_torque: RoleBinding | str | None = None
+    wheel_speed: RoleBinding | str | None = None
+    wheel_angle: RoleBinding | str | None = None
+    current: RoleBinding | str | None = None
+    motor_torque: RoleBinding | str | None = None
+    applied_voltage: RoleBinding | str | None = None
+
+    def given(self) -> tuple[str, ...]:
+        """The roles this map names."""
+        return tuple(r for r in ROLES if getattr(self, r) is not None)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class FmuMapping:
+    """How an FMU's variables meet the contract; written inline in a drive or in a mapping file."""
+
+    roles: RoleMap = field(default_factory=RoleMap)
+    parameters: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+    start_values: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+
+    def binding(self, role: str) -> RoleBinding:
+        """The binding for `role` (by the role's own name when the mapping has none)."""
+        value = getattr(self.roles, role)
+        if value is None:
+            return RoleBinding(name=role)
+        return RoleBinding(name=value) if isinstance(value, str) else value
+
+    def start(self) -> dict[str, float]:
+        """Parameters and start values together, by variable name."""
+        return {**self.parameters, **self.start_values}
+
+
+def load_mapping(path: Path) -> FmuMapping:
+    """Read a mapping file (the `FmuMapping` keys: roles, parameters, start_values).
+
+    Raises:
+        ConfigError: Naming file, line and key, if the file is unreadable or wrong.
+    """
+    return load_config(FmuMapping, path)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class BoundVariable:
+    """A role bound to a variable: value reference and conversion `si = factor * x + offset`."""
+
+    role: str
+    name: str
+    value_reference: int
+    unit: str
+    factor: float
+    offset: float
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RoleReport:
+    """How one role fared in a contract check."""
+
+    role: str
+    required: bool
+    variable: str
+    unit: str | None
+    problem: str | None  # None when the role is bound
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class ContractReport:
+    """The result of checking an FMU against a profile."""
+
+    profile: Profile
+    roles: tuple[RoleReport, ...]
+    problems: tuple[str, ...]  # problems not tied to a role (parameters, interface)
+
+    @property
+    def missing(self) -> tuple[str, ...]:
+        """Required roles that are not bound."""
+        return tuple(r.role for r in self.roles if r.required and r.problem is not None)
+
+    @property
+    def ok(self) -> bool:
+        """Whether the FMU can be driven with this profile."""
+        return not self.missing and not self.problems
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Binding:
+    """An FMU bound to a profile: its inputs and outputs in a fixed order, ready to step."""
+
+    profile: Profile
+    inputs: tuple[BoundVariable, ...]  # (command, load_torque)
+    outputs: Mapping[str, BoundVariable]  # by role; optional roles may be absent
+    start: Mapping[str, float]
+
+
+def _unit_for(info: FmuInfo, name: str | None, role: RoleSpec) -> tuple[Unit | None, str | None]:
+    target = UNITS[role.unit]
+    if name is None:
+        return target, None
+    unit = find_unit(name) or info.units.get(name)
+    if unit is None:
+        known = ", ".join(UNITS)
+        return None, f"unit {name!r} is unknown (known: {known}; or declare it in the FMU's UnitDefinitions)"
+    if not unit.same_dimension(target):
+        return None, f"unit {name!r} cannot be converted to {role.unit}"
+    return unit, None
+
+
+def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> ContractReport:
+    """Check every role and setting of `mapping` against the FMU, without raising."""
+    required = _REQUIRED[profile]
+    roles = [*required, *OPTIONAL_ROLES]
+    reports = []
+    for role in roles:
+        spec = ROLES[role]
+        bind_to = mapping.binding(role)
+        var = info.variables.get(bind_to.name)
+        problem: str | None = None
+        unit_name = bind_to.unit
+        if var is None:
+            hint = suggest(bind_to.name, list(info.variables)) if role in mapping.roles.given() else ""
+            problem = f"no variable {bind_to.name!r}{hint if hint.startswith('; did') else ''}"
+        else:
+            unit_name = bind_to.unit or var.unit
+            wanted = ("input",) if spec.direction == "input" else ("output", "local")
+            if var.causality not in wanted:
+                problem = f"{var.name!r} is a {var.causality}, the role needs an {spec.direction}"
+            elif var.type not in ("Real", "Float64"):
+                problem = f"{var.name!r} is a {var.type}, the role needs a Real/Float64"
+            else:
+                _, problem = _unit_for(info, unit_name, spec)
+        reports.append(
+            RoleReport(role=role, required=role in required, variable=bind_to.name, unit=unit_name, problem=problem)
+        )
+    problems = []
+    if info.co_simulation is None:
+        problems.append("no Co-Simulation interface (Model Exchange only)")
+    if info.major_version not in (2, 3):
+        problems.append(f"FMI {info.fmi_version} is not supported")
+    for name in mapping.start():
+        var = info.variables.get(name)
+        if var is None:
+            problems.append(f"no variable {name!r} to set{suggest(name, list(info.variables))}")
+        elif var.variability == "constant" or var.causality in ("independent",):
+            problems.append(f"{name!r} ({var.causality}, {var.variability}) cannot be set")
+    return ContractReport(profile=profile, roles=tuple(reports), problems=tuple(problems))
+
+
+def bind(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Binding:
+    """Bind the FMU's variables to the profile's roles.
+
+    Raises:
+        FmuError: Listing every missing required role and every other problem, before any run.
+    """
+    report = check_contract(info, mapping, profile)
+    if not report.ok:
+        parts = []
+        if report.missing:
+            details = "; ".join(f"{r.role}: {r.problem}" for r in report.roles if r.required and r.problem)
+            parts.append(f"missing required role(s) {', '.join(report.missing)} ({details})")
+        parts.extend(report.problems)
+        msg = (
+            f"{info.path}: does not satisfy the {profile.value} drive contract: {'; '.join(parts)}; "
+            f"map the roles to the FMU's variables (see `twin fmu check {info.path.name}`)"
+        )
+        raise FmuError(msg)
+    bound: dict[str, BoundVariable] = {}
+    for r in report.roles:
+        if r.problem is not None:
+            continue
+        spec = ROLES[r.role]
+        unit, _ = _unit_for(info, r.unit, spec)
+        assert unit is not None  # checked above
+        var = info.variables[r.variable]
+        bound[r.role] = BoundVariable(
+            role=r.role,
+            name=var.name,
+            value_reference=var.value_reference,
+            unit=unit.name,
+            factor=unit.factor,
+            offset=unit.offset,
+        )
+    command = "voltage" if profile is Profile.VOLTAGE else "speed_setpoint"
+    inputs = (bound.pop(command), bound.pop("load_torque"))
+    for role in ("voltage", "speed_setpoint"):
+        bound.pop(role, None)
+    return Binding(profile=profile, inputs=inputs, outputs=MappingProxyType(bound), start=mapping.start())

@@ -1,0 +1,711 @@
+"""Load FMUs and step their instances fast: FMI 2.0 and 3.0 Co-Simulation behind one Protocol.
+
+`FmuFile(path)` reads and extracts an FMU (a context manager that removes the extraction).
+`FmuFile.instantiate(...)` returns a `Stepper`: one initialised Co-Simulation instance whose inputs
+and outputs are fixed lists of Real/Float64 value references. Its hot path is `step(t_s)`: set the
+inputs from `inputs` (a ctypes double array the caller writes), one doStep, read the outputs into
+`outputs` (a ctypes double array the caller reads). The low-level adapters call the FMU's C
+functions directly with prebuilt ctypes arguments (about 1 µs a call); the `convenience` API goes
+through FMPy's Python wrappers (several µs a call) and exists to measure the difference.
+
+The adapter is chosen once, at instantiation; `step` has no version branches. Every FMU status of
+Discard, Error or Fatal (and a NULL instance) raises `FmuError` naming the FMU, the instance, the sim
+time, the function, the status and the FMU's last log message.
+"""
+
+from __future__ import annotations
+
+import collections
+import ctypes
+import functools
+import logging
+import shutil
+import zipfile
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType, TracebackType
+from typing import Any, Literal, Protocol, Self
+
+import fmpy
+import fmpy.fmi2
+import fmpy.fmi3
+from fmpy.model_description import read_model_description
+
+from twin.core.errors import FmuError
+from twin.cosim.units import Unit
+
+__all__ = ["Api", "FmuFile", "FmuInfo", "StepGroup", "Stepper", "VariableInfo", "read_fmu_info"]
+
+_log = logging.getLogger(__name__)
+
+Api = Literal["lowlevel", "convenience"]
+
+_STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+_REAL_TYPES = frozenset({"Real", "Float64", "Float32"})
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class VariableInfo:
+    """One model variable as the model description declares it."""
+
+    name: str
+    value_reference: int
+    type: str
+    causality: str
+    variability: str
+    unit: str | None
+    start: str | None
+    description: str
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class FmuInfo:
+    """What twin needs from a model description."""
+
+    path: Path
+    fmi_version: str
+    model_name: str
+    description: str
+    generation_tool: str
+    co_simulation: str | None  # model identifier, or None without a Co-Simulation interface
+    model_exchange: str | None
+    guid: str
+    variable_step: bool
+    variables: Mapping[str, VariableInfo]
+    units: Mapping[str, Unit]
+
+    @property
+    def major_version(self) -> int:
+        """1, 2 or 3."""
+        return int(self.fmi_version.split(".")[0])
+
+
+def read_fmu_info(path: Path) -> FmuInfo:
+    """Read an FMU's model description.
+
+    Raises:
+        FmuError: If the file is missing, not a zip, or its model description is invalid.
+    """
+    if not path.is_file():
+        msg = f"{path}: FMU file not found"
+        raise FmuError(msg)
+    if not zipfile.is_zipfile(path):
+        msg = f"{path}: not an FMU (not a zip archive)"
+        raise FmuError(msg)
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception as err:  # FMPy raises bare Exceptions and XML errors of several kinds
+        first = str(err).strip().splitlines()
+        msg = f"{path}: invalid modelDescription.xml: {first[0] if first else type(err).__name__}"
+        raise FmuError(msg) from None
+    variables: dict[str, VariableInfo] = {}
+    for v in md.modelVariables:
+        unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+        variables[v.name] = VariableInfo(
+            name=v.name,
+            value_reference=int(v.valueReference),
+            type=str(v.type),
+            causality=str(v.causality or "local"),
+            variability=str(v.variability or "continuous"),
+            unit=unit,
+            start=None if v.start is None else str(v.start),
+            description=v.description or "",
+        )
+    units: dict[str, Unit] = {}
+    for u in md.unitDefinitions or ():
+        b = u.baseUnit
+        if u.name and b is not None:
+            dims = (b.kg, b.m, b.s, b.A, b.K, b.mol, b.cd, b.rad)
+            units[u.name] = Unit(name=u.name, dims=tuple(int(d) for d in dims), factor=b.factor, offset=b.offset)
+    cs = md.coSimulation
+    return FmuInfo(
+        path=path,
+        fmi_version=str(md.fmiVersion),
+        model_name=md.modelName or "",
+        description=md.description or "",
+        generation_tool=md.generationTool or "",
+        co_simulation=cs.modelIdentifier if cs is not None else None,
+        model_exchange=md.modelExchange.modelIdentifier if md.modelExchange is not None else None,
+        guid=md.guid or "",
+        variable_step=bool(cs.canHandleVariableCommunicationStepSize) if cs is not None else False,
+        variables=MappingProxyType(variables),
+        units=MappingProxyType(units),
+    )
+
+
+class Stepper(Protocol):
+    """One initialised Co-Simulation instance with fixed input and output value references."""
+
+    name: str
+    inputs: ctypes.Array[ctypes.c_double]
+    outputs: ctypes.Array[ctypes.c_double]
+
+    def step(self, t_s: float) -> None:
+        """Write `inputs`, advance from `t_s` by the communication step, read `outputs`."""
+
+    def read_outputs(self) -> None:
+        """Read `outputs` without stepping (after initialisation)."""
+
+    def close(self) -> None:
+        """Terminate and free the instance (idempotent)."""
+
+
+class _Slot(ctypes.Structure):
+    """One instance for the stepping shim (`TwinSlot` in fmus/common/step_shim.c)."""
+
+    _fields_ = (
+        ("fmi_version", ctypes.c_int),
+        ("instance", ctypes.c_void_p),
+        ("set", ctypes.c_void_p),
+        ("get", ctypes.c_void_p),
+        ("step", ctypes.c_void_p),
+        ("in_vr", ctypes.c_void_p),
+        ("n_in", ctypes.c_size_t),
+        ("inputs", ctypes.c_void_p),
+        ("out_vr", ctypes.c_void_p),
+        ("n_out", ctypes.c_size_t),
+        ("outputs", ctypes.c_void_p),
+        ("status", ctypes.c_int * 3),
+        ("terminate", ctypes.c_int),
+    )
+
+
+class StepGroup:
+    """Steps several instances together, one communication step at a time.
+
+    With the low-level API a small compiled shim (fmus/common/step_shim.c) sets the inputs, steps and
+    reads the outputs of every instance in one C call; with the convenience API, or when the shim
+    cannot be built, the instances are stepped one after the other from Python.
+
+    The hot path is `step_next()`: it steps from `index * step_s` and counts the step, and returns -1,
+    or the position of the instance that failed (then call `raise_failure`). Step loops bind it once.
+    """
+
+    def __init__(self, steppers: Sequence[Stepper], *, step_s: float, start_index: int = 0) -> None:
+        """Group `steppers` (all created by this module, with communication step `step_s`)."""
+        self._steppers = tuple(steppers)
+        self._h = step_s
+        self._index = ctypes.c_longlong(start_index)
+        self._shim: Any = None
+        self.step_next: Callable[[], int] = self._step_next_each
+        adapters = [s for s in self._steppers if isinstance(s, _Base) and s.slot_fields() is not None]
+        if len(adapters) == len(self._steppers) and adapters:
+            from twin.cosim.build import build_shim
+
+            try:
+                library = ctypes.CDLL(str(build_shim()))
+            except (FmuError, OSError) as err:
+                _log.warning("stepping FMUs from Python: %s", err)
+            else:
+                self._library = library
+                self._slots = (_Slot * len(adapters))()
+                for slot, adapter in zip(self._slots, adapters, strict=True):
+                    for name, value in (adapter.slot_fields() or {}).items():
+                        setattr(slot, name, value)
+                self._h_c = ctypes.c_double(step_s)
+                shim = library.twin_step_next
+                shim.restype = ctypes.c_int  # no argtypes: every argument is prebuilt below
+                self._shim = shim
+                self.step_next = functools.partial(
+                    shim, self._slots, len(adapters), ctypes.byref(self._index), ctypes.byref(self._h_c)
+                )
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the compiled shim steps the group."""
+        return self._shim is not None
+
+    @property
+    def index(self) -> int:
+        """Communication steps taken so far."""
+        return int(self._index.value)
+
+    def step(self) -> None:
+        """Take one communication step (not the hot path: it checks and raises itself).
+
+        Raises:
+            FmuError: If an instance fails.
+        """
+        failed = self.step_next()
+        if failed >= 0:
+            self.raise_failure(failed)
+
+    def _step_next_each(self) -> int:
+        t_s = self._index.value * self._h
+        for stepper in self._steppers:
+            stepper.step(t_s)  # raises itself
+        self._index.value += 1
+        return -1
+
+    def raise_failure(self, failed: int) -> None:
+        """Raise the FmuError for the instance at position `failed` after `step_next` reported it."""
+        slot = self._slots[failed]
+        adapter = self._steppers[failed]
+        assert isinstance(adapter, _Base)
+        adapter.fail_slot(tuple(slot.status), bool(slot.terminate), self._index.value * self._h)
+
+
+class _Messages:
+    """Keeps an instance's last log messages for error reports and forwards them to logging."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.recent: collections.deque[str] = collections.deque(maxlen=8)
+        self._unread = 0
+
+    def add(self, status: int, category: str, message: str) -> None:
+        text = message.strip()
+        self.recent.append(text)
+        self._unread = min(self._unread + 1, len(self.recent))
+        level = logging.WARNING if status >= 1 else logging.DEBUG
+        _log.log(level, "%s: [%s] %s", self.label, category, text)
+
+    def last(self) -> str:
+        """The first message since the last call: the one the failing call logged."""
+        if not self._unread:
+            return ""
+        text = self.recent[-self._unread]
+        self._unread = 0
+        return text
+
+
+def _decode(value: bytes | None) -> str:
+    return value.decode("utf-8", "replace") if value else ""
+
+
+class FmuFile:
+    """An extracted FMU whose Co-Simulation instances can be created (a context manager)."""
+
+    def __init__(self, path: Path) -> None:
+        """Read and extract `path`.
+
+        Raises:
+            FmuError: If the FMU cannot be read or has no Co-Simulation interface for FMI 2 or 3.
+        """
+        self.info = read_fmu_info(path)
+        self.path = path
+        if self.info.major_version not in (2, 3):
+            msg = f"{path}: FMI {self.info.fmi_version} is not supported (FMI 2.0 and 3.0 are)"
+            raise FmuError(msg)
+        if self.info.co_simulation is None:
+            msg = f"{path}: no Co-Simulation interface (Model Exchange only); twin steps Co-Simulation FMUs"
+            raise FmuError(msg)
+        try:
+            self._dir = Path(fmpy.extract(str(path)))
+        except Exception as err:
+            msg = f"{path}: cannot extract ({err})"
+            raise FmuError(msg) from None
+        self._instances: list[Stepper] = []
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close every instance and remove the extraction."""
+        for inst in self._instances:
+            inst.close()
+        self._instances.clear()
+        shutil.rmtree(self._dir, ignore_errors=True)
+
+    @property
+    def label(self) -> str:
+        """`model name (file name)`, for messages."""
+        return f"{self.info.model_name} ({self.path.name})"
+
+    def instantiate(
+        self,
+        name: str,
+        *,
+        step_s: float,
+        inputs: Sequence[int],
+        outputs: Sequence[int],
+        start: Mapping[str, float] | None = None,
+        start_time_s: float = 0.0,
+        api: Api = "lowlevel",
+    ) -> Stepper:
+        """Create, set up and initialise one instance.
+
+        Args:
+            name: Instance name (appears in messages).
+            step_s: Fixed communication step, s.
+            inputs: Value references written from `Stepper.inputs` before each step (Real/Float64).
+            outputs: Value references read into `Stepper.outputs` after each step.
+            start: Variable name → value set before initialisation (parameters, start values), in
+                the FMU's own units.
+            start_time_s: Start time, s.
+            api: `lowlevel` (direct C calls) or `convenience` (FMPy's wrappers).
+
+        Raises:
+            FmuError: If the library cannot be loaded, instantiation returns NULL, a start value
+                names an unknown or non-settable variable, or initialisation fails.
+        """
+        label = f"{self.label} instance {name!r}"
+        messages = _Messages(label)
+        kwargs = {
+            "guid": self.info.guid,
+            "unzipDirectory": str(self._dir),
+            "modelIdentifier": self.info.co_simulation,
+            "instanceName": name,
+        }
+        try:
+            if self.info.major_version == 2:
+                fmu: Any = fmpy.fmi2.FMU2Slave(**kwargs)
+            else:
+                fmu = fmpy.fmi3.FMU3Slave(**kwargs)
+        except Exception as err:
+            platform = fmpy.platform if self.info.major_version == 2 else fmpy.platform_tuple
+            msg = f"{label}: cannot load the binary for {platform}: {err}"
+            raise FmuError(msg) from None
+        stepper: _Base
+        try:
+            if self.info.major_version == 2:
+                stepper = _Fmi2(fmu, label, messages, step_s, inputs, outputs, api)
+            else:
+                stepper = _Fmi3(fmu, label, messages, step_s, inputs, outputs, api)
+            stepper.initialize(self.info, start or {}, start_time_s)
+        except FmuError:
+            raise
+        except Exception as err:  # a library or ctypes failure during setup
+            msg = f"{label}: setup failed: {err}"
+            raise FmuError(msg) from None
+        self._instances.append(stepper)
+        return stepper
+
+
+class _Base:
+    """What both adapters share: buffers, labels, status checks, start values, closing."""
+
+    def __init__(  # noqa: PLR0917 - private, built in one place
+        self,
+        fmu: Any,
+        label: str,
+        messages: _Messages,
+        step_s: float,
+        inputs: Sequence[int],
+        outputs: Sequence[int],
+        api: Api,
+    ) -> None:
+        self.name = label
+        self.step_s = float(step_s)
+        self._fmu = fmu
+        self._messages = messages
+        self._h = float(step_s)
+        self._api = api
+        self._in_vr = list(inputs)
+        self._out_vr = list(outputs)
+        self.inputs = (ctypes.c_double * max(1, len(inputs)))()
+        self.outputs = (ctypes.c_double * max(1, len(outputs)))()
+        self._open = False
+        self._failed = False
+
+    def fail(self, function: str, status: int, t_s: float) -> None:
+        """Raise the FmuError for a bad status."""
+        self._failed = True
+        text = _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
+        detail = self._messages.last()
+        msg = f"{self.name} failed at t = {t_s:.6f} s: {function} returned {text}" + (f" ({detail})" if detail else "")
+        raise FmuError(msg)
+
+    step_s: float = 0.0
+    _version: int = 0
+    # Set by the adapters' `initialize`.
+    _c_ptr: ctypes.c_void_p
+    _set: Any
+    _get: Any
+    _do: Any
+    _in_refs: Any
+    _out_refs: Any
+    _n_in: int
+    _n_out: int
+
+    def step(self, t_s: float) -> None:
+        raise NotImplementedError
+
+    def read_outputs(self) -> None:
+        raise NotImplementedError
+
+    _FUNCTIONS: tuple[str, str, str] = ("set", "doStep", "get")
+
+    def slot_fields(self) -> dict[str, Any] | None:
+        """The values of a `_Slot` for this instance, or None on the convenience API."""
+        if self._api != "lowlevel":
+            return None
+        return {
+            "fmi_version": self._version,
+            "instance": self._c_ptr.value,
+            "set": ctypes.cast(self._set, ctypes.c_void_p).value,
+            "get": ctypes.cast(self._get, ctypes.c_void_p).value,
+            "step": ctypes.cast(self._do, ctypes.c_void_p).value,
+            "in_vr": ctypes.addressof(self._in_refs),
+            "n_in": self._n_in,
+            "inputs": ctypes.addressof(self.inputs),
+            "out_vr": ctypes.addressof(self._out_refs),
+            "n_out": self._n_out,
+            "outputs": ctypes.addressof(self.outputs),
+        }
+
+    def fail_slot(self, statuses: tuple[int, ...], terminate: bool, t_s: float) -> None:
+        """Raise for what the shim reported."""
+        if terminate and max(statuses) <= 1:
+            self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+            statuses = (statuses[0], 3, statuses[2])
+        self._raise_first(self._FUNCTIONS, statuses, t_s)
+
+    def _raise_first(self, functions: tuple[str, ...], statuses: tuple[int, ...], t_s: float) -> None:
+        for function, status in zip(functions, statuses, strict=True):
+            if status > 1:
+                self.fail(function, status, t_s)
+
+    def _set_start(self, info: FmuInfo, start: Mapping[str, float]) -> None:
+        for var_name, value in start.items():
+            var = info.variables.get(var_name)
+            if var is None:
+                msg = f"{self.name}: no variable {var_name!r} to set"
+                raise FmuError(msg)
+            if var.causality not in ("parameter", "input", "calculatedParameter", "local", "output") or (
+                var.variability == "constant"
+            ):
+                msg = f"{self.name}: {var_name!r} ({var.causality}, {var.variability}) cannot be set"
+                raise FmuError(msg)
+            self._set_one(var, value)
+
+    def _set_one(self, var: VariableInfo, value: float) -> None:
+        raise NotImplementedError
+
+    def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
+        raise NotImplementedError
+
+    def _call(self, function: str, t_s: float, action: Any) -> None:
+        try:
+            action()
+        except fmpy.fmi1.FMICallException as err:
+            self.fail(function, int(err.status), t_s)
+
+    def _step_convenience(self, t_s: float) -> None:
+        """The same step through FMPy's wrappers (list building and checks in Python on every call)."""
+        fmu = self._fmu
+        setter, getter = (fmu.setReal, fmu.getReal) if self._version == 2 else (fmu.setFloat64, fmu.getFloat64)
+        try:
+            setter(self._in_vr, list(self.inputs)[: self._n_in])
+            fmu.doStep(t_s, self._h)
+            values = getter(self._out_vr)
+        except fmpy.fmi1.FMICallException as err:
+            self.fail(err.function, int(err.status), t_s)
+        for k, value in enumerate(values):
+            self.outputs[k] = value
+
+    def close(self) -> None:
+        if not self._open:
+            return
+        self._open = False
+        fmu = self._fmu
+        try:
+            if not self._failed:
+                fmu.terminate()
+        except Exception as err:  # terminate may fail after an error; freeing still must happen
+            _log.debug("%s: terminate: %s", self.name, err)
+        try:
+            fmu.freeInstance()
+        except Exception as err:
+            _log.debug("%s: freeInstance: %s", self.name, err)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+class _Fmi2(_Base):
+    """FMI 2.0 Co-Simulation adapter."""
+
+    _version = 2
+    _FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")
+
+    def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
+        fmu = self._fmu
+        messages = self._messages
+
+        def logger(env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+            messages.add(status, _decode(category), _decode(message))
+
+        callbacks = fmpy.fmi2.fmi2CallbackFunctions()
+        callbacks.logger = fmpy.fmi2.fmi2CallbackLoggerTYPE(logger)
+        callbacks.allocateMemory = fmpy.fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+        callbacks.freeMemory = fmpy.fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
+        from fmpy.logging import addLoggerProxy
+
+        addLoggerProxy(ctypes.byref(callbacks))
+        self._callbacks = callbacks  # keep the ctypes callbacks alive
+        try:
+            fmu.instantiate(callbacks=callbacks, loggingOn=False)
+        except Exception:
+            detail = messages.last()
+            msg = f"{self.name}: fmi2Instantiate returned NULL" + (f" ({detail})" if detail else "")
+            raise FmuError(msg) from None
+        self._open = True
+        c = fmu.component
+        self._c = c
+        self._call("fmi2SetupExperiment", start_time_s, lambda: fmu.setupExperiment(startTime=start_time_s))
+        self._set_start(info, start)
+        self._call("fmi2EnterInitializationMode", start_time_s, fmu.enterInitializationMode)
+        self._call("fmi2ExitInitializationMode", start_time_s, fmu.exitInitializationMode)
+
+        dll = fmu.dll
+        status = ctypes.c_int
+        vr_array = ctypes.c_uint * max(1, len(self._in_vr))
+        self._in_refs = vr_array(*self._in_vr)
+        self._out_refs = (ctypes.c_uint * max(1, len(self._out_vr)))(*self._out_vr)
+        pointer = ctypes.c_void_p
+        dbl_p = ctypes.POINTER(ctypes.c_double)
+        uint_p = ctypes.POINTER(ctypes.c_uint)
+        self._set = ctypes.CFUNCTYPE(status, pointer, uint_p, ctypes.c_size_t, dbl_p)(("fmi2SetReal", dll))
+        self._get = ctypes.CFUNCTYPE(status, pointer, uint_p, ctypes.c_size_t, dbl_p)(("fmi2GetReal", dll))
+        self._do = ctypes.CFUNCTYPE(status, pointer, ctypes.c_double, ctypes.c_double, ctypes.c_int)(
+            ("fmi2DoStep", dll)
+        )
+        self._c_ptr = ctypes.c_void_p(c)
+        self._n_in = len(self._in_vr)
+        self._n_out = len(self._out_vr)
+        if self._api == "convenience":
+            self.step = self._step_convenience  # type: ignore[method-assign]
+        self.read_outputs()
+
+    def _set_one(self, var: VariableInfo, value: float) -> None:
+        fmu = self._fmu
+        vr = [var.value_reference]
+        if var.type == "Real":
+            action = lambda: fmu.setReal(vr, [float(value)])  # noqa: E731
+        elif var.type in ("Integer", "Enumeration"):
+            action = lambda: fmu.setInteger(vr, [int(value)])  # noqa: E731
+        elif var.type == "Boolean":
+            action = lambda: fmu.setBoolean(vr, [bool(value)])  # noqa: E731
+        else:
+            msg = f"{self.name}: {var.name!r} is a {var.type}; only numbers can be set"
+            raise FmuError(msg)
+        self._call(f"setting {var.name}", 0.0, action)
+
+    def step(self, t_s: float) -> None:
+        c = self._c_ptr
+        set_status = self._set(c, self._in_refs, self._n_in, self.inputs)
+        step_status = self._do(c, t_s, self._h, 1)
+        get_status = self._get(c, self._out_refs, self._n_out, self.outputs)
+        if (set_status | step_status | get_status) > 1:
+            self._raise_first(("fmi2SetReal", "fmi2DoStep", "fmi2GetReal"), (set_status, step_status, get_status), t_s)
+
+    def read_outputs(self) -> None:
+        status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs)
+        if status > 1:
+            self.fail("fmi2GetReal", status, 0.0)
+
+
+class _Fmi3(_Base):
+    """FMI 3.0 Co-Simulation adapter."""
+
+    _version = 3
+    _FUNCTIONS = ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")
+
+    def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
+        fmu = self._fmu
+        messages = self._messages
+
+        def log_message(env: Any, status: int, category: bytes, message: bytes) -> None:
+            messages.add(status, _decode(category), _decode(message))
+
+        try:
+            fmu.instantiate(loggingOn=False, logMessage=log_message)
+        except Exception:
+            detail = messages.last()
+            msg = f"{self.name}: fmi3InstantiateCoSimulation returned NULL" + (f" ({detail})" if detail else "")
+            raise FmuError(msg) from None
+        self._open = True
+        self._set_start(info, start)
+        self._call(
+            "fmi3EnterInitializationMode", start_time_s, lambda: fmu.enterInitializationMode(startTime=start_time_s)
+        )
+        self._call("fmi3ExitInitializationMode", start_time_s, fmu.exitInitializationMode)
+
+        dll = fmu.dll
+        status = ctypes.c_int
+        pointer = ctypes.c_void_p
+        dbl_p = ctypes.POINTER(ctypes.c_double)
+        uint_p = ctypes.POINTER(ctypes.c_uint)
+        bool_p = ctypes.POINTER(ctypes.c_bool)
+        size = ctypes.c_size_t
+        self._in_refs = (ctypes.c_uint * max(1, len(self._in_vr)))(*self._in_vr)
+        self._out_refs = (ctypes.c_uint * max(1, len(self._out_vr)))(*self._out_vr)
+        self._set = ctypes.CFUNCTYPE(status, pointer, uint_p, size, dbl_p, size)(("fmi3SetFloat64", dll))
+        self._get = ctypes.CFUNCTYPE(status, pointer, uint_p, size, dbl_p, size)(("fmi3GetFloat64", dll))
+        self._do = ctypes.CFUNCTYPE(
+            status, pointer, ctypes.c_double, ctypes.c_double, ctypes.c_bool, bool_p, bool_p, bool_p, dbl_p
+        )(("fmi3DoStep", dll))
+        self._event = ctypes.c_bool(False)
+        self._terminate = ctypes.c_bool(False)
+        self._early = ctypes.c_bool(False)
+        self._last_time = ctypes.c_double(0.0)
+        self._refs = (
+            ctypes.byref(self._event),
+            ctypes.byref(self._terminate),
+            ctypes.byref(self._early),
+            ctypes.byref(self._last_time),
+        )
+        self._c_ptr = ctypes.c_void_p(fmu.component)
+        self._n_in = len(self._in_vr)
+        self._n_out = len(self._out_vr)
+        if self._api == "convenience":
+            self.step = self._step_convenience  # type: ignore[method-assign]
+        self.read_outputs()
+
+    _SETTERS: Mapping[str, tuple[str, type]] = MappingProxyType(
+        {
+            "Float64": ("setFloat64", float),
+            "Float32": ("setFloat32", float),
+            "Int8": ("setInt8", int),
+            "UInt8": ("setUInt8", int),
+            "Int16": ("setInt16", int),
+            "UInt16": ("setUInt16", int),
+            "Int32": ("setInt32", int),
+            "UInt32": ("setUInt32", int),
+            "Int64": ("setInt64", int),
+            "UInt64": ("setUInt64", int),
+            "Enumeration": ("setInt64", int),
+            "Boolean": ("setBoolean", bool),
+        }
+    )
+
+    def _set_one(self, var: VariableInfo, value: float) -> None:
+        setter = self._SETTERS.get(var.type)
+        if setter is None:
+            msg = f"{self.name}: {var.name!r} is a {var.type}; only numbers can be set"
+            raise FmuError(msg)
+        method, kind = setter
+        function = getattr(self._fmu, method)
+        vr = [var.value_reference]
+        self._call(f"setting {var.name}", 0.0, lambda: function(vr, [kind(value)]))
+
+    def step(self, t_s: float) -> None:
+        c = self._c_ptr
+        refs = self._refs
+        set_status = self._set(c, self._in_refs, self._n_in, self.inputs, self._n_in)
+        step_status = self._do(c, t_s, self._h, True, refs[0], refs[1], refs[2], refs[3])
+        get_status = self._get(c, self._out_refs, self._n_out, self.outputs, self._n_out)
+        if (set_status | step_status | get_status) > 1 or self._terminate.value:
+            if self._terminate.value and step_status <= 1:
+                self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+                step_status = 3
+            self._raise_first(
+                ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"), (set_status, step_status, get_status), t_s
+            )
+
+    def read_outputs(self) -> None:
+        status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs, self._n_out)
+        if status > 1:
+            self.fail("fmi3GetFloat64", status, 0.0)

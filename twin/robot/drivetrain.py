@@ -1,0 +1,553 @@
+"""Drivetrains: what the simulation loop steps to move the robot, and the FMU-based one.
+
+`Drivetrain` is the Protocol the loop calls; both the FMU drive here and an ideal kinematic drive
+implement it. The loop sets the latest command with `set_cmd_vel`, calls `advance(n)` to run `n`
+fixed physics steps between its events, and reads `chassis_state()` and `wheel_state()` for sensors
+and recording.
+
+`FmuDrivetrain` runs one FMU instance per wheel (left, right) through the drive contract
+(`twin.cosim.contract`): inverse kinematics with optional firmware clamps, then either the twin's
+wheel-speed PI (profile `voltage`, gains designed by `twin.robot.drive_control`) or the FMU's own
+loop (profile `velocity-servo`), one doStep per wheel per step, and the chassis
+(`twin.robot.chassis`) turning wheel speeds into motion and giving each wheel its load torque.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Literal, NamedTuple, Protocol, Self
+
+import numpy as np
+
+from twin.core.errors import ConfigError
+from twin.cosim.build import resolve_fmu
+from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
+from twin.cosim.fmu import Api, FmuFile, FmuInfo, StepGroup, Stepper
+from twin.robot.chassis import Chassis, ChassisParams, ChassisState, ContactFn, SlipModel
+from twin.robot.drive_control import (
+    MotorConstants,
+    SpeedLoop,
+    StepComparison,
+    design_speed_pi,
+    linear_step_response,
+)
+
+__all__ = [
+    "CommandLimits",
+    "Drivetrain",
+    "FmuDrive",
+    "FmuDrivetrain",
+    "MotorModel",
+    "SpeedLoopTargets",
+    "WheelState",
+    "fmu_step_response",
+    "motor_constants",
+    "wheel_setpoints",
+]
+
+_log = logging.getLogger(__name__)
+
+
+class WheelState(NamedTuple):
+    """Per-wheel signals, each a (left, right) pair; NaN where the FMU has no such output."""
+
+    angle_rad: tuple[float, float]
+    speed_radps: tuple[float, float]
+    effort_nm: tuple[float, float]  # drive torque at the wheel
+    voltage_v: tuple[float, float]
+    current_a: tuple[float, float]
+
+
+class Drivetrain(Protocol):
+    """What the simulation loop steps. Time advances only through `advance`."""
+
+    step_ns: int
+
+    def set_cmd_vel(self, v_mps: float, w_radps: float) -> None:
+        """Take a new body velocity command (held until the next one)."""
+
+    def advance(self, n_steps: int) -> None:
+        """Run `n_steps` fixed physics steps."""
+
+    def chassis_state(self) -> ChassisState:
+        """Pose, rates and accelerations of the chassis now."""
+
+    def wheel_state(self) -> WheelState:
+        """Wheel angles, speeds, efforts, voltages and currents now."""
+
+    def close(self) -> None:
+        """Release resources (idempotent)."""
+
+
+# --- the drive section of a scenario ------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class CommandLimits:
+    """Clamps applied to cmd_vel before the wheels, as the TB3 firmware does (null: no clamp).
+
+    TB3 firmware values: Waffle 0.26 m/s, 1.82 rad/s; Burger 0.22 m/s, 2.84 rad/s; each wheel
+    ±337 velocity units = 77.2 rpm = 8.08 rad/s.
+    """
+
+    max_linear_mps: float | None = None
+    max_angular_radps: float | None = None
+    max_wheel_speed_radps: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class MotorModel:
+    """The linear motor model for the speed-loop design: each a number (SI) or an FMU parameter's name.
+
+    Defaults name the parameters of the project's FMUs.
+    """
+
+    resistance_ohm: float | str = "R"
+    inductance_h: float | str = "L"
+    torque_constant_nm_per_a: float | str = "Kt"
+    back_emf_vs_per_rad: float | str = "Ke"
+    rotor_inertia_kgm2: float | str = "J_rotor"
+    rotor_friction_nms_per_rad: float | str = "b_rotor"
+    gear_ratio: float | str = "N"
+    load_inertia_kgm2: float | str = "J_wheel"
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class SpeedLoopTargets:
+    """Design targets of the twin's wheel-speed PI (profile `voltage`)."""
+
+    bandwidth_hz: float = 15.0  # open-loop crossover
+    phase_margin_deg: float = 60.0
+    voltage_limit_v: float = 12.0  # the PI's output clamp (the battery)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class FmuDrive:
+    """Drive section `type: fmu`: wheels stepped as FMUs (one instance per wheel)."""
+
+    type: Literal["fmu"] = "fmu"
+    fmu: str = "builtin:xm430_w210"  # a built-in (builtin:NAME), used when `fmu_file` is null
+    fmu_file: Path | None = None  # a .fmu file (relative to the scenario); overrides `fmu`
+    fmi_version: Literal[2, 3] = 2  # for built-ins
+    profile: Literal["voltage", "velocity-servo"] = "voltage"
+    mapping: FmuMapping | Path = field(default_factory=FmuMapping)  # inline, or a mapping file
+    communication_step_s: float | None = None  # null: the physics step
+    motor: MotorModel | None = field(default_factory=MotorModel)  # for the PI design; null in servo
+    speed_loop: SpeedLoopTargets = field(default_factory=SpeedLoopTargets)
+    wheel_inertia_kgm2: float | None = None  # the drive's inertia at the wheel; null: from motor, or probed
+    limits: CommandLimits = field(default_factory=CommandLimits)
+    slip: SlipModel = field(default_factory=SlipModel)
+    api: Literal["lowlevel", "convenience"] = "lowlevel"
+
+    def __post_init__(self) -> None:
+        if self.fmu_file is None and not self.fmu.startswith("builtin:"):
+            msg = f"fmu: {self.fmu!r} is not builtin:NAME; give a file as fmu_file"
+            raise ValueError(msg)
+        if self.communication_step_s is not None and not self.communication_step_s > 0.0:
+            msg = f"communication_step_s must be positive, got {self.communication_step_s}"
+            raise ValueError(msg)
+
+    def resolved_mapping(self) -> FmuMapping:
+        """The mapping, read from its file if it is a path.
+
+        Raises:
+            ConfigError: If the mapping file is wrong.
+        """
+        return load_mapping(self.mapping) if isinstance(self.mapping, Path) else self.mapping
+
+
+def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits: CommandLimits) -> tuple[float, float]:
+    """Inverse kinematics with the firmware's clamps: body command → (left, right) wheel speeds, rad/s."""
+    if limits.max_linear_mps is not None:
+        v_mps = max(-limits.max_linear_mps, min(limits.max_linear_mps, v_mps))
+    if limits.max_angular_radps is not None:
+        w_radps = max(-limits.max_angular_radps, min(limits.max_angular_radps, w_radps))
+    half = w_radps * chassis.wheel_separation_m / 2.0
+    left = (v_mps - half) / chassis.wheel_radius_m
+    right = (v_mps + half) / chassis.wheel_radius_m
+    if limits.max_wheel_speed_radps is not None:
+        cap = limits.max_wheel_speed_radps
+        left, right = max(-cap, min(cap, left)), max(-cap, min(cap, right))
+    return left, right
+
+
+# --- the FMU drivetrain --------------------------------------------------------------------------
+
+
+_OUTPUT_ORDER = ("wheel_speed", "wheel_angle", "current", "motor_torque", "applied_voltage")
+
+
+def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]) -> MotorConstants:
+    """Resolve a motor model against an FMU: numbers as given, names from the start values or the FMU.
+
+    Raises:
+        ConfigError: If a named parameter is missing or the constants are not physical.
+    """
+    values: dict[str, float] = {}
+    for name in MotorModel.__dataclass_fields__:
+        ref = getattr(model, name)
+        if isinstance(ref, str):
+            if ref in start:
+                values[name] = float(start[ref])
+                continue
+            var = info.variables.get(ref)
+            if var is None or var.start is None:
+                msg = (
+                    f"drive.motor.{name}: the FMU has no parameter {ref!r} with a start value; "
+                    "give the number (SI) or the FMU parameter's name"
+                )
+                raise ConfigError(msg)
+            values[name] = float(var.start)
+        else:
+            values[name] = float(ref)
+    try:
+        return MotorConstants(**values)
+    except ValueError as err:
+        msg = f"drive.motor: {err}"
+        raise ConfigError(msg) from None
+
+
+class FmuDrivetrain:
+    """Two FMU wheel drives and the chassis, stepped at a fixed step (a context manager)."""
+
+    def __init__(
+        self,
+        drive: FmuDrive,
+        chassis: ChassisParams,
+        *,
+        step_ns: int,
+        pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        contact: ContactFn | None = None,
+    ) -> None:
+        """Build (on first use), load and bind the FMU, design the speed loop, instantiate both wheels.
+
+        Args:
+            drive: The scenario's drive section.
+            chassis: Robot numbers (from the robot's SDF).
+            step_ns: The loop's physics step, ns.
+            pose: Initial pose (x_m, y_m, yaw_rad).
+            contact: `(x_m, y_m, yaw_rad) -> bool`, True if that pose would penetrate the world.
+
+        Raises:
+            FmuError: If the FMU cannot be built, loaded, bound to the profile or initialised.
+            ConfigError: If the mapping file, motor model or speed-loop targets are wrong.
+        """
+        self.step_ns = step_ns
+        physics_s = step_ns * 1e-9
+        comm_s = drive.communication_step_s or physics_s
+        ratio = comm_s / physics_s
+        if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
+            msg = (
+                f"drive.communication_step_s: {comm_s:g} s must be a whole multiple of the physics step {physics_s:g} s"
+            )
+            raise ConfigError(msg)
+        self._ratio = round(ratio)
+        self._pending = 0
+        self._h = comm_s
+        self.drive = drive
+        self.params = chassis
+        self.profile = Profile(drive.profile)
+        path = resolve_fmu(drive.fmu_file or drive.fmu, fmi_version=drive.fmi_version)
+        self._file = FmuFile(path)
+        try:
+            self._setup(drive, chassis, pose, contact)
+        except BaseException:
+            self._file.close()
+            raise
+
+    def _setup(
+        self, drive: FmuDrive, chassis: ChassisParams, pose: tuple[float, float, float], contact: ContactFn | None
+    ) -> None:
+        info = self._file.info
+        mapping = drive.resolved_mapping()
+        binding = bind(info, mapping, self.profile)
+        self.binding = binding
+        self.motor: MotorConstants | None = None
+        self.speed_loop: SpeedLoop | None = None
+        if drive.motor is not None and (self.profile is Profile.VOLTAGE or drive.wheel_inertia_kgm2 is None):
+            try:
+                self.motor = motor_constants(drive.motor, info, binding.start)
+            except ConfigError:
+                if self.profile is Profile.VOLTAGE:
+                    raise
+        if self.profile is Profile.VOLTAGE:
+            if self.motor is None:
+                msg = "drive.motor: the voltage profile needs the motor model to design the speed loop"
+                raise ConfigError(msg)
+            targets = drive.speed_loop
+            self.speed_loop = design_speed_pi(
+                self.motor,
+                crossover_hz=targets.bandwidth_hz,
+                phase_margin_deg=targets.phase_margin_deg,
+                step_s=self._h,
+            )
+            _log.info("speed loop: %s", self.speed_loop)
+        outputs = [binding.outputs[r] for r in _OUTPUT_ORDER if r in binding.outputs]
+        self._out_index = {b.role: k for k, b in enumerate(outputs)}
+        in_vrs = [b.value_reference for b in binding.inputs]
+        out_vrs = [b.value_reference for b in outputs]
+        wheel_inertia = drive.wheel_inertia_kgm2
+        if wheel_inertia is None:
+            wheel_inertia = self.motor.wheel_inertia_kgm2 if self.motor is not None else self._probe(binding)
+        self.wheel_inertia_kgm2 = wheel_inertia
+        api: Api = drive.api
+        self._left: Stepper = self._file.instantiate(
+            "left", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
+        )
+        self._right: Stepper = self._file.instantiate(
+            "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
+        )
+        self._group = StepGroup((self._left, self._right), step_s=self._h)
+        self.chassis = Chassis(
+            chassis, step_s=self._h, wheel_inertia_kgm2=wheel_inertia, pose=pose, contact=contact, slip=drive.slip
+        )
+        cmd, load = binding.inputs
+        self._cmd_scale, self._cmd_offset = 1.0 / cmd.factor, cmd.offset
+        self._load_scale, self._load_offset = 1.0 / load.factor, load.offset
+        speed = binding.outputs["wheel_speed"]
+        self._speed_factor, self._speed_offset = speed.factor, speed.offset
+        self._ref_left = self._ref_right = 0.0
+        self._int_left = self._int_right = 0.0
+        self._volt_left = self._volt_right = 0.0
+        self._w_left = self._speed(self._left)
+        self._w_right = self._speed(self._right)
+        if self.speed_loop is not None:
+            self._kp = self.speed_loop.kp_v_per_radps
+            self._ki = self.speed_loop.ki_v_per_rad
+            self._v_max = drive.speed_loop.voltage_limit_v
+            self._run = self._run_voltage
+        else:
+            self._run = self._run_servo
+
+    def _probe(self, binding: Binding) -> float:
+        """Estimate the drive's inertia at the wheel from one step under a small load torque."""
+        in_vrs = [b.value_reference for b in binding.inputs]
+        speed = binding.outputs["wheel_speed"]
+        probe_nm, h = 0.01, self._h
+        stepper = self._file.instantiate(
+            "probe", step_s=h, inputs=in_vrs, outputs=[speed.value_reference], start=binding.start
+        )
+        try:
+            cmd, load = binding.inputs
+            stepper.inputs[0] = (0.0 - cmd.offset) / cmd.factor
+            stepper.inputs[1] = (probe_nm - load.offset) / load.factor
+            w0 = speed.factor * stepper.outputs[0] + speed.offset
+            stepper.step(0.0)
+            dw = abs(speed.factor * stepper.outputs[0] + speed.offset - w0)
+        finally:
+            stepper.close()
+        inertia = probe_nm * h / dw if dw > 0.0 else 1.0
+        _log.info("probed drive inertia at the wheel: %.3g kg m^2", inertia)
+        return inertia
+
+    def _speed(self, stepper: Stepper) -> float:
+        return self._speed_factor * stepper.outputs[0] + self._speed_offset
+
+    # --- the Drivetrain protocol ---
+
+    @property
+    def t_ns(self) -> int:
+        """Time of the last communication point, ns."""
+        return round(self._group.index * self._h * 1e9)
+
+    def set_cmd_vel(self, v_mps: float, w_radps: float) -> None:
+        """Take a body velocity command; the wheels' setpoints follow with the firmware's clamps."""
+        self._ref_left, self._ref_right = wheel_setpoints(v_mps, w_radps, self.params, self.drive.limits)
+
+    def advance(self, n_steps: int) -> None:
+        """Run `n_steps` physics steps (one FMU step per wheel each `communication_step_s`).
+
+        Raises:
+            FmuError: If an FMU fails; names the FMU, instance, sim time and status.
+        """
+        self._pending += n_steps
+        count = self._pending // self._ratio
+        self._pending -= count * self._ratio
+        if count:
+            self._run(count)
+
+    # The two step loops below are the per-step hot path: everything they need is bound to locals
+    # once per batch, and the loop body is straight-line code (one compiled call steps both FMUs).
+
+    def _run_voltage(self, count: int) -> None:
+        h, kp, ki, v_max = self._h, self._kp, self._ki, self._v_max
+        cs, co, ls, lo = self._cmd_scale, self._cmd_offset, self._load_scale, self._load_offset
+        sf, so = self._speed_factor, self._speed_offset
+        in_left, in_right = self._left.inputs, self._right.inputs
+        out_left, out_right = self._left.outputs, self._right.outputs
+        group = self._group
+        step_next, chassis = group.step_next, self.chassis
+        update = chassis.update
+        ref_left, ref_right = self._ref_left, self._ref_right
+        w_left, w_right = self._w_left, self._w_right
+        int_left, int_right = self._int_left, self._int_right
+        v_left = self._volt_left
+        v_right = self._volt_right
+        try:
+            for _ in range(count):
+                # PI per wheel with conditional integration (no wind-up while saturated).
+                e = ref_left - w_left
+                u = kp * e + ki * int_left
+                v_left = v_max if u > v_max else (-v_max if u < -v_max else u)
+                if v_left == u or (u > 0.0) != (e > 0.0):
+                    int_left += e * h
+                e = ref_right - w_right
+                u = kp * e + ki * int_right
+                v_right = v_max if u > v_max else (-v_max if u < -v_max else u)
+                if v_right == u or (u > 0.0) != (e > 0.0):
+                    int_right += e * h
+                in_left[0] = (v_left - co) * cs
+                in_left[1] = (chassis.load_left_nm - lo) * ls
+                in_right[0] = (v_right - co) * cs
+                in_right[1] = (chassis.load_right_nm - lo) * ls
+                failed = step_next()
+                if failed >= 0:
+                    group.raise_failure(failed)
+                w_left = sf * out_left[0] + so
+                w_right = sf * out_right[0] + so
+                update(w_left, w_right)
+        finally:
+            self._w_left, self._w_right = w_left, w_right
+            self._int_left, self._int_right = int_left, int_right
+            self._volt_left, self._volt_right = v_left, v_right
+
+    def _run_servo(self, count: int) -> None:
+        cs, co, ls, lo = self._cmd_scale, self._cmd_offset, self._load_scale, self._load_offset
+        sf, so = self._speed_factor, self._speed_offset
+        in_left, in_right = self._left.inputs, self._right.inputs
+        out_left, out_right = self._left.outputs, self._right.outputs
+        group = self._group
+        step_next, chassis = group.step_next, self.chassis
+        update = chassis.update
+        in_left[0] = (self._ref_left - co) * cs
+        in_right[0] = (self._ref_right - co) * cs
+        w_left, w_right = self._w_left, self._w_right
+        try:
+            for _ in range(count):
+                in_left[1] = (chassis.load_left_nm - lo) * ls
+                in_right[1] = (chassis.load_right_nm - lo) * ls
+                failed = step_next()
+                if failed >= 0:
+                    group.raise_failure(failed)
+                w_left = sf * out_left[0] + so
+                w_right = sf * out_right[0] + so
+                update(w_left, w_right)
+        finally:
+            self._w_left, self._w_right = w_left, w_right
+
+    def chassis_state(self) -> ChassisState:
+        """Pose, rates and accelerations of the chassis now."""
+        return self.chassis.state()
+
+    def _signal(self, role: str, left_fallback: float, right_fallback: float) -> tuple[float, float]:
+        k = self._out_index.get(role)
+        if k is None:
+            return left_fallback, right_fallback
+        b = self.binding.outputs[role]
+        return (
+            b.factor * self._left.outputs[k] + b.offset,
+            b.factor * self._right.outputs[k] + b.offset,
+        )
+
+    def wheel_state(self) -> WheelState:
+        """Wheel angles, speeds, efforts, voltages and currents now (NaN where the FMU has none)."""
+        nan = math.nan
+        if self.profile is Profile.VOLTAGE:
+            volts = self._signal("applied_voltage", self._volt_left, self._volt_right)
+        else:
+            volts = self._signal("applied_voltage", nan, nan)
+        return WheelState(
+            angle_rad=self._signal(
+                "wheel_angle", self.chassis.wheel_angle_left_rad, self.chassis.wheel_angle_right_rad
+            ),
+            speed_radps=(self._w_left, self._w_right),
+            effort_nm=self._signal("motor_torque", nan, nan),
+            voltage_v=volts,
+            current_a=self._signal("current", nan, nan),
+        )
+
+    @property
+    def fmu_info(self) -> FmuInfo:
+        """The FMU's model description."""
+        return self._file.info
+
+    def close(self) -> None:
+        """Terminate and free both instances and remove the extracted FMU."""
+        self._file.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+# --- step response of a drive FMU ---------------------------------------------------------------
+
+
+def fmu_step_response(
+    path: Path,
+    *,
+    voltage_v: float = 12.0,
+    step_s: float = 0.001,
+    duration_s: float | None = None,
+    mapping: FmuMapping | None = None,
+    motor_model: MotorModel | None = None,
+) -> tuple[StepComparison, MotorConstants]:
+    """Run the FMU's no-load step response at `voltage_v` and the linear model's at the same times.
+
+    The run lasts `duration_s`, or 8 mechanical time constants of the linear model.
+
+    Raises:
+        FmuError: If the FMU cannot be loaded, bound to the voltage profile or stepped.
+        ConfigError: If the FMU's parameters do not give a linear motor model.
+    """
+    mapping = mapping or FmuMapping()
+    with FmuFile(path) as fmu:
+        binding = bind(fmu.info, mapping, Profile.VOLTAGE)
+        motor = motor_constants(motor_model or MotorModel(), fmu.info, binding.start)
+        if duration_s is None:
+            damping = motor.resistance_ohm * motor.wheel_friction_nms_per_rad + (
+                motor.gear_ratio**2 * motor.torque_constant_nm_per_a * motor.back_emf_vs_per_rad
+            )
+            duration_s = 8.0 * motor.resistance_ohm * motor.wheel_inertia_kgm2 / damping
+        n = max(2, math.ceil(duration_s / step_s))
+        if n > 1_000_000:
+            msg = f"step response: {n} steps of {step_s:g} s is too many; use a larger --step-ms"
+            raise ConfigError(msg)
+        speed = binding.outputs["wheel_speed"]
+        current = binding.outputs.get("current")
+        outputs = [speed.value_reference] + ([current.value_reference] if current else [])
+        stepper = fmu.instantiate(
+            "step",
+            step_s=step_s,
+            inputs=[b.value_reference for b in binding.inputs],
+            outputs=outputs,
+            start=binding.start,
+        )
+        cmd, load = binding.inputs
+        stepper.inputs[0] = (voltage_v - cmd.offset) / cmd.factor
+        stepper.inputs[1] = (0.0 - load.offset) / load.factor
+        t = np.arange(n + 1) * step_s
+        w = np.empty(n + 1)
+        i = np.full(n + 1, np.nan)
+        w[0] = speed.factor * stepper.outputs[0] + speed.offset
+        if current:
+            i[0] = current.factor * stepper.outputs[1] + current.offset
+        for k in range(n):
+            stepper.step(k * step_s)
+            w[k + 1] = speed.factor * stepper.outputs[0] + speed.offset
+            if current:
+                i[k + 1] = current.factor * stepper.outputs[1] + current.offset
+    model = linear_step_response(motor, voltage_v=voltage_v, t_s=t)
+    comparison = StepComparison(
+        t_s=t, fmu_speed_radps=w, model_speed_radps=model, current_a=i, voltage_v=voltage_v, step_s=step_s
+    )
+    return comparison, motor
