@@ -14,11 +14,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 
 from twin.core.errors import ConfigError
+
+if TYPE_CHECKING:
+    import control
 
 __all__ = ["MotorConstants", "SpeedLoop", "design_speed_pi", "motor_transfer_function"]
 
@@ -67,6 +70,8 @@ class MotorConstants:
 
 def motor_transfer_function(motor: MotorConstants) -> control.TransferFunction:
     """ω_wheel(s)/V(s) of the linear motor, rad/s per V."""
+    import control  # python-control pulls in scipy.signal: seconds of import, paid only when designing
+
     r, ind = motor.resistance_ohm, motor.inductance_h
     j, b = motor.wheel_inertia_kgm2, motor.wheel_friction_nms_per_rad
     n, kt, ke = motor.gear_ratio, motor.torque_constant_nm_per_a, motor.back_emf_vs_per_rad
@@ -115,6 +120,8 @@ def design_speed_pi(motor: MotorConstants, *, crossover_hz: float, phase_margin_
 
 def verify_speed_pi(motor: MotorConstants, *, kp: float, ki: float, step_s: float) -> SpeedLoop:
     """Measure margins, bandwidth and step response of the loop with this PI (hold delay as a Padé)."""
+    import control
+
     plant = motor_transfer_function(motor)
     num, den = control.pade(step_s / 2.0, 3)
     delay = control.tf(num, den)
@@ -160,5 +167,7 @@ class StepComparison:
 
 def linear_step_response(motor: MotorConstants, *, voltage_v: float, t_s: np.ndarray) -> np.ndarray:
     """Wheel speed of the linear model after a voltage step at t = 0, at the times `t_s`."""
+    import control
+
     response = control.forced_response(motor_transfer_function(motor), T=t_s, U=np.full_like(t_s, voltage_v), X0=0.0)
     return np.asarray(response.outputs, dtype=np.float64)

@@ -1,8 +1,9 @@
-"""The ideal drive: wheel speeds follow the command under an acceleration limit, no slip, no dynamics.
+"""The ideal drivetrain: wheel speeds follow the command under an acceleration limit; no slip, no motors.
 
-It reproduces what Gazebo's `gazebo_ros_diff_drive` does to a TurtleBot3 (wheel-rim acceleration
-limited to `max_wheel_acceleration_mps2`) without the motor dynamics the FMU drivetrain adds.
-Contact with the world is checked through a `Contact` callable; the robot stops at contact.
+It does to a TurtleBot3 what Gazebo's `gazebo_ros_diff_drive` does (wheel-rim speed changes limited
+to `max_wheel_acceleration_mps2`) without the motor dynamics of the FMU drivetrain. It implements
+`twin.robot.drivetrain.Drivetrain`. Contact with the world is a pose refusal: a step whose end pose
+the `contact` callable reports as penetrating is not taken, and the wheels stop.
 """
 
 from __future__ import annotations
@@ -11,27 +12,15 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["ChassisState", "KinematicDrive", "KinematicParams"]
+from twin.robot.chassis import ChassisState, ContactFn
+from twin.robot.drivetrain import WheelState
 
-# A contact lasts until the robot is this far from the world again (no chatter while pushing).
-_RELEASE_M = 1e-3
+__all__ = ["KinematicDrivetrain", "KinematicParams"]
 
-# (x_m, y_m, yaw_rad) -> clearance in metres (<= 0 when the pose penetrates the world)
-Clearance = Callable[[float, float, float], float]
+DistanceFn = Callable[[float, float, float], float]
 
-
-@dataclass(slots=True)
-class ChassisState:
-    """The planar chassis state, updated in place by the drive; sensors read it."""
-
-    x_m: float = 0.0
-    y_m: float = 0.0
-    yaw_rad: float = 0.0
-    v_mps: float = 0.0
-    w_radps: float = 0.0
-    accel_mps2: float = 0.0  # longitudinal acceleration in the body frame
-    yaw_accel_radps2: float = 0.0
-    in_contact: bool = False
+# Longest arc taken in one piece while the wheel speeds are steady: contact is checked at its end.
+_MAX_CHUNK_TRAVEL_M = 0.002
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -40,32 +29,44 @@ class KinematicParams:
 
     wheel_radius_m: float
     wheel_separation_m: float
-    max_wheel_acceleration_mps2: float
-    step_s: float
-    bounding_radius_m: float = 0.3  # farthest point of the robot's collision shape from base_footprint
+    max_wheel_acceleration_mps2: float  # math.inf for none
+    bounding_radius_m: float = 0.3  # farthest point of the robot's collision shape from its base frame
 
 
-class KinematicDrive:
+class KinematicDrivetrain:
     """Ideal differential drive with an acceleration limit and stop-at-contact."""
 
-    def __init__(self, params: KinematicParams, *, clearance: Clearance | None = None) -> None:
+    def __init__(
+        self,
+        params: KinematicParams,
+        *,
+        step_ns: int,
+        pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        contact: ContactFn | None = None,
+        free_distance: DistanceFn | None = None,
+    ) -> None:
+        """Set up at rest at `pose`.
+
+        Args:
+            params: Geometry and limits.
+            step_ns: The physics step, ns.
+            pose: Initial (x_m, y_m, yaw_rad).
+            contact: `(x, y, yaw) -> bool`, True if that pose would penetrate the world.
+            free_distance: `(x, y, yaw) -> m` the robot may move from there with no contact possible
+                (e.g. `CollisionMonitor.free_m`); lets steady motion take longer pieces.
+        """
         self.params = params
-        self.state = ChassisState()
-        self.wheel_angle_rad = [0.0, 0.0]  # left, right
-        self.wheel_speed_radps = [0.0, 0.0]
+        self._free = free_distance
+        self.step_ns = step_ns
+        self._dt = step_ns * 1e-9
+        self._contact = contact
+        self.x_m, self.y_m, self.yaw_rad = pose
+        self.v_mps = self.w_radps = 0.0
+        self._accel = (0.0, 0.0, 0.0)  # longitudinal, lateral, yaw
+        self.blocked = False
+        self.angle_rad = [0.0, 0.0]  # left, right
         self._rim = [0.0, 0.0]  # wheel-rim speeds, m/s
         self._target = [0.0, 0.0]
-        self._clearance = clearance
-        self._blocked = False  # the last move was refused by the world
-        self._budget_m = 0.0  # how far any robot point may move before the world must be checked again
-        self.contacts = 0
-
-    def reset_pose(self, x_m: float, y_m: float, yaw_rad: float) -> None:
-        """Place the robot (at rest) and forget the clearance budget."""
-        s = self.state
-        s.x_m, s.y_m, s.yaw_rad = x_m, y_m, yaw_rad
-        s.v_mps = s.w_radps = s.accel_mps2 = s.yaw_accel_radps2 = 0.0
-        self._budget_m = 0.0
 
     def set_cmd_vel(self, v_mps: float, w_radps: float) -> None:
         """Set the commanded body velocity; it holds until the next command."""
@@ -76,46 +77,41 @@ class KinematicDrive:
     def advance(self, n_steps: int) -> None:
         """Advance `n_steps` physics steps."""
         p = self.params
-        dt = p.step_s
+        dt = self._dt
         dv_max = p.max_wheel_acceleration_mps2 * dt
         inv_track = 1.0 / p.wheel_separation_m
         rim, target = self._rim, self._target
-        s = self.state
-        v0, w0 = s.v_mps, s.w_radps
+        v0, w0 = self.v_mps, self.w_radps
         steps_left = n_steps
         while steps_left > 0:
             n = 1
             if rim[0] == target[0] and rim[1] == target[1]:
-                # Steady wheel speeds: move in one exact arc as far as the clearance budget allows.
+                # Steady wheel speeds: move along one exact arc, in pieces short enough for contact.
                 n = steps_left
-                if self._clearance is not None:
-                    per_step = (abs(rim[0]) + abs(rim[1])) * (0.5 + p.bounding_radius_m * inv_track) * dt
-                    if per_step > 0.0 and per_step * n >= self._budget_m:
-                        n = max(1, min(n, int(self._budget_m / per_step)))
+                per_step = (abs(rim[0]) + abs(rim[1])) * (0.5 + p.bounding_radius_m * inv_track) * dt
+                if self._contact is not None and per_step * n > _MAX_CHUNK_TRAVEL_M:
+                    limit = _MAX_CHUNK_TRAVEL_M
+                    if self._free is not None:
+                        limit = max(limit, self._free(self.x_m, self.y_m, self.yaw_rad))
+                    if per_step * n > limit:
+                        n = max(1, int(limit / per_step))
             else:
                 for i in (0, 1):
                     err = target[i] - rim[i]
                     rim[i] = target[i] if abs(err) <= dv_max else rim[i] + math.copysign(dv_max, err)
             v = 0.5 * (rim[0] + rim[1])
             w = (rim[1] - rim[0]) * inv_track
-            if v != 0.0 or w != 0.0:
-                self._move(v, w, n * dt)
-                if self._blocked:
-                    rim[0] = rim[1] = 0.0
-                    v = w = 0.0
+            if (v != 0.0 or w != 0.0) and not self._move(v, w, n * dt):
+                rim[0] = rim[1] = 0.0
+                v = w = 0.0
             steps_left -= n
-            s.v_mps, s.w_radps = v, w
+            self.v_mps, self.w_radps = v, w
         total_dt = n_steps * dt
-        s.accel_mps2 = (s.v_mps - v0) / total_dt
-        s.yaw_accel_radps2 = (s.w_radps - w0) / total_dt
-        inv_r = 1.0 / p.wheel_radius_m
-        self.wheel_speed_radps[0] = rim[0] * inv_r
-        self.wheel_speed_radps[1] = rim[1] * inv_r
+        self._accel = ((self.v_mps - v0) / total_dt, self.v_mps * self.w_radps, (self.w_radps - w0) / total_dt)
 
-    def _move(self, v: float, w: float, dt: float) -> None:
-        s = self.state
-        self._blocked = False
-        x, y, yaw = s.x_m, s.y_m, s.yaw_rad
+    def _move(self, v: float, w: float, dt: float) -> bool:
+        """Move along the arc (v, w) for dt; return False (and stay) if the world refuses the end pose."""
+        x, y, yaw = self.x_m, self.y_m, self.yaw_rad
         dyaw = w * dt
         if abs(dyaw) < 1e-9:
             nx = x + v * dt * math.cos(yaw + 0.5 * dyaw)
@@ -124,25 +120,34 @@ class KinematicDrive:
             radius = v / w
             nx = x + radius * (math.sin(yaw + dyaw) - math.sin(yaw))
             ny = y - radius * (math.cos(yaw + dyaw) - math.cos(yaw))
-        nyaw = yaw + dyaw
-        if self._clearance is not None:
-            travel = abs(v * dt) + abs(dyaw) * self.params.bounding_radius_m
-            if travel >= self._budget_m:
-                clearance = self._clearance(nx, ny, nyaw)
-                if clearance <= 0.0:
-                    if not s.in_contact:
-                        self.contacts += 1
-                    s.in_contact = True
-                    self._blocked = True
-                    self._budget_m = 0.0
-                    return
-                self._budget_m = clearance
-                if clearance > _RELEASE_M:
-                    s.in_contact = False
-            else:
-                self._budget_m -= travel
-        s.x_m, s.y_m, s.yaw_rad = nx, ny, math.atan2(math.sin(nyaw), math.cos(nyaw))
-        r = self.params.wheel_radius_m
+        nyaw = math.atan2(math.sin(yaw + dyaw), math.cos(yaw + dyaw))
+        if self._contact is not None and self._contact(nx, ny, nyaw):
+            self.blocked = True
+            return False
+        self.blocked = False
+        self.x_m, self.y_m, self.yaw_rad = nx, ny, nyaw
         half = 0.5 * self.params.wheel_separation_m
-        self.wheel_angle_rad[0] += (v - w * half) * dt / r
-        self.wheel_angle_rad[1] += (v + w * half) * dt / r
+        inv_r = 1.0 / self.params.wheel_radius_m
+        self.angle_rad[0] += (v - w * half) * dt * inv_r
+        self.angle_rad[1] += (v + w * half) * dt * inv_r
+        return True
+
+    def chassis_state(self) -> ChassisState:
+        """Pose, rates and accelerations of the chassis now."""
+        ax, ay, alpha = self._accel
+        return ChassisState(self.x_m, self.y_m, self.yaw_rad, self.v_mps, self.w_radps, ax, ay, alpha, self.blocked)
+
+    def wheel_state(self) -> WheelState:
+        """Wheel angles and speeds now; ideal wheels have no torque, voltage or current (NaN)."""
+        inv_r = 1.0 / self.params.wheel_radius_m
+        nan = (math.nan, math.nan)
+        return WheelState(
+            angle_rad=(self.angle_rad[0], self.angle_rad[1]),
+            speed_radps=(self._rim[0] * inv_r, self._rim[1] * inv_r),
+            effort_nm=nan,
+            voltage_v=nan,
+            current_a=nan,
+        )
+
+    def close(self) -> None:
+        """Nothing to release."""

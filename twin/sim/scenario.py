@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Literal
 
 from twin.core.config import load_config
+from twin.robot.drivetrain import FmuDrive
 
 __all__ = ["Scenario", "default_scenario_path", "load_scenario"]
 
@@ -122,6 +123,35 @@ class CmdVelScriptMission:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class WaypointsMission:
+    """Drive through points `[x, y]` or `[x, y, yaw]` (world frame) with a go-to-point law; ends at the last.
+
+    The law steers on the ground-truth pose: it stands in for navigation, not for a planner, so
+    the points must be joined by free straight lines.
+    """
+
+    type: Literal["waypoints"] = "waypoints"
+    rate_hz: float = 10.0
+    points: tuple[tuple[float, ...], ...] = ()
+    max_linear_mps: float = 0.22
+    max_angular_radps: float = 1.0
+    tolerance_m: float = 0.1
+    yaw_tolerance_rad: float = 0.1
+    turn_in_place_rad: float = 0.4
+    heading_gain: float = 2.0
+    distance_gain: float = 1.0
+
+    def __post_init__(self) -> None:
+        for i, point in enumerate(self.points):
+            if len(point) not in (2, 3):
+                msg = f"points[{i}] must be [x, y] or [x, y, yaw], got {list(point)}"
+                raise ValueError(msg)
+        if not (self.max_linear_mps > 0.0 and self.max_angular_radps > 0.0 and self.tolerance_m > 0.0):
+            msg = "max_linear_mps, max_angular_radps and tolerance_m must be positive"
+            raise ValueError(msg)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class RecordingSection:
     """Where and how the bag is written."""
 
@@ -139,8 +169,8 @@ class Scenario:
     robot: RobotSection
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
-    drive: KinematicDrive = field(default_factory=KinematicDrive)
-    mission: CmdVelScriptMission = field(default_factory=CmdVelScriptMission)
+    drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)
+    mission: CmdVelScriptMission | WaypointsMission = field(default_factory=CmdVelScriptMission)
     recording: RecordingSection = field(default_factory=RecordingSection)
     seed: int = 0
     max_duration_s: float = 600.0

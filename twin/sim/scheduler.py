@@ -72,6 +72,13 @@ class Scheduler:
         self._push(task)
         return task
 
+    def once(self, name: str, fn: TaskFn, *, at_k: int = 0, priority: int = 50) -> Task:
+        """Add a task that fires once, at step `at_k`."""
+        task = Task(name=name, fn=fn, priority=priority, num=0, den=1, step_ns=self.step_ns, due_k=at_k)
+        self.tasks.append(task)
+        self._push(task)
+        return task
+
     def _push(self, task: Task) -> None:
         self._seq += 1
         heapq.heappush(self._heap, (task.due_k, task.priority, self._seq, task))
@@ -88,5 +95,6 @@ class Scheduler:
             task = heapq.heappop(heap)[3]
             task.fn(t_ns)
             task.count += 1
-            task.due_k = task.due_step(task.count)
-            self._push(task)
+            if task.num:
+                task.due_k = task.due_step(task.count)
+                self._push(task)

@@ -719,6 +719,12 @@ class CollisionMonitor:
         self.queries = 0
         """How many FCL queries were made (for benchmarks)."""
 
+    def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
+        """Return how far the robot may still move from this pose with no contact possible (0 if unknown)."""
+        moved = math.hypot(x_m - self._x, y_m - self._y) + self.body.radius_m * abs(yaw_rad - self._yaw)
+        free = self._free_m - moved
+        return free if free > 0.0 else 0.0
+
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose (empty tuple when free)."""
         moved = math.hypot(x_m - self._x, y_m - self._y) + self.body.radius_m * abs(yaw_rad - self._yaw)

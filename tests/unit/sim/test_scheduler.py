@@ -15,7 +15,9 @@ def run(scheduler: Scheduler, end_k: int) -> None:
         scheduler.fire_due(k)
 
 
-@pytest.mark.parametrize(("rate_hz", "step_ns"), [(30.0, 1_000_000), (200.0, 1_000_000), (5.0, 2_000_000), (7.3, 1_000_000)])
+@pytest.mark.parametrize(
+    ("rate_hz", "step_ns"), [(30.0, 1_000_000), (200.0, 1_000_000), (5.0, 2_000_000), (7.3, 1_000_000)]
+)
 def test_count_over_a_run_is_rate_times_duration_plus_one(rate_hz: float, step_ns: int) -> None:
     sched = Scheduler(step_ns)
     stamps: list[int] = []
@@ -45,3 +47,12 @@ def test_start_step_skips_earlier_firings() -> None:
     sched.add("t", 100.0, stamps.append, start_k=25)
     run(sched, 60)
     assert stamps == [30_000_000, 40_000_000, 50_000_000, 60_000_000]
+
+
+def test_once_fires_a_single_time_at_its_step() -> None:
+    sched = Scheduler(1_000_000)
+    stamps: list[int] = []
+    sched.once("static", stamps.append, at_k=3)
+    sched.add("t", 100.0, lambda t: None)
+    run(sched, 100)
+    assert stamps == [3_000_000]

@@ -1,0 +1,144 @@
+"""`twin simulate [SCENARIO]`: run a scenario headless and record a ROS 2 bag."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import json
+import signal
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from twin.cli.progress import Progress
+from twin.core.errors import ConfigError, Interrupted, TwinError
+from twin.sim.scenario import Scenario, default_scenario_path, load_scenario
+from twin.sim.simulation import RunSummary, Simulation
+
+_EPILOG = """\
+examples:
+  twin simulate                                   the default scenario (house, Waffle), bag in bags/
+  twin simulate scenarios/default.yaml --duration 60 --out /tmp/run1
+  twin simulate my.yaml --seed 7 --storage sqlite3 --distro jazzy
+  twin simulate --json | jq .bag_path             a machine-readable summary on stdout
+
+The run ends when the mission ends, at --duration (or the scenario's max_duration_s), or on
+Ctrl-C / SIGTERM; in every case the bag is closed and readable. Exit codes: 0 done, 2 scenario
+error, 3 world error, 4 FMU error, 5 bag error, 6 tree error, 130 interrupted.
+"""
+
+
+def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
+    """Add the `simulate` command."""
+    parser = subparsers.add_parser(
+        "simulate",
+        help="run a scenario and record a ROS 2 bag",
+        description=(
+            "Run a scenario with no ROS, no Gazebo and no display, faster than real time, and record "
+            "everything as a ROS 2 bag (MCAP by default) that ros2 bag, Foxglove, PlotJuggler, rosbags "
+            "and mcap read. Without SCENARIO, runs the shipped default scenario."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[common],
+    )
+    parser.add_argument("scenario", nargs="?", type=Path, metavar="SCENARIO", help="scenario YAML file")
+    parser.add_argument(
+        "--duration", type=float, metavar="S", help="simulated seconds to run (overrides the mission end)"
+    )
+    parser.add_argument("--out", type=Path, metavar="DIR", help="bag folder to create (default: a new folder in bags/)")
+    parser.add_argument("--seed", type=int, metavar="N", help="seed for every noise stream (overrides the scenario)")
+    parser.add_argument("--storage", choices=("mcap", "sqlite3"), help="bag storage (overrides the scenario)")
+    parser.add_argument(
+        "--distro", choices=("humble", "iron", "jazzy", "kilted", "rolling"), help="ROS 2 distro the bag targets"
+    )
+    parser.add_argument("--json", action="store_true", help="print the run summary as JSON on stdout")
+    parser.set_defaults(func=_simulate)
+
+
+def _bag_path(scenario: Scenario, out: Path | None) -> Path:
+    if out is not None:
+        return out
+    stamp = datetime.datetime.now().strftime("%Y_%m_%d-%H_%M_%S")
+    base = Path(scenario.recording.out_dir) / f"{scenario.name}_{stamp}"
+    path, n = base, 1
+    while path.exists():
+        n += 1
+        path = base.with_name(f"{base.name}_{n}")
+    return path
+
+
+class _StopFlag:
+    """Set by SIGINT/SIGTERM; a second Ctrl-C stops at once."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def __call__(self) -> bool:
+        return self.signum is not None
+
+    def handle(self, signum: int, frame: object) -> None:
+        if self.signum is not None and signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        self.signum = signum
+
+
+@contextmanager
+def _graceful_signals(flag: _StopFlag) -> Iterator[None]:
+    previous = {sig: signal.signal(sig, flag.handle) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _summary_line(summary: RunSummary) -> str:
+    return (
+        f"simulated {summary.sim_s:.1f} s in {summary.wall_s:.2f} s ({summary.real_time_factor:.0f}x real time), "
+        f"{summary.messages} messages, {summary.contacts} contacts, {summary.ended_by}: {summary.bag_path}"
+    )
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    path = args.scenario if args.scenario is not None else default_scenario_path()
+    scenario = load_scenario(path)
+    changes: dict[str, Any] = {}
+    if args.seed is not None:
+        changes["seed"] = args.seed
+    recording: dict[str, Any] = {}
+    if args.storage is not None:
+        recording["storage"] = args.storage
+    if args.distro is not None:
+        recording["distro"] = args.distro
+    if recording:
+        changes["recording"] = dataclasses.replace(scenario.recording, **recording)
+    scenario = dataclasses.replace(scenario, **changes)
+    if args.duration is not None and not args.duration > 0:
+        msg = f"--duration must be a positive number of seconds, got {args.duration}"
+        raise ConfigError(msg)
+    bag_path = _bag_path(scenario, args.out)
+
+    flag = _StopFlag()
+    progress = Progress(args.duration or scenario.max_duration_s)
+    with _graceful_signals(flag), Simulation(scenario, bag_path=bag_path, duration_s=args.duration) as sim:
+        try:
+            summary = sim.run(should_stop=flag, progress=progress.update)
+        except TwinError as err:
+            progress.close()
+            t_s = sim.t_s
+            msg = f"{err} (the bag up to t={t_s:.3f} s is in {bag_path})"
+            raise type(err)(msg) from err
+        finally:
+            progress.close()
+    if args.json:
+        print(json.dumps({**dataclasses.asdict(summary), "bag_path": str(summary.bag_path)}, indent=2))
+    else:
+        print(_summary_line(summary))
+    if flag.signum is not None:
+        print(f"twin: stopped by {signal.Signals(flag.signum).name}; the bag is complete", file=sys.stderr)
+        return Interrupted.exit_code if flag.signum == signal.SIGINT else 128 + flag.signum
+    return 0
