@@ -80,37 +80,44 @@ class KinematicDrivetrain:
         dt = self._dt
         dv_max = p.max_wheel_acceleration_mps2 * dt
         inv_track = 1.0 / p.wheel_separation_m
+        reach = 0.5 + p.bounding_radius_m * inv_track  # farthest point's travel per unit of |rim| speed
         rim, target = self._rim, self._target
+        contact, free = self._contact, self._free
         v0, w0 = self.v_mps, self.w_radps
+        # Motion known to be free of contact: no check is needed until it is used up.
+        budget = math.inf if contact is None else (free(self.x_m, self.y_m, self.yaw_rad) if free else 0.0)
+        used = 0.0
         steps_left = n_steps
         while steps_left > 0:
             n = 1
             if rim[0] == target[0] and rim[1] == target[1]:
-                # Steady wheel speeds: move along one exact arc, in pieces short enough for contact.
-                n = steps_left
-                per_step = (abs(rim[0]) + abs(rim[1])) * (0.5 + p.bounding_radius_m * inv_track) * dt
-                if self._contact is not None and per_step * n > _MAX_CHUNK_TRAVEL_M:
-                    limit = _MAX_CHUNK_TRAVEL_M
-                    if self._free is not None:
-                        limit = max(limit, self._free(self.x_m, self.y_m, self.yaw_rad))
-                    if per_step * n > limit:
-                        n = max(1, int(limit / per_step))
+                n = steps_left  # steady wheel speeds: one exact arc, in pieces when near the world
+                per_step = (abs(rim[0]) + abs(rim[1])) * reach * dt
+                if per_step * n > budget - used and per_step * n > _MAX_CHUNK_TRAVEL_M:
+                    n = max(1, int(max(budget - used, _MAX_CHUNK_TRAVEL_M) / per_step))
             else:
                 for i in (0, 1):
                     err = target[i] - rim[i]
                     rim[i] = target[i] if abs(err) <= dv_max else rim[i] + math.copysign(dv_max, err)
             v = 0.5 * (rim[0] + rim[1])
             w = (rim[1] - rim[0]) * inv_track
-            if (v != 0.0 or w != 0.0) and not self._move(v, w, n * dt):
-                rim[0] = rim[1] = 0.0
-                v = w = 0.0
+            if v != 0.0 or w != 0.0:
+                travel = (abs(rim[0]) + abs(rim[1])) * reach * dt * n
+                used += travel
+                if used < budget:
+                    self._move(v, w, n * dt, None)
+                elif self._move(v, w, n * dt, contact):
+                    budget, used = (free(self.x_m, self.y_m, self.yaw_rad) if free else 0.0), 0.0
+                else:
+                    rim[0] = rim[1] = 0.0
+                    v = w = 0.0
             steps_left -= n
             self.v_mps, self.w_radps = v, w
         total_dt = n_steps * dt
         self._accel = ((self.v_mps - v0) / total_dt, self.v_mps * self.w_radps, (self.w_radps - w0) / total_dt)
 
-    def _move(self, v: float, w: float, dt: float) -> bool:
-        """Move along the arc (v, w) for dt; return False (and stay) if the world refuses the end pose."""
+    def _move(self, v: float, w: float, dt: float, contact: ContactFn | None) -> bool:
+        """Move along the arc (v, w) for dt; return False (and stay) if `contact` refuses the end pose."""
         x, y, yaw = self.x_m, self.y_m, self.yaw_rad
         dyaw = w * dt
         if abs(dyaw) < 1e-9:
@@ -120,11 +127,14 @@ class KinematicDrivetrain:
             radius = v / w
             nx = x + radius * (math.sin(yaw + dyaw) - math.sin(yaw))
             ny = y - radius * (math.cos(yaw + dyaw) - math.cos(yaw))
-        nyaw = math.atan2(math.sin(yaw + dyaw), math.cos(yaw + dyaw))
-        if self._contact is not None and self._contact(nx, ny, nyaw):
-            self.blocked = True
-            return False
-        self.blocked = False
+        nyaw = yaw + dyaw
+        if nyaw > math.pi or nyaw < -math.pi:
+            nyaw = math.atan2(math.sin(nyaw), math.cos(nyaw))
+        if contact is not None:
+            if contact(nx, ny, nyaw):
+                self.blocked = True
+                return False
+            self.blocked = False
         self.x_m, self.y_m, self.yaw_rad = nx, ny, nyaw
         half = 0.5 * self.params.wheel_separation_m
         inv_r = 1.0 / self.params.wheel_radius_m
