@@ -34,7 +34,7 @@ def default_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     bag = tmp_path_factory.mktemp("sim") / "default"
     result = run_twin("simulate", "--duration", "20", "--out", str(bag))
     assert result.returncode == 0, result.stderr
-    assert f"simulated 20.0 s" in result.stdout and str(bag) in result.stdout
+    assert "simulated 20.0 s" in result.stdout and str(bag) in result.stdout
     return bag
 
 
