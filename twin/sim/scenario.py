@@ -167,10 +167,10 @@ class Scenario:
     name: str
     world: WorldSection
     robot: RobotSection
+    mission: CmdVelScriptMission | WaypointsMission
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
     drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)
-    mission: CmdVelScriptMission | WaypointsMission = field(default_factory=CmdVelScriptMission)
     recording: RecordingSection = field(default_factory=RecordingSection)
     seed: int = 0
     max_duration_s: float = 600.0

@@ -506,7 +506,7 @@ class Simulation:
         advance = drive.advance
         steps_per_s = NS_PER_S // self.step_ns
         next_report = 0
-        ended_by = "duration"
+        ended_by = "duration" if run_to_limit else "max_duration_s reached before the mission ended"
         timers = self._timers
         clock = time.perf_counter
         drive_s = 0.0
@@ -531,6 +531,7 @@ class Simulation:
             scheduler.fire_due(k)
             if mission.done and not run_to_limit:
                 end_k = k  # the mission is over: this step's publications are the last
+                ended_by = "mission complete"
             if k >= next_report:
                 if should_stop():
                     ended_by = "interrupted"
@@ -538,8 +539,6 @@ class Simulation:
                 if progress is not None:
                     progress(k / steps_per_s, self.bus.message_count)
                 next_report = k + steps_per_s
-        if ended_by != "interrupted" and self.mission.done:
-            ended_by = "mission complete"
         wall_s = clock() - wall0
         sim_s = k * self.step_ns / NS_PER_S
         breakdown = dict(timers)
