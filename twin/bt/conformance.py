@@ -21,7 +21,7 @@ import dataclasses
 import json
 import math
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
@@ -29,11 +29,24 @@ from twin.bt.factory import BehaviorTreeFactory
 from twin.bt.node import ConditionNode, NodeConfig, StatefulActionNode, TreeNode
 from twin.bt.ports import PortSpec, bidirectional_port, input_port, output_port
 from twin.bt.status import NodeKind, NodeStatus
-from twin.bt.tree import ManualClock
+from twin.bt.tree import ManualClock, StatusListener
 from twin.bt.values import PortType
 from twin.core.errors import TreeError
 
-__all__ = ["CaseResult", "CaseRun", "ConformanceCase", "check_case", "compare_run", "load_case", "run_case"]
+__all__ = [
+    "CaseResult",
+    "CaseRun",
+    "ConformanceCase",
+    "LeafCallRecorder",
+    "ScriptedAction",
+    "ScriptedCondition",
+    "Step",
+    "check_case",
+    "compare_run",
+    "load_case",
+    "run_case",
+    "scripted_node_class",
+]
 
 _NS_PER_MS: Final = 1_000_000
 MODES: Final = ("once", "exactly_once")
@@ -163,8 +176,8 @@ def load_case(path: Path) -> ConformanceCase:
     )
 
 
-class _Recorder:
-    """Collects the transitions and leaf calls of one tick."""
+class LeafCallRecorder:
+    """Collects the transitions and leaf calls of one tick, and the steps taken per node path."""
 
     def __init__(self) -> None:
         self.transitions: list[list[str]] = []
@@ -172,13 +185,14 @@ class _Recorder:
         self.counters: dict[str, int] = {}
 
     def on_status(self, t_ns: int, path: str, uid: int, prev: NodeStatus, new: NodeStatus) -> None:
+        """Record a status change (a tree listener)."""
         self.transitions.append([path, prev.name, new.name])
 
 
 class _Scripted:
     """The behaviour shared by scripted actions and conditions: take the next step of the path's script."""
 
-    def __init__(self, node: TreeNode, scripts: Mapping[str, tuple[Step, ...]], recorder: _Recorder) -> None:
+    def __init__(self, node: TreeNode, scripts: Mapping[str, tuple[Step, ...]], recorder: LeafCallRecorder) -> None:
         self._node = node
         self._scripts = scripts
         self._recorder = recorder
@@ -216,7 +230,7 @@ class ScriptedAction(StatefulActionNode):
     """A `Leaf` (or action `node_types` entry) that plays its script."""
 
     def __init__(
-        self, name: str, config: NodeConfig, scripts: Mapping[str, tuple[Step, ...]], recorder: _Recorder
+        self, name: str, config: NodeConfig, scripts: Mapping[str, tuple[Step, ...]], recorder: LeafCallRecorder
     ) -> None:
         super().__init__(name, config)
         self._play = _Scripted(self, scripts, recorder)
@@ -238,7 +252,7 @@ class ScriptedCondition(ConditionNode):
     """A `Cond` (or condition `node_types` entry) that plays its script."""
 
     def __init__(
-        self, name: str, config: NodeConfig, scripts: Mapping[str, tuple[Step, ...]], recorder: _Recorder
+        self, name: str, config: NodeConfig, scripts: Mapping[str, tuple[Step, ...]], recorder: LeafCallRecorder
     ) -> None:
         super().__init__(name, config)
         self._play = _Scripted(self, scripts, recorder)
@@ -248,14 +262,16 @@ class ScriptedCondition(ConditionNode):
         return self._play.step("tick")
 
 
-def _scripted_class(base: type[TreeNode], ports: tuple[PortSpec, ...]) -> type[TreeNode]:
+def scripted_node_class(base: type[TreeNode], ports: tuple[PortSpec, ...], name: str = "") -> type[TreeNode]:
+    """A subclass of `ScriptedAction` or `ScriptedCondition` with the given ports."""
+
     def provided_ports(cls: type) -> tuple[PortSpec, ...]:
         return ports
 
-    return type(base.__name__, (base,), {"provided_ports": classmethod(provided_ports)})
+    return type(name or base.__name__, (base,), {"provided_ports": classmethod(provided_ports)})
 
 
-def scripted_factory(case: ConformanceCase, recorder: _Recorder) -> BehaviorTreeFactory:
+def scripted_factory(case: ConformanceCase, recorder: LeafCallRecorder) -> BehaviorTreeFactory:
     """A factory with BT.CPP's built-ins and the case's scripted node types."""
     factory = BehaviorTreeFactory()
     types = {
@@ -265,7 +281,7 @@ def scripted_factory(case: ConformanceCase, recorder: _Recorder) -> BehaviorTree
     types.update(case.node_types)
     for name, scripted in types.items():
         base: type[TreeNode] = ScriptedAction if scripted.kind is NodeKind.ACTION else ScriptedCondition
-        factory.register_node_type(_scripted_class(base, scripted.ports), name, case.leaf_scripts, recorder)
+        factory.register_node_type(scripted_node_class(base, scripted.ports), name, case.leaf_scripts, recorder)
     return factory
 
 
@@ -288,8 +304,22 @@ def _json_value(value: Any) -> Any:
     return repr(value)
 
 
-def run_case(case: ConformanceCase, *, mode: str = "once", v3: bool = False) -> CaseRun:
+def run_case(
+    case: ConformanceCase,
+    *,
+    mode: str = "once",
+    v3: bool = False,
+    listeners: Sequence[StatusListener] = (),
+    tick_listener: Callable[[int, NodeStatus], None] | None = None,
+) -> CaseRun:
     """Run a case's tree (its `xml`, or `xml_v3` when `v3`) with scripted leaves.
+
+    Args:
+        case: the case.
+        mode: `once` (tickOnce) or `exactly_once` (tickExactlyOnce).
+        v3: run `xml_v3` instead of `xml`.
+        listeners: extra status listeners (e.g. a `StatusLog`).
+        tick_listener: called with (t_ns, root status) after each completed tick.
 
     Raises:
         TreeError: If `v3` is asked for a case without `xml_v3`, or the mode is unknown.
@@ -301,7 +331,7 @@ def run_case(case: ConformanceCase, *, mode: str = "once", v3: bool = False) -> 
     if xml is None:
         msg = f"{case.path}: the case has no xml_v3"
         raise TreeError(msg)
-    recorder = _Recorder()
+    recorder = LeafCallRecorder()
     factory = scripted_factory(case, recorder)
     clock = ManualClock()
     try:
@@ -311,6 +341,8 @@ def run_case(case: ConformanceCase, *, mode: str = "once", v3: bool = False) -> 
     except TreeError as err:
         return CaseRun(trace=(), blackboard=None, load_error=str(err))
     tree.add_listener(recorder.on_status)
+    for listener in listeners:
+        tree.add_listener(listener)
     tick = tree.tick_once if mode == "once" else tree.tick_exactly_once
     trace: list[Mapping[str, Any]] = []
     for index in range(case.ticks):
@@ -325,6 +357,8 @@ def run_case(case: ConformanceCase, *, mode: str = "once", v3: bool = False) -> 
             break
         entry.update(root_status=status.name, transitions=recorder.transitions, leaf_calls=recorder.calls)
         trace.append(entry)
+        if tick_listener is not None:
+            tick_listener(tree.now_ns, status)
     board = {key: _json_value(entry.value) for key, entry in tree.root_blackboard.items()}
     return CaseRun(trace=tuple(trace), blackboard=board)
 

@@ -13,6 +13,7 @@ Every error is one line `file:line: what; the fix` (a `TreeError`).
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
@@ -140,6 +141,7 @@ def parse_xml(text: str, source: str) -> XmlElement:
 
 
 Report = Callable[[str, str], None]
+StubBuilder = Callable[[NodeManifest, str, NodeConfig], TreeNode]
 
 
 def _raise(location: str, message: str) -> None:
@@ -221,7 +223,7 @@ def _check_v4_names(root: XmlElement, report: Report, strict: bool) -> None:
         if tree.tag != "BehaviorTree":
             continue
         for element in tree.iter():
-            name = element.type_name
+            name = "SubTree" if element.tag == "SubTree" else element.type_name
             if name in V3_RENAMES:
                 report(
                     element.location,
@@ -335,6 +337,7 @@ class TreeParser:
             raise TreeError(msg)
         version = 4 if declared == "4" else 3
         document = Document(source=source, base_dir=base_dir or Path.cwd(), root=root, version=version)
+        self.documents.append(document)  # first, so that the main file stays documents[0]
         if version == 3:
             _normalise_v3(root)
         else:
@@ -349,7 +352,6 @@ class TreeParser:
                 tree_id = f"BehaviorTree_{self._suffix}"
                 self._suffix += 1
             self.tree_roots[tree_id] = (tree, document)
-        self.documents.append(document)
         return document
 
     def _load_include(self, include: XmlElement, document: Document) -> None:
@@ -417,9 +419,9 @@ class TreeParser:
                 )
             for child in tree.children:
                 for element in child.iter():
-                    self._verify_element(element, known)
+                    self._verify_element(element, known, document.version)
 
-    def _verify_element(self, element: XmlElement, known: Mapping[str, NodeKind]) -> None:
+    def _verify_element(self, element: XmlElement, known: Mapping[str, NodeKind], document_version: int) -> None:
         report = self.report
         tag = element.tag
         is_builtin = tag in BUILTIN_TAGS
@@ -437,8 +439,14 @@ class TreeParser:
         name = node_id if is_builtin else tag
         kind = known.get(name)
         if kind is None:
-            hint = suggest(name, list(known))
-            report(element.location, f"unknown node type <{name}>{hint}; register it on the factory or fix the name")
+            if document_version == 4 and (name in V3_RENAMES or name in V3_REMOVED):
+                return  # already reported with its v4 replacement
+            close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            report(
+                element.location,
+                f"unknown node type <{name}>{hint}; register it on the factory (or fix the name)",
+            )
             return
         if not is_builtin and node_id:
             report(
@@ -485,15 +493,27 @@ class TreeParser:
         raise TreeError(msg)
 
     def instantiate(
-        self, *, main_tree: str | None = None, blackboard: Blackboard | None = None, clock: Callable[[], int]
+        self,
+        *,
+        main_tree: str | None = None,
+        blackboard: Blackboard | None = None,
+        clock: Callable[[], int],
+        stub: StubBuilder | None = None,
     ) -> Tree:
         """Build the main tree.
+
+        Args:
+            main_tree: the tree ID (default: `main_tree_id()`).
+            blackboard: the root blackboard (default: a new one).
+            clock: simulation time in integer nanoseconds.
+            stub: builds a placeholder for node types that are declared but not implemented (for
+                validation and display); without it such a type is an error.
 
         Raises:
             TreeError: `file:line: ...` for the first problem.
         """
         tree_id = self.main_tree_id(main_tree)
-        builder = _Builder(self)
+        builder = _Builder(self, stub)
         builder.create_subtree(tree_id, _Scope("", "", blackboard or Blackboard(), ()), None, None)
         nodes = builder.nodes
         return Tree(root=nodes[0], nodes=nodes, subtrees=builder.subtrees, clock=clock)
@@ -563,8 +583,9 @@ class _Scope:
 class _Builder:
     """Creates the nodes of one tree, depth first (BT.CPP `recursivelyCreateSubtree`)."""
 
-    def __init__(self, parser: TreeParser) -> None:
+    def __init__(self, parser: TreeParser, stub: StubBuilder | None) -> None:
         self.parser = parser
+        self.stub = stub
         self.factory = parser.factory
         self.nodes: list[TreeNode] = []
         self.subtrees: list[SubtreeInstance] = []
@@ -680,14 +701,16 @@ class _Builder:
             node.subtree_id = type_id  # type: ignore[attr-defined]
         else:
             manifest_or_none = factory.manifests.get(type_id)
+            if manifest_or_none is None and self.stub is not None:
+                manifest_or_none = self.parser.node_models.get(type_id)
             if manifest_or_none is None:
                 known = list(factory.manifests)
                 _raise(element.location, f"unknown node type <{type_id}>{suggest(type_id, known)}")
             manifest = manifest_or_none  # type: ignore[assignment]
-            if not manifest.bound:
+            if not manifest.bound and self.stub is None:
                 _raise(
                     element.location,
-                    f"node type <{type_id}> is declared ({manifest.description}) but has no implementation; "
+                    f"node type <{type_id}> ({manifest.description}) is declared but has no implementation; "
                     f"register one with factory.register_node_type(...)",
                 )
             ports, others = check_ports(element, manifest, factory.enums, _raise)
@@ -720,7 +743,11 @@ class _Builder:
                 location=element.location,
             )
             try:
-                node = factory.build_node(type_id, instance_name, config)
+                if manifest.bound:
+                    node = factory.build_node(type_id, instance_name, config)
+                else:
+                    assert self.stub is not None
+                    node = self.stub(manifest, instance_name, config)
             except TreeError as err:
                 msg = f"{element.location}: cannot create <{type_id}> '{path}': {err}"
                 raise TreeError(msg) from None

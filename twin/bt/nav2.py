@@ -323,4 +323,4 @@ def declare_nav2_leaves(factory: BehaviorTreeFactory) -> None:
     """Declare Nav2's navigator leaves (ports known, no implementation) unless already registered."""
     for node_id, (kind, ports) in NAV2_LEAVES.items():
         if node_id not in factory.manifests:
-            factory.declare_node_type(node_id, kind, ports, description="Nav2 node (declared; no implementation)")
+            factory.declare_node_type(node_id, kind, ports, description="a Nav2 node")
