@@ -6,12 +6,18 @@ WasEntryUpdated.
 
 from __future__ import annotations
 
-from typing import Final
-
-from twin.bt.node import ConditionNode, NodeConfig, StatefulActionNode, SyncActionNode, remapped_key, strip_pointer
+from twin.bt.node import (
+    ConditionNode,
+    NodeConfig,
+    StatefulActionNode,
+    SyncActionNode,
+    TreeNode,
+    remapped_key,
+    strip_pointer,
+)
 from twin.bt.ports import PortSpec, bidirectional_port, input_port
 from twin.bt.script import Script, parse_script, script_truth
-from twin.bt.status import NodeStatus
+from twin.bt.status import FAILURE, RUNNING, SUCCESS, NodeStatus
 from twin.bt.tree import TimerHandle
 from twin.bt.values import ConversionError, PortType
 from twin.core.errors import TreeError
@@ -22,14 +28,11 @@ __all__ = [
     "EntryUpdatedAction",
     "ScriptCondition",
     "ScriptNode",
+    "ScriptPort",
     "SetBlackboardNode",
     "SleepNode",
     "UnsetBlackboardNode",
 ]
-
-RUNNING: Final = NodeStatus.RUNNING
-SUCCESS: Final = NodeStatus.SUCCESS
-FAILURE: Final = NodeStatus.FAILURE
 
 
 class AlwaysSuccessNode(SyncActionNode):
@@ -48,25 +51,31 @@ class AlwaysFailureNode(SyncActionNode):
         return FAILURE
 
 
-class _ScriptLoader:
-    """Parses the `code` port, again only when its text changes.
+class ScriptPort:
+    """A script held in an input port: parsed once, and again only when its text changes.
 
-    As in BT.CPP, an empty `code` is never parsed: `Script` then does nothing and
-    `ScriptCondition` fails when ticked.
+    As in BT.CPP, an empty script is never parsed: `load()` then returns None (a `Script` does
+    nothing; `ScriptCondition` and `Precondition` fail when ticked).
     """
 
-    __slots__ = ("_node", "_script", "_source", "_what")
+    __slots__ = ("_node", "_port", "_script", "_source")
 
-    def __init__(self, node: SyncActionNode | ConditionNode, what: str) -> None:
+    def __init__(self, node: TreeNode, port: str) -> None:
         self._node = node
-        self._what = what
+        self._port = port
         self._source = ""
         self._script: Script | None = None
 
     def load(self) -> Script | None:
-        ok, source = self._node.read_input("code", PortType.STRING)
+        """The current script.
+
+        Raises:
+            TreeError: If the port cannot be read.
+            ScriptSyntaxError: If the script does not parse.
+        """
+        ok, source = self._node.read_input(self._port, PortType.STRING)
         if not ok:
-            msg = f"Missing port [code] in {self._what}: {source}"
+            msg = f"Missing port [{self._port}] in {self._node.registration_id}: {source}"
             raise TreeError(msg)
         if source != self._source:
             self._script = parse_script(source)
@@ -84,7 +93,7 @@ class ScriptNode(SyncActionNode):
 
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)
-        self._loader = _ScriptLoader(self, "Script")
+        self._loader = ScriptPort(self, "code")
         self._loader.load()
 
     def tick(self) -> NodeStatus:
@@ -109,7 +118,7 @@ class ScriptCondition(ConditionNode):
 
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)
-        self._loader = _ScriptLoader(self, "ScriptCondition")
+        self._loader = ScriptPort(self, "code")
         self._loader.load()
 
     def tick(self) -> NodeStatus:

@@ -16,11 +16,11 @@ Points that matter for traces (all as BT.CPP 4.8 does them):
 
 from __future__ import annotations
 
-from typing import ClassVar, Final
+from typing import ClassVar
 
 from twin.bt.node import ControlNode, NodeConfig
 from twin.bt.ports import PortSpec, input_port
-from twin.bt.status import NodeStatus
+from twin.bt.status import FAILURE, IDLE, RUNNING, SKIPPED, SUCCESS, NodeStatus
 from twin.bt.values import PortType, from_chars_double, parse_string
 from twin.core.errors import TreeError
 
@@ -38,54 +38,59 @@ __all__ = [
     "switch_node_type",
 ]
 
-IDLE: Final = NodeStatus.IDLE
-RUNNING: Final = NodeStatus.RUNNING
-SUCCESS: Final = NodeStatus.SUCCESS
-FAILURE: Final = NodeStatus.FAILURE
-SKIPPED: Final = NodeStatus.SKIPPED
-
 
 def _idle_child(node: ControlNode) -> TreeError:
     return TreeError(f"[{node.name}]: a child should not return IDLE")
 
 
-class SequenceNode(ControlNode):
-    """Tick children in order until one fails or is RUNNING; `AsyncSequence` when `asynch`."""
+class _SequentialNode(ControlNode):
+    """Shared tick of Sequence (stops at a FAILURE), Fallback (at a SUCCESS) and SequenceWithMemory."""
+
+    _STOP: ClassVar[NodeStatus]  # a child status that ends the node with that status
+    _NEXT: ClassVar[NodeStatus]  # a child status that moves on to the next child
+    _MEMORY: ClassVar[bool] = False  # keep the position after a stop or a halt (SequenceWithMemory)
 
     def __init__(self, name: str, config: NodeConfig, asynch: bool = False) -> None:
         super().__init__(name, config)
         self._current = 0
         self._skipped = 0
-        self._asynch = asynch
+        self._wakes_up = asynch or self._MEMORY
 
     def halt(self) -> None:
-        """Restart from the first child next time."""
-        self._current = 0
-        self._skipped = 0
+        """Halt the children; restart from the first child next time unless the node has memory."""
+        if not self._MEMORY:
+            self._current = 0
+            self._skipped = 0
         super().halt()
 
     def tick(self) -> NodeStatus:
         """Tick the children from the current one."""
         children = self.children
         count = len(children)
-        if not self._status.is_active:
+        own = self._status
+        if own is IDLE or own is SKIPPED:
             self._skipped = 0
-        self.set_status(RUNNING)
+        if own is not RUNNING:
+            self.set_status(RUNNING)
         while self._current < count:
             child = children[self._current]
             prev = child._status
             status = child.execute_tick()
-            if status is RUNNING:
-                return RUNNING
-            if status is FAILURE:
-                self.reset_children()
-                self._current = 0
-                return FAILURE
-            if status is SUCCESS:
+            if status is self._NEXT:
                 self._current += 1
-                if self._asynch and self.requires_wake_up() and prev is IDLE and self._current < count:
+                if self._wakes_up and self.requires_wake_up() and prev is IDLE and self._current < count:
                     self.emit_wake_up_signal()
                     return RUNNING
+            elif status is RUNNING:
+                return RUNNING
+            elif status is self._STOP:
+                if self._MEMORY:
+                    for index in range(self._current, count):
+                        self.halt_child(index)
+                else:
+                    self.reset_children()
+                    self._current = 0
+                return status
             elif status is SKIPPED:
                 self._current += 1
                 self._skipped += 1
@@ -96,100 +101,32 @@ class SequenceNode(ControlNode):
             self.reset_children()
             self._current = 0
             self._skipped = 0
-        return SKIPPED if all_skipped else SUCCESS
+        return SKIPPED if all_skipped else self._NEXT
 
 
-class SequenceWithMemory(ControlNode):
+class SequenceNode(_SequentialNode):
+    """Tick children in order until one fails or is RUNNING; `AsyncSequence` when `asynch`."""
+
+    _STOP = FAILURE
+    _NEXT = SUCCESS
+
+
+class SequenceWithMemory(_SequentialNode):
     """A sequence that resumes at the child that was running or failed, even after a halt."""
+
+    _STOP = FAILURE
+    _NEXT = SUCCESS
+    _MEMORY = True
 
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)
-        self._current = 0
-        self._skipped = 0
-
-    def tick(self) -> NodeStatus:
-        """Tick the children from the remembered one."""
-        children = self.children
-        count = len(children)
-        if not self._status.is_active:
-            self._skipped = 0
-        self.set_status(RUNNING)
-        while self._current < count:
-            child = children[self._current]
-            prev = child._status
-            status = child.execute_tick()
-            if status is RUNNING:
-                return RUNNING
-            if status is FAILURE:
-                for index in range(self._current, count):
-                    self.halt_child(index)
-                return FAILURE
-            if status is SUCCESS:
-                self._current += 1
-                if self.requires_wake_up() and prev is IDLE and self._current < count:
-                    self.emit_wake_up_signal()
-                    return RUNNING
-            elif status is SKIPPED:
-                self._current += 1
-                self._skipped += 1
-            else:
-                raise _idle_child(self)
-        all_skipped = self._skipped == count
-        if self._current == count:
-            self.reset_children()
-            self._current = 0
-            self._skipped = 0
-        return SKIPPED if all_skipped else SUCCESS
 
 
-class FallbackNode(ControlNode):
+class FallbackNode(_SequentialNode):
     """Tick children in order until one succeeds or is RUNNING; `AsyncFallback` when `asynch`."""
 
-    def __init__(self, name: str, config: NodeConfig, asynch: bool = False) -> None:
-        super().__init__(name, config)
-        self._current = 0
-        self._skipped = 0
-        self._asynch = asynch
-
-    def halt(self) -> None:
-        """Restart from the first child next time."""
-        self._current = 0
-        self._skipped = 0
-        super().halt()
-
-    def tick(self) -> NodeStatus:
-        """Tick the children from the current one."""
-        children = self.children
-        count = len(children)
-        if not self._status.is_active:
-            self._skipped = 0
-        self.set_status(RUNNING)
-        while self._current < count:
-            child = children[self._current]
-            prev = child._status
-            status = child.execute_tick()
-            if status is RUNNING:
-                return RUNNING
-            if status is SUCCESS:
-                self.reset_children()
-                self._current = 0
-                return SUCCESS
-            if status is FAILURE:
-                self._current += 1
-                if self._asynch and self.requires_wake_up() and prev is IDLE and self._current < count:
-                    self.emit_wake_up_signal()
-                    return RUNNING
-            elif status is SKIPPED:
-                self._current += 1
-                self._skipped += 1
-            else:
-                raise _idle_child(self)
-        all_skipped = self._skipped == count
-        if self._current == count:
-            self.reset_children()
-            self._current = 0
-            self._skipped = 0
-        return SKIPPED if all_skipped else FAILURE
+    _STOP = SUCCESS
+    _NEXT = FAILURE
 
 
 class _ReactiveBase(ControlNode):
@@ -210,9 +147,11 @@ class _ReactiveBase(ControlNode):
     def tick(self) -> NodeStatus:
         """Tick every child from the first; a RUNNING child halts all the others."""
         all_skipped = True
-        if self._status is IDLE:
+        own = self._status
+        if own is IDLE:
             self._running_child = -1
-        self.set_status(RUNNING)
+        if own is not RUNNING:
+            self.set_status(RUNNING)
         children = self.children
         for index, child in enumerate(children):
             status = child.execute_tick()

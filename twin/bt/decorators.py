@@ -12,10 +12,11 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any, ClassVar, Final
 
+from twin.bt.actions import ScriptPort
 from twin.bt.node import DecoratorNode, NodeConfig, TreeNode, remapped_key
 from twin.bt.ports import PortSpec, bidirectional_port, input_port, output_port
-from twin.bt.script import Script, parse_script, script_truth
-from twin.bt.status import NodeKind, NodeStatus, PortDirection
+from twin.bt.script import script_truth
+from twin.bt.status import FAILURE, IDLE, RUNNING, SKIPPED, SUCCESS, NodeKind, NodeStatus, PortDirection
 from twin.bt.tree import TimerHandle
 from twin.bt.values import PortType
 from twin.core.errors import TreeError
@@ -38,11 +39,6 @@ __all__ = [
     "loop_node_type",
 ]
 
-IDLE: Final = NodeStatus.IDLE
-RUNNING: Final = NodeStatus.RUNNING
-SUCCESS: Final = NodeStatus.SUCCESS
-FAILURE: Final = NodeStatus.FAILURE
-SKIPPED: Final = NodeStatus.SKIPPED
 _NS_PER_MS: Final = 1_000_000
 
 
@@ -120,8 +116,69 @@ class KeepRunningUntilFailureNode(DecoratorNode):
         return self._status
 
 
-class RepeatNode(DecoratorNode):
+class _CountingNode(DecoratorNode):
+    """Shared tick of Repeat (counts successes) and RetryUntilSuccessful (counts failures)."""
+
+    _PORT: ClassVar[str]
+    _AGAIN: ClassVar[NodeStatus]  # a child status that counts one cycle and ticks the child again
+    _STOP: ClassVar[NodeStatus]  # a child status that ends the node with that status
+    _REREAD: ClassVar[bool]  # read the limit again after each cycle (Retry does)
+
+    def __init__(self, name: str, config: NodeConfig) -> None:
+        super().__init__(name, config)
+        self._limit = 0
+        self._count = 0
+
+    def halt(self) -> None:
+        """Restart the count."""
+        self._count = 0
+        super().halt()
+
+    def tick(self) -> NodeStatus:
+        """Tick the child until a cycle is RUNNING, it stops early, or the cycles are used up."""
+        ok, value = self.read_input(self._PORT)
+        if not ok:
+            raise TreeError(f"Missing parameter [{self._PORT}] in {type(self).__name__}: {value}")
+        self._limit = int(value)
+        do_loop = self._count < self._limit or self._limit == -1
+        self.set_status(RUNNING)
+        child = self.child
+        while do_loop:
+            prev = child._status
+            status = child.execute_tick()
+            if status is self._AGAIN:
+                self._count += 1
+                if self._REREAD:
+                    ok, value = self.read_input(self._PORT)
+                    if ok:
+                        self._limit = int(value)
+                do_loop = self._count < self._limit or self._limit == -1
+                self.reset_child()
+                if self.requires_wake_up() and prev is IDLE and do_loop:
+                    self.emit_wake_up_signal()
+                    return RUNNING
+            elif status is self._STOP:
+                self._count = 0
+                self.reset_child()
+                return status
+            elif status is RUNNING:
+                return RUNNING
+            elif status is SKIPPED:
+                self.reset_child()
+                return SKIPPED
+            else:
+                raise _idle_child(self)
+        self._count = 0
+        return self._AGAIN
+
+
+class RepeatNode(_CountingNode):
     """Repeat a succeeding child `num_cycles` times (-1: forever); a failure stops it."""
+
+    _PORT = "num_cycles"
+    _AGAIN = SUCCESS
+    _STOP = FAILURE
+    _REREAD = False
 
     @classmethod
     def provided_ports(cls) -> tuple[PortSpec, ...]:
@@ -135,52 +192,14 @@ class RepeatNode(DecoratorNode):
             ),
         )
 
-    def __init__(self, name: str, config: NodeConfig) -> None:
-        super().__init__(name, config)
-        self._num_cycles = 0
-        self._repeat_count = 0
 
-    def halt(self) -> None:
-        """Restart the count."""
-        self._repeat_count = 0
-        super().halt()
-
-    def tick(self) -> NodeStatus:
-        """Tick the child until a cycle is RUNNING, it fails, or the cycles are done."""
-        ok, value = self.read_input("num_cycles")
-        if not ok:
-            raise TreeError(f"Missing parameter [num_cycles] in RepeatNode: {value}")
-        self._num_cycles = int(value)
-        do_loop = self._repeat_count < self._num_cycles or self._num_cycles == -1
-        self.set_status(RUNNING)
-        child = self.child
-        while do_loop:
-            prev = child._status
-            status = child.execute_tick()
-            if status is SUCCESS:
-                self._repeat_count += 1
-                do_loop = self._repeat_count < self._num_cycles or self._num_cycles == -1
-                self.reset_child()
-                if self.requires_wake_up() and prev is IDLE and do_loop:
-                    self.emit_wake_up_signal()
-                    return RUNNING
-            elif status is FAILURE:
-                self._repeat_count = 0
-                self.reset_child()
-                return FAILURE
-            elif status is RUNNING:
-                return RUNNING
-            elif status is SKIPPED:
-                self.reset_child()
-                return SKIPPED
-            else:
-                raise _idle_child(self)
-        self._repeat_count = 0
-        return SUCCESS
-
-
-class RetryNode(DecoratorNode):
+class RetryNode(_CountingNode):
     """Retry a failing child up to `num_attempts` times (-1: forever); a success stops it."""
+
+    _PORT = "num_attempts"
+    _AGAIN = FAILURE
+    _STOP = SUCCESS
+    _REREAD = True
 
     @classmethod
     def provided_ports(cls) -> tuple[PortSpec, ...]:
@@ -193,52 +212,6 @@ class RetryNode(DecoratorNode):
                 required=True,
             ),
         )
-
-    def __init__(self, name: str, config: NodeConfig) -> None:
-        super().__init__(name, config)
-        self._max_attempts = 0
-        self._try_count = 0
-
-    def halt(self) -> None:
-        """Restart the count."""
-        self._try_count = 0
-        super().halt()
-
-    def tick(self) -> NodeStatus:
-        """Tick the child until it succeeds, is RUNNING, or the attempts are used up."""
-        ok, value = self.read_input("num_attempts")
-        if not ok:
-            raise TreeError(f"Missing parameter [num_attempts] in RetryNode: {value}")
-        self._max_attempts = int(value)
-        do_loop = self._try_count < self._max_attempts or self._max_attempts == -1
-        self.set_status(RUNNING)
-        child = self.child
-        while do_loop:
-            prev = child._status
-            status = child.execute_tick()
-            if status is SUCCESS:
-                self._try_count = 0
-                self.reset_child()
-                return SUCCESS
-            if status is FAILURE:
-                self._try_count += 1
-                ok, value = self.read_input("num_attempts")
-                if ok:
-                    self._max_attempts = int(value)
-                do_loop = self._try_count < self._max_attempts or self._max_attempts == -1
-                self.reset_child()
-                if self.requires_wake_up() and prev is IDLE and do_loop:
-                    self.emit_wake_up_signal()
-                    return RUNNING
-            elif status is RUNNING:
-                return RUNNING
-            elif status is SKIPPED:
-                self.reset_child()
-                return SKIPPED
-            else:
-                raise _idle_child(self)
-        self._try_count = 0
-        return FAILURE
 
 
 class _TimerOwner(DecoratorNode):
@@ -423,23 +396,13 @@ class PreconditionNode(DecoratorNode):
 
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)
-        self._source = ""
-        self._script: Script | None = None
+        self._script = ScriptPort(self, "if")
         self._children_running = False
-        self._load_script()
-
-    def _load_script(self) -> Script | None:
-        ok, source = self.read_input("if", PortType.STRING)
-        if not ok:
-            raise TreeError(f"Missing parameter [if] in Precondition: {source}")
-        if source != self._source:
-            self._script = parse_script(source)
-            self._source = source
-        return self._script
+        self._script.load()
 
     def tick(self) -> NodeStatus:
         """Evaluate the condition unless the child is running, then tick the child or return `else`."""
-        script = self._load_script()
+        script = self._script.load()
         ok, else_status = self.read_input("else")
         if not ok:
             raise TreeError(f"Missing parameter [else] in Precondition: {else_status}")

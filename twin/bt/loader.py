@@ -16,7 +16,7 @@ import dataclasses
 import difflib
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 from xml.parsers import expat
 
 from twin.bt.blackboard import Blackboard
@@ -677,6 +677,15 @@ class _Builder:
         if type_id == instance_name:
             path += f"::{uid}"
         pre, post = parse_conditions(element, _raise)
+        common: dict[str, Any] = {
+            "path": path,
+            "uid": uid,
+            "blackboard": blackboard,
+            "enums": factory.enums,
+            "pre_conditions": pre,
+            "post_conditions": post,
+            "location": element.location,
+        }
         if kind is NodeKind.SUBTREE:
             manifest = factory.manifests["SubTree"]
             ports, others = {}, {}
@@ -685,18 +694,7 @@ class _Builder:
                     ports[name] = value
                 elif not is_reserved_attribute(name):
                     others[name] = value
-            config = NodeConfig(
-                path=path,
-                uid=uid,
-                blackboard=blackboard,
-                input_ports=ports,
-                manifest=manifest,
-                enums=factory.enums,
-                other_attributes=others,
-                pre_conditions=pre,
-                post_conditions=post,
-                location=element.location,
-            )
+            config = NodeConfig(input_ports=ports, manifest=manifest, other_attributes=others, **common)
             node = factory.build_node("SubTree", instance_name, config)
             node.subtree_id = type_id  # type: ignore[attr-defined]
         else:
@@ -730,17 +728,7 @@ class _Builder:
                     if spec.is_output and name not in outputs and _is_pointer(spec.default_str):
                         outputs[name] = spec.default_str
             config = NodeConfig(
-                path=path,
-                uid=uid,
-                blackboard=blackboard,
-                input_ports=inputs,
-                output_ports=outputs,
-                manifest=manifest,
-                enums=factory.enums,
-                other_attributes=others,
-                pre_conditions=pre,
-                post_conditions=post,
-                location=element.location,
+                input_ports=inputs, output_ports=outputs, manifest=manifest, other_attributes=others, **common
             )
             try:
                 if manifest.bound:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Final
 
 from twin.bt.node import ControlNode, DecoratorNode, NodeConfig
 from twin.bt.ports import PortSpec, input_port, output_port
-from twin.bt.status import NodeKind, NodeStatus
+from twin.bt.status import FAILURE, RUNNING, SKIPPED, SUCCESS, NodeKind, NodeStatus
 from twin.core.errors import TreeError
 
 if TYPE_CHECKING:
@@ -31,12 +31,6 @@ __all__ = [
     "declare_nav2_leaves",
     "register_nav2_controls",
 ]
-
-IDLE: Final = NodeStatus.IDLE
-RUNNING: Final = NodeStatus.RUNNING
-SUCCESS: Final = NodeStatus.SUCCESS
-FAILURE: Final = NodeStatus.FAILURE
-SKIPPED: Final = NodeStatus.SKIPPED
 
 
 class PipelineSequence(ControlNode):

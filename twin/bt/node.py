@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Final
 from twin.bt.blackboard import Blackboard
 from twin.bt.ports import NO_DEFAULT, PortSpec
 from twin.bt.script import Environment, Script, script_truth
-from twin.bt.status import NodeKind, NodeStatus
+from twin.bt.status import FAILURE, IDLE, RUNNING, SKIPPED, SUCCESS, NodeKind, NodeStatus
 from twin.bt.values import ConversionError, PortType, cast_value, parse_string
 from twin.core.errors import TreeError
 
@@ -47,12 +47,6 @@ __all__ = [
     "remapped_key",
     "strip_pointer",
 ]
-
-IDLE: Final = NodeStatus.IDLE
-RUNNING: Final = NodeStatus.RUNNING
-SUCCESS: Final = NodeStatus.SUCCESS
-FAILURE: Final = NodeStatus.FAILURE
-SKIPPED: Final = NodeStatus.SKIPPED
 
 
 class TickError(TreeError):
@@ -137,11 +131,9 @@ def remapped_key(port_name: str, value: str) -> str | None:
     return strip_pointer(value)
 
 
-def _no_listener(node: TreeNode, prev: NodeStatus, new: NodeStatus) -> None:
-    return None
-
-
 _PRE_RESULT: Final = (FAILURE, SUCCESS, SKIPPED)
+_MISSING: Final = object()
+_IMMUTABLE_KINDS: Final = frozenset(("any", "string", "int", "double", "bool", "status"))
 _WHILE: Final = 3
 
 
@@ -167,12 +159,13 @@ class TreeNode:
         self._name = name
         self._config = config
         self._status = IDLE
-        self._notify: Callable[[TreeNode, NodeStatus, NodeStatus], None] = _no_listener
+        self._notify: Callable[[TreeNode, NodeStatus, NodeStatus], None] | None = None
         self._tree: Tree | None = None
         self._registration_id = config.manifest.registration_id if config.manifest else type(self).__name__
         self._pre = config.pre_conditions if any(s is not None for s in config.pre_conditions) else None
         self._post = config.post_conditions if any(s is not None for s in config.post_conditions) else None
         self._env = Environment(config.blackboard, config.enums)
+        self._literals: dict[tuple[str, str], Any] = {}
 
     @classmethod
     def provided_ports(cls) -> Sequence[PortSpec]:
@@ -221,7 +214,7 @@ class TreeNode:
         """The tree the node belongs to (None while it is being built)."""
         return self._tree
 
-    def _attach(self, tree: Tree, notify: Callable[[TreeNode, NodeStatus, NodeStatus], None]) -> None:
+    def _attach(self, tree: Tree, notify: Callable[[TreeNode, NodeStatus, NodeStatus], None] | None) -> None:
         self._tree = tree
         self._notify = notify
 
@@ -262,7 +255,15 @@ class TreeNode:
             if self._post is not None and (new is SUCCESS or new is FAILURE):
                 self._run_post_conditions(new)
             if new is not SKIPPED:
-                self.set_status(new)
+                if new is IDLE:
+                    msg = "tick() returned IDLE; a node must return RUNNING, SUCCESS, FAILURE or SKIPPED"
+                    raise TypeError(msg)
+                prev = self._status
+                if prev is not new:
+                    self._status = new
+                    notify = self._notify
+                    if notify is not None:
+                        notify(self, prev, new)
             return new
         except TickError:
             raise
@@ -316,14 +317,18 @@ class TreeNode:
         prev = self._status
         if prev is not new:
             self._status = new
-            self._notify(self, prev, new)
+            notify = self._notify
+            if notify is not None:
+                notify(self, prev, new)
 
     def reset_status(self) -> None:
         """Set the status to IDLE (reported when it was not IDLE)."""
         prev = self._status
         if prev is not IDLE:
             self._status = IDLE
-            self._notify(self, prev, IDLE)
+            notify = self._notify
+            if notify is not None:
+                notify(self, prev, IDLE)
 
     # -- wake-ups and time ---------------------------------------------------------------------
 
@@ -380,10 +385,18 @@ class TreeNode:
             raw = spec.default
         key_on_board = remapped_key(key, raw)
         if key_on_board is None:
+            cache_key = (key, ptype.name)
+            cached = self._literals.get(cache_key, _MISSING)
+            if cached is not _MISSING:
+                return True, cached
             try:
-                return True, parse_string(raw, ptype, config.enums)
+                value = parse_string(raw, ptype, config.enums)
             except ConversionError as err:
                 return False, f"getInput(): {err}"
+            if ptype.kind in _IMMUTABLE_KINDS:
+                # A literal port string never changes: parse it once.
+                self._literals[cache_key] = value
+            return True, value
         entry = config.blackboard.get_entry(key_on_board)
         if entry is not None and entry.value is not None:
             value = entry.value
@@ -533,7 +546,10 @@ class ControlNode(TreeNode):
     def reset_children(self) -> None:
         """Halt every RUNNING child and reset every child to IDLE, in order."""
         for child in self.children:
-            if child._status is RUNNING:
+            status = child._status
+            if status is IDLE:
+                continue
+            if status is RUNNING:
                 child.halt_node()
             child.reset_status()
 

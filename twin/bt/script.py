@@ -254,6 +254,13 @@ class _Unary(_Expr):
         raise ScriptError(msg)
 
 
+def _require_operands(op: str, lhs: Any, rhs: Any) -> None:
+    for side, value in (("left", lhs), ("right", rhs)):
+        if value is None:
+            msg = f"The {side} operand of the operator [{op}] is not initialized"
+            raise ScriptError(msg)
+
+
 def _divide(lhs: float, rhs: float) -> float:
     try:
         return lhs / rhs
@@ -275,12 +282,7 @@ class _Binary(_Expr):
         op = self.op
         lhs = self.lhs.evaluate(env)
         rhs = self.rhs.evaluate(env)
-        if lhs is None:
-            msg = f"The left operand of the operator [{op}] is not initialized"
-            raise ScriptError(msg)
-        if rhs is None:
-            msg = f"The right operand of the operator [{op}] is not initialized"
-            raise ScriptError(msg)
+        _require_operands(op, lhs, rhs)
         if _is_num(lhs) and _is_num(rhs):
             if op == "+":
                 return _to_double(lhs) + _to_double(rhs)
@@ -339,17 +341,18 @@ _EPSILON: Final = 1.1920928955078125e-07  # float epsilon, BT.CPP's tolerance fo
 
 
 def _compare(op: str, lhs: Any, rhs: Any) -> bool:
+    # Written as BT.CPP writes them (a negated test), which matters for NaN: every ordering holds.
     if op == "==":
         return abs(lhs - rhs) <= _EPSILON if isinstance(lhs, float) else bool(lhs == rhs)
     if op == "!=":
         return not (abs(lhs - rhs) <= _EPSILON) if isinstance(lhs, float) else bool(lhs != rhs)
     if op == "<":
-        return bool(lhs < rhs)
+        return not lhs >= rhs
     if op == ">":
-        return bool(lhs > rhs)
+        return not lhs <= rhs
     if op == "<=":
-        return bool(lhs <= rhs)
-    return bool(lhs >= rhs)
+        return not lhs > rhs
+    return not lhs < rhs
 
 
 class _Compare(_Expr):
@@ -363,12 +366,7 @@ class _Compare(_Expr):
         lhs = self.operands[0].evaluate(env)
         for index, op in enumerate(self.ops):
             rhs = self.operands[index + 1].evaluate(env)
-            if lhs is None:
-                msg = f"The left operand of the operator [{op}] is not initialized"
-                raise ScriptError(msg)
-            if rhs is None:
-                msg = f"The right operand of the operator [{op}] is not initialized"
-                raise ScriptError(msg)
+            _require_operands(op, lhs, rhs)
             lhs_num, rhs_num = _is_num(lhs), _is_num(rhs)
             if lhs_num and rhs_num:
                 result = _compare(op, _to_double(lhs), _to_double(rhs))
@@ -681,9 +679,6 @@ class Script:
             for expr in self._exprs:
                 result = expr.evaluate(env)
             return result
-        except ScriptError as err:
-            msg = f"error in script [{self.source}]: {err}"
-            raise ScriptError(msg) from None
         except TreeError as err:
             msg = f"error in script [{self.source}]: {err}"
             raise ScriptError(msg) from None

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import enum
+from typing import Final
 
-__all__ = ["NodeKind", "NodeStatus", "PortDirection"]
+__all__ = ["FAILURE", "IDLE", "RUNNING", "SKIPPED", "SUCCESS", "NodeKind", "NodeStatus", "PortDirection"]
 
 
 class NodeStatus(enum.IntEnum):
@@ -25,6 +26,13 @@ class NodeStatus(enum.IntEnum):
     def is_active(self) -> bool:
         """True for RUNNING, SUCCESS and FAILURE (BT.CPP `isStatusActive`)."""
         return self is not NodeStatus.IDLE and self is not NodeStatus.SKIPPED
+
+
+IDLE: Final = NodeStatus.IDLE
+RUNNING: Final = NodeStatus.RUNNING
+SUCCESS: Final = NodeStatus.SUCCESS
+FAILURE: Final = NodeStatus.FAILURE
+SKIPPED: Final = NodeStatus.SKIPPED
 
 
 class NodeKind(enum.Enum):

@@ -22,16 +22,12 @@ from typing import Final
 
 from twin.bt.blackboard import Blackboard
 from twin.bt.node import TreeNode
-from twin.bt.status import NodeStatus
+from twin.bt.status import FAILURE, RUNNING, SUCCESS, NodeStatus
 from twin.core.errors import TreeError
 
 __all__ = ["ManualClock", "StatusListener", "SubtreeInstance", "TimerHandle", "TimerQueue", "Tree"]
 
 StatusListener = Callable[[int, str, int, NodeStatus, NodeStatus], None]
-
-RUNNING: Final = NodeStatus.RUNNING
-SUCCESS: Final = NodeStatus.SUCCESS
-FAILURE: Final = NodeStatus.FAILURE
 
 
 class ManualClock:
@@ -163,7 +159,7 @@ class Tree:
         self._now_ns = clock()
         self._by_uid = {node.uid: node for node in self.nodes}
         for node in self.nodes:
-            node._attach(self, self._dispatch)
+            node._attach(self, None)
 
     # -- introspection -------------------------------------------------------------------------
 
@@ -212,12 +208,19 @@ class Tree:
         Returns:
             A function that removes the listener.
         """
-        self._listeners = (*self._listeners, listener)
+        self._set_listeners((*self._listeners, listener))
 
         def remove() -> None:
-            self._listeners = tuple(item for item in self._listeners if item is not listener)
+            self._set_listeners(tuple(item for item in self._listeners if item is not listener))
 
         return remove
+
+    def _set_listeners(self, listeners: tuple[StatusListener, ...]) -> None:
+        # Nodes call the dispatcher only while someone listens: no call per change otherwise.
+        self._listeners = listeners
+        notify = self._dispatch if listeners else None
+        for node in self.nodes:
+            node._notify = notify
 
     def _dispatch(self, node: TreeNode, prev: NodeStatus, new: NodeStatus) -> None:
         listeners = self._listeners
