@@ -281,6 +281,7 @@ def _conformance(args: argparse.Namespace) -> int:
             )
         )
     else:
+        sys.stdout.flush()
         print(f"{len(results) - failed} of {len(results)} cases pass", file=sys.stderr)
     return 0 if failed == 0 else 1
 
