@@ -1,0 +1,98 @@
+"""`validate`: every kind of bad input gives one line with file and line."""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+import pytest
+
+from twin.bt import BehaviorTreeFactory
+from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
+from twin.bt.validate import validate_file, validate_text
+
+TREES = Path(__file__).resolve().parents[3] / "trees"
+
+
+@pytest.fixture
+def factory() -> BehaviorTreeFactory:
+    factory = BehaviorTreeFactory(nav2=True)
+    register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
+    return factory
+
+
+def doc(body: str, *, extra: str = "", fmt: str = ' BTCPP_format="4"') -> str:
+    return f'<root{fmt} main_tree_to_execute="Main">\n<BehaviorTree ID="Main">\n{body}\n</BehaviorTree>{extra}\n</root>'
+
+
+@pytest.mark.parametrize("tree_file", sorted(p.name for p in TREES.glob("*.xml")))
+def test_the_shipped_trees_are_valid(factory: BehaviorTreeFactory, tree_file: str) -> None:
+    report = validate_file(TREES / tree_file, factory)
+    assert report.ok, report.problems
+
+
+@pytest.mark.parametrize(
+    ("body", "extra", "fmt", "expected"),
+    [
+        ("<Sequence>\n<AlwaysSuccess>", "", ' BTCPP_format="4"', "t.xml:5: malformed XML"),
+        ("<Teleport/>", "", ' BTCPP_format="4"', "t.xml:3: unknown node type <Teleport>"),
+        ("<Repeat><AlwaysSuccess/></Repeat>", "", ' BTCPP_format="4"', "t.xml:3: <Repeat> needs the port 'num_cycles'"),
+        ('<GoToPose name="g"/>', "", ' BTCPP_format="4"', "t.xml:3: <GoToPose> needs the port 'loc'"),
+        (
+            '<Timeout msec="1" sec="2"><AlwaysSuccess/></Timeout>',
+            "",
+            ' BTCPP_format="4"',
+            "t.xml:3: unknown port 'sec'",
+        ),
+        (
+            '<SubTree ID="Loop"/>',
+            '<BehaviorTree ID="Loop"><SubTree ID="Main"/></BehaviorTree>',
+            ' BTCPP_format="4"',
+            "includes itself (Main -> Loop -> Main)",
+        ),
+        ('<Script code="x := (1"/>', "", ' BTCPP_format="4"', "t.xml:3: <Script> code: script syntax error"),
+        ('<AlwaysSuccess _skipIf="a =="/>', "", ' BTCPP_format="4"', "t.xml:3: _skipIf: script syntax error"),
+        (
+            "<SequenceStar><AlwaysSuccess/></SequenceStar>",
+            "",
+            ' BTCPP_format="4"',
+            't.xml:3: <SequenceStar> is a BT.CPP v3 name; this file declares BTCPP_format="4", so write <SequenceWithMemory>',
+        ),
+        (
+            '<SubTree ID="S" __shared_blackboard="true"/>',
+            '<BehaviorTree ID="S"><AlwaysSuccess/></BehaviorTree>',
+            ' BTCPP_format="4"',
+            'so write _autoremap="true"',
+        ),
+        ('<SubTree ID="Missing"/>', "", ' BTCPP_format="4"', "t.xml:3: SubTree 'Missing' does not match"),
+    ],
+)
+def test_each_problem_is_one_line_with_file_and_line(factory, body: str, extra: str, fmt: str, expected: str) -> None:
+    report = validate_text(doc(body, extra=extra, fmt=fmt), factory, source="t.xml")
+    assert not report.ok
+    assert any(expected in problem for problem in report.problems), report.problems
+    assert all("\n" not in problem and problem.startswith("t.xml:") for problem in report.problems)
+
+
+def test_v3_files_are_valid_with_v3_names(factory: BehaviorTreeFactory) -> None:
+    report = validate_text(doc("<SequenceStar><AlwaysSuccess/></SequenceStar>", fmt=""), factory, source="t.xml")
+    assert report.ok, report.problems
+    assert report.version == 3
+
+
+def test_types_declared_in_the_tree_nodes_model_count_as_known(factory: BehaviorTreeFactory) -> None:
+    model = '<TreeNodesModel><Action ID="LookForObject"><input_port name="color"/></Action></TreeNodesModel>'
+    report = validate_text(doc('<LookForObject color="blue"/>', extra=model), factory, source="t.xml")
+    assert report.ok, report.problems
+    assert report.declared_only == ("LookForObject",)
+    bad = validate_text(doc('<LookForObject colour="blue"/>', extra=model), factory, source="t.xml")
+    assert any("unknown port 'colour'" in p for p in bad.problems)
+
+
+def test_every_tree_is_checked_not_only_the_main_one(factory: BehaviorTreeFactory) -> None:
+    report = validate_text(
+        doc("<AlwaysSuccess/>", extra='<BehaviorTree ID="Other"><Repeat><AlwaysSuccess/></Repeat></BehaviorTree>'),
+        factory,
+        source="t.xml",
+    )
+    assert any("num_cycles" in p for p in report.problems)

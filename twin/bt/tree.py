@@ -1,0 +1,286 @@
+"""A loaded tree: ticking on the simulation clock, timers, wake-ups and status listeners.
+
+`Tree.tick_once()` is BT.CPP's `Tree::tickOnce()`: it fires the timers that are due, ticks the root,
+and ticks it again at once while the root is RUNNING and some node emitted a wake-up signal (a
+`SequenceWithMemory`, `Repeat` or `RetryUntilSuccessful` after an instant child, a timer that
+fired). `tick_exactly_once()` ticks the root once. A completed root is reset to IDLE.
+
+Time comes from the clock the tree is given (a callable returning integer nanoseconds). Timers
+(`Delay`, `Timeout`, `Sleep`) are due at `start + delay` on that clock and fire at the start of the
+first tick at or after that time: what BT.CPP's timer thread does during the sleep between two
+ticks happens here, deterministically, before the root is ticked.
+
+Listeners get every stored status change: `listener(t_ns, node_path, uid, prev, new)`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import heapq
+from collections.abc import Callable, Iterator, Sequence
+from typing import Final
+
+from twin.bt.blackboard import Blackboard
+from twin.bt.node import TreeNode
+from twin.bt.status import FAILURE, RUNNING, SUCCESS, NodeStatus
+from twin.core.errors import TreeError
+
+__all__ = ["ManualClock", "StatusListener", "SubtreeInstance", "TimerHandle", "TimerQueue", "Tree"]
+
+StatusListener = Callable[[int, str, int, NodeStatus, NodeStatus], None]
+
+
+class ManualClock:
+    """A clock a caller advances by hand; call it for the time in nanoseconds.
+
+    Args:
+        start_ns: the initial time.
+    """
+
+    __slots__ = ("t_ns",)
+
+    def __init__(self, start_ns: int = 0) -> None:
+        self.t_ns = start_ns
+
+    def __call__(self) -> int:
+        """The current time in nanoseconds."""
+        return self.t_ns
+
+    def advance(self, dt_ns: int) -> None:
+        """Move the time forward.
+
+        Raises:
+            ValueError: If `dt_ns` is negative.
+        """
+        if dt_ns < 0:
+            msg = f"the clock cannot go back ({dt_ns} ns)"
+            raise ValueError(msg)
+        self.t_ns += dt_ns
+
+
+class TimerHandle:
+    """A pending timer; `cancel()` it before it fires to run its callback with `aborted=True`."""
+
+    __slots__ = ("_callback", "_state", "due_ns")
+
+    _PENDING: Final = 0
+    _FIRED: Final = 1
+    _CANCELLED: Final = 2
+
+    def __init__(self, due_ns: int, callback: Callable[[bool], None]) -> None:
+        self.due_ns = due_ns
+        self._callback = callback
+        self._state = TimerHandle._PENDING
+
+    @property
+    def pending(self) -> bool:
+        """True until the timer fired or was cancelled."""
+        return self._state == TimerHandle._PENDING
+
+    def cancel(self) -> bool:
+        """Cancel a pending timer: its callback runs now with `aborted=True`. False if too late."""
+        if self._state != TimerHandle._PENDING:
+            return False
+        self._state = TimerHandle._CANCELLED
+        self._callback(True)
+        return True
+
+    def _fire(self) -> None:
+        if self._state == TimerHandle._PENDING:
+            self._state = TimerHandle._FIRED
+            self._callback(False)
+
+
+class TimerQueue:
+    """Timers on the simulation clock, fired in due order (then in the order they were added)."""
+
+    __slots__ = ("_heap", "_seq")
+
+    def __init__(self) -> None:
+        self._heap: list[tuple[int, int, TimerHandle]] = []
+        self._seq = 0
+
+    def add(self, due_ns: int, callback: Callable[[bool], None]) -> TimerHandle:
+        """Schedule `callback(aborted=False)` at `due_ns`."""
+        handle = TimerHandle(due_ns, callback)
+        self._seq += 1
+        heapq.heappush(self._heap, (due_ns, self._seq, handle))
+        return handle
+
+    def fire_due(self, now_ns: int) -> None:
+        """Fire every pending timer due at or before `now_ns`."""
+        heap = self._heap
+        while heap and heap[0][0] <= now_ns:
+            _, _, handle = heapq.heappop(heap)
+            handle._fire()
+
+    def next_due_ns(self) -> int | None:
+        """When the next pending timer is due, or None."""
+        heap = self._heap
+        while heap and not heap[0][2].pending:
+            heapq.heappop(heap)
+        return heap[0][0] if heap else None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True, slots=True)
+class SubtreeInstance:
+    """One instantiated (sub)tree: its path (empty for the main tree), tree ID and blackboard."""
+
+    instance_name: str
+    tree_id: str
+    blackboard: Blackboard
+
+
+class Tree:
+    """A tree ready to tick. Build it with `BehaviorTreeFactory.create_tree_*`.
+
+    Args:
+        root: the root node.
+        nodes: every node, in creation order (uid order).
+        subtrees: the main tree first, then each SubTree instance.
+        clock: simulation time in integer nanoseconds.
+    """
+
+    def __init__(
+        self,
+        *,
+        root: TreeNode,
+        nodes: Sequence[TreeNode],
+        subtrees: Sequence[SubtreeInstance],
+        clock: Callable[[], int],
+    ) -> None:
+        self.root = root
+        self.nodes: tuple[TreeNode, ...] = tuple(nodes)
+        self.subtrees: tuple[SubtreeInstance, ...] = tuple(subtrees)
+        self.clock = clock
+        self.timers = TimerQueue()
+        self._listeners: tuple[StatusListener, ...] = ()
+        self._wake_up = False
+        self._now_ns = clock()
+        self._by_uid = {node.uid: node for node in self.nodes}
+        for node in self.nodes:
+            node._attach(self, None)
+
+    # -- introspection -------------------------------------------------------------------------
+
+    @property
+    def root_blackboard(self) -> Blackboard:
+        """The blackboard of the main tree."""
+        return self.subtrees[0].blackboard
+
+    @property
+    def now_ns(self) -> int:
+        """The simulation time of the current (or last) tick."""
+        return self._now_ns
+
+    def node(self, path: str) -> TreeNode:
+        """The node with a full path.
+
+        Raises:
+            KeyError: If there is none.
+        """
+        for node in self.nodes:
+            if node.full_path == path:
+                return node
+        raise KeyError(path)
+
+    def node_by_uid(self, uid: int) -> TreeNode:
+        """The node with a uid.
+
+        Raises:
+            KeyError: If there is none.
+        """
+        return self._by_uid[uid]
+
+    def walk(self) -> Iterator[tuple[int, TreeNode]]:
+        """(depth, node) in depth-first order from the root."""
+        stack: list[tuple[int, TreeNode]] = [(0, self.root)]
+        while stack:
+            depth, node = stack.pop()
+            yield depth, node
+            stack.extend((depth + 1, child) for child in reversed(node.children_nodes()))
+
+    # -- listeners -----------------------------------------------------------------------------
+
+    def add_listener(self, listener: StatusListener) -> Callable[[], None]:
+        """Call `listener(t_ns, node_path, uid, prev, new)` on every status change.
+
+        Returns:
+            A function that removes the listener.
+        """
+        self._set_listeners((*self._listeners, listener))
+
+        def remove() -> None:
+            self._set_listeners(tuple(item for item in self._listeners if item is not listener))
+
+        return remove
+
+    def _set_listeners(self, listeners: tuple[StatusListener, ...]) -> None:
+        # Nodes call the dispatcher only while someone listens: no call per change otherwise.
+        self._listeners = listeners
+        notify = self._dispatch if listeners else None
+        for node in self.nodes:
+            node._notify = notify
+
+    def _dispatch(self, node: TreeNode, prev: NodeStatus, new: NodeStatus) -> None:
+        listeners = self._listeners
+        if listeners:
+            t_ns = self._now_ns
+            config = node._config
+            for listener in listeners:
+                listener(t_ns, config.path, config.uid, prev, new)
+
+    # -- ticking -------------------------------------------------------------------------------
+
+    def emit_wake_up_signal(self) -> None:
+        """Ask `tick_once()` to tick the root again (BT.CPP `WakeUpSignal::emitSignal`)."""
+        self._wake_up = True
+
+    def _take_wake_up(self) -> bool:
+        woken = self._wake_up
+        self._wake_up = False
+        return woken
+
+    def _begin_tick(self) -> None:
+        now = self.clock()
+        if now < self._now_ns:
+            msg = f"the tree's clock went back from {self._now_ns} ns to {now} ns"
+            raise TreeError(msg)
+        self._now_ns = now
+        self.timers.fire_due(now)
+
+    def tick_once(self) -> NodeStatus:
+        """Tick the root; tick it again at once while it is RUNNING and a wake-up was emitted.
+
+        Raises:
+            TickError: If a node fails; the tree keeps the state it had at that point.
+        """
+        self._begin_tick()
+        root = self.root
+        status = root.execute_tick()
+        while status is RUNNING and self._take_wake_up():
+            status = root.execute_tick()
+        if status is SUCCESS or status is FAILURE:
+            root.reset_status()
+        return status
+
+    def tick_exactly_once(self) -> NodeStatus:
+        """Tick the root once, whatever wake-ups were emitted.
+
+        Raises:
+            TickError: If a node fails.
+        """
+        self._begin_tick()
+        root = self.root
+        status = root.execute_tick()
+        if status is SUCCESS or status is FAILURE:
+            root.reset_status()
+        return status
+
+    def halt_tree(self) -> None:
+        """Halt every node (the root first, then each node as a safety net) and reset the root."""
+        self._now_ns = max(self._now_ns, self.clock())
+        self.root.halt_node()
+        for _, node in self.walk():
+            node.halt_node()
+        self.root.reset_status()

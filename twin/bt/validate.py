@@ -1,0 +1,234 @@
+"""Static checks of a tree file: everything `twin tree validate` reports, each as `file:line: ...`.
+
+Beyond what BT.CPP itself rejects when loading (malformed XML, unknown node types, unknown ports,
+literals that do not convert, script syntax errors, SubTree references that do not resolve or
+recurse, v3-only names in a v4 file), validation also reports required ports that are not set
+(BT.CPP would only fail when the node reads them) and v3-only attributes that BT.CPP 4 silently
+ignores. Every tree of the file is checked, not only the main one. Node types declared in the
+file's `<TreeNodesModel>` or on the factory without an implementation count as known; the report
+lists them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+
+from twin.bt.factory import BehaviorTreeFactory
+from twin.bt.loader import TreeParser, XmlElement, check_ports, parse_conditions
+from twin.bt.node import ConditionNode, ControlNode, DecoratorNode, NodeConfig, NodeManifest, SyncActionNode, TreeNode
+from twin.bt.script import ScriptSyntaxError, parse_script
+from twin.bt.status import NodeKind, NodeStatus
+from twin.bt.tree import ManualClock, Tree
+from twin.bt.values import ConversionError, PortType
+from twin.core.config import suggest
+from twin.core.errors import TreeError
+
+__all__ = ["ValidationReport", "load_for_display", "stub_node", "validate_file", "validate_text"]
+
+_SCRIPT_PORTS = {"Script": "code", "ScriptCondition": "code", "Precondition": "if"}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ValidationReport:
+    """The outcome of validating one file.
+
+    Attributes:
+        source: the file.
+        problems: one line each, `file:line: what; the fix`.
+        trees: the IDs of the trees found.
+        main_tree: the tree that would be instantiated, if it can be chosen.
+        declared_only: node types used that are declared but have no implementation.
+        version: 4 for `BTCPP_format="4"`, 3 otherwise.
+    """
+
+    source: str
+    problems: tuple[str, ...]
+    trees: tuple[str, ...] = ()
+    main_tree: str | None = None
+    declared_only: tuple[str, ...] = ()
+    version: int = 4
+
+    @property
+    def ok(self) -> bool:
+        """True when there is no problem."""
+        return not self.problems
+
+
+class _Stub:
+    """A placeholder for a node type without implementation; ticking it is an error."""
+
+    def tick(self) -> NodeStatus:
+        msg = "this node type has no implementation (validation placeholder)"
+        raise TreeError(msg)
+
+
+class _StubAction(_Stub, SyncActionNode):
+    pass
+
+
+class _StubCondition(_Stub, ConditionNode):
+    pass
+
+
+class _StubControl(_Stub, ControlNode):
+    pass
+
+
+class _StubDecorator(_Stub, DecoratorNode):
+    pass
+
+
+_STUBS: dict[NodeKind, type[TreeNode]] = {
+    NodeKind.ACTION: _StubAction,
+    NodeKind.CONDITION: _StubCondition,
+    NodeKind.CONTROL: _StubControl,
+    NodeKind.DECORATOR: _StubDecorator,
+}
+
+
+def stub_node(manifest: NodeManifest, name: str, config: NodeConfig) -> TreeNode:
+    """A placeholder node of the manifest's kind (for display and validation)."""
+    return _STUBS[manifest.kind](name, config)
+
+
+def _check_element(
+    parser: TreeParser, element: XmlElement, report: Callable[[str, str], None], declared_only: set[str]
+) -> None:
+    factory = parser.factory
+    parse_conditions(element, report)
+    if element.tag == "SubTree":
+        subtree_id = element.attrs.get("ID", "")
+        if subtree_id and subtree_id not in parser.tree_roots:
+            hint = suggest(subtree_id, list(parser.tree_roots))
+            report(element.location, f"SubTree {subtree_id!r} does not match any <BehaviorTree ID=...>{hint}")
+        remap = element.attrs.get("_autoremap")
+        if remap is not None:
+            try:
+                PortType.BOOL.parse(remap)
+            except ConversionError:
+                report(element.location, f"_autoremap={remap!r} is not a boolean; use true or false")
+        model = parser.subtree_models.get(subtree_id, {})
+        if remap is None or remap in ("false", "0", "False", "FALSE"):
+            for name, spec in model.items():
+                if name not in element.attrs and not spec.default_str:
+                    report(
+                        element.location, f"SubTree {subtree_id!r} must remap its port {name!r} (see <TreeNodesModel>)"
+                    )
+        return
+    type_id = element.type_name
+    manifest = factory.manifests.get(type_id) or parser.node_models.get(type_id)
+    if manifest is None:
+        return
+    if not manifest.bound:
+        declared_only.add(type_id)
+    check_ports(element, manifest, factory.enums, report)
+    for name, spec in manifest.ports.items():
+        if spec.required and name not in element.attrs and not spec.default_str:
+            what = f" ({spec.description})" if spec.description else ""
+            report(element.location, f'<{type_id}> needs the port {name!r}{what}; add {name}="..."')
+    script_port = _SCRIPT_PORTS.get(type_id)
+    code = element.attrs.get(script_port) if script_port else None
+    if code is not None and not (code.startswith("{") and code.endswith("}")) and code:
+        try:
+            parse_script(code)
+        except ScriptSyntaxError as err:
+            report(element.location, f"<{type_id}> {script_port}: {err}")
+
+
+def _check_recursion(parser: TreeParser, report: Callable[[str, str], None]) -> None:
+    edges: dict[str, list[tuple[str, XmlElement]]] = {}
+    for tree_id, (tree, _) in parser.tree_roots.items():
+        edges[tree_id] = [(e.attrs["ID"], e) for e in tree.iter() if e.tag == "SubTree" and e.attrs.get("ID")]
+    reported: set[frozenset[str]] = set()
+
+    def visit(tree_id: str, path: tuple[str, ...]) -> None:
+        for child, element in edges.get(tree_id, []):
+            if child in path:
+                cycle = (*path[path.index(child) :], child)
+                key = frozenset(cycle)
+                if key not in reported:
+                    reported.add(key)
+                    chain = " -> ".join(cycle)
+                    report(
+                        element.location, f"SubTree {child!r} includes itself ({chain}); a tree cannot contain itself"
+                    )
+            elif child in edges:
+                visit(child, (*path, child))
+
+    for tree_id in edges:
+        visit(tree_id, (tree_id,))
+
+
+def _validate(load: Callable[[TreeParser], None], source: str, factory: BehaviorTreeFactory) -> ValidationReport:
+    problems: list[str] = []
+
+    def report(location: str, message: str) -> None:
+        line = f"{location}: {message}"
+        if line not in problems:
+            problems.append(line)
+
+    parser = TreeParser(factory, strict=True)
+    parser.report = report
+    try:
+        load(parser)
+    except TreeError as err:
+        return ValidationReport(source=source, problems=(*problems, str(err)))
+    declared_only: set[str] = set()
+    for tree, _ in parser.tree_roots.values():
+        for element in tree.iter():
+            if element is not tree:
+                _check_element(parser, element, report, declared_only)
+    _check_recursion(parser, report)
+    main_tree: str | None = None
+    try:
+        main_tree = parser.main_tree_id()
+    except TreeError as err:
+        problems.append(str(err))
+    if not problems:
+        for tree_id in parser.tree_roots:
+            try:
+                parser.instantiate(main_tree=tree_id, clock=ManualClock(), stub=stub_node)
+            except TreeError as err:
+                report_line = str(err)
+                if report_line not in problems:
+                    problems.append(report_line)
+    version = parser.documents[0].version if parser.documents else 4
+    return ValidationReport(
+        source=source,
+        problems=tuple(problems),
+        trees=tuple(parser.tree_roots),
+        main_tree=main_tree,
+        declared_only=tuple(sorted(declared_only)),
+        version=version,
+    )
+
+
+def validate_file(path: Path, factory: BehaviorTreeFactory) -> ValidationReport:
+    """Check a tree file (and its includes) against the factory's node types."""
+
+    def load(parser: TreeParser) -> None:
+        parser.load_file(Path(path))
+
+    return _validate(load, str(path), factory)
+
+
+def validate_text(text: str, factory: BehaviorTreeFactory, *, source: str = "<string>") -> ValidationReport:
+    """Check XML text against the factory's node types."""
+
+    def load(parser: TreeParser) -> None:
+        parser.load_text(text, source=source)
+
+    return _validate(load, source, factory)
+
+
+def load_for_display(path: Path, factory: BehaviorTreeFactory, *, main_tree: str | None = None) -> Tree:
+    """Instantiate a tree for display, with placeholders for declared-only node types.
+
+    Raises:
+        TreeError: If the file does not load.
+    """
+    parser = TreeParser(factory, strict=True)
+    parser.load_file(Path(path))
+    return parser.instantiate(main_tree=main_tree, clock=ManualClock(), stub=stub_node)
