@@ -230,7 +230,14 @@ def _replay(args: argparse.Namespace) -> int:
     _write_csv(csv_path, result, comparison)
     _write_bag(bag_out, result, args, bag)
     summary = _summary(
-        args, inputs=inputs, units=units, result=result, comparison=comparison, bag_out=bag_out, csv_path=csv_path
+        args,
+        fused=config.fuse_gyro,
+        inputs=inputs,
+        units=units,
+        result=result,
+        comparison=comparison,
+        bag_out=bag_out,
+        csv_path=csv_path,
     )
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -242,6 +249,7 @@ def _replay(args: argparse.Namespace) -> int:
 def _summary(
     args: argparse.Namespace,
     *,
+    fused: bool,
     inputs: ReplayInputs,
     units: UnitsDecision,
     result: ReplayResult,
@@ -253,8 +261,8 @@ def _summary(
         "bag": str(args.bag),
         "joint_states": len(inputs.joint_t_ns),
         "imu_samples": len(inputs.gyro_t_ns),
-        "gyro_fused": not args.no_gyro,
-        "gyro_samples_fused": result.gyro_samples if not args.no_gyro else 0,
+        "gyro_fused": fused,
+        "gyro_samples_fused": result.gyro_samples if fused else 0,
         "wheel_radius_m": args.wheel_radius,
         "wheel_separation_m": args.wheel_separation,
         "wheel_source": result.wheel_source,
@@ -290,7 +298,7 @@ def _summary(
 
 def _print_summary(s: dict[str, Any]) -> None:
     x, y, yaw = s["start_pose"]
-    gyro = f"fused ({s['gyro_samples_fused']} samples)" if s["gyro_fused"] else "not fused (--no-gyro)"
+    gyro = f"fused ({s['gyro_samples_fused']} samples)" if s["gyro_fused"] else "not fused (wheel odometry alone)"
     lines = [
         f"twin ekf replay {s['bag']}",
         f"  inputs     {s['joint_states']} joint states, {s['imu_samples']} IMU samples",

@@ -385,11 +385,14 @@ def compare(result: ReplayResult, reference: PoseSeries) -> Comparison:
     pos_err = np.hypot(result.x_m - ref_x, result.y_m - ref_y)
     yaw_err = (result.yaw_rad - ref_yaw + math.pi) % (2.0 * math.pi) - math.pi
     pe, ye = pos_err[inside], yaw_err[inside]
-    span = (rt >= t[inside][0]) & (rt <= t[inside][-1])
-    distance = float(np.sum(np.hypot(np.diff(reference.x_m[span]), np.diff(reference.y_m[span]))))
+    first, last = t[inside][0], t[inside][-1]
+    # The reference's path between the first and the last compared time, its ends interpolated.
+    path_t = np.concatenate(([first], rt[(rt > first) & (rt < last)], [last]))
+    path_x, path_y = np.interp(path_t, rt, reference.x_m), np.interp(path_t, rt, reference.y_m)
+    distance = float(np.sum(np.hypot(np.diff(path_x), np.diff(path_y))))
     return Comparison(
         samples=int(inside.sum()),
-        duration_s=float(t[inside][-1] - t[inside][0]) * 1e-9,
+        duration_s=float(last - first) * 1e-9,
         distance_m=distance,
         position_error_mean_m=float(pe.mean()),
         position_error_rms_m=float(np.sqrt(np.mean(pe * pe))),
