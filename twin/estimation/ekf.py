@@ -48,6 +48,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from numpy.typing import NDArray
+from scipy.linalg.blas import dgemm, dsymm, dsyr2k, dsyrk, dtrmm
 from scipy.linalg.lapack import dposv
 from scipy.stats import chi2
 
@@ -93,8 +94,10 @@ def _gather(state: tuple[int, ...], ros: tuple[int, ...], unobserved: tuple[int,
 # ROS order (x, y, z, rot X, rot Y, rot Z): the pose uses x, y, yaw; the twist v (x) and yaw rate (rot Z).
 _POSE_GATHER = _gather((0, 1, 2), (0, 1, 5), unobserved=(2, 3, 4))
 _TWIST_GATHER = _gather((3, 4), (0, 5), unobserved=(1, 2, 3, 4))
-_PAD = np.array([0.0, UNOBSERVED_VARIANCE])
+_BOTH_GATHER = np.concatenate((_POSE_GATHER, _TWIST_GATHER))
+_new_estimate = tuple.__new__  # builds the NamedTuple without its keyword-parsing __new__
 _RELEASE = _SLIP_RELEASE_RAD2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+_STRICTLY_LOWER = np.tril(np.ones((_N, _N), dtype=bool), -1)
 
 
 class OdometryEstimate(NamedTuple):
@@ -121,8 +124,13 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
     `predict()` runs the model of the module docstring over `self.dt`, with the rate random walks
     `self.rate_variances` (per second) and the wheel-slip variance `self.slip_variance_per_rad` (per
     radian of wheel travel); `update()` keeps filterpy's signature. The state is a 1-D array of 8.
-    Unlike filterpy, `x_prior`, `P_prior`, `x_post` and `P_post` are not kept (they would cost four
-    copies per step).
+
+    The arithmetic goes straight to BLAS/LAPACK on Fortran-ordered arrays (numpy's `@` costs several
+    times more per call on 8x8 matrices): `P F^T` and `H P` read only P's upper triangle (`dsymm`), the
+    Joseph form is applied as symmetric rank-k updates of that triangle (`dsyr2k`, `dsyrk`), so it
+    stays symmetric positive semi-definite by construction, and the lower triangle is mirrored from
+    it at the end of each update. Unlike filterpy, `x_prior`, `P_prior`, `x_post` and `P_post` are
+    not kept (four copies per step).
 
     Args:
         x0: Initial state.
@@ -134,14 +142,16 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
     def __init__(self, x0: FloatArray, p0: FloatArray, *, wheel_radius_m: float, wheel_separation_m: float) -> None:
         super().__init__(dim_x=_N, dim_z=3)
         self.x = np.array(x0, dtype=float)
-        self.P = np.array(p0, dtype=float)
+        self.P = np.array(p0, dtype=float, order="F")
+        self._ft = np.asfortranarray(np.eye(_N))  # F^T, Fortran-ordered, for BLAS
+        self.F = self._ft.T  # filterpy's F: a view, so writing F[i, j] writes F^T[j, i]
         self.dt = 0.0
         self.rate_variances = (0.0, 0.0, 0.0)
         self.slip_variance_per_rad = 0.0
         self._inv_r = 1.0 / wheel_radius_m
         self._half_b = 0.5 * wheel_separation_m
-        self._tmp = np.empty((_N, _N))
-        self._rhs = {m: np.empty((m, _N + 1)) for m in (2, 3)}
+        self._rhs = {m: np.empty((m, _N + 1), order="F") for m in (1, 2, 3)}
+        self._travel = (0.0, 0.0)
 
     def predict_x(self, u: Any = 0) -> None:
         """Advance the state by `self.dt` and set `self.F` to the model's Jacobian there."""
@@ -152,38 +162,42 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
         step = v * dt
         wheel_v = dt * self._inv_r
         wheel_r = self._half_b * wheel_v
-        f = self.F
+        half = 0.5 * dt * step
+        f = self.F  # item writes: cheaper than one fancy-index scatter for eleven entries
         f[0, 2] = -step * s
         f[0, 3] = dt * c
-        f[0, 4] = -0.5 * dt * step * s
+        f[0, 4] = -half * s
         f[1, 2] = step * c
         f[1, 3] = dt * s
-        f[1, 4] = 0.5 * dt * step * c
+        f[1, 4] = half * c
         f[2, 4] = dt
         f[6, 3] = f[7, 3] = wheel_v
         f[6, 4] = -wheel_r
         f[7, 4] = wheel_r
+        travel_left, travel_right = v * wheel_v - rate * wheel_r, v * wheel_v + rate * wheel_r
+        self._travel = (travel_left, travel_right)
         state = self.x
         state[0] = x + step * c
         state[1] = y + step * s
         state[2] = yaw + rate * dt
-        state[6] = left + v * wheel_v - rate * wheel_r
-        state[7] = right + v * wheel_v + rate * wheel_r
+        state[6] = left + travel_left
+        state[7] = right + travel_right
 
     def predict(self, u: Any = 0) -> None:
-        """Predict over `self.dt`: `P = F (P + Q_w dt) F^T + Q_slip` (symmetrised by the next update)."""
+        """Predict over `self.dt`: `P = F (P + Q_w dt) F^T + Q_slip`."""
         p, dt = self.P, self.dt
         qv, qr, qb = self.rate_variances
         p[3, 3] += qv * dt
         p[4, 4] += qr * dt
         p[5, 5] += qb * dt
-        left, right = self.x[6], self.x[7]
         self.predict_x(u)
-        np.matmul(self.F, p, out=self._tmp)
-        np.matmul(self._tmp, self.F.T, out=p)
+        ft = self._ft
+        p = dgemm(1.0, ft, dsymm(1.0, p, ft), trans_a=1)  # F (P F^T)
         if self.slip_variance_per_rad:
-            p[6, 6] += self.slip_variance_per_rad * abs(self.x[6] - left)
-            p[7, 7] += self.slip_variance_per_rad * abs(self.x[7] - right)
+            q = self.slip_variance_per_rad
+            p[6, 6] += q * abs(self._travel[0])
+            p[7, 7] += q * abs(self._travel[1])
+        self.P = p
 
     def update(  # noqa: PLR0917 - filterpy's signature
         self,
@@ -205,13 +219,16 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
         z: FloatArray,
         h: FloatArray,
         r: FloatArray,
+        *,
         innovation: FloatArray | None = None,
         gate: float | None = None,
     ) -> bool:
-        """Update with a linear measurement `z = H s + noise(R)`: Joseph form, then symmetrise.
+        """Update with a linear measurement `z = H s + noise(R)` in Joseph form.
 
-        The gain `K = P H^T S^-1` comes from one Cholesky solve of `S [K^T | w] = [H P | y]`, which also
-        gives the normalised innovation squared `y^T w` for the gate.
+        With `S = H P H^T + R`, one Cholesky solve `S [K^T | w] = [H P | y]` gives the gain and the
+        normalised innovation squared `y^T w` for the gate; then
+        `P <- (I - K H) P (I - K H)^T + K R K^T = P - (K H P + P H^T K^T) + (U K^T)^T (U K^T)`, with
+        `S = U^T U`.
 
         Args:
             z: Measurement.
@@ -227,15 +244,15 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
             EstimationError: If the innovation covariance is not positive definite (a measurement
                 without variance).
         """
+        hf = np.asfortranarray(h)  # no copy when it already is
         p = self.P
-        pht = p @ h.T
-        s = h @ pht
-        s += r
-        y = z - h @ self.x if innovation is None else innovation
+        hp = dsymm(1.0, p, hf, side=1)  # H P
+        s = dgemm(1.0, hp, hf, 1.0, r, trans_b=1)  # H P H^T + R
+        y = z - hf @ self.x if innovation is None else innovation
         rhs = self._rhs[len(y)]
-        rhs[:, :_N] = pht.T
+        rhs[:, :_N] = hp
         rhs[:, _N] = y
-        _, sol, info = dposv(s, rhs)
+        u, sol, info = dposv(s, rhs)
         if info:
             msg = "EKF innovation covariance is not positive definite; every measurement needs a positive variance"
             raise EstimationError(msg)
@@ -243,17 +260,11 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
             return False
         kt = sol[:, :_N]  # K^T
         self.x += y @ kt
-        # Joseph form (I - K H) P (I - K H)^T + K R K^T, expanded with the P H^T and S already at hand:
-        # P - K H P - P H^T K^T + K S K^T; then symmetrise against rounding.
-        pht_kt = pht @ kt
-        p -= pht_kt
-        p -= pht_kt.T
-        p += kt.T @ (s @ kt)
-        p += p.T
-        p *= 0.5
-        k = kt.T
-        self.K, self.S, self.y, self.z = k, s, y, z
-        self._log_likelihood = self._likelihood = self._mahalanobis = None
+        p = dsyr2k(-1.0, hp, kt, 1.0, p, trans=1, overwrite_c=1)  # P - K H P - P H^T K^T (upper)
+        p = dsyrk(1.0, dtrmm(1.0, u, kt), 1.0, p, trans=1, overwrite_c=1)  # + K S K^T (upper)
+        np.copyto(p, p.T, where=_STRICTLY_LOWER)  # mirror the upper triangle
+        self.P = p
+        self.K, self.S, self.y = kt.T, s, y
         return True
 
 
@@ -324,6 +335,11 @@ class OdometryFilter:
         inv_r, half_b = 1.0 / wheel_radius_m, 0.5 * wheel_separation_m / wheel_radius_m
         self._h_speeds = _rows(_N, [{3: inv_r, 4: -half_b}, {3: inv_r, 4: half_b}, {4: 1.0, 5: 1.0}])
         self._h_still = _rows(_N, [{3: 1.0}, {4: 1.0}, {4: 1.0, 5: 1.0}])
+        self._wheel_rows = {id(h): np.asfortranarray(h[:2]) for h in (self._h_angles, self._h_speeds, self._h_still)}
+        self._sparse = {
+            id(h): [[(j, float(c)) for j, c in enumerate(row) if c] for row in h.tolist()]
+            for h in (self._h_angles, self._h_speeds, self._h_still)
+        }
         self._still_var = (noise.standstill_speed_std_mps**2, noise.standstill_yaw_rate_std_radps**2)
         self._still_intervals = 0
         self._z = np.zeros(3)
@@ -335,6 +351,8 @@ class OdometryFilter:
         self._gyro_count = 0
         self._t_ns: int | None = None
         self.slip_detections = 0
+        self._padded = np.zeros(_N * _N + 2)
+        self._padded[-1] = UNOBSERVED_VARIANCE
         self._estimate = self._make_estimate(0)
 
     @property
@@ -453,19 +471,26 @@ class OdometryFilter:
             r[2, 2] = self._gyro_var / self._gyro_count
             if moving:  # the gyro owns the yaw: turning wheels may slip
                 self._release_differential_travel(h)
-            if not ekf.update_linear(z, h, r, gate=self._gate):
+            y = self._innovation(h, 3)
+            if not ekf.update_linear(z, h, r, innovation=y, gate=self._gate):
                 self.slip_detections += 1
                 _log.debug("t=%d ns: wheels and gyro disagree beyond their noise; wheel slip assumed", t_ns)
                 if not moving:
                     self._release_differential_travel(h)
-                ekf.update_linear(z, h, r)
+                ekf.update_linear(z, h, r, innovation=y)
         else:
-            ekf.update_linear(z[:2], h[:2], r[:2, :2])
+            ekf.update_linear(z[:2], self._wheel_rows[id(h)], r[:2, :2], innovation=self._innovation(h, 2))
         self._gyro_anchor_rad = mark
         self._gyro_count = 0
         self._t_ns = t_ns
         self._estimate = self._make_estimate(t_ns)
         return self._estimate
+
+    def _innovation(self, h: FloatArray, rows: int) -> FloatArray:
+        """`z - H x` for the first `rows` rows of one of the filter's sparse measurement matrices."""
+        x = self.ekf.x.tolist()
+        z = self._z
+        return np.array([z[i] - sum(c * x[j] for j, c in terms) for i, terms in enumerate(self._sparse[id(h)][:rows])])
 
     def _release_differential_travel(self, h: FloatArray) -> None:
         """Make the wheels' differential travel over this interval unknown; their common travel stays.
@@ -474,21 +499,27 @@ class OdometryFilter:
         wheel speeds the speed measurement does; at standstill the zero yaw rate is dropped.
         """
         if h is self._h_angles:
-            self.ekf.P[6:8, 6:8] += _RELEASE
+            p = self.ekf.P
+            p[6, 6] += _SLIP_RELEASE_RAD2
+            p[7, 7] += _SLIP_RELEASE_RAD2
+            p[6, 7] -= _SLIP_RELEASE_RAD2
+            p[7, 6] -= _SLIP_RELEASE_RAD2
         elif h is self._h_speeds:
             self._r3[:2, :2] += _RELEASE
         else:
             self._r3[1, 1] += _SLIP_RELEASE_RAD2
 
     def _make_estimate(self, t_ns: int) -> OdometryEstimate:
-        padded = np.concatenate((self.ekf.P.ravel(), _PAD))
+        padded = self._padded
+        padded[: _N * _N] = self.ekf.P.ravel(order="K")  # no copy; P is symmetric, so the order does not matter
+        both = padded[_BOTH_GATHER]  # a fresh array: the estimate owns its covariances
         x, y, yaw, v, rate, bias, _, _ = self.ekf.x.tolist()
         yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
-        return OdometryEstimate(t_ns, x, y, yaw, v, rate, bias, padded[_POSE_GATHER], padded[_TWIST_GATHER])
+        return _new_estimate(OdometryEstimate, (t_ns, x, y, yaw, v, rate, bias, both[:36], both[36:]))
 
 
 def _rows(n: int, rows: list[dict[int, float]]) -> FloatArray:
-    out = np.zeros((len(rows), n))
+    out = np.zeros((len(rows), n), order="F")
     for i, row in enumerate(rows):
         for j, value in row.items():
             out[i, j] = value

@@ -56,6 +56,8 @@ _BLOCK = 256
 
 Vec3 = tuple[float, float, float]
 
+_new_reading = tuple.__new__  # builds the NamedTuple without its keyword-parsing __new__
+
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class GaussianNoise:
@@ -208,11 +210,9 @@ class ImuModel:
         self._biases: list[list[float]] = []
         self._next = _BLOCK
         qx, qy, qz, qw = quat_from_rpy(*spec.mount_rpy_rad)
-        self._q_mount = (qx, qy, qz, qw)
         r = _rotation(qx, qy, qz, qw)  # IMU axes in chassis axes; readings are R^T times chassis vectors
-        self._r = tuple(float(v) for v in r.ravel())
-        self._lever = (float(spec.mount_xyz_m[0]), float(spec.mount_xyz_m[1]))
-        self._g = spec.gravity_mps2
+        rx, ry = float(spec.mount_xyz_m[0]), float(spec.mount_xyz_m[1])
+        self._const = (*(float(v) for v in r.ravel()), rx, ry, spec.gravity_mps2, qx, qy, qz, qw)
         self.orientation_covariance: tuple[float, ...] = (0.0,) * 9
         self.angular_velocity_covariance = _diagonal(spec.angular_velocity_noise)
         self.linear_acceleration_covariance = _diagonal(spec.linear_acceleration_noise)
@@ -261,31 +261,38 @@ class ImuModel:
             accel_y_mps2: Acceleration of the chassis origin along the chassis y axis (lateral; v times
                 yaw rate for a rolling diff drive).
         """
-        if self._next == _BLOCK:
+        i = self._next
+        if i == _BLOCK:
             self._refill()
-        n = self._rows[self._next]
-        self._next += 1
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._r
-        rx, ry = self._lever
+            i = 0
+        self._next = i + 1
+        n0, n1, n2, n3, n4, n5 = self._rows[i]
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, rx, ry, g, mx, my, mz, mw = self._const
         w = yaw_rate_radps
         # Specific force at the IMU origin in chassis axes: a + alpha x r + w x (w x r) - g.
-        fx = accel_x_mps2 - yaw_accel_radps2 * ry - w * w * rx
-        fy = accel_y_mps2 + yaw_accel_radps2 * rx - w * w * ry
-        fz = self._g
-        out = [
-            r20 * w + n[0],
-            r21 * w + n[1],
-            r22 * w + n[2],
-            r00 * fx + r10 * fy + r20 * fz + n[3],
-            r01 * fx + r11 * fy + r21 * fz + n[4],
-            r02 * fx + r12 * fy + r22 * fz + n[5],
-        ]
-        for i, precision in self._quantize:
-            out[i] = round(out[i] / precision) * precision
+        w2 = w * w
+        fx = accel_x_mps2 - yaw_accel_radps2 * ry - w2 * rx
+        fy = accel_y_mps2 + yaw_accel_radps2 * rx - w2 * ry
         # World orientation of the IMU: q_world_chassis (yaw only) times q_chassis_imu.
         s, c = math.sin(0.5 * yaw_rad), math.cos(0.5 * yaw_rad)
-        mx, my, mz, mw = self._q_mount
-        return ImuReading(c * mx - s * my, c * my + s * mx, c * mz + s * mw, c * mw - s * mz, *out)
+        values: tuple[float, ...] = (
+            c * mx - s * my,
+            c * my + s * mx,
+            c * mz + s * mw,
+            c * mw - s * mz,
+            r20 * w + n0,
+            r21 * w + n1,
+            r22 * w + n2,
+            r00 * fx + r10 * fy + r20 * g + n3,
+            r01 * fx + r11 * fy + r21 * g + n4,
+            r02 * fx + r12 * fy + r22 * g + n5,
+        )
+        if self._quantize:
+            out = list(values)
+            for k, precision in self._quantize:
+                out[k + 4] = round(out[k + 4] / precision) * precision
+            values = tuple(out)
+        return _new_reading(ImuReading, values)
 
 
 def _rotation(x: float, y: float, z: float, w: float) -> NDArray[np.float64]:
