@@ -330,7 +330,7 @@ def _print_summary(s: dict[str, Any]) -> None:
             ),
             "  yaw       "
             + "".join(
-                f"{c[k]:8.3f}° "
+                f"{c[k]:9.3f}°"
                 for k in ("yaw_error_mean_deg", "yaw_error_rms_deg", "yaw_error_max_deg", "yaw_error_final_deg")
             ),
             f"  final position error: {c['final_error_percent_of_distance']:.3f} % of the distance travelled",

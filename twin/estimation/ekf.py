@@ -6,11 +6,10 @@ rad, rad), in the `odom` frame.
 **Fusion schedule.** The filter steps once per wheel-encoder reading (30 Hz in the twin, about 20 Hz on a
 real TurtleBot3). Gyro samples (200 Hz) are only integrated as they arrive (`add_gyro`: the trapezoid rule
 between samples, O(1), no matrix work); at the next encoder reading the integral over the interval (its
-tail past the last sample extrapolated from the last two samples, and handed back to the next interval,
-so nothing is lost or counted twice) divided by the interval is one measurement of the average yaw
-rate, with variance `sigma**2 / n` for `n` samples. One step is one
-predict and one stacked update `[wheel_left, wheel_right, gyro_mean]`. `/odom` is published from the
-estimate after each step, stamped with the encoder time.
+tail past the last sample extrapolated from the last two samples and handed to the next interval, so
+nothing is lost or counted twice) divided by the interval is one measurement of the average yaw rate,
+with variance `sigma**2 / n` for `n` samples. One step is one predict and one stacked update of three
+rows. `/odom` is published from the estimate after each step, stamped with the encoder time.
 
 **Model.** Encoder increments and the gyro mean both describe the *average* motion over the interval, so
 `v` and `yaw_rate` are the interval's average rates: their random walk is applied first, then the pose and
@@ -18,24 +17,33 @@ the wheel angles advance with the new rates (midpoint rule, as the TurtleBot3 fi
 
     v' = v + w_v,   r' = r + w_r,   b' = b + w_b
     yaw' = yaw + r' dt,   x' = x + v' dt cos(yaw + r' dt / 2),   y' = y + v' dt sin(yaw + r' dt / 2)
-    wheel_left'  = wheel_left  + (v' - r' B / 2) dt / R + slip_left
-    wheel_right' = wheel_right + (v' + r' B / 2) dt / R + slip_right
+    wheel_left'  = wheel_left  + (v' - r' B / 2) dt / R + n_left
+    wheel_right' = wheel_right + (v' + r' B / 2) dt / R + n_right
 
-The rate noise reaches the pose and the wheels through the rates' Jacobian columns
-(`P' = F (P + Q_w) F^T + Q_slip`). The encoders measure the wheel angles, so their rounding is a
-bounded error of `tick**2 / 12` per reading and not a random walk, while `v` and `yaw_rate` are
-updated from the wheel travel through the radius `R` and separation `B`. The gyro measures
-`yaw_rate + gyro_bias`. With positions unavailable (a joint state with velocities only),
-`add_wheel_speeds` updates `v` and `yaw_rate` from the wheel speeds directly.
+where `n` is odometry noise whose variance grows with the wheel's travel. The rate noise reaches the
+pose and the wheels through the rates' Jacobian columns (`P' = F (P + Q_w) F^T + Q_odometry`).
 
-**Slip gate.** If an update's normalised innovation squared exceeds the configured chi-square quantile
-while the gyro is fused, the wheels and the gyro disagree beyond their noise: the step is taken as
-slip, the wheels' differential travel over the interval is set free, and the update is redone, so the
-gyro carries the yaw and the common wheel travel still carries the speed.
+**Measurements.** The encoders measure the wheel angles, so their rounding is a bounded error of
+`tick**2 / 12` per reading, not a random walk; `v` and `yaw_rate` are updated from the wheel travel
+through the radius `R` and the separation `B`. The gyro measures `yaw_rate + gyro_bias`. Which rows a
+step uses depends on what the wheels did:
 
-**Numerics.** filterpy's `ExtendedKalmanFilter` computes the gain with `inv` and copies its inputs; the
-subclass here keeps filterpy's attributes and interface but computes `K` with `numpy.linalg.solve`, uses
-the Joseph form, symmetrises `P` after every predict and update, and works in preallocated arrays.
+- *Moving, gyro fused*: the gyro owns the yaw. Turning wheels may slip, and a slip that lasts would
+  otherwise be taken for gyro bias, so the wheels' differential travel is set free for the step: the
+  wheels give the speed (their common travel), the gyro the yaw rate.
+- *Standstill* (no tick on either wheel for two readings): a zero-velocity update, `v = 0` and
+  `yaw_rate = 0`, with the gyro: this is where the gyro bias is learned, where no wheel can slip.
+- *Gyro not fused* (or no sample in the interval): the wheels give both speed and yaw rate.
+- *Speeds only* (a joint state without positions, `add_wheel_speeds`): the same, from the wheel speeds.
+
+**Gate.** If the normalised innovation squared of an update exceeds the configured chi-square quantile,
+the wheels and the gyro disagree beyond their noise (at standstill: the robot turned while its wheels
+did not): the wheels' say on the yaw is dropped for that step and the update is redone.
+
+**Numerics.** filterpy's `ExtendedKalmanFilter` computes the gain with `inv` and copies its inputs. The
+subclass here keeps its interface and attributes but solves for the gain (Cholesky, `dposv`), applies the
+Joseph form as symmetric rank-k updates of P's upper triangle (positive semi-definite by construction)
+and mirrors it, calling BLAS/LAPACK directly on Fortran-ordered arrays.
 """
 
 from __future__ import annotations

@@ -156,8 +156,8 @@ def generate_trajectory(
     t_ns = np.arange(n, dtype=np.int64) * step_ns
     wl = rim_left / wheel_radius_m
     wr = rim_right / wheel_radius_m
-    angle_left = np.concatenate(([0.0], np.cumsum(0.5 * (wl[1:] + wl[:-1]) * dt)))
-    angle_right = np.concatenate(([0.0], np.cumsum(0.5 * (wr[1:] + wr[:-1]) * dt)))
+    angle_left = _integral(wl, dt)
+    angle_right = _integral(wr, dt)
 
     slip = slip or WheelSlip()
     x0, y0, yaw0 = initial_pose
@@ -166,7 +166,7 @@ def generate_trajectory(
         ground_right = rim_right * (1.0 - slip.right_fraction)
         v = 0.5 * (ground_left + ground_right)
         w = (ground_right - ground_left) / wheel_separation_m
-        yaw = yaw0 + np.concatenate(([0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * dt)))
+        yaw = yaw0 + _integral(w, dt)
         mid = 0.5 * (yaw[1:] + yaw[:-1])
         ds = 0.5 * (v[1:] + v[:-1]) * dt
         x = x0 + np.concatenate(([0.0], np.cumsum(ds * np.cos(mid))))
@@ -194,6 +194,11 @@ def generate_trajectory(
         wheel_right_radps=wr,
         step_ns=step_ns,
     )
+
+
+def _integral(rate: FloatArray, dt: float) -> FloatArray:
+    """Running integral of a sampled rate by the trapezoid rule (exact for piecewise-linear rates), from 0."""
+    return np.concatenate(([0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * dt)))
 
 
 def _integrate_with_regions(
