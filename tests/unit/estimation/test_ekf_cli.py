@@ -1,0 +1,144 @@
+"""`twin ekf replay`: the command, its outputs and its errors (run in-process with the bag API fixture)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Reader, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from twin.cli import main
+from twin.core.errors import ConfigError, EstimationError
+
+
+def replay(capsys: pytest.CaptureFixture[str], *args: str | Path) -> tuple[int, str, str]:
+    code = main(["ekf", "replay", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_replaying_the_gazebo_bag_writes_a_bag_and_a_csv_and_reports_the_error(
+    gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, _ = replay(capsys, gazebo_bag, "--out", tmp_path / "fused")
+    print(out)
+    assert code == 0
+    assert "rad/s (inferred: velocity / position rate = 1.0000" in out
+    assert "speeds from joint positions" in out
+    assert "against /odom over 28.1 s" in out
+    assert "% of the distance travelled" in out
+    rows = list(csv.DictReader((tmp_path / "fused" / "odometry.csv").open()))
+    assert len(rows) == 826
+    assert float(rows[0]["x_m"]) == pytest.approx(-2.0, abs=1e-4)  # starts at /odom's pose
+    assert abs(float(rows[-1]["position_error_m"])) < 0.01
+    with AnyReader([tmp_path / "fused" / "odometry"], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        (conn,) = reader.connections
+        assert (conn.topic, conn.msgtype) == ("/odometry/filtered", "nav_msgs/msg/Odometry")
+        msgs = [reader.deserialize(raw, conn.msgtype) for _, _, raw in reader.messages()]
+    assert len(msgs) == 826
+    last = msgs[-1]
+    assert (last.header.frame_id, last.child_frame_id) == ("odom", "base_footprint")
+    assert last.pose.pose.position.x == pytest.approx(float(rows[-1]["x_m"]), abs=1e-6)
+    assert last.pose.covariance[0] == pytest.approx(float(rows[-1]["var_x_m2"]), rel=1e-6)
+    assert last.pose.covariance[14] == 1e12
+
+
+def test_json_summary_for_scripts(
+    gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, _ = replay(capsys, gazebo_bag, "--out", tmp_path, "--json", "--storage", "sqlite3")
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["joint_velocity_units"] == "rad/s" and summary["joint_velocity_units_how"] == "inferred"
+    comparison = summary["comparison"]
+    assert comparison["distance_m"] == pytest.approx(4.76, abs=0.01)
+    assert comparison["position_error_final_m"] < 0.01
+    assert abs(comparison["yaw_error_final_deg"]) < 0.1
+    assert (tmp_path / "odometry" / "metadata.yaml").exists()
+
+
+def test_the_unit_flag_is_reported_as_given(
+    gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, _ = replay(capsys, gazebo_bag, "--out", tmp_path, "--joint-velocity-units", "m/s", "--json")
+    assert code == 0
+    assert json.loads(out)["joint_velocity_units_note"] == "m/s (given)"
+
+
+def _copy_without(source: Path, target: Path, dropped: set[str]) -> None:
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader(source) as reader, Writer(target, version=8) as writer:
+        conns = {
+            c.id: writer.add_connection(c.topic, c.msgtype, typestore=store)
+            for c in reader.connections
+            if c.topic not in dropped and c.msgtype in store.types
+        }
+        for conn, t_ns, raw in reader.messages():
+            if conn.id in conns:
+                writer.write(conns[conn.id], t_ns, raw)
+
+
+def test_a_bag_without_imu_gets_one_line_listing_its_topics(
+    gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = tmp_path / "no_imu"
+    _copy_without(gazebo_bag, bag, {"/imu", "/scan", "/tf", "/tf_static", "/rosout", "/parameter_events"})
+    code, out, err = replay(capsys, bag, "--out", tmp_path / "out")
+    assert code == EstimationError.exit_code
+    assert out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert f"{bag}: no /imu to replay; the bag has " in lines[0]
+    assert "/joint_states" in lines[0] and "/odom" in lines[0]
+    # Wheel odometry alone does not need it.
+    code, out, _ = replay(capsys, bag, "--out", tmp_path / "wheels", "--no-gyro")
+    assert code == 0
+    assert "not fused (wheel odometry alone)" in out
+
+
+def test_an_existing_output_bag_is_not_overwritten(
+    gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "odometry").mkdir()
+    (tmp_path / "odometry" / "x").write_text("keep", encoding="utf-8")
+    code, _, err = replay(capsys, gazebo_bag, "--out", tmp_path)
+    assert code == EstimationError.exit_code
+    assert "exists and is not empty; choose another --out" in err
+
+
+def test_filter_settings_come_from_an_estimation_section(
+    gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = tmp_path / "ekf.yaml"
+    config.write_text("estimation:\n  fuse_gyro: false\n", encoding="utf-8")
+    code, out, _ = replay(capsys, gazebo_bag, "--out", tmp_path / "a", "--config", config, "--json")
+    assert code == 0
+    summary = json.loads(out)
+    assert not summary["gyro_fused"] and summary["gyro_samples_fused"] == 0
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("estimation:\n  fuse_gyro: false\n  process_noise: {velocity_random_walk: 1}\n", encoding="utf-8")
+    code, _, err = replay(capsys, gazebo_bag, "--out", tmp_path / "b", "--config", bad)
+    assert code == ConfigError.exit_code
+    assert f"{bad}:3: estimation.process_noise.velocity_random_walk: unknown key; did you mean" in err
+
+
+def test_wrong_geometry_is_refused_before_reading(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = replay(capsys, tmp_path, "--wheel-radius", "0")
+    assert code == ConfigError.exit_code
+    assert "--wheel-radius and --wheel-separation must be positive" in err
+
+
+def test_the_command_is_registered_and_explains_itself(repo: Path) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "twin", "ekf", "replay", "--help"], cwd=repo, capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 0
+    assert "--joint-velocity-units" in done.stdout
+    assert "examples:" in done.stdout

@@ -1,0 +1,338 @@
+"""`twin ekf replay BAG`: run the odometry EKF on a recorded bag's IMU and wheel joint states."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib
+import json
+import math
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from twin.core.config import build, load_yaml
+from twin.core.errors import ConfigError, EstimationError
+from twin.estimation import EstimationSection
+from twin.estimation.replay import (
+    Comparison,
+    ReplayInputs,
+    ReplayResult,
+    UnitsDecision,
+    collect_inputs,
+    compare,
+    infer_velocity_units,
+    replay,
+)
+
+_EPILOG = """\
+examples:
+  twin ekf replay ../shared/fixtures/bags/tb3_waffle_gazebo_humble
+  twin ekf replay my_robot_bag --joint-velocity-units m/s --wheel-separation 0.160 --out /tmp/fused
+  twin ekf replay my_robot_bag --no-gyro --json        wheel odometry alone, numbers for a script
+
+The filter steps on every joint state and fuses the gyro samples in between (docs/estimation.md).
+It writes DIR/odometry (a rosbag2 with nav_msgs/Odometry, odom -> base_footprint) and
+DIR/odometry.csv, and compares the result with the bag's own odometry topic when there is one.
+TurtleBot3 defaults: wheel radius 0.033 m, separation 0.287 m (Waffle; Burger: 0.160 m).
+"""
+
+
+def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
+    """Add the `ekf` command group."""
+    parser = subparsers.add_parser(
+        "ekf",
+        help="run the odometry EKF offline on a bag",
+        description="The odometry EKF (wheel encoders and gyro), offline.",
+        parents=[common],
+    )
+    sub = parser.add_subparsers(dest="ekf_command", metavar="SUBCOMMAND", required=True)
+    rep = sub.add_parser(
+        "replay",
+        help="fuse a bag's /imu and /joint_states into odometry, write it, compare it with /odom",
+        description=(
+            "Run the EKF on a recorded bag's IMU yaw rate and wheel joint states (any rosbag2: sqlite3 or "
+            "MCAP, Humble or later, from the twin, Gazebo or a real robot). Write the fused odometry as a "
+            "new bag and a CSV and, when the bag has its own odometry, report the errors against it."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[common],
+    )
+    rep.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 folder (or a storage file inside one)")
+    rep.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: bags/<BAG name>_ekf)")
+    rep.add_argument(
+        "--joint-velocity-units",
+        choices=("auto", "rad/s", "m/s"),
+        default="auto",
+        help="unit of /joint_states velocity: rad/s (Gazebo) or wheel rim m/s (real TurtleBot3); "
+        "auto infers it from the joint positions (default)",
+    )
+    rep.add_argument("--wheel-radius", type=float, default=0.033, metavar="M", help="wheel radius (default 0.033)")
+    rep.add_argument(
+        "--wheel-separation", type=float, default=0.287, metavar="M", help="wheel separation (default 0.287, Waffle)"
+    )
+    rep.add_argument(
+        "--wheel-source",
+        choices=("auto", "positions", "velocities"),
+        default="auto",
+        help="what the filter reads from /joint_states (default: positions when present)",
+    )
+    rep.add_argument("--no-gyro", action="store_true", help="wheel odometry alone (do not fuse the gyro)")
+    rep.add_argument(
+        "--start-at-origin",
+        action="store_true",
+        help="start at (0, 0, 0) instead of the reference odometry's first pose",
+    )
+    rep.add_argument(
+        "--config", type=Path, metavar="FILE", help="YAML with an `estimation:` section (a scenario works)"
+    )
+    topics = rep.add_argument_group("topics and joints")
+    topics.add_argument("--imu-topic", default="/imu", help="sensor_msgs/Imu topic (default /imu)")
+    topics.add_argument("--joint-topic", default="/joint_states", help="sensor_msgs/JointState topic")
+    topics.add_argument("--odom-topic", default="/odom", help="reference nav_msgs/Odometry topic (default /odom)")
+    topics.add_argument("--left-joint", default="wheel_left_joint", help="left wheel joint name")
+    topics.add_argument("--right-joint", default="wheel_right_joint", help="right wheel joint name")
+    topics.add_argument("--topic", default="/odometry/filtered", help="topic of the fused odometry in the new bag")
+    rep.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="storage of the new bag")
+    rep.add_argument("--json", action="store_true", help="print the summary as JSON")
+    rep.set_defaults(func=_replay)
+
+
+def _bag_module() -> ModuleType:
+    # LEAD: `twin.bag` lands from the bag branch; once it is on main, import it directly:
+    #   from twin.bag import OdometryEncoder, Recorder, open_bag, read_messages
+    try:
+        return importlib.import_module("twin.bag")
+    except ModuleNotFoundError as err:  # pragma: no cover - only before twin.bag is merged
+        msg = "twin.bag is not installed in this build; the replay cannot read bags"
+        raise EstimationError(msg) from err
+
+
+def _load_config(path: Path | None) -> EstimationSection:
+    if path is None:
+        return EstimationSection()
+    node = load_yaml(path)
+    pairs = node.value if node.tag == "tag:yaml.org,2002:map" else []
+    section = next((value for key, value in pairs if key.value == "estimation"), None)
+    if section is None:
+        msg = f"{path}: no `estimation:` section; write the EKF settings under `estimation:`"
+        raise ConfigError(msg)
+    config: EstimationSection = build(EstimationSection, section, key="estimation")
+    return config
+
+
+def _read(args: argparse.Namespace, bag: ModuleType) -> ReplayInputs:
+    info = bag.open_bag(args.bag)
+    names = {t.name for t in info.topics}
+    missing = [t for t in (args.imu_topic, args.joint_topic) if t not in names]
+    if missing and not (args.no_gyro and missing == [args.imu_topic]):
+        listing = ", ".join(sorted(names)) or "no topics"
+        msg = f"{args.bag}: no {' or '.join(missing)} to replay; the bag has {listing}"
+        raise EstimationError(msg)
+    wanted = [t for t in (args.imu_topic, args.joint_topic, args.odom_topic) if t in names]
+    messages = bag.read_messages(args.bag, wanted)
+    return collect_inputs(
+        messages,
+        imu_topic=args.imu_topic,
+        joint_topic=args.joint_topic,
+        reference_topic=args.odom_topic if args.odom_topic in names else None,
+        left_joint=args.left_joint,
+        right_joint=args.right_joint,
+    )
+
+
+def _write_csv(path: Path, result: ReplayResult, comparison: Comparison | None) -> None:
+    pose, twist = result.pose_covariance, result.twist_covariance
+    columns = {
+        "t_ns": result.t_ns,
+        "x_m": result.x_m,
+        "y_m": result.y_m,
+        "yaw_rad": result.yaw_rad,
+        "v_mps": result.v_mps,
+        "yaw_rate_radps": result.yaw_rate_radps,
+        "gyro_bias_radps": result.gyro_bias_radps,
+        "var_x_m2": pose[:, 0],
+        "var_y_m2": pose[:, 7],
+        "cov_xy_m2": pose[:, 1],
+        "var_yaw_rad2": pose[:, 35],
+        "var_v_m2ps2": twist[:, 0],
+        "var_yaw_rate_rad2ps2": twist[:, 35],
+    }
+    if comparison is not None:
+        nan = np.where(comparison.compared, 1.0, np.nan)
+        columns |= {
+            "ref_x_m": comparison.reference_x_m * nan,
+            "ref_y_m": comparison.reference_y_m * nan,
+            "ref_yaw_rad": comparison.reference_yaw_rad * nan,
+            "position_error_m": comparison.position_error_m * nan,
+            "yaw_error_rad": comparison.yaw_error_rad * nan,
+        }
+    table = np.column_stack([np.asarray(v, dtype=float) for v in columns.values()])
+    fmt = ["%d"] + ["%.9g"] * (len(columns) - 1)
+    np.savetxt(path, table, fmt=fmt, delimiter=",", header=",".join(columns), comments="")
+
+
+def _write_bag(path: Path, result: ReplayResult, args: argparse.Namespace, bag: ModuleType) -> None:
+    encoder = bag.OdometryEncoder("odom", "base_footprint")
+    with bag.Recorder(path, storage=args.storage, distro="humble") as recorder:
+        handle = recorder.add_topic(args.topic, encoder.msgtype)
+        for i, t_ns in enumerate(result.t_ns.tolist()):
+            data = encoder.encode(
+                t_ns,
+                float(result.x_m[i]),
+                float(result.y_m[i]),
+                float(result.yaw_rad[i]),
+                float(result.v_mps[i]),
+                float(result.yaw_rate_radps[i]),
+                result.pose_covariance[i],
+                result.twist_covariance[i],
+            )
+            recorder.write(handle, t_ns, data)
+
+
+def _replay(args: argparse.Namespace) -> int:
+    if not (args.wheel_radius > 0.0 and args.wheel_separation > 0.0):
+        msg = (
+            "--wheel-radius and --wheel-separation must be positive, "
+            f"got {args.wheel_radius} and {args.wheel_separation}"
+        )
+        raise ConfigError(msg)
+    config = _load_config(args.config)
+    if args.no_gyro:
+        config = dataclasses.replace(config, fuse_gyro=False)
+    out = args.out if args.out is not None else Path("bags") / f"{args.bag.resolve().name}_ekf"
+    bag_out = out / "odometry"
+    if bag_out.exists() and any(bag_out.iterdir()):
+        msg = f"{bag_out} exists and is not empty; choose another --out or remove it"
+        raise EstimationError(msg)
+    bag = _bag_module()
+    inputs = _read(args, bag)
+    if args.joint_velocity_units == "auto":
+        units = infer_velocity_units(inputs, args.wheel_radius)
+    else:
+        units = UnitsDecision(units=args.joint_velocity_units, how="given", ratio=None)
+    result = replay(
+        inputs,
+        config,
+        wheel_radius_m=args.wheel_radius,
+        wheel_separation_m=args.wheel_separation,
+        velocity_units=units.units,
+        wheel_source=args.wheel_source,
+        start_at_reference=not args.start_at_origin,
+    )
+    comparison = compare(result, inputs.reference) if inputs.reference is not None else None
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path = out / "odometry.csv"
+    _write_csv(csv_path, result, comparison)
+    _write_bag(bag_out, result, args, bag)
+    summary = _summary(
+        args,
+        fused=config.fuse_gyro,
+        inputs=inputs,
+        units=units,
+        result=result,
+        comparison=comparison,
+        bag_out=bag_out,
+        csv_path=csv_path,
+    )
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        _print_summary(summary)
+    return 0
+
+
+def _summary(
+    args: argparse.Namespace,
+    *,
+    fused: bool,
+    inputs: ReplayInputs,
+    units: UnitsDecision,
+    result: ReplayResult,
+    comparison: Comparison | None,
+    bag_out: Path,
+    csv_path: Path,
+) -> dict[str, Any]:
+    summary: dict[str, Any] = {
+        "bag": str(args.bag),
+        "joint_states": len(inputs.joint_t_ns),
+        "imu_samples": len(inputs.gyro_t_ns),
+        "gyro_fused": fused,
+        "gyro_samples_fused": result.gyro_samples if fused else 0,
+        "wheel_radius_m": args.wheel_radius,
+        "wheel_separation_m": args.wheel_separation,
+        "wheel_source": result.wheel_source,
+        "joint_velocity_units": units.units,
+        "joint_velocity_units_how": units.how,
+        "joint_velocity_units_note": units.describe(args.wheel_radius),
+        "slip_detections": result.slip_detections,
+        "final_gyro_bias_radps": float(result.gyro_bias_radps[-1]),
+        "start": "reference" if inputs.reference is not None and not args.start_at_origin else "origin",
+        "start_pose": [float(result.x_m[0]), float(result.y_m[0]), float(result.yaw_rad[0])],
+        "bag_out": str(bag_out),
+        "topic_out": args.topic,
+        "csv_out": str(csv_path),
+        "reference_topic": args.odom_topic if comparison is not None else None,
+    }
+    if comparison is not None:
+        summary["comparison"] = {
+            "samples": comparison.samples,
+            "duration_s": comparison.duration_s,
+            "distance_m": comparison.distance_m,
+            "position_error_mean_m": comparison.position_error_mean_m,
+            "position_error_rms_m": comparison.position_error_rms_m,
+            "position_error_max_m": comparison.position_error_max_m,
+            "position_error_final_m": comparison.position_error_final_m,
+            "final_error_percent_of_distance": comparison.final_error_percent_of_distance,
+            "yaw_error_mean_deg": math.degrees(comparison.yaw_error_mean_rad),
+            "yaw_error_rms_deg": math.degrees(comparison.yaw_error_rms_rad),
+            "yaw_error_max_deg": math.degrees(comparison.yaw_error_max_rad),
+            "yaw_error_final_deg": math.degrees(comparison.yaw_error_final_rad),
+        }
+    return summary
+
+
+def _print_summary(s: dict[str, Any]) -> None:
+    x, y, yaw = s["start_pose"]
+    gyro = f"fused ({s['gyro_samples_fused']} samples)" if s["gyro_fused"] else "not fused (wheel odometry alone)"
+    lines = [
+        f"twin ekf replay {s['bag']}",
+        f"  inputs     {s['joint_states']} joint states, {s['imu_samples']} IMU samples",
+        f"  wheels     radius {s['wheel_radius_m']:g} m, separation {s['wheel_separation_m']:g} m; "
+        f"speeds from joint {s['wheel_source']}",
+        f"  velocity   {s['joint_velocity_units_note']}",
+        f"  gyro       {gyro}; final bias {s['final_gyro_bias_radps']:.2e} rad/s; "
+        f"slip detections {s['slip_detections']}",
+        f"  start      at the {s['start']} ({x:.3f} m, {y:.3f} m, {math.degrees(yaw):.2f} deg)",
+        f"  wrote      {s['bag_out']} ({s['topic_out']}), {s['csv_out']}",
+    ]
+    c = s.get("comparison")
+    if c is None:
+        lines.append("  compare    no reference odometry in the bag")
+    else:
+        lines += [
+            "",
+            f"against {s['reference_topic']} over {c['duration_s']:.1f} s and {c['distance_m']:.3f} m travelled:",
+            "                 mean       rms       max     final",
+            "  position  "
+            + "".join(
+                f"{c[k] * 1000:8.2f}mm"
+                for k in (
+                    "position_error_mean_m",
+                    "position_error_rms_m",
+                    "position_error_max_m",
+                    "position_error_final_m",
+                )
+            ),
+            "  yaw       "
+            + "".join(
+                f"{c[k]:9.3f}°"
+                for k in ("yaw_error_mean_deg", "yaw_error_rms_deg", "yaw_error_max_deg", "yaw_error_final_deg")
+            ),
+            f"  final position error: {c['final_error_percent_of_distance']:.3f} % of the distance travelled",
+        ]
+    print("\n".join(lines), file=sys.stdout)

@@ -1,0 +1,534 @@
+"""The odometry EKF: wheel encoders and a gyro fused into a planar pose, twist and their covariances.
+
+State `s = [x, y, yaw, v, yaw_rate, gyro_bias, wheel_left, wheel_right]` (m, m, rad, m/s, rad/s, rad/s,
+rad, rad), in the `odom` frame.
+
+**Fusion schedule.** The filter steps once per wheel-encoder reading (30 Hz in the twin, about 20 Hz on a
+real TurtleBot3). Gyro samples (200 Hz) are only integrated as they arrive (`add_gyro`: the trapezoid rule
+between samples, O(1), no matrix work); at the next encoder reading the integral over the interval (its
+tail past the last sample extrapolated from the last two samples and handed to the next interval, so
+nothing is lost or counted twice) divided by the interval is one measurement of the average yaw rate,
+with variance `sigma**2 / n` for `n` samples. One step is one predict and one stacked update of three
+rows. `/odom` is published from the estimate after each step, stamped with the encoder time.
+
+**Model.** Encoder increments and the gyro mean both describe the *average* motion over the interval, so
+`v` and `yaw_rate` are the interval's average rates: their random walk is applied first, then the pose and
+the wheel angles advance with the new rates (midpoint rule, as the TurtleBot3 firmware's odometry)::
+
+    v' = v + w_v,   r' = r + w_r,   b' = b + w_b
+    yaw' = yaw + r' dt,   x' = x + v' dt cos(yaw + r' dt / 2),   y' = y + v' dt sin(yaw + r' dt / 2)
+    wheel_left'  = wheel_left  + (v' - r' B / 2) dt / R + n_left
+    wheel_right' = wheel_right + (v' + r' B / 2) dt / R + n_right
+
+where `n` is odometry noise whose variance grows with the wheel's travel. The rate noise reaches the
+pose and the wheels through the rates' Jacobian columns (`P' = F (P + Q_w) F^T + Q_odometry`).
+
+**Measurements.** The encoders measure the wheel angles, so their rounding is a bounded error of
+`tick**2 / 12` per reading, not a random walk; `v` and `yaw_rate` are updated from the wheel travel
+through the radius `R` and the separation `B`. The gyro measures `yaw_rate + gyro_bias`. Which rows a
+step uses depends on what the wheels did:
+
+- *Moving, gyro fused*: the gyro owns the yaw. Turning wheels may slip, and a slip that lasts would
+  otherwise be taken for gyro bias, so the wheels' differential travel is set free for the step: the
+  wheels give the speed (their common travel), the gyro the yaw rate.
+- *Standstill* (no tick on either wheel for two readings): a zero-velocity update, `v = 0` and
+  `yaw_rate = 0`, with the gyro: this is where the gyro bias is learned, where no wheel can slip.
+- *Gyro not fused* (or no sample in the interval): the wheels give both speed and yaw rate.
+- *Speeds only* (a joint state without positions, `add_wheel_speeds`): the same, from the wheel speeds.
+
+**Gate.** If the normalised innovation squared of an update exceeds the configured chi-square quantile,
+the wheels and the gyro disagree beyond their noise (at standstill: the robot turned while its wheels
+did not): the wheels' say on the yaw is dropped for that step and the update is redone.
+
+**Numerics.** filterpy's `ExtendedKalmanFilter` computes the gain with `inv` and copies its inputs. The
+subclass here keeps its interface and attributes but solves for the gain (Cholesky, `dposv`), applies the
+Joseph form as symmetric rank-k updates of P's upper triangle (positive semi-definite by construction)
+and mirrors it, calling BLAS/LAPACK directly on Fortran-ordered arrays.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+from numpy.typing import NDArray
+from scipy.linalg.blas import dgemm, dsymm, dsyr2k, dsyrk, dtrmm
+from scipy.linalg.lapack import dposv
+from scipy.stats import chi2
+
+from twin.core.errors import EstimationError
+from twin.estimation.config import EstimationSection
+
+__all__ = ["STATE_NAMES", "UNOBSERVED_VARIANCE", "OdometryEstimate", "OdometryFilter", "SolvedEkf"]
+
+_log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+
+STATE_NAMES = (
+    "x_m",
+    "y_m",
+    "yaw_rad",
+    "v_mps",
+    "yaw_rate_radps",
+    "gyro_bias_radps",
+    "wheel_left_rad",
+    "wheel_right_rad",
+)
+_N = len(STATE_NAMES)
+
+UNOBSERVED_VARIANCE = 1e12
+"""Variance published for what a planar filter does not estimate (z, roll, pitch; vy, vz, wx, wy),
+as `gazebo_ros_diff_drive` does."""
+
+# Variance added to the differential wheel travel when the slip gate fires (rad², i.e. unknown).
+_SLIP_RELEASE_RAD2 = 1e4
+
+
+def _gather(state: tuple[int, ...], ros: tuple[int, ...], unobserved: tuple[int, ...]) -> NDArray[np.intp]:
+    """Indices into `[P.ravel(), 0, UNOBSERVED_VARIANCE]` that build a ROS 6x6 covariance (row-major)."""
+    out = np.full(36, _N * _N)  # zero
+    out[[i * 7 for i in unobserved]] = _N * _N + 1
+    for a, ra in zip(state, ros, strict=True):
+        for b, rb in zip(state, ros, strict=True):
+            out[ra * 6 + rb] = a * _N + b
+    return out
+
+
+# ROS order (x, y, z, rot X, rot Y, rot Z): the pose uses x, y, yaw; the twist v (x) and yaw rate (rot Z).
+_POSE_GATHER = _gather((0, 1, 2), (0, 1, 5), unobserved=(2, 3, 4))
+_TWIST_GATHER = _gather((3, 4), (0, 5), unobserved=(1, 2, 3, 4))
+_BOTH_GATHER = np.concatenate((_POSE_GATHER, _TWIST_GATHER))
+_new_estimate = tuple.__new__  # builds the NamedTuple without its keyword-parsing __new__
+_RELEASE = _SLIP_RELEASE_RAD2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+_STRICTLY_LOWER = np.tril(np.ones((_N, _N), dtype=bool), -1)
+
+
+class OdometryEstimate(NamedTuple):
+    """What `/odom` (nav_msgs/Odometry, `odom` -> `base_footprint`) carries, at `t_ns`.
+
+    Covariances are flat row-major 6x6 in ROS order (x, y, z, rot X, rot Y, rot Z); the twist is in
+    the child frame (`base_footprint`). Each estimate owns its arrays.
+    """
+
+    t_ns: int
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    v_mps: float
+    yaw_rate_radps: float
+    gyro_bias_radps: float
+    pose_covariance: FloatArray
+    twist_covariance: FloatArray
+
+
+class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
+    """filterpy's EKF for the planar odometry state, with a solved gain and a Joseph-form update.
+
+    `predict()` runs the model of the module docstring over `self.dt`, with the rate random walks
+    `self.rate_variances` (per second) and the wheel-slip variance `self.slip_variance_per_rad` (per
+    radian of wheel travel); `update()` keeps filterpy's signature. The state is a 1-D array of 8.
+
+    The arithmetic goes straight to BLAS/LAPACK on Fortran-ordered arrays (numpy's `@` costs several
+    times more per call on 8x8 matrices): `P F^T` and `H P` read only P's upper triangle (`dsymm`), the
+    Joseph form is applied as symmetric rank-k updates of that triangle (`dsyr2k`, `dsyrk`), so it
+    stays symmetric positive semi-definite by construction, and the lower triangle is mirrored from
+    it at the end of each update. Unlike filterpy, `x_prior`, `P_prior`, `x_post` and `P_post` are
+    not kept (four copies per step).
+
+    Args:
+        x0: Initial state.
+        p0: Initial covariance.
+        wheel_radius_m: Wheel radius `R`.
+        wheel_separation_m: Wheel separation `B`.
+    """
+
+    def __init__(self, x0: FloatArray, p0: FloatArray, *, wheel_radius_m: float, wheel_separation_m: float) -> None:
+        super().__init__(dim_x=_N, dim_z=3)
+        self.x = np.array(x0, dtype=float)
+        self.P = np.array(p0, dtype=float, order="F")
+        self._ft = np.asfortranarray(np.eye(_N))  # F^T, Fortran-ordered, for BLAS
+        self.F = self._ft.T  # filterpy's F: a view, so writing F[i, j] writes F^T[j, i]
+        self.dt = 0.0
+        self.rate_variances = (0.0, 0.0, 0.0)
+        self.slip_variance_per_rad = 0.0
+        self._inv_r = 1.0 / wheel_radius_m
+        self._half_b = 0.5 * wheel_separation_m
+        self._rhs = {m: np.empty((m, _N + 1), order="F") for m in (1, 2, 3)}
+        self._travel = (0.0, 0.0)
+
+    def predict_x(self, u: Any = 0) -> None:
+        """Advance the state by `self.dt` and set `self.F` to the model's Jacobian there."""
+        dt = self.dt
+        x, y, yaw, v, rate, _, left, right = self.x.tolist()
+        heading = yaw + 0.5 * rate * dt
+        c, s = math.cos(heading), math.sin(heading)
+        step = v * dt
+        wheel_v = dt * self._inv_r
+        wheel_r = self._half_b * wheel_v
+        half = 0.5 * dt * step
+        f = self.F  # item writes: cheaper than one fancy-index scatter for eleven entries
+        f[0, 2] = -step * s
+        f[0, 3] = dt * c
+        f[0, 4] = -half * s
+        f[1, 2] = step * c
+        f[1, 3] = dt * s
+        f[1, 4] = half * c
+        f[2, 4] = dt
+        f[6, 3] = f[7, 3] = wheel_v
+        f[6, 4] = -wheel_r
+        f[7, 4] = wheel_r
+        travel_left, travel_right = v * wheel_v - rate * wheel_r, v * wheel_v + rate * wheel_r
+        self._travel = (travel_left, travel_right)
+        state = self.x
+        state[0] = x + step * c
+        state[1] = y + step * s
+        state[2] = yaw + rate * dt
+        state[6] = left + travel_left
+        state[7] = right + travel_right
+
+    def predict(self, u: Any = 0) -> None:
+        """Predict over `self.dt`: `P = F (P + Q_w dt) F^T + Q_slip`."""
+        p, dt = self.P, self.dt
+        qv, qr, qb = self.rate_variances
+        p[3, 3] += qv * dt
+        p[4, 4] += qr * dt
+        p[5, 5] += qb * dt
+        self.predict_x(u)
+        ft = self._ft
+        p = dgemm(1.0, ft, dsymm(1.0, p, ft), trans_a=1)  # F (P F^T)
+        if self.slip_variance_per_rad:
+            q = self.slip_variance_per_rad
+            p[6, 6] += q * abs(self._travel[0])
+            p[7, 7] += q * abs(self._travel[1])
+        self.P = p
+
+    def update(  # noqa: PLR0917 - filterpy's signature
+        self,
+        z: FloatArray,
+        HJacobian: Callable[..., FloatArray],
+        Hx: Callable[..., FloatArray],
+        R: FloatArray | None = None,
+        args: tuple[Any, ...] = (),
+        hx_args: tuple[Any, ...] = (),
+        residual: Callable[[FloatArray, FloatArray], FloatArray] = np.subtract,
+    ) -> None:
+        """Update with measurement `z` (filterpy's signature); the gain is solved, never inverted."""
+        h = HJacobian(self.x, *args)
+        innovation = residual(z, Hx(self.x, *hx_args))
+        self.update_linear(np.asarray(z, dtype=float), h, self.R if R is None else R, innovation=innovation)
+
+    def update_linear(
+        self,
+        z: FloatArray,
+        h: FloatArray,
+        r: FloatArray,
+        *,
+        innovation: FloatArray | None = None,
+        gate: float | None = None,
+    ) -> bool:
+        """Update with a linear measurement `z = H s + noise(R)` in Joseph form.
+
+        With `S = H P H^T + R`, one Cholesky solve `S [K^T | w] = [H P | y]` gives the gain and the
+        normalised innovation squared `y^T w` for the gate; then
+        `P <- (I - K H) P (I - K H)^T + K R K^T = P - (K H P + P H^T K^T) + (U K^T)^T (U K^T)`, with
+        `S = U^T U`.
+
+        Args:
+            z: Measurement.
+            h: Measurement matrix.
+            r: Measurement covariance.
+            innovation: `z - H x` if already computed.
+            gate: Skip the update and return False when the normalised innovation squared exceeds it.
+
+        Returns:
+            True if the state was updated.
+
+        Raises:
+            EstimationError: If the innovation covariance is not positive definite (a measurement
+                without variance).
+        """
+        hf = np.asfortranarray(h)  # no copy when it already is
+        p = self.P
+        hp = dsymm(1.0, p, hf, side=1)  # H P
+        s = dgemm(1.0, hp, hf, 1.0, r, trans_b=1)  # H P H^T + R
+        y = z - hf @ self.x if innovation is None else innovation
+        rhs = self._rhs[len(y)]
+        rhs[:, :_N] = hp
+        rhs[:, _N] = y
+        u, sol, info = dposv(s, rhs)
+        if info:
+            msg = "EKF innovation covariance is not positive definite; every measurement needs a positive variance"
+            raise EstimationError(msg)
+        if gate is not None and y @ sol[:, _N] > gate:
+            return False
+        kt = sol[:, :_N]  # K^T
+        self.x += y @ kt
+        p = dsyr2k(-1.0, hp, kt, 1.0, p, trans=1, overwrite_c=1)  # P - K H P - P H^T K^T (upper)
+        p = dsyrk(1.0, dtrmm(1.0, u, kt), 1.0, p, trans=1, overwrite_c=1)  # + K S K^T (upper)
+        np.copyto(p, p.T, where=_STRICTLY_LOWER)  # mirror the upper triangle
+        self.P = p
+        self.K, self.S, self.y = kt.T, s, y
+        return True
+
+
+class OdometryFilter:
+    """Wheel-encoder and gyro odometry for a differential drive (see the module docstring).
+
+    Per rate: `add_gyro(t_ns, yaw_rate_radps)` for every IMU sample; `add_wheel_positions(t_ns, left_rad,
+    right_rad)` for every joint state, which steps the filter and returns the estimate to publish.
+
+    Args:
+        config: The scenario's `estimation:` section.
+        wheel_radius_m: Wheel radius.
+        wheel_separation_m: Distance between the wheels.
+        initial_pose: Start (x_m, y_m, yaw_rad) in the `odom` frame.
+
+    Raises:
+        EstimationError: If the wheel geometry is not positive.
+    """
+
+    def __init__(
+        self,
+        config: EstimationSection,
+        *,
+        wheel_radius_m: float,
+        wheel_separation_m: float,
+        initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        if not (wheel_radius_m > 0.0 and wheel_separation_m > 0.0):
+            msg = f"wheel radius and separation must be positive, got {wheel_radius_m} m and {wheel_separation_m} m"
+            raise EstimationError(msg)
+        self.config = config
+        self._r = wheel_radius_m
+        self._b = wheel_separation_m
+        noise = config.measurement_noise
+        tick = 2.0 * math.pi / noise.encoder_ticks_per_rev
+        self._angle_var = tick * tick / 12.0  # one reading rounded to a tick: uniform error
+        self._tick_var = tick * tick
+        self._half_tick = 0.5 * tick
+        self._last_angles: tuple[float, float] | None = None
+        init = config.initial_std
+        p0 = np.diag(
+            [
+                init.position_m**2,
+                init.position_m**2,
+                init.yaw_rad**2,
+                init.velocity_mps**2,
+                init.yaw_rate_radps**2,
+                init.gyro_bias_radps**2,
+                self._angle_var,
+                self._angle_var,
+            ]
+        )
+        x0 = np.array([*initial_pose, 0.0, 0.0, 0.0, 0.0, 0.0])
+        self.ekf = SolvedEkf(x0, p0, wheel_radius_m=wheel_radius_m, wheel_separation_m=wheel_separation_m)
+        q = config.process_noise
+        self.ekf.rate_variances = (
+            q.velocity_random_walk_mps_per_sqrt_s**2,
+            q.yaw_rate_random_walk_radps_per_sqrt_s**2,
+            q.gyro_bias_random_walk_radps_per_sqrt_s**2,
+        )
+        self.ekf.slip_variance_per_rad = q.wheel_travel_std_per_sqrt_rad**2
+        self._speed_var = noise.wheel_speed_std_radps**2
+        self._gyro_var = noise.gyro_std_radps**2
+        self._fuse_gyro = config.fuse_gyro
+        p_gate = config.slip_gate_probability
+        self._gate = float(chi2.ppf(p_gate, 3)) if p_gate is not None else None
+        self._h_angles = _rows(_N, [{6: 1.0}, {7: 1.0}, {4: 1.0, 5: 1.0}])
+        inv_r, half_b = 1.0 / wheel_radius_m, 0.5 * wheel_separation_m / wheel_radius_m
+        self._h_speeds = _rows(_N, [{3: inv_r, 4: -half_b}, {3: inv_r, 4: half_b}, {4: 1.0, 5: 1.0}])
+        self._h_still = _rows(_N, [{3: 1.0}, {4: 1.0}, {4: 1.0, 5: 1.0}])
+        self._wheel_rows = {id(h): np.asfortranarray(h[:2]) for h in (self._h_angles, self._h_speeds, self._h_still)}
+        self._sparse = {
+            id(h): [[(j, float(c)) for j, c in enumerate(row) if c] for row in h.tolist()]
+            for h in (self._h_angles, self._h_speeds, self._h_still)
+        }
+        self._still_var = (noise.standstill_speed_std_mps**2, noise.standstill_yaw_rate_std_radps**2)
+        self._still_intervals = 0
+        self._z = np.zeros(3)
+        self._r3 = np.zeros((3, 3))
+        self._gyro_integral_rad = 0.0  # trapezoid integral of the gyro up to its last sample
+        self._gyro_last: tuple[int, float] | None = None  # (t_ns, rad/s) of the last sample
+        self._gyro_slope = 0.0  # rad/s per ns between the last two samples
+        self._gyro_anchor_rad: float | None = None  # the integral's value at the last step time
+        self._gyro_count = 0
+        self._t_ns: int | None = None
+        self.slip_detections = 0
+        self._padded = np.zeros(_N * _N + 2)
+        self._padded[-1] = UNOBSERVED_VARIANCE
+        self._estimate = self._make_estimate(0)
+
+    @property
+    def t_ns(self) -> int | None:
+        """Time of the last step (None before the first wheel reading)."""
+        return self._t_ns
+
+    @property
+    def estimate(self) -> OdometryEstimate:
+        """The latest estimate."""
+        return self._estimate
+
+    @property
+    def state(self) -> FloatArray:
+        """A copy of the state (see `STATE_NAMES`; yaw not wrapped)."""
+        return self.ekf.x.copy()
+
+    @property
+    def covariance(self) -> FloatArray:
+        """A copy of the 8x8 state covariance."""
+        return self.ekf.P.copy()
+
+    def add_gyro(self, t_ns: int, yaw_rate_radps: float) -> None:
+        """Integrate one gyro sample (z axis of a level IMU); it is fused at the next wheel reading.
+
+        Samples not after the previous one are ignored.
+        """
+        last = self._gyro_last
+        if last is None:
+            if self._t_ns is not None:  # hold the first sample back to the last step
+                self._gyro_anchor_rad = -yaw_rate_radps * (t_ns - self._t_ns) * 1e-9
+        elif t_ns > last[0]:
+            self._gyro_integral_rad += 0.5 * (yaw_rate_radps + last[1]) * (t_ns - last[0]) * 1e-9
+            self._gyro_slope = (yaw_rate_radps - last[1]) / (t_ns - last[0])
+        else:
+            return
+        self._gyro_last = (t_ns, yaw_rate_radps)
+        self._gyro_count += 1
+
+    def add_wheel_positions(self, t_ns: int, left_rad: float, right_rad: float) -> OdometryEstimate:
+        """Step the filter with the wheels' joint positions at `t_ns` and return the new estimate.
+
+        The first reading starts the filter (time and wheel angles) and returns the initial estimate.
+
+        Raises:
+            EstimationError: If `t_ns` is not after the previous reading.
+        """
+        last = self._last_angles
+        self._last_angles = (left_rad, right_rad)
+        if self._t_ns is None or last is None:
+            self.ekf.x[6], self.ekf.x[7] = left_rad, right_rad
+            return self._start(t_ns)
+        half_tick = self._half_tick
+        moving = abs(left_rad - last[0]) > half_tick or abs(right_rad - last[1]) > half_tick
+        self._z[0], self._z[1] = left_rad, right_rad
+        self._r3[0, 0] = self._r3[1, 1] = self._angle_var
+        return self._step(t_ns, self._h_angles, moving=moving)
+
+    def add_wheel_speeds(self, t_ns: int, left_radps: float, right_radps: float) -> OdometryEstimate:
+        """Step the filter with the wheels' average speeds since the previous reading.
+
+        For joint states without positions. Each speed has the variance of
+        `wheel_speed_std_radps` plus one tick over the interval.
+
+        Raises:
+            EstimationError: If `t_ns` is not after the previous reading.
+        """
+        if self._t_ns is None:
+            return self._start(t_ns)
+        dt = self._dt(t_ns, self._t_ns)
+        moving = max(abs(left_radps), abs(right_radps)) * dt > self._half_tick
+        self._z[0], self._z[1] = left_radps, right_radps
+        self._r3[0, 0] = self._r3[1, 1] = self._speed_var + self._tick_var / (dt * dt)
+        return self._step(t_ns, self._h_speeds, moving=moving)
+
+    def _start(self, t_ns: int) -> OdometryEstimate:
+        self._t_ns = t_ns
+        self._gyro_anchor_rad = self._gyro_mark(t_ns)
+        self._gyro_count = 0
+        self._estimate = self._make_estimate(t_ns)
+        return self._estimate
+
+    def _dt(self, t_ns: int, last: int) -> float:
+        if t_ns <= last:
+            msg = f"wheel reading at t={t_ns} ns is not after the previous one at t={last} ns"
+            raise EstimationError(msg)
+        return (t_ns - last) * 1e-9
+
+    def _gyro_mark(self, t_ns: int) -> float | None:
+        """Return the gyro integral at `t_ns`, extrapolated past the last sample (None before any sample)."""
+        last = self._gyro_last
+        if last is None:
+            return None
+        tail_ns = t_ns - last[0]
+        return self._gyro_integral_rad + (last[1] + 0.5 * self._gyro_slope * tail_ns) * tail_ns * 1e-9
+
+    def _step(self, t_ns: int, h_wheels: FloatArray, *, moving: bool) -> OdometryEstimate:
+        """Predict to `t_ns` and update with the wheel rows already in `_z[:2]`/`_r3[:2, :2]` and the gyro."""
+        assert self._t_ns is not None
+        dt = self._dt(t_ns, self._t_ns)
+        ekf = self.ekf
+        ekf.dt = dt
+        ekf.predict()
+        z, r = self._z, self._r3
+        r[0, 1] = r[1, 0] = 0.0
+        self._still_intervals = 0 if moving else self._still_intervals + 1
+        standstill = self._still_intervals >= 2
+        h = h_wheels
+        if standstill:  # no tick for two intervals: the robot stands still (zero-velocity update)
+            h = self._h_still
+            z[0] = z[1] = 0.0
+            r[0, 0], r[1, 1] = self._still_var
+        mark, anchor = self._gyro_mark(t_ns), self._gyro_anchor_rad
+        if self._fuse_gyro and self._gyro_count and mark is not None and anchor is not None:
+            z[2] = (mark - anchor) / dt
+            r[2, 2] = self._gyro_var / self._gyro_count
+            if moving:  # the gyro owns the yaw: turning wheels may slip
+                self._release_differential_travel(h)
+            y = self._innovation(h, 3)
+            if not ekf.update_linear(z, h, r, innovation=y, gate=self._gate):
+                self.slip_detections += 1
+                _log.debug("t=%d ns: wheels and gyro disagree beyond their noise; wheel slip assumed", t_ns)
+                if not moving:
+                    self._release_differential_travel(h)
+                ekf.update_linear(z, h, r, innovation=y)
+        else:
+            ekf.update_linear(z[:2], self._wheel_rows[id(h)], r[:2, :2], innovation=self._innovation(h, 2))
+        self._gyro_anchor_rad = mark
+        self._gyro_count = 0
+        self._t_ns = t_ns
+        self._estimate = self._make_estimate(t_ns)
+        return self._estimate
+
+    def _innovation(self, h: FloatArray, rows: int) -> FloatArray:
+        """`z - H x` for the first `rows` rows of one of the filter's sparse measurement matrices."""
+        x = self.ekf.x.tolist()
+        z = self._z
+        return np.array([z[i] - sum(c * x[j] for j, c in terms) for i, terms in enumerate(self._sparse[id(h)][:rows])])
+
+    def _release_differential_travel(self, h: FloatArray) -> None:
+        """Make the wheels' differential travel over this interval unknown; their common travel stays.
+
+        With wheel angles the angle states take the freedom (so they re-anchor to the readings); with
+        wheel speeds the speed measurement does; at standstill the zero yaw rate is dropped.
+        """
+        if h is self._h_angles:
+            p = self.ekf.P
+            p[6, 6] += _SLIP_RELEASE_RAD2
+            p[7, 7] += _SLIP_RELEASE_RAD2
+            p[6, 7] -= _SLIP_RELEASE_RAD2
+            p[7, 6] -= _SLIP_RELEASE_RAD2
+        elif h is self._h_speeds:
+            self._r3[:2, :2] += _RELEASE
+        else:
+            self._r3[1, 1] += _SLIP_RELEASE_RAD2
+
+    def _make_estimate(self, t_ns: int) -> OdometryEstimate:
+        padded = self._padded
+        padded[: _N * _N] = self.ekf.P.ravel(order="K")  # no copy; P is symmetric, so the order does not matter
+        both = padded[_BOTH_GATHER]  # a fresh array: the estimate owns its covariances
+        x, y, yaw, v, rate, bias, _, _ = self.ekf.x.tolist()
+        yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
+        return _new_estimate(OdometryEstimate, (t_ns, x, y, yaw, v, rate, bias, both[:36], both[36:]))
+
+
+def _rows(n: int, rows: list[dict[int, float]]) -> FloatArray:
+    out = np.zeros((len(rows), n), order="F")
+    for i, row in enumerate(rows):
+        for j, value in row.items():
+            out[i, j] = value
+    return out

@@ -1,0 +1,310 @@
+"""The IMU: what Gazebo classic's `ImuSensor` and the ROS 2 `gazebo_ros_imu_sensor` plugin publish.
+
+Semantics reproduced (gazebo-classic 11 `ImuSensor::UpdateImpl`, gazebo_ros_pkgs `ros2` branch):
+
+- **Angular velocity** is the link's world angular velocity expressed in the IMU frame.
+- **Linear acceleration** is the specific force at the IMU's origin, in the IMU frame: the acceleration
+  of that point (the chassis acceleration plus the lever-arm terms `alpha x r` and `omega x (omega x r)`)
+  minus gravity, so a level IMU at rest reads `+g` on z. Gazebo differentiates the velocity between two
+  sensor updates; this model takes the instantaneous accelerations from the chassis, which is the same
+  signal without the half-period lag.
+- **Orientation** is world-referenced (REP-145): the ROS 2 plugin leaves `initial_orientation_as_reference`
+  false, so it reports the IMU frame's rotation in the world, not relative to where it started.
+- **Noise** per axis, as Gazebo's `GaussianNoiseModel`: `out = in + bias + N(mean, stddev)`, rounded to
+  `precision` for `gaussian_quantized`. The turn-on bias is drawn once from `N(bias_mean, bias_stddev)`
+  with a random sign. When `dynamic_bias_stddev` and `dynamic_bias_correlation_time` are set (SDF 1.6+;
+  implemented by gz-sensors, ignored by Gazebo classic) the bias also drifts, as gz-sensors does it: a
+  first-order Gauss-Markov process driven by white noise of density `dynamic_bias_stddev` (per square
+  root second) with correlation time `tau`, advanced exactly over each sample period. Over times much
+  shorter than `tau` it is a random walk of `dynamic_bias_stddev` per square-root second; its stationary
+  deviation is `dynamic_bias_stddev * sqrt(tau / 2)`. Orientation has no noise.
+- **Covariances**: diagonals are the noise variance (`stddev**2`; 0 for `type: none`), the orientation
+  covariance is left all zero, as the ROS 2 plugin does.
+
+Noise comes from two caller-owned `numpy.random.Generator` streams (gyro, accelerometer), drawn in
+blocks so that one sample costs a few float operations. Same seeds and the same calls give the same
+readings.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import lfilter
+
+from twin.core.clock import period_ns
+from twin.core.geometry import quat_from_rpy
+
+__all__ = [
+    "GRAVITY_MPS2",
+    "GaussianNoise",
+    "ImuModel",
+    "ImuReading",
+    "ImuSpec",
+    "three_axes",
+]
+
+GRAVITY_MPS2 = 9.8
+"""Gazebo's default world gravity magnitude (`<gravity>0 0 -9.8</gravity>`)."""
+
+# Noise samples drawn per refill; a block covers 1.28 s at 200 Hz.
+_BLOCK = 256
+
+Vec3 = tuple[float, float, float]
+
+_new_reading = tuple.__new__  # builds the NamedTuple without its keyword-parsing __new__
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class GaussianNoise:
+    """One axis of an SDF `<noise>` element, in the unit of its channel (rad/s or m/s²).
+
+    Field names follow SDF so a parsed `<noise>` maps one to one. `dynamic_bias_correlation_time_s`
+    is SDF's `dynamic_bias_correlation_time`; 0 disables the drift.
+    """
+
+    type: Literal["none", "gaussian", "gaussian_quantized"] = "gaussian"
+    mean: float = 0.0
+    stddev: float = 0.0
+    bias_mean: float = 0.0
+    bias_stddev: float = 0.0
+    dynamic_bias_stddev: float = 0.0
+    dynamic_bias_correlation_time_s: float = 0.0
+    precision: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("stddev", "bias_stddev", "dynamic_bias_stddev", "dynamic_bias_correlation_time_s", "precision"):
+            value = getattr(self, name)
+            if not (value >= 0.0 and math.isfinite(value)):
+                msg = f"{name} must be a finite number >= 0, got {value}"
+                raise ValueError(msg)
+
+    @property
+    def variance(self) -> float:
+        """The white-noise variance gazebo_ros writes on the covariance diagonal."""
+        return 0.0 if self.type == "none" else self.stddev * self.stddev
+
+    @property
+    def drifts(self) -> bool:
+        """True when the bias drifts (dynamic bias set and enabled)."""
+        return self.type != "none" and self.dynamic_bias_stddev > 0.0 and self.dynamic_bias_correlation_time_s > 0.0
+
+
+def three_axes(noise: GaussianNoise) -> tuple[GaussianNoise, GaussianNoise, GaussianNoise]:
+    """Return the same noise for x, y and z (as the TurtleBot3 SDF sets it)."""
+    return (noise, noise, noise)
+
+
+_TB3_GYRO = GaussianNoise(stddev=2e-4)
+_TB3_ACCEL = GaussianNoise(stddev=1.7e-2)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class ImuSpec:
+    """Where the IMU sits, how often it samples, and its noise per axis.
+
+    Defaults are the TurtleBot3 Waffle's `tb3_imu` (TB3_FACTS.md §2.2): 200 Hz, frame `imu_link`,
+    mounted at (-0.032, 0, 0.068) m in `base_footprint` (SDF `imu_joint`), level.
+
+    Attributes:
+        rate_hz: Sample rate.
+        frame_id: `header.frame_id` of the readings (the parent link, or the plugin's `frame_name`).
+        mount_xyz_m: IMU origin in the chassis frame (`base_footprint`, on the wheel axis), metres.
+        mount_rpy_rad: IMU axes relative to the chassis axes (fixed-axis roll, pitch, yaw).
+        gravity_mps2: Magnitude of gravity along world -z.
+        angular_velocity_noise: Gyro noise for x, y, z (rad/s).
+        linear_acceleration_noise: Accelerometer noise for x, y, z (m/s²).
+    """
+
+    rate_hz: float = 200.0
+    frame_id: str = "imu_link"
+    mount_xyz_m: Vec3 = (-0.032, 0.0, 0.068)
+    mount_rpy_rad: Vec3 = (0.0, 0.0, 0.0)
+    gravity_mps2: float = GRAVITY_MPS2
+    angular_velocity_noise: tuple[GaussianNoise, GaussianNoise, GaussianNoise] = field(
+        default_factory=lambda: three_axes(_TB3_GYRO)
+    )
+    linear_acceleration_noise: tuple[GaussianNoise, GaussianNoise, GaussianNoise] = field(
+        default_factory=lambda: three_axes(_TB3_ACCEL)
+    )
+
+    def __post_init__(self) -> None:
+        if not (self.rate_hz > 0.0 and math.isfinite(self.rate_hz)):
+            msg = f"rate_hz must be a positive number, got {self.rate_hz}"
+            raise ValueError(msg)
+
+
+class ImuReading(NamedTuple):
+    """One `sensor_msgs/Imu` worth of numbers: orientation (x, y, z, w), rad/s, m/s², in the IMU frame."""
+
+    orientation_x: float
+    orientation_y: float
+    orientation_z: float
+    orientation_w: float
+    angular_velocity_x: float
+    angular_velocity_y: float
+    angular_velocity_z: float
+    linear_acceleration_x: float
+    linear_acceleration_y: float
+    linear_acceleration_z: float
+
+
+class _ChannelNoise:
+    """The additive error of the three axes of one channel, from one random stream, drawn in blocks."""
+
+    def __init__(self, axes: tuple[GaussianNoise, GaussianNoise, GaussianNoise], rng: np.random.Generator, dt_s: float):
+        self._rng = rng
+        self._mean = np.array([0.0 if a.type == "none" else a.mean for a in axes])
+        self._std = np.array([0.0 if a.type == "none" else a.stddev for a in axes])
+        self.quantize = tuple(
+            (i, a.precision) for i, a in enumerate(axes) if a.type == "gaussian_quantized" and a.precision > 1e-6
+        )
+        # Turn-on bias, as Gazebo samples it: N(bias_mean, bias_stddev), sign flipped with probability 1/2.
+        bias = rng.normal(0.0, 1.0, 3) * [a.bias_stddev for a in axes] + [a.bias_mean for a in axes]
+        flip = rng.uniform(0.0, 1.0, 3) < 0.5
+        self.bias: NDArray[np.float64] = np.where(flip, -bias, bias) * [a.type != "none" for a in axes]
+        # First-order Gauss-Markov drift, exact over one sample period: b' = phi b + sigma_d w, driven by
+        # white noise of density dynamic_bias_stddev (as gz-sensors' GaussianNoiseModel).
+        self._drift_axes = tuple(i for i, a in enumerate(axes) if a.drifts)
+        self._phi = np.ones(3)
+        self._sigma_d = np.zeros(3)
+        for i in self._drift_axes:
+            tau, sigma = axes[i].dynamic_bias_correlation_time_s, axes[i].dynamic_bias_stddev
+            self._phi[i] = math.exp(-dt_s / tau)
+            self._sigma_d[i] = sigma * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt_s / tau))
+
+    def block(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Draw the next `_BLOCK` samples: the bias of each, and its total additive error (bias + white)."""
+        white = self._rng.standard_normal((_BLOCK, 3)) * self._std + self._mean
+        biases = np.repeat(self.bias[None, :], _BLOCK, axis=0)
+        if self._drift_axes:
+            steps = self._rng.standard_normal((_BLOCK, len(self._drift_axes)))
+            for col, i in enumerate(self._drift_axes):
+                zi = [self._phi[i] * self.bias[i]]
+                biases[:, i] = lfilter([self._sigma_d[i]], [1.0, -self._phi[i]], steps[:, col], zi=zi)[0]
+            self.bias = biases[-1].copy()
+        return biases + self._mean, white + biases
+
+
+class ImuModel:
+    """An IMU on a planar chassis, sampled by the caller at `spec.rate_hz`.
+
+    Args:
+        spec: Mounting, rate and noise.
+        gyro_rng: The gyro's noise stream.
+        accel_rng: The accelerometer's noise stream.
+    """
+
+    def __init__(self, spec: ImuSpec, *, gyro_rng: np.random.Generator, accel_rng: np.random.Generator) -> None:
+        self.spec = spec
+        self.period_ns = period_ns(spec.rate_hz)
+        dt_s = self.period_ns * 1e-9
+        self._gyro = _ChannelNoise(spec.angular_velocity_noise, gyro_rng, dt_s)
+        self._accel = _ChannelNoise(spec.linear_acceleration_noise, accel_rng, dt_s)
+        self._quantize = tuple(self._gyro.quantize) + tuple((i + 3, p) for i, p in self._accel.quantize)
+        self._rows: list[list[float]] = []  # per sample: gyro x, y, z and accel x, y, z errors
+        self._biases: list[list[float]] = []
+        self._next = _BLOCK
+        qx, qy, qz, qw = quat_from_rpy(*spec.mount_rpy_rad)
+        r = _rotation(qx, qy, qz, qw)  # IMU axes in chassis axes; readings are R^T times chassis vectors
+        rx, ry = float(spec.mount_xyz_m[0]), float(spec.mount_xyz_m[1])
+        self._const = (*(float(v) for v in r.ravel()), rx, ry, spec.gravity_mps2, qx, qy, qz, qw)
+        self.orientation_covariance: tuple[float, ...] = (0.0,) * 9
+        self.angular_velocity_covariance = _diagonal(spec.angular_velocity_noise)
+        self.linear_acceleration_covariance = _diagonal(spec.linear_acceleration_noise)
+
+    @property
+    def gyro_bias_radps(self) -> Vec3:
+        """The gyro's constant error (bias plus noise mean) at the last sample, per axis: ground truth for tests."""
+        return self._bias_at_last(0)
+
+    @property
+    def accel_bias_mps2(self) -> Vec3:
+        """The accelerometer's constant error (bias plus noise mean) at the last sample, per axis."""
+        return self._bias_at_last(3)
+
+    def _bias_at_last(self, first: int) -> Vec3:
+        if not self._biases:
+            self._refill()
+            self._next = 0
+            row = self._biases[0]
+        else:
+            row = self._biases[max(self._next - 1, 0)]
+        return (row[first], row[first + 1], row[first + 2])
+
+    def _refill(self) -> None:
+        gyro_bias, gyro_error = self._gyro.block()
+        accel_bias, accel_error = self._accel.block()
+        self._rows = np.hstack((gyro_error, accel_error)).tolist()
+        self._biases = np.hstack((gyro_bias, accel_bias)).tolist()
+        self._next = 0
+
+    def sample(
+        self,
+        yaw_rad: float,
+        yaw_rate_radps: float,
+        yaw_accel_radps2: float,
+        accel_x_mps2: float,
+        accel_y_mps2: float,
+    ) -> ImuReading:
+        """Return the next noisy reading of a level chassis.
+
+        Args:
+            yaw_rad: Chassis yaw in the world.
+            yaw_rate_radps: Chassis yaw rate.
+            yaw_accel_radps2: Chassis yaw acceleration.
+            accel_x_mps2: Acceleration of the chassis origin along the chassis x axis (longitudinal).
+            accel_y_mps2: Acceleration of the chassis origin along the chassis y axis (lateral; v times
+                yaw rate for a rolling diff drive).
+        """
+        i = self._next
+        if i == _BLOCK:
+            self._refill()
+            i = 0
+        self._next = i + 1
+        n0, n1, n2, n3, n4, n5 = self._rows[i]
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, rx, ry, g, mx, my, mz, mw = self._const
+        w = yaw_rate_radps
+        # Specific force at the IMU origin in chassis axes: a + alpha x r + w x (w x r) - g.
+        w2 = w * w
+        fx = accel_x_mps2 - yaw_accel_radps2 * ry - w2 * rx
+        fy = accel_y_mps2 + yaw_accel_radps2 * rx - w2 * ry
+        # World orientation of the IMU: q_world_chassis (yaw only) times q_chassis_imu.
+        s, c = math.sin(0.5 * yaw_rad), math.cos(0.5 * yaw_rad)
+        values: tuple[float, ...] = (
+            c * mx - s * my,
+            c * my + s * mx,
+            c * mz + s * mw,
+            c * mw - s * mz,
+            r20 * w + n0,
+            r21 * w + n1,
+            r22 * w + n2,
+            r00 * fx + r10 * fy + r20 * g + n3,
+            r01 * fx + r11 * fy + r21 * g + n4,
+            r02 * fx + r12 * fy + r22 * g + n5,
+        )
+        if self._quantize:
+            out = list(values)
+            for k, precision in self._quantize:
+                out[k + 4] = round(out[k + 4] / precision) * precision
+            values = tuple(out)
+        return _new_reading(ImuReading, values)
+
+
+def _rotation(x: float, y: float, z: float, w: float) -> NDArray[np.float64]:
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _diagonal(axes: tuple[GaussianNoise, GaussianNoise, GaussianNoise]) -> tuple[float, ...]:
+    vx, vy, vz = (a.variance for a in axes)
+    return (vx, 0.0, 0.0, 0.0, vy, 0.0, 0.0, 0.0, vz)
