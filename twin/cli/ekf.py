@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib
 import json
 import math
 import sys
@@ -14,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from twin import bag
 from twin.core.config import build, load_yaml
 from twin.core.errors import ConfigError, EstimationError
 from twin.estimation import EstimationSection
@@ -100,16 +100,6 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     rep.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="storage of the new bag")
     rep.add_argument("--json", action="store_true", help="print the summary as JSON")
     rep.set_defaults(func=_replay)
-
-
-def _bag_module() -> ModuleType:
-    # LEAD: `twin.bag` lands from the bag branch; once it is on main, import it directly:
-    #   from twin.bag import OdometryEncoder, Recorder, open_bag, read_messages
-    try:
-        return importlib.import_module("twin.bag")
-    except ModuleNotFoundError as err:  # pragma: no cover - only before twin.bag is merged
-        msg = "twin.bag is not installed in this build; the replay cannot read bags"
-        raise EstimationError(msg) from err
 
 
 def _load_config(path: Path | None) -> EstimationSection:
@@ -209,7 +199,6 @@ def _replay(args: argparse.Namespace) -> int:
     if bag_out.exists() and any(bag_out.iterdir()):
         msg = f"{bag_out} exists and is not empty; choose another --out or remove it"
         raise EstimationError(msg)
-    bag = _bag_module()
     inputs = _read(args, bag)
     if args.joint_velocity_units == "auto":
         units = infer_velocity_units(inputs, args.wheel_radius)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
@@ -39,13 +38,8 @@ def default_drive() -> Trajectory:
 
 
 @pytest.fixture
-def bag_module(monkeypatch: pytest.MonkeyPatch) -> ModuleType:
-    """The real `twin.bag` when it is importable; until it is merged, the rosbags stand-in."""
-    try:
-        module = importlib.import_module("twin.bag")
-    except ModuleNotFoundError:
-        from tests.unit.estimation import bag_shim as module
-    import twin.cli.ekf as cli_ekf
+def bag_module() -> ModuleType:
+    """The bag package the replay reads and writes through."""
+    import twin.bag
 
-    monkeypatch.setattr(cli_ekf, "_bag_module", lambda: module)
-    return module
+    return twin.bag
