@@ -125,6 +125,7 @@ class Recorder:
         self._interval_s = flush_interval_s
         self._chunk_messages = max(1, chunk_messages)
         self._custom_data = dict(custom_data or {})
+        self._fsync = fsync
         self._registry = TypeRegistry()
         self._topics: dict[int, _Topic] = {}
         self._topic_names: dict[str, int] = {}
@@ -311,6 +312,11 @@ class Recorder:
             return
         try:
             self._storage.write_batch(batch)
+        except (KeyboardInterrupt, SystemExit):
+            # Interrupted mid-write: the storage is back at its last complete batch; keep these
+            # messages so that closing the bag still writes them.
+            self._pending = batch + self._pending
+            raise
         except ValueError as err:
             msg = f"{self.file_path}: {self._describe_bad_batch(batch, err)}"
             raise BagError(msg) from None
@@ -376,7 +382,7 @@ class Recorder:
                 except sqlite3.Error as err:
                     _log.warning("%s: metadata table not updated: %s", self.file_path, err)
                 self._sqlite.close()
-            write_metadata(self.path, meta)
+            write_metadata(self.path, meta, fsync=self._fsync)
         except (OSError, sqlite3.Error) as err:
             self._close_quietly()
             msg = (

@@ -239,3 +239,30 @@ class _Wrapped:
 
     def __getattr__(self, name: str) -> object:
         return getattr(self._inner, name)
+
+
+def test_ctrl_c_in_the_middle_of_a_disk_write_still_closes_a_complete_bag(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    bag = tmp_path / "interrupted"
+    enc = StringEncoder()
+    with pytest.raises(KeyboardInterrupt), Recorder(bag, chunk_messages=10) as rec:
+        h = rec.add_topic("/chatter", StringEncoder.msgtype)
+        for k in range(25):
+            rec.write(h, k, enc.encode(f"hello {k}"))
+        rec.flush()
+        assert rec._mcap is not None
+        file = rec._mcap._file
+        real_write = file.write
+
+        def interrupted_write(data: object) -> int:
+            monkeypatch.setattr(rec._mcap, "_file", file)  # only the first write is interrupted
+            real_write(bytes(memoryview(data))[:50])  # type: ignore[arg-type]
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(rec._mcap, "_file", _Wrapped(file, interrupted_write))
+        for k in range(25, 40):
+            rec.write(h, k, enc.encode(f"hello {k}"))
+        rec.flush()
+    # the interrupted batch was cut off the file, kept, and written on close
+    assert [m.msg.data for m in read_messages(bag)] == [f"hello {k}" for k in range(40)]
