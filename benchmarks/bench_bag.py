@@ -214,22 +214,34 @@ def _rosbags_reference(n: int, tmp: Path) -> dict[str, float]:
     return out
 
 
+def _rss_mib(field: str) -> float:
+    """`VmRSS` (now) or `VmHWM` (peak) of this process, MiB."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return round(int(line.split()[1]) / 1024, 1)
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
+
+
 def _memory_child(seconds: float, storage: str) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         bag = Path(tmp) / "mem"
-        t0 = time.perf_counter()
         with Recorder(bag, storage=storage) as rec:
-            n = MissionMix(rec).run(round(seconds * NS))
-        wall = time.perf_counter() - t0
+            mix = MissionMix(rec)
+            rss_setup = _rss_mib("VmRSS")
+            t0 = time.perf_counter()
+            n = mix.run(round(seconds * NS))
+            wall = time.perf_counter() - t0
+            rss_end = _rss_mib("VmRSS")
         size = sum(p.stat().st_size for p in bag.iterdir())
-    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     print(
         json.dumps(
             {
                 "messages": n,
                 "bag_mib": round(size / 2**20, 1),
                 "wall_s": round(wall, 1),
-                "peak_rss_mib": round(peak_kib / 1024, 1),
+                "rss_after_setup_mib": rss_setup,
+                "rss_at_end_mib": rss_end,
+                "peak_rss_mib": _rss_mib("VmHWM"),
             }
         )
     )

@@ -123,9 +123,12 @@ class _Stats:
     message_count: int = 0
     start_ns: int = 2**64 - 1
     end_ns: int = 0
-    channel_counts: dict[int, int] = field(default_factory=dict)
-    channel_start_ns: dict[int, int] = field(default_factory=dict)
-    channel_end_ns: dict[int, int] = field(default_factory=dict)
+    counts: NDArray[np.int64] = field(default_factory=lambda: np.zeros(1, dtype=np.int64))
+
+    @property
+    def channel_counts(self) -> dict[int, int]:
+        """Messages per channel id (channels without messages left out)."""
+        return {ch: int(n) for ch, n in enumerate(self.counts.tolist()) if n}
 
     def add(self, channels: NDArray[np.uint16], times: NDArray[np.uint64]) -> None:
         if channels.size == 0:
@@ -133,12 +136,10 @@ class _Stats:
         self.message_count += int(channels.size)
         self.start_ns = min(self.start_ns, int(times.min()))
         self.end_ns = max(self.end_ns, int(times.max()))
-        for ch in np.unique(channels).tolist():
-            mask = channels == ch
-            sel = times[mask]
-            self.channel_counts[ch] = self.channel_counts.get(ch, 0) + int(sel.size)
-            self.channel_start_ns[ch] = min(self.channel_start_ns.get(ch, 2**64 - 1), int(sel.min()))
-            self.channel_end_ns[ch] = max(self.channel_end_ns.get(ch, 0), int(sel.max()))
+        per_channel = np.bincount(channels)
+        if per_channel.size > self.counts.size:
+            self.counts = np.concatenate((self.counts, np.zeros(per_channel.size - self.counts.size, dtype=np.int64)))
+        self.counts[: per_channel.size] += per_channel
 
 
 def _chunk_index(
@@ -168,21 +169,20 @@ def _message_indexes(
     channels: NDArray[np.uint16], times: NDArray[np.uint64], offsets: NDArray[np.uint64], base: int
 ) -> tuple[bytes, dict[int, int]]:
     """MessageIndex records for one chunk (one per channel) and each record's file offset."""
+    order = np.argsort(channels, kind="stable")  # per channel, in time order
+    entries = np.empty(channels.size, dtype=_INDEX_ENTRY)
+    entries["time"] = times[order]
+    entries["offset"] = offsets[order]
+    raw = entries.tobytes()
+    sorted_channels = channels[order]
+    starts = np.flatnonzero(np.r_[True, sorted_channels[1:] != sorted_channels[:-1]])
+    ends = np.r_[starts[1:], channels.size]
     parts: list[bytes] = []
     where: dict[int, int] = {}
     pos = base
-    order = np.argsort(channels, kind="stable")
-    sorted_channels = channels[order]
-    bounds = np.flatnonzero(np.diff(sorted_channels)) + 1
-    for group in np.split(order, bounds):
-        if group.size == 0:
-            continue
-        ch = int(channels[group[0]])
-        entries = np.empty(group.size, dtype=_INDEX_ENTRY)
-        entries["time"] = times[group]
-        entries["offset"] = offsets[group]
-        body = entries.tobytes()
-        record = _record(OP_MESSAGE_INDEX, _U16.pack(ch) + _U32.pack(len(body)) + body)
+    for ch, a, b in zip(sorted_channels[starts].tolist(), starts.tolist(), ends.tolist(), strict=True):
+        body = raw[16 * a : 16 * b]
+        record = _RECORD.pack(OP_MESSAGE_INDEX, 6 + len(body)) + _U16.pack(ch) + _U32.pack(len(body)) + body
         where[ch] = pos
         pos += len(record)
         parts.append(record)

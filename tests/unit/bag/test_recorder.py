@@ -266,3 +266,21 @@ def test_ctrl_c_in_the_middle_of_a_disk_write_still_closes_a_complete_bag(
         rec.flush()
     # the interrupted batch was cut off the file, kept, and written on close
     assert [m.msg.data for m in read_messages(bag)] == [f"hello {k}" for k in range(40)]
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_topics_can_appear_in_the_middle_of_a_recording(tmp_path: Path, storage: str) -> None:
+    bag = tmp_path / "late"
+    clock, text = ClockEncoder(), StringEncoder()
+    with Recorder(bag, storage=storage, chunk_messages=16) as rec:
+        h_clock = rec.add_topic("/clock", ClockEncoder.msgtype)
+        for k in range(40):
+            rec.write(h_clock, k, clock.encode(k))
+        h_late = rec.add_topic("/late", StringEncoder.msgtype)  # with messages still pending
+        for k in range(40, 80):
+            rec.write(h_clock, k, clock.encode(k))
+            rec.write(h_late, k, text.encode(str(k)))
+    got = [(m.topic, m.t_ns) for m in read_messages(bag)]
+    assert len(got) == 120
+    assert [t for topic, t in got if topic == "/late"] == list(range(40, 80))
+    assert open_bag(bag).topic("/late").message_count == 40
