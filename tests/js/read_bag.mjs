@@ -100,14 +100,14 @@ async function readDb3(file) {
   }
   if (known.length > 0) {
     for await (const m of bag.readMessages({ topics: known })) {
-      addMessage(topics, m.topic.name, m.topic.type, m.timestamp.sec * 1e9 + m.timestamp.nsec, m.value);
+      addMessage(topics, m.topic.name, m.topic.type, BigInt(m.timestamp.sec) * 1000000000n + BigInt(m.timestamp.nsec), m.value);
     }
   }
   if (custom.length > 0) {
     for await (const m of bag.readMessages({ topics: custom, rawMessages: true })) {
       const decoder = embedded.get(m.topic.type);
       if (!decoder) throw new Error(`no definition for ${m.topic.type}`);
-      addMessage(topics, m.topic.name, m.topic.type, m.timestamp.sec * 1e9 + m.timestamp.nsec, decoder.readMessage(m.data));
+      addMessage(topics, m.topic.name, m.topic.type, BigInt(m.timestamp.sec) * 1000000000n + BigInt(m.timestamp.nsec), decoder.readMessage(m.data));
     }
   }
   await bag.close();

@@ -652,20 +652,39 @@ class ParticleCloudEncoder:
     def __init__(self, frame_id: str = "map") -> None:
         """Particles in `frame_id`."""
         self.frame_id = frame_id
+        frame = string_bytes(frame_id)
+        # stamp, frame id, (pad to 4) particle count, then padding so the particles start 8-aligned
+        count_pad = (-(8 + len(frame))) % 4
+        self._pad = (-(8 + len(frame) + count_pad + 4)) % 8
+        self._prefix = struct.Struct(f"<4siI{len(frame)}s{count_pad}xI{self._pad}x")
+        self._frame = frame
 
     def encode(self, stamp_ns: int, poses: ArrayLike, weights: ArrayLike) -> bytes:
         """Encode `(N, 3)` x, y, yaw (or `(N, 7)`) poses with their `N` weights."""
-        arr = _planar_poses(poses)
+        arr = np.asarray(poses, dtype=np.float64)
         weight = np.asarray(weights, dtype=np.float64).reshape(-1)
-        if weight.shape[0] != arr.shape[0]:
-            msg = f"ParticleCloudEncoder got {arr.shape[0]} poses but {weight.shape[0]} weights"
+        n = arr.shape[0] if arr.ndim == 2 else 0
+        if arr.ndim != 2 or arr.shape[1] not in (3, 7) or weight.shape[0] != n:
+            msg = (
+                "ParticleCloudEncoder needs (N, 3) x, y, yaw or (N, 7) poses and N weights; "
+                f"got poses of shape {arr.shape} and {weight.shape[0]} weights"
+            )
             raise BagError(msg)
-        w = CdrWriter()
-        w.header(stamp_ns, self.frame_id)
-        w.count(arr.shape[0])
-        if arr.shape[0]:
-            w.array(np.column_stack((arr, weight)), sequence=False)
-        return w.getvalue()
+        # Each Particle is 8 doubles (pose, weight), 8-aligned: the sequence is one float64 block.
+        block = np.zeros((n, 8))
+        if arr.shape[1] == 7:
+            block[:, :7] = arr
+        else:
+            block[:, 0:2] = arr[:, 0:2]
+            half = 0.5 * arr[:, 2]
+            block[:, 5] = np.sin(half)
+            block[:, 6] = np.cos(half)
+        block[:, 7] = weight
+        sec, nanosec = divmod(stamp_ns, _NS)
+        prefix = self._prefix.pack(ENCAPSULATION, sec, nanosec, self._frame, n)
+        if n == 0:  # no particles, nothing to align
+            return prefix[: len(prefix) - self._pad]
+        return prefix + block.tobytes()
 
 
 class OccupancyGridEncoder:

@@ -166,14 +166,21 @@ def render_metadata(meta: BagMetadata, *, root: bool = True) -> str:
     return "\n".join(_body_lines(meta, ""))
 
 
-def write_metadata(bag_dir: Path, meta: BagMetadata) -> Path:
-    """Write `metadata.yaml` into `bag_dir` atomically (a temporary file renamed over it)."""
+def write_metadata(bag_dir: Path, meta: BagMetadata, *, fsync: bool = True) -> Path:
+    """Write `metadata.yaml` into `bag_dir` atomically (a temporary file renamed over it).
+
+    Args:
+        bag_dir: The bag folder.
+        meta: What to write.
+        fsync: Sync the file before renaming it (survives power loss, costs a disk flush).
+    """
     path = bag_dir / METADATA_FILE
     tmp = bag_dir / (METADATA_FILE + ".tmp")
     with tmp.open("w", encoding="utf-8") as out:
         out.write(render_metadata(meta))
-        out.flush()
-        os.fsync(out.fileno())
+        if fsync:
+            out.flush()
+            os.fsync(out.fileno())
     tmp.replace(path)
     return path
 

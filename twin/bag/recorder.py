@@ -53,7 +53,7 @@ TopicHandle = NewType("TopicHandle", int)
 
 STORAGES = ("mcap", "sqlite3")
 _EXTENSIONS = {"mcap": ".mcap", "sqlite3": ".db3"}
-_CHECK_EVERY = 32  # writes between clock checks when the loop is fast
+_MAX_STEP = 64  # most writes between two looks at the clock
 _DISK_FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
 
@@ -91,6 +91,7 @@ class Recorder:
         chunk_messages: int = 4096,
         fsync: bool = False,
         custom_data: dict[str, str] | None = None,
+        write_log: str | os.PathLike[str] | None = None,
     ) -> None:
         """Create the bag folder and its storage file.
 
@@ -101,9 +102,12 @@ class Recorder:
             distro: Whose rosbag2 the bag imitates: `humble` (default; metadata version 8, read by
                 every distro from Humble on), `iron`, or `jazzy`/`kilted`/`rolling` (version 9).
             flush_interval_s: Longest wall time a written message waits before reaching the disk.
-            chunk_messages: Most messages per MCAP chunk / sqlite3 transaction.
+            chunk_messages: Messages per MCAP chunk / sqlite3 transaction (a batch may run a few
+                dozen over while the recorder is not looking).
             fsync: Also fsync each flush (survives power loss, not just a killed process).
             custom_data: `custom_data` entries for `metadata.yaml` (version >= 6).
+            write_log: For crash tests: append `topic t_ns monotonic_ns` per `write()` to this
+                file, each line one write(2) so it survives a kill. Slows writing down.
 
         Raises:
             BagError: If the folder exists and is not empty, the storage or distro is unknown, or
@@ -121,11 +125,13 @@ class Recorder:
         self._interval_s = flush_interval_s
         self._chunk_messages = max(1, chunk_messages)
         self._custom_data = dict(custom_data or {})
+        self._fsync = fsync
         self._registry = TypeRegistry()
         self._topics: dict[int, _Topic] = {}
         self._topic_names: dict[str, int] = {}
         self._pending: list[tuple[int, int, bytes]] = []
-        self._next_check = _CHECK_EVERY
+        self._step = 1  # writes between looks at the clock, adapted to the write rate
+        self._next_check = 1
         self._closed = False
         self._failed = False
         self._written = 0
@@ -161,6 +167,10 @@ class Recorder:
         now = time.monotonic()
         self._deadline = now + self._interval_s
         self._last_check = now
+        self._log_fd: int | None = None
+        if write_log is not None:
+            self._log_fd = os.open(write_log, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+            self.write = self._write_and_log  # type: ignore[method-assign]
 
     # -- context manager ----------------------------------------------------------------------
 
@@ -255,6 +265,13 @@ class Recorder:
         if len(pending) >= self._next_check:
             self._check(len(pending))
 
+    def _write_and_log(self, handle: TopicHandle, t_ns: int, data: bytes) -> None:
+        Recorder.write(self, handle, t_ns, data)
+        topic = self._topics.get(handle)
+        line = f"{topic.name if topic else handle} {t_ns} {time.monotonic_ns()}\n"
+        assert self._log_fd is not None
+        os.write(self._log_fd, line.encode())
+
     def poll(self) -> None:
         """Flush if the flush interval has passed; call it when the loop goes long without writing."""
         if self._pending:
@@ -265,11 +282,18 @@ class Recorder:
         if n >= self._chunk_messages or now >= self._deadline:
             self.flush()
             return
-        # A slow loop checks the clock on every write, a fast one every few dozen.
-        step = _CHECK_EVERY if now - self._last_check < self._interval_s / 8 else 1
+        if force_clock:
+            return
+        # Look at the clock about every interval/16: every write in a slow loop, every few dozen
+        # in a fast one. The step halves as soon as writes slow down.
+        elapsed = now - self._last_check
+        target = self._interval_s / 16
+        if elapsed < target / 2:
+            self._step = min(2 * self._step, _MAX_STEP)
+        elif elapsed > target:
+            self._step = max(self._step // 2, 1)
         self._last_check = now
-        if not force_clock:
-            self._next_check = n + step
+        self._next_check = n + self._step
 
     def flush(self) -> None:
         """Write the pending messages to disk now.
@@ -283,11 +307,16 @@ class Recorder:
         now = time.monotonic()
         self._deadline = now + self._interval_s
         self._last_check = now
-        self._next_check = _CHECK_EVERY
+        self._next_check = self._step
         if not batch:
             return
         try:
             self._storage.write_batch(batch)
+        except (KeyboardInterrupt, SystemExit):
+            # Interrupted mid-write: the storage is back at its last complete batch; keep these
+            # messages so that closing the bag still writes them.
+            self._pending = batch + self._pending
+            raise
         except ValueError as err:
             msg = f"{self.file_path}: {self._describe_bad_batch(batch, err)}"
             raise BagError(msg) from None
@@ -336,6 +365,9 @@ class Recorder:
     def _finish(self) -> None:
         self._closed = True
         self._pending = _ClosedBatch(self.path)
+        if self._log_fd is not None:
+            os.close(self._log_fd)
+            self._log_fd = None
         try:
             meta = self.metadata()
             if self._mcap is not None:
@@ -350,7 +382,7 @@ class Recorder:
                 except sqlite3.Error as err:
                     _log.warning("%s: metadata table not updated: %s", self.file_path, err)
                 self._sqlite.close()
-            write_metadata(self.path, meta)
+            write_metadata(self.path, meta, fsync=self._fsync)
         except (OSError, sqlite3.Error) as err:
             self._close_quietly()
             msg = (

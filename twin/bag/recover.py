@@ -43,7 +43,7 @@ class RecoveryReport:
     files: tuple[str, ...]
     message_count: int
     topic_counts: tuple[tuple[str, int], ...]
-    was_complete: bool  #: the storage files were already complete (only metadata.yaml was written)
+    was_complete: bool  #: storage files complete and metadata.yaml present: nothing was missing
     dropped_bytes: int  #: bytes of partial records cut off the end
     metadata: BagMetadata
 
@@ -241,6 +241,7 @@ def _finish(
     was_complete: bool,
     dropped: int,
 ) -> RecoveryReport:
+    was_complete = was_complete and previous is not None
     profile = distro_profile(_distro(distro))
     version = previous.version if previous and previous.version >= 8 else profile.metadata_version
     start = min(starts) if starts else 0

@@ -2,7 +2,7 @@
 
 The tables are those of rosbag2's sqlite3 plugin at schema version 4 (Iron and later):
 `schema`, `metadata`, `topics` (with `type_description_hash`), `message_definitions` and
-`messages`, plus the `timestamp_idx` index. Humble's reader selects only the columns it knows
+`messages`, plus the `timestamp_idx` index (built on close). Humble's reader selects only the columns it knows
 and ignores the rest, so the same file serves every distro; `message_definitions` is what lets
 readers decode types they have never seen.
 
@@ -23,6 +23,7 @@ from pathlib import Path
 __all__ = ["Sqlite3Writer", "SqliteTopicStats", "recover_sqlite", "sqlite_topic_stats"]
 
 _INSERT = "INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)"
+_TIME_INDEX = "CREATE INDEX IF NOT EXISTS timestamp_idx ON messages (timestamp ASC)"
 
 
 class Sqlite3Writer:
@@ -128,10 +129,17 @@ class Sqlite3Writer:
             self._db.execute("INSERT INTO metadata (metadata_version, metadata) VALUES (?, ?)", (version, text))
 
     def close(self) -> None:
-        """Close the database (every batch is already committed)."""
+        """Index the messages by time, as rosbag2 does, and close the database.
+
+        The index is built here rather than kept up while recording: that saves about a
+        microsecond per message, and a killed recording gets it from `recover_sqlite()`.
+        """
         if not self._closed:
             self._closed = True
-            self._db.close()
+            try:
+                self._db.execute(_TIME_INDEX)
+            finally:
+                self._db.close()
 
 
 class _Transaction:
@@ -217,7 +225,7 @@ def recover_sqlite(path: Path) -> tuple[list[SqliteTopicStats], str]:
         if not {"topics", "messages"} <= tables:
             msg = "not a rosbag2 database (no topics and messages tables)"
             raise sqlite3.DatabaseError(msg)
-        db.execute("CREATE INDEX IF NOT EXISTS timestamp_idx ON messages (timestamp ASC)")
+        db.execute(_TIME_INDEX)
         distro = ""
         if "schema" in tables:
             row = db.execute("SELECT ros_distro FROM schema").fetchone()

@@ -1,0 +1,153 @@
+"""`twin bag recover`: what a killed recording leaves becomes a complete, indexed bag."""
+
+from __future__ import annotations
+
+import random
+import shutil
+import sqlite3
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+
+from twin.bag import ClockEncoder, Recorder, open_bag, read_messages, recover_bag
+from twin.bag.mcap_file import scan_mcap
+from twin.bag.mission_mix import MissionMix
+from twin.core.errors import BagError
+
+
+def _record_in_chunks(bag: Path, *, storage: str = "mcap", distro: str = "humble") -> None:
+    with Recorder(bag, storage=storage, distro=distro, chunk_messages=300) as rec:
+        MissionMix(rec, particles=20, path_poses=10).run(3_000_000_000)
+
+
+def _chunk_ends(file: Path) -> list[tuple[int, int]]:
+    """(end offset of each chunk record, messages up to and including it)."""
+    scan = scan_mcap(file)
+    out, total = [], 0
+    for chunk in scan.chunks:
+        total += len(chunk.channels)
+        out.append((chunk.offset + chunk.length, total))
+    return out
+
+
+def _valid_everywhere(bag: Path, expected: int) -> None:
+    """Indexed readers find exactly `expected` messages, and every one decodes."""
+    (file,) = bag.glob("*.mcap")
+    with file.open("rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        assert summary.statistics.message_count == expected
+        assert sum(1 for _ in reader.iter_messages()) == expected
+    with AnyReader([bag]) as reader:
+        assert sum(1 for c, _, raw in reader.messages() if reader.deserialize(raw, c.msgtype) is not None) == expected
+    assert open_bag(bag).message_count == expected
+
+
+def test_a_truncated_mcap_keeps_every_complete_chunk(tmp_path: Path) -> None:
+    """Cut the file at random bytes (as a kill would); recovery keeps exactly the whole chunks before the cut."""
+    complete = tmp_path / "complete"
+    _record_in_chunks(complete)
+    (src,) = complete.glob("*.mcap")
+    ends = _chunk_ends(src)
+    assert len(ends) >= 5
+    data = src.read_bytes()
+    rng = random.Random(7)
+    # random cuts, plus right at the end of a chunk, one byte short of it, and inside its indexes
+    cuts = [rng.randrange(200, ends[-1][0]) for _ in range(8)] + [ends[2][0], ends[2][0] - 1, ends[2][0] + 20]
+    for i, cut in enumerate(cuts):
+        bag = tmp_path / f"cut{i}"
+        bag.mkdir()
+        (bag / src.name).write_bytes(data[:cut])
+        report = recover_bag(bag)
+        # a whole chunk is kept even if its message indexes were cut off: they are rebuilt
+        expected = max((n for end, n in ends if end <= cut), default=0)
+        assert not report.was_complete
+        assert report.message_count == expected, f"cut at byte {cut}"
+        _valid_everywhere(bag, expected)
+        meta = (bag / "metadata.yaml").read_text()
+        assert "version: 8" in meta and "ros_distro: humble" in meta
+
+
+def test_recovering_a_complete_bag_only_rewrites_metadata(tmp_path: Path) -> None:
+    bag = tmp_path / "ok"
+    _record_in_chunks(bag, distro="jazzy")
+    (file,) = bag.glob("*.mcap")
+    before = file.read_bytes()
+    original = (bag / "metadata.yaml").read_text()
+    assert recover_bag(bag).was_complete
+    (bag / "metadata.yaml").unlink()
+    report = recover_bag(bag)
+    assert not report.was_complete and report.dropped_bytes == 0
+    assert file.read_bytes() == before
+    assert (bag / "metadata.yaml").read_text() == original  # same distro form (version 9) and counts
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy"])
+def test_sqlite3_without_metadata_is_rebuilt_in_its_distro_form(tmp_path: Path, distro: str) -> None:
+    bag = tmp_path / "db"
+    _record_in_chunks(bag, storage="sqlite3", distro=distro)
+    original = open_bag(bag)
+    (bag / "metadata.yaml").unlink()
+    with pytest.raises(BagError, match="twin bag recover"):
+        open_bag(bag)
+    report = recover_bag(bag)
+    info = open_bag(bag)
+    assert report.metadata.version == (8 if distro == "humble" else 9)
+    assert info.message_count == original.message_count
+    assert {t.name: (t.message_count, t.qos) for t in info.topics} == {
+        t.name: (t.message_count, t.qos) for t in original.topics
+    }
+    assert sum(1 for _ in read_messages(bag)) == original.message_count
+
+
+def test_sqlite3_interrupted_mid_transaction_rolls_back_to_the_last_commit(tmp_path: Path) -> None:
+    """A hot journal (the process died inside a commit) is rolled back; committed batches stay."""
+    bag = tmp_path / "hot"
+    clock = ClockEncoder()
+    with Recorder(bag, storage="sqlite3") as rec:
+        h = rec.add_topic("/clock", ClockEncoder.msgtype)
+        for k in range(100):
+            rec.write(h, k, clock.encode(k))
+    (db_file,) = bag.glob("*.db3")
+    (bag / "metadata.yaml").unlink()
+    # Simulate the kill: a second connection starts a big transaction, spills it to the file and
+    # leaves its journal behind (we copy both files mid-transaction).
+    crashed = tmp_path / "crashed"
+    crashed.mkdir()
+    conn = sqlite3.connect(db_file, isolation_level=None)
+    conn.execute("PRAGMA cache_size=1")
+    conn.execute("BEGIN")
+    conn.executemany(
+        "INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)",
+        [(1, 1000 + k, bytes(4000)) for k in range(500)],
+    )
+    shutil.copy(db_file, crashed / db_file.name)
+    journal = db_file.with_name(db_file.name + "-journal")
+    assert journal.exists()
+    shutil.copy(journal, crashed / journal.name)
+    conn.execute("ROLLBACK")
+    conn.close()
+    report = recover_bag(crashed)
+    assert not report.was_complete
+    assert report.message_count == 100
+    assert not (crashed / journal.name).exists()
+    assert [m.msg.clock.nanosec for m in read_messages(crashed)][:3] == [0, 1, 2]
+
+
+def test_recover_refuses_what_it_cannot_recover(tmp_path: Path) -> None:
+    with pytest.raises(BagError, match="no such bag folder"):
+        recover_bag(tmp_path / "missing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(BagError, match=r"no \.mcap or \.db3"):
+        recover_bag(tmp_path / "empty")
+    (tmp_path / "junk").mkdir()
+    (tmp_path / "junk" / "junk_0.mcap").write_bytes(b"not an mcap file at all")
+    with pytest.raises(BagError, match="not an MCAP file"):
+        recover_bag(tmp_path / "junk")
+    (tmp_path / "junkdb").mkdir()
+    (tmp_path / "junkdb" / "junkdb_0.db3").write_bytes(b"not a database" * 100)
+    with pytest.raises(BagError, match="cannot recover"):
+        recover_bag(tmp_path / "junkdb")
