@@ -51,7 +51,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
@@ -299,11 +299,16 @@ class OdometryFilter:
         wheel_radius_m: float,
         wheel_separation_m: float,
         initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        gyro_samples: Literal["instantaneous", "interval_mean"] = "instantaneous",
     ) -> None:
         if not (wheel_radius_m > 0.0 and wheel_separation_m > 0.0):
             msg = f"wheel radius and separation must be positive, got {wheel_radius_m} m and {wheel_separation_m} m"
             raise EstimationError(msg)
         self.config = config
+        # Instantaneous rates (Gazebo, most drivers) integrate by the trapezoid rule; a gyro that
+        # reports its mean rate over each sample period (an integrating sensor, twin's IMU) by the
+        # rectangle rule, which then gives the heading change exactly.
+        self._gyro_mean = gyro_samples == "interval_mean"
         self._r = wheel_radius_m
         self._b = wheel_separation_m
         noise = config.measurement_noise
@@ -393,8 +398,11 @@ class OdometryFilter:
             if self._t_ns is not None:  # hold the first sample back to the last step
                 self._gyro_anchor_rad = -yaw_rate_radps * (t_ns - self._t_ns) * 1e-9
         elif t_ns > last[0]:
-            self._gyro_integral_rad += 0.5 * (yaw_rate_radps + last[1]) * (t_ns - last[0]) * 1e-9
-            self._gyro_slope = (yaw_rate_radps - last[1]) / (t_ns - last[0])
+            if self._gyro_mean:
+                self._gyro_integral_rad += yaw_rate_radps * (t_ns - last[0]) * 1e-9
+            else:
+                self._gyro_integral_rad += 0.5 * (yaw_rate_radps + last[1]) * (t_ns - last[0]) * 1e-9
+                self._gyro_slope = (yaw_rate_radps - last[1]) / (t_ns - last[0])
         else:
             return
         self._gyro_last = (t_ns, yaw_rate_radps)

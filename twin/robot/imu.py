@@ -38,6 +38,8 @@ from scipy.signal import lfilter
 
 from twin.core.clock import period_ns
 from twin.core.geometry import quat_from_rpy
+from twin.world.robot_model import ImuSpec as SdfImuSpec
+from twin.world.robot_model import NoiseSpec
 
 __all__ = [
     "GRAVITY_MPS2",
@@ -308,3 +310,38 @@ def _rotation(x: float, y: float, z: float, w: float) -> NDArray[np.float64]:
 def _diagonal(axes: tuple[GaussianNoise, GaussianNoise, GaussianNoise]) -> tuple[float, ...]:
     vx, vy, vz = (a.variance for a in axes)
     return (vx, 0.0, 0.0, 0.0, vy, 0.0, 0.0, 0.0, vz)
+
+
+def _gaussian(noise: NoiseSpec) -> GaussianNoise:
+    kind = noise.type if noise.type in ("gaussian", "gaussian_quantized") else "none"
+    return GaussianNoise(
+        type=kind,  # type: ignore[arg-type]
+        mean=noise.mean,
+        stddev=noise.stddev,
+        bias_mean=noise.bias_mean,
+        bias_stddev=noise.bias_stddev,
+        dynamic_bias_stddev=noise.dynamic_bias_stddev,
+        dynamic_bias_correlation_time_s=noise.dynamic_bias_correlation_time_s,
+        precision=noise.precision,
+    )
+
+
+def imu_model_spec(sdf: SdfImuSpec) -> ImuSpec:
+    """Return the IMU model's spec for an IMU read from a robot's SDF (rate, frame, mount and noise)."""
+    mount = sdf.mount
+    return ImuSpec(
+        rate_hz=sdf.rate_hz,
+        frame_id=sdf.frame_id,
+        mount_xyz_m=(mount.x_m, mount.y_m, mount.z_m),
+        mount_rpy_rad=(mount.roll_rad, mount.pitch_rad, mount.yaw_rad),
+        angular_velocity_noise=(
+            _gaussian(sdf.angular_velocity_noise[0]),
+            _gaussian(sdf.angular_velocity_noise[1]),
+            _gaussian(sdf.angular_velocity_noise[2]),
+        ),
+        linear_acceleration_noise=(
+            _gaussian(sdf.linear_acceleration_noise[0]),
+            _gaussian(sdf.linear_acceleration_noise[1]),
+            _gaussian(sdf.linear_acceleration_noise[2]),
+        ),
+    )

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from twin.robot.chassis import ChassisState, ContactFn
+from twin.robot.disturbances import WheelSlip
 from twin.robot.drivetrain import WheelState
 
 __all__ = ["KinematicDrivetrain", "KinematicParams"]
@@ -44,6 +45,7 @@ class KinematicDrivetrain:
         pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
         contact: ContactFn | None = None,
         free_distance: DistanceFn | None = None,
+        slip: WheelSlip | None = None,
     ) -> None:
         """Set up at rest at `pose`.
 
@@ -54,8 +56,12 @@ class KinematicDrivetrain:
             contact: `(x, y, yaw) -> bool`, True if that pose would penetrate the world.
             free_distance: `(x, y, yaw) -> m` the robot may move from there with no contact possible
                 (e.g. `CollisionMonitor.free_m`); lets steady motion take longer pieces.
+            slip: Wheel slip: each wheel's ground speed is (1 - fraction) times its rim speed, with the
+                fractions looked up where the robot is at the start of each piece of motion.
         """
         self.params = params
+        no_slip = slip is None or (slip.is_uniform and slip.left_fraction == 0.0 and slip.right_fraction == 0.0)
+        self._slip = None if no_slip else slip
         self._free = free_distance
         self.step_ns = step_ns
         self._dt = step_ns * 1e-9
@@ -99,8 +105,14 @@ class KinematicDrivetrain:
                 for i in (0, 1):
                     err = target[i] - rim[i]
                     rim[i] = target[i] if abs(err) <= dv_max else rim[i] + math.copysign(dv_max, err)
-            v = 0.5 * (rim[0] + rim[1])
-            w = (rim[1] - rim[0]) * inv_track
+            if self._slip is None:
+                v = 0.5 * (rim[0] + rim[1])
+                w = (rim[1] - rim[0]) * inv_track
+            else:
+                slip_left, slip_right = self._slip.fractions_at(self.x_m, self.y_m)
+                ground_left, ground_right = (1.0 - slip_left) * rim[0], (1.0 - slip_right) * rim[1]
+                v = 0.5 * (ground_left + ground_right)
+                w = (ground_right - ground_left) * inv_track
             if v != 0.0 or w != 0.0:
                 travel = (abs(rim[0]) + abs(rim[1])) * reach * dt * n
                 used += travel
@@ -136,10 +148,9 @@ class KinematicDrivetrain:
                 return False
             self.blocked = False
         self.x_m, self.y_m, self.yaw_rad = nx, ny, nyaw
-        half = 0.5 * self.params.wheel_separation_m
         inv_r = 1.0 / self.params.wheel_radius_m
-        self.angle_rad[0] += (v - w * half) * dt * inv_r
-        self.angle_rad[1] += (v + w * half) * dt * inv_r
+        self.angle_rad[0] += self._rim[0] * dt * inv_r  # the wheels turn with their rims, slip or not
+        self.angle_rad[1] += self._rim[1] * dt * inv_r
         return True
 
     def chassis_state(self) -> ChassisState:

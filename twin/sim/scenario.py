@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import Literal
 
 from twin.core.config import load_config
+from twin.estimation import EstimationSection
+from twin.robot.disturbances import Disturbances
 from twin.robot.drivetrain import FmuDrive
 
 __all__ = ["Scenario", "default_scenario_path", "load_scenario"]
@@ -75,7 +77,7 @@ class SensorsSection:
     """Sensor and publication rates."""
 
     lidar: LidarSection = field(default_factory=LidarSection)
-    odom: RateSection = field(default_factory=lambda: RateSection(rate_hz=30.0))
+    ground_truth: RateSection = field(default_factory=lambda: RateSection(rate_hz=30.0))
     clock: RateSection = field(default_factory=lambda: RateSection(rate_hz=100.0))
 
 
@@ -171,6 +173,8 @@ class Scenario:
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
     drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)
+    estimation: EstimationSection = field(default_factory=EstimationSection)
+    disturbances: Disturbances = field(default_factory=Disturbances)
     recording: RecordingSection = field(default_factory=RecordingSection)
     seed: int = 0
     max_duration_s: float = 600.0

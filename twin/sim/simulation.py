@@ -22,6 +22,7 @@ import numpy as np
 from twin.bag import (
     ClockEncoder,
     ContactEncoder,
+    ImuEncoder,
     JointStateEncoder,
     LogEncoder,
     MotorStateEncoder,
@@ -35,8 +36,11 @@ from twin.bag import (
 from twin.core.clock import NS_PER_S, ns_to_s, s_to_ns
 from twin.core.errors import ConfigError, TwinError
 from twin.core.geometry import Mat4, quat_from_rpy, rpy_from_matrix
+from twin.estimation import OdometryFilter
 from twin.robot.chassis import ChassisParams
 from twin.robot.drivetrain import Drivetrain, FmuDrivetrain
+from twin.robot.encoders import EncoderModel, EncoderSpec
+from twin.robot.imu import ImuModel, imu_model_spec
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
 from twin.robot.lidar import Lidar
 from twin.sim.bus import Bus, Publisher
@@ -215,6 +219,9 @@ class Simulation:
             raise ConfigError(msg)
         self.lidar = Lidar.from_robot(robot, scene, self._rng.stream("lidar")) if robot.lidar is not None else None
         self.drive = self._make_drive(scene.robot_body(robot.collisions).radius_m)
+        self._wheels = self._wheel_frames()
+        self._imu = self._make_imu()
+        self._encoders, self._ekf = self._make_odometry()
         self.mission = make_mission(scenario.mission)
         self._run_to_limit = duration_s is not None
         limit_ns = s_to_ns(scenario.max_duration_s if duration_s is None else duration_s)
@@ -238,6 +245,48 @@ class Simulation:
             self.drive.close()
             raise
 
+    def _wheel_frames(self) -> list[tuple[str, str, str, Mat4, tuple[float, float, float]]]:
+        """(joint, parent, child, T_parent, axis) of the left and right wheel joints, in that order."""
+        drive = self.robot.drive
+        assert drive is not None
+        side = {drive.left_joint: 0, drive.right_joint: 1}
+        wheels = [(f.joint, f.parent, f.name, f.T_parent, f.axis) for f in self.robot.frames if f.joint in side]
+        return sorted(wheels, key=lambda w: side[w[0]])
+
+    def _make_imu(self) -> ImuModel | None:
+        spec = self.robot.imu
+        if spec is None:
+            _log.info("robot %s has no IMU: /imu is not published and the EKF uses the wheels alone", self.robot.name)
+            return None
+        model_spec = self.scenario.disturbances.imu.apply(imu_model_spec(spec))
+        return ImuModel(model_spec, gyro_rng=self._rng.stream("imu.gyro"), accel_rng=self._rng.stream("imu.accel"))
+
+    def _make_odometry(self) -> tuple[EncoderModel | None, OdometryFilter | None]:
+        robot, sc = self.robot, self.scenario
+        assert robot.drive is not None
+        if len(self._wheels) != 2:
+            _log.warning("robot %s: wheel joints not found among its frames; no /joint_states or /odom", robot.name)
+            return None, None
+        rate = robot.joint_states.rate_hz if robot.joint_states is not None else 30.0
+        spec = EncoderSpec(
+            rate_hz=rate,
+            joint_names=(robot.drive.left_joint, robot.drive.right_joint),
+            wheel_radius_m=robot.drive.wheel_radius_m,
+        )
+        encoders = EncoderModel(spec, sc.disturbances.encoders, self._rng.stream("encoders"))
+        estimation = sc.estimation
+        if self._imu is None and estimation.fuse_gyro:
+            estimation = dataclasses.replace(estimation, fuse_gyro=False)
+        pose = sc.robot.initial_pose
+        ekf = OdometryFilter(
+            estimation,
+            wheel_radius_m=robot.drive.wheel_radius_m,
+            wheel_separation_m=robot.drive.wheel_separation_m,
+            initial_pose=(pose.x_m, pose.y_m, pose.yaw_rad),
+            gyro_samples="interval_mean",
+        )
+        return encoders, ekf
+
     def _make_drive(self, bounding_radius_m: float) -> Drivetrain:
         sc, robot = self.scenario, self.robot
         assert robot.drive is not None
@@ -251,7 +300,12 @@ class Simulation:
                 bounding_radius_m=bounding_radius_m,
             )
             return KinematicDrivetrain(
-                params, step_ns=self.step_ns, pose=pose, contact=self._touches, free_distance=self._monitor.free_m
+                params,
+                step_ns=self.step_ns,
+                pose=pose,
+                contact=self._touches,
+                free_distance=self._monitor.free_m,
+                slip=sc.disturbances.wheel_slip,
             )
         chassis = ChassisParams(
             wheel_radius_m=robot.drive.wheel_radius_m,
@@ -308,15 +362,10 @@ class Simulation:
         # Latched, once at t = 0: the robot's fixed frames and its description.
         static_pairs = [("map", "odom")]
         static_poses = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)]
-        self._wheels: list[tuple[str, str, str, Mat4, tuple[float, float, float]]] = []
-        wheel_side = {robot.drive.left_joint: 0, robot.drive.right_joint: 1}
         for frame in robot.frames:
             if frame.joint_type is JointType.FIXED:
                 static_pairs.append((frame.parent, frame.name))
                 static_poses.append(_tf_pose(frame.T_parent))
-            elif frame.joint in wheel_side:
-                self._wheels.append((frame.joint, frame.parent, frame.name, frame.T_parent, frame.axis))
-        self._wheels.sort(key=lambda w: wheel_side[w[0]])
         tf_static = bus.advertise("/tf_static", TFEncoder.msgtype)
         description = bus.advertise("/robot_description", StringEncoder.msgtype)
         static_encoder = TFEncoder(static_pairs)
@@ -365,39 +414,55 @@ class Simulation:
 
             add("lidar", robot.lidar.rate_hz, self._timed("lidar", scan), priority=_P_SENSOR)
 
-        # Joint states and the wheels' transforms (robot_state_publisher publishes them on each).
+        # Wheel encoders -> /joint_states and the wheels' transforms (robot_state_publisher publishes
+        # them on each), then the EKF fuses them with the gyro into /odom and odom -> base_footprint.
         if len(self._wheels) == 2:
-            joint_pub = bus.advertise("/joint_states", JointStateEncoder.msgtype)
-            joint_enc = JointStateEncoder([w[0] for w in self._wheels])
-            wheel_tf = TFEncoder([(w[1], w[2]) for w in self._wheels])
-            tf_pub = bus.advertise("/tf", TFEncoder.msgtype)
-            wheel_state = self.drive.wheel_state
-            left, right = (_JointTransform(w[3], w[4]) for w in self._wheels)
+            self._setup_odometry()
 
-            def joints(t_ns: int) -> None:
-                ws = wheel_state()
-                angles = ws.angle_rad
-                joint_pub.publish(t_ns, joint_enc.encode(t_ns, angles, ws.speed_radps))
-                poses = (left.at(angles[0]), right.at(angles[1]))
-                tf_pub.publish(t_ns, wheel_tf.encode(t_ns, poses))
-
-            rate = robot.joint_states.rate_hz if robot.joint_states is not None else 30.0
-            add("joint_states", rate, self._timed("joint_states", joints), priority=_P_STATE)
-
-        # Odometry: ground truth for now (as Gazebo's diff drive with odometry_source WORLD).
-        odom_pub = bus.advertise("/odom", OdometryEncoder.msgtype)
-        tf_pub = bus.advertise("/tf", TFEncoder.msgtype)
-        cov = np.diag(_ODOM_COV)
-        odom_enc = OdometryEncoder("odom", robot.base_frame, pose_covariance=cov, twist_covariance=cov)
-        odom_tf = TFEncoder([("odom", robot.base_frame)])
+        # Ground truth, in the world (= map) frame, for analysis.
+        truth_pub = bus.advertise("/ground_truth/odom", OdometryEncoder.msgtype)
+        truth_enc = OdometryEncoder("map", robot.base_frame)
         chassis = self.drive.chassis_state
 
-        def odom(t_ns: int) -> None:
+        def ground_truth(t_ns: int) -> None:
             s = chassis()
-            odom_pub.publish(t_ns, odom_enc.encode(t_ns, s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps))
-            tf_pub.publish(t_ns, odom_tf.encode_planar(t_ns, s.x_m, s.y_m, s.yaw_rad))
+            truth_pub.publish(t_ns, truth_enc.encode(t_ns, s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps))
 
-        add("odom", sc.sensors.odom.rate_hz, self._timed("odom", odom), priority=_P_STATE)
+        add(
+            "ground_truth",
+            sc.sensors.ground_truth.rate_hz,
+            self._timed("ground_truth", ground_truth),
+            priority=_P_STATE,
+        )
+
+        # IMU -> /imu, and its yaw rate to the EKF.
+        if self._imu is not None:
+            imu, ekf = self._imu, self._ekf
+            imu_pub = bus.advertise("/imu", ImuEncoder.msgtype)
+            imu_enc = ImuEncoder(
+                imu.spec.frame_id,
+                orientation_covariance=imu.orientation_covariance,
+                angular_velocity_covariance=imu.angular_velocity_covariance,
+                linear_acceleration_covariance=imu.linear_acceleration_covariance,
+            )
+            add_gyro = ekf.add_gyro if ekf is not None and sc.estimation.fuse_gyro else None
+
+            # The gyro reports its mean rate over each sample period (an integrating MEMS gyro behind
+            # its low-pass filter), so its samples add up to the true heading change; the EKF
+            # integrates them by the rectangle rule (`gyro_samples="interval_mean"`).
+            last = [0, self.scenario.robot.initial_pose.yaw_rad]
+
+            def imu_sample(t_ns: int) -> None:
+                s = chassis()
+                dt_ns = t_ns - last[0]
+                rate = math.remainder(s.yaw_rad - last[1], math.tau) * 1e9 / dt_ns if dt_ns > 0 else s.yaw_rate_radps
+                last[0], last[1] = t_ns, s.yaw_rad
+                r = imu.sample(s.yaw_rad, rate, s.yaw_accel_radps2, s.ax_mps2, s.ay_mps2)
+                imu_pub.publish(t_ns, imu_enc.encode(t_ns, *r))
+                if add_gyro is not None:
+                    add_gyro(t_ns, r.angular_velocity_z)
+
+            add("imu", imu.spec.rate_hz, self._timed("imu", imu_sample), priority=_P_SENSOR)
 
         # Motor signals of an FMU drive: voltage, current, torque and speed per wheel.
         if isinstance(self.drive, FmuDrivetrain) and len(self._wheels) == 2:
@@ -426,6 +491,51 @@ class Simulation:
             clock_pub.publish(t_ns, clock_enc.encode(t_ns))
 
         add("clock", sc.sensors.clock.rate_hz, self._timed("clock", clock), priority=_P_CLOCK)
+
+    def _setup_odometry(self) -> None:
+        robot, bus = self.robot, self.bus
+        assert robot.drive is not None and self._encoders is not None and self._ekf is not None
+        names = [w[0] for w in self._wheels]
+        with_effort = isinstance(self.drive, FmuDrivetrain)
+        joint_pub = bus.advertise("/joint_states", JointStateEncoder.msgtype)
+        joint_enc = JointStateEncoder(names, with_effort=with_effort)
+        tf_pub = bus.advertise("/tf", TFEncoder.msgtype)
+        wheel_tf = TFEncoder([(w[1], w[2]) for w in self._wheels])
+        left, right = (_JointTransform(w[3], w[4]) for w in self._wheels)
+        odom_pub = bus.advertise("/odom", OdometryEncoder.msgtype)
+        odom_enc = OdometryEncoder("odom", robot.base_frame)
+        odom_tf = TFEncoder([("odom", robot.base_frame)])
+        wheel_state, encoders, ekf = self.drive.wheel_state, self._encoders, self._ekf
+
+        def odometry(t_ns: int) -> None:
+            ws = wheel_state()
+            js = encoders.read(t_ns, ws.angle_rad[0], ws.angle_rad[1])
+            positions = (js.position_left_rad, js.position_right_rad)
+            velocities = (js.velocity_left, js.velocity_right)
+            if with_effort:
+                joint_pub.publish(t_ns, joint_enc.encode(t_ns, positions, velocities, ws.effort_nm))
+            else:
+                joint_pub.publish(t_ns, joint_enc.encode(t_ns, positions, velocities))
+            tf_pub.publish(t_ns, wheel_tf.encode(t_ns, (left.at(positions[0]), right.at(positions[1]))))
+            est = ekf.add_wheel_positions(t_ns, positions[0], positions[1])
+            odom_pub.publish(
+                t_ns,
+                odom_enc.encode(
+                    t_ns,
+                    est.x_m,
+                    est.y_m,
+                    est.yaw_rad,
+                    est.v_mps,
+                    est.yaw_rate_radps,
+                    est.pose_covariance,
+                    est.twist_covariance,
+                ),
+            )
+            tf_pub.publish(t_ns, odom_tf.encode_planar(t_ns, est.x_m, est.y_m, est.yaw_rad))
+
+        self.scheduler.add(
+            "odometry", self._encoders.spec.rate_hz, self._timed("odometry", odometry), priority=_P_STATE
+        )
 
     # -- contact ---------------------------------------------------------------------------------
 

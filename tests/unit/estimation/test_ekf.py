@@ -168,3 +168,33 @@ def test_the_estimation_section_loads_from_yaml_and_rejects_bad_values(tmp_path:
     typo.write_text("slip_gate_probabilty: 0.99\n", encoding="utf-8")
     with pytest.raises(ConfigError, match="did you mean 'slip_gate_probability'"):
         load_config(EstimationSection, typo)
+
+
+def test_interval_mean_gyro_samples_integrate_to_the_exact_heading() -> None:
+    # A yaw rate that steps every 7 ms, sampled by a gyro that reports its mean rate over each 5 ms
+    # period: the rectangle rule recovers the heading exactly; the trapezoid rule does not.
+    def rate(t_ms: int) -> float:
+        return 0.8 if (t_ms // 7) % 2 else -0.3
+
+    results = {}
+    for mode in ("interval_mean", "instantaneous"):
+        odom = OdometryFilter(
+            EstimationSection(),
+            wheel_radius_m=0.033,
+            wheel_separation_m=0.287,
+            gyro_samples=mode,  # type: ignore[arg-type]
+        )
+        odom.add_wheel_positions(0, 0.0, 0.0)
+        heading = 0.0
+        for t_ms in range(1, 3001):
+            heading += rate(t_ms - 1) * 1e-3
+            if t_ms % 5 == 0:
+                mean = sum(rate(k) for k in range(t_ms - 5, t_ms)) / 5.0
+                odom.add_gyro(t_ms * 1_000_000, mean)
+            if t_ms % 100 == 0:
+                # The wheels turn too (spin in place), so the gyro owns the yaw.
+                wheel = heading * 0.287 / 2 / 0.033
+                odom.add_wheel_positions(t_ms * 1_000_000, -wheel, wheel)
+        results[mode] = abs(odom.estimate.yaw_rad - math.remainder(heading, math.tau))
+    assert results["interval_mean"] < 1e-5
+    assert results["instantaneous"] > 10 * results["interval_mean"]

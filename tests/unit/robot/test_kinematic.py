@@ -95,3 +95,25 @@ def test_known_free_distance_allows_long_pieces() -> None:
     drive.advance(1000)
     assert calls <= 2  # the first step of the ramp, then one piece for the rest
     assert drive.chassis_state().x_m == pytest.approx(0.2)
+
+
+def test_slip_moves_the_robot_less_than_the_wheels_turn() -> None:
+    from twin.robot.disturbances import WheelSlip
+
+    drive = KinematicDrivetrain(UNLIMITED, step_ns=STEP_NS, slip=WheelSlip(left_fraction=0.1, right_fraction=0.1))
+    drive.set_cmd_vel(0.2, 0.0)
+    drive.advance(1000)
+    assert drive.chassis_state().x_m == pytest.approx(0.18, abs=1e-4)
+    assert drive.wheel_state().angle_rad[0] == pytest.approx(0.2 / 0.033, rel=1e-3)
+
+
+def test_uneven_slip_turns_the_robot_although_the_wheels_turn_alike() -> None:
+    from twin.robot.disturbances import SlipRegion, WheelSlip
+
+    patch = SlipRegion.rectangle(x_min_m=-1, y_min_m=-1, x_max_m=1, y_max_m=1, left_fraction=0.3, right_fraction=0.0)
+    drive = KinematicDrivetrain(UNLIMITED, step_ns=STEP_NS, slip=WheelSlip(regions=(patch,)))
+    drive.set_cmd_vel(0.2, 0.0)
+    drive.advance(1000)
+    left, right = drive.wheel_state().angle_rad
+    assert left == pytest.approx(right)
+    assert drive.chassis_state().yaw_rad == pytest.approx(0.3 * 0.2 / 0.287, rel=1e-2)
