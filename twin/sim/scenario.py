@@ -73,10 +73,18 @@ class RateSection:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class ImuSection:
+    """The IMU of the robot's SDF (rate, frame, mount and noise come from there)."""
+
+    enabled: bool = True
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class SensorsSection:
     """Sensor and publication rates."""
 
     lidar: LidarSection = field(default_factory=LidarSection)
+    imu: ImuSection = field(default_factory=ImuSection)
     ground_truth: RateSection = field(default_factory=lambda: RateSection(rate_hz=30.0))
     clock: RateSection = field(default_factory=lambda: RateSection(rate_hz=100.0))
 
@@ -173,6 +181,7 @@ class Scenario:
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
     drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)
+    odometry: Literal["ekf", "ground_truth"] = "ekf"
     estimation: EstimationSection = field(default_factory=EstimationSection)
     disturbances: Disturbances = field(default_factory=Disturbances)
     recording: RecordingSection = field(default_factory=RecordingSection)

@@ -38,7 +38,7 @@ from twin.core.errors import ConfigError, TwinError
 from twin.core.geometry import Mat4, quat_from_rpy, rpy_from_matrix
 from twin.estimation import OdometryFilter
 from twin.robot.chassis import ChassisParams
-from twin.robot.drivetrain import Drivetrain, FmuDrivetrain
+from twin.robot.drivetrain import Drivetrain, FmuDrivetrain, WheelState
 from twin.robot.encoders import EncoderModel, EncoderSpec
 from twin.robot.imu import ImuModel, imu_model_spec
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
@@ -255,6 +255,8 @@ class Simulation:
 
     def _make_imu(self) -> ImuModel | None:
         spec = self.robot.imu
+        if not self.scenario.sensors.imu.enabled:
+            return None
         if spec is None:
             _log.info("robot %s has no IMU: /imu is not published and the EKF uses the wheels alone", self.robot.name)
             return None
@@ -274,6 +276,8 @@ class Simulation:
             wheel_radius_m=robot.drive.wheel_radius_m,
         )
         encoders = EncoderModel(spec, sc.disturbances.encoders, self._rng.stream("encoders"))
+        if sc.odometry == "ground_truth":
+            return encoders, None
         estimation = sc.estimation
         if self._imu is None and estimation.fuse_gyro:
             estimation = dataclasses.replace(estimation, fuse_gyro=False)
@@ -494,7 +498,7 @@ class Simulation:
 
     def _setup_odometry(self) -> None:
         robot, bus = self.robot, self.bus
-        assert robot.drive is not None and self._encoders is not None and self._ekf is not None
+        assert robot.drive is not None and self._encoders is not None
         names = [w[0] for w in self._wheels]
         with_effort = isinstance(self.drive, FmuDrivetrain)
         joint_pub = bus.advertise("/joint_states", JointStateEncoder.msgtype)
@@ -507,31 +511,50 @@ class Simulation:
         odom_tf = TFEncoder([("odom", robot.base_frame)])
         wheel_state, encoders, ekf = self.drive.wheel_state, self._encoders, self._ekf
 
-        def odometry(t_ns: int) -> None:
-            ws = wheel_state()
-            js = encoders.read(t_ns, ws.angle_rad[0], ws.angle_rad[1])
-            positions = (js.position_left_rad, js.position_right_rad)
-            velocities = (js.velocity_left, js.velocity_right)
+        def joints(t_ns: int, ws: WheelState) -> tuple[float, float]:
+            if ekf is None:  # Gazebo's joint states: the exact joint angles and speeds
+                positions, velocities = ws.angle_rad, ws.speed_radps
+            else:
+                js = encoders.read(t_ns, ws.angle_rad[0], ws.angle_rad[1])
+                positions = (js.position_left_rad, js.position_right_rad)
+                velocities = (js.velocity_left, js.velocity_right)
             if with_effort:
                 joint_pub.publish(t_ns, joint_enc.encode(t_ns, positions, velocities, ws.effort_nm))
             else:
                 joint_pub.publish(t_ns, joint_enc.encode(t_ns, positions, velocities))
             tf_pub.publish(t_ns, wheel_tf.encode(t_ns, (left.at(positions[0]), right.at(positions[1]))))
-            est = ekf.add_wheel_positions(t_ns, positions[0], positions[1])
-            odom_pub.publish(
-                t_ns,
-                odom_enc.encode(
+            return positions[0], positions[1]
+
+        if ekf is None:
+            cov = np.diag(_ODOM_COV)
+            truth_enc = OdometryEncoder("odom", robot.base_frame, pose_covariance=cov, twist_covariance=cov)
+            chassis = self.drive.chassis_state
+
+            def odometry(t_ns: int) -> None:
+                joints(t_ns, wheel_state())
+                s = chassis()
+                odom_pub.publish(t_ns, truth_enc.encode(t_ns, s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps))
+                tf_pub.publish(t_ns, odom_tf.encode_planar(t_ns, s.x_m, s.y_m, s.yaw_rad))
+
+        else:
+            add_wheel_positions = ekf.add_wheel_positions
+
+            def odometry(t_ns: int) -> None:
+                est = add_wheel_positions(t_ns, *joints(t_ns, wheel_state()))
+                odom_pub.publish(
                     t_ns,
-                    est.x_m,
-                    est.y_m,
-                    est.yaw_rad,
-                    est.v_mps,
-                    est.yaw_rate_radps,
-                    est.pose_covariance,
-                    est.twist_covariance,
-                ),
-            )
-            tf_pub.publish(t_ns, odom_tf.encode_planar(t_ns, est.x_m, est.y_m, est.yaw_rad))
+                    odom_enc.encode(
+                        t_ns,
+                        est.x_m,
+                        est.y_m,
+                        est.yaw_rad,
+                        est.v_mps,
+                        est.yaw_rate_radps,
+                        est.pose_covariance,
+                        est.twist_covariance,
+                    ),
+                )
+                tf_pub.publish(t_ns, odom_tf.encode_planar(t_ns, est.x_m, est.y_m, est.yaw_rad))
 
         self.scheduler.add(
             "odometry", self._encoders.spec.rate_hz, self._timed("odometry", odometry), priority=_P_STATE
