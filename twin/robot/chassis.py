@@ -157,6 +157,16 @@ class ChassisDynamics(NamedTuple):
     blocked: bool
 
 
+# The Chassis attribute behind each field of ChassisDynamics, in order (the others are public).
+_PRIVATE = {
+    "block_common": "_block_common",
+    "block_diff": "_block_diff",
+    "w_left_prev_radps": "_wl",
+    "w_right_prev_radps": "_wr",
+}
+_DYNAMIC_ATTRIBUTES = tuple(_PRIVATE.get(name, name) for name in ChassisDynamics._fields)
+
+
 class ChassisCoefficients(NamedTuple):
     """The numbers `Chassis.update` works with, derived once from the parameters (see `Chassis`)."""
 
@@ -262,47 +272,12 @@ class Chassis:
 
     def dynamics(self) -> ChassisDynamics:
         """The whole state carried between steps."""
-        return ChassisDynamics(
-            self.x_m,
-            self.y_m,
-            self.yaw_rad,
-            self.v_mps,
-            self.yaw_rate_radps,
-            self.ax_mps2,
-            self.ay_mps2,
-            self.yaw_accel_radps2,
-            self._block_common,
-            self._block_diff,
-            self._wl,
-            self._wr,
-            self.wheel_angle_left_rad,
-            self.wheel_angle_right_rad,
-            self.load_left_nm,
-            self.load_right_nm,
-            self.blocked,
-        )
+        return ChassisDynamics._make(getattr(self, name) for name in _DYNAMIC_ATTRIBUTES)
 
     def set_dynamics(self, state: ChassisDynamics) -> None:
         """Continue from `state` (as `dynamics` returned it, or a compiled loop advanced it)."""
-        (
-            self.x_m,
-            self.y_m,
-            self.yaw_rad,
-            self.v_mps,
-            self.yaw_rate_radps,
-            self.ax_mps2,
-            self.ay_mps2,
-            self.yaw_accel_radps2,
-            self._block_common,
-            self._block_diff,
-            self._wl,
-            self._wr,
-            self.wheel_angle_left_rad,
-            self.wheel_angle_right_rad,
-            self.load_left_nm,
-            self.load_right_nm,
-            self.blocked,
-        ) = state
+        for name, value in zip(_DYNAMIC_ATTRIBUTES, state, strict=True):
+            setattr(self, name, value)
 
     def update(self, w_left: float, w_right: float) -> None:
         """Advance one step with the wheels at these speeds (rad/s); set the next load torques."""

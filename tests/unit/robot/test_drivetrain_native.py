@@ -12,9 +12,10 @@ from pathlib import Path
 import pytest
 
 from tests.unit.cosim.helpers import acme
+from tests.unit.robot.test_drivetrain import ACME_MOTOR
 from twin.core.errors import FmuError
 from twin.robot.chassis import ChassisParams, SlipModel, SlipRegion
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain, MotorModel
+from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
 from twin.sim.scenario import default_scenario_path, load_scenario
 from twin.world import build_scene, load_robot, load_world
 from twin.world.scene import CollisionMonitor
@@ -125,16 +126,7 @@ def test_native_loop_converts_vendor_units_as_the_python_path() -> None:
     drive = FmuDrive(
         fmu_file=acme(),
         mapping=REPO / "fmus" / "maps" / "acme_drive.yaml",
-        motor=MotorModel(
-            resistance_ohm="Rw",
-            inductance_h=1e-6,
-            torque_constant_nm_per_a="k_m",
-            back_emf_vs_per_rad="k_m",
-            rotor_inertia_kgm2="J_total",
-            rotor_friction_nms_per_rad="d_visc",
-            gear_ratio=1.0,
-            load_inertia_kgm2=0.0,
-        ),
+        motor=ACME_MOTOR,
     )
     native, python = _both(drive)
     assert_same(native, python)
