@@ -5,7 +5,8 @@
  * cost is made of. Each slot holds an instance and its FMI 2 or FMI 3 function pointers.
  */
 #include <stdbool.h>
-#include <stddef.h>
+
+#include "step_shim.h"
 
 typedef int (*set2_fn)(void *, const unsigned *, size_t, const double *);
 typedef int (*get2_fn)(void *, const unsigned *, size_t, double *);
@@ -14,24 +15,6 @@ typedef int (*set3_fn)(void *, const unsigned *, size_t, const double *, size_t)
 typedef int (*get3_fn)(void *, const unsigned *, size_t, double *, size_t);
 typedef int (*do3_fn)(void *, double, double, bool, bool *, bool *, bool *, double *);
 
-typedef struct {
-    int fmi_version;
-    void *instance;
-    void *set;
-    void *get;
-    void *step;
-    const unsigned *in_vr;
-    size_t n_in;
-    const double *in;
-    const unsigned *out_vr;
-    size_t n_out;
-    double *out;
-    int status[3]; /* of the set, doStep and get calls */
-    int terminate; /* FMI 3: the FMU asked to end the simulation */
-} TwinSlot;
-
-/* Step every slot from t by h. Returns -1 when all calls succeeded (status OK or Warning), else the
- * index of the first slot with a worse status or a termination request; later slots are not stepped. */
 int twin_step_slots(TwinSlot *slots, int n, double t, double h) {
     for (int k = 0; k < n; k++) {
         TwinSlot *s = &slots[k];
@@ -53,9 +36,7 @@ int twin_step_slots(TwinSlot *slots, int n, double t, double h) {
     return -1;
 }
 
-/* Step every slot from t = *step_index * h by h and count the step; the hot path of twin's loop,
- * called with prebuilt arguments only. Returns as twin_step_slots; *step_index is not advanced on a
- * failure, so the failing step's start time is *step_index * h. */
+/* The hot path of the Python step loop, called with prebuilt arguments only. */
 int twin_step_next(TwinSlot *slots, int n, long long *step_index, const double *h) {
     const int failed = twin_step_slots(slots, n, (double)*step_index * *h, *h);
     if (failed < 0) ++*step_index;

@@ -58,6 +58,10 @@ FMUS_DIR = Path(__file__).resolve().parent.parent.parent / "fmus"
 BUILTIN_PREFIX = "builtin:"
 CFLAGS: tuple[str, ...] = ("-O2", "-shared", "-fPIC", "-std=c11", "-Wall")
 _BUILDER_VERSION = "1"  # bump when the generated files change shape
+# The shim library's files (not part of any FMU, so they do not enter the FMUs' hashes).
+_SHIM_SOURCES = ("step_shim.c", "drive_loop.c")
+_SHIM_FILES = ("step_shim.h", *_SHIM_SOURCES)
+_SHIM_CFLAGS = ("-ffp-contract=off",)
 _TIME_VR = 4096  # MODEL_TIME_VR in fmus/common/model.h
 
 
@@ -222,29 +226,34 @@ def build_fmu(model_dir: Path, variant: str, *, fmi_version: FmiVersion = 2, for
 
 
 def build_shim() -> Path:
-    """Build (or reuse) the stepping shim `fmus/common/step_shim.c` as a shared library in the cache.
+    """Build (or reuse) the stepping shim and the compiled drive loop as a shared library in the cache.
+
+    The library holds `fmus/common/step_shim.c` (FMU instances stepped in one call) and
+    `fmus/common/drive_loop.c` (the drivetrain's whole per-step path). It is compiled without FMA
+    contraction so that the drive loop's arithmetic matches Python's to the last bit.
 
     Raises:
         FmuError: If no C compiler is found or compilation fails.
     """
-    source = FMUS_DIR / "common" / "step_shim.c"
+    common = FMUS_DIR / "common"
+    sources = [common / name for name in _SHIM_SOURCES]
     compiler = _compiler("step shim")
-    digest = _digest([source], compiler, "step_shim", 0)
+    digest = _digest([common / name for name in _SHIM_FILES], compiler, " ".join(("step_shim", *_SHIM_CFLAGS)), 0)
     target = cache_dir() / "fmus" / f"step_shim-{digest[:16]}.so"
     if target.is_file():
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="twin-shim-", dir=target.parent) as tmp_text:
         staged = Path(tmp_text) / "step_shim.so"
-        cmd = [compiler[0], *CFLAGS, str(source), "-o", str(staged)]
+        cmd = [compiler[0], *CFLAGS, *_SHIM_CFLAGS, *map(str, sources), "-o", str(staged), "-lm"]
         try:
             result = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
         except OSError as err:
             msg = f"cannot build the step shim: {compiler[0]} did not run ({err.strerror})"
             raise FmuError(msg) from None
         if result.returncode != 0:
-            first = (result.stderr.strip().splitlines() or ["?"])[0]
-            msg = f"cannot build the step shim: {first}"
+            lines = [ln for ln in result.stderr.splitlines() if "error" in ln] or result.stderr.splitlines() or ["?"]
+            msg = f"cannot build the step shim: {lines[0].strip()}"
             raise FmuError(msg)
         os.replace(staged, target)
     return target
@@ -256,7 +265,7 @@ def build_shim() -> Path:
 def _input_files(model_dir: Path, spec: FmuSourceSpec) -> list[Path]:
     files = [model_dir / "fmu.yaml", *(model_dir / s for s in spec.sources)]
     for folder in (FMUS_DIR / "common", FMUS_DIR / "include"):
-        files.extend(sorted(p for p in folder.iterdir() if p.suffix in {".c", ".h"}))
+        files.extend(sorted(p for p in folder.iterdir() if p.suffix in {".c", ".h"} and p.name not in _SHIM_FILES))
     for path in files:
         if not path.is_file():
             msg = f"{model_dir / 'fmu.yaml'}: source file {path} not found"

@@ -221,6 +221,21 @@ class StepGroup:
         """Communication steps taken so far."""
         return int(self._index.value)
 
+    @property
+    def size(self) -> int:
+        """How many instances the group steps."""
+        return len(self._steppers)
+
+    def shim(self) -> tuple[ctypes.CDLL, ctypes.Array[_Slot], ctypes.c_longlong] | None:
+        """The shim library, the slots and the step counter, for a compiled loop that steps the group.
+
+        None when the group is stepped from Python. A compiled loop steps through `twin_step_next`
+        with these slots and this counter, so `index` and `raise_failure` stay right.
+        """
+        if self._shim is None:
+            return None
+        return self._library, self._slots, self._index
+
     def step(self) -> None:
         """Take one communication step (not the hot path: it checks and raises itself).
 

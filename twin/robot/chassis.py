@@ -16,6 +16,10 @@ Load torques (wheel side, per wheel) for the next step are
   else it stays. A blocked mode gets a holding torque (the estimated drive torque plus damping), so
   the wheels stall and, with the voltage held, the current rises to about V/R. The block lifts when
   the drive pushes the other way.
+
+`Chassis.update` is the reference of the compiled drive loop (`fmus/common/drive_loop.c`), which
+does the same arithmetic in C; `coefficients`, `dynamics` and `set_dynamics` hand a chassis to it
+and back. A change here must be made there too (the drivetrain tests compare the two).
 """
 
 from __future__ import annotations
@@ -25,9 +29,23 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
-__all__ = ["Chassis", "ChassisParams", "ChassisState", "ContactFn", "SlipModel", "SlipRegion"]
+__all__ = [
+    "Chassis",
+    "ChassisCoefficients",
+    "ChassisDynamics",
+    "ChassisParams",
+    "ChassisState",
+    "ContactFn",
+    "DistanceFn",
+    "SlipModel",
+    "SlipRegion",
+]
 
 ContactFn = Callable[[float, float, float], bool]
+"""`(x_m, y_m, yaw_rad) -> bool`: True if the robot at that pose would penetrate the world."""
+DistanceFn = Callable[[float, float, float], float]
+"""`(x_m, y_m, yaw_rad) -> m`: how far the robot may move from that pose with no contact possible,
+counting translation plus |rotation| times its bounding radius (e.g. `CollisionMonitor.free_m`)."""
 
 _ROLL_SPEED_EPS_MPS = 0.005  # rolling resistance reaches full strength above this rim speed
 _HOLD_DAMPING = 0.5  # fraction of a blocked mode's speed removed per step
@@ -114,6 +132,58 @@ class ChassisState(NamedTuple):
     blocked: bool  # a contact refused some motion in the last step
 
 
+class ChassisDynamics(NamedTuple):
+    """Everything `Chassis.update` carries from one step to the next.
+
+    It hands the chassis to a compiled loop and back (`twin.cosim.drive_loop`).
+    """
+
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    v_mps: float
+    yaw_rate_radps: float
+    ax_mps2: float
+    ay_mps2: float
+    yaw_accel_radps2: float
+    block_common: float  # sign of the blocked forward motion, 0 when free
+    block_diff: float
+    w_left_prev_radps: float  # the wheel speeds of the last step
+    w_right_prev_radps: float
+    wheel_angle_left_rad: float
+    wheel_angle_right_rad: float
+    load_left_nm: float
+    load_right_nm: float
+    blocked: bool
+
+
+# The Chassis attribute behind each field of ChassisDynamics, in order (the others are public).
+_PRIVATE = {
+    "block_common": "_block_common",
+    "block_diff": "_block_diff",
+    "w_left_prev_radps": "_wl",
+    "w_right_prev_radps": "_wr",
+}
+_DYNAMIC_ATTRIBUTES = tuple(_PRIVATE.get(name, name) for name in ChassisDynamics._fields)
+
+
+class ChassisCoefficients(NamedTuple):
+    """The numbers `Chassis.update` works with, derived once from the parameters (see `Chassis`)."""
+
+    step_s: float
+    half_r: float  # r / 2, m
+    r_over_b: float
+    m_common: float  # per-wheel chassis inertia of the common mode, kg m²
+    m_diff: float  # and of the differential mode
+    j: float  # the drive's own inertia at the wheel, kg m²
+    j_over_h: float
+    k_common: float  # share of a mode's drive torque the chassis takes, without slip
+    k_diff: float
+    roll_nm: float  # rolling resistance torque at the wheel
+    roll_gain: float  # its ramp gain per rad/s of wheel speed
+    hold_damping: float  # fraction of a blocked mode's speed removed per step
+
+
 class Chassis:
     """Planar chassis integrated at a fixed step from the wheel speeds."""
 
@@ -177,6 +247,37 @@ class Chassis:
             self.yaw_accel_radps2,
             self.blocked,
         )
+
+    @property
+    def slip(self) -> SlipModel | None:
+        """The slip model, None when nothing slips anywhere."""
+        return self._slip
+
+    def coefficients(self) -> ChassisCoefficients:
+        """The derived numbers `update` works with."""
+        return ChassisCoefficients(
+            step_s=self._h,
+            half_r=self._half_r,
+            r_over_b=self._r_over_b,
+            m_common=self._m_common,
+            m_diff=self._m_diff,
+            j=self._j,
+            j_over_h=self._j_over_h,
+            k_common=self._k_common,
+            k_diff=self._k_diff,
+            roll_nm=self._roll_nm,
+            roll_gain=self._roll_gain,
+            hold_damping=_HOLD_DAMPING,
+        )
+
+    def dynamics(self) -> ChassisDynamics:
+        """The whole state carried between steps."""
+        return ChassisDynamics._make(getattr(self, name) for name in _DYNAMIC_ATTRIBUTES)
+
+    def set_dynamics(self, state: ChassisDynamics) -> None:
+        """Continue from `state` (as `dynamics` returned it, or a compiled loop advanced it)."""
+        for name, value in zip(_DYNAMIC_ATTRIBUTES, state, strict=True):
+            setattr(self, name, value)
 
     def update(self, w_left: float, w_right: float) -> None:
         """Advance one step with the wheels at these speeds (rad/s); set the next load torques."""

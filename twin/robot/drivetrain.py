@@ -10,6 +10,13 @@ and recording.
 wheel-speed PI (profile `voltage`, gains designed by `twin.robot.drive_control`) or the FMU's own
 loop (profile `velocity-servo`), one doStep per wheel per step, and the chassis
 (`twin.robot.chassis`) turning wheel speeds into motion and giving each wheel its load torque.
+
+Two implementations of that per-step path give the same numbers: the Python one here (the
+reference, `api: lowlevel` or `convenience`) and the compiled one (`api: native`, the default,
+`twin.cosim.drive_loop`), which runs a whole batch of steps in one C call. Contact stays in Python:
+the compiled loop runs while the robot's motion stays inside the distance the world reports free
+(`free_distance`), and the steps near the world run on the Python path with the contact check
+each step.
 """
 
 from __future__ import annotations
@@ -24,11 +31,20 @@ from typing import Literal, NamedTuple, Protocol, Self
 
 import numpy as np
 
-from twin.core.errors import ConfigError
+from twin.core.errors import ConfigError, FmuError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
+from twin.cosim.drive_loop import DriveLoop
 from twin.cosim.fmu import Api, FmuFile, FmuInfo, StepGroup, Stepper
-from twin.robot.chassis import Chassis, ChassisParams, ChassisState, ContactFn, SlipModel
+from twin.robot.chassis import (
+    Chassis,
+    ChassisDynamics,
+    ChassisParams,
+    ChassisState,
+    ContactFn,
+    DistanceFn,
+    SlipModel,
+)
 from twin.robot.drive_control import (
     MotorConstants,
     SpeedLoop,
@@ -142,7 +158,9 @@ class FmuDrive:
     wheel_inertia_kgm2: float | None = None  # the drive's inertia at the wheel; null: from motor, or probed
     limits: CommandLimits = field(default_factory=CommandLimits)
     slip: SlipModel = field(default_factory=SlipModel)
-    api: Literal["lowlevel", "convenience"] = "lowlevel"
+    # native: the per-step path compiled (the fast one); lowlevel: the Python reference path with the
+    # FMUs stepped by the compiled shim; convenience: the Python path through FMPy's wrappers.
+    api: Literal["native", "lowlevel", "convenience"] = "native"
 
     def __post_init__(self) -> None:
         if self.fmu_file is None and not self.fmu.startswith("builtin:"):
@@ -180,6 +198,8 @@ def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits
 
 
 _OUTPUT_ORDER = ("wheel_speed", "wheel_angle", "current", "motor_torque", "applied_voltage")
+# The wheels' state in the compiled loop (`FmuDrivetrain` keeps each as `_<name>`).
+_WHEEL_STATE = ("ref_left", "ref_right", "w_left", "w_right", "int_left", "int_right", "volt_left", "volt_right")
 
 
 def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]) -> MotorConstants:
@@ -223,6 +243,8 @@ class FmuDrivetrain:
         step_ns: int,
         pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
         contact: ContactFn | None = None,
+        free_distance: DistanceFn | None = None,
+        bounding_radius_m: float = 0.0,
     ) -> None:
         """Build (on first use), load and bind the FMU, design the speed loop, instantiate both wheels.
 
@@ -232,12 +254,24 @@ class FmuDrivetrain:
             step_ns: The loop's physics step, ns.
             pose: Initial pose (x_m, y_m, yaw_rad).
             contact: `(x_m, y_m, yaw_rad) -> bool`, True if that pose would penetrate the world.
+            free_distance: `(x_m, y_m, yaw_rad) -> m` the robot may move from there with no
+                contact possible (e.g. `CollisionMonitor.free_m`). With `contact` and without it,
+                every moving step checks contact on the Python path.
+            bounding_radius_m: The radius `free_distance` counts rotation with (the farthest point
+                of the robot's collision shape from its base frame).
 
         Raises:
             FmuError: If the FMU cannot be built, loaded, bound to the profile or initialised.
             ConfigError: If the mapping file, motor model or speed-loop targets are wrong.
+            ValueError: If `bounding_radius_m` is negative.
         """
         self.step_ns = step_ns
+        if bounding_radius_m < 0.0:
+            msg = f"bounding_radius_m must not be negative, got {bounding_radius_m}"
+            raise ValueError(msg)
+        self._contact = contact
+        self._free = free_distance
+        self._reach_m = bounding_radius_m
         physics_s = step_ns * 1e-9
         comm_s = drive.communication_step_s or physics_s
         ratio = comm_s / physics_s
@@ -288,14 +322,18 @@ class FmuDrivetrain:
             )
             _log.info("speed loop: %s", self.speed_loop)
         outputs = [binding.outputs[r] for r in _OUTPUT_ORDER if r in binding.outputs]
-        self._out_index = {b.role: k for k, b in enumerate(outputs)}
+        # Per optional output role: (index in the outputs, factor, offset) to twin units, or None.
+        self._reading = {
+            role: next(((k, b.factor, b.offset) for k, b in enumerate(outputs) if b.role == role), None)
+            for role in _OUTPUT_ORDER[1:]
+        }
         in_vrs = [b.value_reference for b in binding.inputs]
         out_vrs = [b.value_reference for b in outputs]
         wheel_inertia = drive.wheel_inertia_kgm2
         if wheel_inertia is None:
             wheel_inertia = self.motor.wheel_inertia_kgm2 if self.motor is not None else self._probe(binding)
         self.wheel_inertia_kgm2 = wheel_inertia
-        api: Api = drive.api
+        api: Api = "lowlevel" if drive.api == "native" else drive.api
         self._left: Stepper = self._file.instantiate(
             "left", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
         )
@@ -303,7 +341,7 @@ class FmuDrivetrain:
             "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
         )
         self._group = StepGroup((self._left, self._right), step_s=self._h)
-        self.chassis = Chassis(
+        self._chassis = Chassis(
             chassis, step_s=self._h, wheel_inertia_kgm2=wheel_inertia, pose=pose, contact=contact, slip=drive.slip
         )
         cmd, load = binding.inputs
@@ -316,13 +354,79 @@ class FmuDrivetrain:
         self._volt_left = self._volt_right = 0.0
         self._w_left = self._speed(self._left)
         self._w_right = self._speed(self._right)
+        self._kp = self._ki = self._v_max = 0.0
         if self.speed_loop is not None:
             self._kp = self.speed_loop.kp_v_per_radps
             self._ki = self.speed_loop.ki_v_per_rad
             self._v_max = drive.speed_loop.voltage_limit_v
-            self._run = self._run_voltage
+            self._run_python = self._run_voltage
         else:
-            self._run = self._run_servo
+            self._run_python = self._run_servo
+        self._run = self._run_python
+        self._loop: DriveLoop | None = None
+        if drive.api == "native":
+            try:
+                self._loop = self._native_loop()
+            except FmuError as err:
+                _log.warning("running the drivetrain's step loop in Python: %s", err)
+            else:
+                self._run = self._run_native
+
+    def _native_loop(self) -> DriveLoop:
+        """Set up the compiled loop with this drive's numbers and state."""
+        slip = self._chassis.slip
+        regions = None
+        if slip is not None:
+            regions = [(r.x_min_m, r.x_max_m, r.y_min_m, r.y_max_m, r.slip) for r in slip.regions]
+        loop = DriveLoop(self._group, slip_regions=regions)
+        loop.write(
+            servo=self.speed_loop is None,
+            kp=self._kp,
+            ki=self._ki,
+            v_max=self._v_max,
+            cmd_scale=self._cmd_scale,
+            cmd_offset=self._cmd_offset,
+            load_scale=self._load_scale,
+            load_offset=self._load_offset,
+            speed_scale=self._speed_factor,
+            speed_offset=self._speed_offset,
+            slip=slip.slip if slip is not None else 0.0,
+            reach_m=self._reach_m,
+            **self._chassis.coefficients()._asdict(),
+        )
+        self._loop = loop
+        self._to_native()
+        return loop
+
+    def _to_native(self) -> None:
+        """Hand the wheels' and the chassis' state to the compiled loop."""
+        assert self._loop is not None
+        self._loop.write(
+            ref_left=self._ref_left,
+            ref_right=self._ref_right,
+            w_left=self._w_left,
+            w_right=self._w_right,
+            int_left=self._int_left,
+            int_right=self._int_right,
+            volt_left=self._volt_left,
+            volt_right=self._volt_right,
+            **self._chassis.dynamics()._asdict(),
+        )
+
+    def _to_python(self) -> None:
+        """Take the wheels' and the chassis' state back from the compiled loop."""
+        assert self._loop is not None
+        (
+            self._ref_left,
+            self._ref_right,
+            self._w_left,
+            self._w_right,
+            self._int_left,
+            self._int_right,
+            self._volt_left,
+            self._volt_right,
+        ) = self._loop.read(_WHEEL_STATE)
+        self._chassis.set_dynamics(ChassisDynamics._make(self._loop.read(ChassisDynamics._fields)))
 
     def _probe(self, binding: Binding) -> float:
         """Estimate the drive's inertia at the wheel from one step under a small load torque."""
@@ -348,6 +452,11 @@ class FmuDrivetrain:
     def _speed(self, stepper: Stepper) -> float:
         return self._speed_factor * stepper.outputs[0] + self._speed_offset
 
+    @property
+    def native(self) -> bool:
+        """Whether the compiled loop runs the steps (`api: native` and the shim built)."""
+        return self._loop is not None
+
     # --- the Drivetrain protocol ---
 
     @property
@@ -357,7 +466,11 @@ class FmuDrivetrain:
 
     def set_cmd_vel(self, v_mps: float, w_radps: float) -> None:
         """Take a body velocity command; the wheels' setpoints follow with the firmware's clamps."""
-        self._ref_left, self._ref_right = wheel_setpoints(v_mps, w_radps, self.params, self.drive.limits)
+        left, right = wheel_setpoints(v_mps, w_radps, self.params, self.drive.limits)
+        self._ref_left, self._ref_right = left, right
+        if self._loop is not None:
+            self._loop.state.ref_left = left
+            self._loop.state.ref_right = right
 
     def advance(self, n_steps: int) -> None:
         """Run `n_steps` physics steps (one FMU step per wheel each `communication_step_s`).
@@ -371,8 +484,48 @@ class FmuDrivetrain:
         if count:
             self._run(count)
 
-    # The two step loops below are the per-step hot path: everything they need is bound to locals
-    # once per batch, and the loop body is straight-line code (one compiled call steps both FMUs).
+    def _run_native(self, count: int) -> None:
+        """Run `count` steps in the compiled loop, and on the Python path where contact is possible."""
+        assert self._loop is not None
+        run, state = self._loop.run, self._loop.state
+        contact, free = self._contact, self._free
+        while count:
+            if contact is None:
+                budget = math.inf
+            else:
+                budget = free(state.x_m, state.y_m, state.yaw_rad) if free is not None else 0.0
+            count -= run(count, budget)
+            if state.stopped_on_budget:
+                count = self._near_world(count)
+
+    def _near_world(self, count: int) -> int:
+        """Finish the step the compiled loop stopped in, and go on in Python while the robot moves near the world.
+
+        The compiled loop has stepped this step's FMUs; its chassis update, with the contact checks,
+        runs on the Python path, and so do the following steps while the chassis moves and
+        `free_distance` reports no free motion. A chassis at rest (stalled against a wall) goes
+        back to the compiled loop, which takes steps without motion and no contact check. Returns
+        the steps left for the compiled loop.
+        """
+        self._to_python()
+        try:
+            chassis, free = self._chassis, self._free
+            chassis.update(self._w_left, self._w_right)
+            count -= 1
+            while (
+                count
+                and (chassis.v_mps or chassis.yaw_rate_radps)
+                and (free is None or free(chassis.x_m, chassis.y_m, chassis.yaw_rad) <= 0.0)
+            ):
+                self._run_python(1)
+                count -= 1
+            return count
+        finally:
+            self._to_native()
+
+    # The two step loops below are the Python reference of the per-step path: everything they need
+    # is bound to locals once per batch, and the loop body is straight-line code (one compiled call
+    # steps both FMUs).
 
     def _run_voltage(self, count: int) -> None:
         h, kp, ki, v_max = self._h, self._kp, self._ki, self._v_max
@@ -381,7 +534,7 @@ class FmuDrivetrain:
         in_left, in_right = self._left.inputs, self._right.inputs
         out_left, out_right = self._left.outputs, self._right.outputs
         group = self._group
-        step_next, chassis = group.step_next, self.chassis
+        step_next, chassis = group.step_next, self._chassis
         update = chassis.update
         ref_left, ref_right = self._ref_left, self._ref_right
         w_left, w_right = self._w_left, self._w_right
@@ -422,7 +575,7 @@ class FmuDrivetrain:
         in_left, in_right = self._left.inputs, self._right.inputs
         out_left, out_right = self._left.outputs, self._right.outputs
         group = self._group
-        step_next, chassis = group.step_next, self.chassis
+        step_next, chassis = group.step_next, self._chassis
         update = chassis.update
         in_left[0] = (self._ref_left - co) * cs
         in_right[0] = (self._ref_right - co) * cs
@@ -442,33 +595,41 @@ class FmuDrivetrain:
 
     def chassis_state(self) -> ChassisState:
         """Pose, rates and accelerations of the chassis now."""
-        return self.chassis.state()
-
-    def _signal(self, role: str, left_fallback: float, right_fallback: float) -> tuple[float, float]:
-        k = self._out_index.get(role)
-        if k is None:
-            return left_fallback, right_fallback
-        b = self.binding.outputs[role]
-        return (
-            b.factor * self._left.outputs[k] + b.offset,
-            b.factor * self._right.outputs[k] + b.offset,
+        if self._loop is None:
+            return self._chassis.state()
+        s = self._loop.state
+        return ChassisState(
+            s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps, s.ax_mps2, s.ay_mps2, s.yaw_accel_radps2, s.blocked
         )
+
+    def _signal(self, role: str, fallback: tuple[float, float]) -> tuple[float, float]:
+        reading = self._reading[role]
+        if reading is None:
+            return fallback
+        k, factor, offset = reading
+        return factor * self._left.outputs[k] + offset, factor * self._right.outputs[k] + offset
 
     def wheel_state(self) -> WheelState:
         """Wheel angles, speeds, efforts, voltages and currents now (NaN where the FMU has none)."""
         nan = math.nan
-        if self.profile is Profile.VOLTAGE:
-            volts = self._signal("applied_voltage", self._volt_left, self._volt_right)
+        if self._loop is None:
+            c = self._chassis
+            speeds = (self._w_left, self._w_right)
+            own_volts = (self._volt_left, self._volt_right)
+            angles = (c.wheel_angle_left_rad, c.wheel_angle_right_rad)
         else:
-            volts = self._signal("applied_voltage", nan, nan)
+            s = self._loop.state
+            speeds = (s.w_left, s.w_right)
+            own_volts = (s.volt_left, s.volt_right)
+            angles = (s.wheel_angle_left_rad, s.wheel_angle_right_rad)
+        if self.profile is not Profile.VOLTAGE:
+            own_volts = (nan, nan)
         return WheelState(
-            angle_rad=self._signal(
-                "wheel_angle", self.chassis.wheel_angle_left_rad, self.chassis.wheel_angle_right_rad
-            ),
-            speed_radps=(self._w_left, self._w_right),
-            effort_nm=self._signal("motor_torque", nan, nan),
-            voltage_v=volts,
-            current_a=self._signal("current", nan, nan),
+            angle_rad=self._signal("wheel_angle", angles),
+            speed_radps=speeds,
+            effort_nm=self._signal("motor_torque", (nan, nan)),
+            voltage_v=self._signal("applied_voltage", own_volts),
+            current_a=self._signal("current", (nan, nan)),
         )
 
     @property

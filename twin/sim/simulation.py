@@ -317,7 +317,15 @@ class Simulation:
             mass_kg=robot.mass_kg,
             yaw_inertia_kgm2=_yaw_inertia(robot),
         )
-        return FmuDrivetrain(sc.drive, chassis, step_ns=self.step_ns, pose=pose, contact=self._touches)
+        return FmuDrivetrain(
+            sc.drive,
+            chassis,
+            step_ns=self.step_ns,
+            pose=pose,
+            contact=self._touches,
+            free_distance=self._monitor.free_m,
+            bounding_radius_m=bounding_radius_m,
+        )
 
     @property
     def t_s(self) -> float:

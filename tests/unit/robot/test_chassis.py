@@ -94,3 +94,23 @@ def test_drivetrain_stalls_against_a_wall_with_rising_current() -> None:
         dt.advance(500)
         assert not dt.chassis_state().blocked
         assert dt.chassis_state().x_m < 0.09
+
+
+def test_chassis_handed_over_mid_run_continues_the_same() -> None:
+    slip = SlipModel(slip=0.1)
+    contact = lambda x, y, yaw: x > 0.05  # noqa: E731
+    whole = Chassis(WAFFLE, step_s=0.001, wheel_inertia_kgm2=4.5e-3, contact=contact, slip=slip)
+    for _ in range(1000):  # into the wall, handed over while blocked (with holding torques)
+        whole.update(5.0, 4.0)
+        if whole.state().blocked:
+            break
+    assert whole.state().blocked
+    other = Chassis(WAFFLE, step_s=0.001, wheel_inertia_kgm2=4.5e-3, contact=contact, slip=slip)
+    handed = whole.dynamics()
+    other.set_dynamics(handed)
+    for k in range(400):  # slowing, then reversing
+        w_left, w_right = 5.0 - 0.02 * k, 4.0 - 0.02 * k
+        whole.update(w_left, w_right)
+        other.update(w_left, w_right)
+    assert other.dynamics() == whole.dynamics()
+    assert whole.dynamics() != handed  # it went on (turning along the wall), and the other the same

@@ -131,7 +131,8 @@ def test_vendor_fmu_with_other_names_and_units_drives_through_the_mapping() -> N
     assert chassis.x_m == pytest.approx(0.15 * 2.0, rel=0.1)
 
 
-def test_fmu_error_mid_run_raises_fmu_error_naming_time_and_status() -> None:
+@pytest.mark.parametrize("api", ["native", "lowlevel"])
+def test_fmu_error_mid_run_raises_fmu_error_naming_time_and_status(api: str) -> None:
     mapping = load_mapping(REPO / "fmus" / "maps" / "acme_drive.yaml")
     drive = FmuDrive(
         fmu_file=acme(fmi_version=3),
@@ -143,18 +144,21 @@ def test_fmu_error_mid_run_raises_fmu_error_naming_time_and_status() -> None:
     # The acme FMU has no speed setpoint: the servo profile must be refused before any run...
     with pytest.raises(FmuError, match=r"missing required role\(s\) speed_setpoint"):
         FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS)
-    # ...and in the voltage profile it runs until its fault.
+    # ...and in the voltage profile it runs until its fault, in the compiled loop as in Python.
     drive = FmuDrive(
         fmu_file=acme(fmi_version=3),
         mapping=type(mapping)(roles=mapping.roles, parameters={"fault_time": 0.25}),
         motor=ACME_MOTOR,
+        api=api,  # type: ignore[arg-type]
     )
     with FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS) as dt:
+        assert dt.native == (api == "native")
         dt.set_cmd_vel(0.1, 0.0)
         with pytest.raises(FmuError) as err:
-            dt.advance(1000)
+            for _ in range(100):
+                dt.advance(10)
         t_ns = dt.t_ns
-    assert "failed at t = 0.250000 s: fmi3DoStep returned Error" in str(err.value)
+    assert "instance 'left' failed at t = 0.250000 s: fmi3DoStep returned Error" in str(err.value)
     assert t_ns == 250 * MS
 
 

@@ -1,0 +1,228 @@
+"""The compiled drive loop (`api: native`) against the Python reference (`api: lowlevel`): the same
+trajectory and wheel signals for both profiles, with slip, through vendor units, and through wall
+contacts, where the compiled loop hands the steps near the world to the Python path."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import pytest
+
+from tests.unit.cosim.helpers import acme
+from tests.unit.robot.test_drivetrain import ACME_MOTOR
+from twin.core.errors import FmuError
+from twin.robot.chassis import ChassisParams, SlipModel, SlipRegion
+from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
+from twin.sim.scenario import default_scenario_path, load_scenario
+from twin.world import build_scene, load_robot, load_world
+from twin.world.scene import CollisionMonitor
+
+REPO = Path(__file__).resolve().parents[3]
+MS = 1_000_000
+WAFFLE = ChassisParams.tb3_waffle()
+BATCHES = (5, 1, 7, 3, 5, 30)  # the loop advances by uneven batches between its events
+# Accelerate, turn, reverse, stop: (v m/s, w rad/s, steps).
+SCRIPT = ((0.2, 0.0, 300), (0.15, 1.2, 400), (-0.1, -0.6, 300), (0.0, 0.0, 200), (0.26, -1.8, 300))
+TOL = 1e-12
+
+Trace = list[tuple[float | bool, ...]]
+
+
+def _drive_script(dt: FmuDrivetrain, script: Sequence[tuple[float, float, int]]) -> Trace:
+    trace: Trace = []
+    k = 0
+    for v, w, steps in script:
+        dt.set_cmd_vel(v, w)
+        left = steps
+        while left > 0:
+            n = min(left, BATCHES[k % len(BATCHES)])
+            dt.advance(n)
+            left -= n
+            k += 1
+            wheels = dt.wheel_state()
+            trace.append((dt.t_ns, *dt.chassis_state(), *(x for pair in wheels for x in pair)))
+    return trace
+
+
+def _run(
+    drive: FmuDrive,
+    script: Sequence[tuple[float, float, int]] = SCRIPT,
+    *,
+    params: ChassisParams = WAFFLE,
+    contact: Callable[[float, float, float], bool] | None = None,
+    free: Callable[[float, float, float], float] | None = None,
+    radius_m: float = 0.0,
+) -> Trace:
+    with FmuDrivetrain(
+        drive, params, step_ns=MS, contact=contact, free_distance=free, bounding_radius_m=radius_m
+    ) as dt:
+        assert dt.native == (drive.api == "native")
+        return _drive_script(dt, script)
+
+
+def _both(drive: FmuDrive, **kwargs: object) -> tuple[Trace, Trace]:
+    native = _run(drive, **kwargs)  # type: ignore[arg-type]
+    python = _run(FmuDrive(**{**_fields(drive), "api": "lowlevel"}), **kwargs)  # type: ignore[arg-type]
+    return native, python
+
+
+def _fields(drive: FmuDrive) -> dict[str, object]:
+    return {name: getattr(drive, name) for name in FmuDrive.__dataclass_fields__}
+
+
+def assert_same(native: Trace, python: Trace) -> None:
+    assert len(native) == len(python)
+    for k, (a, b) in enumerate(zip(native, python, strict=True)):
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            if isinstance(x, int):  # the time, and `blocked`
+                assert x == y, f"record {k}, field {i}: {x} != {y}"
+            elif not (math.isnan(x) and math.isnan(y)):
+                assert abs(x - y) <= TOL * max(1.0, abs(y)), f"record {k}, field {i}: {x!r} != {y!r}"
+
+
+class Counted:
+    """A contact callable that counts its calls and the contacts it reported."""
+
+    def __init__(self, contact: Callable[[float, float, float], bool]) -> None:
+        self.contact = contact
+        self.calls = self.hits = 0
+
+    def __call__(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        self.calls += 1
+        hit = self.contact(x_m, y_m, yaw_rad)
+        self.hits += hit
+        return hit
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+@pytest.mark.parametrize("profile,fmu", [("voltage", "xm430_w210"), ("velocity-servo", "xm430_w210_servo")])
+def test_native_loop_gives_the_python_trajectory_and_wheel_signals(profile: str, fmu: str, fmi_version: int) -> None:
+    drive = FmuDrive(fmu=f"builtin:{fmu}", profile=profile, fmi_version=fmi_version)  # type: ignore[arg-type]
+    native, python = _both(drive)
+    assert_same(native, python)
+    assert python[-1][1] != 0.0 and python[-1][3] != 0.0  # it went somewhere and turned
+
+
+@pytest.mark.parametrize("profile,fmu", [("voltage", "xl430_w250"), ("velocity-servo", "xl430_w250_servo")])
+def test_native_loop_matches_with_slip_regions(profile: str, fmu: str) -> None:
+    slip = SlipModel(
+        slip=0.05,
+        regions=(
+            SlipRegion(x_min_m=0.02, x_max_m=0.08, y_min_m=-1.0, y_max_m=1.0, slip=0.6),
+            SlipRegion(x_min_m=-1.0, x_max_m=1.0, y_min_m=0.03, y_max_m=1.0, slip=0.3),
+        ),
+    )
+    drive = FmuDrive(fmu=f"builtin:{fmu}", profile=profile, slip=slip)  # type: ignore[arg-type]
+    native, python = _both(drive, params=ChassisParams.tb3_burger())
+    assert_same(native, python)
+    no_slip, _ = _both(FmuDrive(fmu=f"builtin:{fmu}", profile=profile), params=ChassisParams.tb3_burger())  # type: ignore[arg-type]
+    assert abs(native[-1][1] - no_slip[-1][1]) > 1e-3  # the slip changed the run
+
+
+def test_native_loop_converts_vendor_units_as_the_python_path() -> None:
+    drive = FmuDrive(
+        fmu_file=acme(),
+        mapping=REPO / "fmus" / "maps" / "acme_drive.yaml",
+        motor=ACME_MOTOR,
+    )
+    native, python = _both(drive)
+    assert_same(native, python)
+
+
+@pytest.mark.parametrize("profile,fmu", [("voltage", "xm430_w210"), ("velocity-servo", "xm430_w210_servo")])
+def test_native_loop_matches_through_a_wall_stall_and_release(profile: str, fmu: str) -> None:
+    # The chassis stall scenario: a wall at x = 0.1, driven into, stalled against, then backed off.
+    script = ((0.2, 0.0, 400), (0.2, 0.0, 500), (-0.1, 0.0, 500))
+    drive = FmuDrive(fmu=f"builtin:{fmu}", profile=profile)  # type: ignore[arg-type]
+    runs = {}
+    for api in ("native", "lowlevel"):
+        contact = Counted(lambda x, y, yaw: x > 0.1)
+        trace = _run(
+            FmuDrive(**{**_fields(drive), "api": api}),  # type: ignore[arg-type]
+            script,
+            contact=contact,
+            free=lambda x, y, yaw: max(0.0, 0.1 - x),
+        )
+        runs[api] = (trace, contact.calls)
+    (native, native_calls), (python, python_calls) = runs["native"], runs["lowlevel"]
+    assert_same(native, python)
+    blocked = [record[9] for record in python]
+    assert any(blocked) and not blocked[-1]  # it stalled at the wall, and backing off freed it
+    assert max(record[1] for record in python) <= 0.1
+    # The compiled loop checked contact only near the wall, the Python path every moving step.
+    assert 0 < native_calls < python_calls / 5
+
+
+def test_native_loop_counts_rotation_in_its_travel_bound() -> None:
+    # A wall at x = 0.3 touched by a point 0.2 m ahead of the base: turning alone moves it, so the
+    # compiled loop must count |rotation| x 0.2 m against the free distance.
+    reach = 0.2
+
+    def front_x(x: float, yaw: float) -> float:
+        return x + reach * math.cos(yaw)
+
+    script = ((0.0, 1.5, 600), (0.15, -1.0, 900), (0.0, 1.5, 700), (-0.1, 0.0, 300))
+    runs = []
+    for api in ("native", "lowlevel"):
+        contact = Counted(lambda x, y, yaw: front_x(x, yaw) > 0.3)
+        trace = _run(
+            FmuDrive(api=api),  # type: ignore[arg-type]
+            script,
+            contact=contact,
+            free=lambda x, y, yaw: max(0.0, 0.3 - front_x(x, yaw)),
+            radius_m=reach,
+        )
+        runs.append((trace, contact.calls))
+    (native, native_calls), (python, python_calls) = runs
+    assert_same(native, python)
+    assert any(record[9] for record in python)  # the wall was reached
+    assert native_calls < python_calls
+
+
+def test_native_loop_matches_in_the_house_with_the_collision_monitor() -> None:
+    # The default scenario's world and robot, driven into the wall south of the start and turned away.
+    scenario = load_scenario(default_scenario_path())
+    world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
+    robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+    scene = build_scene(world, exclude_models=(robot.name,))
+    body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
+    script = ((0.2, 0.0, 8000), (-0.05, 0.8, 1500), (0.2, 0.0, 1500))
+    runs = []
+    for api in ("native", "lowlevel"):
+        monitor = CollisionMonitor(scene, body)
+        contact = Counted(lambda x, y, yaw, monitor=monitor: bool(monitor.check(x, y, yaw)))
+        with FmuDrivetrain(
+            FmuDrive(api=api),  # type: ignore[arg-type]
+            WAFFLE,
+            step_ns=MS,
+            pose=(0.0, 0.0, -math.pi / 2),
+            contact=contact,
+            free_distance=monitor.free_m,
+            bounding_radius_m=body.radius_m,
+        ) as dt:
+            runs.append((_drive_script(dt, script), contact))
+    (native, native_contact), (python, python_contact) = runs
+    assert_same(native, python)
+    assert native_contact.hits > 0 and python_contact.hits > 0
+    assert native_contact.calls < python_contact.calls / 2  # at the wall, turning away, it checks each step
+    assert -1.281 < min(record[2] for record in python) < -0.9  # stopped at the wall's face
+
+
+def test_native_api_falls_back_to_python_when_the_shim_cannot_be_built(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    import twin.cosim.build
+
+    def no_compiler() -> Path:
+        raise FmuError("cannot build the step shim: no C compiler")
+
+    monkeypatch.setattr(twin.cosim.build, "build_shim", no_compiler)
+    with caplog.at_level(logging.WARNING), FmuDrivetrain(FmuDrive(), WAFFLE, step_ns=MS) as dt:
+        assert not dt.native
+        trace = _drive_script(dt, SCRIPT[:2])
+    assert "no C compiler" in caplog.text
+    monkeypatch.undo()
+    assert_same(trace, _run(FmuDrive(), SCRIPT[:2]))
