@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import datetime
 import json
+import os
 import signal
 import sys
 from collections.abc import Iterator
@@ -124,7 +125,12 @@ def _simulate(args: argparse.Namespace) -> int:
 
     flag = _StopFlag()
     progress = Progress(args.duration or scenario.max_duration_s)
-    with _graceful_signals(flag), Simulation(scenario, bag_path=bag_path, duration_s=args.duration) as sim:
+    # Crash tests set TWIN_BAG_WRITE_LOG to learn what the recorder was handed, and when.
+    write_log = os.environ.get("TWIN_BAG_WRITE_LOG")
+    simulation = Simulation(
+        scenario, bag_path=bag_path, duration_s=args.duration, write_log=Path(write_log) if write_log else None
+    )
+    with _graceful_signals(flag), simulation as sim:
         try:
             summary = sim.run(should_stop=flag, progress=progress.update)
         except TwinError as err:

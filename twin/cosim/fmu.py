@@ -273,7 +273,8 @@ class _Messages:
         text = message.strip()
         self.recent.append(text)
         self._unread = min(self._unread + 1, len(self.recent))
-        level = logging.WARNING if status >= 1 else logging.DEBUG
+        # Warnings are worth a line; an error's message is repeated in the FmuError that follows it.
+        level = logging.WARNING if status == 1 else logging.DEBUG
         _log.log(level, "%s: [%s] %s", self.label, category, text)
 
     def last(self) -> str:

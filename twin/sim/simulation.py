@@ -175,13 +175,20 @@ class Simulation:
         duration_s: Stop after this much sim time even if the mission goes on (default: the
             mission's end, at most `scenario.max_duration_s`).
         profile: Time each subsystem (for benchmarks; adds a little overhead).
+        write_log: For crash tests: the recorder appends `topic t_ns monotonic_ns` per message here.
 
     Raises:
         TwinError: If any input (world, robot, scenario values) is wrong; nothing is left open.
     """
 
     def __init__(
-        self, scenario: Scenario, *, bag_path: Path, duration_s: float | None = None, profile: bool = False
+        self,
+        scenario: Scenario,
+        *,
+        bag_path: Path,
+        duration_s: float | None = None,
+        profile: bool = False,
+        write_log: Path | None = None,
     ) -> None:
         self.scenario = scenario
         self.step_ns = s_to_ns(scenario.physics.step_s)
@@ -229,7 +236,9 @@ class Simulation:
         self._setup_s = time.perf_counter() - t0
 
         try:
-            self.recorder = Recorder(bag_path, storage=scenario.recording.storage, distro=scenario.recording.distro)
+            self.recorder = Recorder(
+                bag_path, storage=scenario.recording.storage, distro=scenario.recording.distro, write_log=write_log
+            )
         except BaseException:
             self.drive.close()
             raise

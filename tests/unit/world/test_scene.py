@@ -187,3 +187,14 @@ def test_clearance_is_a_lower_bound_and_the_monitor_skips_far_checks(tmp_path: P
     while not monitor.check(x, 0.0, 0.0):
         x += 0.001
     assert x == pytest.approx(0.95 - 0.073, abs=2e-3)
+
+
+def test_grazing_inside_the_margin_queries_a_few_times_not_every_step(tmp_path: Path) -> None:
+    _, monitor = _robot_scene(tmp_path)
+    # Drive along the wall (y) with the robot's front 3 mm from its face: inside the 5 mm margin.
+    x = 0.95 - 0.073 - 0.003
+    assert monitor.check(x, -1.0, 0.0) == ()
+    queries = monitor.queries
+    for k in range(1, 1001):  # 1 m in 1 mm steps
+        assert monitor.check(x, -1.0 + 0.001 * k, 0.0) == ()
+    assert monitor.queries - queries < 1000  # not two queries per step, as a zero free distance would cost

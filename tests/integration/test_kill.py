@@ -4,9 +4,8 @@ Every message handed to the recorder more than 0.5 s of wall time before the kil
 the recovered bag. The recording process logs each handed message with its wall time (the
 recorder's `write_log` option), so the test knows exactly what had to survive.
 
-The process is `kill_writer.py` (the mission's topic mix at a steady pace). To aim this test at
-the real thing, make `_recording_command` start `twin simulate` with a recorder opened with
-`write_log=` the given path.
+The process is `twin simulate` running the default scenario (open-ended, far faster than real
+time), with `TWIN_BAG_WRITE_LOG` naming the log.
 """
 
 from __future__ import annotations
@@ -25,13 +24,13 @@ from mcap.reader import make_reader
 
 from twin.bag import open_bag, read_messages, recover_bag
 
-REPO = Path(__file__).resolve().parents[3]
+REPO = Path(__file__).resolve().parents[2]
 KILLS = 10
 MARGIN_NS = 500_000_000  # what the recorder promises: at most 0.5 s of wall time is lost
 
 
-def _recording_command(bag: Path, log: Path, storage: str) -> list[str]:
-    return [sys.executable, str(Path(__file__).with_name("kill_writer.py")), str(bag), str(log), "--storage", storage]
+def _recording_command(bag: Path, storage: str) -> list[str]:
+    return [sys.executable, "-m", "twin", "simulate", "--duration", "100000", "--storage", storage, "--out", str(bag)]
 
 
 def _read_log(log: Path) -> list[tuple[str, int, int]]:
@@ -61,11 +60,11 @@ def _kill_after(proc: subprocess.Popen[bytes], log: Path, delay_s: float) -> int
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_sigkill_at_random_moments_loses_at_most_half_a_second(tmp_path: Path, storage: str) -> None:
     rng = random.Random(f"kill-{storage}")
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
     for i in range(KILLS):
         bag, log = tmp_path / f"run{i}", tmp_path / f"run{i}.log"
+        env = {**os.environ, "PYTHONPATH": str(REPO), "TWIN_BAG_WRITE_LOG": str(log)}
         proc = subprocess.Popen(
-            _recording_command(bag, log, storage), cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+            _recording_command(bag, storage), cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
         )
         killed_ns = _kill_after(proc, log, rng.uniform(0.7, 2.0))
         assert not (bag / "metadata.yaml").exists()  # it really died mid-recording

@@ -1,0 +1,107 @@
+"""Issue 3 end to end: FMU drivetrains in `twin simulate`, a vendor FMU swapped in by the scenario alone."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from rosbags.highlevel import AnyReader
+
+from tests.conftest import REPO, run_twin
+from tests.unit.cosim.helpers import acme
+
+VENDOR_DRIVE = """\
+drive:
+  type: fmu
+  fmu_file: {fmu}
+  fmi_version: 3
+  profile: voltage
+  mapping: {mapping}
+  motor:                       # the vendor's parameter names, for the twin's speed-loop design
+    resistance_ohm: Rw
+    inductance_h: 1.0e-6
+    torque_constant_nm_per_a: k_m
+    back_emf_vs_per_rad: k_m
+    rotor_inertia_kgm2: J_total
+    rotor_friction_nms_per_rad: d_visc
+    gear_ratio: 1.0
+    load_inertia_kgm2: 0.0
+"""
+
+
+def topics(bag: Path) -> dict[str, list[object]]:
+    out: dict[str, list[object]] = {}
+    with AnyReader([bag]) as reader:
+        for con, _, raw in reader.messages():
+            out.setdefault(con.topic, []).append(reader.deserialize(raw, con.msgtype))
+    return out
+
+
+def test_builtin_fmu_drive_runs_the_default_mission_and_records_motor_signals(tmp_path: Path) -> None:
+    bag = tmp_path / "fmu"
+    result = run_twin("simulate", str(REPO / "scenarios" / "house_fmu.yaml"), "--duration", "15", "--out", str(bag))
+    assert result.returncode == 0, result.stderr
+    msgs = topics(bag)
+    motors = msgs["/motor_state"]
+    assert abs(len(motors) - 15 * 30) <= 1
+    assert max(abs(c) for m in motors for c in m.current_a) > 0.05  # the motors draw current while driving
+    assert all(abs(v) <= 12.0 + 1e-9 for m in motors for v in m.voltage_v)  # the PI's clamp: the battery
+    joints = msgs["/joint_states"]
+    assert len(joints[-1].effort) == 2  # efforts from the FMU's motor torque
+    odom = msgs["/ground_truth/odom"][-1]
+    assert math.hypot(odom.pose.pose.position.x, odom.pose.pose.position.y) > 0.5
+
+
+def test_vendor_fmu_with_other_names_and_units_swaps_in_through_the_scenario(tmp_path: Path) -> None:
+    scenario = tmp_path / "vendor.yaml"
+    scenario.write_text(
+        "name: vendor\n"
+        + VENDOR_DRIVE.format(fmu=acme(fmi_version=3), mapping=REPO / "fmus" / "maps" / "acme_drive.yaml")
+    )
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--duration", "10", "--out", str(bag))
+    assert result.returncode == 0, result.stderr
+    msgs = topics(bag)
+    motors, truth = msgs["/motor_state"], msgs["/ground_truth/odom"]
+    # rpm came back as rad/s: the wheels' rim speeds average to the chassis' true speed.
+    ratios = [
+        0.033 * (m.velocity_rad_s[0] + m.velocity_rad_s[1]) / 2 / t.twist.twist.linear.x
+        for m, t in zip(motors, truth, strict=False)
+        if abs(t.twist.twist.linear.x) > 0.05
+    ]
+    assert len(ratios) > 50
+    assert sorted(ratios)[len(ratios) // 2] == pytest.approx(1.0, abs=0.02)
+    # mA came back as A: a TB3 wheel motor draws well under its 2.3 A stall current here.
+    assert 0.01 < max(abs(c) for m in motors for c in m.current_a) < 2.3
+
+
+def test_fmu_missing_a_role_is_refused_before_the_run_naming_the_roles(tmp_path: Path) -> None:
+    scenario = tmp_path / "bare.yaml"
+    scenario.write_text(
+        "name: bare\n"
+        + VENDOR_DRIVE.format(fmu=acme("acme_bare", fmi_version=3), mapping=REPO / "fmus" / "maps" / "acme_drive.yaml")
+    )
+    result = run_twin("simulate", str(scenario), "--duration", "5", "--out", str(tmp_path / "bag"))
+    assert result.returncode == 4
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr
+    assert "load_torque" in lines[0] and "wheel_speed" in lines[0]
+    assert not (tmp_path / "bag").exists()
+
+
+def test_fmu_error_mid_run_ends_with_one_line_exit_4_and_a_readable_bag(tmp_path: Path) -> None:
+    mapping = tmp_path / "faulty_map.yaml"
+    mapping.write_text(
+        (REPO / "fmus" / "maps" / "acme_drive.yaml").read_text().replace("Rw: 5.2", "Rw: 5.2\n  fault_time: 3.0")
+    )
+    scenario = tmp_path / "faulty.yaml"
+    scenario.write_text("name: faulty\n" + VENDOR_DRIVE.format(fmu=acme(fmi_version=3), mapping=mapping))
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--duration", "10", "--out", str(bag))
+    assert result.returncode == 4, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    assert "t=3.0" in lines[0] and str(bag) in lines[0]
+    clock = topics(bag)["/clock"]
+    assert 290 <= len(clock) <= 301  # everything up to the fault is in the bag
