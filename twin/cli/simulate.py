@@ -127,9 +127,17 @@ def _simulate(args: argparse.Namespace) -> int:
     progress = Progress(args.duration or scenario.max_duration_s)
     # Crash tests set TWIN_BAG_WRITE_LOG to learn what the recorder was handed, and when.
     write_log = os.environ.get("TWIN_BAG_WRITE_LOG")
-    simulation = Simulation(
-        scenario, bag_path=bag_path, duration_s=args.duration, write_log=Path(write_log) if write_log else None
-    )
+    try:
+        simulation = Simulation(
+            scenario, bag_path=bag_path, duration_s=args.duration, write_log=Path(write_log) if write_log else None
+        )
+    except ConfigError as err:
+        text = str(err)
+        if not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text or text.startswith("/"):
+            raise
+        # A scenario value the loaded world or robot refuses: name the scenario file too.
+        msg = f"{path}: {text}"
+        raise ConfigError(msg) from err
     with _graceful_signals(flag), simulation as sim:
         try:
             summary = sim.run(should_stop=flag, progress=progress.update)

@@ -37,8 +37,8 @@ from twin.core.clock import NS_PER_S, ns_to_s, s_to_ns
 from twin.core.errors import ConfigError, TwinError
 from twin.core.geometry import Mat4, quat_from_rpy, rpy_from_matrix
 from twin.estimation import OdometryFilter
-from twin.robot.chassis import ChassisParams
-from twin.robot.drivetrain import Drivetrain, FmuDrivetrain, WheelState
+from twin.robot.chassis import ChassisParams, SlipModel
+from twin.robot.drivetrain import Drivetrain, FmuDrive, FmuDrivetrain, WheelState
 from twin.robot.encoders import EncoderModel, EncoderSpec
 from twin.robot.imu import ImuModel, imu_model_spec
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
@@ -92,9 +92,31 @@ def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
     if not overrides:
         return robot
     if robot.lidar is None:
-        msg = f"sensors.lidar sets {', '.join(overrides)} but robot {robot.name!r} has no lidar in its SDF"
+        msg = f"sensors.lidar: sets {', '.join(overrides)} but robot {robot.name!r} has no lidar in its SDF"
         raise ConfigError(msg)
     return dataclasses.replace(robot, lidar=dataclasses.replace(robot.lidar, **overrides))
+
+
+def _fmu_slip(sc: Scenario) -> FmuDrive:
+    """Return the FMU drive section with `disturbances.wheel_slip` moved into its chassis slip model.
+
+    Raises:
+        ConfigError: If slip is set in both places, or in a form the FMU chassis cannot model.
+    """
+    assert isinstance(sc.drive, FmuDrive)
+    slip = sc.disturbances.wheel_slip
+    if not slip.regions and slip.left_fraction == 0.0 and slip.right_fraction == 0.0:
+        return sc.drive
+    if sc.drive.slip != SlipModel():
+        msg = "slip is set twice, in disturbances.wheel_slip and in drive.slip; keep one"
+        raise ConfigError(msg)
+    if slip.regions or slip.left_fraction != slip.right_fraction:
+        msg = (
+            "disturbances.wheel_slip: the FMU chassis slips both wheels alike; give equal left and right "
+            "fractions, use drive.slip for rectangular slippery regions, or the kinematic drive for the rest"
+        )
+        raise ConfigError(msg)
+    return dataclasses.replace(sc.drive, slip=SlipModel(slip=slip.left_fraction))
 
 
 def _yaw_inertia(robot: RobotModelSpec) -> float:
@@ -220,7 +242,7 @@ class Simulation:
         if spawn_contacts:
             c = spawn_contacts[0]
             msg = (
-                f"robot.initial_pose ({pose.x_m}, {pose.y_m}, {pose.yaw_rad}) puts {robot.name} inside "
+                f"robot.initial_pose: ({pose.x_m}, {pose.y_m}, {pose.yaw_rad}) puts {robot.name} inside "
                 f"{c.model}::{c.link}; choose a free spawn pose"
             )
             raise ConfigError(msg)
@@ -327,7 +349,7 @@ class Simulation:
             yaw_inertia_kgm2=_yaw_inertia(robot),
         )
         return FmuDrivetrain(
-            sc.drive,
+            _fmu_slip(sc),
             chassis,
             step_ns=self.step_ns,
             pose=pose,
