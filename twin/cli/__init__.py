@@ -79,11 +79,15 @@ def _configure_logging(args: argparse.Namespace) -> None:
         level = logging.ERROR
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("twin: %(levelname)s: %(message)s"))
+    handler.setLevel(level)
     root = logging.getLogger()
     for old in list(root.handlers):
         root.removeHandler(old)
     root.addHandler(handler)
     root.setLevel(level)
+    # twin's own INFO lines are made even when the console shows less: a simulation copies them
+    # into the bag's /rosout, as a ROS 2 system records its nodes' logs.
+    logging.getLogger("twin").setLevel(min(level, logging.INFO))
     logging.captureWarnings(True)
 
 

@@ -1,27 +1,35 @@
-"""Missions that drive the robot until navigation and behaviour trees take over.
+"""Missions that drive the robot: a behaviour tree with a navigator, waypoints, or a cmd_vel script.
 
-A mission is asked for a velocity command at its rate, given the chassis pose, and says when it
-is done. `cmd_vel_script` replays timed velocity segments open loop; `waypoints` steers through
-a list of points (and optional final headings) with a simple go-to-point law on the pose it is
-given, like a robot following a hand-made route.
+The loop asks a mission for a velocity command at its rate, given the pose the robot believes it
+has, and stops when the mission says it is done. A behaviour-tree mission is also ticked at its own
+rate (`tick`), like the thesis's autonomy node on its 500 ms timer.
 """
 
 from __future__ import annotations
 
-import math
+import logging
+import random
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
+from twin.bt import BehaviorTreeFactory, NodeStatus
+from twin.bt.log import StatusChange, StatusChangeBuffer
+from twin.bt.mission_nodes import LOCATION_FILE_KEY, register_mission_nodes
 from twin.core.clock import s_to_ns
-from twin.core.geometry import wrap_angle
-from twin.sim.scenario import CmdVelScriptMission, WaypointsMission
+from twin.nav.follower import PathFollower
+from twin.nav.navigator import GridNavigator
+from twin.sim.scenario import BehaviorTreeMission, CmdVelScriptMission, WaypointsMission
 
-__all__ = ["CmdVelScript", "Mission", "WaypointFollower", "make_mission"]
+__all__ = ["CmdVelScript", "Mission", "TreeMission", "WaypointFollower"]
+
+_log = logging.getLogger(__name__)
 
 
 class Mission(Protocol):
     """What the loop asks a mission at its rate."""
 
     done: bool
+    result: str
 
     def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
         """Return (linear m/s, angular rad/s) for now; set `done` when the mission is over."""
@@ -42,6 +50,7 @@ class CmdVelScript:
         self.end_ns = end
         self._i = 0
         self.done = False
+        self.result = "complete"
 
     def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
         """Return the segment's command at `t_ns` (times must not go backwards)."""
@@ -55,41 +64,78 @@ class CmdVelScript:
 
 
 class WaypointFollower:
-    """Turns towards the next point, drives to it, and turns to its heading if one is given."""
+    """Drives to each point in turn (turning to its heading when one is given); done after the last."""
 
     def __init__(self, spec: WaypointsMission) -> None:
-        self.spec = spec
-        self._i = 0
+        self._points = spec.points
+        self._follower = PathFollower(spec.follower)
+        self._i = -1
         self.done = not spec.points
+        self.result = "complete"
         self.reached: list[int] = []  # sim time each point was reached, ns
 
     def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
         """Return the command that brings the robot to the current point."""
-        spec = self.spec
-        while self._i < len(spec.points):
-            point = spec.points[self._i]
-            dx, dy = point[0] - x_m, point[1] - y_m
-            dist = math.hypot(dx, dy)
-            if dist > spec.tolerance_m:
-                err = wrap_angle(math.atan2(dy, dx) - yaw_rad)
-                w = max(-spec.max_angular_radps, min(spec.max_angular_radps, spec.heading_gain * err))
-                if abs(err) > spec.turn_in_place_rad:
-                    return (0.0, w)
-                v = min(spec.max_linear_mps, spec.distance_gain * dist) * math.cos(err)
-                return (v, w)
-            if len(point) == 3:
-                err = wrap_angle(point[2] - yaw_rad)
-                if abs(err) > spec.yaw_tolerance_rad:
-                    w = max(-spec.max_angular_radps, min(spec.max_angular_radps, spec.heading_gain * err))
-                    return (0.0, w)
-            self.reached.append(t_ns)
+        follower = self._follower
+        while not self.done:
+            if self._i >= 0:  # the follower has the current point (set below when the last was reached)
+                v, w = follower.command(x_m, y_m, yaw_rad)
+                if not follower.done:
+                    return (v, w)
+                self.reached.append(t_ns)
             self._i += 1
-        self.done = True
+            if self._i == len(self._points):
+                self.done = True
+                break
+            point = self._points[self._i]
+            follower.set_path([(point[0], point[1])], point[2] if len(point) == 3 else None)
         return (0.0, 0.0)
 
 
-def make_mission(spec: CmdVelScriptMission | WaypointsMission) -> CmdVelScript | WaypointFollower:
-    """Return the mission a scenario's `mission:` section describes."""
-    if isinstance(spec, CmdVelScriptMission):
-        return CmdVelScript(spec)
-    return WaypointFollower(spec)
+class TreeMission:
+    """A BehaviorTree.CPP tree whose `GoToPose` nodes drive through a navigator.
+
+    Raises:
+        TreeError: If the tree file cannot be loaded (file:line and the problem).
+    """
+
+    def __init__(
+        self, spec: BehaviorTreeMission, navigator: GridNavigator, *, clock: Callable[[], int], seed: int
+    ) -> None:
+        self.spec = spec
+        self.navigator = navigator
+        factory = BehaviorTreeFactory(nav2=True)
+        register_mission_nodes(factory, navigator=navigator, rng=random.Random(seed))
+        factory.load_plugins()
+        self.tree = factory.create_tree_from_file(spec.tree, main_tree=spec.main_tree, clock=clock)
+        if spec.locations is not None:
+            self.tree.root_blackboard.set(LOCATION_FILE_KEY, str(spec.locations))
+        self._changes = StatusChangeBuffer()
+        self.tree.add_listener(self._changes)
+        self.done = False
+        self.result = "running"
+        self.ticks = 0
+        _log.info("BT created from %s", spec.tree)
+
+    def tick(self, t_ns: int) -> Sequence[StatusChange]:
+        """Tick the tree once (BT.CPP `tickOnce`) and return the status changes it made."""
+        if self.done:
+            return ()
+        self.ticks += 1
+        status = self.tree.tick_once()
+        if status in (NodeStatus.SUCCESS, NodeStatus.FAILURE):
+            self.done = True
+            self.result = status.name
+            if status is NodeStatus.SUCCESS:
+                _log.info("Finished Navigation")
+            else:
+                _log.warning("Navigation Failed")
+        return self._changes.flush()
+
+    def node_name(self, uid: int) -> str:
+        """The name of a node, as Nav2's BT log carries it."""
+        return self.tree.node_by_uid(uid).name
+
+    def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
+        """Return the navigator's command at this pose."""
+        return self.navigator.command(t_ns, x_m, y_m, yaw_rad)

@@ -13,6 +13,8 @@ from typing import Literal
 
 from twin.core.config import load_config
 from twin.estimation import EstimationSection
+from twin.nav.follower import FollowerParams
+from twin.nav.navigator import ProgressParams
 from twin.robot.disturbances import Disturbances
 from twin.robot.drivetrain import FmuDrive
 
@@ -134,31 +136,56 @@ class CmdVelScriptMission:
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class WaypointsMission:
-    """Drive through points `[x, y]` or `[x, y, yaw]` (world frame) with a go-to-point law; ends at the last.
+    """Drive through points `[x, y]` or `[x, y, yaw]` (world frame) with the path follower; ends at the last.
 
-    The law steers on the ground-truth pose: it stands in for navigation, not for a planner, so
-    the points must be joined by free straight lines.
+    No planner: the points must be joined by free straight lines.
     """
 
     type: Literal["waypoints"] = "waypoints"
     rate_hz: float = 10.0
     points: tuple[tuple[float, ...], ...] = ()
-    max_linear_mps: float = 0.22
-    max_angular_radps: float = 1.0
-    tolerance_m: float = 0.1
-    yaw_tolerance_rad: float = 0.1
-    turn_in_place_rad: float = 0.4
-    heading_gain: float = 2.0
-    distance_gain: float = 1.0
+    follower: FollowerParams = field(default_factory=FollowerParams)
 
     def __post_init__(self) -> None:
         for i, point in enumerate(self.points):
             if len(point) not in (2, 3):
                 msg = f"points[{i}] must be [x, y] or [x, y, yaw], got {list(point)}"
                 raise ValueError(msg)
-        if not (self.max_linear_mps > 0.0 and self.max_angular_radps > 0.0 and self.tolerance_m > 0.0):
-            msg = "max_linear_mps, max_angular_radps and tolerance_m must be positive"
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class PlannerSection:
+    """The global planner on the world's grid (Nav2 NavFn-like; TB3 Nav2 values as defaults)."""
+
+    resolution_m: float = 0.05
+    robot_radius_m: float | None = None  # null: the circle around the robot's collision shapes
+    inflation_radius_m: float = 0.55
+    cost_scaling_factor: float = 3.0
+    tolerance_m: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not 0.005 <= self.resolution_m <= 0.5:
+            msg = f"resolution_m must be between 0.005 and 0.5 m, got {self.resolution_m}"
             raise ValueError(msg)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class BehaviorTreeMission:
+    """A BehaviorTree.CPP mission (v3 or v4 XML) ticked like the thesis's autonomy node.
+
+    `GoToPose` goals go to the twin's navigator: a plan on the world's grid, followed on the
+    robot's odometry. The run ends when the tree returns SUCCESS or FAILURE.
+    """
+
+    type: Literal["behavior_tree"] = "behavior_tree"
+    tree: Path
+    main_tree: str | None = None
+    locations: Path | None = None  # set as `location_file` on the blackboard
+    tick_rate_hz: float = 2.0  # the thesis's 500 ms timer
+    controller_rate_hz: float = 10.0  # TB3 Nav2 controller_frequency
+    follower: FollowerParams = field(default_factory=FollowerParams)
+    planner: PlannerSection = field(default_factory=PlannerSection)
+    progress: ProgressParams = field(default_factory=ProgressParams)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -177,7 +204,7 @@ class Scenario:
     name: str
     world: WorldSection
     robot: RobotSection
-    mission: CmdVelScriptMission | WaypointsMission
+    mission: BehaviorTreeMission | CmdVelScriptMission | WaypointsMission
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
     drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)

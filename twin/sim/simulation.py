@@ -20,6 +20,7 @@ from typing import Self
 import numpy as np
 
 from twin.bag import (
+    BehaviorTreeLogEncoder,
     ClockEncoder,
     ContactEncoder,
     ImuEncoder,
@@ -27,6 +28,7 @@ from twin.bag import (
     LogEncoder,
     MotorStateEncoder,
     OdometryEncoder,
+    PathEncoder,
     Recorder,
     ScanEncoder,
     StringEncoder,
@@ -37,6 +39,7 @@ from twin.core.clock import NS_PER_S, ns_to_s, s_to_ns
 from twin.core.errors import ConfigError, TwinError
 from twin.core.geometry import Mat4, quat_from_rpy, rpy_from_matrix
 from twin.estimation import OdometryFilter
+from twin.nav import GridNavigator, GridPlanner, build_grid
 from twin.robot.chassis import ChassisParams, SlipModel
 from twin.robot.drivetrain import Drivetrain, FmuDrive, FmuDrivetrain, WheelState
 from twin.robot.encoders import EncoderModel, EncoderSpec
@@ -44,12 +47,18 @@ from twin.robot.imu import ImuModel, imu_model_spec
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
 from twin.robot.lidar import Lidar
 from twin.sim.bus import Bus, Publisher
-from twin.sim.mission import make_mission
+from twin.sim.mission import CmdVelScript, TreeMission, WaypointFollower
 from twin.sim.rng import RngStreams
-from twin.sim.scenario import LidarSection, Scenario
+from twin.sim.scenario import (
+    BehaviorTreeMission,
+    CmdVelScriptMission,
+    LidarSection,
+    Scenario,
+    WaypointsMission,
+)
 from twin.sim.scheduler import Scheduler
 from twin.world import RobotModelSpec, build_scene, load_robot, load_world, urdf_from_robot
-from twin.world.scene import CollisionMonitor, Contact
+from twin.world.scene import CollisionMonitor, Contact, RobotBody, Scene
 from twin.world.types import JointType
 
 __all__ = ["RunSummary", "Simulation"]
@@ -247,11 +256,12 @@ class Simulation:
             )
             raise ConfigError(msg)
         self.lidar = Lidar.from_robot(robot, scene, self._rng.stream("lidar")) if robot.lidar is not None else None
-        self.drive = self._make_drive(scene.robot_body(robot.collisions).radius_m)
+        body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
+        self.drive = self._make_drive(body.radius_m)
         self._wheels = self._wheel_frames()
         self._imu = self._make_imu()
         self._encoders, self._ekf = self._make_odometry()
-        self.mission = make_mission(scenario.mission)
+        self.mission = self._make_mission(scene, body)
         self._run_to_limit = duration_s is not None
         limit_ns = s_to_ns(scenario.max_duration_s if duration_s is None else duration_s)
         self.end_k = -(-limit_ns // self.step_ns)
@@ -275,6 +285,26 @@ class Simulation:
             self.recorder.close()
             self.drive.close()
             raise
+
+    def _make_mission(self, scene: Scene, body: RobotBody) -> TreeMission | WaypointFollower | CmdVelScript:
+        spec = self.scenario.mission
+        if isinstance(spec, CmdVelScriptMission):
+            return CmdVelScript(spec)
+        if isinstance(spec, WaypointsMission):
+            return WaypointFollower(spec)
+        z_lo, z_hi = body.z_range_m
+        heights = tuple(float(h) for h in np.linspace(max(z_lo, 0.02), max(z_hi - 0.005, 0.03), 4))
+        planner_spec = spec.planner
+        grid = build_grid(scene, heights_m=heights, resolution_m=planner_spec.resolution_m)
+        planner = GridPlanner(
+            grid,
+            robot_radius_m=planner_spec.robot_radius_m or body.radius_m,
+            inflation_radius_m=planner_spec.inflation_radius_m,
+            cost_scaling_factor=planner_spec.cost_scaling_factor,
+            tolerance_m=planner_spec.tolerance_m,
+        )
+        navigator = GridNavigator(planner, spec.follower, spec.progress)
+        return TreeMission(spec, navigator, clock=lambda: self._k * self.step_ns, seed=self.scenario.seed)
 
     def _wheel_frames(self) -> list[tuple[str, str, str, Mat4, tuple[float, float, float]]]:
         """(joint, parent, child, T_parent, axis) of the left and right wheel joints, in that order."""
@@ -420,19 +450,26 @@ class Simulation:
 
         self.scheduler.once("static", publish_static, at_k=0, priority=_P_STATE)
 
-        # Mission: cmd_vel.
+        # Mission: the tree at its rate, the controller's cmd_vel at its rate. The mission steers on
+        # the pose the robot believes (the EKF's, odom = map here; the ground truth without EKF).
         cmd_pub = bus.advertise("/cmd_vel", TwistEncoder.msgtype)
         twist = TwistEncoder()
-
-        chassis_now = self.drive.chassis_state
+        chassis_now, ekf, mission_obj = self.drive.chassis_state, self._ekf, self.mission
+        if isinstance(mission_obj, TreeMission):
+            self._setup_tree(mission_obj)
 
         def mission(t_ns: int) -> None:
-            s = chassis_now()
-            v, w = self.mission.command(t_ns, s.x_m, s.y_m, s.yaw_rad)
+            if ekf is not None:
+                e = ekf.estimate
+                v, w = mission_obj.command(t_ns, e.x_m, e.y_m, e.yaw_rad)
+            else:
+                s = chassis_now()
+                v, w = mission_obj.command(t_ns, s.x_m, s.y_m, s.yaw_rad)
             self.drive.set_cmd_vel(v, w)
             cmd_pub.publish(t_ns, twist.encode(v, w))
 
-        add("mission", sc.mission.rate_hz, self._timed("mission", mission), priority=_P_MISSION)
+        rate = sc.mission.controller_rate_hz if isinstance(sc.mission, BehaviorTreeMission) else sc.mission.rate_hz
+        add("mission", rate, self._timed("mission", mission), priority=_P_MISSION)
 
         # Lidar.
         if self.lidar is not None and robot.lidar is not None:
@@ -534,6 +571,29 @@ class Simulation:
             clock_pub.publish(t_ns, clock_enc.encode(t_ns))
 
         add("clock", sc.sensors.clock.rate_hz, self._timed("clock", clock), priority=_P_CLOCK)
+
+    def _setup_tree(self, mission: TreeMission) -> None:
+        bt_pub = self.bus.advertise("/behavior_tree_log", BehaviorTreeLogEncoder.msgtype)
+        bt_enc = BehaviorTreeLogEncoder()
+        plan_pub = self.bus.advertise("/plan", PathEncoder.msgtype)
+        plan_enc = PathEncoder("map")
+        navigator = mission.navigator
+        plans = [0]
+
+        def tick(t_ns: int) -> None:
+            changes = mission.tick(t_ns)
+            if changes:
+                events = [(c.t_ns, mission.node_name(c.uid), c.prev.name, c.new.name) for c in changes]
+                bt_pub.publish(t_ns, bt_enc.encode(t_ns, events))
+            if navigator.plans != plans[0]:
+                plans[0] = navigator.plans
+                if navigator.path:
+                    plan_pub.publish(t_ns, plan_enc.encode(t_ns, [(x, y, 0.0) for x, y in navigator.path]))
+
+        assert isinstance(self.scenario.mission, BehaviorTreeMission)
+        self.scheduler.add(
+            "tree", self.scenario.mission.tick_rate_hz, self._timed("tree", tick), priority=_P_MISSION - 5
+        )
 
     def _setup_odometry(self) -> None:
         robot, bus = self.robot, self.bus
