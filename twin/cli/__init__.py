@@ -26,9 +26,11 @@ _COMMAND_MODULES: tuple[str, ...] = ("simulate", "scenario", "world", "fmu", "tr
 
 _EPILOG = """\
 examples:
-  twin simulate                         run the default scenario, write a bag to bags/
-  twin simulate scenarios/house.yaml --duration 60 --out /tmp/run1
-  twin scenario check scenarios/house.yaml
+  twin simulate                         the thesis's mission in the house; a bag in bags/
+  twin simulate scenarios/house_fmu.yaml --duration 60 --out /tmp/run1
+  twin scenario check scenarios/house_burger.yaml
+  twin bag info bags/<run>              what a bag holds
+  twin tree validate trees/tree.xml
   twin world info ../shared/fixtures/gazebo_classic/worlds/turtlebot3_house.world \\
       --model-path ../shared/fixtures/gazebo_classic/models
   twin <command> --help                 more on one command

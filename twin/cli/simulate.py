@@ -100,8 +100,13 @@ def _graceful_signals(flag: _StopFlag) -> Iterator[None]:
 def _summary_line(summary: RunSummary) -> str:
     return (
         f"simulated {summary.sim_s:.1f} s in {summary.wall_s:.2f} s ({summary.real_time_factor:.0f}x real time), "
-        f"{summary.messages} messages, {summary.contacts} contacts, {summary.ended_by}: {summary.bag_path}"
+        f"{summary.messages} messages, {summary.contacts} contacts, {summary.ended_by}"
+        f"{_result(summary)}: {summary.bag_path}"
     )
+
+
+def _result(summary: RunSummary) -> str:
+    return f" (tree {summary.mission_result})" if summary.mission_result in ("SUCCESS", "FAILURE") else ""
 
 
 def _simulate(args: argparse.Namespace) -> int:

@@ -50,7 +50,7 @@ class CmdVelScript:
         self.end_ns = end
         self._i = 0
         self.done = False
-        self.result = "complete"
+        self.result = "running"
 
     def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
         """Return the segment's command at `t_ns` (times must not go backwards)."""
@@ -59,7 +59,7 @@ class CmdVelScript:
             self._i += 1
         if self._i < len(ends):
             return self._cmds[self._i]
-        self.done = True
+        self.done, self.result = True, "complete"
         return (0.0, 0.0)
 
 
@@ -71,7 +71,7 @@ class WaypointFollower:
         self._follower = PathFollower(spec.follower)
         self._i = -1
         self.done = not spec.points
-        self.result = "complete"
+        self.result = "complete" if self.done else "running"
         self.reached: list[int] = []  # sim time each point was reached, ns
 
     def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
@@ -85,7 +85,7 @@ class WaypointFollower:
                 self.reached.append(t_ns)
             self._i += 1
             if self._i == len(self._points):
-                self.done = True
+                self.done, self.result = True, "complete"
                 break
             point = self._points[self._i]
             follower.set_path([(point[0], point[1])], point[2] if len(point) == 3 else None)

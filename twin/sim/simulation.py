@@ -91,6 +91,7 @@ class RunSummary:
     topics: dict[str, int]
     contacts: int
     ended_by: str
+    mission_result: str
     seed: int
     breakdown_s: dict[str, float]
 
@@ -789,6 +790,7 @@ class Simulation:
             topics={name: pub.count for name, pub in self.bus.publishers.items()},
             contacts=self.contacts,
             ended_by=ended_by,
+            mission_result=self.mission.result,
             seed=self.scenario.seed,
             breakdown_s=breakdown,
         )
