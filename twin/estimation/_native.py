@@ -4,21 +4,25 @@
 without Python in between: ~50 µs per step becomes a few. It is built on first use with the system
 C compiler (`twin.core.native`); without one, `OdometryFilter` steps through filterpy.
 
-One `double` workspace holds everything the step reads and writes; its layout is the C enum below,
-which `twin_ekf_layout` reports so that the Python side never hard-codes an offset:
+One `double` workspace holds the filter; its layout is the C enum below, which `twin_ekf_layout`
+reports so that the Python side never hard-codes an offset:
 
-    X     state (8)                      P      covariance (8x8, row-major, kept exactly symmetric)
-    PAD   0.0 and the unobserved variance, right after P: targets of the ROS covariance gather
-    PAR   1/R, B/2, rate random walks (v, yaw rate, bias), slip variance per rad, slip release, gate
-    H     three 3x8 measurement matrices: wheel angles, wheel speeds, standstill
-    IN    dt, kind (0 angles, 1 speeds, 2 standstill), moving, fuse gyro, z (3), R diagonal (3)
-    OUT   x, y, yaw (wrapped to [-pi, pi)), v, yaw rate, gyro bias
-    ROS   pose and twist covariances, 6x6 each, ROS order, gathered from P
-    GATHER  where each ROS entry comes from: an index into P (and PAD), as a double
+    X      state (8)                      P      covariance (8x8, row-major, kept exactly symmetric)
+    PAD    0.0 and the unobserved variance, right after P: targets of the ROS covariance gather
+    PAR    1/R, B/2, rate random walks (v, yaw rate, bias), slip variance per rad, slip release, gate
+           (negative: none), fuse gyro (0/1), gyro sample variance, standstill speed and yaw-rate variances
+    STILL  readings in a row without a tick
+    H      three 3x8 measurement matrices: wheel angles, wheel speeds, standstill
+    IN     dt, kind (0 angles, 1 speeds), moving (0/1), the two wheel readings, their variance,
+           the gyro's heading change over the interval and its sample count (0: no gyro), output row
+    OUT    x, y, yaw (wrapped to [-pi, pi)), v, yaw rate, gyro bias
+    GATHER where each of the 72 published covariance entries comes from: an index into P and PAD
 
-`twin_ekf_step(ws)` returns 0 (updated), 1 (the gate fired: the wheels' say on the yaw was
-dropped and the update redone) or -1 (an innovation covariance not positive definite; nothing
-after the predict was applied).
+`twin_ekf_step(ws, ros)` runs `OdometryFilter._step` (standstill detection, gyro fusion, slip
+release and gate) and `SolvedEkf.predict`/`update_linear`, and writes the pose and twist
+covariances (6x6 each, ROS order) to row `IN.row` of `ros` (rows of 72 doubles). It returns
+0 (updated), 1 (the gate fired: the wheels' say on the yaw was dropped and the update redone) or
+-1 (an innovation covariance not positive definite; nothing after the predict was applied).
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from twin.core.native import CLibrary, load_library, native_disabled
 __all__ = ["LAYOUT_NAMES", "load_ekf_kernel"]
 
 # Names of the workspace regions, in the order twin_ekf_layout reports their offsets (then the size).
-LAYOUT_NAMES = ("X", "P", "PAD", "PAR", "H", "IN", "OUT", "ROS", "GATHER", "SIZE")
+LAYOUT_NAMES = ("X", "P", "PAD", "PAR", "STILL", "H", "IN", "OUT", "GATHER", "SIZE")
 
 _SOURCE = r"""
 #include <math.h>
@@ -42,17 +46,18 @@ enum {
     WS_P = WS_X + N,
     WS_PAD = WS_P + N * N,
     WS_PAR = WS_PAD + 2,
-    WS_H = WS_PAR + 8,
+    WS_STILL = WS_PAR + 12,
+    WS_H = WS_STILL + 1,
     WS_IN = WS_H + 3 * 3 * N,
-    WS_OUT = WS_IN + 10,
-    WS_ROS = WS_OUT + 6,
-    WS_GATHER = WS_ROS + 72,
+    WS_OUT = WS_IN + 9,
+    WS_GATHER = WS_OUT + 6,
     WS_SIZE = WS_GATHER + 72
 };
+enum { PAR_GATE = 7, PAR_FUSE = 8, PAR_GYRO_VAR = 9, PAR_STILL_SPEED_VAR = 10, PAR_STILL_RATE_VAR = 11 };
 enum { KIND_ANGLES = 0, KIND_SPEEDS = 1, KIND_STILL = 2 };
 
 int twin_ekf_layout(long *out) {
-    const long layout[] = {WS_X, WS_P, WS_PAD, WS_PAR, WS_H, WS_IN, WS_OUT, WS_ROS, WS_GATHER, WS_SIZE};
+    const long layout[] = {WS_X, WS_P, WS_PAD, WS_PAR, WS_STILL, WS_H, WS_IN, WS_OUT, WS_GATHER, WS_SIZE};
     for (int i = 0; i < 10; ++i) out[i] = layout[i];
     return 10;
 }
@@ -103,25 +108,33 @@ static void predict(double *ws, double dt) {
    The last term is a Gram matrix; P's upper triangle is formed and mirrored, so P stays exactly
    symmetric. With gate >= 0, returns 0 without updating when y^T w exceeds it.
    Returns 1 (updated), 0 (gated) or -1 (S not positive definite). */
-static int update(double *ws, const double *H, int m, const double *z, const double R[3][3], double gate) {
-    double *x = ws + WS_X, *P = ws + WS_P;
+static int update(double *restrict ws, const double *restrict H, int m, const double *z, const double R[3][3],
+                  double gate) {
+    double *restrict x = ws + WS_X, *restrict P = ws + WS_P;
     double HP[3][N], W[3][N + 1], L[3][3] = {{0}};
+    int nonzero[3][N], count[3];  /* H's rows have one or two entries: skip the zeros */
+    for (int i = 0; i < m; ++i) {
+        count[i] = 0;
+        for (int k = 0; k < N; ++k)
+            if (H[i * N + k] != 0.0) nonzero[i][count[i]++] = k;
+    }
     for (int i = 0; i < m; ++i) {
         double hx = 0.0;
-        for (int k = 0; k < N; ++k) hx += H[i * N + k] * x[k];
-        W[i][N] = z[i] - hx;
-        for (int j = 0; j < N; ++j) {
-            double acc = 0.0;
-            for (int k = 0; k < N; ++k) acc += H[i * N + k] * P[k * N + j];
-            HP[i][j] = acc;
-            W[i][j] = acc;
+        for (int j = 0; j < N; ++j) HP[i][j] = 0.0;
+        for (int t = 0; t < count[i]; ++t) {
+            int k = nonzero[i][t];
+            double h = H[i * N + k];
+            hx += h * x[k];
+            for (int j = 0; j < N; ++j) HP[i][j] += h * P[k * N + j];
         }
+        for (int j = 0; j < N; ++j) W[i][j] = HP[i][j];
+        W[i][N] = z[i] - hx;
     }
     double y[3] = {W[0][N], m > 1 ? W[1][N] : 0.0, m > 2 ? W[2][N] : 0.0};
     for (int i = 0; i < m; ++i)
         for (int j = 0; j <= i; ++j) {
             double acc = R[i][j];
-            for (int k = 0; k < N; ++k) acc += HP[i][k] * H[j * N + k];
+            for (int t = 0; t < count[j]; ++t) acc += HP[i][nonzero[j][t]] * H[j * N + nonzero[j][t]];
             for (int k = 0; k < j; ++k) acc -= L[i][k] * L[j][k];
             if (i == j) {
                 if (!(acc > 0.0)) return -1;
@@ -197,18 +210,30 @@ static double wrap_angle(double a) {
     return r - M_PI;
 }
 
-int twin_ekf_step(double *ws) {
-    const double *in = ws + WS_IN;
-    double dt = in[0], gate = ws[WS_PAR + 7];  /* negative: no gate */
-    int kind = (int)in[1], moving = in[2] != 0.0, fuse = in[3] != 0.0;
-    const double *z = in + 4;
-    double R[3][3] = {{in[7], 0.0, 0.0}, {0.0, in[8], 0.0}, {0.0, 0.0, in[9]}};
+int twin_ekf_step(double *ws, double *ros) {
+    const double *in = ws + WS_IN, *par = ws + WS_PAR;
+    double dt = in[0], gyro_count = in[7];
+    int kind = (int)in[1], moving = in[2] != 0.0;
+    double z[3] = {in[3], in[4], 0.0};
+    double R[3][3] = {{in[5], 0.0, 0.0}, {0.0, in[5], 0.0}, {0.0, 0.0, 0.0}};
+    ws[WS_STILL] = moving ? 0.0 : ws[WS_STILL] + 1.0;
+    if (ws[WS_STILL] >= 2.0) {  /* no tick for two intervals: a zero-velocity update */
+        kind = KIND_STILL;
+        z[0] = z[1] = 0.0;
+        R[0][0] = par[PAR_STILL_SPEED_VAR];
+        R[1][1] = par[PAR_STILL_RATE_VAR];
+    }
+    int fuse = par[PAR_FUSE] != 0.0 && gyro_count > 0.0;
+    if (fuse) {
+        z[2] = in[6] / dt;
+        R[2][2] = par[PAR_GYRO_VAR] / gyro_count;
+    }
     const double *H = ws + WS_H + kind * 3 * N;
     int status = 0;
     predict(ws, dt);
     if (fuse) {
-        if (moving) release(ws, kind, R);
-        int done = update(ws, H, 3, z, R, gate);
+        if (moving) release(ws, kind, R);  /* the gyro owns the yaw: turning wheels may slip */
+        int done = update(ws, H, 3, z, R, par[PAR_GATE]);
         if (done < 0) return -1;
         if (done == 0) {
             status = 1;
@@ -221,7 +246,8 @@ int twin_ekf_step(double *ws) {
     double *out = ws + WS_OUT, *x = ws + WS_X;
     out[0] = x[0]; out[1] = x[1]; out[2] = wrap_angle(x[2]);
     out[3] = x[3]; out[4] = x[4]; out[5] = x[5];
-    for (int i = 0; i < 72; ++i) ws[WS_ROS + i] = ws[WS_P + (int)ws[WS_GATHER + i]];
+    double *row = ros + 72 * (long)in[8];
+    for (int i = 0; i < 72; ++i) row[i] = ws[WS_P + (int)ws[WS_GATHER + i]];
     return status;
 }
 """
@@ -235,11 +261,11 @@ def load_ekf_kernel() -> ctypes.CDLL | None:
 @functools.cache
 def _load() -> ctypes.CDLL | None:
     # Compiled without FMA contraction: the products and sums round as numpy's do.
-    flags = ("-O2", "-shared", "-fPIC", "-ffp-contract=off")
+    flags = ("-O3", "-shared", "-fPIC", "-ffp-contract=off")
     lib = load_library(CLibrary(name="odometry_ekf", source=_SOURCE, flags=flags), keep_gil=True)  # a 1 µs call
     if lib is None:
         return None
     lib.twin_ekf_layout.restype = ctypes.c_int
     lib.twin_ekf_layout.argtypes = [ctypes.c_void_p]
-    lib.twin_ekf_step.restype = ctypes.c_int  # no argtypes: called with the prebuilt workspace
+    lib.twin_ekf_step.restype = ctypes.c_int  # no argtypes: called with prebuilt pointers
     return lib

@@ -114,6 +114,7 @@ _new_estimate = tuple.__new__  # builds the NamedTuple without its keyword-parsi
 _RELEASE = _SLIP_RELEASE_RAD2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
 _STRICTLY_LOWER = np.tril(np.ones((_N, _N), dtype=bool), -1)
 _ANGLES, _SPEEDS, _STILL = 0, 1, 2  # what the wheel rows measure (the kernel's kinds)
+_COVARIANCE_ROWS = 256  # published covariances allocated at once (the kernel writes one row per step)
 _NOT_POSITIVE_DEFINITE = (
     "EKF innovation covariance is not positive definite; every measurement needs a positive variance"
 )
@@ -388,13 +389,11 @@ class OdometryFilter:
         kernel = load_ekf_kernel() if native else None
         self.native = kernel is not None
         """True when the compiled kernel steps the filter."""
-        self._update: Callable[[float, int, bool, bool, float, float, float, float, float, float], bool]
-        self._estimate_after_step: Callable[[int], OdometryEstimate]
-        if kernel is None:
-            self._update, self._estimate_after_step = self._update_filterpy, self._make_estimate
-        else:
+        # One step, `(t_ns, kind, moving, z_left, z_right, variance) -> estimate`: chosen once.
+        self._step: Callable[[int, int, bool, float, float, float], OdometryEstimate] = self._step_filterpy
+        if kernel is not None:
             self._bind_kernel(kernel, inv_r=1.0 / wheel_radius_m, half_b=0.5 * wheel_separation_m)
-            self._update, self._estimate_after_step = self._update_native, self._native_estimate
+            self._step = self._step_native
         self._estimate = self._make_estimate(0)
 
     def _bind_kernel(self, kernel: ctypes.CDLL, *, inv_r: float, half_b: float) -> None:
@@ -410,17 +409,41 @@ class OdometryFilter:
         x[:], p[:] = ekf.x, ekf.P
         ws[at["PAD"] : at["PAD"] + 2] = (0.0, UNOBSERVED_VARIANCE)
         gate = -1.0 if self._gate is None else self._gate
-        parameters = (inv_r, half_b, *ekf.rate_variances, ekf.slip_variance_per_rad, _SLIP_RELEASE_RAD2, gate)
+        parameters = (
+            inv_r,
+            half_b,
+            *ekf.rate_variances,
+            ekf.slip_variance_per_rad,
+            _SLIP_RELEASE_RAD2,
+            gate,
+            float(self._fuse_gyro),
+            self._gyro_var,
+            *self._still_var,
+        )
         ws[at["PAR"] : at["PAR"] + len(parameters)] = parameters
         h = np.concatenate([rows.ravel(order="C") for rows in self._h])
         ws[at["H"] : at["H"] + h.size] = h
         ekf.x, ekf.P = x, p
         ws[at["GATHER"] : at["GATHER"] + _BOTH_GATHER.size] = _BOTH_GATHER
         self._ws_c = ws_c  # owns the memory of the views
-        self._kernel_step = functools.partial(kernel.twin_ekf_step, ws_c)
-        self._in, self._in_end = at["IN"], at["IN"] + 10
+        self._kernel = kernel
+        self._in, self._in_end = at["IN"], at["IN"] + 9
         self._out = ws[at["OUT"] : at["OUT"] + 6]
-        self._ros = ws[at["ROS"] : at["ROS"] + 72]
+        self._new_covariance_block()
+
+    def _new_covariance_block(self) -> None:
+        """Give the kernel fresh rows to write the published covariances into, one row per step.
+
+        Each estimate's covariances are views of their own row, which nothing writes again: the
+        estimate owns them without a copy per step.
+        """
+        block = np.empty((_COVARIANCE_ROWS, 72))
+        self._poses, self._twists = list(block[:, :36]), list(block[:, 36:])
+        self._row = 0
+        self._kernel_step = functools.partial(
+            self._kernel.twin_ekf_step, self._ws_c, ctypes.c_void_p(block.ctypes.data)
+        )
+        self._block = block
 
     @property
     def t_ns(self) -> int | None:
@@ -448,19 +471,20 @@ class OdometryFilter:
         Samples not after the previous one, and samples that are not a finite number, are ignored.
         """
         last = self._gyro_last
-        if not math.isfinite(yaw_rate_radps):
-            return
         if last is None:
+            if not math.isfinite(yaw_rate_radps):
+                return
             if self._t_ns is not None:  # hold the first sample back to the last step
                 self._gyro_anchor_rad = -yaw_rate_radps * (t_ns - self._t_ns) * 1e-9
-        elif t_ns > last[0]:
-            if self._gyro_mean:
-                self._gyro_integral_rad += yaw_rate_radps * (t_ns - last[0]) * 1e-9
-            else:
-                self._gyro_integral_rad += 0.5 * (yaw_rate_radps + last[1]) * (t_ns - last[0]) * 1e-9
-                self._gyro_slope = (yaw_rate_radps - last[1]) / (t_ns - last[0])
         else:
-            return
+            dt_ns = t_ns - last[0]
+            if dt_ns <= 0 or not math.isfinite(yaw_rate_radps):
+                return
+            if self._gyro_mean:
+                self._gyro_integral_rad += yaw_rate_radps * dt_ns * 1e-9
+            else:
+                self._gyro_integral_rad += 0.5 * (yaw_rate_radps + last[1]) * dt_ns * 1e-9
+                self._gyro_slope = (yaw_rate_radps - last[1]) / dt_ns
         self._gyro_last = (t_ns, yaw_rate_radps)
         self._gyro_count += 1
 
@@ -523,7 +547,7 @@ class OdometryFilter:
         tail_ns = t_ns - last[0]
         return self._gyro_integral_rad + (last[1] + 0.5 * self._gyro_slope * tail_ns) * tail_ns * 1e-9
 
-    def _step(  # noqa: PLR0917 - the hot path takes plain numbers positionally
+    def _step_filterpy(  # noqa: PLR0917 - the hot path takes plain numbers positionally
         self, t_ns: int, kind: int, moving: bool, z_left: float, z_right: float, variance: float
     ) -> OdometryEstimate:
         """Predict to `t_ns` and update with two wheel readings of `kind` (each of `variance`) and the gyro."""
@@ -540,16 +564,61 @@ class OdometryFilter:
             fuse, z_gyro, r_gyro = True, (mark - anchor) / dt, self._gyro_var / self._gyro_count
         else:
             fuse, z_gyro, r_gyro = False, 0.0, 0.0
-        if self._update(dt, kind, moving, fuse, z_left, z_right, z_gyro, r_left, r_right, r_gyro):
-            self.slip_detections += 1
-            _log.debug("t=%d ns: wheels and gyro disagree beyond their noise; wheel slip assumed", t_ns)
+        if self._update_filterpy(dt, kind, moving, fuse, z_left, z_right, z_gyro, r_left, r_right, r_gyro):
+            self._slip_detected(t_ns)
         self._gyro_anchor_rad = mark
         self._gyro_count = 0
         self._t_ns = t_ns
-        self._estimate = self._estimate_after_step(t_ns)
+        self._estimate = self._make_estimate(t_ns)
         return self._estimate
 
-    def _update_filterpy(  # noqa: PLR0917 - one signature with _update_native
+    def _step_native(  # noqa: PLR0917 - the hot path takes plain numbers positionally
+        self, t_ns: int, kind: int, moving: bool, z_left: float, z_right: float, variance: float
+    ) -> OdometryEstimate:
+        """`_step_filterpy` in the compiled kernel, which does the standstill and gyro logic too."""
+        assert self._t_ns is not None
+        dt = self._dt(t_ns, self._t_ns)
+        mark, anchor = self._gyro_mark(t_ns), self._gyro_anchor_rad
+        if mark is not None and anchor is not None:
+            turned_rad, count = mark - anchor, self._gyro_count
+        else:
+            turned_rad, count = 0.0, 0
+        row = self._row
+        if row == _COVARIANCE_ROWS:
+            self._new_covariance_block()
+            row = 0
+        self._row = row + 1
+        self._ws_c[self._in : self._in_end] = (
+            dt,
+            kind,
+            moving,
+            z_left,
+            z_right,
+            variance,
+            turned_rad,
+            count,
+            row,
+        )
+        status = self._kernel_step()
+        if status:
+            if status < 0:
+                raise EstimationError(_NOT_POSITIVE_DEFINITE)
+            self._slip_detected(t_ns)
+        self._gyro_anchor_rad = mark
+        self._gyro_count = 0
+        self._t_ns = t_ns
+        x, y, yaw, v, rate, bias = self._out.tolist()  # the kernel wrapped the yaw
+        estimate: OdometryEstimate = _new_estimate(
+            OdometryEstimate, (t_ns, x, y, yaw, v, rate, bias, self._poses[row], self._twists[row])
+        )
+        self._estimate = estimate
+        return estimate
+
+    def _slip_detected(self, t_ns: int) -> None:
+        self.slip_detections += 1
+        _log.debug("t=%d ns: wheels and gyro disagree beyond their noise; wheel slip assumed", t_ns)
+
+    def _update_filterpy(  # noqa: PLR0917 - one private call site
         self,
         dt: float,
         kind: int,
@@ -583,17 +652,6 @@ class OdometryFilter:
         ekf.update_linear(z, h, r, innovation=y)
         return True
 
-    def _update_native(self, *inputs: float) -> bool:
-        """The same step in the compiled kernel; return True if the slip gate fired.
-
-        `inputs` are `_update_filterpy`'s arguments, which are the kernel's IN block in order.
-        """
-        self._ws_c[self._in : self._in_end] = inputs
-        status: int = self._kernel_step()
-        if status < 0:
-            raise EstimationError(_NOT_POSITIVE_DEFINITE)
-        return status == 1
-
     def _innovation(self, kind: int, rows: int) -> FloatArray:
         """`z - H x` for the first `rows` rows of the measurement matrix of `kind`."""
         x = self.ekf.x.tolist()
@@ -623,11 +681,6 @@ class OdometryFilter:
         both = padded[_BOTH_GATHER]  # a fresh array: the estimate owns its covariances
         x, y, yaw, v, rate, bias, _, _ = self.ekf.x.tolist()
         yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
-        return _new_estimate(OdometryEstimate, (t_ns, x, y, yaw, v, rate, bias, both[:36], both[36:]))
-
-    def _native_estimate(self, t_ns: int) -> OdometryEstimate:
-        x, y, yaw, v, rate, bias = self._out.tolist()  # the kernel wrapped the yaw and gathered the covariances
-        both = self._ros.copy()
         return _new_estimate(OdometryEstimate, (t_ns, x, y, yaw, v, rate, bias, both[:36], both[36:]))
 
 

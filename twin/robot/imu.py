@@ -214,7 +214,10 @@ class ImuModel:
         qx, qy, qz, qw = quat_from_rpy(*spec.mount_rpy_rad)
         r = _rotation(qx, qy, qz, qw)  # IMU axes in chassis axes; readings are R^T times chassis vectors
         rx, ry = float(spec.mount_xyz_m[0]), float(spec.mount_xyz_m[1])
-        self._const = (*(float(v) for v in r.ravel()), rx, ry, spec.gravity_mps2, qx, qy, qz, qw)
+        rot = [float(v) for v in r.ravel()]
+        g = spec.gravity_mps2
+        gravity = (rot[6] * g, rot[7] * g, rot[8] * g)  # minus gravity in IMU axes (the chassis stays level)
+        self._const = (*rot, rx, ry, *gravity, qx, qy, qz, qw)
         self.orientation_covariance: tuple[float, ...] = (0.0,) * 9
         self.angular_velocity_covariance = _diagonal(spec.angular_velocity_noise)
         self.linear_acceleration_covariance = _diagonal(spec.linear_acceleration_noise)
@@ -269,7 +272,7 @@ class ImuModel:
             i = 0
         self._next = i + 1
         n0, n1, n2, n3, n4, n5 = self._rows[i]
-        r00, r01, r02, r10, r11, r12, r20, r21, r22, rx, ry, g, mx, my, mz, mw = self._const
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, rx, ry, g0, g1, g2, mx, my, mz, mw = self._const
         w = yaw_rate_radps
         # Specific force at the IMU origin in chassis axes: a + alpha x r + w x (w x r) - g.
         w2 = w * w
@@ -277,24 +280,29 @@ class ImuModel:
         fy = accel_y_mps2 + yaw_accel_radps2 * rx - w2 * ry
         # World orientation of the IMU: q_world_chassis (yaw only) times q_chassis_imu.
         s, c = math.sin(0.5 * yaw_rad), math.cos(0.5 * yaw_rad)
-        values: tuple[float, ...] = (
-            c * mx - s * my,
-            c * my + s * mx,
-            c * mz + s * mw,
-            c * mw - s * mz,
-            r20 * w + n0,
-            r21 * w + n1,
-            r22 * w + n2,
-            r00 * fx + r10 * fy + r20 * g + n3,
-            r01 * fx + r11 * fy + r21 * g + n4,
-            r02 * fx + r12 * fy + r22 * g + n5,
+        reading: ImuReading = _new_reading(
+            ImuReading,
+            (
+                c * mx - s * my,
+                c * my + s * mx,
+                c * mz + s * mw,
+                c * mw - s * mz,
+                r20 * w + n0,
+                r21 * w + n1,
+                r22 * w + n2,
+                r00 * fx + r10 * fy + g0 + n3,
+                r01 * fx + r11 * fy + g1 + n4,
+                r02 * fx + r12 * fy + g2 + n5,
+            ),
         )
-        if self._quantize:
-            out = list(values)
-            for k, precision in self._quantize:
-                out[k + 4] = round(out[k + 4] / precision) * precision
-            values = tuple(out)
-        return _new_reading(ImuReading, values)
+        return self._quantized(reading) if self._quantize else reading
+
+    def _quantized(self, reading: ImuReading) -> ImuReading:
+        """Round the `gaussian_quantized` axes to their precision (Gazebo's `GaussianNoiseModel`)."""
+        out = list(reading)
+        for k, precision in self._quantize:
+            out[k + 4] = round(out[k + 4] / precision) * precision
+        return _new_reading(ImuReading, out)
 
 
 def _rotation(x: float, y: float, z: float, w: float) -> NDArray[np.float64]:
