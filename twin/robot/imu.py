@@ -172,12 +172,16 @@ class _ChannelNoise:
         # First-order Gauss-Markov drift, exact over one sample period: b' = phi b + sigma_d w, driven by
         # white noise of density dynamic_bias_stddev (as gz-sensors' GaussianNoiseModel).
         self._drift_axes = tuple(i for i, a in enumerate(axes) if a.drifts)
-        self._phi = np.ones(3)
-        self._sigma_d = np.zeros(3)
+        # Axes with the same drift (usually all three) are filtered in one call: (phi, sigma_d) -> axes.
+        groups: dict[tuple[float, float], list[int]] = {}
         for i in self._drift_axes:
             tau, sigma = axes[i].dynamic_bias_correlation_time_s, axes[i].dynamic_bias_stddev
-            self._phi[i] = math.exp(-dt_s / tau)
-            self._sigma_d[i] = sigma * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt_s / tau))
+            phi, sigma_d = math.exp(-dt_s / tau), sigma * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt_s / tau))
+            groups.setdefault((phi, sigma_d), []).append(i)
+        columns = {axis: col for col, axis in enumerate(self._drift_axes)}  # in the block's drift steps
+        self._drift_groups = tuple(
+            (phi, sigma_d, axes_, [columns[i] for i in axes_]) for (phi, sigma_d), axes_ in groups.items()
+        )
 
     def block(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Draw the next `_BLOCK` samples: the bias of each, and its total additive error (bias + white)."""
@@ -185,9 +189,9 @@ class _ChannelNoise:
         biases = np.repeat(self.bias[None, :], _BLOCK, axis=0)
         if self._drift_axes:
             steps = self._rng.standard_normal((_BLOCK, len(self._drift_axes)))
-            for col, i in enumerate(self._drift_axes):
-                zi = [self._phi[i] * self.bias[i]]
-                biases[:, i] = lfilter([self._sigma_d[i]], [1.0, -self._phi[i]], steps[:, col], zi=zi)[0]
+            for phi, sigma_d, axes, columns in self._drift_groups:
+                zi = (phi * self.bias[axes])[None, :]
+                biases[:, axes] = lfilter([sigma_d], [1.0, -phi], steps[:, columns], axis=0, zi=zi)[0]
             self.bias = biases[-1].copy()
         return biases + self._mean, white + biases
 
@@ -209,7 +213,7 @@ class ImuModel:
         self._accel = _ChannelNoise(spec.linear_acceleration_noise, accel_rng, dt_s)
         self._quantize = tuple(self._gyro.quantize) + tuple((i + 3, p) for i, p in self._accel.quantize)
         self._rows: list[list[float]] = []  # per sample: gyro x, y, z and accel x, y, z errors
-        self._biases: list[list[float]] = []
+        self._biases: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # gyro, accel: per sample
         self._next = _BLOCK
         qx, qy, qz, qw = quat_from_rpy(*spec.mount_rpy_rad)
         r = _rotation(qx, qy, qz, qw)  # IMU axes in chassis axes; readings are R^T times chassis vectors
@@ -230,22 +234,21 @@ class ImuModel:
     @property
     def accel_bias_mps2(self) -> Vec3:
         """The accelerometer's constant error (bias plus noise mean) at the last sample, per axis."""
-        return self._bias_at_last(3)
+        return self._bias_at_last(1)
 
-    def _bias_at_last(self, first: int) -> Vec3:
-        if not self._biases:
+    def _bias_at_last(self, channel: int) -> Vec3:
+        if self._biases is None:
             self._refill()
             self._next = 0
-            row = self._biases[0]
-        else:
-            row = self._biases[max(self._next - 1, 0)]
-        return (row[first], row[first + 1], row[first + 2])
+        assert self._biases is not None
+        x, y, z = self._biases[channel][max(self._next - 1, 0)].tolist()
+        return (x, y, z)
 
     def _refill(self) -> None:
         gyro_bias, gyro_error = self._gyro.block()
         accel_bias, accel_error = self._accel.block()
         self._rows = np.hstack((gyro_error, accel_error)).tolist()
-        self._biases = np.hstack((gyro_bias, accel_bias)).tolist()
+        self._biases = (gyro_bias, accel_bias)
         self._next = 0
 
     def sample(
