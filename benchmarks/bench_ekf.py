@@ -5,6 +5,8 @@ EKF's gyro intake (200 Hz) and its predict/update step (30 Hz), timing each call
 JSON: CPU milliseconds per simulated second for each part and their share of the whole-run budget
 (ARCHITECTURE.md: the default mission, everything included, at most 10 ms per simulated second).
 Each part's time is the best of several repeats (least disturbed by other load on the machine).
+The EKF step runs in its compiled kernel (the default); the same drive through filterpy's
+`SolvedEkf` (the reference path, `native=False`) is timed alongside for the ratio.
 
     python benchmarks/bench_ekf.py [--repeats 5]
 """
@@ -32,12 +34,15 @@ from twin.robot.trajectory import default_test_drive, generate_trajectory
 BUDGET_MS_PER_SIM_S = 10.0
 
 
-def run_once(traj_lists: dict[str, list[float]], imu_idx: list[int], enc_idx: list[int]) -> dict[str, float]:
+def run_once(
+    traj_lists: dict[str, list[float]], imu_idx: list[int], enc_idx: list[int], *, native: bool = True
+) -> dict[str, float]:
     dist = Disturbances()
     g, a, e = np.random.SeedSequence(0).spawn(3)
     imu = ImuModel(dist.imu.apply(ImuSpec()), gyro_rng=np.random.default_rng(g), accel_rng=np.random.default_rng(a))
     enc = EncoderModel(EncoderSpec(), dist.encoders, np.random.default_rng(e))
-    ekf = OdometryFilter(EstimationSection(), wheel_radius_m=0.033, wheel_separation_m=0.287)
+    ekf = OdometryFilter(EstimationSection(), wheel_radius_m=0.033, wheel_separation_m=0.287, native=native)
+    assert ekf.native == native, "the EKF kernel did not build (no C compiler?)"
     t, yaw, rate = traj_lists["t"], traj_lists["yaw"], traj_lists["rate"]
     acc, ax, ay = traj_lists["accel"], traj_lists["ax"], traj_lists["ay"]
     left, right = traj_lists["left"], traj_lists["right"]
@@ -83,9 +88,11 @@ def main() -> None:
         "right": traj.wheel_right_rad.tolist(),
     }
     best: dict[str, float] = {}
+    reference = float("inf")
     for _ in range(args.repeats):
         for part, seconds in run_once(lists, imu_idx, enc_idx).items():
             best[part] = min(best.get(part, float("inf")), seconds)
+        reference = min(reference, run_once(lists, imu_idx, enc_idx, native=False)["ekf_step"])
     sim_s = traj.duration_s
     per_sim_s = {part: 1000.0 * seconds / sim_s for part, seconds in best.items()}
     total = sum(per_sim_s.values())
@@ -105,6 +112,11 @@ def main() -> None:
         "ekf_only_share_of_budget": round(
             (per_sim_s["ekf_step"] + per_sim_s["ekf_gyro_intake"]) / BUDGET_MS_PER_SIM_S, 4
         ),
+        "ekf_step_filterpy_reference": {
+            "ms_per_simulated_s": round(1000.0 * reference / sim_s, 4),
+            "us_per_call": round(1e6 * reference / len(enc_idx), 2),
+            "over_native": round(reference / best["ekf_step"], 1),
+        },
         "machine": {
             "python": platform.python_version(),
             "numpy": np.__version__,

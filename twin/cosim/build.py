@@ -3,22 +3,19 @@
 A model directory holds `fmu.yaml` (model name, C sources, variables, variants) and its C files.
 Each variant is built for FMI 2.0 or 3.0 Co-Simulation: the model description and a header of value
 references and start values are generated from `fmu.yaml`, the sources are compiled with the system
-C compiler (`$CC`, else `cc`, else `gcc`) together with the FMI layer of `fmus/common`, and the
+C compiler (`$CC`, else `cc`, `gcc` or `clang`) together with the FMI layer of `fmus/common`, and the
 result is zipped into `<cache>/fmus/<variant>-fmi<N>-<hash>.fmu`. The hash covers every source,
 header and build setting, so a changed input gives a new file and an unchanged one is reused.
 
-The cache is `$TWIN_CACHE_DIR`, else `$XDG_CACHE_HOME/twin`, else `~/.cache/twin`.
+The cache is `$TWIN_CACHE_DIR`, else `$XDG_CACHE_HOME/twin`, else `~/.cache/twin` (`twin.core.native`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import hashlib
 import logging
 import os
-import shutil
-import subprocess
 import tempfile
 import uuid
 import xml.etree.ElementTree as ET
@@ -33,6 +30,16 @@ import fmpy
 
 from twin.core.config import load_config
 from twin.core.errors import FmuError
+from twin.core.native import (
+    CLibrary,
+    NativeBuildError,
+    build_library,
+    cache_dir,
+    compile_shared,
+    compiler_candidates,
+    compiler_version,
+    find_compiler,
+)
 from twin.cosim.units import BASE_NAMES, find_unit
 
 __all__ = [
@@ -118,15 +125,6 @@ class BuiltFmu:
     fmi_version: FmiVersion
     path: Path
     rebuilt: bool
-
-
-def cache_dir() -> Path:
-    """Return the cache root (`$TWIN_CACHE_DIR`, `$XDG_CACHE_HOME/twin` or `~/.cache/twin`)."""
-    if root := os.environ.get("TWIN_CACHE_DIR"):
-        return Path(root).expanduser()
-    if xdg := os.environ.get("XDG_CACHE_HOME"):
-        return Path(xdg).expanduser() / "twin"
-    return Path.home() / ".cache" / "twin"
 
 
 def load_source_spec(model_dir: Path) -> FmuSourceSpec:
@@ -236,27 +234,18 @@ def build_shim() -> Path:
         FmuError: If no C compiler is found or compilation fails.
     """
     common = FMUS_DIR / "common"
-    sources = [common / name for name in _SHIM_SOURCES]
-    compiler = _compiler("step shim")
-    digest = _digest([common / name for name in _SHIM_FILES], compiler, " ".join(("step_shim", *_SHIM_CFLAGS)), 0)
-    target = cache_dir() / "fmus" / f"step_shim-{digest[:16]}.so"
-    if target.is_file():
-        return target
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="twin-shim-", dir=target.parent) as tmp_text:
-        staged = Path(tmp_text) / "step_shim.so"
-        cmd = [compiler[0], *CFLAGS, *_SHIM_CFLAGS, *map(str, sources), "-o", str(staged), "-lm"]
-        try:
-            result = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
-        except OSError as err:
-            msg = f"cannot build the step shim: {compiler[0]} did not run ({err.strerror})"
-            raise FmuError(msg) from None
-        if result.returncode != 0:
-            lines = [ln for ln in result.stderr.splitlines() if "error" in ln] or result.stderr.splitlines() or ["?"]
-            msg = f"cannot build the step shim: {lines[0].strip()}"
-            raise FmuError(msg)
-        os.replace(staged, target)
-    return target
+    try:
+        shim = CLibrary(
+            name="step_shim",
+            files=tuple(common / name for name in _SHIM_SOURCES),
+            depends=tuple(common / name for name in _SHIM_FILES if name not in _SHIM_SOURCES),
+            flags=(*CFLAGS, *_SHIM_CFLAGS),
+            subdir="fmus",
+        )
+        return build_library(shim)
+    except NativeBuildError as err:
+        msg = f"cannot build the step shim: {err}"
+        raise FmuError(msg) from None
 
 
 # --- inputs and hashing ------------------------------------------------------------------------
@@ -282,26 +271,15 @@ def _digest(files: list[Path], compiler: tuple[str, str], variant: str, fmi_vers
     return h.hexdigest()
 
 
-@functools.lru_cache(maxsize=8)
-def _compiler_version(path: str) -> str:
-    try:
-        out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=30, check=False)
-    except OSError:
-        return "unknown"
-    return out.stdout.splitlines()[0] if out.stdout else "unknown"
-
-
 def _compiler(variant: str) -> tuple[str, str]:
-    candidates = [c for c in (os.environ.get("CC"), "cc", "gcc") if c]
-    for candidate in candidates:
-        path = shutil.which(candidate)
-        if path:
-            return path, _compiler_version(path)
-    msg = (
-        f"cannot build FMU {variant!r}: no C compiler found (tried {', '.join(candidates)}); "
-        "install one (e.g. apt-get install gcc) or set CC"
-    )
-    raise FmuError(msg)
+    path = find_compiler()
+    if path is None:
+        msg = (
+            f"cannot build FMU {variant!r}: no C compiler found (tried {', '.join(compiler_candidates())}); "
+            "install one (e.g. apt-get install gcc) or set CC"
+        )
+        raise FmuError(msg)
+    return path, compiler_version(path)
 
 
 def _compile(  # noqa: PLR0917 - one private call site
@@ -317,8 +295,7 @@ def _compile(  # noqa: PLR0917 - one private call site
 ) -> None:
     common = FMUS_DIR / "common"
     layer = common / ("fmi2_layer.c" if fmi_version == 2 else "fmi3_layer.c")
-    cmd = [
-        compiler[0],
+    flags = [
         *CFLAGS,
         f'-DMODEL_GUID="{token}"',
         *(f"-D{d}=1" for d in variant_spec.defines),
@@ -326,23 +303,14 @@ def _compile(  # noqa: PLR0917 - one private call site
         f"-I{model_dir}",
         f"-I{common}",
         f"-I{FMUS_DIR / 'include'}",
-        *(str(model_dir / s) for s in spec.sources),
-        str(layer),
-        str(common / "linsys.c"),
-        "-o",
-        str(library),
-        "-lm",
     ]
+    sources = [*(model_dir / s for s in spec.sources), layer, common / "linsys.c"]
     try:
-        result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False)
-    except OSError as err:
-        msg = f"cannot build FMU {variant!r}: {compiler[0]} did not run ({err.strerror})"
+        diagnostics = compile_shared(compiler[0], sources, library, flags=flags)
+    except NativeBuildError as err:
+        msg = f"cannot build FMU {variant!r}: {err}"
         raise FmuError(msg) from None
-    if result.returncode != 0:
-        lines = [ln for ln in result.stderr.splitlines() if "error" in ln] or result.stderr.splitlines() or ["?"]
-        msg = f"cannot build FMU {variant!r}: {Path(compiler[0]).name} failed: {lines[0].strip()}"
-        raise FmuError(msg)
-    for line in result.stderr.splitlines():
+    for line in diagnostics.splitlines():
         _log.debug("%s: %s", variant, line)
 
 

@@ -42,12 +42,18 @@ did not): the wheels' say on the yaw is dropped for that step and the update is 
 
 **Numerics.** filterpy's `ExtendedKalmanFilter` computes the gain with `inv` and copies its inputs. The
 subclass here keeps its interface and attributes but solves for the gain (Cholesky, `dposv`), applies the
-Joseph form as symmetric rank-k updates of P's upper triangle (positive semi-definite by construction)
-and mirrors it, calling BLAS/LAPACK directly on Fortran-ordered arrays.
+Joseph form as symmetric rank-k updates of P's upper triangle (its `K S K^T` term a Gram matrix) and
+mirrors it, calling BLAS/LAPACK directly on Fortran-ordered arrays.
+
+**Speed.** `OdometryFilter` steps through a compiled kernel (`twin.estimation._native`) that does the same
+arithmetic in C, a few microseconds per step instead of ~50; `SolvedEkf` is the reference it is tested
+against and the fallback without a C compiler (or with `native=False`, `TWIN_NO_NATIVE=1`).
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import logging
 import math
 from collections.abc import Callable
@@ -61,6 +67,7 @@ from scipy.linalg.lapack import dposv
 from scipy.stats import chi2
 
 from twin.core.errors import EstimationError
+from twin.estimation._native import LAYOUT_NAMES, load_ekf_kernel
 from twin.estimation.config import EstimationSection
 
 __all__ = ["STATE_NAMES", "UNOBSERVED_VARIANCE", "OdometryEstimate", "OdometryFilter", "SolvedEkf"]
@@ -106,6 +113,11 @@ _BOTH_GATHER = np.concatenate((_POSE_GATHER, _TWIST_GATHER))
 _new_estimate = tuple.__new__  # builds the NamedTuple without its keyword-parsing __new__
 _RELEASE = _SLIP_RELEASE_RAD2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
 _STRICTLY_LOWER = np.tril(np.ones((_N, _N), dtype=bool), -1)
+_ANGLES, _SPEEDS, _STILL = 0, 1, 2  # what the wheel rows measure (the kernel's kinds)
+_COVARIANCE_ROWS = 256  # published covariances allocated at once (the kernel writes one row per step)
+_NOT_POSITIVE_DEFINITE = (
+    "EKF innovation covariance is not positive definite; every measurement needs a positive variance"
+)
 
 
 class OdometryEstimate(NamedTuple):
@@ -262,8 +274,7 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
         rhs[:, _N] = y
         u, sol, info = dposv(s, rhs)
         if info:
-            msg = "EKF innovation covariance is not positive definite; every measurement needs a positive variance"
-            raise EstimationError(msg)
+            raise EstimationError(_NOT_POSITIVE_DEFINITE)
         if gate is not None and y @ sol[:, _N] > gate:
             return False
         kt = sol[:, :_N]  # K^T
@@ -282,11 +293,22 @@ class OdometryFilter:
     Per rate: `add_gyro(t_ns, yaw_rate_radps)` for every IMU sample; `add_wheel_positions(t_ns, left_rad,
     right_rad)` for every joint state, which steps the filter and returns the estimate to publish.
 
+    The filter is filterpy's (`SolvedEkf`, in `ekf`). By default each step runs in a compiled kernel
+    (`twin.estimation._native`: the same predict, update, gate and slip handling in C, about ten times
+    faster); `native=False`, `TWIN_NO_NATIVE=1` or a machine without a C compiler step through `SolvedEkf`
+    itself, the reference implementation. Both give the same estimates and covariances to rounding (the
+    tests compare them). With the kernel, `ekf.x` and `ekf.P` are views of its workspace: read them, but
+    step the filter only through this class.
+
     Args:
         config: The scenario's `estimation:` section.
         wheel_radius_m: Wheel radius.
         wheel_separation_m: Distance between the wheels.
         initial_pose: Start (x_m, y_m, yaw_rad) in the `odom` frame.
+        gyro_samples: `instantaneous` rates (Gazebo, most drivers) are integrated by the trapezoid rule;
+            `interval_mean` rates (a gyro reporting its mean over each sample period, as the twin's IMU)
+            by the rectangle rule.
+        native: Step with the compiled kernel when it is available.
 
     Raises:
         EstimationError: If the wheel geometry is not positive.
@@ -300,17 +322,15 @@ class OdometryFilter:
         wheel_separation_m: float,
         initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
         gyro_samples: Literal["instantaneous", "interval_mean"] = "instantaneous",
+        native: bool = True,
     ) -> None:
         if not (wheel_radius_m > 0.0 and wheel_separation_m > 0.0):
             msg = f"wheel radius and separation must be positive, got {wheel_radius_m} m and {wheel_separation_m} m"
             raise EstimationError(msg)
         self.config = config
-        # Instantaneous rates (Gazebo, most drivers) integrate by the trapezoid rule; a gyro that
-        # reports its mean rate over each sample period (an integrating sensor, twin's IMU) by the
-        # rectangle rule, which then gives the heading change exactly.
+        # Instantaneous rates integrate by the trapezoid rule; a gyro that reports its mean rate over
+        # each sample period by the rectangle rule, which then gives the heading change exactly.
         self._gyro_mean = gyro_samples == "interval_mean"
-        self._r = wheel_radius_m
-        self._b = wheel_separation_m
         noise = config.measurement_noise
         tick = 2.0 * math.pi / noise.encoder_ticks_per_rev
         self._angle_var = tick * tick / 12.0  # one reading rounded to a tick: uniform error
@@ -344,15 +364,15 @@ class OdometryFilter:
         self._fuse_gyro = config.fuse_gyro
         p_gate = config.slip_gate_probability
         self._gate = float(chi2.ppf(p_gate, 3)) if p_gate is not None else None
-        self._h_angles = _rows(_N, [{6: 1.0}, {7: 1.0}, {4: 1.0, 5: 1.0}])
         inv_r, half_b = 1.0 / wheel_radius_m, 0.5 * wheel_separation_m / wheel_radius_m
-        self._h_speeds = _rows(_N, [{3: inv_r, 4: -half_b}, {3: inv_r, 4: half_b}, {4: 1.0, 5: 1.0}])
-        self._h_still = _rows(_N, [{3: 1.0}, {4: 1.0}, {4: 1.0, 5: 1.0}])
-        self._wheel_rows = {id(h): np.asfortranarray(h[:2]) for h in (self._h_angles, self._h_speeds, self._h_still)}
-        self._sparse = {
-            id(h): [[(j, float(c)) for j, c in enumerate(row) if c] for row in h.tolist()]
-            for h in (self._h_angles, self._h_speeds, self._h_still)
-        }
+        # Measurement rows by kind (_ANGLES, _SPEEDS, _STILL); the third row is the gyro.
+        self._h = (
+            _rows(_N, [{6: 1.0}, {7: 1.0}, {4: 1.0, 5: 1.0}]),
+            _rows(_N, [{3: inv_r, 4: -half_b}, {3: inv_r, 4: half_b}, {4: 1.0, 5: 1.0}]),
+            _rows(_N, [{3: 1.0}, {4: 1.0}, {4: 1.0, 5: 1.0}]),
+        )
+        self._wheel_rows = tuple(np.asfortranarray(h[:2]) for h in self._h)
+        self._sparse = tuple([[(j, float(c)) for j, c in enumerate(row) if c] for row in h.tolist()] for h in self._h)
         self._still_var = (noise.standstill_speed_std_mps**2, noise.standstill_yaw_rate_std_radps**2)
         self._still_intervals = 0
         self._z = np.zeros(3)
@@ -366,7 +386,64 @@ class OdometryFilter:
         self.slip_detections = 0
         self._padded = np.zeros(_N * _N + 2)
         self._padded[-1] = UNOBSERVED_VARIANCE
+        kernel = load_ekf_kernel() if native else None
+        self.native = kernel is not None
+        """True when the compiled kernel steps the filter."""
+        # One step, `(t_ns, kind, moving, z_left, z_right, variance) -> estimate`: chosen once.
+        self._step: Callable[[int, int, bool, float, float, float], OdometryEstimate] = self._step_filterpy
+        if kernel is not None:
+            self._bind_kernel(kernel, inv_r=1.0 / wheel_radius_m, half_b=0.5 * wheel_separation_m)
+            self._step = self._step_native
         self._estimate = self._make_estimate(0)
+
+    def _bind_kernel(self, kernel: ctypes.CDLL, *, inv_r: float, half_b: float) -> None:
+        """Move the state into the kernel's workspace (`ekf.x` and `ekf.P` become views of it)."""
+        offsets = (ctypes.c_long * len(LAYOUT_NAMES))()
+        kernel.twin_ekf_layout(offsets)
+        at = dict(zip(LAYOUT_NAMES, offsets, strict=True))
+        ws_c = (ctypes.c_double * at["SIZE"])()
+        ws = np.frombuffer(ws_c, dtype=np.float64)
+        ekf = self.ekf
+        x = ws[at["X"] : at["X"] + _N]
+        p = ws[at["P"] : at["P"] + _N * _N].reshape(_N, _N)
+        x[:], p[:] = ekf.x, ekf.P
+        ws[at["PAD"] : at["PAD"] + 2] = (0.0, UNOBSERVED_VARIANCE)
+        gate = -1.0 if self._gate is None else self._gate
+        parameters = (
+            inv_r,
+            half_b,
+            *ekf.rate_variances,
+            ekf.slip_variance_per_rad,
+            _SLIP_RELEASE_RAD2,
+            gate,
+            float(self._fuse_gyro),
+            self._gyro_var,
+            *self._still_var,
+        )
+        ws[at["PAR"] : at["PAR"] + len(parameters)] = parameters
+        h = np.concatenate([rows.ravel(order="C") for rows in self._h])
+        ws[at["H"] : at["H"] + h.size] = h
+        ekf.x, ekf.P = x, p
+        ws[at["GATHER"] : at["GATHER"] + _BOTH_GATHER.size] = _BOTH_GATHER
+        self._ws_c = ws_c  # owns the memory of the views
+        self._kernel = kernel
+        self._in, self._in_end = at["IN"], at["IN"] + 9
+        self._out = ws[at["OUT"] : at["OUT"] + 6]
+        self._new_covariance_block()
+
+    def _new_covariance_block(self) -> None:
+        """Give the kernel fresh rows to write the published covariances into, one row per step.
+
+        Each estimate's covariances are views of their own row, which nothing writes again: the
+        estimate owns them without a copy per step.
+        """
+        block = np.empty((_COVARIANCE_ROWS, 72))
+        self._poses, self._twists = list(block[:, :36]), list(block[:, 36:])
+        self._row = 0
+        self._kernel_step = functools.partial(
+            self._kernel.twin_ekf_step, self._ws_c, ctypes.c_void_p(block.ctypes.data)
+        )
+        self._block = block
 
     @property
     def t_ns(self) -> int | None:
@@ -391,20 +468,23 @@ class OdometryFilter:
     def add_gyro(self, t_ns: int, yaw_rate_radps: float) -> None:
         """Integrate one gyro sample (z axis of a level IMU); it is fused at the next wheel reading.
 
-        Samples not after the previous one are ignored.
+        Samples not after the previous one, and samples that are not a finite number, are ignored.
         """
         last = self._gyro_last
         if last is None:
+            if not math.isfinite(yaw_rate_radps):
+                return
             if self._t_ns is not None:  # hold the first sample back to the last step
                 self._gyro_anchor_rad = -yaw_rate_radps * (t_ns - self._t_ns) * 1e-9
-        elif t_ns > last[0]:
-            if self._gyro_mean:
-                self._gyro_integral_rad += yaw_rate_radps * (t_ns - last[0]) * 1e-9
-            else:
-                self._gyro_integral_rad += 0.5 * (yaw_rate_radps + last[1]) * (t_ns - last[0]) * 1e-9
-                self._gyro_slope = (yaw_rate_radps - last[1]) / (t_ns - last[0])
         else:
-            return
+            dt_ns = t_ns - last[0]
+            if dt_ns <= 0 or not math.isfinite(yaw_rate_radps):
+                return
+            if self._gyro_mean:
+                self._gyro_integral_rad += yaw_rate_radps * dt_ns * 1e-9
+            else:
+                self._gyro_integral_rad += 0.5 * (yaw_rate_radps + last[1]) * dt_ns * 1e-9
+                self._gyro_slope = (yaw_rate_radps - last[1]) / dt_ns
         self._gyro_last = (t_ns, yaw_rate_radps)
         self._gyro_count += 1
 
@@ -414,8 +494,10 @@ class OdometryFilter:
         The first reading starts the filter (time and wheel angles) and returns the initial estimate.
 
         Raises:
-            EstimationError: If `t_ns` is not after the previous reading.
+            EstimationError: If `t_ns` is not after the previous reading, or a reading is not finite.
         """
+        if not (math.isfinite(left_rad) and math.isfinite(right_rad)):
+            raise EstimationError(_not_finite(t_ns, left_rad, right_rad))
         last = self._last_angles
         self._last_angles = (left_rad, right_rad)
         if self._t_ns is None or last is None:
@@ -423,9 +505,8 @@ class OdometryFilter:
             return self._start(t_ns)
         half_tick = self._half_tick
         moving = abs(left_rad - last[0]) > half_tick or abs(right_rad - last[1]) > half_tick
-        self._z[0], self._z[1] = left_rad, right_rad
-        self._r3[0, 0] = self._r3[1, 1] = self._angle_var
-        return self._step(t_ns, self._h_angles, moving=moving)
+        var = self._angle_var
+        return self._step(t_ns, _ANGLES, moving, left_rad, right_rad, var)
 
     def add_wheel_speeds(self, t_ns: int, left_radps: float, right_radps: float) -> OdometryEstimate:
         """Step the filter with the wheels' average speeds since the previous reading.
@@ -434,15 +515,16 @@ class OdometryFilter:
         `wheel_speed_std_radps` plus one tick over the interval.
 
         Raises:
-            EstimationError: If `t_ns` is not after the previous reading.
+            EstimationError: If `t_ns` is not after the previous reading, or a reading is not finite.
         """
+        if not (math.isfinite(left_radps) and math.isfinite(right_radps)):
+            raise EstimationError(_not_finite(t_ns, left_radps, right_radps))
         if self._t_ns is None:
             return self._start(t_ns)
         dt = self._dt(t_ns, self._t_ns)
         moving = max(abs(left_radps), abs(right_radps)) * dt > self._half_tick
-        self._z[0], self._z[1] = left_radps, right_radps
-        self._r3[0, 0] = self._r3[1, 1] = self._speed_var + self._tick_var / (dt * dt)
-        return self._step(t_ns, self._h_speeds, moving=moving)
+        var = self._speed_var + self._tick_var / (dt * dt)
+        return self._step(t_ns, _SPEEDS, moving, left_radps, right_radps, var)
 
     def _start(self, t_ns: int) -> OdometryEstimate:
         self._t_ns = t_ns
@@ -465,62 +547,130 @@ class OdometryFilter:
         tail_ns = t_ns - last[0]
         return self._gyro_integral_rad + (last[1] + 0.5 * self._gyro_slope * tail_ns) * tail_ns * 1e-9
 
-    def _step(self, t_ns: int, h_wheels: FloatArray, *, moving: bool) -> OdometryEstimate:
-        """Predict to `t_ns` and update with the wheel rows already in `_z[:2]`/`_r3[:2, :2]` and the gyro."""
+    def _step_filterpy(  # noqa: PLR0917 - the hot path takes plain numbers positionally
+        self, t_ns: int, kind: int, moving: bool, z_left: float, z_right: float, variance: float
+    ) -> OdometryEstimate:
+        """Predict to `t_ns` and update with two wheel readings of `kind` (each of `variance`) and the gyro."""
         assert self._t_ns is not None
         dt = self._dt(t_ns, self._t_ns)
-        ekf = self.ekf
-        ekf.dt = dt
-        ekf.predict()
-        z, r = self._z, self._r3
-        r[0, 1] = r[1, 0] = 0.0
+        r_left = r_right = variance
         self._still_intervals = 0 if moving else self._still_intervals + 1
-        standstill = self._still_intervals >= 2
-        h = h_wheels
-        if standstill:  # no tick for two intervals: the robot stands still (zero-velocity update)
-            h = self._h_still
-            z[0] = z[1] = 0.0
-            r[0, 0], r[1, 1] = self._still_var
+        if self._still_intervals >= 2:  # no tick for two intervals: the robot stands still (zero-velocity update)
+            kind = _STILL
+            z_left = z_right = 0.0
+            r_left, r_right = self._still_var
         mark, anchor = self._gyro_mark(t_ns), self._gyro_anchor_rad
         if self._fuse_gyro and self._gyro_count and mark is not None and anchor is not None:
-            z[2] = (mark - anchor) / dt
-            r[2, 2] = self._gyro_var / self._gyro_count
-            if moving:  # the gyro owns the yaw: turning wheels may slip
-                self._release_differential_travel(h)
-            y = self._innovation(h, 3)
-            if not ekf.update_linear(z, h, r, innovation=y, gate=self._gate):
-                self.slip_detections += 1
-                _log.debug("t=%d ns: wheels and gyro disagree beyond their noise; wheel slip assumed", t_ns)
-                if not moving:
-                    self._release_differential_travel(h)
-                ekf.update_linear(z, h, r, innovation=y)
+            fuse, z_gyro, r_gyro = True, (mark - anchor) / dt, self._gyro_var / self._gyro_count
         else:
-            ekf.update_linear(z[:2], self._wheel_rows[id(h)], r[:2, :2], innovation=self._innovation(h, 2))
+            fuse, z_gyro, r_gyro = False, 0.0, 0.0
+        if self._update_filterpy(dt, kind, moving, fuse, z_left, z_right, z_gyro, r_left, r_right, r_gyro):
+            self._slip_detected(t_ns)
         self._gyro_anchor_rad = mark
         self._gyro_count = 0
         self._t_ns = t_ns
         self._estimate = self._make_estimate(t_ns)
         return self._estimate
 
-    def _innovation(self, h: FloatArray, rows: int) -> FloatArray:
-        """`z - H x` for the first `rows` rows of one of the filter's sparse measurement matrices."""
+    def _step_native(  # noqa: PLR0917 - the hot path takes plain numbers positionally
+        self, t_ns: int, kind: int, moving: bool, z_left: float, z_right: float, variance: float
+    ) -> OdometryEstimate:
+        """`_step_filterpy` in the compiled kernel, which does the standstill and gyro logic too."""
+        assert self._t_ns is not None
+        dt = self._dt(t_ns, self._t_ns)
+        mark, anchor = self._gyro_mark(t_ns), self._gyro_anchor_rad
+        if mark is not None and anchor is not None:
+            turned_rad, count = mark - anchor, self._gyro_count
+        else:
+            turned_rad, count = 0.0, 0
+        row = self._row
+        if row == _COVARIANCE_ROWS:
+            self._new_covariance_block()
+            row = 0
+        self._row = row + 1
+        self._ws_c[self._in : self._in_end] = (
+            dt,
+            kind,
+            moving,
+            z_left,
+            z_right,
+            variance,
+            turned_rad,
+            count,
+            row,
+        )
+        status = self._kernel_step()
+        if status:
+            if status < 0:
+                raise EstimationError(_NOT_POSITIVE_DEFINITE)
+            self._slip_detected(t_ns)
+        self._gyro_anchor_rad = mark
+        self._gyro_count = 0
+        self._t_ns = t_ns
+        x, y, yaw, v, rate, bias = self._out.tolist()  # the kernel wrapped the yaw
+        estimate: OdometryEstimate = _new_estimate(
+            OdometryEstimate, (t_ns, x, y, yaw, v, rate, bias, self._poses[row], self._twists[row])
+        )
+        self._estimate = estimate
+        return estimate
+
+    def _slip_detected(self, t_ns: int) -> None:
+        self.slip_detections += 1
+        _log.debug("t=%d ns: wheels and gyro disagree beyond their noise; wheel slip assumed", t_ns)
+
+    def _update_filterpy(  # noqa: PLR0917 - one private call site
+        self,
+        dt: float,
+        kind: int,
+        moving: bool,
+        fuse: bool,
+        z_left: float,
+        z_right: float,
+        z_gyro: float,
+        r_left: float,
+        r_right: float,
+        r_gyro: float,
+    ) -> bool:
+        """Predict over `dt` and update through `SolvedEkf`; return True if the slip gate fired."""
+        ekf = self.ekf
+        ekf.dt = dt
+        ekf.predict()
+        z, r = self._z, self._r3
+        z[0], z[1], z[2] = z_left, z_right, z_gyro
+        r[0, 1] = r[1, 0] = 0.0
+        r[0, 0], r[1, 1], r[2, 2] = r_left, r_right, r_gyro
+        if not fuse:
+            ekf.update_linear(z[:2], self._wheel_rows[kind], r[:2, :2], innovation=self._innovation(kind, 2))
+            return False
+        if moving:  # the gyro owns the yaw: turning wheels may slip
+            self._release_differential_travel(kind)
+        h, y = self._h[kind], self._innovation(kind, 3)
+        if ekf.update_linear(z, h, r, innovation=y, gate=self._gate):
+            return False
+        if not moving:
+            self._release_differential_travel(kind)
+        ekf.update_linear(z, h, r, innovation=y)
+        return True
+
+    def _innovation(self, kind: int, rows: int) -> FloatArray:
+        """`z - H x` for the first `rows` rows of the measurement matrix of `kind`."""
         x = self.ekf.x.tolist()
         z = self._z
-        return np.array([z[i] - sum(c * x[j] for j, c in terms) for i, terms in enumerate(self._sparse[id(h)][:rows])])
+        return np.array([z[i] - sum(c * x[j] for j, c in terms) for i, terms in enumerate(self._sparse[kind][:rows])])
 
-    def _release_differential_travel(self, h: FloatArray) -> None:
+    def _release_differential_travel(self, kind: int) -> None:
         """Make the wheels' differential travel over this interval unknown; their common travel stays.
 
         With wheel angles the angle states take the freedom (so they re-anchor to the readings); with
         wheel speeds the speed measurement does; at standstill the zero yaw rate is dropped.
         """
-        if h is self._h_angles:
+        if kind == _ANGLES:
             p = self.ekf.P
             p[6, 6] += _SLIP_RELEASE_RAD2
             p[7, 7] += _SLIP_RELEASE_RAD2
             p[6, 7] -= _SLIP_RELEASE_RAD2
             p[7, 6] -= _SLIP_RELEASE_RAD2
-        elif h is self._h_speeds:
+        elif kind == _SPEEDS:
             self._r3[:2, :2] += _RELEASE
         else:
             self._r3[1, 1] += _SLIP_RELEASE_RAD2
@@ -532,6 +682,10 @@ class OdometryFilter:
         x, y, yaw, v, rate, bias, _, _ = self.ekf.x.tolist()
         yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
         return _new_estimate(OdometryEstimate, (t_ns, x, y, yaw, v, rate, bias, both[:36], both[36:]))
+
+
+def _not_finite(t_ns: int, left: float, right: float) -> str:
+    return f"wheel reading at t={t_ns} ns is not a finite number: left {left}, right {right}"
 
 
 def _rows(n: int, rows: list[dict[int, float]]) -> FloatArray:

@@ -172,12 +172,16 @@ class _ChannelNoise:
         # First-order Gauss-Markov drift, exact over one sample period: b' = phi b + sigma_d w, driven by
         # white noise of density dynamic_bias_stddev (as gz-sensors' GaussianNoiseModel).
         self._drift_axes = tuple(i for i, a in enumerate(axes) if a.drifts)
-        self._phi = np.ones(3)
-        self._sigma_d = np.zeros(3)
+        # Axes with the same drift (usually all three) are filtered in one call: (phi, sigma_d) -> axes.
+        groups: dict[tuple[float, float], list[int]] = {}
         for i in self._drift_axes:
             tau, sigma = axes[i].dynamic_bias_correlation_time_s, axes[i].dynamic_bias_stddev
-            self._phi[i] = math.exp(-dt_s / tau)
-            self._sigma_d[i] = sigma * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt_s / tau))
+            phi, sigma_d = math.exp(-dt_s / tau), sigma * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt_s / tau))
+            groups.setdefault((phi, sigma_d), []).append(i)
+        columns = {axis: col for col, axis in enumerate(self._drift_axes)}  # in the block's drift steps
+        self._drift_groups = tuple(
+            (phi, sigma_d, axes_, [columns[i] for i in axes_]) for (phi, sigma_d), axes_ in groups.items()
+        )
 
     def block(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Draw the next `_BLOCK` samples: the bias of each, and its total additive error (bias + white)."""
@@ -185,9 +189,9 @@ class _ChannelNoise:
         biases = np.repeat(self.bias[None, :], _BLOCK, axis=0)
         if self._drift_axes:
             steps = self._rng.standard_normal((_BLOCK, len(self._drift_axes)))
-            for col, i in enumerate(self._drift_axes):
-                zi = [self._phi[i] * self.bias[i]]
-                biases[:, i] = lfilter([self._sigma_d[i]], [1.0, -self._phi[i]], steps[:, col], zi=zi)[0]
+            for phi, sigma_d, axes, columns in self._drift_groups:
+                zi = (phi * self.bias[axes])[None, :]
+                biases[:, axes] = lfilter([sigma_d], [1.0, -phi], steps[:, columns], axis=0, zi=zi)[0]
             self.bias = biases[-1].copy()
         return biases + self._mean, white + biases
 
@@ -209,12 +213,15 @@ class ImuModel:
         self._accel = _ChannelNoise(spec.linear_acceleration_noise, accel_rng, dt_s)
         self._quantize = tuple(self._gyro.quantize) + tuple((i + 3, p) for i, p in self._accel.quantize)
         self._rows: list[list[float]] = []  # per sample: gyro x, y, z and accel x, y, z errors
-        self._biases: list[list[float]] = []
+        self._biases: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # gyro, accel: per sample
         self._next = _BLOCK
         qx, qy, qz, qw = quat_from_rpy(*spec.mount_rpy_rad)
         r = _rotation(qx, qy, qz, qw)  # IMU axes in chassis axes; readings are R^T times chassis vectors
         rx, ry = float(spec.mount_xyz_m[0]), float(spec.mount_xyz_m[1])
-        self._const = (*(float(v) for v in r.ravel()), rx, ry, spec.gravity_mps2, qx, qy, qz, qw)
+        rot = [float(v) for v in r.ravel()]
+        g = spec.gravity_mps2
+        gravity = (rot[6] * g, rot[7] * g, rot[8] * g)  # minus gravity in IMU axes (the chassis stays level)
+        self._const = (*rot, rx, ry, *gravity, qx, qy, qz, qw)
         self.orientation_covariance: tuple[float, ...] = (0.0,) * 9
         self.angular_velocity_covariance = _diagonal(spec.angular_velocity_noise)
         self.linear_acceleration_covariance = _diagonal(spec.linear_acceleration_noise)
@@ -227,22 +234,21 @@ class ImuModel:
     @property
     def accel_bias_mps2(self) -> Vec3:
         """The accelerometer's constant error (bias plus noise mean) at the last sample, per axis."""
-        return self._bias_at_last(3)
+        return self._bias_at_last(1)
 
-    def _bias_at_last(self, first: int) -> Vec3:
-        if not self._biases:
+    def _bias_at_last(self, channel: int) -> Vec3:
+        if self._biases is None:
             self._refill()
             self._next = 0
-            row = self._biases[0]
-        else:
-            row = self._biases[max(self._next - 1, 0)]
-        return (row[first], row[first + 1], row[first + 2])
+        assert self._biases is not None
+        x, y, z = self._biases[channel][max(self._next - 1, 0)].tolist()
+        return (x, y, z)
 
     def _refill(self) -> None:
         gyro_bias, gyro_error = self._gyro.block()
         accel_bias, accel_error = self._accel.block()
         self._rows = np.hstack((gyro_error, accel_error)).tolist()
-        self._biases = np.hstack((gyro_bias, accel_bias)).tolist()
+        self._biases = (gyro_bias, accel_bias)
         self._next = 0
 
     def sample(
@@ -269,7 +275,7 @@ class ImuModel:
             i = 0
         self._next = i + 1
         n0, n1, n2, n3, n4, n5 = self._rows[i]
-        r00, r01, r02, r10, r11, r12, r20, r21, r22, rx, ry, g, mx, my, mz, mw = self._const
+        r00, r01, r02, r10, r11, r12, r20, r21, r22, rx, ry, g0, g1, g2, mx, my, mz, mw = self._const
         w = yaw_rate_radps
         # Specific force at the IMU origin in chassis axes: a + alpha x r + w x (w x r) - g.
         w2 = w * w
@@ -277,24 +283,29 @@ class ImuModel:
         fy = accel_y_mps2 + yaw_accel_radps2 * rx - w2 * ry
         # World orientation of the IMU: q_world_chassis (yaw only) times q_chassis_imu.
         s, c = math.sin(0.5 * yaw_rad), math.cos(0.5 * yaw_rad)
-        values: tuple[float, ...] = (
-            c * mx - s * my,
-            c * my + s * mx,
-            c * mz + s * mw,
-            c * mw - s * mz,
-            r20 * w + n0,
-            r21 * w + n1,
-            r22 * w + n2,
-            r00 * fx + r10 * fy + r20 * g + n3,
-            r01 * fx + r11 * fy + r21 * g + n4,
-            r02 * fx + r12 * fy + r22 * g + n5,
+        reading: ImuReading = _new_reading(
+            ImuReading,
+            (
+                c * mx - s * my,
+                c * my + s * mx,
+                c * mz + s * mw,
+                c * mw - s * mz,
+                r20 * w + n0,
+                r21 * w + n1,
+                r22 * w + n2,
+                r00 * fx + r10 * fy + g0 + n3,
+                r01 * fx + r11 * fy + g1 + n4,
+                r02 * fx + r12 * fy + g2 + n5,
+            ),
         )
-        if self._quantize:
-            out = list(values)
-            for k, precision in self._quantize:
-                out[k + 4] = round(out[k + 4] / precision) * precision
-            values = tuple(out)
-        return _new_reading(ImuReading, values)
+        return self._quantized(reading) if self._quantize else reading
+
+    def _quantized(self, reading: ImuReading) -> ImuReading:
+        """Round the `gaussian_quantized` axes to their precision (Gazebo's `GaussianNoiseModel`)."""
+        out = list(reading)
+        for k, precision in self._quantize:
+            out[k + 4] = round(out[k + 4] / precision) * precision
+        return _new_reading(ImuReading, out)
 
 
 def _rotation(x: float, y: float, z: float, w: float) -> NDArray[np.float64]:

@@ -527,19 +527,21 @@ class Simulation:
                 linear_acceleration_covariance=imu.linear_acceleration_covariance,
             )
             add_gyro = ekf.add_gyro if ekf is not None and sc.estimation.fuse_gyro else None
+            sample, encode_imu, publish_imu = imu.sample, imu_enc.encode, imu_pub.publish
 
             # The gyro reports its mean rate over each sample period (an integrating MEMS gyro behind
             # its low-pass filter), so its samples add up to the true heading change; the EKF
             # integrates them by the rectangle rule (`gyro_samples="interval_mean"`).
-            last = [0, self.scenario.robot.initial_pose.yaw_rad]
+            last_t_ns, last_yaw = 0, self.scenario.robot.initial_pose.yaw_rad
 
             def imu_sample(t_ns: int) -> None:
+                nonlocal last_t_ns, last_yaw
                 s = chassis()
-                dt_ns = t_ns - last[0]
-                rate = math.remainder(s.yaw_rad - last[1], math.tau) * 1e9 / dt_ns if dt_ns > 0 else s.yaw_rate_radps
-                last[0], last[1] = t_ns, s.yaw_rad
-                r = imu.sample(s.yaw_rad, rate, s.yaw_accel_radps2, s.ax_mps2, s.ay_mps2)
-                imu_pub.publish(t_ns, imu_enc.encode(t_ns, *r))
+                yaw, dt_ns = s.yaw_rad, t_ns - last_t_ns
+                rate = math.remainder(yaw - last_yaw, math.tau) * 1e9 / dt_ns if dt_ns > 0 else s.yaw_rate_radps
+                last_t_ns, last_yaw = t_ns, yaw
+                r = sample(yaw, rate, s.yaw_accel_radps2, s.ax_mps2, s.ay_mps2)
+                publish_imu(t_ns, encode_imu(t_ns, *r))
                 if add_gyro is not None:
                     add_gyro(t_ns, r.angular_velocity_z)
 
@@ -637,24 +639,18 @@ class Simulation:
                 tf_pub.publish(t_ns, odom_tf.encode_planar(t_ns, s.x_m, s.y_m, s.yaw_rad))
 
         else:
-            add_wheel_positions = ekf.add_wheel_positions
+            add_wheel_positions, encode_odom, encode_tf = (
+                ekf.add_wheel_positions,
+                odom_enc.encode,
+                odom_tf.encode_planar,
+            )
 
             def odometry(t_ns: int) -> None:
-                est = add_wheel_positions(t_ns, *joints(t_ns, wheel_state()))
-                odom_pub.publish(
-                    t_ns,
-                    odom_enc.encode(
-                        t_ns,
-                        est.x_m,
-                        est.y_m,
-                        est.yaw_rad,
-                        est.v_mps,
-                        est.yaw_rate_radps,
-                        est.pose_covariance,
-                        est.twist_covariance,
-                    ),
+                _, x, y, yaw, v, yaw_rate, _, pose_cov, twist_cov = add_wheel_positions(
+                    t_ns, *joints(t_ns, wheel_state())
                 )
-                tf_pub.publish(t_ns, odom_tf.encode_planar(t_ns, est.x_m, est.y_m, est.yaw_rad))
+                odom_pub.publish(t_ns, encode_odom(t_ns, x, y, yaw, v, yaw_rate, pose_cov, twist_cov))
+                tf_pub.publish(t_ns, encode_tf(t_ns, x, y, yaw))
 
         self.scheduler.add(
             "odometry", self._encoders.spec.rate_hz, self._timed("odometry", odometry), priority=_P_STATE

@@ -2,25 +2,16 @@
 
 numpy pays a few microseconds per call on small arrays, and a scan needs dozens of calls; the
 same loop in C costs a few microseconds in all. The kernel is compiled on first use into the
-twin cache folder (`TWIN_CACHE_DIR`, default `~/.cache/twin`), keyed by a hash of its source,
-and loaded with ctypes. Without a C compiler the ray caster uses its numpy implementation, which
-gives the same ranges (the tests compare them).
+twin cache folder and loaded with ctypes (`twin.core.native`). Without a C compiler the ray
+caster uses its numpy implementation, which gives the same ranges (the tests compare them).
 """
 
 from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
-import logging
-import os
-import shutil
-import subprocess
-import sys
-import tempfile
-from pathlib import Path
 
-_log = logging.getLogger(__name__)
+from twin.core.native import CLibrary, load_library
 
 _SOURCE = r"""
 #include <math.h>
@@ -162,57 +153,14 @@ void twin_cast_rays(const double *seg, const long *seg_idx, long n_seg,
 """
 
 
-def cache_dir() -> Path:
-    """Return the folder where twin keeps built artefacts (`TWIN_CACHE_DIR`, else ~/.cache/twin)."""
-    env = os.environ.get("TWIN_CACHE_DIR")
-    if env:
-        return Path(env).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME")
-    return (Path(base) if base else Path.home() / ".cache") / "twin"
-
-
-def _compiler() -> str | None:
-    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if name and shutil.which(name):
-            return name
-    return None
-
-
 @functools.cache
 def load_kernel() -> ctypes.CDLL | None:
     """Return the compiled ray-casting kernel, building it on first use; None if unavailable.
 
-    Set `TWIN_NO_NATIVE=1` to force the numpy implementation.
+    Set `TWIN_NO_NATIVE=1` to force the numpy implementation (`twin.core.native`).
     """
-    if os.environ.get("TWIN_NO_NATIVE") or not sys.platform.startswith(("linux", "darwin")):
-        return None
-    digest = hashlib.sha256(_SOURCE.encode()).hexdigest()[:16]
-    target = cache_dir() / "kernels" / f"raycast-{digest}.so"
-    if not target.is_file():
-        compiler = _compiler()
-        if compiler is None:
-            _log.info("no C compiler found; the ray caster uses numpy (slower)")
-            return None
-        try:
-            target.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-                src = Path(tmp) / "raycast.c"
-                src.write_text(_SOURCE)
-                built = Path(tmp) / target.name
-                subprocess.run(
-                    [compiler, "-O2", "-shared", "-fPIC", "-o", str(built), str(src), "-lm"],
-                    check=True,
-                    capture_output=True,
-                    timeout=120,
-                )
-                os.replace(built, target)
-        except (OSError, subprocess.SubprocessError) as err:
-            _log.info("could not build the ray-casting kernel (%s); using numpy", err)
-            return None
-    try:
-        lib = ctypes.CDLL(str(target))
-    except OSError as err:
-        _log.info("could not load %s (%s); using numpy", target, err)
+    lib = load_library(CLibrary(name="raycast", source=_SOURCE))
+    if lib is None:
         return None
     ptr = ctypes.c_void_p
     lib.twin_cast_fan.restype = ctypes.c_int

@@ -1,4 +1,5 @@
-"""Fixtures for the estimation tests: the Gazebo fixture bag, read with rosbags (test-only), and a bag API."""
+"""Fixtures for the estimation tests: the filter's two implementations, the Gazebo fixture bag (read with rosbags,
+test-only), and a bag API."""
 
 from __future__ import annotations
 
@@ -13,6 +14,16 @@ from rosbags.typesys import Stores, get_typestore
 
 from twin.estimation.replay import ReplayInputs, collect_inputs
 from twin.robot.trajectory import Trajectory, default_test_drive, generate_trajectory
+
+
+@pytest.fixture(params=["native", "filterpy"])
+def ekf_backend(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Run the test once with the compiled kernel (when it builds) and once with filterpy alone (`TWIN_NO_NATIVE`)."""
+    if request.param == "filterpy":
+        monkeypatch.setenv("TWIN_NO_NATIVE", "1")
+    else:
+        monkeypatch.delenv("TWIN_NO_NATIVE", raising=False)
+    return str(request.param)
 
 
 @pytest.fixture(scope="session")

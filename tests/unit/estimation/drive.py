@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.estimation import EstimationSection, OdometryFilter
+from twin.estimation import EstimationSection, OdometryEstimate, OdometryFilter
 from twin.robot.disturbances import Disturbances
 from twin.robot.encoders import EncoderModel, EncoderSpec
 from twin.robot.imu import ImuModel, ImuSpec
@@ -15,6 +15,43 @@ from twin.robot.trajectory import Trajectory
 
 WHEEL_RADIUS_M = 0.033
 WHEEL_SEPARATION_M = 0.287
+STEP_NS = 33_333_333  # joint states at 30 Hz
+
+
+def make_filter(
+    config: EstimationSection | None = None, pose: tuple[float, float, float] = (0.0, 0.0, 0.0), *, native: bool = True
+) -> OdometryFilter:
+    """A TurtleBot3 filter (default config) at `pose`."""
+    return OdometryFilter(
+        config or EstimationSection(),
+        wheel_radius_m=WHEEL_RADIUS_M,
+        wheel_separation_m=WHEEL_SEPARATION_M,
+        initial_pose=pose,
+        native=native,
+    )
+
+
+def feed_perfect_wheels(
+    odom: OdometryFilter, seconds: float, v: float, w: float, *, gyro: float | None = None, start: int = 0
+) -> int:
+    """Feed perfect wheels (and six gyro readings `gyro` per step, default the true rate) for `seconds`.
+
+    Returns the next step index, to continue from.
+    """
+    r, b = WHEEL_RADIUS_M, WHEEL_SEPARATION_M
+    left, right = float(odom.state[6]), float(odom.state[7])
+    k = start
+    if odom.t_ns is None:  # the first reading only starts the filter
+        odom.add_wheel_positions(k * STEP_NS, left, right)
+    for _ in range(round(seconds * 30)):
+        k += 1
+        t = k * STEP_NS
+        for j in range(6, 0, -1):
+            odom.add_gyro(t - j * 5_000_000 + 1, w if gyro is None else gyro)
+        left += (v - w * b / 2) / r * STEP_NS * 1e-9
+        right += (v + w * b / 2) / r * STEP_NS * 1e-9
+        odom.add_wheel_positions(t, left, right)
+    return k
 
 
 @dataclass(frozen=True)
@@ -22,13 +59,16 @@ class DriveRun:
     """Filter estimates and ground truth at each filter step."""
 
     t_ns: NDArray[np.int64]
-    state: NDArray[np.float64]  # (N, 6): x, y, yaw (unwrapped), v, yaw_rate, gyro_bias
-    covariance: NDArray[np.float64]  # (N, 6, 6)
-    truth: NDArray[np.float64]  # (N, 6): same layout; rates are interval averages
+    state: NDArray[np.float64]  # (N, 8): x, y, yaw (unwrapped), v, yaw_rate, gyro_bias, wheel angles
+    covariance: NDArray[np.float64]  # (N, 8, 8)
+    truth: NDArray[np.float64]  # (N, 6): the first six states; rates are interval averages
     distance_m: float
+    estimates: list[OdometryEstimate]  # what /odom would publish at each step
+    native: bool  # the compiled kernel stepped the filter
+    slip_detections: int
 
     def errors(self) -> NDArray[np.float64]:
-        err = self.state - self.truth
+        err = self.state[:, :6] - self.truth
         err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
         return err
 
@@ -54,6 +94,7 @@ def run_drive(
     disturbances: Disturbances | None = None,
     encoder_spec: EncoderSpec | None = None,
     seed: int = 0,
+    native: bool = True,
 ) -> DriveRun:
     """Run the default TurtleBot3 sensors (with `disturbances`) and the EKF along `traj`.
 
@@ -71,6 +112,7 @@ def run_drive(
         wheel_radius_m=WHEEL_RADIUS_M,
         wheel_separation_m=WHEEL_SEPARATION_M,
         initial_pose=(float(traj.x_m[0]), float(traj.y_m[0]), float(traj.yaw_rad[0])),
+        native=native,
     )
     imu_idx = traj.indices_at_rate(imu.spec.rate_hz).tolist()
     enc_idx = traj.indices_at_rate(spec.rate_hz).tolist()
@@ -78,7 +120,7 @@ def run_drive(
     yaw, rate, accel = traj.yaw_rad.tolist(), traj.yaw_rate_radps.tolist(), traj.yaw_accel_radps2.tolist()
     ax, ay = traj.accel_x_mps2.tolist(), traj.accel_y_mps2.tolist()
     left, right = traj.wheel_left_rad.tolist(), traj.wheel_right_rad.tolist()
-    steps, states, covs, biases = [], [], [], []
+    steps, states, covs, biases, estimates = [], [], [], [], []
     j = 0
     for i in enc_idx:
         while j < len(imu_idx) and imu_idx[j] <= i:  # IMU samples up to and including this step
@@ -86,10 +128,10 @@ def run_drive(
             ekf.add_gyro(t[k], imu.sample(yaw[k], rate[k], accel[k], ax[k], ay[k]).angular_velocity_z)
             j += 1
         js = enc.read(t[i], left[i], right[i])
-        ekf.add_wheel_positions(t[i], js.position_left_rad, js.position_right_rad)
+        estimates.append(ekf.add_wheel_positions(t[i], js.position_left_rad, js.position_right_rad))
         steps.append(i)
-        states.append(ekf.ekf.x[:6].copy())
-        covs.append(ekf.ekf.P[:6, :6].copy())
+        states.append(ekf.state)
+        covs.append(ekf.covariance)
         biases.append(imu.gyro_bias_radps[2])
     idx = np.array(steps)
     t_ns = traj.t_ns[idx]
@@ -98,4 +140,6 @@ def run_drive(
     v_avg = np.concatenate(([0.0], np.diff(cum_v[idx]) / dt))
     w_avg = np.concatenate(([0.0], np.diff(traj.yaw_rad[idx]) / dt))
     truth = np.column_stack([traj.x_m[idx], traj.y_m[idx], traj.yaw_rad[idx], v_avg, w_avg, np.array(biases)])
-    return DriveRun(t_ns, np.array(states), np.array(covs), truth, traj.distance_m)
+    return DriveRun(
+        t_ns, np.array(states), np.array(covs), truth, traj.distance_m, estimates, ekf.native, ekf.slip_detections
+    )

@@ -7,37 +7,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.unit.estimation.drive import WHEEL_RADIUS_M, WHEEL_SEPARATION_M
+from tests.unit.estimation.drive import feed_perfect_wheels as drive
+from tests.unit.estimation.drive import make_filter as make
 from twin.core.config import load_config
 from twin.core.errors import ConfigError, EstimationError
 from twin.estimation import EstimationSection, OdometryFilter
 from twin.estimation.config import MeasurementNoise, ProcessNoise
 from twin.estimation.ekf import UNOBSERVED_VARIANCE, SolvedEkf
 
-R, B = 0.033, 0.287
+R, B = WHEEL_RADIUS_M, WHEEL_SEPARATION_M
 DT_NS = 33_333_333
 
-
-def make(config: EstimationSection | None = None, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> OdometryFilter:
-    return OdometryFilter(config or EstimationSection(), wheel_radius_m=R, wheel_separation_m=B, initial_pose=pose)
-
-
-def drive(
-    odom: OdometryFilter, seconds: float, v: float, w: float, *, gyro: float | None = None, start: int = 0
-) -> int:
-    """Feed perfect wheels (and a gyro reading `gyro`, default the true rate) for `seconds`; return the next step."""
-    left, right = odom.ekf.x[6], odom.ekf.x[7]
-    k = start
-    if odom.t_ns is None:  # the first reading only starts the filter
-        odom.add_wheel_positions(k * DT_NS, left, right)
-    for _ in range(round(seconds * 30)):
-        k += 1
-        t = k * DT_NS
-        for j in range(6, 0, -1):
-            odom.add_gyro(t - j * 5_000_000 + 1, w if gyro is None else gyro)
-        left += (v - w * B / 2) / R * DT_NS * 1e-9
-        right += (v + w * B / 2) / R * DT_NS * 1e-9
-        odom.add_wheel_positions(t, left, right)
-    return k
+pytestmark = pytest.mark.usefixtures("ekf_backend")
 
 
 def test_the_solved_joseph_update_equals_the_textbook_kalman_update() -> None:

@@ -24,6 +24,7 @@ def replay(capsys: pytest.CaptureFixture[str], *args: str | Path) -> tuple[int, 
     return code, out, err
 
 
+@pytest.mark.usefixtures("ekf_backend")
 def test_replaying_the_gazebo_bag_writes_a_bag_and_a_csv_and_reports_the_error(
     gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -50,6 +51,7 @@ def test_replaying_the_gazebo_bag_writes_a_bag_and_a_csv_and_reports_the_error(
     assert last.pose.covariance[14] == 1e12
 
 
+@pytest.mark.usefixtures("ekf_backend")
 def test_json_summary_for_scripts(
     gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -64,6 +66,7 @@ def test_json_summary_for_scripts(
     assert (tmp_path / "odometry" / "metadata.yaml").exists()
 
 
+@pytest.mark.usefixtures("ekf_backend")
 def test_the_unit_flag_is_reported_as_given(
     gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -113,6 +116,7 @@ def test_an_existing_output_bag_is_not_overwritten(
     assert "exists and is not empty; choose another --out" in err
 
 
+@pytest.mark.usefixtures("ekf_backend")
 def test_filter_settings_come_from_an_estimation_section(
     gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -18,7 +18,7 @@ from twin.estimation import EstimationSection
 from twin.robot.disturbances import Disturbances, SlipRegion, WheelSlip
 from twin.robot.trajectory import Trajectory, default_test_drive, generate_trajectory
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("ekf_backend")]
 
 ACCURACY_SEEDS = range(3)
 NEES_RUNS = 12

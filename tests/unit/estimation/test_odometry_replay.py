@@ -21,6 +21,8 @@ from twin.estimation.replay import (
 
 R, B = 0.033, 0.287
 
+pytestmark = pytest.mark.usefixtures("ekf_backend")
+
 
 def run(inputs: ReplayInputs, **kwargs: object) -> tuple[float, float]:
     result = replay(inputs, EstimationSection(), wheel_radius_m=R, wheel_separation_m=B, **kwargs)  # type: ignore[arg-type]

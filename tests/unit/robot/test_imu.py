@@ -112,6 +112,36 @@ def test_dynamic_bias_is_a_gauss_markov_process_as_gz_sensors_drives_it() -> Non
     assert corr == pytest.approx(math.exp(-1.0), abs=0.1)
 
 
+def test_each_axis_drifts_with_its_own_correlation_time_and_density() -> None:
+    # Axes that drift alike are filtered together; each must still follow b' = phi b + sigma_d w with
+    # its own phi and sigma_d (w standard normal), and an axis without drift must keep its bias.
+    def drift(sigma: float, tau: float) -> GaussianNoise:
+        return GaussianNoise(
+            stddev=1e-4, bias_stddev=1e-3, dynamic_bias_stddev=sigma, dynamic_bias_correlation_time_s=tau
+        )
+
+    gyro = (drift(1e-3, 2.0), GaussianNoise(stddev=1e-4, bias_stddev=1e-3), drift(4e-3, 0.25))
+    accel = (drift(1e-2, 0.5), drift(1e-2, 0.5), drift(3e-2, 0.5))
+    imu = make(ImuSpec(angular_velocity_noise=gyro, linear_acceleration_noise=accel))
+    rows = []
+    for _ in range(4000):
+        imu.sample(0.0, 0.0, 0.0, 0.0, 0.0)
+        rows.append((*imu.gyro_bias_radps, *imu.accel_bias_mps2))
+    biases = np.array(rows)
+    dt = 1.0 / 200.0
+    for axis, noise in enumerate((*gyro, *accel)):
+        b = biases[:, axis]
+        if not noise.drifts:
+            assert np.all(b == b[0]) and b[0] != 0.0
+            continue
+        tau, sigma = noise.dynamic_bias_correlation_time_s, noise.dynamic_bias_stddev
+        phi = math.exp(-dt / tau)
+        sigma_d = sigma * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt / tau))
+        w = (b[1:] - phi * b[:-1]) / sigma_d
+        assert w.std() == pytest.approx(1.0, abs=0.05), axis
+        assert abs(w.mean()) < 0.1, axis
+
+
 def test_quantised_noise_rounds_to_the_precision() -> None:
     spec = ImuSpec(
         linear_acceleration_noise=three_axes(GaussianNoise(type="gaussian_quantized", stddev=0.05, precision=0.01))
