@@ -2,7 +2,8 @@
 
 Prints JSON: real-time factor, CPU ms per simulated second, and each subsystem's share of the loop,
 for two configurations of the same scenario:
-  foundation  kinematic drive, lidar at 5 Hz, recording; ground-truth /odom, no IMU (issue 2's scope)
+  foundation  kinematic drive, lidar at 5 Hz, recording; ground-truth /odom, no IMU, the hand-made
+              house tour instead of the tree and planner (issue 2's scope)
   full        the default scenario as shipped: IMU at 200 Hz, encoders, EKF /odom, ground truth
 Speed is compared as ratios within one run (this machine is shared and noisy), never asserted.
 
@@ -27,9 +28,10 @@ from twin.sim.simulation import Simulation
 
 
 def foundation(scenario):  # type: ignore[no-untyped-def]
-    """The scenario without the IMU and the EKF: /odom is the ground truth, as Gazebo's diff drive gives."""
+    """The scenario without IMU, EKF, tree and planner: Gazebo-like /odom, the house tour's waypoints."""
     sensors = dataclasses.replace(scenario.sensors, imu=dataclasses.replace(scenario.sensors.imu, enabled=False))
-    return dataclasses.replace(scenario, sensors=sensors, odometry="ground_truth")
+    tour = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / "house_tour.yaml").mission
+    return dataclasses.replace(scenario, sensors=sensors, odometry="ground_truth", mission=tour)
 
 
 def run_once(scenario, sim_s: float, *, profile: bool) -> dict[str, object]:  # type: ignore[no-untyped-def]
