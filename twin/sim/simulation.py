@@ -246,7 +246,8 @@ class Simulation:
             raise ConfigError(msg)
         self.robot = robot
         scene = build_scene(world, exclude_models=(robot.name,))
-        self._monitor = CollisionMonitor(scene, scene.robot_body(robot.collisions, base_height_m=robot.base_height_m))
+        body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
+        self._monitor = CollisionMonitor(scene, body)
         pose = scenario.robot.initial_pose
         spawn_contacts = self._monitor.check(pose.x_m, pose.y_m, pose.yaw_rad)
         if spawn_contacts:
@@ -257,18 +258,16 @@ class Simulation:
             )
             raise ConfigError(msg)
         self.lidar = Lidar.from_robot(robot, scene, self._rng.stream("lidar")) if robot.lidar is not None else None
-        body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
         self.drive = self._make_drive(body.radius_m)
-        self._wheels = self._wheel_frames()
-        self._imu = self._make_imu()
-        self._encoders, self._ekf = self._make_odometry()
-        self.mission = self._make_mission(scene, body)
-        self._run_to_limit = duration_s is not None
-        limit_ns = s_to_ns(scenario.max_duration_s if duration_s is None else duration_s)
-        self.end_k = -(-limit_ns // self.step_ns)
-        self._setup_s = time.perf_counter() - t0
-
-        try:
+        try:  # from here on, a failure must release the drive (FMU instances) it leaves behind
+            self._wheels = self._wheel_frames()
+            self._imu = self._make_imu()
+            self._encoders, self._ekf = self._make_odometry()
+            self.mission = self._make_mission(scene, body)
+            self._run_to_limit = duration_s is not None
+            limit_ns = s_to_ns(scenario.max_duration_s if duration_s is None else duration_s)
+            self.end_k = -(-limit_ns // self.step_ns)
+            self._setup_s = time.perf_counter() - t0
             self.recorder = Recorder(
                 bag_path, storage=scenario.recording.storage, distro=scenario.recording.distro, write_log=write_log
             )
