@@ -145,19 +145,29 @@ def _escape(text: str) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
 
 
-def _convert(elem: etree._Element, file: Path | None) -> XmlNode:
-    children = tuple(_convert(child, file) for child in elem if isinstance(child.tag, str))
+def _convert(elem: etree._Element, file: Path | None, line_offset: int = 0) -> XmlNode:
+    children = tuple(_convert(child, file, line_offset) for child in elem if isinstance(child.tag, str))
     return XmlNode(
         tag=str(elem.tag),
         attrib=tuple((str(k), str(v)) for k, v in elem.attrib.items()),
         text=(elem.text or "").strip(),
         children=children,
         file=file,
-        line=elem.sourceline or 0,
+        line=(elem.sourceline or 0) + line_offset,
     )
 
 
-_PARSER = etree.XMLParser(remove_comments=True, remove_pis=True, resolve_entities=False, huge_tree=True)
+def _parser() -> etree.XMLParser:
+    # A parser per document: its error log then holds that document's problems only. `recover`
+    # keeps going past the slips Gazebo's own XML reader (tinyxml2) never checks; `_parse` still
+    # refuses every other error.
+    return etree.XMLParser(remove_comments=True, remove_pis=True, resolve_entities=False, huge_tree=True, recover=True)
+
+
+#: libxml2 errors that tinyxml2, and so Gazebo, lets through: prefixes never declared with xmlns
+#: (`<gz:system_priority>`, `<experimental:params>`, SDF's custom elements) and `--` inside a comment.
+_TOLERATED_TYPES = frozenset({"ERR_HYPHEN_IN_COMMENT"})
+_TOLERATED_DOMAINS = frozenset({"NAMESPACE"})
 
 
 def parse_file(path: Path) -> XmlNode:
@@ -184,18 +194,35 @@ def parse_string(text: str, source: Path | None = None) -> XmlNode:
 
 
 def _parse(data: bytes, path: Path | None) -> XmlNode:
+    """Parse as Gazebo does: well-formed XML, forgiving only what tinyxml2 forgives.
+
+    Beyond undeclared prefixes and `--` in comments, blank lines before the XML declaration are
+    accepted (they are cut, and line numbers still count them).
+    """
     where = str(path) if path is not None else "<string>"
-    if not data.strip():
+    body = data.lstrip()
+    if not body:
         msg = f"{where}: the file is empty; expected an SDF document (<sdf version=...>)"
         raise WorldError(msg)
+    skipped_lines = data[: len(data) - len(body)].count(b"\n")
+    parser = _parser()
     try:
-        root = etree.fromstring(data, _PARSER)
+        root = etree.fromstring(body, parser)
     except etree.XMLSyntaxError as err:
         line, column = err.position if err.position else (err.lineno or 0, 0)
         reason = (err.msg or str(err)).split(", line ")[0]
-        msg = f"{where}:{line}:{column}: malformed XML: {reason}"
+        msg = f"{where}:{line + skipped_lines}:{column}: malformed XML: {reason}"
         raise WorldError(msg) from None
-    return _convert(root, path)
+    for entry in parser.error_log:
+        if entry.domain_name in _TOLERATED_DOMAINS or entry.type_name in _TOLERATED_TYPES:
+            continue
+        reason = entry.message.strip()
+        msg = f"{where}:{entry.line + skipped_lines}:{entry.column}: malformed XML: {reason}"
+        raise WorldError(msg)
+    if root is None:
+        msg = f"{where}:1:0: malformed XML: no root element"
+        raise WorldError(msg)
+    return _convert(root, path, skipped_lines)
 
 
 def parse_pose(node: XmlNode | None) -> Mat4:

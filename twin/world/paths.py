@@ -8,13 +8,25 @@ set up for Gazebo Classic (`GAZEBO_MODEL_PATH`) or gz-sim (`GZ_SIM_RESOURCE_PATH
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from urllib.parse import unquote, urlsplit
 
 from twin.core.errors import WorldError
 from twin.world._xml import parse_file
 
-__all__ = ["MAX_SDF_VERSION", "find_model_dir", "model_file", "resolve_resource", "sdf_version", "search_path"]
+__all__ = [
+    "MAX_SDF_VERSION",
+    "find_model_dir",
+    "fuel_cache_roots",
+    "fuel_model_dir",
+    "fuel_model_name",
+    "model_file",
+    "resolve_resource",
+    "sdf_version",
+    "search_path",
+]
 
 #: The newest SDFormat version this loader knows.
 MAX_SDF_VERSION = (1, 11)
@@ -116,7 +128,8 @@ def resolve_resource(uri: str, *, base_dir: Path, search: Sequence[Path]) -> Pat
 
     Understands `model://NAME/rest` and `package://NAME/rest` (both against the search path),
     `file://` URIs, absolute paths and paths relative to the SDF file that names them (`base_dir`).
-    Web URIs (`http://`, `https://`) are never fetched: they resolve to None.
+    Web URIs (`http://`, `https://`) are never fetched: a Fuel URI resolves to its copy in a local
+    Fuel cache (see `fuel_model_dir`), any other to None.
     """
     uri = uri.strip()
     for scheme in ("model://", "package://"):
@@ -128,7 +141,7 @@ def resolve_resource(uri: str, *, base_dir: Path, search: Sequence[Path]) -> Pat
                     return candidate
             return None
     if uri.startswith(("http://", "https://")):
-        return None
+        return _fuel_file(uri)
     if uri.startswith("file://"):
         uri = uri[len("file://") :]
     path = Path(uri).expanduser()
@@ -139,3 +152,93 @@ def resolve_resource(uri: str, *, base_dir: Path, search: Sequence[Path]) -> Pat
         if candidate.exists():
             return candidate
     return None
+
+
+# --- Gazebo Fuel's local cache ---------------------------------------------------------------------
+
+#: `https://fuel.gazebosim.org/1.0/OpenRobotics/models/Radio/4/files/meshes/Radio.dae`: host, owner,
+#: model name, then an optional version (a number or `tip`) and an optional `files/<path>`.
+_FUEL_URI = re.compile(
+    r"^/(?:[\d.]+/)?(?P<owner>[^/]+)/models/(?P<name>[^/]+)(?:/(?P<version>\d+|tip))?(?:/files/(?P<rest>.+))?/?$"
+)
+
+
+def fuel_cache_roots(env: Mapping[str, str] | None = None) -> tuple[Path, ...]:
+    """Return the folders where gz-sim (and Ignition before it) keep downloaded Fuel models.
+
+    `GZ_FUEL_CACHE_PATH` and `IGN_FUEL_CACHE_PATH` when set, then `~/.gz/fuel` and `~/.ignition/fuel`.
+    """
+    env = os.environ if env is None else env
+    roots = [Path(env[name]).expanduser() for name in ("GZ_FUEL_CACHE_PATH", "IGN_FUEL_CACHE_PATH") if env.get(name)]
+    home = Path(env.get("HOME") or Path.home())
+    roots += [home / ".gz" / "fuel", home / ".ignition" / "fuel"]
+    return tuple(dict.fromkeys(roots))
+
+
+def _child(folder: Path, name: str) -> Path | None:
+    """Return `folder/name`, matching the name without regard to case (Fuel lowercases owners and models)."""
+    exact = folder / name
+    if exact.exists():
+        return exact
+    if not folder.is_dir():
+        return None
+    wanted = name.lower()
+    for entry in folder.iterdir():
+        if entry.name.lower() == wanted:
+            return entry
+    return None
+
+
+def _fuel_parts(uri: str) -> tuple[str, str, str, str | None, str | None] | None:
+    parts = urlsplit(uri.strip())
+    match = _FUEL_URI.match(unquote(parts.path))
+    if not parts.netloc or match is None:
+        return None
+    version = match["version"] if match["version"] != "tip" else None
+    return parts.netloc, match["owner"], match["name"], version, match["rest"]
+
+
+def _fuel_version_dir(uri: str, env: Mapping[str, str] | None) -> tuple[Path, str | None] | None:
+    found = _fuel_parts(uri)
+    if found is None:
+        return None
+    host, owner, name, version, rest = found
+    for root in fuel_cache_roots(env):
+        folder: Path | None = root
+        for part in (host, owner, "models", name):
+            folder = _child(folder, part) if folder is not None else None
+        model = folder
+        if model is None or not model.is_dir():
+            continue
+        if version is not None:
+            chosen = _child(model, version)
+        else:
+            versions = [entry for entry in model.iterdir() if entry.is_dir() and entry.name.isdigit()]
+            chosen = max(versions, key=lambda entry: int(entry.name)) if versions else None
+        if chosen is not None and chosen.is_dir():
+            return chosen, rest
+    return None
+
+
+def fuel_model_dir(uri: str, env: Mapping[str, str] | None = None) -> Path | None:
+    """Return the local copy of a Fuel model URI (the newest cached version unless one is named), or None.
+
+    Gazebo keeps what it downloads under `<cache>/<host>/<owner>/models/<name>/<version>/`; a world
+    written for Fuel therefore loads offline on any machine that has run it in Gazebo once.
+    """
+    found = _fuel_version_dir(uri, env)
+    return found[0] if found is not None and found[1] is None else None
+
+
+def _fuel_file(uri: str, env: Mapping[str, str] | None = None) -> Path | None:
+    found = _fuel_version_dir(uri, env)
+    if found is None or found[1] is None:
+        return None
+    path = found[0] / found[1]
+    return path if path.exists() else None
+
+
+def fuel_model_name(uri: str) -> str | None:
+    """Return the model name a Fuel URI names (`Ground Plane`), or None if it is not a Fuel model URI."""
+    found = _fuel_parts(uri)
+    return found[2] if found is not None else None

@@ -37,6 +37,8 @@ from twin.world._xml import XmlNode, parse_file, parse_pose, parse_string
 from twin.world.paths import (
     MAX_SDF_VERSION,
     find_model_dir,
+    fuel_model_dir,
+    fuel_model_name,
     model_file,
     resolve_resource,
     sdf_version,
@@ -223,7 +225,8 @@ _UNDERSTOOD_PLUGINS = (
 
 
 def _norm_model_name(text: str) -> str:
-    return text.strip().rstrip("/").rsplit("/", 1)[-1].lower().replace(" ", "_").replace("-", "_")
+    name = fuel_model_name(text) or text.strip().rstrip("/").rsplit("/", 1)[-1]
+    return name.lower().replace(" ", "_").replace("-", "_")
 
 
 # --- raw (unresolved) structures -----------------------------------------------------------------
@@ -245,6 +248,8 @@ class _RawModel:
     frames: list[XmlNode] = field(default_factory=list)
     models: list[_RawModel] = field(default_factory=list)
     plugins: list[Plugin] = field(default_factory=list)
+    #: Names of the nested includes that could not be resolved and were skipped with a warning.
+    skipped: set[str] = field(default_factory=set)
 
     @property
     def pose_node(self) -> XmlNode | None:
@@ -290,6 +295,9 @@ class _Scope:
             head, rest = name.split("::", 1)
             if head in self._entries and self._entries[head][0] == "model":
                 return self.T(head, where) @ self.nested(head).T(rest, where)
+        if name not in self._entries and name == self.raw.name:
+            # The model's own name for its frame: Gazebo accepts it where `__model__` is meant.
+            return self._cache["__model__"]
         if name not in self._entries:
             for other, (kind, raw) in self._entries.items():
                 if kind == "model" and isinstance(raw, _RawModel) and raw.merged and self.nested(other).has(name):
@@ -410,6 +418,9 @@ class _Loader:
                 included = self.include(child, file, parent_static=static)
                 if included is not None:
                     raw.models.append(included)
+                else:
+                    uri = child.text_at("uri") or ""
+                    raw.skipped.add(child.text_at("name") or fuel_model_name(uri) or uri.rstrip("/").rsplit("/", 1)[-1])
             elif tag == "plugin":
                 raw.plugins.append(self.plugin(child))
             else:
@@ -434,9 +445,11 @@ class _Loader:
         if known is None or child.tag in known:
             return
         self.unknown.append(child)
+        # `prefix:name` is SDF's custom element (a simulator's own extension), not a typo.
+        what = "custom element" if ":" in child.tag else "unknown element"
         self.warn(
             f"unknown:{parent}/{child.tag}",
-            f"{child.where}: unknown element <{child.tag}> in <{parent}>; kept as data and ignored",
+            f"{child.where}: {what} <{child.tag}> in <{parent}>; kept as data and ignored",
         )
 
     def plugin(self, node: XmlNode) -> Plugin:
@@ -466,8 +479,8 @@ class _Loader:
             if uri.startswith(("http://", "https://")):
                 self.warn(
                     f"include:{uri}",
-                    f"{node.where}: cannot fetch <include> {uri!r} offline; skipped "
-                    "(download the model into a folder on the model path to use it)",
+                    f"{node.where}: cannot fetch <include> {uri!r} offline and it is in no local Fuel cache; "
+                    "skipped (`gz fuel download -u URI` caches it, or put the model on the model path)",
                 )
                 return None
             msg = (
@@ -516,7 +529,10 @@ class _Loader:
             name = uri.split("://", 1)[1]
             path = find_model_dir(name, search)
         elif uri.startswith(("http://", "https://")):
-            path = find_model_dir(uri.rstrip("/").rsplit("/", 1)[-1], search)
+            # The local Fuel cache first, then a folder of the model's name on the model path.
+            path = fuel_model_dir(uri) or find_model_dir(
+                fuel_model_name(uri) or uri.rstrip("/").rsplit("/", 1)[-1], search
+            )
         else:
             path = resolve_resource(uri, base_dir=file.parent, search=search)
         if path is None:
@@ -573,11 +589,17 @@ class _Loader:
                     base_dir=base_dir,
                 )
             )
-        joints = [self.build_joint(node, raw, scope, T_world_model, link_world) for node in raw.joints]
+        joints = [
+            self.build_joint(node, raw, scope, T_world_model, link_world)
+            for node in raw.joints
+            if not self.on_skipped(raw, node, (node.text_at("parent") or "", node.text_at("child") or ""))
+        ]
         frames = []
         for node in raw.frames:
             name = node.get("name") or ""
             attached = node.get("attached_to") or ""
+            if self.on_skipped(raw, node, (attached,)):
+                continue
             T_model_frame = scope.T(name, node.where)
             if attached in link_world:
                 T_world = link_world[attached] @ inverse(scope.T(attached, node.where)) @ T_model_frame
@@ -618,6 +640,19 @@ class _Loader:
             source=raw.file,
             sdf_version=f"{raw.version[0]}.{raw.version[1]}",
         )
+
+    def on_skipped(self, raw: _RawModel, node: XmlNode, frames: tuple[str, ...]) -> bool:
+        """Warn and return True if a joint or frame attaches to a model whose include was skipped."""
+        for frame in frames:
+            head = frame.split("::", 1)[0]
+            if head in raw.skipped:
+                self.warn(
+                    f"on-skipped:{node.where}",
+                    f"{node.where}: <{node.tag}> {node.get('name')!r} refers to {frame!r}, whose <include> "
+                    "was skipped; it is skipped too",
+                )
+                return True
+        return False
 
     def element_pose(self, node: XmlNode, scope: _Scope, T_model_link: Mat4, link_name: str) -> Mat4:
         """Return the pose of a collision/visual/sensor/inertial in its link frame."""
@@ -788,6 +823,9 @@ class _Loader:
         geom = node.find("geometry")
         label = f"{what} {node.get('name')!r} of link {link!r} in model {model!r}"
         if geom is None:
+            if not collision:
+                self.warn(f"visual-geometry:{node.where}", f"{node.where}: {label} has no <geometry>; skipped")
+                return None
             msg = f"{node.where}: {label} has no <geometry>"
             raise WorldError(msg)
         shapes = [c for c in geom.children if c.tag in _GEOMETRY_TAGS]
@@ -827,6 +865,14 @@ class _Loader:
                 msg = f"{shape.where}: <mesh> of {label} needs a <uri>"
                 raise WorldError(msg)
             path = resolve_resource(uri, base_dir=base_dir, search=self.fallback_search(base_dir))
+            if (path is None or not path.is_file()) and uri.startswith(("http://", "https://")):
+                # A Fuel mesh that is in no local Fuel cache: like a web <include>, never fetched.
+                self.warn(
+                    f"mesh:{uri}",
+                    f"{shape.where}: cannot fetch {what} mesh {uri!r} offline and it is in no local Fuel cache; "
+                    f"that {what} of link {link!r} in model {model!r} is skipped (`gz fuel download` caches it)",
+                )
+                return None
             if path is None or not path.is_file():
                 if collision:
                     msg = (
