@@ -36,7 +36,13 @@ _CONSTRUCTOR = yaml.constructor.SafeConstructor()
 
 
 def suggest(word: str, choices: Sequence[str]) -> str:
-    """Return `; did you mean 'x'?` for the closest choice, or a list of the valid ones."""
+    """Return `; did you mean 'x'?` for the closest choice, or a list of the valid ones.
+
+    Settings carry their unit in the name (`x_m`, `yaw_rad`), so `x` is matched to `x_m` first.
+    """
+    with_unit = [c for c in choices if c.startswith(f"{word}_")]
+    if len(with_unit) == 1:
+        return f"; did you mean {with_unit[0]!r}? (settings name their unit)"
     close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
     if close:
         return f"; did you mean {close[0]!r}?"

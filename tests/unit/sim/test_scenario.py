@@ -37,6 +37,15 @@ def test_scenario_typo_names_file_line_key_and_fix(tmp_path: Path) -> None:
         load_scenario(path)
 
 
+def test_a_key_without_its_unit_is_pointed_to_the_unit_named_one(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text("robot:\n  initial_pose: {x_m: 1.0, yaw: 0.5}\n")
+    with pytest.raises(
+        ConfigError, match=rf"^{path}:2: robot.initial_pose.yaw: unknown key; did you mean 'yaw_rad'\? \(settings name"
+    ):
+        load_scenario(path)
+
+
 def test_overriding_one_key_keeps_the_rest(tmp_path: Path) -> None:
     path = tmp_path / "s.yaml"
     path.write_text("name: t\nrobot: {model: turtlebot3_burger}\nrecording: {storage: sqlite3}\n")
