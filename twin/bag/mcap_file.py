@@ -151,6 +151,8 @@ def _chunk_index(
     index_offsets: Mapping[int, int],
     index_length: int,
     size: int,
+    compression: str = "",
+    compressed_size: int | None = None,
 ) -> bytes:
     offsets = b"".join(_U16.pack(ch) + _U64.pack(off) for ch, off in index_offsets.items())
     content = (
@@ -158,8 +160,8 @@ def _chunk_index(
         + _U32.pack(len(offsets))
         + offsets
         + _U64.pack(index_length)
-        + _string("")
-        + _U64.pack(size)
+        + _string(compression)
+        + _U64.pack(size if compressed_size is None else compressed_size)
         + _U64.pack(size)
     )
     return _record(OP_CHUNK_INDEX, content)
@@ -480,11 +482,15 @@ class _ChunkInfo:
     end_ns: int
     size: int
     compression: str
+    compressed_size: int
     channels: NDArray[np.uint16]
     times: NDArray[np.uint64]
     offsets: NDArray[np.uint64]
     index_offsets: dict[int, int] = field(default_factory=dict)
     index_length: int = 0
+    #: Schema and Channel records written inside the chunk (other writers put them there).
+    schemas: list[SchemaRecord] = field(default_factory=list)
+    channel_records: list[ChannelRecord] = field(default_factory=list)
 
 
 @dataclass(kw_only=True, slots=True)
@@ -530,10 +536,13 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
     start_ns, end_ns, size = cur.u64(), cur.u64(), cur.u64()
     cur.u32()  # crc, checked by readers that want to
     compression = cur.string()
-    records = _decompress(compression, cur.take(cur.u64()), size)
+    compressed_size = cur.u64()
+    records = _decompress(compression, cur.take(compressed_size), size)
     channels: list[int] = []
     times: list[int] = []
     offsets: list[int] = []
+    schemas: list[SchemaRecord] = []
+    channel_records: list[ChannelRecord] = []
     inner = _Cursor(records)
     while inner.pos < len(records):
         rec_start = inner.pos
@@ -545,6 +554,10 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
             body.u32()
             times.append(body.u64())
             offsets.append(rec_start)
+        elif op == OP_SCHEMA:
+            schemas.append(_schema_record(body))
+        elif op == OP_CHANNEL:
+            channel_records.append(_channel_record(body))
     return _ChunkInfo(
         offset=offset,
         length=length,
@@ -552,10 +565,25 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
         end_ns=end_ns,
         size=size,
         compression=compression,
+        compressed_size=compressed_size,
         channels=np.array(channels, dtype=np.uint16),
         times=np.array(times, dtype=np.uint64),
         offsets=np.array(offsets, dtype=np.uint64),
+        schemas=schemas,
+        channel_records=channel_records,
     )
+
+
+def _schema_record(cur: _Cursor) -> SchemaRecord:
+    sid = cur.u16()
+    name, encoding = cur.string(), cur.string()
+    return SchemaRecord(id=sid, name=name, encoding=encoding, data=cur.take(cur.u32()))
+
+
+def _channel_record(cur: _Cursor) -> ChannelRecord:
+    cid, sid = cur.u16(), cur.u16()
+    topic, encoding = cur.string(), cur.string()
+    return ChannelRecord(id=cid, schema_id=sid, topic=topic, message_encoding=encoding, metadata=cur.mapping())
 
 
 def _records(view: memoryview, pos: int) -> Iterator[tuple[int, int, int]]:
@@ -591,18 +619,16 @@ def scan_mcap(path: Path) -> McapScan:
                 cur.string()
                 scan.library = cur.string()
             elif op == OP_SCHEMA:
-                sid = cur.u16()
-                name, encoding = cur.string(), cur.string()
-                scan.schemas[sid] = SchemaRecord(id=sid, name=name, encoding=encoding, data=cur.take(cur.u32()))
+                schema = _schema_record(cur)
+                scan.schemas[schema.id] = schema
             elif op == OP_CHANNEL:
-                cid, sid = cur.u16(), cur.u16()
-                topic, encoding = cur.string(), cur.string()
-                scan.channels[cid] = ChannelRecord(
-                    id=cid, schema_id=sid, topic=topic, message_encoding=encoding, metadata=cur.mapping()
-                )
+                channel = _channel_record(cur)
+                scan.channels[channel.id] = channel
             elif op == OP_CHUNK:
                 last_chunk = _parse_chunk(view, offset, 9 + length)
                 scan.chunks.append(last_chunk)
+                scan.schemas.update((schema.id, schema) for schema in last_chunk.schemas)
+                scan.channels.update((channel.id, channel) for channel in last_chunk.channel_records)
             elif op == OP_MESSAGE_INDEX and last_chunk is not None:
                 ch = cur.u16()
                 last_chunk.index_offsets[ch] = offset
@@ -695,6 +721,8 @@ def recover_mcap(path: Path) -> McapRecovery:
                 index_offsets=c.index_offsets,
                 index_length=c.index_length,
                 size=c.size,
+                compression=c.compression,
+                compressed_size=c.compressed_size,
             )
             for c in scan.chunks
         ]

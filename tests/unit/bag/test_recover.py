@@ -151,3 +151,40 @@ def test_recover_refuses_what_it_cannot_recover(tmp_path: Path) -> None:
     (tmp_path / "junkdb" / "junkdb_0.db3").write_bytes(b"not a database" * 100)
     with pytest.raises(BagError, match="cannot recover"):
         recover_bag(tmp_path / "junkdb")
+
+
+def test_another_writers_zstd_chunks_holding_their_schemas_recover(tmp_path: Path) -> None:
+    """Writers such as rosbag2's and the mcap libraries put Schema and Channel records inside
+    (compressed) chunks; a killed file of theirs must recover with its topics, not as an empty bag."""
+    import struct
+
+    from mcap.writer import CompressionType, Writer
+
+    bag = tmp_path / "other"
+    bag.mkdir()
+    file = bag / "other_0.mcap"
+    with file.open("wb") as stream:
+        writer = Writer(stream, chunk_size=2000, compression=CompressionType.ZSTD)
+        writer.start(profile="ros2", library="another writer")
+        schema = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        channel = writer.register_channel("/chatter", "cdr", schema)
+        for i in range(1, 501):
+            text = f"hello {i}".encode() + b"\0"
+            writer.add_message(
+                channel, log_time=i, publish_time=i, data=b"\0\1\0\0" + struct.pack("<I", len(text)) + text
+            )
+        writer.finish()
+    with file.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    assert len(chunks) >= 4 and {c.compression for c in chunks} == {"zstd"}
+    kept = chunks[len(chunks) // 2]
+    cut = kept.chunk_start_offset + kept.chunk_length + 5  # inside its message indexes, as a kill leaves it
+    file.write_bytes(file.read_bytes()[:cut])
+    report = recover_bag(bag)
+    expected = kept.message_end_time  # log times run 1, 2, 3, ...
+    assert report.message_count == expected
+    _valid_everywhere(bag, expected)
+    meta = (bag / "metadata.yaml").read_text()
+    assert "name: /chatter" in meta and "type: std_msgs/msg/String" in meta
