@@ -156,7 +156,12 @@ def _check(args: argparse.Namespace) -> int:
         }
         print(json.dumps(doc, indent=2))
         return 0 if report.ok else 4
-    interfaces = [n for n, v in (("Co-Simulation", info.co_simulation), ("Model Exchange", info.model_exchange)) if v]
+    kinds = (
+        ("Co-Simulation", info.co_simulation),
+        ("Model Exchange", info.model_exchange),
+        ("Scheduled Execution", info.scheduled_execution),
+    )
+    interfaces = [name for name, identifier in kinds if identifier]
     print(f"{path}")
     print(f"  FMI {info.fmi_version}, {info.model_name!r}, {' + '.join(interfaces) or 'no interface'}")
     if info.generation_tool:

@@ -239,7 +239,12 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
         )
     problems = []
     if info.co_simulation is None:
-        problems.append("no Co-Simulation interface (Model Exchange only)")
+        only = [
+            n
+            for n, i in (("Model Exchange", info.model_exchange), ("Scheduled Execution", info.scheduled_execution))
+            if i
+        ]
+        problems.append("no Co-Simulation interface" + (f" ({' + '.join(only)} only)" if only else ""))
     if info.major_version not in (2, 3):
         problems.append(f"FMI {info.fmi_version} is not supported")
     for name in mapping.start():

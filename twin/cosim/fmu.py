@@ -59,6 +59,10 @@ class VariableInfo:
     description: str
 
 
+def _identifier(interface: object) -> str | None:
+    return str(getattr(interface, "modelIdentifier", "")) or None if interface is not None else None
+
+
 @dataclass(frozen=True, kw_only=True, slots=True)
 class FmuInfo:
     """What twin needs from a model description."""
@@ -71,6 +75,7 @@ class FmuInfo:
     co_simulation: str | None  # model identifier, or None without a Co-Simulation interface
     model_exchange: str | None
     guid: str
+    scheduled_execution: str | None = None  # FMI 3 Scheduled Execution (not stepped by the twin)
     variable_step: bool
     variables: Mapping[str, VariableInfo]
     units: Mapping[str, Unit]
@@ -128,6 +133,7 @@ def read_fmu_info(path: Path) -> FmuInfo:
         co_simulation=cs.modelIdentifier if cs is not None else None,
         model_exchange=md.modelExchange.modelIdentifier if md.modelExchange is not None else None,
         guid=md.guid or "",
+        scheduled_execution=_identifier(getattr(md, "scheduledExecution", None)),
         variable_step=bool(cs.canHandleVariableCommunicationStepSize) if cs is not None else False,
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),

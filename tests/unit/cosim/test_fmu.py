@@ -10,6 +10,7 @@ import pytest
 from tests.unit.cosim.helpers import acme
 from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
+from twin.cosim.contract import FmuMapping, Profile, check_contract
 from twin.cosim.fmu import FmuFile, read_fmu_info
 
 
@@ -114,3 +115,24 @@ def test_model_exchange_only_fmu_is_refused_for_stepping(tmp_path: Path) -> None
     assert read_fmu_info(me_only).co_simulation is None
     with pytest.raises(FmuError, match=r"no Co-Simulation interface"):
         FmuFile(me_only)
+
+
+@pytest.mark.parametrize(
+    ("element", "named"), [("ModelExchange", "Model Exchange"), ("ScheduledExecution", "Scheduled Execution")]
+)
+def test_check_names_the_interface_an_fmu_has_instead_of_co_simulation(
+    tmp_path: Path, element: str, named: str
+) -> None:
+    source = resolve_fmu("builtin:xl430_w250", fmi_version=3)
+    other = tmp_path / "other.fmu"
+    with zipfile.ZipFile(source) as src, zipfile.ZipFile(other, "w") as dst:
+        for item in src.namelist():
+            data = src.read(item)
+            if item == "modelDescription.xml":
+                data = data.replace(b"<CoSimulation", f"<{element}".encode())
+            dst.writestr(item, data)
+    info = read_fmu_info(other)
+    assert info.co_simulation is None
+    report = check_contract(info, FmuMapping(), Profile.VOLTAGE)
+    assert not report.ok
+    assert f"no Co-Simulation interface ({named} only)" in report.problems
