@@ -142,3 +142,64 @@ def test_errors_of_a_bad_tree_are_one_line_without_traceback(tmp_path: Path) -> 
     assert result.returncode == 6
     assert result.stderr.strip().count("\n") == 0
     assert f"{tree}:4: malformed XML" in result.stderr
+
+
+_PALETTE = """<root BTCPP_format="4">
+  <TreeNodesModel>
+    <Action ID="DriveOnHeading">
+      <input_port name="dist_to_travel" default="0.15"/>
+      <input_port name="speed" default="0.025"/>
+      <output_port name="error_code_id"/>
+    </Action>
+    <Action ID="FollowPath">
+      <input_port name="path"/>
+      <input_port name="controller_id"/>
+      <output_port name="tracking_feedback"/>
+    </Action>
+    <Condition ID="IsBatteryLow"><input_port name="min_battery"/></Condition>
+  </TreeNodesModel>
+</root>
+"""
+
+_USES_PALETTE = """<root BTCPP_format="4" main_tree_to_execute="M">
+  <BehaviorTree ID="M">
+    <Sequence>
+      <Inverter><IsBatteryLow min_battery="0.2"/></Inverter>
+      <DriveOnHeading dist_to_travel="2.0" speed="0.2"/>
+      <FollowPath path="{path}" controller_id="FollowPath" tracking_feedback="{fb}"/>
+    </Sequence>
+  </BehaviorTree>
+</root>
+"""
+
+
+def test_validate_and_show_take_node_types_from_a_palette(tmp_path: Path) -> None:
+    palette = tmp_path / "nodes.xml"
+    palette.write_text(_PALETTE)
+    tree = tmp_path / "calibrate.xml"
+    tree.write_text(_USES_PALETTE)
+    without = twin("tree", "validate", tree)
+    assert without.returncode == 6
+    assert "unknown node type <IsBatteryLow>" in without.stderr
+    assert "unknown port 'tracking_feedback' of <FollowPath>" in without.stderr  # the built-in Nav2 list's ports
+    with_palette = twin("tree", "validate", tree, "--nodes", palette)
+    assert with_palette.returncode == 0, with_palette.stderr
+    assert "declared without implementation here: DriveOnHeading, FollowPath, IsBatteryLow" in with_palette.stdout
+    shown = twin("tree", "show", tree, "--nodes", palette)
+    assert shown.returncode == 0, shown.stderr
+    assert "DriveOnHeading" in shown.stdout and "IsBatteryLow" in shown.stdout
+    # the palette's ports are checked like any other: a typo is still one line
+    tree.write_text(_USES_PALETTE.replace('speed="0.2"', 'sped="0.2"'))
+    typo = twin("tree", "validate", tree, "--nodes", palette)
+    assert typo.returncode == 6
+    assert f"{tree}:5: unknown port 'sped' of <DriveOnHeading>" in typo.stderr
+
+
+def test_a_palette_without_tree_nodes_model_is_one_clear_line(tmp_path: Path) -> None:
+    not_palette = tmp_path / "tree.xml"
+    not_palette.write_text(_USES_PALETTE)
+    result = twin("tree", "validate", REPO / "trees" / "tree.xml", "--nodes", not_palette)
+    assert result.returncode != 0
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no <TreeNodesModel> here" in lines[0] and str(not_palette) in lines[0]
+    assert "Traceback" not in result.stderr

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from twin.bt.factory import BehaviorTreeFactory
-from twin.bt.loader import TreeParser, XmlElement, check_ports, parse_conditions
+from twin.bt.loader import BUILTIN_TAGS, TreeParser, XmlElement, _model_ports, check_ports, parse_conditions, parse_xml
 from twin.bt.node import ConditionNode, ControlNode, DecoratorNode, NodeConfig, NodeManifest, SyncActionNode, TreeNode
 from twin.bt.script import ScriptSyntaxError, parse_script
 from twin.bt.status import NodeKind, NodeStatus
@@ -25,7 +25,14 @@ from twin.bt.values import ConversionError, PortType
 from twin.core.config import suggest
 from twin.core.errors import TreeError
 
-__all__ = ["ValidationReport", "load_for_display", "stub_node", "validate_file", "validate_text"]
+__all__ = [
+    "ValidationReport",
+    "declare_node_models",
+    "load_for_display",
+    "stub_node",
+    "validate_file",
+    "validate_text",
+]
 
 _SCRIPT_PORTS = {"Script": "code", "ScriptCondition": "code", "Precondition": "if"}
 
@@ -203,6 +210,52 @@ def _validate(load: Callable[[TreeParser], None], source: str, factory: Behavior
         declared_only=tuple(sorted(declared_only)),
         version=version,
     )
+
+
+def declare_node_models(factory: BehaviorTreeFactory, path: Path) -> list[str]:
+    """Declare every node type of a `<TreeNodesModel>` file on the factory, without implementation.
+
+    Such a file is a node palette: Groot's export, or Nav2's `nav2_tree_nodes.xml` listing every
+    Nav2 plugin with its ports. Types with an implementation keep their own ports; the palette
+    replaces bare declarations (the twin's own list of Nav2 leaves follows one Nav2 release).
+    Returns the IDs declared.
+
+    Raises:
+        TreeError: If the file cannot be read, is malformed, has no `<TreeNodesModel>`, or an
+            entry has no ID (each `file:line: ...`).
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as err:
+        msg = f"{path}: cannot read: {err.strerror or err}"
+        raise TreeError(msg) from None
+    root = parse_xml(text, str(path))
+    models = [root] if root.tag == "TreeNodesModel" else [c for c in root.children if c.tag == "TreeNodesModel"]
+    if not models:
+        msg = f"{root.location}: no <TreeNodesModel> here; --nodes takes a node palette such as nav2_tree_nodes.xml"
+        raise TreeError(msg)
+
+    def fail(location: str, message: str) -> None:
+        raise TreeError(f"{location}: {message}")
+
+    declared = []
+    for entry in (e for model in models for e in model.children):
+        kind = BUILTIN_TAGS.get(entry.tag)
+        if kind is None or kind is NodeKind.SUBTREE:
+            continue
+        node_id = entry.attrs.get("ID")
+        if not node_id:
+            fail(entry.location, f"<{entry.tag}> in <TreeNodesModel> needs an ID attribute")
+            continue
+        existing = factory.manifests.get(node_id)
+        if existing is not None:
+            if existing.bound:
+                continue  # an implementation declares its own ports
+            factory.unregister(node_id)  # a declaration only (such as Nav2's leaves): the palette is newer
+        ports = _model_ports(entry, fail)
+        factory.declare_node_type(node_id, kind, ports.values(), description=f"declared in {path}")
+        declared.append(node_id)
+    return declared
 
 
 def validate_file(path: Path, factory: BehaviorTreeFactory) -> ValidationReport:

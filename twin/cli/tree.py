@@ -6,6 +6,7 @@ import argparse
 import json
 import random
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +28,7 @@ from twin.bt.node import TreeNode
 from twin.bt.ports import bidirectional_port, is_allowed_port_name
 from twin.bt.status import NodeKind, NodeStatus
 from twin.bt.tree import ManualClock, Tree
-from twin.bt.validate import load_for_display, validate_file
+from twin.bt.validate import declare_node_models, load_for_display, validate_file
 from twin.core.clock import NS_PER_S
 from twin.core.errors import TreeError
 
@@ -69,12 +70,17 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
             "name in a BTCPP_format=\"4\" file. Prints one 'file:line: problem' line per problem on stderr "
             "and exits 6 when there is any."
         ),
-        epilog="example:\n  twin tree validate trees/tree.xml",
+        epilog=(
+            "examples:\n"
+            "  twin tree validate trees/tree.xml\n"
+            "  twin tree validate my_nav2_tree.xml --nodes nav2_behavior_tree/nav2_tree_nodes.xml"
+        ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
     validate.add_argument("file", type=Path, metavar="FILE", help="BT.CPP XML file")
     validate.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
+    _add_nodes_option(validate)
     validate.set_defaults(func=_validate)
 
     show = sub.add_parser(
@@ -87,6 +93,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     )
     show.add_argument("file", type=Path, metavar="FILE", help="BT.CPP XML file")
     show.add_argument("--main-tree", metavar="ID", help="the tree to show (default: main_tree_to_execute)")
+    _add_nodes_option(show)
     show.set_defaults(func=_show)
 
     conformance = sub.add_parser(
@@ -153,12 +160,28 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     log.set_defaults(func=_log_command)
 
 
-def _factory(*, seed: int = 0, polls_to_arrive: int = 3) -> BehaviorTreeFactory:
+def _add_nodes_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--nodes",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="PALETTE.xml",
+        help=(
+            "declare the node types of a <TreeNodesModel> file (a Groot palette, Nav2's nav2_tree_nodes.xml) "
+            "without implementation, for checking; repeatable"
+        ),
+    )
+
+
+def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] = ()) -> BehaviorTreeFactory:
     factory = BehaviorTreeFactory(nav2=True)
     register_mission_nodes(
         factory, navigator=ScriptedNavigator(polls_to_arrive=polls_to_arrive), rng=random.Random(seed)
     )
     factory.load_plugins()
+    for palette in nodes:
+        declare_node_models(factory, palette)
     return factory
 
 
@@ -166,7 +189,7 @@ def _factory(*, seed: int = 0, polls_to_arrive: int = 3) -> BehaviorTreeFactory:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    report = validate_file(args.file, _factory())
+    report = validate_file(args.file, _factory(nodes=args.nodes))
     if args.json:
         print(
             json.dumps(
@@ -235,7 +258,7 @@ def render_outline(tree: Tree) -> str:
 
 
 def _show(args: argparse.Namespace) -> int:
-    tree = load_for_display(args.file, _factory(), main_tree=args.main_tree)
+    tree = load_for_display(args.file, _factory(nodes=args.nodes), main_tree=args.main_tree)
     main = tree.subtrees[0].tree_id
     print(f"{args.file}: tree {main}, {len(tree.nodes)} nodes")
     print(render_outline(tree))
