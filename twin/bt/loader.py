@@ -39,7 +39,7 @@ from twin.core.errors import TreeError
 if TYPE_CHECKING:
     from twin.bt.factory import BehaviorTreeFactory
 
-__all__ = ["Document", "TreeParser", "XmlElement", "parse_xml"]
+__all__ = ["Document", "TreeParser", "XmlElement", "model_ports", "parse_xml"]
 
 BUILTIN_TAGS: Final = {kind.value: kind for kind in NodeKind}
 
@@ -243,7 +243,7 @@ def _check_v4_names(root: XmlElement, report: Report, strict: bool) -> None:
                     )
 
 
-def _model_ports(element: XmlElement, report: Report) -> dict[str, PortSpec]:
+def model_ports(element: XmlElement, report: Report) -> dict[str, PortSpec]:
     """Ports of one `<TreeNodesModel>` entry (untyped; defaults kept as strings)."""
     ports: dict[str, PortSpec] = {}
     directions = {
@@ -397,7 +397,7 @@ class TreeParser:
                             NodeManifest(
                                 kind=BUILTIN_TAGS[entry.tag],
                                 registration_id=entry.attrs["ID"],
-                                ports=_model_ports(entry, report),
+                                ports=model_ports(entry, report),
                                 description=f"declared in <TreeNodesModel> of {document.source}",
                                 bound=False,
                             ),
@@ -465,7 +465,7 @@ class TreeParser:
         for model in (child for child in document.root.children if child.tag == "TreeNodesModel"):
             for entry in model.children:
                 if entry.tag == "SubTree" and entry.attrs.get("ID"):
-                    self.subtree_models.setdefault(entry.attrs["ID"], {}).update(_model_ports(entry, self.report))
+                    self.subtree_models.setdefault(entry.attrs["ID"], {}).update(model_ports(entry, self.report))
 
     # -- instantiation -------------------------------------------------------------------------
 

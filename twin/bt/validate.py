@@ -14,9 +14,10 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from pathlib import Path
+from typing import NoReturn
 
 from twin.bt.factory import BehaviorTreeFactory
-from twin.bt.loader import BUILTIN_TAGS, TreeParser, XmlElement, _model_ports, check_ports, parse_conditions, parse_xml
+from twin.bt.loader import BUILTIN_TAGS, TreeParser, XmlElement, check_ports, model_ports, parse_conditions, parse_xml
 from twin.bt.node import ConditionNode, ControlNode, DecoratorNode, NodeConfig, NodeManifest, SyncActionNode, TreeNode
 from twin.bt.script import ScriptSyntaxError, parse_script
 from twin.bt.status import NodeKind, NodeStatus
@@ -235,7 +236,7 @@ def declare_node_models(factory: BehaviorTreeFactory, path: Path) -> list[str]:
         msg = f"{root.location}: no <TreeNodesModel> here; --nodes takes a node palette such as nav2_tree_nodes.xml"
         raise TreeError(msg)
 
-    def fail(location: str, message: str) -> None:
+    def fail(location: str, message: str) -> NoReturn:
         raise TreeError(f"{location}: {message}")
 
     declared = []
@@ -246,13 +247,12 @@ def declare_node_models(factory: BehaviorTreeFactory, path: Path) -> list[str]:
         node_id = entry.attrs.get("ID")
         if not node_id:
             fail(entry.location, f"<{entry.tag}> in <TreeNodesModel> needs an ID attribute")
-            continue
         existing = factory.manifests.get(node_id)
         if existing is not None:
             if existing.bound:
                 continue  # an implementation declares its own ports
             factory.unregister(node_id)  # a declaration only (such as Nav2's leaves): the palette is newer
-        ports = _model_ports(entry, fail)
+        ports = model_ports(entry, fail)
         factory.declare_node_type(node_id, kind, ports.values(), description=f"declared in {path}")
         declared.append(node_id)
     return declared

@@ -60,7 +60,10 @@ class VariableInfo:
 
 
 def _identifier(interface: object) -> str | None:
-    return str(getattr(interface, "modelIdentifier", "")) or None if interface is not None else None
+    """The model identifier of an fmpy interface description (None when the FMU lacks it)."""
+    if interface is None:
+        return None
+    return str(getattr(interface, "modelIdentifier", "") or "") or None
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
