@@ -449,10 +449,13 @@ class _Base:
     _n_in: int
     _n_out: int
 
+    # The FMI 2 and FMI 3 adapters below implement these four; this base is never stepped itself.
     def step(self, t_s: float) -> None:
+        """Set the inputs, advance one communication step from `t_s`, and read the outputs."""
         raise NotImplementedError
 
     def read_outputs(self) -> None:
+        """Read the mapped outputs into their buffer."""
         raise NotImplementedError
 
     _FUNCTIONS: tuple[str, str, str] = ("set", "doStep", "get")
@@ -501,9 +504,11 @@ class _Base:
             self._set_one(var, value)
 
     def _set_one(self, var: VariableInfo, value: float) -> None:
+        """Set one variable through the FMI version's typed setter."""
         raise NotImplementedError
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
+        """Instantiate, apply start values and enter and leave initialisation mode."""
         raise NotImplementedError
 
     def _call(self, function: str, t_s: float, action: Any) -> None:
