@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 
 __all__ = ["EXTRA_DEFINITIONS", "MessageDefinition", "TypeRegistry"]
 
+
 @dataclass(frozen=True, kw_only=True, slots=True)
 class MessageDefinition:
     """What a bag stores about a message type."""
