@@ -31,21 +31,28 @@ class EkfNode(Node):
         add_wheel_positions = ekf.add_wheel_positions
 
         def on_joint_states(msg: Any) -> None:
-            read = joint_positions(msg, names)
-            if read is None:
-                return
-            t_ns, (left, right) = read
+            if type(msg) is Encoded:
+                t_ns, (left, right), _ = msg[2]
+            else:
+                read = joint_positions(msg, names)
+                if read is None:
+                    return
+                t_ns, (left, right) = read
             _, x, y, yaw, v, yaw_rate, _, pose_cov, twist_cov = add_wheel_positions(t_ns, left, right)
             odom_pub.publish(
-                Encoded(encode_odom, (t_ns, x, y, yaw, v, yaw_rate, pose_cov, twist_cov), (x, y, yaw, v, yaw_rate))
+                Encoded((encode_odom, (t_ns, x, y, yaw, v, yaw_rate, pose_cov, twist_cov), (x, y, yaw, v, yaw_rate)))
             )
-            tf_pub.publish(Encoded(encode_tf, (t_ns, x, y, yaw)))
+            tf_pub.publish(Encoded((encode_tf, (t_ns, x, y, yaw), None)))
 
         if fuse_gyro:
             add_gyro = ekf.add_gyro
 
             def on_imu(msg: Any) -> None:
-                add_gyro(*imu_yaw_rate(msg))
+                if type(msg) is Encoded:
+                    t_ns, reading = msg[2]
+                    add_gyro(t_ns, reading.angular_velocity_z)
+                else:
+                    add_gyro(*imu_yaw_rate(msg))
 
             self.create_subscription("sensor_msgs/msg/Imu", "/imu", on_imu, 10, raw=True)
         self.create_subscription("sensor_msgs/msg/JointState", "/joint_states", on_joint_states, 10, raw=True)

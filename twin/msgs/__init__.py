@@ -67,6 +67,81 @@ def _short_names() -> dict[str, str]:
     return names
 
 
+_DTYPES = {
+    "bool": "bool",
+    "byte": "uint8",
+    "char": "uint8",
+    "int8": "int8",
+    "uint8": "uint8",
+    "int16": "int16",
+    "uint16": "uint16",
+    "int32": "int32",
+    "uint32": "uint32",
+    "int64": "int64",
+    "uint64": "uint64",
+    "float32": "float32",
+    "float64": "float64",
+}
+
+
+def _default(desc: tuple[Any, Any]) -> Any:
+    """Return a fresh default value for one field description of the type store (rclpy's defaults)."""
+    import numpy as np
+
+    kind, args = desc
+    if kind == 1:  # a base type: (name, string bound)
+        base = args[0]
+        return "" if base in ("string", "wstring") else False if base == "bool" else 0.0 if "float" in base else 0
+    if kind == 2:  # a message
+        return get_message(args)()
+    inner, size = args
+    if kind == 3 and inner[0] == 1 and inner[1][0] in _DTYPES:  # a fixed array of numbers
+        return np.zeros(size, dtype=_DTYPES[inner[1][0]])
+    if kind == 3:
+        return [_default(inner) for _ in range(size)]
+    if inner[0] == 1 and inner[1][0] in _DTYPES:  # a sequence of numbers
+        return np.zeros(0, dtype=_DTYPES[inner[1][0]])
+    return []
+
+
+@functools.cache
+def _class(msgtype: str) -> type:
+    """The message class with rclpy's conveniences: every field optional, with its default."""
+    base = typestore().types[msgtype]
+    fields: Any = typestore().fielddefs[msgtype][1]
+    names = [n for n, _ in fields]
+    descs = dict(fields)
+
+    def init(self: Any, *args: Any, **kwargs: Any) -> None:
+        for name, value in zip(names, args, strict=False):
+            kwargs[name] = value
+        for name in names:
+            if name not in kwargs:
+                kwargs[name] = _default(descs[name])
+        base.__init__(self, **kwargs)
+
+    return type(base.__name__, (base,), {"__init__": init, "__doc__": f"ROS 2 message {msgtype}."})
+
+
+def _normalize(msg: Any, msgtype: str) -> Any:
+    """Turn lists given for number arrays into the numpy arrays the serialiser takes (rclpy takes both)."""
+    import numpy as np
+
+    fields: Any = typestore().fielddefs[msgtype][1]
+    for name, (kind, args) in fields:
+        value = getattr(msg, name)
+        if kind == 2:
+            _normalize(value, args)
+        elif kind in (3, 4):
+            inner = args[0]
+            if inner[0] == 1 and inner[1][0] in _DTYPES and not isinstance(value, np.ndarray):
+                setattr(msg, name, np.asarray(value, dtype=_DTYPES[inner[1][0]]))
+            elif inner[0] == 2:
+                for item in value:
+                    _normalize(item, inner[1])
+    return msg
+
+
 def get_message(name: str) -> type:
     """Return the message class for a short (`Twist`) or full (`geometry_msgs/msg/Twist`) name.
 
@@ -77,12 +152,11 @@ def get_message(name: str) -> type:
     full = name if "/" in name else _short_names().get(name, "")
     if "/" in name and "/msg/" not in name and name.count("/") == 1:
         full = name.replace("/", "/msg/")  # geometry_msgs/Twist, as ROS 1 and launch files write it
-    cls = types.get(full)
-    if cls is None:
+    if full not in types:
         choices = list(_short_names()) if "/" not in name else [t for t in types if "/msg/" in t]
         msg = f"no ROS 2 message type {name!r}{suggest(name, choices)}"
         raise ConfigError(msg)
-    return cls
+    return _class(full)
 
 
 def message_type_name(msg_type: type | str) -> str:
@@ -103,7 +177,10 @@ def message_type_name(msg_type: type | str) -> str:
 def serialize(msg: Any, msgtype: str | None = None) -> bytes:
     """Return a message's CDR bytes (little endian, as rosbag2 stores them)."""
     name = msgtype or msg.__msgtype__
-    return bytes(typestore().serialize_cdr(msg, name))
+    try:
+        return bytes(typestore().serialize_cdr(msg, name))
+    except (TypeError, AttributeError, ValueError):
+        return bytes(typestore().serialize_cdr(_normalize(msg, name), name))
 
 
 def deserialize(data: bytes | memoryview, msgtype: str) -> Any:

@@ -81,7 +81,10 @@ class MissionNode(Node):
         pose = list(initial_pose)
 
         def on_odom(msg: Any) -> None:
-            pose[0], pose[1], pose[2] = odometry_pose(msg)
+            if type(msg) is Encoded:
+                pose[0], pose[1], pose[2] = msg[2][:3]
+            else:
+                pose[0], pose[1], pose[2] = odometry_pose(msg)
 
         if tree_rate_hz is not None:
             self._add_tree(mission, tree_rate_hz)  # type: ignore[arg-type]
@@ -91,15 +94,10 @@ class MissionNode(Node):
 
         def on_timer(t_ns: int) -> None:
             v, w = command(t_ns, pose[0], pose[1], pose[2])
-            cmd_pub.publish(Encoded(encode, (v, w), (v, w)))
+            cmd_pub.publish(Encoded((encode, (v, w), (v, w))))
 
         self.create_rate_timer(command_rate_hz, on_timer, priority=PRIORITY_COMMAND)
         self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
-
-    @property
-    def done(self) -> bool:
-        """Whether the mission is over."""
-        return self.mission.done
 
     def _add_tree(self, mission: TreeMissionLike, rate_hz: float) -> None:
         bt_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "/behavior_tree_log", 10)
@@ -113,11 +111,11 @@ class MissionNode(Node):
             changes = mission.tick(t_ns)
             if changes:
                 events = [(c.t_ns, mission.node_name(c.uid), c.prev.name, c.new.name) for c in changes]
-                bt_pub.publish(Encoded(bt_encode, (t_ns, events), events))
+                bt_pub.publish(Encoded((bt_encode, (t_ns, events), events)))
             if navigator.plans != plans[0]:
                 plans[0] = navigator.plans
                 if navigator.path:
                     poses = [(x, y, 0.0) for x, y in navigator.path]
-                    plan_pub.publish(Encoded(plan_encode, (t_ns, poses), poses))
+                    plan_pub.publish(Encoded((plan_encode, (t_ns, poses), poses)))
 
         self.create_rate_timer(rate_hz, tick, priority=PRIORITY_TREE)

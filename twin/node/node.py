@@ -118,28 +118,26 @@ def _qos(qos: QoSProfile | int) -> QoSProfile:
     return QoSProfile(depth=qos) if isinstance(qos, int) else qos
 
 
-class Encoded:
-    """A message a built-in node publishes: its fields for in-process readers, its CDR bytes made on demand.
+class Encoded(tuple[Any, ...]):
+    """A message a built-in node publishes: `Encoded((encode, args, data))`.
 
-    `data` is whatever the publishing node documents (e.g. a tuple of numbers); `cdr()` runs the
-    node's fast encoder once, the first time a recorder or live view asks. A subscriber that asked
-    for a message class gets the decoded ROS message (`twin.msgs`) instead, decoded once.
+    `data` (item 2) is whatever the publishing node documents, for in-process readers (a tuple of
+    numbers, a reading); `encode(*args)` (items 0 and 1) makes the CDR bytes, run only for a sink (the
+    recorder, a live view). A subscriber that asked for a message class gets the decoded ROS message
+    (`twin.msgs`) instead. A plain tuple subclass, because a built-in node makes hundreds a simulated
+    second and a tuple is the cheapest object Python builds.
     """
 
-    __slots__ = ("_args", "_cdr", "_fn", "data", "ros")
+    __slots__ = ()
 
-    def __init__(self, fn: Callable[..., bytes], args: tuple[Any, ...], data: Any = None) -> None:
-        self._fn = fn
-        self._args = args
-        self._cdr: bytes | None = None
-        self.data = data
-        self.ros: Any = None
+    @property
+    def data(self) -> Any:
+        """The publishing node's in-process payload."""
+        return self[2]
 
     def cdr(self) -> bytes:
-        """Return the message's CDR bytes (encoded on the first call)."""
-        data = self._cdr
-        if data is None:
-            data = self._cdr = self._fn(*self._args)
+        """Return the message's CDR bytes (encoded on each call)."""
+        data: bytes = self[0](*self[1])
         return data
 
 

@@ -31,7 +31,7 @@ def stamp_ns(header: Any) -> int:
 def twist_of(msg: Any) -> tuple[float, float]:
     """Return (linear x, angular z) of a Twist."""
     if type(msg) is Encoded:
-        v, w = msg.data
+        v, w = msg[2]
         return float(v), float(w)
     return float(msg.linear.x), float(msg.angular.z)
 
@@ -39,7 +39,7 @@ def twist_of(msg: Any) -> tuple[float, float]:
 def joint_positions(msg: Any, names: Sequence[str]) -> tuple[int, tuple[float, ...]] | None:
     """Return (stamp ns, positions of `names` in that order) of a JointState, or None if a name is missing."""
     if type(msg) is Encoded:
-        t_ns, positions, _ = msg.data
+        t_ns, positions, _ = msg[2]
         return t_ns, tuple(positions)
     index = {n: i for i, n in enumerate(msg.name)}
     if any(n not in index for n in names) or len(msg.position) < len(msg.name):
@@ -50,7 +50,7 @@ def joint_positions(msg: Any, names: Sequence[str]) -> tuple[int, tuple[float, .
 def imu_yaw_rate(msg: Any) -> tuple[int, float]:
     """Return (stamp ns, angular velocity z rad/s) of an Imu."""
     if type(msg) is Encoded:
-        t_ns, reading = msg.data
+        t_ns, reading = msg[2]
         return t_ns, float(reading.angular_velocity_z)
     return stamp_ns(msg.header), float(msg.angular_velocity.z)
 
@@ -58,7 +58,7 @@ def imu_yaw_rate(msg: Any) -> tuple[int, float]:
 def odometry_pose(msg: Any) -> tuple[float, float, float]:
     """Return the planar pose (x, y, yaw) of an Odometry."""
     if type(msg) is Encoded:
-        x, y, yaw = msg.data[:3]
+        x, y, yaw = msg[2][:3]
         return x, y, yaw
     p, q = msg.pose.pose.position, msg.pose.pose.orientation
     yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))

@@ -88,7 +88,7 @@ class ContactTracker:
         self.monitor = monitor
         self.contact: tuple[Contact, ...] = ()
         self.in_contact = False  # a contact episode is open
-        self.touching = False  # the node must track the open episode
+        self.pending = False  # the node must track the open episode (after each physics advance)
 
     def touches(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
         """Whether the robot at this pose touches the world (opens an episode when it starts)."""
@@ -97,7 +97,7 @@ class ContactTracker:
             if not self.in_contact:
                 self.in_contact = True
                 self.contact = contacts
-                self.touching = True
+                self.pending = True
             return True
         return False
 
@@ -125,7 +125,10 @@ class DiffDriveNode(Node):
         set_cmd_vel = drive.set_cmd_vel
 
         def on_cmd_vel(msg: Any) -> None:
-            set_cmd_vel(*twist_of(msg))
+            if type(msg) is Encoded:
+                set_cmd_vel(*msg[2])
+            else:
+                set_cmd_vel(*twist_of(msg))
 
         self.create_subscription("geometry_msgs/msg/Twist", "/cmd_vel", on_cmd_vel, 10, raw=True)
         self._contact_pub = self.create_publisher(ContactEncoder.msgtype, "/contacts", 10)
@@ -137,19 +140,18 @@ class DiffDriveNode(Node):
 
             def motors(t_ns: int) -> None:
                 ws = wheel_state()
-                motor_pub.publish(Encoded(encode, (t_ns, ws.voltage_v, ws.current_a, ws.effort_nm, ws.speed_radps), ws))
+                motor_pub.publish(
+                    Encoded((encode, (t_ns, ws.voltage_v, ws.current_a, ws.effort_nm, ws.speed_radps), ws))
+                )
 
             self.create_rate_timer(motor_rate_hz, motors, priority=PRIORITY_STATE)
 
-    def advance(self, n_steps: int) -> None:
-        """Step the drivetrain `n_steps` physics steps (the executor calls this between events)."""
-        self.drive.advance(n_steps)
+        # The executor steps the drivetrain `n_steps` physics steps between events.
+        self.advance: Callable[[int], None] = drive.advance
 
     def after_advance(self, t_ns: int) -> None:
         """Report a contact's beginning, and its end once the robot is clear of it again."""
         tracker = self.tracker
-        if not tracker.touching:
-            return
         s = self.drive.chassis_state()
         if not self._reported:
             self._report(t_ns, begin=True)
@@ -162,7 +164,7 @@ class DiffDriveNode(Node):
         x0, y0 = self._release_from
         if math.hypot(s.x_m - x0, s.y_m - y0) >= _CONTACT_RELEASE_M:
             self._report(t_ns, begin=False)
-            tracker.in_contact = tracker.touching = self._reported = False
+            tracker.in_contact = tracker.pending = self._reported = False
 
     def _report(self, t_ns: int, *, begin: bool) -> None:
         c = self.tracker.contact[0]
@@ -175,7 +177,9 @@ class DiffDriveNode(Node):
             "normal": c.normal,
             "depth_m": c.depth_m,
         }
-        self._contact_pub.publish(Encoded(functools.partial(self._contact_enc.encode, *args, **kwargs), (), (event, c)))
+        self._contact_pub.publish(
+            Encoded((functools.partial(self._contact_enc.encode, *args, **kwargs), (), (event, c)))
+        )
         if begin:
             self.contacts += 1
             _log.warning("t=%.3f s: contact with %s::%s; the robot stops", ns_to_s(t_ns), c.model, c.link)
@@ -206,7 +210,7 @@ class LidarNode(Node):
         def on_timer(t_ns: int) -> None:
             s = chassis()
             ranges = scan(s.x_m, s.y_m, s.yaw_rad)
-            pub.publish(Encoded(encode, (t_ns, ranges), ranges))
+            pub.publish(Encoded((encode, (t_ns, ranges), ranges)))
 
         self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_SENSOR)
 
@@ -237,7 +241,7 @@ class ImuNode(Node):
             rate = math.remainder(yaw - last_yaw, math.tau) * 1e9 / dt_ns if dt_ns > 0 else s.yaw_rate_radps
             last_t_ns, last_yaw = t_ns, yaw
             r = sample(yaw, rate, s.yaw_accel_radps2, s.ax_mps2, s.ay_mps2)
-            pub.publish(Encoded(encode, (t_ns, *r), (t_ns, r)))
+            pub.publish(Encoded((encode, (t_ns, *r), (t_ns, r))))
 
         self.create_rate_timer(imu.spec.rate_hz, on_timer, priority=PRIORITY_SENSOR)
 
@@ -270,9 +274,11 @@ class JointStateNode(Node):
                 positions = (js.position_left_rad, js.position_right_rad)
                 velocities = (js.velocity_left, js.velocity_right)
             if with_effort:
-                pub.publish(Encoded(encode, (t_ns, positions, velocities, ws.effort_nm), (t_ns, positions, velocities)))
+                pub.publish(
+                    Encoded((encode, (t_ns, positions, velocities, ws.effort_nm), (t_ns, positions, velocities)))
+                )
             else:
-                pub.publish(Encoded(encode, (t_ns, positions, velocities), (t_ns, positions, velocities)))
+                pub.publish(Encoded((encode, (t_ns, positions, velocities), (t_ns, positions, velocities))))
 
         self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_STATE)
 
@@ -294,8 +300,8 @@ class GazeboOdometryNode(Node):
         def on_timer(t_ns: int) -> None:
             s = chassis()
             state = (s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps)
-            odom_pub.publish(Encoded(encode_odom, (t_ns, *state), state))
-            tf_pub.publish(Encoded(encode_tf, (t_ns, s.x_m, s.y_m, s.yaw_rad)))
+            odom_pub.publish(Encoded((encode_odom, (t_ns, *state), state)))
+            tf_pub.publish(Encoded((encode_tf, (t_ns, s.x_m, s.y_m, s.yaw_rad), None)))
 
         self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_STATE)
 
@@ -311,7 +317,7 @@ class GroundTruthNode(Node):
         def on_timer(t_ns: int) -> None:
             s = chassis()
             state = (s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps)
-            pub.publish(Encoded(encode, (t_ns, *state), state))
+            pub.publish(Encoded((encode, (t_ns, *state), state)))
 
         self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_STATE)
 
@@ -325,7 +331,7 @@ class ClockNode(Node):
         pub = self.create_publisher(ClockEncoder.msgtype, "/clock", SENSOR_DATA)
 
         def on_timer(t_ns: int) -> None:
-            pub.publish(Encoded(encode, (t_ns,), t_ns))
+            pub.publish(Encoded((encode, (t_ns,), t_ns)))
 
         self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_CLOCK)
 
@@ -382,8 +388,8 @@ class RobotStatePublisher(Node):
         description = self.create_publisher(StringEncoder.msgtype, "/robot_description", LATCHED)
 
         def publish_static(t_ns: int) -> None:
-            tf_static.publish(Encoded(static_encoder.encode, (t_ns, poses)))
-            description.publish(Encoded(StringEncoder().encode, (urdf,), urdf))
+            tf_static.publish(Encoded((static_encoder.encode, (t_ns, poses), None)))
+            description.publish(Encoded((StringEncoder().encode, (urdf,), urdf)))
 
         self.create_one_shot(publish_static, priority=PRIORITY_STATE)
         if len(wheels) != 2:
@@ -394,10 +400,13 @@ class RobotStatePublisher(Node):
         tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
 
         def on_joint_states(msg: Any) -> None:
-            read = joint_positions(msg, names)
-            if read is None:
-                return
-            t_ns, (pl, pr) = read
-            tf_pub.publish(Encoded(encode, (t_ns, (left.at(pl), right.at(pr)))))
+            if type(msg) is Encoded:
+                t_ns, (pl, pr), _ = msg[2]
+            else:
+                read = joint_positions(msg, names)
+                if read is None:
+                    return
+                t_ns, (pl, pr) = read
+            tf_pub.publish(Encoded((encode, (t_ns, (left.at(pl), right.at(pr))), None)))
 
         self.create_subscription(JointStateEncoder.msgtype, "/joint_states", on_joint_states, 10, raw=True)

@@ -76,8 +76,8 @@ class Topic:
     msgtype: str
     publishers: list[str] = field(default_factory=list)  # node names
     subscribers: list[str] = field(default_factory=list)
-    callbacks: list[Callable[[Any], None]] = field(default_factory=list)
-    sinks: int = 0  # how many of the callbacks (the first ones) are sinks
+    callbacks: list[Callable[[Any], None]] = field(default_factory=list)  # subscriptions, in order
+    sinks: list[tuple[Callable[[Any, int, bytes], None], Any]] = field(default_factory=list)  # (write, handle)
     count: int = 0
     latched: list[Any] = field(default_factory=list)  # the last messages, for late subscribers
     latch_depth: int = 0
@@ -126,6 +126,7 @@ class Executor:
         self.now_ns = 0
         self._advance: Callable[[int], None] | None = None
         self._after_advance: Callable[[int], None] | None = None
+        self._pending: Any = None
         self._failure: BaseException | None = None
 
     # -- the graph -------------------------------------------------------------------------------
@@ -158,9 +159,9 @@ class Executor:
         for pub in node.publishers:
             topic = self._topic(pub.topic, pub.msg_type, node, publishing=True)
             topic.publishers.append(name)
-            if not topic.latch_depth and pub.qos.durability == "transient_local":
-                topic.latch_depth = pub.qos.depth
-            pub.publish = self._publish_function(topic, node, pub.msg_type, checked=not trusted)
+            if pub.qos.durability == "transient_local":
+                topic.latch_depth = max(topic.latch_depth, pub.qos.depth, 1)
+            pub.publish = self._publish_function(topic, node, pub.qos, checked=not trusted)
             pub.get_subscription_count = functools.partial(_callback_count, topic)
         for sub in node.subscriptions:
             topic = self._topic(sub.topic, sub.msg_type, node, publishing=False)
@@ -202,51 +203,61 @@ class Executor:
         return topic
 
     def _attach_sinks(self, topic: Topic, node: Node) -> None:
-        """Give the sinks that take this topic their callbacks, ahead of every subscription."""
+        """Declare the topic to every sink that takes it; publications reach sinks before subscriptions."""
         pub = next(p for p in node.publishers if p.topic == topic.name)
         topic.qos = pub.qos
-        takers = [sink for sink, keep in self._sinks if keep.takes(topic.name)]
-        for position, sink in enumerate(takers):
-            handle = sink.add_topic(topic.name, topic.msgtype, qos=_record_qos(topic.name, pub.qos))
-            topic.callbacks.insert(position, self._sink_callback(sink, handle, topic.msgtype))
-            topic.sinks += 1
+        for sink, keep in self._sinks:
+            if keep.takes(topic.name):
+                handle = sink.add_topic(topic.name, topic.msgtype, qos=_record_qos(topic.name, pub.qos))
+                topic.sinks.append((sink.write, handle))
 
-    def _sink_callback(self, sink: Sink, handle: Any, msgtype: str) -> Callable[[Any], None]:
-        write = sink.write
+    def _publish_function(self, topic: Topic, node: Node, qos: QoSProfile, *, checked: bool) -> Callable[[Any], None]:
+        """Build one publisher's `publish`: specialised for its topic's sinks, its QoS and its node's trust."""
         from twin.msgs import serialize
 
-        def to_sink(msg: Any) -> None:
-            if type(msg) is Encoded:
-                write(handle, self.now_ns, msg.cdr())
-            else:
-                write(handle, self.now_ns, serialize(msg, msgtype))
+        callbacks, msgtype = topic.callbacks, topic.msgtype
+        if len(topic.sinks) == 1:  # the common case, inlined: the recorder
+            ((write, handle),) = topic.sinks
 
-        return to_sink
+            def publish(msg: Any) -> None:
+                topic.count += 1
+                if type(msg) is Encoded:
+                    write(handle, self.now_ns, msg[0](*msg[1]))
+                else:
+                    write(handle, self.now_ns, serialize(msg, msgtype))
+                for callback in callbacks:
+                    callback(msg)
 
-    def _publish_function(
-        self, topic: Topic, node: Node, msg_type: type | str, *, checked: bool
-    ) -> Callable[[Any], None]:
-        callbacks = topic.callbacks
-        latched = topic.latched
+        else:
+            sinks = topic.sinks
 
-        def publish(msg: Any) -> None:
-            topic.count += 1
-            for callback in callbacks:
-                callback(msg)
-            if topic.latch_depth:
+            def publish(msg: Any) -> None:
+                topic.count += 1
+                if sinks:
+                    data = msg[0](*msg[1]) if type(msg) is Encoded else serialize(msg, msgtype)
+                    for write, handle in sinks:
+                        write(handle, self.now_ns, data)
+                for callback in callbacks:
+                    callback(msg)
+
+        if qos.durability == "transient_local":  # latched: late subscribers get the last `depth` messages
+            latched, depth, plain = topic.latched, max(1, qos.depth), publish
+
+            def publish(msg: Any) -> None:
+                plain(msg)
                 latched.append(msg)
-                del latched[: -topic.latch_depth]
+                del latched[:-depth]
 
         if not checked:
             return publish
-        msgtype = topic.msgtype
+        unchecked = publish
 
         def checked_publish(msg: Any) -> None:
             if type(msg) is not Encoded and getattr(msg, "__msgtype__", None) != msgtype:
                 given = getattr(msg, "__msgtype__", type(msg).__name__)
                 text = f"node {node.get_name()} published a {given} on {topic.name}, which carries {msgtype}"
                 raise SimulationError(text)
-            publish(msg)
+            unchecked(msg)
 
         return checked_publish
 
@@ -261,10 +272,7 @@ class Executor:
 
             def deliver(msg: Any) -> None:
                 if type(msg) is Encoded:
-                    ros = msg.ros
-                    if ros is None:
-                        ros = msg.ros = deserialize(msg.cdr(), msgtype)
-                    callback(ros)
+                    callback(deserialize(msg[0](*msg[1]), msgtype))
                 else:
                     callback(msg)
 
@@ -324,8 +332,17 @@ class Executor:
 
         return timed
 
-    def set_physics(self, advance: Callable[[int], None], after_advance: Callable[[int], None] | None = None) -> None:
-        """Set what moves the world between events: `advance(n_steps)`, then `after_advance(t_ns)`."""
+    def set_physics(
+        self,
+        advance: Callable[[int], None],
+        after_advance: Callable[[int], None] | None = None,
+        pending: Any = None,
+    ) -> None:
+        """Set what moves the world between events: `advance(n_steps)`, then `after_advance(t_ns)`.
+
+        With `pending` (an object with a boolean `pending` attribute), `after_advance` runs only
+        while `pending.pending` is true, so a quiet step costs one attribute read.
+        """
         if self._profile:
             timings = self.timings_s
             timings.setdefault("physics", 0.0)
@@ -338,6 +355,7 @@ class Executor:
 
         self._advance = advance
         self._after_advance = after_advance
+        self._pending = pending
 
     # -- running ---------------------------------------------------------------------------------
 
@@ -355,11 +373,11 @@ class Executor:
         self,
         end_k: int,
         *,
-        done: Callable[[], bool] = lambda: False,
+        done: Any = None,
         should_stop: Callable[[], bool] = lambda: False,
         progress: Callable[[float, int], None] | None = None,
     ) -> str:
-        """Run until step `end_k`, until `done()` after a step's timers, or until `should_stop()`.
+        """Run until step `end_k`, until `done.done` is true after a step's timers, or until `should_stop()`.
 
         Returns:
             Why it ended: "duration", "done" or "interrupted".
@@ -367,7 +385,7 @@ class Executor:
         Raises:
             TwinError: From any node; the sinks hold everything published before it.
         """
-        scheduler, advance, after = self.scheduler, self._advance, self._after_advance
+        scheduler, advance, after, pending = self.scheduler, self._advance, self._after_advance, self._pending
         step_ns = self.step_ns
         steps_per_s = max(1, NS_PER_S // step_ns)
         next_report = self._k
@@ -380,13 +398,13 @@ class Executor:
                     advance(due - k)
                 k = self._k = due
                 self.now_ns = k * step_ns
-                if after is not None:
+                if after is not None and (pending is None or pending.pending):
                     after(self.now_ns)
             if k >= end_k:
                 break
             self.now_ns = k * step_ns
             scheduler.fire_due(k)
-            if done():
+            if done is not None and done.done:
                 end_k = k  # this step's publications are the last
                 ended = "done"
             if k >= next_report:
@@ -417,7 +435,7 @@ class Executor:
 
 
 def _callback_count(topic: Topic) -> int:
-    return len(topic.callbacks)
+    return len(topic.callbacks) + len(topic.sinks)
 
 
 def _rate(timer: Timer) -> float | None:

@@ -46,7 +46,7 @@ class RosoutBridge(Node):
             function=record.funcName,
             line=record.lineno,
         )
-        self._pub.publish(Encoded(encode, (), record))
+        self._pub.publish(Encoded((encode, (), record)))
 
 
 class _Handler(logging.Handler):

@@ -225,7 +225,7 @@ class Simulation:
                 unused = node.undeclared_overrides()
                 if unused:
                     _log.warning("node %s never declares parameter(s) %s", node.get_name(), ", ".join(unused))
-            self.executor.set_physics(self._drive_node.advance, self._drive_node.after_advance)
+            self.executor.set_physics(self._drive_node.advance, self._drive_node.after_advance, pending=self._tracker)
         except BaseException:
             try:
                 self.drive.close()
@@ -450,7 +450,7 @@ class Simulation:
             self.scenario.seed,
         )
         mission = self.mission_node
-        done: Callable[[], bool] = (lambda: False) if mission is None or self._run_to_limit else (lambda: mission.done)
+        done = None if mission is None or self._run_to_limit else self.mission  # its `done` ends the run
         wall0 = time.perf_counter()
         why = self.executor.spin(self.end_k, done=done, should_stop=should_stop, progress=progress)
         wall_s = time.perf_counter() - wall0
