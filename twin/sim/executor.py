@@ -446,4 +446,4 @@ def _rate(timer: Timer) -> float | None:
 
 def _name(fn: Callable[..., Any]) -> str:
     name = getattr(fn, "__qualname__", None) or getattr(fn, "__name__", None) or type(fn).__name__
-    return name.replace(".<locals>", "")
+    return ".".join(name.replace(".<locals>", "").split(".")[-2:])  # Class.method, or outer.inner

@@ -211,6 +211,11 @@ class Simulation:
                 exclude=selection.exclude,
                 exclude_regex=selection.exclude_regex,
             )
+            # Wire the graph once without sinks: a node that cannot join (a duplicate name, a topic of
+            # another type) is refused before a bag folder exists.
+            scratch = Executor(self.step_ns)
+            for node in [RosoutBridge(), *self._builtin_nodes(), *user_nodes]:
+                scratch.add_node(node)
             if bag_path is not None:
                 self.recorder = Recorder(
                     bag_path, storage=scenario.recording.storage, distro=scenario.recording.distro, write_log=write_log
