@@ -30,6 +30,7 @@ class InitAmclPose(Node):
         self.timer = self.create_timer(0.1, self.on_timer)
 
     def on_timer(self) -> None:
+        """Send the pose once somebody listens, then stop the timer."""
         if self.publisher.get_subscription_count() == 0:
             self.get_logger().info("waiting for a subscriber on /initialpose", once=True)
             return

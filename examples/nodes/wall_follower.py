@@ -38,6 +38,7 @@ class WallFollower(Node):
         return float(ranges[inside].min()) if inside.any() else math.inf
 
     def on_scan(self, scan: LaserScan) -> None:
+        """Steer on one scan."""
         ahead = self.sector(scan, -25.0, 25.0)
         ahead_left = self.sector(scan, 25.0, 65.0)
         left = min(self.sector(scan, 65.0, 115.0), ahead_left * math.cos(math.radians(45.0)))
