@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from twin.core.errors import ConfigError
+from twin.nav._native import load_kernel
 from twin.nav.map_server import OccupancyMap
 from twin.nav.params import AmclParams
 
@@ -101,6 +102,13 @@ class AmclEstimate:
         return out
 
 
+def _bin_keys(bins: NDArray[np.int64]) -> NDArray[np.int64]:
+    """One integer per (x, y, yaw) histogram bin."""
+    local = bins - bins.min(axis=0)
+    span = local.max(axis=0) + 1
+    return np.asarray((local[:, 0] * span[1] + local[:, 1]) * span[2] + local[:, 2], dtype=np.int64)
+
+
 class LikelihoodField:
     """The map's distance to the nearest occupied cell, and per-cell beam likelihood cubes.
 
@@ -143,11 +151,19 @@ class Amcl:
         occupancy: The map it localises against (`/map`).
         laser: The scan's geometry and the laser's mount in the base frame.
         rng: The filter's random numbers (seed it from the scenario seed).
+        native: Use the C kernel for the laser model when it can be built (else numpy).
     """
 
     def __init__(
-        self, params: AmclParams, occupancy: OccupancyMap, laser: LaserGeometry, rng: np.random.Generator
+        self,
+        params: AmclParams,
+        occupancy: OccupancyMap,
+        laser: LaserGeometry,
+        rng: np.random.Generator,
+        *,
+        native: bool = True,
     ) -> None:
+        self._lib = load_kernel() if native else None
         self.params = params
         self.map = occupancy
         self.laser = laser
@@ -282,7 +298,18 @@ class Amcl:
     def _sensor(self, ranges: F64) -> None:
         bx, by = self._beams(ranges)
         poses = self.poses
-        if len(bx):
+        if len(bx) and self._lib is not None:
+            poses = np.ascontiguousarray(poses)
+            self.poses = poses
+            bx, by = np.ascontiguousarray(bx), np.ascontiguousarray(by)
+            cubes = self._cubes
+            likelihood = np.empty(len(poses))
+            self._lib.twin_amcl_likelihood(
+                poses.ctypes.data, len(poses), bx.ctypes.data, by.ctypes.data, len(bx),
+                cubes.ctypes.data, cubes.shape[0], cubes.shape[1], self._pad,
+                self.field.origin_x_m, self.field.origin_y_m, self.field.resolution_m, likelihood.ctypes.data,
+            )  # fmt: skip
+        elif len(bx):
             c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
             res = self.field.resolution_m
             hx = poses[:, 0:1] + c * bx - s * by
@@ -351,7 +378,7 @@ class Amcl:
                 new[random, 2] = rng.uniform(-math.pi, math.pi, count)
             self._w_slow = self._w_fast = 0.0
         bins = self._bins(new)
-        _, first = np.unique(bins, axis=0, return_index=True)
+        _, first = np.unique(_bin_keys(bins), return_index=True)
         is_first = np.zeros(m, dtype=bool)
         is_first[first] = True
         leaves = np.cumsum(is_first)

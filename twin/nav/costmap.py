@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from twin.nav._native import load_kernel
 from twin.nav.costmap_grid import (
     FREE_SPACE,
     INSCRIBED_INFLATED_OBSTACLE,
@@ -152,6 +153,7 @@ class Costmap:
         static_map: The `/map` for the static layer (a costmap without one may receive it later
             through `set_static_map`).
         robot_xy_m: Where a rolling window starts centred.
+        native: Ray-trace with the C kernel when it can be built (else numpy; the same cells).
     """
 
     def __init__(
@@ -160,8 +162,10 @@ class Costmap:
         *,
         static_map: OccupancyMap | None = None,
         robot_xy_m: tuple[float, float] = (0.0, 0.0),
+        native: bool = True,
     ) -> None:
         self.params = params
+        self._lib = load_kernel() if native else None
         self.inscribed_radius_m, self.circumscribed_radius_m, self.footprint = footprint_radii(params)
         self._default = NO_INFORMATION if params.track_unknown_space else FREE_SPACE
         self._static: U8 | None = None
@@ -338,6 +342,16 @@ class Costmap:
         y1 = np.clip(((wy - g.origin_y_m) / res).astype(np.int64), 0, rows - 1)
         max_cells = max(0.0, math.ceil(source.raytrace_max_range_m / res))
         min_cells = max(0.0, math.ceil(source.raytrace_min_range_m / res))
+        if self._lib is not None:
+            bounds = np.array([rows, -1, cols, -1], dtype=np.int64)
+            x1c, y1c = np.ascontiguousarray(x1, dtype=np.int64), np.ascontiguousarray(y1, dtype=np.int64)
+            self._lib.twin_raytrace(
+                cost.ctypes.data, rows, cols, x0, y0, x1c.ctypes.data, y1c.ctypes.data, len(x1c),
+                float(max_cells), float(min_cells), FREE_SPACE, bounds.ctypes.data,
+            )  # fmt: skip
+            if bounds[1] < 0:
+                return []
+            return [np.array([bounds[0], bounds[1]], dtype=np.intp), np.array([bounds[2], bounds[3]], dtype=np.intp)]
         rr, cc = _bresenham(x0, y0, x1, y1, max_cells=max_cells, min_cells=min_cells)
         keep = (rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols)
         rr, cc = rr[keep], cc[keep]
@@ -436,17 +450,14 @@ def _shift(cost: U8, dr: int, dc: int, fill: int) -> U8:
 
 
 def _in_polygon(x: F64, y: F64, poly: F64) -> NDArray[np.bool_]:
-    """Even-odd test of points (broadcast x, y) against a polygon (n, 2)."""
-    inside = np.zeros(np.broadcast(x, y).shape, dtype=bool)
-    n = len(poly)
-    for i in range(n):
-        x1, y1 = poly[i]
-        x2, y2 = poly[(i + 1) % n]
-        crosses = (y1 > y) != (y2 > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-        inside ^= crosses & (x < xc)
-    return inside
+    """Even-odd test of points (x a row, y a column, broadcast) against a polygon (n, 2)."""
+    x1, y1 = poly[:, 0, None, None], poly[:, 1, None, None]
+    nxt = np.roll(poly, -1, axis=0)
+    x2, y2 = nxt[:, 0, None, None], nxt[:, 1, None, None]
+    crosses = (y1 > y[None]) != (y2 > y[None])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xc = x1 + (y[None] - y1) * (x2 - x1) / (y2 - y1)
+    return np.asarray(np.logical_xor.reduce(crosses & (x[None] < xc), axis=0), dtype=bool)
 
 
 def _bresenham(

@@ -91,3 +91,17 @@ def test_converges_from_0_3_m_and_0_2_rad_off_over_ten_seeds() -> None:
         finals.append(float(np.median(pos[-50:])))  # the last 10 s
     print("median error over the last 10 s of 30 s, per seed:", np.round(finals, 3).tolist())
     assert max(finals) < 0.25 and float(np.mean(finals)) < 0.15
+
+
+def test_the_c_kernel_weighs_particles_as_numpy_does() -> None:
+    _, occupancy = world()
+    laser = LaserGeometry(angle_min_rad=0.0, angle_increment_rad=6.28 / 359, range_min_m=0.12, range_max_m=3.5)
+    native = Amcl(amcl_params(), occupancy, laser, np.random.default_rng(0), native=True)
+    numpy_only = Amcl(amcl_params(), occupancy, laser, np.random.default_rng(0), native=False)
+    assert native._lib is not None and numpy_only._lib is None
+    ranges = np.random.default_rng(1).uniform(0.1, 4.0, 360)
+    for amcl in (native, numpy_only):
+        amcl.set_initial_pose(-2.0, -0.5, 1.0, np.diag([0.5, 0.5, 1.0]))
+        amcl._sensor(ranges)
+    assert np.array_equal(native.poses, numpy_only.poses)
+    assert np.allclose(native.weights, numpy_only.weights, rtol=1e-12, atol=0.0)

@@ -246,3 +246,19 @@ def test_a_partial_update_equals_a_full_rebuild(tmp_path: Path) -> None:
         costmap._full_update = True  # rebuild the whole master from the layers
         costmap.update(*pose)
         assert np.array_equal(partial, costmap.grid.cost)
+
+
+def test_the_c_kernel_and_numpy_clear_the_same_cells(tmp_path: Path) -> None:
+    glob, local = _tb3()
+    with_box, without_box = _room(tmp_path, True), _room(tmp_path, False)
+    data = np.zeros((140, 140), dtype=np.int8)
+    occupancy = OccupancyMap(resolution_m=0.05, origin_x_m=-3.5, origin_y_m=-3.5, data=data)
+    for params, static in ((glob, occupancy), (local, None)):
+        native = Costmap(params, static_map=static, native=True)
+        numpy_only = Costmap(params, static_map=static, native=False)
+        assert native._lib is not None and numpy_only._lib is None
+        for k, pose in enumerate([(0.0, 0.0, 0.0), (0.4, -0.3, 1.0), (-0.6, 0.5, 2.5)]):
+            observation = _observe(with_box if k != 1 else without_box, *pose)
+            native.update(*pose, [observation])
+            numpy_only.update(*pose, [observation])
+            assert np.array_equal(native.grid.cost, numpy_only.grid.cost)
