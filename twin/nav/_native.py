@@ -79,6 +79,70 @@ void twin_raytrace(unsigned char *cost, long rows, long cols, long x0, long y0,
         }
     }
 }
+
+/* Inflation: out[r, c] = max over lethal cells (value `lethal` in grid) within the stencil of
+   stencil[dr + R, dc + R] (the cost at that offset's distance). out must start at zero. */
+void twin_inflate(const unsigned char *grid, long rows, long cols, unsigned char lethal,
+                  const unsigned char *stencil, long radius, unsigned char *out) {
+    long w = 2 * radius + 1;
+    for (long r = 0; r < rows; ++r) {
+        for (long c = 0; c < cols; ++c) {
+            if (grid[r * cols + c] != lethal) continue;
+            long r0 = r - radius < 0 ? 0 : r - radius;
+            long r1 = r + radius > rows - 1 ? rows - 1 : r + radius;
+            long c0 = c - radius < 0 ? 0 : c - radius;
+            long c1 = c + radius > cols - 1 ? cols - 1 : c + radius;
+            for (long rr = r0; rr <= r1; ++rr) {
+                const unsigned char *srow = stencil + (rr - r + radius) * w + (radius - c);
+                unsigned char *orow = out + rr * cols;
+                for (long cc = c0; cc <= c1; ++cc) {
+                    unsigned char v = srow[cc];
+                    if (v > orow[cc]) orow[cc] = v;
+                }
+            }
+        }
+    }
+}
+
+/* Set the cells whose centres lie inside a polygon (even-odd) to `value`; bounds grow as in raytrace. */
+void twin_fill_polygon(unsigned char *cost, long rows, long cols, double ox, double oy, double res,
+                       const double *poly, long n, unsigned char value, long *bounds) {
+    double xmin = poly[0], xmax = poly[0], ymin = poly[1], ymax = poly[1];
+    for (long i = 1; i < n; ++i) {
+        if (poly[2 * i] < xmin) xmin = poly[2 * i];
+        if (poly[2 * i] > xmax) xmax = poly[2 * i];
+        if (poly[2 * i + 1] < ymin) ymin = poly[2 * i + 1];
+        if (poly[2 * i + 1] > ymax) ymax = poly[2 * i + 1];
+    }
+    long c0 = (long)((xmin - ox) / res), c1 = (long)((xmax - ox) / res) + 1;
+    long r0 = (long)((ymin - oy) / res), r1 = (long)((ymax - oy) / res) + 1;
+    if (c0 < 0) c0 = 0;
+    if (r0 < 0) r0 = 0;
+    if (c1 > cols) c1 = cols;
+    if (r1 > rows) r1 = rows;
+    for (long r = r0; r < r1; ++r) {
+        double y = oy + (r + 0.5) * res;
+        for (long c = c0; c < c1; ++c) {
+            double x = ox + (c + 0.5) * res;
+            int inside = 0;
+            for (long i = 0; i < n; ++i) {
+                double x1 = poly[2 * i], y1 = poly[2 * i + 1];
+                double x2 = poly[2 * ((i + 1) % n)], y2 = poly[2 * ((i + 1) % n) + 1];
+                if ((y1 > y) != (y2 > y)) {
+                    double xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1);
+                    if (x < xc) inside = !inside;
+                }
+            }
+            if (inside) {
+                cost[r * cols + c] = value;
+                if (r < bounds[0]) bounds[0] = r;
+                if (r > bounds[1]) bounds[1] = r;
+                if (c < bounds[2]) bounds[2] = c;
+                if (c > bounds[3]) bounds[3] = c;
+            }
+        }
+    }
+}
 """
 
 
@@ -95,4 +159,8 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_raytrace.argtypes = [
         ptr, long_, long_, long_, long_, ptr, ptr, long_, dbl, dbl, ctypes.c_ubyte, ptr,
     ]  # fmt: skip
+    lib.twin_inflate.restype = None
+    lib.twin_inflate.argtypes = [ptr, long_, long_, ctypes.c_ubyte, ptr, long_, ptr]
+    lib.twin_fill_polygon.restype = None
+    lib.twin_fill_polygon.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ctypes.c_ubyte, ptr]
     return lib

@@ -183,8 +183,13 @@ class Costmap:
             origin_y_m=oy,
             cost=np.full((rows, cols), self._default, dtype=np.uint8),
         )
+        seen: set[tuple[tuple[ObservationSource, ...], bool]] = set()
         for layer in params.obstacle_layers:
-            if layer.enabled:
+            key = (layer.sources, layer.footprint_clearing_enabled)
+            # Two layers fed the same sources hold the same cells (TB3's obstacle_layer and
+            # voxel_layer, for a planar lidar); their maximum is either one, so keep one.
+            if layer.enabled and key not in seen:
+                seen.add(key)
                 self._obstacles.append(
                     _ObstacleLayer(layer.sources, layer.footprint_clearing_enabled, (rows, cols), self._default)
                 )
@@ -192,6 +197,7 @@ class Costmap:
         self._inflate = inflation is not None and inflation.enabled
         self._radius_cells = math.ceil(inflation.inflation_radius_m / res) if inflation is not None else 0
         self._full_update = True
+        self._stencil_cache: tuple[tuple[int, float], U8] | None = None
         if static_map is not None and params.static_layer is not None and params.static_layer.enabled:
             self.set_static_map(static_map)
 
@@ -380,6 +386,15 @@ class Costmap:
         poly = np.array([(x + c * px - s * py, y + s * px + c * py) for px, py in self.footprint])
         res = g.resolution_m
         rows, cols = cost.shape
+        if self._lib is not None:
+            bounds = np.array([rows, -1, cols, -1], dtype=np.int64)
+            self._lib.twin_fill_polygon(
+                cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res,
+                poly.ctypes.data, len(poly), FREE_SPACE, bounds.ctypes.data,
+            )  # fmt: skip
+            if bounds[1] < 0:
+                return []
+            return [np.array([bounds[0], bounds[1]], dtype=np.intp), np.array([bounds[2], bounds[3]], dtype=np.intp)]
         c0 = max(0, int((poly[:, 0].min() - g.origin_x_m) / res))
         c1 = min(cols, int((poly[:, 0].max() - g.origin_x_m) / res) + 1)
         r0 = max(0, int((poly[:, 1].min() - g.origin_y_m) / res))
@@ -409,18 +424,41 @@ class Costmap:
             if infl.inflate_around_unknown:
                 seeds |= master == NO_INFORMATION
             if seeds.any():
-                distance = np.asarray(ndimage.distance_transform_edt(~seeds), dtype=np.float64)
-                cost = inflation_costs(
-                    distance,
-                    resolution_m=self.grid.resolution_m,
-                    inscribed_radius_m=self.inscribed_radius_m,
-                    cost_scaling_factor=infl.cost_scaling_factor,
-                    radius_cells=self._radius_cells,
-                )
+                if self._lib is not None:
+                    # max over obstacles of the cost at their offset = the cost at the nearest one's distance
+                    cost = np.zeros(master.shape, dtype=np.uint8)
+                    stencil = self._stencil()
+                    self._lib.twin_inflate(
+                        np.ascontiguousarray(seeds, dtype=np.uint8).ctypes.data, master.shape[0], master.shape[1], 1,
+                        stencil.ctypes.data, self._radius_cells, cost.ctypes.data,
+                    )  # fmt: skip
+                else:
+                    distance = np.asarray(ndimage.distance_transform_edt(~seeds), dtype=np.float64)
+                    cost = self._costs(distance)
                 unknown = master == NO_INFORMATION
                 take = (cost > FREE_SPACE) if infl.inflate_unknown else (cost >= INSCRIBED_INFLATED_OBSTACLE)
                 master = np.where(unknown, np.where(take, cost, master), np.maximum(master, cost)).astype(np.uint8)
         self.grid.cost[w0:w1, v0:v1] = master[w0 - e0 : w1 - e0, v0 - f0 : v1 - f0]
+
+    def _costs(self, distance_cells: F64) -> U8:
+        infl = self.params.inflation
+        assert infl is not None
+        return inflation_costs(
+            distance_cells,
+            resolution_m=self.grid.resolution_m,
+            inscribed_radius_m=self.inscribed_radius_m,
+            cost_scaling_factor=infl.cost_scaling_factor,
+            radius_cells=self._radius_cells,
+        )
+
+    def _stencil(self) -> U8:
+        """The inflation cost at every cell offset within the radius, (2R + 1) x (2R + 1)."""
+        key = (self._radius_cells, self.grid.resolution_m)
+        if self._stencil_cache is None or self._stencil_cache[0] != key:
+            offsets = np.arange(-self._radius_cells, self._radius_cells + 1, dtype=np.float64)
+            stencil = np.ascontiguousarray(self._costs(np.hypot(offsets[:, None], offsets[None, :])))
+            self._stencil_cache = (key, stencil)
+        return self._stencil_cache[1]
 
     def _layers(self, r0: int, r1: int, c0: int, c1: int) -> U8:
         """Static (overwrite) then obstacle layers (maximum) over a window; the master before inflation."""
