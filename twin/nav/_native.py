@@ -15,6 +15,7 @@ from twin.core.native import CLibrary, load_library
 
 _SOURCE = r"""
 #include <math.h>
+#include <stdlib.h>
 
 /* AMCL likelihood field: out[j] = 1 + sum_i cubes[row, col] over the beams' endpoints.
    poses (n, 3); beam endpoints (bx, by) in the base frame; cubes (rows, cols) padded by `pad`. */
@@ -80,28 +81,87 @@ void twin_raytrace(unsigned char *cost, long rows, long cols, long x0, long y0,
     }
 }
 
-/* Inflation: out[r, c] = max over lethal cells (value `lethal` in grid) within the stencil of
-   stencil[dr + R, dc + R] (the cost at that offset's distance). out must start at zero. */
-void twin_inflate(const unsigned char *grid, long rows, long cols, unsigned char lethal,
-                  const unsigned char *stencil, long radius, unsigned char *out) {
-    long w = 2 * radius + 1;
-    for (long r = 0; r < rows; ++r) {
-        for (long c = 0; c < cols; ++c) {
-            if (grid[r * cols + c] != lethal) continue;
-            long r0 = r - radius < 0 ? 0 : r - radius;
-            long r1 = r + radius > rows - 1 ? rows - 1 : r + radius;
-            long c0 = c - radius < 0 ? 0 : c - radius;
-            long c1 = c + radius > cols - 1 ? cols - 1 : c + radius;
-            for (long rr = r0; rr <= r1; ++rr) {
-                const unsigned char *srow = stencil + (rr - r + radius) * w + (radius - c);
-                unsigned char *orow = out + rr * cols;
-                for (long cc = c0; cc <= c1; ++cc) {
-                    unsigned char v = srow[cc];
-                    if (v > orow[cc]) orow[cc] = v;
-                }
-            }
+/* ObstacleLayer for one observation: clip each endpoint's ray to the grid as raytraceFreespace
+   does, clear it (twin_raytrace), then mark endpoints within [min_range, max_range) LETHAL (254).
+   pts (n, 2) in the grid's frame; bounds as in twin_raytrace. */
+void twin_obstacle_update(unsigned char *cost, long rows, long cols, double gx, double gy, double res,
+                          double ox, double oy, const double *pts, long n, int clearing, int marking,
+                          double ray_max_cells, double ray_min_cells,
+                          double mark_max_m, double mark_min_m, long *bounds) {
+    double map_end_x = gx + cols * res, map_end_y = gy + rows * res;
+    double fx0 = (ox - gx) / res, fy0 = (oy - gy) / res;
+    if (clearing && fx0 >= 0.0 && fy0 >= 0.0 && fx0 < cols && fy0 < rows) {
+        long x0 = (long)fx0, y0 = (long)fy0;
+        for (long k = 0; k < n; ++k) {
+            double wx = pts[2 * k], wy = pts[2 * k + 1];
+            double a = wx - ox, b = wy - oy, t;
+            if (wx < gx) { t = (gx - ox) / a; wx = gx; wy = oy + b * t; }
+            if (wy < gy) { t = (gy - oy) / b; wx = ox + a * t; wy = gy; }
+            if (wx > map_end_x) { t = (map_end_x - ox) / a; wx = map_end_x - 0.001; wy = oy + b * t; }
+            if (wy > map_end_y) { t = (map_end_y - oy) / b; wx = ox + a * t; wy = map_end_y - 0.001; }
+            long x1 = (long)((wx - gx) / res), y1 = (long)((wy - gy) / res);
+            if (x1 < 0) x1 = 0;
+            if (x1 > cols - 1) x1 = cols - 1;
+            if (y1 < 0) y1 = 0;
+            if (y1 > rows - 1) y1 = rows - 1;
+            twin_raytrace(cost, rows, cols, x0, y0, &x1, &y1, 1, ray_max_cells, ray_min_cells, 0, bounds);
         }
     }
+    if (!marking) return;
+    for (long k = 0; k < n; ++k) {
+        double dx = pts[2 * k] - ox, dy = pts[2 * k + 1] - oy;
+        double d2 = dx * dx + dy * dy;
+        if (d2 >= mark_max_m * mark_max_m || d2 < mark_min_m * mark_min_m) continue;
+        double fx = (pts[2 * k] - gx) / res, fy = (pts[2 * k + 1] - gy) / res;
+        if (fx < 0.0 || fy < 0.0 || fx >= cols || fy >= rows) continue;
+        long c = (long)fx, r = (long)fy;
+        cost[r * cols + c] = 254;
+        if (r < bounds[0]) bounds[0] = r;
+        if (r > bounds[1]) bounds[1] = r;
+        if (c < bounds[2]) bounds[2] = c;
+        if (c > bounds[3]) bounds[3] = c;
+    }
+}
+
+/* Felzenszwalb-Huttenlocher 1D squared distance transform of f (n values, stride `step`). */
+static void dt1d(const double *f, long n, long step, double *d, long *v, double *z, double *tmp) {
+    for (long q = 0; q < n; ++q) tmp[q] = f[q * step];
+    long k = 0;
+    v[0] = 0; z[0] = -HUGE_VAL; z[1] = HUGE_VAL;
+    for (long q = 1; q < n; ++q) {
+        double s = ((tmp[q] + (double)q * q) - (tmp[v[k]] + (double)v[k] * v[k])) / (2.0 * q - 2.0 * v[k]);
+        while (s <= z[k]) {
+            --k;
+            s = ((tmp[q] + (double)q * q) - (tmp[v[k]] + (double)v[k] * v[k])) / (2.0 * q - 2.0 * v[k]);
+        }
+        ++k; v[k] = q; z[k] = s; z[k + 1] = HUGE_VAL;
+    }
+    k = 0;
+    for (long q = 0; q < n; ++q) {
+        while (z[k + 1] < q) ++k;
+        d[q * step] = (double)(q - v[k]) * (q - v[k]) + tmp[v[k]];
+    }
+}
+
+/* Inflation: squared distance (cells) of every cell to the nearest seed (seeds[i] != 0), then
+   out[i] = table[d2] when d2 <= max_d2, else 0. Returns -1 when memory runs out. */
+int twin_inflate(const unsigned char *seeds, long rows, long cols, const unsigned char *table,
+                 long max_d2, unsigned char *out) {
+    long n = rows > cols ? rows : cols;
+    double *grid = malloc(sizeof(double) * (size_t)(rows * cols));
+    double *tmp = malloc(sizeof(double) * (size_t)n);
+    double *z = malloc(sizeof(double) * (size_t)(n + 1));
+    long *v = malloc(sizeof(long) * (size_t)n);
+    if (!grid || !tmp || !z || !v) { free(grid); free(tmp); free(z); free(v); return -1; }
+    for (long i = 0; i < rows * cols; ++i) grid[i] = seeds[i] ? 0.0 : 1e20;
+    for (long c = 0; c < cols; ++c) dt1d(grid + c, rows, cols, grid + c, v, z, tmp);
+    for (long r = 0; r < rows; ++r) dt1d(grid + r * cols, cols, 1, grid + r * cols, v, z, tmp);
+    for (long i = 0; i < rows * cols; ++i) {
+        double d2 = grid[i];
+        out[i] = d2 <= (double)max_d2 ? table[(long)d2] : 0;
+    }
+    free(grid); free(tmp); free(z); free(v);
+    return 0;
 }
 
 /* Set the cells whose centres lie inside a polygon (even-odd) to `value`; bounds grow as in raytrace. */
@@ -159,8 +219,13 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_raytrace.argtypes = [
         ptr, long_, long_, long_, long_, ptr, ptr, long_, dbl, dbl, ctypes.c_ubyte, ptr,
     ]  # fmt: skip
-    lib.twin_inflate.restype = None
-    lib.twin_inflate.argtypes = [ptr, long_, long_, ctypes.c_ubyte, ptr, long_, ptr]
+    lib.twin_obstacle_update.restype = None
+    lib.twin_obstacle_update.argtypes = [
+        ptr, long_, long_, dbl, dbl, dbl, dbl, dbl, ptr, long_, ctypes.c_int, ctypes.c_int,
+        dbl, dbl, dbl, dbl, ptr,
+    ]  # fmt: skip
+    lib.twin_inflate.restype = ctypes.c_int
+    lib.twin_inflate.argtypes = [ptr, long_, long_, ptr, long_, ptr]
     lib.twin_fill_polygon.restype = None
     lib.twin_fill_polygon.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ctypes.c_ubyte, ptr]
     return lib

@@ -197,7 +197,7 @@ class Costmap:
         self._inflate = inflation is not None and inflation.enabled
         self._radius_cells = math.ceil(inflation.inflation_radius_m / res) if inflation is not None else 0
         self._full_update = True
-        self._stencil_cache: tuple[tuple[int, float], U8] | None = None
+        self._table_cache: tuple[tuple[int, float], U8] | None = None
         if static_map is not None and params.static_layer is not None and params.static_layer.enabled:
             self.set_static_map(static_map)
 
@@ -302,13 +302,15 @@ class Costmap:
         rows, cols = self.grid.cost.shape
         touched: list[NDArray[np.intp]] = []
         for layer in self._obstacles:
+            # as ObstacleLayer::updateBounds: every clearing observation first, then every marking one
             for source in layer.sources:
                 for obs in observations:
                     if source.clearing:
-                        touched.extend(self._clear(layer.cost, obs, source))
+                        touched.extend(self._observe(layer.cost, obs, source, clearing=True))
+            for source in layer.sources:
                 for obs in observations:
                     if source.marking:
-                        touched.extend(self._mark(layer.cost, obs, source))
+                        touched.extend(self._observe(layer.cost, obs, source, clearing=False))
             if layer.footprint_clearing:
                 touched.extend(self._clear_footprint(layer.cost, x, y, yaw))
         rr = np.concatenate(touched[0::2]) if touched else np.zeros(0, np.intp)
@@ -316,6 +318,28 @@ class Costmap:
         if not len(rr):
             return None
         return int(rr.min()), min(rows, int(rr.max()) + 1), int(cc.min()), min(cols, int(cc.max()) + 1)
+
+    def _observe(
+        self, cost: U8, obs: Observation, source: ObservationSource, *, clearing: bool
+    ) -> list[NDArray[np.intp]]:
+        """Clear along (or mark the ends of) one observation's rays; return the touched bounds or cells."""
+        if self._lib is None:
+            return self._clear(cost, obs, source) if clearing else self._mark(cost, obs, source)
+        g = self.grid
+        res = g.resolution_m
+        rows, cols = cost.shape
+        pts = np.ascontiguousarray(obs.points_xy_m, dtype=np.float64)
+        bounds = np.array([rows, -1, cols, -1], dtype=np.int64)
+        self._lib.twin_obstacle_update(
+            cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res, obs.origin_x_m, obs.origin_y_m,
+            pts.ctypes.data, len(pts), int(clearing), int(not clearing),
+            float(max(0.0, math.ceil(source.raytrace_max_range_m / res))),
+            float(max(0.0, math.ceil(source.raytrace_min_range_m / res))),
+            source.obstacle_max_range_m, source.obstacle_min_range_m, bounds.ctypes.data,
+        )  # fmt: skip
+        if bounds[1] < 0:
+            return []
+        return [np.array([bounds[0], bounds[1]], dtype=np.intp), np.array([bounds[2], bounds[3]], dtype=np.intp)]
 
     def _clear(self, cost: U8, obs: Observation, source: ObservationSource) -> list[NDArray[np.intp]]:
         g = self.grid
@@ -348,16 +372,6 @@ class Costmap:
         y1 = np.clip(((wy - g.origin_y_m) / res).astype(np.int64), 0, rows - 1)
         max_cells = max(0.0, math.ceil(source.raytrace_max_range_m / res))
         min_cells = max(0.0, math.ceil(source.raytrace_min_range_m / res))
-        if self._lib is not None:
-            bounds = np.array([rows, -1, cols, -1], dtype=np.int64)
-            x1c, y1c = np.ascontiguousarray(x1, dtype=np.int64), np.ascontiguousarray(y1, dtype=np.int64)
-            self._lib.twin_raytrace(
-                cost.ctypes.data, rows, cols, x0, y0, x1c.ctypes.data, y1c.ctypes.data, len(x1c),
-                float(max_cells), float(min_cells), FREE_SPACE, bounds.ctypes.data,
-            )  # fmt: skip
-            if bounds[1] < 0:
-                return []
-            return [np.array([bounds[0], bounds[1]], dtype=np.intp), np.array([bounds[2], bounds[3]], dtype=np.intp)]
         rr, cc = _bresenham(x0, y0, x1, y1, max_cells=max_cells, min_cells=min_cells)
         keep = (rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols)
         rr, cc = rr[keep], cc[keep]
@@ -425,13 +439,15 @@ class Costmap:
                 seeds |= master == NO_INFORMATION
             if seeds.any():
                 if self._lib is not None:
-                    # max over obstacles of the cost at their offset = the cost at the nearest one's distance
-                    cost = np.zeros(master.shape, dtype=np.uint8)
-                    stencil = self._stencil()
-                    self._lib.twin_inflate(
-                        np.ascontiguousarray(seeds, dtype=np.uint8).ctypes.data, master.shape[0], master.shape[1], 1,
-                        stencil.ctypes.data, self._radius_cells, cost.ctypes.data,
+                    cost = np.empty(master.shape, dtype=np.uint8)
+                    table = self._cost_table()
+                    seed_cells = np.ascontiguousarray(seeds, dtype=np.uint8)  # kept alive across the call
+                    status = self._lib.twin_inflate(
+                        seed_cells.ctypes.data, master.shape[0], master.shape[1],
+                        table.ctypes.data, len(table) - 1, cost.ctypes.data,
                     )  # fmt: skip
+                    if status != 0:
+                        raise MemoryError("costmap inflation: out of memory")
                 else:
                     distance = np.asarray(ndimage.distance_transform_edt(~seeds), dtype=np.float64)
                     cost = self._costs(distance)
@@ -451,14 +467,13 @@ class Costmap:
             radius_cells=self._radius_cells,
         )
 
-    def _stencil(self) -> U8:
-        """The inflation cost at every cell offset within the radius, (2R + 1) x (2R + 1)."""
+    def _cost_table(self) -> U8:
+        """The inflation cost for every squared cell distance 0..R^2."""
         key = (self._radius_cells, self.grid.resolution_m)
-        if self._stencil_cache is None or self._stencil_cache[0] != key:
-            offsets = np.arange(-self._radius_cells, self._radius_cells + 1, dtype=np.float64)
-            stencil = np.ascontiguousarray(self._costs(np.hypot(offsets[:, None], offsets[None, :])))
-            self._stencil_cache = (key, stencil)
-        return self._stencil_cache[1]
+        if self._table_cache is None or self._table_cache[0] != key:
+            d2 = np.arange(self._radius_cells**2 + 1, dtype=np.float64)
+            self._table_cache = (key, np.ascontiguousarray(self._costs(np.sqrt(d2))))
+        return self._table_cache[1]
 
     def _layers(self, r0: int, r1: int, c0: int, c1: int) -> U8:
         """Static (overwrite) then obstacle layers (maximum) over a window; the master before inflation."""
