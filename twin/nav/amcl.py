@@ -69,7 +69,12 @@ def _angle_diff(a: float, b: float) -> float:
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class LaserGeometry:
-    """A LaserScan's fixed fields and the laser's mount in the robot base frame."""
+    """A LaserScan's fixed fields and the laser's mount in the robot base frame.
+
+    Beam i points at `mount_yaw_rad + angle_min_rad + i * angle_increment_rad` in the base frame;
+    for a lidar mounted upside down (rolled by pi) pass `-angle_min` and `-angle_increment`, as
+    AMCL does when it transforms the scan's angles into the base frame.
+    """
 
     angle_min_rad: float
     angle_increment_rad: float
@@ -248,7 +253,8 @@ class Amcl:
             if not (abs(dx) > p.update_min_d_m or abs(dy) > p.update_min_d_m or abs(dyaw) > p.update_min_a_rad):
                 return None
             self._motion(dx, dy, dyaw, ryaw)
-        self._sensor(np.asarray(ranges, dtype=np.float64))
+        if p.max_beams >= 2:  # Nav2's likelihood model refuses fewer than two beams (no weighting)
+            self._sensor(np.asarray(ranges, dtype=np.float64))
         self._odom_ref = (x, y, yaw)
         self._resample_count += 1
         if self._resample_count % p.resample_interval == 0:
