@@ -18,27 +18,37 @@ _SOURCE = r"""
 #include <stdlib.h>
 
 /* AMCL likelihood field: out[j] = 1 + sum_i cubes[row, col] over the beams' endpoints.
-   poses (n, 3); beam endpoints (bx, by) in the base frame; cubes (rows, cols) padded by `pad`. */
-void twin_amcl_likelihood(const double *poses, long n, const double *bx, const double *by, long nb,
-                          const double *cubes, long rows, long cols, long pad,
-                          double ox, double oy, double res, double *out) {
+   poses (n, 3); beam endpoints (bx, by) in the base frame; cubes (rows, cols) padded by `pad`.
+   Beam by beam over all particles: one beam's endpoints from a cluster of particles fall in a few
+   neighbouring cells, which keeps the lookups in cache. Returns -1 when memory runs out. */
+int twin_amcl_likelihood(const double *poses, long n, const double *bx, const double *by, long nb,
+                         const double *cubes, long rows, long cols, long pad,
+                         double ox, double oy, double res, double *out) {
+    double *cs = malloc(2 * sizeof(double) * (size_t)(n > 0 ? n : 1));
+    if (!cs) return -1;
+    double *sn = cs + n;
     for (long j = 0; j < n; ++j) {
-        double x = poses[3 * j], y = poses[3 * j + 1], yaw = poses[3 * j + 2];
-        double c = cos(yaw), s = sin(yaw);
-        double p = 0.0;
-        for (long i = 0; i < nb; ++i) {
-            double hx = x + c * bx[i] - s * by[i];
-            double hy = y + s * bx[i] + c * by[i];
+        cs[j] = cos(poses[3 * j + 2]);
+        sn[j] = sin(poses[3 * j + 2]);
+        out[j] = 0.0;
+    }
+    for (long i = 0; i < nb; ++i) {
+        double ex = bx[i], ey = by[i];
+        for (long j = 0; j < n; ++j) {
+            double hx = poses[3 * j] + cs[j] * ex - sn[j] * ey;
+            double hy = poses[3 * j + 1] + sn[j] * ex + cs[j] * ey;
             long col = (long)floor((hx - ox) / res + 0.5) + pad;
             long row = (long)floor((hy - oy) / res + 0.5) + pad;
             if (col < 0) col = 0;
             if (col > cols - 1) col = cols - 1;
             if (row < 0) row = 0;
             if (row > rows - 1) row = rows - 1;
-            p += cubes[row * cols + col];
+            out[j] += cubes[row * cols + col];
         }
-        out[j] = 1.0 + p;
     }
+    for (long j = 0; j < n; ++j) out[j] += 1.0;
+    free(cs);
+    return 0;
 }
 
 /* Costmap2D::raytraceLine from (x0, y0) to each (x1[k], y1[k]): set visited cells to `value`.
@@ -213,7 +223,7 @@ def load_kernel() -> ctypes.CDLL | None:
     if lib is None:
         return None
     ptr, long_, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
-    lib.twin_amcl_likelihood.restype = None
+    lib.twin_amcl_likelihood.restype = ctypes.c_int
     lib.twin_amcl_likelihood.argtypes = [ptr, long_, ptr, ptr, long_, ptr, long_, long_, long_, dbl, dbl, dbl, ptr]
     lib.twin_raytrace.restype = None
     lib.twin_raytrace.argtypes = [

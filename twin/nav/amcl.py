@@ -43,6 +43,7 @@ from twin.core.errors import ConfigError
 from twin.nav._native import load_kernel
 from twin.nav.map_server import OccupancyMap
 from twin.nav.params import AmclParams
+from twin.world.robot_model import LidarSpec
 
 __all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField"]
 
@@ -83,6 +84,21 @@ class LaserGeometry:
     mount_x_m: float = 0.0
     mount_y_m: float = 0.0
     mount_yaw_rad: float = 0.0
+
+    @classmethod
+    def from_spec(cls, spec: LidarSpec) -> LaserGeometry:
+        """Return the geometry of a robot's lidar as its scans are published (mirrored if mounted upside down)."""
+        mount = spec.mount
+        sweep = 1.0 if math.cos(mount.roll_rad) * math.cos(mount.pitch_rad) >= 0.0 else -1.0
+        return cls(
+            angle_min_rad=sweep * spec.angle_min_rad,
+            angle_increment_rad=sweep * spec.angle_increment_rad,
+            range_min_m=spec.range_min_m,
+            range_max_m=spec.range_max_m,
+            mount_x_m=mount.x_m,
+            mount_y_m=mount.y_m,
+            mount_yaw_rad=mount.yaw_rad,
+        )
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -310,11 +326,13 @@ class Amcl:
             bx, by = np.ascontiguousarray(bx), np.ascontiguousarray(by)
             cubes = self._cubes
             likelihood = np.empty(len(poses))
-            self._lib.twin_amcl_likelihood(
+            status = self._lib.twin_amcl_likelihood(
                 poses.ctypes.data, len(poses), bx.ctypes.data, by.ctypes.data, len(bx),
                 cubes.ctypes.data, cubes.shape[0], cubes.shape[1], self._pad,
                 self.field.origin_x_m, self.field.origin_y_m, self.field.resolution_m, likelihood.ctypes.data,
             )  # fmt: skip
+            if status != 0:
+                raise MemoryError("amcl likelihood: out of memory")
         elif len(bx):
             c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
             res = self.field.resolution_m

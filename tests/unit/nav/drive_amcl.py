@@ -73,15 +73,7 @@ def drive(
     rng = np.random.default_rng(seed)
     lidar = Lidar.from_robot(robot, scene, np.random.default_rng(seed + 1000))
     spec = lidar.spec
-    laser = LaserGeometry(
-        angle_min_rad=spec.angle_min_rad,
-        angle_increment_rad=spec.angle_increment_rad,
-        range_min_m=spec.range_min_m,
-        range_max_m=spec.range_max_m,
-        mount_x_m=spec.mount.x_m,
-        mount_y_m=spec.mount.y_m,
-        mount_yaw_rad=spec.mount.yaw_rad,
-    )
+    laser = LaserGeometry.from_spec(spec)
     amcl = Amcl(amcl_params(), occupancy, laser, np.random.default_rng(seed + 2000))
     amcl.set_initial_pose(*initial, np.diag([cov, cov, yaw_var]))
     truth = path_poses(duration_s)
