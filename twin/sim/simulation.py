@@ -32,6 +32,7 @@ from twin.estimation.node import EkfNode
 from twin.nav import GridNavigator, GridPlanner, build_grid
 from twin.nav.mission_node import MissionNode
 from twin.node import Node
+from twin.node.rosout import RosoutBridge
 from twin.robot.chassis import ChassisParams, SlipModel
 from twin.robot.drivetrain import Drivetrain, FmuDrive, FmuDrivetrain
 from twin.robot.encoders import EncoderModel, EncoderSpec
@@ -54,7 +55,6 @@ from twin.sim.executor import Executor, RecordFilter, Sink
 from twin.sim.launch import load_nodes
 from twin.sim.mission import CmdVelScript, TreeMission, WaypointFollower
 from twin.sim.rng import RngStreams
-from twin.sim.rosout import RosoutBridge
 from twin.sim.scenario import (
     BehaviorTreeMission,
     CmdVelScriptMission,

@@ -6,12 +6,10 @@ as `twin`. The bridge is a node, so its lines reach the recorder like any other 
 
 from __future__ import annotations
 
-import functools
 import logging
 
-from twin.bag import LogEncoder
 from twin.core.errors import TwinError
-from twin.node import Encoded, Node
+from twin.node.node import Node
 
 __all__ = ["RosoutBridge"]
 
@@ -26,27 +24,28 @@ class RosoutBridge(Node):
 
     def __init__(self) -> None:
         super().__init__("rosout")
-        self._pub = self.create_publisher(LogEncoder.msgtype, "/rosout", 1000)
-        self._encoders: dict[str, LogEncoder] = {}
+        from twin.msgs import get_message
+
+        self._log_msg = get_message("rcl_interfaces/msg/Log")
+        self._time_msg = get_message("builtin_interfaces/msg/Time")
+        self._pub = self.create_publisher(self._log_msg, "/rosout", 1000)
         self.handler = _Handler(self)
 
     def publish_record(self, record: logging.LogRecord) -> None:
         """Publish one log record."""
         level = next((ros for py, ros in _LEVELS if record.levelno >= py), 10)
         name = record.name[len(_NODE_PREFIX) :] if record.name.startswith(_NODE_PREFIX) else "twin"
-        encoder = self._encoders.get(name)
-        if encoder is None:
-            encoder = self._encoders[name] = LogEncoder(name)
-        encode = functools.partial(
-            encoder.encode,
-            self._graph_now(),
-            level,
-            record.getMessage(),
+        sec, nanosec = divmod(self._graph_now(), 1_000_000_000)
+        msg = self._log_msg(
+            stamp=self._time_msg(sec=sec, nanosec=nanosec),
+            level=level,
+            name=name,
+            msg=record.getMessage(),
             file=record.pathname,
             function=record.funcName,
             line=record.lineno,
         )
-        self._pub.publish(Encoded((encode, (), record)))
+        self._pub.publish(msg)
 
 
 class _Handler(logging.Handler):
