@@ -24,6 +24,7 @@ __all__ = [
     "clock_ns",
     "pose_reader",
     "scan_ranges",
+    "stamp_kind",
     "stamp_reader",
     "twist_reader",
     "yaw_of",
@@ -132,6 +133,13 @@ def clock_ns(buf: bytes) -> int:
 @functools.cache
 def _fielddefs() -> dict[str, object]:
     return dict(TypeRegistry().store.fielddefs)
+
+
+def stamp_kind(msgtype: str) -> int:
+    """Where a type's stamp is: 0 nowhere, 1 at the start (a header or Time), 2 TFMessage's first transform."""
+    if msgtype == "tf2_msgs/msg/TFMessage":
+        return 2
+    return 1 if stamp_reader(msgtype) is not None else 0
 
 
 def stamp_reader(msgtype: str) -> Callable[[bytes], int | None] | None:

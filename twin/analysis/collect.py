@@ -58,8 +58,10 @@ EXPECTED_RATE_HZ: dict[str, float] = {
 
 _SCAN_CELL_M = 0.05
 _SCAN_BEAM_STRIDE = 4
+_SCAN_MOVE_M = 0.05
+_SCAN_TURN_RAD = 0.1
 _PLAN_POINTS = 200
-_WARMUP = 50
+_BLOCK = 8192
 
 
 class PoseTrack:
@@ -100,12 +102,18 @@ class PoseTrack:
 
 @dataclass(kw_only=True, slots=True)
 class TopicHealth:
-    """Running statistics of one topic's message times."""
+    """Running statistics of one topic's message times, updated a block of messages at a time.
+
+    `add` only appends the record time and the stamp's 8 raw bytes; every `_BLOCK` messages the
+    block is reduced with numpy into sums, extremes and counts, so memory stays bounded.
+    """
 
     topic: str
     msgtype: str
     decodable: bool
     expected_rate_hz: float | None
+    stamp_kind: int = 0  # 0: no stamp, 1: a leading header/Time, 2: TFMessage's first transform
+    little_endian: bool = True
     count: int = 0
     first_ns: int = 0
     last_ns: int = 0
@@ -118,52 +126,77 @@ class TopicHealth:
     skew_min_s: float = math.inf
     skew_max_s: float = -math.inf
     skew_sum_s: float = 0.0
+    periodic: bool = True
     _period_s: float | None = None
-    _warmup: list[float] = field(default_factory=list)
-    _last_stamp: int | None = None
+    _last_stamp: int = 0
+    t_buf: array[int] = field(default_factory=lambda: array("q"))
+    stamp_buf: bytearray = field(default_factory=bytearray)
 
-    def add(self, t_ns: int, stamp_ns: int | None) -> None:
-        """Count one message recorded at `t_ns` carrying header stamp `stamp_ns` (None: no stamp)."""
+    def add(self, t_ns: int, buf: bytes) -> None:
+        """Count one message recorded at `t_ns` (its serialized bytes `buf` give the stamp)."""
+        self.t_buf.append(t_ns)
+        kind = self.stamp_kind
+        if kind == 1:
+            self.stamp_buf += buf[4:12]
+        elif kind == 2:
+            self.stamp_buf += buf[8:16] if len(buf) >= 16 and buf[4:8] != b"\0\0\0\0" else bytes(8)
+        if len(self.t_buf) >= _BLOCK:
+            self.flush()
+
+    def flush(self) -> None:
+        """Reduce the buffered block into the statistics."""
+        if not self.t_buf:
+            return
+        t = np.frombuffer(self.t_buf, dtype=np.int64)
         if self.count:
-            dt = (t_ns - self.last_ns) * 1e-9
-            self.sum_dt += dt
-            self.sum_dt2 += dt * dt
-            self.max_gap_s = max(self.max_gap_s, dt)
-            if self._period_s is None:
-                self._warmup.append(dt)
-                if len(self._warmup) >= _WARMUP:
-                    self._settle()
-            elif dt > 3.0 * self._period_s:
-                self.gaps += 1
+            dt = np.diff(t, prepend=self.last_ns) * 1e-9
         else:
-            self.first_ns = t_ns
-        self.count += 1
-        self.last_ns = t_ns
-        if stamp_ns is not None and stamp_ns > 0:
-            if self._last_stamp is not None and stamp_ns < self._last_stamp:
-                self.non_monotonic += 1
-            self._last_stamp = stamp_ns
-            skew = (t_ns - stamp_ns) * 1e-9
-            self.skew_count += 1
-            self.skew_sum_s += skew
-            self.skew_min_s = min(self.skew_min_s, skew)
-            self.skew_max_s = max(self.skew_max_s, skew)
+            self.first_ns = int(t[0])
+            dt = np.diff(t) * 1e-9
+        if len(dt):
+            if self._period_s is None:
+                self._settle(dt)
+            assert self._period_s is not None
+            self.sum_dt += float(dt.sum())
+            self.sum_dt2 += float(np.dot(dt, dt))
+            self.max_gap_s = max(self.max_gap_s, float(dt.max()))
+            self.gaps += int(np.count_nonzero(dt > 3.0 * self._period_s))
+        self.count += len(t)
+        self.last_ns = int(t[-1])
+        if self.stamp_kind:
+            raw = np.frombuffer(bytes(self.stamp_buf), dtype=np.dtype([("s", "<i4"), ("n", "<u4")]))
+            if not self.little_endian:
+                raw = raw.byteswap()
+            stamps = raw["s"].astype(np.int64) * 1_000_000_000 + raw["n"].astype(np.int64)
+            has = stamps > 0
+            st = stamps[has]
+            if len(st):
+                prev = np.concatenate(([self._last_stamp], st[:-1])) if self._last_stamp else st[:-1]
+                cur = st if self._last_stamp else st[1:]
+                self.non_monotonic += int(np.count_nonzero(cur < prev))
+                self._last_stamp = int(st[-1])
+                skew = (t[has] - st) * 1e-9
+                self.skew_count += len(skew)
+                self.skew_sum_s += float(skew.sum())
+                self.skew_min_s = min(self.skew_min_s, float(skew.min()))
+                self.skew_max_s = max(self.skew_max_s, float(skew.max()))
+        self.t_buf = array("q")
+        self.stamp_buf = bytearray()
 
-    def _settle(self) -> None:
+    def _settle(self, warm: NDArray[np.float64]) -> None:
         if self.expected_rate_hz:
             self._period_s = 1.0 / self.expected_rate_hz
-        else:
-            self._period_s = float(np.median(self._warmup)) if self._warmup else None
-        if self._period_s is not None and self._period_s > 0.0:
-            self.gaps += sum(1 for dt in self._warmup if dt > 3.0 * self._period_s)
-        else:
-            self._period_s = math.inf  # all at one time: no period to measure gaps against
-        self._warmup = []
+            return
+        mean = float(warm.mean())
+        # Only a periodic topic has gaps: events (logs, parameters) come when they come.
+        self.periodic = len(warm) >= 3 and mean > 0.0 and float(warm.std()) < 0.5 * mean
+        self._period_s = float(np.median(warm)) if self.periodic else math.inf
 
     def finish(self) -> None:
-        """Count the gaps of a topic too short to leave its warm-up."""
-        if self._period_s is None and self._warmup:
-            self._settle()
+        """Reduce what is still buffered."""
+        self.flush()
+        if self._period_s is None:
+            self.periodic = False
 
     @property
     def rate_hz(self) -> float | None:
@@ -192,7 +225,7 @@ class TopicHealth:
             "expected_rate_hz": self.expected_rate_hz,
             "jitter_ms": None if self.jitter_s is None else self.jitter_s * 1e3,
             "max_interval_s": self.max_gap_s if self.count > 1 else None,
-            "gaps_over_3_periods": self.gaps,
+            "gaps_over_3_periods": self.gaps if self.periodic else None,
             "non_monotonic_stamps": self.non_monotonic,
             "stamp_offset_mean_s": self.skew_sum_s / self.skew_count if skew else None,
             "stamp_skew_spread_ms": (self.skew_max_s - self.skew_min_s) * 1e3 if skew else None,
@@ -220,7 +253,8 @@ class BagData:
     cmd: tuple[array[float], array[float], array[float]] | None = None  # t s, v, ω
     cmd_stamped: bool = False
     scan_min: tuple[array[float], array[float]] | None = None  # t s, min valid range m
-    scan_cells: dict[tuple[int, int], int] = field(default_factory=dict)
+    scan_cells: dict[int, int] = field(default_factory=dict)  # cell (x << 32 | y) -> scans that hit it
+    scan_from: tuple[float, float, float] | None = None  # pose of the last scan placed
     health: dict[str, TopicHealth] = field(default_factory=dict)
     clock: tuple[array[int], array[int]] | None = None  # record ns, clock ns
     bt_events: list[tuple[float, str, str, str]] = field(default_factory=list)
@@ -282,6 +316,11 @@ def collect(
             `twin bag recover`.
     """
     bag = Path(path)
+    try:  # opening the storage first turns a truncated file into one error line, not a warning and an error
+        for _ in read_messages(bag, []):
+            pass
+    except BagError as err:
+        raise BagError(_truncation_hint(bag, err)) from None
     info = open_bag(bag)
     data = BagData(info=info, start_ns=info.start_ns)
     names = {t.name for t in info.topics}
@@ -308,43 +347,43 @@ def collect(
     clock_ok = "/clock" in by_name and by_name["/clock"].msgtype == "rosgraph_msgs/msg/Clock"
     if clock_ok:
         data.clock = (array("q"), array("q"))
-    stamp_fns = {ti.name: _cdr.stamp_reader(ti.msgtype) for ti in info.topics}
+    for h in data.health.values():
+        h.stamp_kind = _cdr.stamp_kind(h.msgtype)
 
     read_topics = None if wanted is None else wanted
     if read_topics is not None and not read_topics:
         return data
     span = max(info.duration_ns, 1)
     next_report = 0
-    last_pose: tuple[float, float, float] | None = None
     pose_rank = {t: i for i, t in enumerate(POSE_TOPICS)}
     best_rank = min((pose_rank[t] for t in pose_fns), default=99)
+    handlers: dict[str, Callable[[int, bytes], None]] = {}
+    state = {"pose": None}
+    for topic, fn in pose_fns.items():
+        handlers[topic] = _pose_handler(data, topic, fn, state if pose_rank[topic] == best_rank else None)
+    if twist_fn is not None and data.cmd is not None:
+        handlers[CMD_TOPIC] = _cmd_handler(data, twist_fn)
+    if data.scan_min is not None:
+        handlers[SCAN_TOPIC] = lambda t_ns, buf: _add_scan(data, t_ns, buf, state["pose"] if scan_points else None)
+    if data.clock is not None:
+        handlers["/clock"] = _clock_handler(data.clock)
+    health_of = data.health if health else {}
+    endian_checked: set[str] = set()
     try:
         for topic, _type, t_ns, raw in read_messages(bag, read_topics, decode=False):
             buf: bytes = raw
-            try:
-                if health:
-                    h = data.health.get(topic)
-                    if h is not None:
-                        stamp_fn = stamp_fns.get(topic)
-                        h.add(t_ns, stamp_fn(buf) if stamp_fn is not None else None)
-                pose_fn = pose_fns.get(topic)
-                if pose_fn is not None:
-                    sample = pose_fn(buf)
-                    data.poses[topic].add(t_ns, sample)
-                    if pose_rank[topic] == best_rank:
-                        last_pose = (sample[1], sample[2], sample[3])
-                elif topic == CMD_TOPIC and twist_fn is not None and data.cmd is not None:
-                    _stamp, v, w = twist_fn(buf)
-                    data.cmd[0].append(data.t_s(t_ns))
-                    data.cmd[1].append(v)
-                    data.cmd[2].append(w)
-                elif topic == SCAN_TOPIC and data.scan_min is not None:
-                    _add_scan(data, t_ns, buf, last_pose if scan_points else None)
-                elif topic == "/clock" and data.clock is not None:
-                    data.clock[0].append(t_ns)
-                    data.clock[1].append(_cdr.clock_ns(buf))
-            except (IndexError, ValueError, TypeError) as err:  # struct.error is a ValueError
-                _log.warning("%s: a message on %s at %d ns does not parse (%s); skipped", bag, topic, t_ns, err)
+            th = health_of.get(topic)
+            if th is not None:
+                if topic not in endian_checked:
+                    endian_checked.add(topic)
+                    th.little_endian = len(buf) > 1 and bool(buf[1] & 1)
+                th.add(t_ns, buf)
+            handler = handlers.get(topic)
+            if handler is not None:
+                try:
+                    handler(t_ns, buf)
+                except (IndexError, ValueError, TypeError) as err:  # struct.error is a ValueError
+                    _log.warning("%s: a message on %s at %d ns does not parse (%s); skipped", bag, topic, t_ns, err)
             if progress is not None and t_ns >= next_report:
                 progress((t_ns - info.start_ns) / span)
                 next_report = t_ns + span // 50
@@ -357,9 +396,47 @@ def collect(
     return data
 
 
+def _pose_handler(
+    data: BagData, topic: str, fn: Callable[[bytes], _cdr.PoseSample], state: dict[str, Any] | None
+) -> Callable[[int, bytes], None]:
+    track = data.poses[topic]
+
+    def handle(t_ns: int, buf: bytes) -> None:
+        sample = fn(buf)
+        track.add(t_ns, sample)
+        if state is not None:
+            state["pose"] = (sample[1], sample[2], sample[3])
+
+    return handle
+
+
+def _clock_handler(clock: tuple[array[int], array[int]]) -> Callable[[int, bytes], None]:
+    rec, sim = clock
+
+    def handle(t_ns: int, buf: bytes) -> None:
+        rec.append(t_ns)
+        sim.append(_cdr.clock_ns(buf))
+
+    return handle
+
+
+def _cmd_handler(data: BagData, fn: Callable[[bytes], tuple[int | None, float, float]]) -> Callable[[int, bytes], None]:
+    assert data.cmd is not None
+    t_arr, v_arr, w_arr = data.cmd
+    t_s = data.t_s
+
+    def handle(t_ns: int, buf: bytes) -> None:
+        _stamp, v, w = fn(buf)
+        t_arr.append(t_s(t_ns))
+        v_arr.append(v)
+        w_arr.append(w)
+
+    return handle
+
+
 def _truncation_hint(bag: Path, err: BagError) -> str:
-    text = str(err)
-    if "recover" in text:
+    text = str(err).rstrip(". ")
+    if "recover" in text or "no such bag folder" in text:
         return text
     return f"{text}; if its recording was killed, run `twin bag recover {bag}`"
 
@@ -367,30 +444,39 @@ def _truncation_hint(bag: Path, err: BagError) -> str:
 def _add_scan(data: BagData, t_ns: int, buf: bytes, pose: tuple[float, float, float] | None) -> None:
     assert data.scan_min is not None
     _stamp, a_min, a_inc, r_min, r_max, _u, ranges = _cdr.scan_ranges(buf)
-    valid = (ranges >= r_min) & (ranges <= r_max) & np.isfinite(ranges)
+    valid = (ranges >= r_min) & (ranges <= r_max)
     data.scan_min[0].append(data.t_s(t_ns))
     data.scan_min[1].append(float(ranges[valid].min()) if valid.any() else math.nan)
     if pose is None:
         return
+    # Endpoints only from scans taken after the robot moved or turned: a standing robot adds nothing new.
+    last = data.scan_from
+    x, y, yaw = pose
+    if last is not None and math.hypot(x - last[0], y - last[1]) < _SCAN_MOVE_M and abs(yaw - last[2]) < _SCAN_TURN_RAD:
+        return
+    data.scan_from = pose
     idx = np.flatnonzero(valid[::_SCAN_BEAM_STRIDE]) * _SCAN_BEAM_STRIDE
     if not len(idx):
         return
-    x, y, yaw = pose
     ang = yaw + a_min + a_inc * idx
     r = ranges[idx].astype(np.float64)
-    cells = np.floor(np.stack((x + r * np.cos(ang), y + r * np.sin(ang)), axis=1) / _SCAN_CELL_M).astype(np.int64)
-    cells_counts = data.scan_cells
-    for cx, cy in np.unique(cells, axis=0).tolist():
-        key = (cx, cy)
-        cells_counts[key] = cells_counts.get(key, 0) + 1
+    cx = np.floor((x + r * np.cos(ang)) / _SCAN_CELL_M).astype(np.int64)
+    cy = np.floor((y + r * np.sin(ang)) / _SCAN_CELL_M).astype(np.int64)
+    keys = np.unique((cx << 32) + (cy & 0xFFFFFFFF))
+    cells = data.scan_cells
+    for key in keys.tolist():
+        cells[key] = cells.get(key, 0) + 1
 
 
 def scan_points(data: BagData, min_hits: int = 2) -> F64:
     """Centres of the scan-endpoint cells hit at least `min_hits` times, shape (N, 2)."""
-    pts = [k for k, n in data.scan_cells.items() if n >= min_hits]
-    if not pts:
+    keys = np.array([k for k, n in data.scan_cells.items() if n >= min_hits], dtype=np.int64)
+    if not len(keys):
         return np.zeros((0, 2))
-    return (np.asarray(pts, dtype=np.float64) + 0.5) * _SCAN_CELL_M
+    cx = keys >> 32
+    cy = (keys & 0xFFFFFFFF).astype(np.int64)
+    cy = np.where(cy >= 2**31, cy - 2**32, cy)
+    return (np.stack((cx, cy), axis=1).astype(np.float64) + 0.5) * _SCAN_CELL_M
 
 
 def _decode_rare(data: BagData, bag: Path, names: set[str]) -> None:
