@@ -85,8 +85,16 @@ def world_walls(sdf: Path, model_path: Sequence[Path] = (), height_m: float = 0.
         if m.name.startswith("turtlebot3_") and not m.name.endswith(("_world", "_house")) and "dqn" not in m.name
     ]
     scene = build_scene(world, exclude_models=robots)
-    segments = np.asarray(scene.ray_caster(height_m).segments, dtype=np.float64)
-    return segments.reshape(-1, 4)
+    caster = scene.ray_caster(height_m)
+    segments = np.asarray(caster.segments, dtype=np.float64).reshape(-1, 4)
+    circles = np.asarray(caster.circles, dtype=np.float64).reshape(-1, 3)
+    if len(circles):  # round obstacles (cylinders) as 24-gons
+        ang = np.linspace(0.0, 2.0 * math.pi, 25)
+        cx, cy, r = circles[:, :1], circles[:, 1:2], circles[:, 2:3]
+        px, py = cx + r * np.cos(ang), cy + r * np.sin(ang)
+        polys = np.stack((px[:, :-1], py[:, :-1], px[:, 1:], py[:, 1:]), axis=2).reshape(-1, 4)
+        segments = np.concatenate((segments, polys))
+    return segments
 
 
 def analyze(

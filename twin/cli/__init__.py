@@ -22,7 +22,17 @@ __all__ = ["main", "run"]
 _log = logging.getLogger("twin")
 
 # Command-group modules under twin.cli, in the order `twin --help` lists them.
-_COMMAND_MODULES: tuple[str, ...] = ("simulate", "scenario", "world", "fmu", "tree", "bag", "ekf", "analyze")
+_COMMAND_MODULES: tuple[str, ...] = (
+    "simulate",
+    "scenario",
+    "world",
+    "fmu",
+    "tree",
+    "bag",
+    "ekf",
+    "analyze",
+    "replay",
+)
 
 _EPILOG = """\
 examples:

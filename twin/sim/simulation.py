@@ -47,12 +47,14 @@ from twin.robot.imu import ImuModel, imu_model_spec
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
 from twin.robot.lidar import Lidar
 from twin.sim.bus import Bus, Publisher
-from twin.sim.mission import CmdVelScript, TreeMission, WaypointFollower
+from twin.sim.mission import BagReplay, CmdVelScript, TreeMission, WaypointFollower
+from twin.sim.replay import start_moving
 from twin.sim.rng import RngStreams
 from twin.sim.scenario import (
     BehaviorTreeMission,
     CmdVelScriptMission,
     LidarSection,
+    ReplayMission,
     Scenario,
     WaypointsMission,
 )
@@ -286,10 +288,14 @@ class Simulation:
             self.drive.close()
             raise
 
-    def _make_mission(self, scene: Scene, body: RobotBody) -> TreeMission | WaypointFollower | CmdVelScript:
+    def _make_mission(self, scene: Scene, body: RobotBody) -> TreeMission | WaypointFollower | CmdVelScript | BagReplay:
         spec = self.scenario.mission
         if isinstance(spec, CmdVelScriptMission):
             return CmdVelScript(spec)
+        if isinstance(spec, ReplayMission):
+            replay = BagReplay(spec)
+            start_moving(self.drive, *replay.commands.start_velocity)
+            return replay
         if isinstance(spec, WaypointsMission):
             return WaypointFollower(spec)
         z_lo, z_hi = body.z_range_m
