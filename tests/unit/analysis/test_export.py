@@ -45,3 +45,30 @@ def test_unknown_topic_is_one_line_exit_5(twin_bag: Path, tmp_path: Path) -> Non
     proc = run_twin("bag", "export", str(twin_bag), "--topics", "/nope", "--out", str(tmp_path))
     assert proc.returncode == 5
     assert len(proc.stderr.strip().splitlines()) == 1 and "/nope" in proc.stderr
+
+
+def test_ekf_replay_takes_wheel_geometry_from_the_bags_urdf_and_says_so(gazebo_bag: Path, tmp_path: Path) -> None:
+    import json
+
+    proc = run_twin("ekf", "replay", str(gazebo_bag), "--out", str(tmp_path / "e"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    # turtlebot3_waffle_pi.urdf: wheel joints at y = +-0.144 m, tyre cylinders of radius 0.033 m.
+    assert s["wheel_radius_m"] == pytest.approx(0.033)
+    assert s["wheel_separation_m"] == pytest.approx(0.288)
+    assert (s["left_joint"], s["right_joint"]) == ("wheel_left_joint", "wheel_right_joint")
+    assert all("/robot_description" in v and "turtlebot3_waffle_pi" in v for v in s["geometry_sources"].values())
+
+
+def test_ekf_replay_without_urdf_names_the_default_it_used(twin_bag: Path, tmp_path: Path) -> None:
+    import json
+
+    from tests.unit.analysis.test_analyze_cli import _copy_topics
+
+    bag = _copy_topics(twin_bag, tmp_path / "no_urdf", ["/imu", "/joint_states", "/odom"])
+    proc = run_twin("ekf", "replay", str(bag), "--out", str(tmp_path / "e"), "--wheel-separation", "0.287", "--json")
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert s["geometry_sources"]["wheel_separation"] == "--wheel-separation"
+    assert s["geometry_sources"]["wheel_radius"] == "TurtleBot3 Waffle default (no /robot_description)"
+    assert s["wheel_radius_m"] == 0.033
