@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.analysis import _cdr
-from twin.bag import BagInfo, open_bag, read_messages
+from twin.bag import BagInfo, open_bag, read_messages, read_raw
 from twin.core.errors import BagError
 
 __all__ = [
@@ -134,20 +134,26 @@ class TopicHealth:
 
     def add(self, t_ns: int, buf: bytes) -> None:
         """Count one message recorded at `t_ns` (its serialized bytes `buf` give the stamp)."""
+        if not self.t_buf and self.count == 0:
+            self.little_endian = len(buf) > 1 and bool(buf[1] & 1)
         self.t_buf.append(t_ns)
         kind = self.stamp_kind
         if kind == 1:
             self.stamp_buf += buf[4:12]
         elif kind == 2:
-            self.stamp_buf += buf[8:16] if len(buf) >= 16 and buf[4:8] != b"\0\0\0\0" else bytes(8)
+            self.add_tf_stamp(buf)
         if len(self.t_buf) >= _BLOCK:
             self.flush()
+
+    def add_tf_stamp(self, buf: bytes) -> None:
+        """Buffer the stamp of a TFMessage's first transform (zeros when it has none)."""
+        self.stamp_buf += buf[8:16] if len(buf) >= 16 and buf[4:8] != b"\0\0\0\0" else bytes(8)
 
     def flush(self) -> None:
         """Reduce the buffered block into the statistics."""
         if not self.t_buf:
             return
-        t = np.frombuffer(self.t_buf, dtype=np.int64)
+        t = np.frombuffer(self.t_buf, dtype=np.int64).copy()  # the buffer is cleared below
         if self.count:
             dt = np.diff(t, prepend=self.last_ns) * 1e-9
         else:
@@ -180,8 +186,8 @@ class TopicHealth:
                 self.skew_sum_s += float(skew.sum())
                 self.skew_min_s = min(self.skew_min_s, float(skew.min()))
                 self.skew_max_s = max(self.skew_max_s, float(skew.max()))
-        self.t_buf = array("q")
-        self.stamp_buf = bytearray()
+        del self.t_buf[:]
+        del self.stamp_buf[:]
 
     def _settle(self, warm: NDArray[np.float64]) -> None:
         if self.expected_rate_hz:
@@ -368,17 +374,29 @@ def collect(
     if data.clock is not None:
         handlers["/clock"] = _clock_handler(data.clock)
     health_of = data.health if health else {}
-    endian_checked: set[str] = set()
+    route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]] = {
+        name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
+    }
+    block = _BLOCK
     try:
-        for topic, _type, t_ns, raw in read_messages(bag, read_topics, decode=False):
-            buf: bytes = raw
-            th = health_of.get(topic)
-            if th is not None:
-                if topic not in endian_checked:
-                    endian_checked.add(topic)
+        for topic, t_ns, raw in read_raw(bag, read_topics):
+            r = route.get(topic)
+            if r is None:
+                continue
+            buf: Any = raw  # bytes or a memoryview into the chunk
+            th, handler = r
+            if th is not None:  # TopicHealth.add, inlined: this runs for every message of the bag
+                tb = th.t_buf
+                if not tb and th.count == 0:
                     th.little_endian = len(buf) > 1 and bool(buf[1] & 1)
-                th.add(t_ns, buf)
-            handler = handlers.get(topic)
+                tb.append(t_ns)
+                kind = th.stamp_kind
+                if kind == 1:
+                    th.stamp_buf += buf[4:12]
+                elif kind == 2:
+                    th.add_tf_stamp(buf)
+                if len(tb) >= block:
+                    th.flush()
             if handler is not None:
                 try:
                     handler(t_ns, buf)
