@@ -27,6 +27,7 @@ __all__ = [
     "stamp_kind",
     "stamp_reader",
     "twist_reader",
+    "type_store",
     "yaw_of",
 ]
 
@@ -131,8 +132,14 @@ def clock_ns(buf: bytes) -> int:
 
 
 @functools.cache
+def type_store() -> Any:
+    """Humble's standard types plus nav2_msgs and twin_msgs (one store, built on first use, read-only after)."""
+    return TypeRegistry().store
+
+
 def _fielddefs() -> dict[str, object]:
-    return dict(TypeRegistry().store.fielddefs)
+    fielddefs: dict[str, object] = type_store().fielddefs
+    return fielddefs
 
 
 def stamp_kind(msgtype: str) -> int:

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from twin.analysis import _cdr
 from twin.bag import BagInfo, open_bag, read_messages, read_raw
+from twin.bag.raw import raw_readable
 from twin.core.errors import BagError
 
 __all__ = [
@@ -323,8 +324,9 @@ def collect(
     """
     bag = Path(path)
     try:  # opening the storage first turns a truncated file into one error line, not a warning and an error
-        for _ in read_messages(bag, []):
-            pass
+        if not raw_readable(bag):
+            for _ in read_messages(bag, []):
+                pass
     except BagError as err:
         raise BagError(_truncation_hint(bag, err)) from None
     info = open_bag(bag)
@@ -373,6 +375,14 @@ def collect(
         handlers[SCAN_TOPIC] = lambda t_ns, buf: _add_scan(data, t_ns, buf, state["pose"] if scan_points else None)
     if data.clock is not None:
         handlers["/clock"] = _clock_handler(data.clock)
+    if decoded:
+        if "/contacts" in by_name and (wanted is None or "/contacts" in wanted):
+            data.contacts = []
+        for name in _DECODED_TOPICS:
+            if name in by_name and (wanted is None or name in wanted) and by_name[name].decodable:
+                rare = _rare_handler(data, name, by_name[name].msgtype)
+                if rare is not None:
+                    handlers[name] = rare
     health_of = data.health if health else {}
     route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]] = {
         name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
@@ -409,8 +419,6 @@ def collect(
         raise BagError(_truncation_hint(bag, err)) from None
     for h in data.health.values():
         h.finish()
-    if decoded:
-        _decode_rare(data, bag, names if wanted is None else set(wanted))
     return data
 
 
@@ -497,47 +505,53 @@ def scan_points(data: BagData, min_hits: int = 2) -> F64:
     return (np.stack((cx, cy), axis=1).astype(np.float64) + 0.5) * _SCAN_CELL_M
 
 
-def _decode_rare(data: BagData, bag: Path, names: set[str]) -> None:
-    rare = [t for t in _DECODED_TOPICS if t in names and data.info.topic(t).decodable]
-    if "/contacts" in names:
-        data.contacts = []
-    if not rare:
-        return
-    try:
-        for m in read_messages(bag, rare):
-            t_s = data.t_s(m.t_ns)
-            msg = m.msg
-            if m.topic == "/behavior_tree_log" and hasattr(msg, "event_log"):
-                for e in msg.event_log:
-                    data.bt_events.append((t_s, str(e.node_name), str(e.previous_status), str(e.current_status)))
-            elif m.topic == "/plan" and hasattr(msg, "poses"):
-                xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=np.float64)
-                if len(xy) > _PLAN_POINTS:
-                    xy = xy[np.linspace(0, len(xy) - 1, _PLAN_POINTS).astype(np.int64)]
-                data.plans.append((t_s, xy.reshape(-1, 2)))
-            elif m.topic == "/goal_pose" and hasattr(msg, "pose"):
-                p = msg.pose
-                q = p.orientation
-                data.goals.append((t_s, p.position.x, p.position.y, _cdr.yaw_of(q.x, q.y, q.z, q.w)))
-            elif m.topic == "/contacts" and data.contacts is not None and hasattr(msg, "event"):
-                data.contacts.append(
-                    ContactEvent(
-                        t_s=t_s,
-                        begin=int(msg.event) == 1,
-                        x_m=float(msg.position.x),
-                        y_m=float(msg.position.y),
-                        what=str(msg.world_collision),
-                    )
-                )
-            elif m.topic == "/map" and hasattr(msg, "info"):
-                w, h = int(msg.info.width), int(msg.info.height)
-                grid = np.asarray(msg.data, dtype=np.float64).reshape(h, w) if w * h else np.zeros((0, 0))
-                o = msg.info.origin.position
-                data.occupancy = (grid, float(msg.info.resolution), float(o.x), float(o.y))
-            elif m.topic == "/robot_description" and hasattr(msg, "data"):
-                data.robot_description = str(msg.data)
-    except BagError as err:
-        _log.warning("%s", err)
+def _rare_handler(data: BagData, topic: str, msgtype: str) -> Callable[[int, bytes], None] | None:
+    """A handler decoding a rare structured topic in the main pass (standard definitions), or None."""
+    store = _cdr.type_store()
+    if msgtype not in store.fielddefs:
+        return None
+
+    def handle(t_ns: int, buf: bytes) -> None:
+        try:
+            msg = store.deserialize_cdr(bytes(buf), msgtype)
+        except Exception as err:  # rosbags raises several kinds; one bad message is skipped, not fatal
+            _log.warning("%s at %d ns does not decode as %s (%s); skipped", topic, t_ns, msgtype, err)
+            return
+        _take_rare(data, topic, data.t_s(t_ns), msg)
+
+    return handle
+
+
+def _take_rare(data: BagData, topic: str, t_s: float, msg: Any) -> None:
+    if topic == "/behavior_tree_log" and hasattr(msg, "event_log"):
+        for e in msg.event_log:
+            data.bt_events.append((t_s, str(e.node_name), str(e.previous_status), str(e.current_status)))
+    elif topic == "/plan" and hasattr(msg, "poses"):
+        xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=np.float64)
+        if len(xy) > _PLAN_POINTS:
+            xy = xy[np.linspace(0, len(xy) - 1, _PLAN_POINTS).astype(np.int64)]
+        data.plans.append((t_s, xy.reshape(-1, 2)))
+    elif topic == "/goal_pose" and hasattr(msg, "pose"):
+        p = msg.pose
+        q = p.orientation
+        data.goals.append((t_s, p.position.x, p.position.y, _cdr.yaw_of(q.x, q.y, q.z, q.w)))
+    elif topic == "/contacts" and data.contacts is not None and hasattr(msg, "event"):
+        data.contacts.append(
+            ContactEvent(
+                t_s=t_s,
+                begin=int(msg.event) == 1,
+                x_m=float(msg.position.x),
+                y_m=float(msg.position.y),
+                what=str(msg.world_collision),
+            )
+        )
+    elif topic == "/map" and hasattr(msg, "info"):
+        w, h = int(msg.info.width), int(msg.info.height)
+        grid = np.asarray(msg.data, dtype=np.float64).reshape(h, w) if w * h else np.zeros((0, 0))
+        o = msg.info.origin.position
+        data.occupancy = (grid, float(msg.info.resolution), float(o.x), float(o.y))
+    elif topic == "/robot_description" and hasattr(msg, "data"):
+        data.robot_description = str(msg.data)
 
 
 def best_pose(data: BagData) -> PoseTrack | None:

@@ -259,7 +259,11 @@ def write_comparison(result: Comparison, out_dir: Path, *, walls: F64 | None = N
     files[1].write_bytes(plots.overlay_plot({label_a: result.track_a, label_b: result.track_b}, walls, title))
     files[2].write_bytes(
         plots.localization_plot(
-            result.t_s, result.position_error_m, result.yaw_error_rad, f"B vs A ({result.topic_a}): pose error"
+            result.t_s,
+            result.position_error_m,
+            result.yaw_error_rad,
+            f"B ({result.topic_b}) vs A ({result.topic_a}): pose error",
+            xlabel="time from each bag's first pose (s)",
         )
     )
     return files

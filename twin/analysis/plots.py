@@ -139,14 +139,16 @@ def velocity_plot(
     return _png(fig)
 
 
-def localization_plot(t_s: F64, pos_err_m: F64, yaw_err_rad: F64, title: str) -> bytes:
+def localization_plot(
+    t_s: F64, pos_err_m: F64, yaw_err_rad: F64, title: str, xlabel: str = "time from bag start (s)"
+) -> bytes:
     """Position and yaw error of the estimate over time."""
     fig = Figure(figsize=(8, 3.5))
     ax = fig.add_subplot()
     t, p, y = _thin(t_s, pos_err_m, yaw_err_rad)
     ax.plot(t, p * 100.0, color="tab:blue", lw=1.0, label="position error (cm)")
     ax.set_ylabel("position error (cm)")
-    ax.set_xlabel("time from bag start (s)")
+    ax.set_xlabel(xlabel)
     ax2 = ax.twinx()
     ax2.plot(t, np.degrees(y), color="tab:orange", lw=0.8, alpha=0.8, label="yaw error (deg)")
     ax2.set_ylabel("|yaw error| (deg)")

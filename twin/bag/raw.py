@@ -23,7 +23,7 @@ from twin.bag.metadata import read_metadata
 from twin.bag.reader import _bag_dir, read_messages
 from twin.core.errors import BagError
 
-__all__ = ["read_raw"]
+__all__ = ["raw_readable", "read_raw"]
 
 _RECORD = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQQI")
@@ -31,6 +31,25 @@ _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 _MSG_HEAD = struct.Struct("<HIQQ")
 _CHANNEL_HEAD = struct.Struct("<HH")
+
+
+def _fast(bag: Path, topics: Sequence[str] | None) -> _McapChunks | None:
+    meta = read_metadata(bag)
+    files = [bag / Path(rel).name for rel in meta.relative_file_paths]
+    if meta.storage_identifier == "mcap" and len(files) == 1 and not meta.compression_format:
+        fast = _McapChunks(files[0], topics)
+        if fast.in_order():
+            return fast
+    return None
+
+
+def raw_readable(path: str | os.PathLike[str]) -> bool:
+    """Whether `read_raw` reads this bag's file directly (a complete, in-order MCAP file).
+
+    Raises:
+        BagError: If the folder is not a bag (no such folder, no metadata.yaml).
+    """
+    return _fast(_bag_dir(path), None) is not None
 
 
 def read_raw(
@@ -44,18 +63,15 @@ def read_raw(
         BagError: If the bag is unreadable (or a requested topic is missing, listing the bag's topics).
     """
     bag = _bag_dir(path)
-    meta = read_metadata(bag)
-    files = [bag / Path(rel).name for rel in meta.relative_file_paths]
-    if meta.storage_identifier == "mcap" and len(files) == 1 and not meta.compression_format:
-        fast = _McapChunks(files[0], topics)
-        if fast.in_order():
-            names = {t.name for t in meta.topics}
-            for name in topics or ():
-                if name not in names:
-                    msg = f"{bag}: no topic {name!r}; it has {', '.join(sorted(names)) or 'no topics'}"
-                    raise BagError(msg)
-            yield from fast.messages()
-            return
+    fast = _fast(bag, topics)
+    if fast is not None:
+        names = {t.name for t in read_metadata(bag).topics}
+        for name in topics or ():
+            if name not in names:
+                msg = f"{bag}: no topic {name!r}; it has {', '.join(sorted(names)) or 'no topics'}"
+                raise BagError(msg)
+        yield from fast.messages()
+        return
     for m in read_messages(bag, topics, decode=False):
         yield m.topic, m.t_ns, m.msg
 
