@@ -34,6 +34,7 @@ from twin.bag.qos import (
     Reliability,
     default_qos,
 )
+from twin.bag.raw import read_raw
 from twin.bag.reader import BagInfo, BagMessage, TopicInfo, open_bag, read_messages
 from twin.bag.recorder import STORAGES, Recorder, TopicHandle
 from twin.bag.recover import RecoveryReport, recover_bag
@@ -74,5 +75,6 @@ __all__ = [
     "default_qos",
     "open_bag",
     "read_messages",
+    "read_raw",
     "recover_bag",
 ]

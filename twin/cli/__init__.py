@@ -22,7 +22,19 @@ __all__ = ["main", "run"]
 _log = logging.getLogger("twin")
 
 # Command-group modules under twin.cli, in the order `twin --help` lists them.
-_COMMAND_MODULES: tuple[str, ...] = ("simulate", "scenario", "graph", "world", "map", "fmu", "tree", "bag", "ekf")
+_COMMAND_MODULES: tuple[str, ...] = (
+    "simulate",
+    "scenario",
+    "graph",
+    "world",
+    "map",
+    "fmu",
+    "tree",
+    "bag",
+    "ekf",
+    "analyze",
+    "replay",
+)
 
 _EPILOG = """\
 examples:

@@ -10,6 +10,7 @@ from typing import Any
 
 from twin.bag import BagInfo, RecoveryReport, open_bag, recover_bag
 from twin.bag.qos import QosProfile, qos_summary
+from twin.cli.bag_export import add_export_parser
 
 _INFO_EPILOG = """\
 examples:
@@ -63,6 +64,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     recover.add_argument("dir", type=Path, metavar="DIR", help="bag folder")
     recover.add_argument("--json", action="store_true", help="print the outcome as JSON")
     recover.set_defaults(func=_recover)
+    add_export_parser(sub, common)
 
 
 def _size(n: int) -> str:

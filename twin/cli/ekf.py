@@ -37,8 +37,18 @@ examples:
 The filter steps on every joint state and fuses the gyro samples in between (docs/estimation.md).
 It writes DIR/odometry (a rosbag2 with nav_msgs/Odometry, odom -> base_footprint) and
 DIR/odometry.csv, and compares the result with the bag's own odometry topic when there is one.
-TurtleBot3 defaults: wheel radius 0.033 m, separation 0.287 m (Waffle; Burger: 0.160 m).
+Wheel radius, separation and joint names come from the flags, else from the bag's
+/robot_description (URDF: the outermost pair of wheel joints with cylinder links), else the
+TurtleBot3 Waffle's (0.033 m, 0.287 m, wheel_left_joint/wheel_right_joint); the summary says
+which, and from where.
 """
+
+_DEFAULT_GEOMETRY = {
+    "wheel_radius": 0.033,
+    "wheel_separation": 0.287,
+    "left_joint": "wheel_left_joint",
+    "right_joint": "wheel_right_joint",
+}
 
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
@@ -71,9 +81,17 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         help="unit of /joint_states velocity: rad/s (Gazebo) or wheel rim m/s (real TurtleBot3); "
         "auto infers it from the joint positions (default)",
     )
-    rep.add_argument("--wheel-radius", type=float, default=0.033, metavar="M", help="wheel radius (default 0.033)")
     rep.add_argument(
-        "--wheel-separation", type=float, default=0.287, metavar="M", help="wheel separation (default 0.287, Waffle)"
+        "--wheel-radius",
+        type=float,
+        metavar="M",
+        help="wheel radius (default: the bag's /robot_description URDF, else 0.033, TurtleBot3)",
+    )
+    rep.add_argument(
+        "--wheel-separation",
+        type=float,
+        metavar="M",
+        help="wheel separation (default: the bag's /robot_description URDF, else 0.287, Waffle)",
     )
     rep.add_argument(
         "--wheel-source",
@@ -94,8 +112,8 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     topics.add_argument("--imu-topic", default="/imu", help="sensor_msgs/Imu topic (default /imu)")
     topics.add_argument("--joint-topic", default="/joint_states", help="sensor_msgs/JointState topic")
     topics.add_argument("--odom-topic", default="/odom", help="reference nav_msgs/Odometry topic (default /odom)")
-    topics.add_argument("--left-joint", default="wheel_left_joint", help="left wheel joint name")
-    topics.add_argument("--right-joint", default="wheel_right_joint", help="right wheel joint name")
+    topics.add_argument("--left-joint", help="left wheel joint name (default: URDF, else wheel_left_joint)")
+    topics.add_argument("--right-joint", help="right wheel joint name (default: URDF, else wheel_right_joint)")
     topics.add_argument("--topic", default="/odometry/filtered", help="topic of the fused odometry in the new bag")
     rep.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="storage of the new bag")
     rep.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -184,7 +202,56 @@ def _write_bag(path: Path, result: ReplayResult, args: argparse.Namespace, bag: 
             recorder.write(handle, t_ns, data)
 
 
+def _resolve_geometry(args: argparse.Namespace, bag_mod: ModuleType) -> dict[str, str]:
+    """Fill the wheel geometry and joint names left unset: the bag's URDF, else the defaults.
+
+    Returns:
+        {setting: where it came from}, for the summary.
+    """
+    from twin.world.urdf_wheels import wheels_from_urdf
+
+    sources = {k: "--" + k.replace("_", "-") for k in _DEFAULT_GEOMETRY if getattr(args, k) is not None}
+    if len(sources) == len(_DEFAULT_GEOMETRY):
+        return sources
+    urdf = None
+    info = bag_mod.open_bag(args.bag)
+    if "/robot_description" in {t.name for t in info.topics}:
+        for m in bag_mod.read_messages(args.bag, ["/robot_description"]):
+            urdf = wheels_from_urdf(str(m.msg.data))
+            break
+    found = (
+        {}
+        if urdf is None
+        else {
+            "wheel_radius": urdf.wheel_radius_m,
+            "wheel_separation": urdf.wheel_separation_m,
+            "left_joint": urdf.left_joint,
+            "right_joint": urdf.right_joint,
+        }
+    )
+    for key, default in _DEFAULT_GEOMETRY.items():
+        if getattr(args, key) is not None:
+            continue
+        if key in found:
+            setattr(args, key, found[key])
+            assert urdf is not None
+            sources[key] = f"/robot_description (URDF of {urdf.robot or 'the robot'})"
+        else:
+            setattr(args, key, default)
+            reason = "no /robot_description" if urdf is None and not found else "not in the URDF"
+            sources[key] = f"TurtleBot3 Waffle default ({reason})"
+    return sources
+
+
 def _replay(args: argparse.Namespace) -> int:
+    given = [v for v in (args.wheel_radius, args.wheel_separation) if v is not None]
+    if not all(v > 0.0 for v in given):  # refused before the bag is read
+        msg = (
+            "--wheel-radius and --wheel-separation must be positive, "
+            f"got {args.wheel_radius} and {args.wheel_separation}"
+        )
+        raise ConfigError(msg)
+    geometry_sources = _resolve_geometry(args, bag)
     if not (args.wheel_radius > 0.0 and args.wheel_separation > 0.0):
         msg = (
             "--wheel-radius and --wheel-separation must be positive, "
@@ -228,6 +295,7 @@ def _replay(args: argparse.Namespace) -> int:
         bag_out=bag_out,
         csv_path=csv_path,
     )
+    summary["geometry_sources"] = geometry_sources
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -254,6 +322,8 @@ def _summary(
         "gyro_samples_fused": result.gyro_samples if fused else 0,
         "wheel_radius_m": args.wheel_radius,
         "wheel_separation_m": args.wheel_separation,
+        "left_joint": args.left_joint,
+        "right_joint": args.right_joint,
         "wheel_source": result.wheel_source,
         "joint_velocity_units": units.units,
         "joint_velocity_units_how": units.how,
@@ -293,6 +363,9 @@ def _print_summary(s: dict[str, Any]) -> None:
         f"  inputs     {s['joint_states']} joint states, {s['imu_samples']} IMU samples",
         f"  wheels     radius {s['wheel_radius_m']:g} m, separation {s['wheel_separation_m']:g} m; "
         f"speeds from joint {s['wheel_source']}",
+        f"  geometry   radius from {s['geometry_sources']['wheel_radius']}, separation from "
+        f"{s['geometry_sources']['wheel_separation']}",
+        f"  joints     {s['left_joint']} / {s['right_joint']} from {s['geometry_sources']['left_joint']}",
         f"  velocity   {s['joint_velocity_units_note']}",
         f"  gyro       {gyro}; final bias {s['final_gyro_bias_radps']:.2e} rad/s; "
         f"slip detections {s['slip_detections']}",

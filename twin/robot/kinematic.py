@@ -74,6 +74,12 @@ class KinematicDrivetrain:
         self._rim = [0.0, 0.0]  # wheel-rim speeds, m/s
         self._target = [0.0, 0.0]
 
+    def start_moving(self, v_mps: float, w_radps: float) -> None:
+        """Start with the body already at (v, ω) and commanded to keep it (before the first step)."""
+        self.set_cmd_vel(v_mps, w_radps)
+        self._rim[0], self._rim[1] = self._target
+        self.v_mps, self.w_radps = v_mps, w_radps
+
     def set_cmd_vel(self, v_mps: float, w_radps: float) -> None:
         """Set the commanded body velocity; it holds until the next command."""
         half = 0.5 * self.params.wheel_separation_m

@@ -18,9 +18,10 @@ from twin.bt.mission_nodes import LOCATION_FILE_KEY, register_mission_nodes
 from twin.core.clock import s_to_ns
 from twin.nav.follower import PathFollower
 from twin.nav.navigator import GridNavigator
-from twin.sim.scenario import BehaviorTreeMission, CmdVelScriptMission, WaypointsMission
+from twin.sim.replay import load_commands
+from twin.sim.scenario import BehaviorTreeMission, CmdVelScriptMission, ReplayMission, WaypointsMission
 
-__all__ = ["CmdVelScript", "Mission", "TreeMission", "WaypointFollower"]
+__all__ = ["BagReplay", "CmdVelScript", "Mission", "TreeMission", "WaypointFollower"]
 
 _log = logging.getLogger(__name__)
 
@@ -61,6 +62,49 @@ class CmdVelScript:
             return self._cmds[self._i]
         self.done, self.result = True, "complete"
         return (0.0, 0.0)
+
+
+class BagReplay:
+    """Replays a bag's velocity commands at their recorded sim times; done at the bag's last pose.
+
+    The command in force at `t_ns` is the last one recorded at or before it; before the first,
+    the bag's first velocity (the robot keeps doing what it was doing); after the bag's end, zero.
+
+    Raises:
+        BagError: If the bag is unreadable or lacks the command topic or poses (see `load_commands`).
+    """
+
+    def __init__(self, spec: ReplayMission) -> None:
+        self.spec = spec
+        self.commands = load_commands(spec)
+        self._t = self.commands.t_ns.tolist()
+        self._v = self.commands.v_mps.tolist()
+        self._w = self.commands.w_radps.tolist()
+        self.end_ns = self.commands.end_ns
+        self._before = self.commands.start_velocity
+        self._i = -1
+        self.done = False
+        self.result = "running"
+        _log.info(
+            "replaying %d commands on %s from %s (%s), %.3f s",
+            len(self._t),
+            spec.topic,
+            spec.bag,
+            self.commands.time_source,
+            self.end_ns * 1e-9,
+        )
+
+    def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
+        """Return the recorded command in force at `t_ns` (times must not go backwards)."""
+        if t_ns >= self.end_ns:
+            self.done, self.result = True, "complete"
+            return (0.0, 0.0)
+        times = self._t
+        while self._i + 1 < len(times) and times[self._i + 1] <= t_ns:
+            self._i += 1
+        if self._i < 0:
+            return self._before
+        return (self._v[self._i], self._w[self._i])
 
 
 class WaypointFollower:

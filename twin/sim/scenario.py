@@ -21,7 +21,7 @@ from twin.nav.navigator import ProgressParams
 from twin.robot.disturbances import Disturbances
 from twin.robot.drivetrain import FmuDrive
 
-__all__ = ["NodeSpec", "Scenario", "default_scenario_path", "load_scenario"]
+__all__ = ["NodeSpec", "ReplayMission", "Scenario", "default_scenario_path", "load_scenario", "with_replay_start"]
 
 _DATA = Path(__file__).resolve().parent.parent / "data"
 DEFAULTS_PATH = _DATA / "scenario_defaults.yaml"
@@ -157,6 +157,29 @@ class WaypointsMission:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class ReplayMission:
+    """Drive with the velocity commands recorded in a bag, each at its recorded sim time.
+
+    Sim time 0 is the bag's first pose on `pose_topic` (its header stamp); a command's time is its
+    header stamp (TwistStamped), else its record time mapped through the bag's `/clock`. The robot
+    starts at that first pose (`initial_pose: bag`, replacing `robot.initial_pose`) and the run
+    ends at the bag's last pose.
+    """
+
+    type: Literal["replay"] = "replay"
+    bag: Path
+    topic: str = "/cmd_vel"
+    pose_topic: str | None = None  # null: /ground_truth/odom, else /odom
+    initial_pose: Literal["bag", "scenario"] = "bag"
+    rate_hz: float = 200.0  # how often the loop asks; a recorded command takes effect at most 1/rate late
+
+    def __post_init__(self) -> None:
+        if not (self.rate_hz > 0.0 and math.isfinite(self.rate_hz)):
+            msg = f"rate_hz must be a positive number, got {self.rate_hz}"
+            raise ValueError(msg)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class PlannerSection:
     """The global planner on the world's grid (Nav2 NavFn-like; TB3 Nav2 values as defaults)."""
 
@@ -249,7 +272,7 @@ class Scenario:
     name: str
     world: WorldSection
     robot: RobotSection
-    mission: BehaviorTreeMission | CmdVelScriptMission | WaypointsMission | NoMission
+    mission: BehaviorTreeMission | CmdVelScriptMission | WaypointsMission | ReplayMission | NoMission
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
     drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)
@@ -271,8 +294,32 @@ def default_scenario_path() -> Path:
 def load_scenario(path: Path) -> Scenario:
     """Load a scenario file laid over the packaged defaults.
 
+    A `type: replay` mission with `initial_pose: bag` sets `robot.initial_pose` to the bag's
+    first pose.
+
     Raises:
         ConfigError: Naming file, line and key, if the file is unreadable or any key is wrong.
+        BagError: If a replay mission's bag is unreadable or lacks its command or pose topic.
     """
     scenario = load_config(Scenario, path, defaults=DEFAULTS_PATH)
-    return dataclasses.replace(scenario, source_path=Path(path).resolve())
+    return with_replay_start(dataclasses.replace(scenario, source_path=Path(path).resolve()))
+
+
+def with_replay_start(scenario: Scenario) -> Scenario:
+    """The scenario with `robot.initial_pose` at a replay mission's first recorded pose (else unchanged).
+
+    Raises:
+        BagError: If the bag is unreadable, has no commands on the mission's topic, or no poses.
+    """
+    mission = scenario.mission
+    if not isinstance(mission, ReplayMission):
+        return scenario
+    # Imported here: twin.sim.replay imports this module, and only replay missions read a bag.
+    from twin.sim.replay import check_bag, first_pose
+
+    check_bag(mission)
+    if mission.initial_pose != "bag":
+        return scenario
+    x, y, yaw = first_pose(mission)
+    pose = InitialPose(x_m=x, y_m=y, yaw_rad=yaw)
+    return dataclasses.replace(scenario, robot=dataclasses.replace(scenario.robot, initial_pose=pose))

@@ -53,13 +53,15 @@ from twin.robot.nodes import (
 )
 from twin.sim.executor import Executor, RecordFilter, Sink
 from twin.sim.launch import load_nodes
-from twin.sim.mission import CmdVelScript, TreeMission, WaypointFollower
+from twin.sim.mission import BagReplay, CmdVelScript, TreeMission, WaypointFollower
+from twin.sim.replay import start_moving
 from twin.sim.rng import RngStreams
 from twin.sim.scenario import (
     BehaviorTreeMission,
     CmdVelScriptMission,
     LidarSection,
     NoMission,
+    ReplayMission,
     Scenario,
     WaypointsMission,
 )
@@ -241,12 +243,18 @@ class Simulation:
 
     # -- what the nodes simulate -----------------------------------------------------------------
 
-    def _make_mission(self, scene: Scene, body: RobotBody) -> TreeMission | WaypointFollower | CmdVelScript | None:
+    def _make_mission(
+        self, scene: Scene, body: RobotBody
+    ) -> TreeMission | WaypointFollower | CmdVelScript | BagReplay | None:
         spec = self.scenario.mission
         if isinstance(spec, NoMission):
             return None
         if isinstance(spec, CmdVelScriptMission):
             return CmdVelScript(spec)
+        if isinstance(spec, ReplayMission):
+            replay = BagReplay(spec)
+            start_moving(self.drive, *replay.commands.start_velocity)
+            return replay
         if isinstance(spec, WaypointsMission):
             return WaypointFollower(spec)
         z_lo, z_hi = body.z_range_m

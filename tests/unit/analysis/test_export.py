@@ -1,0 +1,74 @@
+"""`twin bag export`: one table per topic, ROS field paths as columns, values as decoded."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from tests.conftest import run_twin
+from twin.bag import read_messages
+
+
+def test_csv_has_a_row_per_message_with_field_path_columns(gazebo_bag: Path, tmp_path: Path) -> None:
+    proc = run_twin("bag", "export", str(gazebo_bag), "--topics", "/odom", "/scan", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    with (tmp_path / "odom.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    msgs = list(read_messages(gazebo_bag, ["/odom"]))
+    assert len(rows) == len(msgs) == 826
+    for row, m in zip(rows, msgs, strict=True):
+        assert int(row["t_ns"]) == m.t_ns
+        assert float(row["pose.pose.position.x"]) == m.msg.pose.pose.position.x
+        assert row["child_frame_id"] == m.msg.child_frame_id
+        assert [float(v) for v in row["pose.covariance"].split()] == list(m.msg.pose.covariance)
+    with (tmp_path / "scan.csv").open() as f:
+        first = next(csv.DictReader(f))
+    scan = next(iter(read_messages(gazebo_bag, ["/scan"]))).msg
+    assert len(first["ranges"].split()) == len(scan.ranges) == 360
+
+
+def test_parquet_keeps_arrays_as_lists(twin_bag: Path, tmp_path: Path) -> None:
+    proc = run_twin(
+        "bag", "export", str(twin_bag), "--topics", "/ground_truth/odom", "--format", "parquet", "--out", str(tmp_path)
+    )
+    assert proc.returncode == 0, proc.stderr
+    table = pq.read_table(tmp_path / "ground_truth_odom.parquet").to_pydict()
+    msgs = list(read_messages(twin_bag, ["/ground_truth/odom"]))
+    assert table["pose.pose.position.y"] == [m.msg.pose.pose.position.y for m in msgs]
+    assert table["twist.covariance"][0] == pytest.approx(list(msgs[0].msg.twist.covariance))
+
+
+def test_unknown_topic_is_one_line_exit_5(twin_bag: Path, tmp_path: Path) -> None:
+    proc = run_twin("bag", "export", str(twin_bag), "--topics", "/nope", "--out", str(tmp_path))
+    assert proc.returncode == 5
+    assert len(proc.stderr.strip().splitlines()) == 1 and "/nope" in proc.stderr
+
+
+def test_ekf_replay_takes_wheel_geometry_from_the_bags_urdf_and_says_so(gazebo_bag: Path, tmp_path: Path) -> None:
+    import json
+
+    proc = run_twin("ekf", "replay", str(gazebo_bag), "--out", str(tmp_path / "e"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    # turtlebot3_waffle_pi.urdf: wheel joints at y = +-0.144 m, tyre cylinders of radius 0.033 m.
+    assert s["wheel_radius_m"] == pytest.approx(0.033)
+    assert s["wheel_separation_m"] == pytest.approx(0.288)
+    assert (s["left_joint"], s["right_joint"]) == ("wheel_left_joint", "wheel_right_joint")
+    assert all("/robot_description" in v and "turtlebot3_waffle_pi" in v for v in s["geometry_sources"].values())
+
+
+def test_ekf_replay_without_urdf_names_the_default_it_used(twin_bag: Path, tmp_path: Path) -> None:
+    import json
+
+    from tests.unit.analysis.test_analyze_cli import _copy_topics
+
+    bag = _copy_topics(twin_bag, tmp_path / "no_urdf", ["/imu", "/joint_states", "/odom"])
+    proc = run_twin("ekf", "replay", str(bag), "--out", str(tmp_path / "e"), "--wheel-separation", "0.287", "--json")
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert s["geometry_sources"]["wheel_separation"] == "--wheel-separation"
+    assert s["geometry_sources"]["wheel_radius"] == "TurtleBot3 Waffle default (no /robot_description)"
+    assert s["wheel_radius_m"] == 0.033

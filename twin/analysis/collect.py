@@ -1,0 +1,559 @@
+"""One streaming pass over a bag, keeping only what analysis needs: series of a few numbers per message.
+
+Poses, commands and scan minima are kept as compact arrays (a few doubles per message, the
+messages themselves are dropped); topic health is accumulated as running sums; scan endpoints
+go into a fixed-resolution occupancy count bounded by the area seen. Rare, structured topics
+(the behaviour-tree log, plans, goals, contacts, the map, the robot description) are decoded
+in a second pass over those topics alone.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from array import array
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from twin.analysis import _cdr
+from twin.bag import BagInfo, open_bag, read_messages, read_raw
+from twin.bag.raw import raw_readable
+from twin.core.errors import BagError
+
+__all__ = [
+    "CMD_TOPIC",
+    "POSE_TOPICS",
+    "BagData",
+    "ContactEvent",
+    "PoseTrack",
+    "TopicHealth",
+    "best_pose",
+    "collect",
+    "scan_points",
+]
+
+_log = logging.getLogger(__name__)
+
+F64 = NDArray[np.float64]
+
+#: Pose sources in order of trust: the simulator's truth, the localization, the odometry.
+POSE_TOPICS: tuple[str, ...] = ("/ground_truth/odom", "/amcl_pose", "/odom")
+CMD_TOPIC = "/cmd_vel"
+SCAN_TOPIC = "/scan"
+_DECODED_TOPICS = ("/behavior_tree_log", "/plan", "/goal_pose", "/contacts", "/map", "/robot_description")
+
+#: Rates a TurtleBot3 system publishes at (the twin's and Gazebo's TB3 defaults), Hz.
+EXPECTED_RATE_HZ: dict[str, float] = {
+    "/imu": 200.0,
+    "/odom": 30.0,
+    "/joint_states": 30.0,
+    "/ground_truth/odom": 30.0,
+    "/scan": 5.0,
+}
+
+_SCAN_CELL_M = 0.05
+_SCAN_BEAM_STRIDE = 4
+_SCAN_MOVE_M = 0.05
+_SCAN_TURN_RAD = 0.1
+_PLAN_POINTS = 200
+_BLOCK = 8192
+
+
+class PoseTrack:
+    """A pose topic as arrays: record time, header stamp, x, y, yaw, v and ω (nan where not carried)."""
+
+    def __init__(self, topic: str, msgtype: str) -> None:
+        self.topic = topic
+        self.msgtype = msgtype
+        self._t = array("q")
+        self._stamp = array("q")
+        self._vals = array("d")
+
+    def add(self, t_ns: int, sample: _cdr.PoseSample) -> None:
+        """Append one pose read at record time `t_ns`."""
+        stamp, x, y, yaw, v, w = sample
+        self._t.append(t_ns)
+        self._stamp.append(stamp if stamp > 0 else t_ns)
+        self._vals.extend((x, y, yaw, v, w))
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    @property
+    def t_ns(self) -> NDArray[np.int64]:
+        """Record times, ns."""
+        return np.frombuffer(self._t, dtype=np.int64) if self._t else np.zeros(0, np.int64)
+
+    @property
+    def stamp_ns(self) -> NDArray[np.int64]:
+        """Header stamps, ns (the record time where the header carries none)."""
+        return np.frombuffer(self._stamp, dtype=np.int64) if self._stamp else np.zeros(0, np.int64)
+
+    @property
+    def values(self) -> F64:
+        """Shape (N, 5): x m, y m, yaw rad, v m/s, ω rad/s."""
+        return np.frombuffer(self._vals, dtype=np.float64).reshape(-1, 5) if self._vals else np.zeros((0, 5))
+
+
+@dataclass(kw_only=True, slots=True)
+class TopicHealth:
+    """Running statistics of one topic's message times, updated a block of messages at a time.
+
+    `add` only appends the record time and the stamp's 8 raw bytes; every `_BLOCK` messages the
+    block is reduced with numpy into sums, extremes and counts, so memory stays bounded.
+    """
+
+    topic: str
+    msgtype: str
+    decodable: bool
+    expected_rate_hz: float | None
+    stamp_kind: int = 0  # 0: no stamp, 1: a leading header/Time, 2: TFMessage's first transform
+    little_endian: bool = True
+    count: int = 0
+    first_ns: int = 0
+    last_ns: int = 0
+    sum_dt: float = 0.0
+    sum_dt2: float = 0.0
+    max_gap_s: float = 0.0
+    gaps: int = 0
+    non_monotonic: int = 0
+    skew_count: int = 0
+    skew_min_s: float = math.inf
+    skew_max_s: float = -math.inf
+    skew_sum_s: float = 0.0
+    periodic: bool = True
+    _period_s: float | None = None
+    _last_stamp: int = 0
+    t_buf: array[int] = field(default_factory=lambda: array("q"))
+    stamp_buf: bytearray = field(default_factory=bytearray)
+
+    def add(self, t_ns: int, buf: bytes) -> None:
+        """Count one message recorded at `t_ns` (its serialized bytes `buf` give the stamp)."""
+        if not self.t_buf and self.count == 0:
+            self.little_endian = len(buf) > 1 and bool(buf[1] & 1)
+        self.t_buf.append(t_ns)
+        kind = self.stamp_kind
+        if kind == 1:
+            self.stamp_buf += buf[4:12]
+        elif kind == 2:
+            self.add_tf_stamp(buf)
+        if len(self.t_buf) >= _BLOCK:
+            self.flush()
+
+    def add_tf_stamp(self, buf: bytes) -> None:
+        """Buffer the stamp of a TFMessage's first transform (zeros when it has none)."""
+        self.stamp_buf += buf[8:16] if len(buf) >= 16 and buf[4:8] != b"\0\0\0\0" else bytes(8)
+
+    def flush(self) -> None:
+        """Reduce the buffered block into the statistics."""
+        if not self.t_buf:
+            return
+        t = np.frombuffer(self.t_buf, dtype=np.int64).copy()  # the buffer is cleared below
+        if self.count:
+            dt = np.diff(t, prepend=self.last_ns) * 1e-9
+        else:
+            self.first_ns = int(t[0])
+            dt = np.diff(t) * 1e-9
+        if len(dt):
+            if self._period_s is None:
+                self._settle(dt)
+            assert self._period_s is not None
+            self.sum_dt += float(dt.sum())
+            self.sum_dt2 += float(np.dot(dt, dt))
+            self.max_gap_s = max(self.max_gap_s, float(dt.max()))
+            self.gaps += int(np.count_nonzero(dt > 3.0 * self._period_s))
+        self.count += len(t)
+        self.last_ns = int(t[-1])
+        if self.stamp_kind:
+            raw = np.frombuffer(bytes(self.stamp_buf), dtype=np.dtype([("s", "<i4"), ("n", "<u4")]))
+            if not self.little_endian:
+                raw = raw.byteswap()
+            stamps = raw["s"].astype(np.int64) * 1_000_000_000 + raw["n"].astype(np.int64)
+            has = stamps > 0
+            st = stamps[has]
+            if len(st):
+                prev = np.concatenate(([self._last_stamp], st[:-1])) if self._last_stamp else st[:-1]
+                cur = st if self._last_stamp else st[1:]
+                self.non_monotonic += int(np.count_nonzero(cur < prev))
+                self._last_stamp = int(st[-1])
+                skew = (t[has] - st) * 1e-9
+                self.skew_count += len(skew)
+                self.skew_sum_s += float(skew.sum())
+                self.skew_min_s = min(self.skew_min_s, float(skew.min()))
+                self.skew_max_s = max(self.skew_max_s, float(skew.max()))
+        del self.t_buf[:]
+        del self.stamp_buf[:]
+
+    def _settle(self, warm: NDArray[np.float64]) -> None:
+        if self.expected_rate_hz:
+            self._period_s = 1.0 / self.expected_rate_hz
+            return
+        mean = float(warm.mean())
+        # Only a periodic topic has gaps: events (logs, parameters) come when they come.
+        self.periodic = len(warm) >= 3 and mean > 0.0 and float(warm.std()) < 0.5 * mean
+        self._period_s = float(np.median(warm)) if self.periodic else math.inf
+
+    def finish(self) -> None:
+        """Reduce what is still buffered."""
+        self.flush()
+        if self._period_s is None:
+            self.periodic = False
+
+    @property
+    def rate_hz(self) -> float | None:
+        """Mean rate, Hz (None below two messages)."""
+        n = self.count - 1
+        return n / self.sum_dt if n > 0 and self.sum_dt > 0 else None
+
+    @property
+    def jitter_s(self) -> float | None:
+        """Standard deviation of the interval between messages, s."""
+        n = self.count - 1
+        if n < 2:
+            return None
+        mean = self.sum_dt / n
+        return math.sqrt(max(self.sum_dt2 / n - mean * mean, 0.0))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The topic's health as plain values (JSON-ready)."""
+        skew = self.skew_count > 0
+        return {
+            "topic": self.topic,
+            "type": self.msgtype,
+            "decodable": self.decodable,
+            "count": self.count,
+            "rate_hz": self.rate_hz,
+            "expected_rate_hz": self.expected_rate_hz,
+            "jitter_ms": None if self.jitter_s is None else self.jitter_s * 1e3,
+            "max_interval_s": self.max_gap_s if self.count > 1 else None,
+            "gaps_over_3_periods": self.gaps if self.periodic else None,
+            "non_monotonic_stamps": self.non_monotonic,
+            "stamp_offset_mean_s": self.skew_sum_s / self.skew_count if skew else None,
+            "stamp_skew_spread_ms": (self.skew_max_s - self.skew_min_s) * 1e3 if skew else None,
+        }
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class ContactEvent:
+    """A contact's beginning or end."""
+
+    t_s: float
+    begin: bool
+    x_m: float
+    y_m: float
+    what: str
+
+
+@dataclass(kw_only=True, slots=True)
+class BagData:
+    """What one pass over a bag keeps."""
+
+    info: BagInfo
+    start_ns: int
+    poses: dict[str, PoseTrack] = field(default_factory=dict)
+    cmd: tuple[array[float], array[float], array[float]] | None = None  # t s, v, ω
+    cmd_stamped: bool = False
+    scan_min: tuple[array[float], array[float]] | None = None  # t s, min valid range m
+    scan_cells: dict[int, int] = field(default_factory=dict)  # cell (x << 32 | y) -> scans that hit it
+    scan_from: tuple[float, float, float] | None = None  # pose of the last scan placed
+    health: dict[str, TopicHealth] = field(default_factory=dict)
+    clock: tuple[array[int], array[int]] | None = None  # record ns, clock ns
+    bt_events: list[tuple[float, str, str, str]] = field(default_factory=list)
+    plans: list[tuple[float, F64]] = field(default_factory=list)
+    goals: list[tuple[float, float, float, float]] = field(default_factory=list)  # t s, x, y, yaw
+    contacts: list[ContactEvent] | None = None
+    occupancy: tuple[F64, float, float, float] | None = None  # grid (rows=y), resolution, origin x, y
+    robot_description: str | None = None
+
+    def has(self, topic: str) -> bool:
+        """Whether the bag has `topic` with at least one message."""
+        h = self.health.get(topic)
+        return h is not None and h.count > 0
+
+    def t_s(self, t_ns: int) -> float:
+        """Seconds from the bag's start."""
+        return (t_ns - self.start_ns) * 1e-9
+
+    def clock_at(self, t_ns: NDArray[np.int64]) -> NDArray[np.int64] | None:
+        """The sim time (from /clock) at record times `t_ns`, or None without /clock."""
+        if self.clock is None or len(self.clock[0]) < 2:
+            return None
+        rec = np.frombuffer(self.clock[0], dtype=np.int64)
+        sim = np.frombuffer(self.clock[1], dtype=np.int64)
+        return np.round(np.interp(t_ns.astype(np.float64), rec.astype(np.float64), sim.astype(np.float64))).astype(
+            np.int64
+        )
+
+
+def _best_pose(data: BagData) -> PoseTrack | None:
+    for topic in POSE_TOPICS:
+        track = data.poses.get(topic)
+        if track is not None and len(track):
+            return track
+    return None
+
+
+def collect(
+    path: str | os.PathLike[str],
+    *,
+    topics: Iterable[str] | None = None,
+    health: bool = True,
+    scan_points: bool = False,
+    decoded: bool = True,
+    progress: Callable[[float], None] | None = None,
+) -> BagData:
+    """Read the bag once (twice with `decoded`) and keep the series analysis uses.
+
+    Args:
+        path: The bag folder.
+        topics: Only these topics (None: all; health then covers every topic).
+        health: Accumulate each topic's timing statistics.
+        scan_points: Accumulate scan endpoints (placed with the best pose known at the scan).
+        decoded: Also decode the rare structured topics (BT log, plans, goals, contacts, map).
+        progress: Called with the fraction of the bag's time read, now and then.
+
+    Raises:
+        BagError: If the folder is not a readable bag; a truncated storage file says to run
+            `twin bag recover`.
+    """
+    bag = Path(path)
+    try:  # opening the storage first turns a truncated file into one error line, not a warning and an error
+        if not raw_readable(bag):
+            for _ in read_messages(bag, []):
+                pass
+    except BagError as err:
+        raise BagError(_truncation_hint(bag, err)) from None
+    info = open_bag(bag)
+    data = BagData(info=info, start_ns=info.start_ns)
+    names = {t.name for t in info.topics}
+    wanted = None if topics is None else [t for t in topics if t in names]
+    by_name = {t.name: t for t in info.topics}
+    for ti in info.topics:
+        if wanted is None or ti.name in wanted:
+            data.health[ti.name] = TopicHealth(
+                topic=ti.name,
+                msgtype=ti.msgtype,
+                decodable=ti.decodable,
+                expected_rate_hz=EXPECTED_RATE_HZ.get(ti.name),
+            )
+    pose_fns = {t: fn for t in POSE_TOPICS if t in by_name and (fn := _cdr.pose_reader(by_name[t].msgtype)) is not None}
+    for t in pose_fns:
+        data.poses[t] = PoseTrack(t, by_name[t].msgtype)
+    twist_fn = _cdr.twist_reader(by_name[CMD_TOPIC].msgtype) if CMD_TOPIC in by_name else None
+    if twist_fn is not None:
+        data.cmd = (array("d"), array("d"), array("d"))
+        data.cmd_stamped = by_name[CMD_TOPIC].msgtype.endswith("Stamped")
+    scan_ok = SCAN_TOPIC in by_name and by_name[SCAN_TOPIC].msgtype == "sensor_msgs/msg/LaserScan"
+    if scan_ok:
+        data.scan_min = (array("d"), array("d"))
+    clock_ok = "/clock" in by_name and by_name["/clock"].msgtype == "rosgraph_msgs/msg/Clock"
+    if clock_ok:
+        data.clock = (array("q"), array("q"))
+    for h in data.health.values():
+        h.stamp_kind = _cdr.stamp_kind(h.msgtype)
+
+    read_topics = None if wanted is None else wanted
+    if read_topics is not None and not read_topics:
+        return data
+    span = max(info.duration_ns, 1)
+    next_report = 0
+    pose_rank = {t: i for i, t in enumerate(POSE_TOPICS)}
+    best_rank = min((pose_rank[t] for t in pose_fns), default=99)
+    handlers: dict[str, Callable[[int, bytes], None]] = {}
+    state = {"pose": None}
+    for topic, fn in pose_fns.items():
+        handlers[topic] = _pose_handler(data, topic, fn, state if pose_rank[topic] == best_rank else None)
+    if twist_fn is not None and data.cmd is not None:
+        handlers[CMD_TOPIC] = _cmd_handler(data, twist_fn)
+    if data.scan_min is not None:
+        handlers[SCAN_TOPIC] = lambda t_ns, buf: _add_scan(data, t_ns, buf, state["pose"] if scan_points else None)
+    if data.clock is not None:
+        handlers["/clock"] = _clock_handler(data.clock)
+    if decoded:
+        if "/contacts" in by_name and (wanted is None or "/contacts" in wanted):
+            data.contacts = []
+        for name in _DECODED_TOPICS:
+            if name in by_name and (wanted is None or name in wanted) and by_name[name].decodable:
+                rare = _rare_handler(data, name, by_name[name].msgtype)
+                if rare is not None:
+                    handlers[name] = rare
+    health_of = data.health if health else {}
+    route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]] = {
+        name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
+    }
+    block = _BLOCK
+    try:
+        for topic, t_ns, raw in read_raw(bag, read_topics):
+            r = route.get(topic)
+            if r is None:
+                continue
+            buf: Any = raw  # bytes or a memoryview into the chunk
+            th, handler = r
+            if th is not None:  # TopicHealth.add, inlined: this runs for every message of the bag
+                tb = th.t_buf
+                if not tb and th.count == 0:
+                    th.little_endian = len(buf) > 1 and bool(buf[1] & 1)
+                tb.append(t_ns)
+                kind = th.stamp_kind
+                if kind == 1:
+                    th.stamp_buf += buf[4:12]
+                elif kind == 2:
+                    th.add_tf_stamp(buf)
+                if len(tb) >= block:
+                    th.flush()
+            if handler is not None:
+                try:
+                    handler(t_ns, buf)
+                except (IndexError, ValueError, TypeError) as err:  # struct.error is a ValueError
+                    _log.warning("%s: a message on %s at %d ns does not parse (%s); skipped", bag, topic, t_ns, err)
+            if progress is not None and t_ns >= next_report:
+                progress((t_ns - info.start_ns) / span)
+                next_report = t_ns + span // 50
+    except BagError as err:
+        raise BagError(_truncation_hint(bag, err)) from None
+    for h in data.health.values():
+        h.finish()
+    return data
+
+
+def _pose_handler(
+    data: BagData, topic: str, fn: Callable[[bytes], _cdr.PoseSample], state: dict[str, Any] | None
+) -> Callable[[int, bytes], None]:
+    track = data.poses[topic]
+
+    def handle(t_ns: int, buf: bytes) -> None:
+        sample = fn(buf)
+        track.add(t_ns, sample)
+        if state is not None:
+            state["pose"] = (sample[1], sample[2], sample[3])
+
+    return handle
+
+
+def _clock_handler(clock: tuple[array[int], array[int]]) -> Callable[[int, bytes], None]:
+    rec, sim = clock
+
+    def handle(t_ns: int, buf: bytes) -> None:
+        rec.append(t_ns)
+        sim.append(_cdr.clock_ns(buf))
+
+    return handle
+
+
+def _cmd_handler(data: BagData, fn: Callable[[bytes], tuple[int | None, float, float]]) -> Callable[[int, bytes], None]:
+    assert data.cmd is not None
+    t_arr, v_arr, w_arr = data.cmd
+    t_s = data.t_s
+
+    def handle(t_ns: int, buf: bytes) -> None:
+        _stamp, v, w = fn(buf)
+        t_arr.append(t_s(t_ns))
+        v_arr.append(v)
+        w_arr.append(w)
+
+    return handle
+
+
+def _truncation_hint(bag: Path, err: BagError) -> str:
+    text = str(err).rstrip(". ")
+    if "recover" in text or "no such bag folder" in text:
+        return text
+    return f"{text}; if its recording was killed, run `twin bag recover {bag}`"
+
+
+def _add_scan(data: BagData, t_ns: int, buf: bytes, pose: tuple[float, float, float] | None) -> None:
+    assert data.scan_min is not None
+    _stamp, a_min, a_inc, r_min, r_max, _u, ranges = _cdr.scan_ranges(buf)
+    valid = (ranges >= r_min) & (ranges <= r_max)
+    data.scan_min[0].append(data.t_s(t_ns))
+    data.scan_min[1].append(float(ranges[valid].min()) if valid.any() else math.nan)
+    if pose is None:
+        return
+    # Endpoints only from scans taken after the robot moved or turned: a standing robot adds nothing new.
+    last = data.scan_from
+    x, y, yaw = pose
+    if last is not None and math.hypot(x - last[0], y - last[1]) < _SCAN_MOVE_M and abs(yaw - last[2]) < _SCAN_TURN_RAD:
+        return
+    data.scan_from = pose
+    idx = np.flatnonzero(valid[::_SCAN_BEAM_STRIDE]) * _SCAN_BEAM_STRIDE
+    if not len(idx):
+        return
+    ang = yaw + a_min + a_inc * idx
+    r = ranges[idx].astype(np.float64)
+    cx = np.floor((x + r * np.cos(ang)) / _SCAN_CELL_M).astype(np.int64)
+    cy = np.floor((y + r * np.sin(ang)) / _SCAN_CELL_M).astype(np.int64)
+    keys = np.unique((cx << 32) + (cy & 0xFFFFFFFF))
+    cells = data.scan_cells
+    for key in keys.tolist():
+        cells[key] = cells.get(key, 0) + 1
+
+
+def scan_points(data: BagData, min_hits: int = 2) -> F64:
+    """Centres of the scan-endpoint cells hit at least `min_hits` times, shape (N, 2)."""
+    keys = np.array([k for k, n in data.scan_cells.items() if n >= min_hits], dtype=np.int64)
+    if not len(keys):
+        return np.zeros((0, 2))
+    cx = keys >> 32
+    cy = (keys & 0xFFFFFFFF).astype(np.int64)
+    cy = np.where(cy >= 2**31, cy - 2**32, cy)
+    return (np.stack((cx, cy), axis=1).astype(np.float64) + 0.5) * _SCAN_CELL_M
+
+
+def _rare_handler(data: BagData, topic: str, msgtype: str) -> Callable[[int, bytes], None] | None:
+    """A handler decoding a rare structured topic in the main pass (standard definitions), or None."""
+    store = _cdr.type_store()
+    if msgtype not in store.fielddefs:
+        return None
+
+    def handle(t_ns: int, buf: bytes) -> None:
+        try:
+            msg = store.deserialize_cdr(bytes(buf), msgtype)
+        except Exception as err:  # rosbags raises several kinds; one bad message is skipped, not fatal
+            _log.warning("%s at %d ns does not decode as %s (%s); skipped", topic, t_ns, msgtype, err)
+            return
+        _take_rare(data, topic, data.t_s(t_ns), msg)
+
+    return handle
+
+
+def _take_rare(data: BagData, topic: str, t_s: float, msg: Any) -> None:
+    if topic == "/behavior_tree_log" and hasattr(msg, "event_log"):
+        for e in msg.event_log:
+            data.bt_events.append((t_s, str(e.node_name), str(e.previous_status), str(e.current_status)))
+    elif topic == "/plan" and hasattr(msg, "poses"):
+        xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=np.float64)
+        if len(xy) > _PLAN_POINTS:
+            xy = xy[np.linspace(0, len(xy) - 1, _PLAN_POINTS).astype(np.int64)]
+        data.plans.append((t_s, xy.reshape(-1, 2)))
+    elif topic == "/goal_pose" and hasattr(msg, "pose"):
+        p = msg.pose
+        q = p.orientation
+        data.goals.append((t_s, p.position.x, p.position.y, _cdr.yaw_of(q.x, q.y, q.z, q.w)))
+    elif topic == "/contacts" and data.contacts is not None and hasattr(msg, "event"):
+        data.contacts.append(
+            ContactEvent(
+                t_s=t_s,
+                begin=int(msg.event) == 1,
+                x_m=float(msg.position.x),
+                y_m=float(msg.position.y),
+                what=str(msg.world_collision),
+            )
+        )
+    elif topic == "/map" and hasattr(msg, "info"):
+        w, h = int(msg.info.width), int(msg.info.height)
+        grid = np.asarray(msg.data, dtype=np.float64).reshape(h, w) if w * h else np.zeros((0, 0))
+        o = msg.info.origin.position
+        data.occupancy = (grid, float(msg.info.resolution), float(o.x), float(o.y))
+    elif topic == "/robot_description" and hasattr(msg, "data"):
+        data.robot_description = str(msg.data)
+
+
+def best_pose(data: BagData) -> PoseTrack | None:
+    """The most trusted pose source present (ground truth, then localization, then odometry)."""
+    return _best_pose(data)

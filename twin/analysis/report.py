@@ -1,0 +1,449 @@
+"""`twin analyze`: a bag's report as JSON, Markdown, one self-contained HTML page and PNG plots.
+
+`analyze(bag)` reads the bag once (streaming) and computes everything; `write_report(report, out)`
+writes the files. A section whose topics the bag lacks says what it would need; the rest runs.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as dt
+import html
+import json
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from twin import __version__
+from twin.analysis import plots
+from twin.analysis.collect import POSE_TOPICS, BagData, collect, scan_points
+from twin.analysis.metrics import RunMetrics, compute_metrics, localization_error, mission_timeline
+
+__all__ = ["Report", "analyze", "world_walls", "write_report"]
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Section:
+    """One part of the report: present, or what it would need."""
+
+    name: str
+    available: bool
+    needs: str = ""
+    plot: str | None = None  # file name of its PNG
+
+
+@dataclass(kw_only=True, slots=True)
+class Report:
+    """Everything `twin analyze` computes for one bag."""
+
+    bag: Path
+    summary: dict[str, Any]
+    metrics: RunMetrics
+    timeline: dict[str, Any] | None
+    health: list[dict[str, Any]]
+    sections: list[Section]
+    pngs: dict[str, bytes] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The report as JSON-ready values (plots by file name)."""
+        return {
+            "twin_version": __version__,
+            "bag": str(self.bag),
+            "summary": self.summary,
+            "metrics": self.metrics.to_dict(),
+            "mission": self.timeline,
+            "topic_health": self.health,
+            "sections": [
+                {"name": s.name, "available": s.available, "needs": s.needs or None, "plot": s.plot}
+                for s in self.sections
+            ],
+        }
+
+
+def world_walls(sdf: Path, model_path: Sequence[Path] = (), height_m: float = 0.17) -> F64:
+    """The walls of an SDF world cut at `height_m` (a TB3 lidar's height), shape (M, 4): x0, y0, x1, y1.
+
+    Robots in the world (models named `turtlebot3_*` other than the world models) are left out.
+
+    Raises:
+        WorldError: If the world does not load.
+    """
+    from twin.world import build_scene, load_world
+
+    world = load_world(sdf, model_path=tuple(model_path))
+    robots = [
+        m.name
+        for m in world.models
+        if m.name.startswith("turtlebot3_") and not m.name.endswith(("_world", "_house")) and "dqn" not in m.name
+    ]
+    scene = build_scene(world, exclude_models=robots)
+    caster = scene.ray_caster(height_m)
+    segments = np.asarray(caster.segments, dtype=np.float64).reshape(-1, 4)
+    circles = np.asarray(caster.circles, dtype=np.float64).reshape(-1, 3)
+    if len(circles):  # round obstacles (cylinders) as 24-gons
+        ang = np.linspace(0.0, 2.0 * math.pi, 25)
+        cx, cy, r = circles[:, :1], circles[:, 1:2], circles[:, 2:3]
+        px, py = cx + r * np.cos(ang), cy + r * np.sin(ang)
+        polys = np.stack((px[:, :-1], py[:, :-1], px[:, 1:], py[:, 1:]), axis=2).reshape(-1, 4)
+        segments = np.concatenate((segments, polys))
+    return segments
+
+
+def analyze(
+    path: str | os.PathLike[str],
+    *,
+    walls: F64 | None = None,
+    world_name: str = "",
+    plots_enabled: bool = True,
+    progress: Callable[[float], None] | None = None,
+) -> Report:
+    """Read the bag and compute its report (metrics, mission timeline, topic health, plots).
+
+    Args:
+        path: The bag folder.
+        walls: The world's wall segments (from `world_walls`) for the map; None uses the bag's
+            /map, else the scan endpoints.
+        world_name: Named on the map when `walls` are given.
+        plots_enabled: Render the PNGs (the slow part on long bags).
+        progress: Called with the fraction of the bag read.
+
+    Raises:
+        BagError: If it is not a readable bag.
+    """
+    bag = Path(path)
+    data = collect(bag, scan_points=walls is None, progress=progress)
+    metrics = compute_metrics(data)
+    info = data.info
+    timeline = mission_timeline(data.bt_events)
+    summary = {
+        "storage": info.storage,
+        "metadata_version": info.version,
+        "ros_distro": info.ros_distro or None,
+        "start_utc": dt.datetime.fromtimestamp(info.start_ns / 1e9, tz=dt.UTC).isoformat(),
+        "duration_s": info.duration_ns * 1e-9,
+        "messages": info.message_count,
+        "topics": len(info.topics),
+        "size_bytes": info.size_bytes,
+    }
+    health = [h.to_dict() for h in sorted(data.health.values(), key=lambda h: h.topic)]
+    report = Report(
+        bag=bag,
+        summary=summary,
+        metrics=metrics,
+        timeline=None if timeline is None else _timeline_dict(timeline),
+        health=health,
+        sections=[],
+    )
+    _sections(report, data, walls, world_name, plots_enabled)
+    return report
+
+
+def _timeline_dict(tl: Any) -> dict[str, Any]:
+    return {
+        "root": tl.root,
+        "outcome": tl.outcome,
+        "start_s": tl.start_s,
+        "end_s": tl.end_s,
+        "goals": [
+            {"name": g.name, "start_s": g.start_s, "end_s": g.end_s, "duration_s": g.duration_s, "result": g.result}
+            for g in tl.goals
+        ],
+        "recoveries": [{"t_s": t, "name": n} for t, n in tl.recoveries],
+    }
+
+
+def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str, render: bool) -> None:
+    title = report.bag.name
+    add = report.sections.append
+    tracks = {t: data.poses[t].values[:, :2] for t in POSE_TOPICS if t in data.poses and len(data.poses[t])}
+
+    # Map.
+    if walls is not None:
+        background = f"walls of {world_name or 'the world'}"
+        layers = plots.MapLayers(walls=walls, background=background)
+    elif data.occupancy is not None:
+        layers = plots.MapLayers(occupancy=data.occupancy, background="/map")
+    elif data.scan_cells:
+        layers = plots.MapLayers(scan_points=scan_points(data), background="/scan endpoints, placed on the best pose")
+    else:
+        layers = plots.MapLayers(background="")
+    layers.tracks = tracks
+    layers.plans = [p for _, p in data.plans]
+    goals = [(x, y) for _, x, y, _ in data.goals] or [(p[-1, 0], p[-1, 1]) for _, p in data.plans if len(p)]
+    layers.goals = np.array(goals, dtype=np.float64).reshape(-1, 2) if goals else None
+    if data.contacts:
+        layers.contacts = np.array([(c.x_m, c.y_m) for c in data.contacts if c.begin], dtype=np.float64).reshape(-1, 2)
+    if tracks:
+        _plot(report, "map", render, lambda: plots.map_plot(layers, title))
+    else:
+        add(Section(name="map", available=False, needs="a pose topic: " + ", ".join(POSE_TOPICS)))
+
+    # Velocity: commanded vs actual.
+    motion_topics = ("/ground_truth/odom", "/odom")
+    motion = next((data.poses[t] for t in motion_topics if t in data.poses and len(data.poses[t])), None)
+    cmd = None
+    if data.cmd is not None and len(data.cmd[0]):
+        cmd = tuple(np.frombuffer(a, dtype=np.float64) for a in data.cmd)
+    actual = None
+    if motion is not None:
+        vals = motion.values
+        actual = (data_t_s(data, motion.t_ns), vals[:, 3], vals[:, 4])
+    if cmd is None and actual is None:
+        add(Section(name="velocity", available=False, needs="/cmd_vel and an Odometry topic (/odom)"))
+    else:
+        label = motion.topic if motion is not None else ""
+        _plot(report, "velocity", render, lambda: plots.velocity_plot(cmd, actual, label, title))  # type: ignore[arg-type]
+
+    # Localization error.
+    reference = data.poses.get("/ground_truth/odom")
+    estimate = next((data.poses[t] for t in ("/amcl_pose", "/odom") if t in data.poses and len(data.poses[t])), None)
+    if reference is not None and len(reference) and estimate is not None:
+        t_ns, pos, yaw = localization_error(estimate, reference)
+        t_s = (t_ns - data.start_ns) * 1e-9
+        ttl = f"{title}: {estimate.topic} vs {reference.topic}"
+        _plot(report, "localization", render, lambda: plots.localization_plot(t_s, pos, yaw, ttl))
+    else:
+        add(
+            Section(
+                name="localization",
+                available=False,
+                needs="/ground_truth/odom (the truth) and /amcl_pose or /odom (the estimate)",
+            )
+        )
+
+    # Clearance.
+    if data.scan_min is not None and len(data.scan_min[0]):
+        t = np.frombuffer(data.scan_min[0], dtype=np.float64)
+        r = np.frombuffer(data.scan_min[1], dtype=np.float64)
+        _plot(report, "clearance", render, lambda: plots.clearance_plot(t, r, f"{title}: minimum lidar range"))
+    else:
+        add(Section(name="clearance", available=False, needs="/scan (sensor_msgs/LaserScan)"))
+
+    # Mission timeline.
+    tl = report.timeline
+    if tl is not None:
+        end_all = report.summary["duration_s"]
+        bars = [
+            (g["name"], g["start_s"], g["end_s"] if g["end_s"] is not None else end_all, g["result"])
+            for g in tl["goals"]
+        ]
+        recs = [(r["t_s"], r["name"]) for r in tl["recoveries"]]
+        ttl = f"{title}: mission {tl['outcome']}"
+        _plot(report, "timeline", render, lambda: plots.timeline_plot(bars, recs, end_all, ttl))
+    else:
+        add(Section(name="timeline", available=False, needs="/behavior_tree_log (nav2_msgs/BehaviorTreeLog)"))
+
+
+def data_t_s(data: BagData, t_ns: NDArray[np.int64]) -> F64:
+    """Record times as seconds from the bag's start."""
+    return (t_ns - data.start_ns).astype(np.float64) * 1e-9
+
+
+def _plot(report: Report, name: str, render: bool, make: Callable[[], bytes]) -> None:
+    if render:
+        report.pngs[f"{name}.png"] = make()
+    report.sections.append(Section(name=name, available=True, plot=f"{name}.png" if render else None))
+
+
+# -- writing -------------------------------------------------------------------------------------
+
+
+def _fmt(value: Any, unit: str = "", digits: int = 3) -> str:
+    if value is None:
+        return "n/a"
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            return "n/a"
+        return f"{value:.{digits}f}{' ' + unit if unit else ''}"
+    return f"{value}{' ' + unit if unit else ''}"
+
+
+_METRIC_ROWS: tuple[tuple[str, str, str, int], ...] = (
+    ("outcome", "outcome", "", 0),
+    ("goals_succeeded", "goals succeeded", "", 0),
+    ("recoveries", "recoveries", "", 0),
+    ("duration_s", "bag duration", "s", 2),
+    ("mission_duration_s", "mission duration", "s", 2),
+    ("pose_source", "path from", "", 0),
+    ("path_length_m", "path length", "m", 3),
+    ("mean_speed_mps", "mean speed (moving)", "m/s", 3),
+    ("max_speed_mps", "max speed", "m/s", 3),
+    ("rms_jerk_mps3", "RMS jerk", "m/s³", 2),
+    ("time_stopped_s", "time stopped", "s", 2),
+    ("contacts", "contacts", "", 0),
+    ("localization_source", "localization", "", 0),
+    ("localization_error_median_m", "loc. error median", "m", 4),
+    ("localization_error_p95_m", "loc. error p95", "m", 4),
+    ("localization_error_max_m", "loc. error max", "m", 4),
+    ("min_lidar_range_m", "min lidar range", "m", 3),
+    ("min_lidar_range_t_s", "  at", "s", 2),
+)
+
+
+def summary_lines(report: Report) -> list[str]:
+    """The terminal summary: metrics, goals, unhealthy topics, missing sections."""
+    m = report.metrics.to_dict()
+    s = report.summary
+    lines = [
+        f"{report.bag}: {s['storage']}, {s['duration_s']:.1f} s, {s['messages']} messages on {s['topics']} topics",
+    ]
+    for key, label, unit, digits in _METRIC_ROWS:
+        lines.append(f"  {label:<22}{_fmt(m[key], unit, digits)}")
+    if report.timeline is not None:
+        for g in report.timeline["goals"]:
+            lines.append(f"  goal {g['name']:<17}{g['result']:<8} {_fmt(g['duration_s'], 's', 1)}")
+    for h in report.health:
+        flags = _health_flags(h)
+        if flags:
+            lines.append(f"  topic {h['topic']}: {'; '.join(flags)}")
+    for sec in report.sections:
+        if not sec.available:
+            lines.append(f"  no {sec.name} plot: needs {sec.needs}")
+    for note in report.metrics.notes:
+        lines.append(f"  note: {note}")
+    return lines
+
+
+def _health_flags(h: dict[str, Any]) -> list[str]:
+    flags = []
+    if not h["decodable"]:
+        flags.append(f"type {h['type']} cannot be decoded")
+    rate, expected = h["rate_hz"], h["expected_rate_hz"]
+    if rate is not None and expected is not None and abs(rate - expected) > 0.1 * expected:
+        flags.append(f"rate {rate:.1f} Hz, expected {expected:g} Hz")
+    if h["gaps_over_3_periods"]:
+        flags.append(f"{h['gaps_over_3_periods']} gaps > 3 periods (longest {h['max_interval_s']:.3f} s)")
+    if h["non_monotonic_stamps"]:
+        flags.append(f"{h['non_monotonic_stamps']} stamps going backwards")
+    return flags
+
+
+def _markdown(report: Report) -> str:
+    d = report.to_dict()
+    s = d["summary"]
+    m = d["metrics"]
+    out = [
+        f"# Bag report: {report.bag.name}",
+        "",
+        f"`{report.bag}`: {s['storage']}, metadata v{s['metadata_version']}, {s['ros_distro'] or 'distro unknown'}, "
+        f"started {s['start_utc']}, {s['duration_s']:.2f} s, {s['messages']} messages on {s['topics']} topics.",
+        "",
+        "## Metrics",
+        "",
+        "| metric | value |",
+        "|---|---|",
+    ]
+    out += [f"| {label.strip()} | {_fmt(m[key], unit, digits)} |" for key, label, unit, digits in _METRIC_ROWS]
+    if m["notes"]:
+        out += ["", *[f"- {n}" for n in m["notes"]]]
+    out += ["", "## Mission", ""]
+    tl = d["mission"]
+    if tl is None:
+        out.append("No mission timeline: it needs `/behavior_tree_log` (nav2_msgs/BehaviorTreeLog).")
+    else:
+        out += [
+            f"Root `{tl['root']}`: **{tl['outcome']}**.",
+            "",
+            "| goal | start (s) | duration (s) | result |",
+            "|---|---|---|---|",
+        ]
+        out += [
+            f"| {g['name']} | {g['start_s']:.2f} | {_fmt(g['duration_s'], '', 2)} | {g['result']} |"
+            for g in tl["goals"]
+        ]
+        out += ["", f"Recoveries: {len(tl['recoveries'])}"]
+        out += [f"- {r['t_s']:.2f} s: {r['name']}" for r in tl["recoveries"]]
+    out += ["", "## Plots", ""]
+    for sec in report.sections:
+        if sec.available and sec.plot:
+            out += [f"### {sec.name}", "", f"![{sec.name}]({sec.plot})", ""]
+        elif not sec.available:
+            out += [f"### {sec.name}", "", f"Not drawn: needs {sec.needs}.", ""]
+    out += [
+        "## Topic health",
+        "",
+        "| topic | type | count | rate (Hz) | expected | jitter (ms) | gaps > 3 periods | max interval (s) "
+        "| stamps backwards | record − stamp (s) | skew spread (ms) | flags |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for h in d["topic_health"]:
+        out.append(
+            f"| {h['topic']} | {h['type']} | {h['count']} | {_fmt(h['rate_hz'], '', 2)} | "
+            f"{_fmt(h['expected_rate_hz'], '', 0)} | {_fmt(h['jitter_ms'], '', 2)} | "
+            f"{_fmt(h['gaps_over_3_periods']) if h['gaps_over_3_periods'] is not None else 'aperiodic'} | "
+            f"{_fmt(h['max_interval_s'], '', 3)} | {h['non_monotonic_stamps']} | "
+            f"{_fmt(h['stamp_offset_mean_s'], '', 3)} | "
+            f"{_fmt(h['stamp_skew_spread_ms'], '', 2)} | {'; '.join(_health_flags(h))} |"
+        )
+    out += ["", f"_Written by twin {__version__} `twin analyze`._", ""]
+    return "\n".join(out)
+
+
+def _html(report: Report, markdown: str) -> str:
+    """A self-contained page: the Markdown's content as HTML, the plots inline as base64 PNGs."""
+    body: list[str] = []
+    in_table = False
+    for line in markdown.splitlines():
+        if line.startswith("|"):
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            if all(set(c) <= {"-"} for c in cells):
+                continue
+            if not in_table:
+                body.append("<table>")
+                in_table = True
+                body.append("<tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in cells) + "</tr>")
+            else:
+                body.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
+            continue
+        if in_table:
+            body.append("</table>")
+            in_table = False
+        if line.startswith("![") and "](" in line:
+            name = line[line.index("](") + 2 : -1]
+            png = report.pngs.get(name)
+            if png is not None:
+                b64 = base64.b64encode(png).decode("ascii")
+                body.append(f'<img alt="{html.escape(name)}" src="data:image/png;base64,{b64}">')
+            continue
+        if line.startswith("#"):
+            level = len(line) - len(line.lstrip("#"))
+            body.append(f"<h{level}>{html.escape(line[level:].strip())}</h{level}>")
+        elif line.startswith("- "):
+            body.append(f"<li>{html.escape(line[2:])}</li>")
+        elif line.strip():
+            body.append(f"<p>{html.escape(line.replace('**', '').replace('`', '').replace('_', ' ').strip())}</p>")
+    if in_table:
+        body.append("</table>")
+    style = (
+        "body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}"
+        "table{border-collapse:collapse;font-size:0.85em;margin:0.5em 0}"
+        "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}th{background:#eee}img{max-width:100%}"
+    )
+    title = html.escape(f"Bag report: {report.bag.name}")
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
+        f"<style>{style}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
+
+
+def write_report(report: Report, out_dir: Path) -> list[Path]:
+    """Write report.json, report.md, report.html and the PNGs into `out_dir`; return the files."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, png in report.pngs.items():
+        (out_dir / name).write_bytes(png)
+        written.append(out_dir / name)
+    md = _markdown(report)
+    (out_dir / "report.json").write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+    (out_dir / "report.md").write_text(md)
+    (out_dir / "report.html").write_text(_html(report, md))
+    written += [out_dir / "report.json", out_dir / "report.md", out_dir / "report.html"]
+    return written

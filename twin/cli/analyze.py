@@ -1,0 +1,164 @@
+"""`twin analyze BAG` and `twin analyze compare A B`: reports on bags, and two bags of one run compared."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+
+class _Fraction:
+    """`reading BAG  42%` on stderr, only when stderr is a terminal; cleared on exit."""
+
+    def __init__(self, label: str, *, enabled: bool) -> None:
+        self._label = label
+        self._on = enabled and sys.stderr.isatty()
+        self._drawn = False
+
+    def update(self, fraction: float) -> None:
+        if self._on:
+            sys.stderr.write(f"\r{self._label} {100 * min(max(fraction, 0.0), 1.0):3.0f}%\x1b[K")
+            sys.stderr.flush()
+            self._drawn = True
+
+    def __enter__(self) -> _Fraction:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._drawn:
+            sys.stderr.write("\r\x1b[K")
+            sys.stderr.flush()
+
+
+_EPILOG = """\
+examples:
+  twin analyze ../shared/fixtures/bags/tb3_waffle_gazebo_humble
+  twin analyze bags/run1 --out /tmp/run1_report         report.md, report.html, report.json, PNGs
+  twin analyze bags/run1 --json | jq .metrics.path_length_m
+  twin analyze ../shared/fixtures/bags/tb3_waffle_gazebo_humble \\
+      --world ../shared/fixtures/gazebo_classic/worlds/turtlebot3_world.world \\
+      --model-path ../shared/fixtures/gazebo_classic/models     the world's walls on the map
+  twin analyze compare bags/twin_run ../shared/fixtures/bags/tb3_waffle_gazebo_humble --max-position-error 0.05
+
+Reads any rosbag2 bag (MCAP or sqlite3, metadata 4 to 9, any distro) in one streaming pass. A
+section whose topics the bag lacks says what it needs; the rest still runs. The report (default
+folder: BAG_report next to the bag) holds report.md, report.json, report.html (self-contained,
+plots inline) and the PNG plots. Exit codes: 0 done, 5 unreadable bag (a truncated one: run
+`twin bag recover`).
+"""
+
+_COMPARE_EPILOG = """\
+examples:
+  twin analyze compare bags/replay ../shared/fixtures/bags/tb3_waffle_gazebo_humble
+  twin analyze compare bags/fmu_run bags/kinematic_run --topic /ground_truth/odom --align
+  twin analyze compare A B --max-position-error 0.05 && echo "within 5 cm"
+
+Poses of the chosen topic in each bag (default: /ground_truth/odom, else /odom, the first both
+have; or --topic for both, --topic A_TOPIC B_TOPIC for each) are matched in time from each bag's
+start (sim time from the header stamps), then compared: position and yaw error over time, ATE
+(RMS position error, optionally after a Umeyama rigid alignment with --align) and RPE over 1 s.
+Exit codes: 0 done (and within --max-position-error), 1 over the threshold, 5 unreadable bags or
+no common pose topic.
+"""
+
+
+def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
+    """Add the `analyze` command (and its `compare` form)."""
+    parser = subparsers.add_parser(
+        "analyze",
+        help="report on a bag: metrics, mission timeline, topic health, plots (or compare two bags)",
+        description=(
+            "Analyse a ROS 2 bag: mission outcome and goals, path, speed, contacts, localization error, "
+            "clearance, topic health, and plots; `twin analyze compare A B` compares two bags of one run."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[common],
+    )
+    parser.add_argument("bag", metavar="BAG", help="bag folder to analyse (or `compare`, see below)")
+    parser.add_argument("rest", nargs="*", metavar="B", help=argparse.SUPPRESS)
+    parser.add_argument("--out", type=Path, metavar="DIR", help="report folder (default: BAG_report beside the bag)")
+    parser.add_argument("--json", action="store_true", help="print the report (or comparison) as JSON on stdout")
+    parser.add_argument("--world", type=Path, metavar="SDF", help="draw this world's walls on the map")
+    parser.add_argument(
+        "--model-path", type=Path, action="append", default=[], metavar="DIR", help="where model:// URIs resolve"
+    )
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots (faster)")
+    cmp = parser.add_argument_group("compare A B")
+    cmp.add_argument("--topic", nargs="+", metavar="TOPIC", help="pose topic in both bags (or one per bag)")
+    cmp.add_argument("--align", action="store_true", help="Umeyama-align B's trajectory to A's before the ATE")
+    cmp.add_argument(
+        "--max-position-error", type=float, metavar="M", help="exit 1 when the final or max position error exceeds M"
+    )
+    parser.set_defaults(func=_analyze)
+
+
+def _walls(args: argparse.Namespace) -> Any:
+    if args.world is None:
+        return None
+    from twin.analysis.report import world_walls
+
+    return world_walls(args.world, args.model_path)
+
+
+def _analyze(args: argparse.Namespace) -> int:
+    if args.bag == "compare":
+        return _compare(args)
+    if args.rest:
+        print(
+            f"twin: error: analyze takes one BAG, got {1 + len(args.rest)}; use `twin analyze compare A B`",
+            file=sys.stderr,
+        )
+        return 2
+    from twin.analysis.report import analyze, summary_lines, write_report
+
+    bag = Path(args.bag)
+    walls = _walls(args)
+    with _Fraction(f"reading {bag}", enabled=not args.quiet) as bar:
+        report = analyze(
+            bag,
+            walls=walls,
+            world_name=args.world.name if args.world else "",
+            plots_enabled=not args.no_plots,
+            progress=bar.update,
+        )
+    out = args.out if args.out is not None else bag.resolve().parent / f"{bag.resolve().name}_report"
+    files = write_report(report, out)
+    if args.json:
+        print(json.dumps({**report.to_dict(), "files": [str(f) for f in files]}, indent=2))
+    else:
+        print("\n".join(summary_lines(report)))
+        print(f"report: {out / 'report.html'} (and report.md, report.json, {len(report.pngs)} plots)")
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from twin.analysis.compare import compare_bags, write_comparison
+    from twin.core.errors import BagError
+
+    if len(args.rest) != 2:
+        msg = f"analyze compare needs two bags A B, got {len(args.rest)}: `twin analyze compare A B`"
+        raise BagError(msg)
+    a, b = (Path(p) for p in args.rest)
+    topics = tuple(args.topic) if args.topic else None
+    if topics is not None and len(topics) > 2:
+        msg = f"--topic takes one topic (both bags) or two (A's, B's), got {len(topics)}"
+        raise BagError(msg)
+    result = compare_bags(a, b, topics=topics, align=args.align)
+    out = args.out
+    if out is not None:
+        write_comparison(result, out, walls=_walls(args))
+    d = result.to_dict()
+    over = args.max_position_error is not None and result.max_position_error_m > args.max_position_error
+    d["threshold_m"] = args.max_position_error
+    d["within_threshold"] = None if args.max_position_error is None else not over
+    if args.json:
+        print(json.dumps(d, indent=2))
+    else:
+        print("\n".join(result.summary_lines()))
+        if args.max_position_error is not None:
+            verdict = "over" if over else "within"
+            print(f"  max position error {result.max_position_error_m:.4f} m: {verdict} {args.max_position_error:g} m")
+    return 1 if over else 0

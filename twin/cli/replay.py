@@ -1,0 +1,134 @@
+"""`twin replay BAG --world W`: drive the twin with a bag's recorded commands and compare the runs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+_EPILOG = """\
+examples:
+  twin replay ../shared/fixtures/bags/tb3_waffle_gazebo_humble \\
+      --world ../shared/fixtures/gazebo_classic/worlds/turtlebot3_world.world \\
+      --model-path ../shared/fixtures/gazebo_classic/models --out /tmp/replay
+  twin replay BAG --world W --model-path M --drive fmu      the FMU drivetrain instead of ideal wheels
+
+Writes into --out (default: BAG_replay beside the bag): scenario.yaml (the replay as a scenario
+`twin simulate` runs again), bag/ (the twin's run) and the comparison of the twin's
+/ground_truth/odom against the bag's pose topic: comparison.json, overlay.png,
+compare_error.png. The robot defaults to the model named in the bag's /robot_description when
+the model path has it. Exit codes: 0 done (and within --max-position-error), 1 over it, 2
+scenario error, 3 world error, 4 FMU error, 5 bag error (e.g. no /cmd_vel to replay).
+"""
+
+_FMU_DRIVE = "{type: fmu, fmu: 'builtin:xm430_w210', fmi_version: 2, profile: voltage}"
+
+
+def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
+    """Add the `replay` command."""
+    parser = subparsers.add_parser(
+        "replay",
+        help="drive the twin with a bag's /cmd_vel at its times, from its first pose, and compare",
+        description=(
+            "Replay a bag's velocity commands in the twin (at their recorded sim times, from the bag's "
+            "first pose and velocity) and compare the twin's trajectory with the bag's."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[common],
+    )
+    parser.add_argument("bag", type=Path, metavar="BAG", help="bag whose commands to replay")
+    parser.add_argument("--world", type=Path, required=True, metavar="SDF", help="the world the bag was recorded in")
+    parser.add_argument(
+        "--model-path", type=Path, action="append", default=[], metavar="DIR", help="where model:// URIs resolve"
+    )
+    parser.add_argument("--robot", metavar="MODEL", help="robot model (default: the bag's /robot_description name)")
+    parser.add_argument(
+        "--drive", choices=("kinematic", "fmu"), default="kinematic", help="drivetrain (default: kinematic)"
+    )
+    parser.add_argument("--topic", default="/cmd_vel", help="command topic in the bag (default: /cmd_vel)")
+    parser.add_argument(
+        "--pose-topic", metavar="TOPIC", help="the bag's pose topic (default: /ground_truth/odom, else /odom)"
+    )
+    parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: BAG_replay beside the bag)")
+    parser.add_argument(
+        "--max-position-error", type=float, metavar="M", help="exit 1 if the final or max error exceeds M"
+    )
+    parser.add_argument("--json", action="store_true", help="print the comparison as JSON on stdout")
+    parser.set_defaults(func=_replay)
+
+
+def _robot_name(bag: Path, model_path: list[Path]) -> str | None:
+    """The <robot name> of the bag's /robot_description, if a model of that name is on the model path."""
+    from twin.bag import open_bag, read_messages
+
+    if "/robot_description" not in {t.name for t in open_bag(bag).topics}:
+        return None
+    for m in read_messages(bag, ["/robot_description"]):
+        match = re.search(r"<robot\s[^>]*name\s*=\s*[\"']([^\"']+)", str(m.msg.data))
+        if match and any((p / match.group(1) / "model.config").exists() for p in model_path):
+            return match.group(1)
+    return None
+
+
+def _yaml_path(p: Path) -> str:
+    return json.dumps(str(p.resolve()))
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from twin.analysis.compare import compare_bags, write_comparison
+    from twin.analysis.report import world_walls
+    from twin.sim.scenario import load_scenario
+    from twin.sim.simulation import Simulation
+
+    bag = args.bag
+    out = args.out if args.out is not None else bag.resolve().parent / f"{bag.resolve().name}_replay"
+    out.mkdir(parents=True, exist_ok=True)
+    robot = args.robot or _robot_name(bag, args.model_path) or "turtlebot3_waffle"
+    drive = "{type: kinematic}" if args.drive == "kinematic" else _FMU_DRIVE
+    model_path = "[" + ", ".join(_yaml_path(p) for p in args.model_path) + "]"
+    pose_topic = json.dumps(args.pose_topic) if args.pose_topic else "null"
+    scenario_file = out / "scenario.yaml"
+    scenario_file.write_text(
+        f"# Written by `twin replay`: {bag} replayed in {args.world.name}.\n"
+        f"name: replay_{bag.resolve().name}\n"
+        f"world: {{sdf: {_yaml_path(args.world)}, model_path: {model_path}}}\n"
+        f"robot: {{model: {json.dumps(robot)}}}\n"
+        f"drive: {drive}\n"
+        f"mission: {{type: replay, bag: {_yaml_path(bag)}, topic: {json.dumps(args.topic)}, "
+        f"pose_topic: {pose_topic}}}\n"
+    )
+    scenario = load_scenario(scenario_file)
+    run_bag = out / "bag"
+    if run_bag.exists():
+        import shutil
+
+        shutil.rmtree(run_bag)
+    with Simulation(scenario, bag_path=run_bag) as sim:
+        summary = sim.run()
+        source_topic = sim.mission.commands.pose_topic  # type: ignore[union-attr]
+    result = compare_bags(bag, run_bag, topics=(source_topic, "/ground_truth/odom"))
+    walls = world_walls(args.world, args.model_path)
+    write_comparison(result, out, walls=walls)
+    over = args.max_position_error is not None and result.max_position_error_m > args.max_position_error
+    d = result.to_dict()
+    d.update(
+        robot=robot,
+        drive=args.drive,
+        replay_bag=str(run_bag),
+        scenario=str(scenario_file),
+        sim_s=summary.sim_s,
+        wall_s=summary.wall_s,
+        threshold_m=args.max_position_error,
+        within_threshold=None if args.max_position_error is None else not over,
+    )
+    (out / "comparison.json").write_text(json.dumps(d, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(d, indent=2))
+    else:
+        print(f"replayed {bag} with {robot} ({args.drive} drive): {summary.sim_s:.2f} s in {summary.wall_s:.2f} s")
+        print("\n".join(result.summary_lines()))
+        print(f"output: {out} (scenario.yaml, bag/, comparison.json, overlay.png, compare_error.png)")
+    return 1 if over else 0

@@ -1,0 +1,186 @@
+"""The recorded commands of a replay mission: read from a bag, timed on its sim clock.
+
+Sim time 0 of the replay is the bag's first pose on the pose topic (its header stamp). A command's
+time is its header stamp when it has one (TwistStamped), else its record time mapped through the
+bag's `/clock` (record time -> sim time, interpolated), else its record time.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from twin.bag import open_bag, read_messages
+from twin.core.errors import BagError
+from twin.sim.scenario import ReplayMission
+
+__all__ = ["RecordedCommands", "check_bag", "first_pose", "load_commands", "start_moving"]
+
+_log = logging.getLogger(__name__)
+
+_POSE_TOPICS = ("/ground_truth/odom", "/odom")
+_TWIST_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RecordedCommands:
+    """Commands (v m/s, ω rad/s) from replay time `t_ns[i]` on, and where the bag's robot started."""
+
+    t_ns: NDArray[np.int64]
+    v_mps: NDArray[np.float64]
+    w_radps: NDArray[np.float64]
+    start_pose: tuple[float, float, float]
+    start_velocity: tuple[float, float]  # (v m/s, ω rad/s) of the first pose, 0 if the topic carries none
+    end_ns: int  # the bag's last pose, in replay time
+    pose_topic: str
+    time_source: str  # how command times were found: header stamps, /clock, or record times
+
+
+def _stamp_ns(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+def _yaw(q: Any) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def _pose_topic(spec: ReplayMission, topics: dict[str, str]) -> str:
+    bag = spec.bag
+    if spec.pose_topic is not None:
+        if spec.pose_topic not in topics:
+            msg = f"{bag}: mission.pose_topic {spec.pose_topic!r} is not in the bag; it has {', '.join(sorted(topics))}"
+            raise BagError(msg)
+        return spec.pose_topic
+    for name in _POSE_TOPICS:
+        if name in topics:
+            return name
+    msg = f"{bag}: no {' or '.join(_POSE_TOPICS)} to start the replay from; set mission.pose_topic to its pose topic"
+    raise BagError(msg)
+
+
+def _pose(msg: Any) -> tuple[float, float, float]:
+    pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+    return (float(pose.position.x), float(pose.position.y), _yaw(pose.orientation))
+
+
+def _first(spec: ReplayMission) -> tuple[str, int, tuple[float, float, float], tuple[float, float], int]:
+    info = open_bag(spec.bag)
+    topics = {t.name: t.msgtype for t in info.topics}
+    topic = _pose_topic(spec, topics)
+    first: Any = None
+    first_t = last_t = 0
+    for m in read_messages(spec.bag, [topic]):
+        if first is None:
+            first, first_t = m.msg, _stamp_ns(m.msg) or m.t_ns
+        last_t = _stamp_ns(m.msg) or m.t_ns
+    if first is None:
+        msg = f"{spec.bag}: {topic} has no messages to start the replay from; set mission.pose_topic"
+        raise BagError(msg)
+    twist = getattr(getattr(first, "twist", None), "twist", None)
+    velocity = (float(twist.linear.x), float(twist.angular.z)) if twist is not None else (0.0, 0.0)
+    return topic, first_t, _pose(first), velocity, last_t
+
+
+def first_pose(spec: ReplayMission) -> tuple[float, float, float]:
+    """The bag's first pose (x m, y m, yaw rad) on the mission's pose topic.
+
+    Raises:
+        BagError: If the bag is unreadable or has no such poses.
+    """
+    return _first(spec)[2]
+
+
+def check_bag(spec: ReplayMission) -> dict[str, str]:
+    """Check the bag has Twist commands on the mission's topic; return its topics and their types.
+
+    Raises:
+        BagError: If the bag is unreadable or lacks the command topic (or it is not a Twist).
+    """
+    bag = spec.bag
+    info = open_bag(bag)
+    topics = {t.name: t.msgtype for t in info.topics}
+    if spec.topic not in topics or info.topic(spec.topic).message_count == 0:
+        have = ", ".join(n for n, t in sorted(topics.items()) if t in _TWIST_TYPES) or "no Twist topic"
+        msg = (
+            f"{bag}: no velocity commands on {spec.topic} to replay (Twist topics: {have}); "
+            "record the robot's commands, or set mission.topic (twin replay --topic) to the topic carrying them"
+        )
+        raise BagError(msg)
+    if topics[spec.topic] not in _TWIST_TYPES:
+        msg = f"{bag}: {spec.topic} is {topics[spec.topic]}, not a Twist; set mission.topic to a Twist topic"
+        raise BagError(msg)
+    return topics
+
+
+def load_commands(spec: ReplayMission) -> RecordedCommands:
+    """Read the mission's commands and start pose from its bag.
+
+    Raises:
+        BagError: If the bag is unreadable, lacks the command topic (or it is not a Twist), or
+            has no poses to start from.
+    """
+    bag: Path = spec.bag
+    topics = check_bag(spec)
+    pose_topic, t0_ns, pose, velocity, last_ns = _first(spec)
+    clock_rec: list[int] = []
+    clock_sim: list[int] = []
+    if "/clock" in topics:
+        for m in read_messages(bag, ["/clock"]):
+            clock_rec.append(m.t_ns)
+            clock_sim.append(int(m.msg.clock.sec) * 1_000_000_000 + int(m.msg.clock.nanosec))
+    stamped = topics[spec.topic].endswith("Stamped")
+    times: list[int] = []
+    v: list[float] = []
+    w: list[float] = []
+    for m in read_messages(bag, [spec.topic]):
+        twist = m.msg.twist if stamped else m.msg
+        times.append(_stamp_ns(m.msg) if stamped else m.t_ns)
+        v.append(float(twist.linear.x))
+        w.append(float(twist.angular.z))
+    t = np.asarray(times, dtype=np.int64)
+    if stamped:
+        source = "header stamps"
+    elif len(clock_rec) >= 2:
+        rec = np.asarray(clock_rec, dtype=np.float64)
+        sim = np.asarray(clock_sim, dtype=np.float64)
+        t = np.round(np.interp(t.astype(np.float64), rec, sim)).astype(np.int64)
+        source = "record times mapped through /clock"
+    else:
+        source = "record times (no /clock)"
+    return RecordedCommands(
+        t_ns=t - t0_ns,
+        v_mps=np.asarray(v, dtype=np.float64),
+        w_radps=np.asarray(w, dtype=np.float64),
+        start_pose=pose,
+        start_velocity=velocity,
+        end_ns=last_ns - t0_ns,
+        pose_topic=pose_topic,
+        time_source=source,
+    )
+
+
+def start_moving(drive: object, v_mps: float, w_radps: float) -> bool:
+    """Give `drive` the bag's first velocity if it can start moving (the kinematic drive can).
+
+    Returns:
+        Whether the velocity was applied; a drive that cannot starts at rest (logged).
+    """
+    if v_mps == 0.0 and w_radps == 0.0:
+        return True
+    setter = getattr(drive, "start_moving", None)
+    if setter is None:
+        _log.info(
+            "the %s starts at rest; the bag's first velocity (%.4f m/s, %.4f rad/s) is not applied",
+            type(drive).__name__,
+            v_mps,
+            w_radps,
+        )
+        return False
+    setter(v_mps, w_radps)
+    return True
