@@ -28,7 +28,7 @@ __all__ = ["main", "run"]
 _log = logging.getLogger("twin")
 
 # Command-group modules under twin.cli, in the order `twin --help` lists them.
-_COMMAND_MODULES: tuple[str, ...] = ("simulate", "scenario", "world", "fmu", "tree", "bag", "ekf")
+_COMMAND_MODULES: tuple[str, ...] = ("simulate", "scenario", "world", "fmu", "tree", "bag", "ekf", "sweep")
 
 _EPILOG = """\
 examples:
