@@ -90,7 +90,8 @@ def execute_run(task: RunTask) -> dict[str, Any]:
             row |= {"outcome": "success", "reason": ""}
         else:
             row |= {"outcome": "failure", "reason": f"mission {result or 'unfinished'}: {summary.get('ended_by', '')}"}
-    if bag.is_dir() and (bag / "metadata.yaml").exists():
+    # A run cut short by its timeout or a crash is not analysed (its bag, if any, is kept as asked).
+    if row["outcome"] in ("success", "failure", "error") and (bag / "metadata.yaml").exists():
         try:
             row |= _metrics(bag)
         except Exception as err:  # a bag that does not read back fails this run, not the sweep
