@@ -128,6 +128,8 @@ def load_sweep(path: Path) -> SweepSpec:
         )
     draws = _draws(raw.get("random") or {}, nodes.get("random"))
     seeds = _seeds(raw, nodes)
+    if seeds != (None,) and "seed" in [k for k, _ in vary] + [d.key for d in draws]:
+        _fail(nodes.get("runs", nodes.get("seeds", node)), "seed", "vary the seed or give runs:/seeds:, not both")
     timeout_s = raw.get("timeout_s", 600.0)
     if isinstance(timeout_s, bool) or not isinstance(timeout_s, int | float) or not 0 < timeout_s < math.inf:
         _fail(nodes.get("timeout_s", node), "timeout_s", f"expected a positive number of seconds, got {timeout_s!r}")

@@ -22,13 +22,11 @@ def _sweep(tmp_path: Path, text: str) -> Path:
 
 
 def test_a_grid_runs_every_combination_for_every_seed(tmp_path: Path) -> None:
-    path = _sweep(
-        tmp_path, "runs: 2\nvary:\n  robot.model: [turtlebot3_waffle, turtlebot3_burger]\n  seed: [5, 6, 7]\n"
-    )
-    runs = expand_runs(load_sweep(path))
+    text = "runs: 2\nvary:\n  robot.model: [turtlebot3_waffle, turtlebot3_burger]\n  max_duration_s: [5, 6, 7]\n"
+    runs = expand_runs(load_sweep(_sweep(tmp_path, text)))
     assert len(runs) == 2 * 3 * 2
     assert [r.run_id for r in runs[:3]] == ["r0000", "r0001", "r0002"]
-    combos = {(dict(r.values)["robot.model"], dict(r.values)["seed"], r.seed) for r in runs}
+    combos = {(dict(r.values)["robot.model"], dict(r.values)["max_duration_s"], r.seed) for r in runs}
     assert len(combos) == 12
 
 
@@ -94,6 +92,7 @@ def test_random_draws_are_seeded_within_bounds_and_repeat(tmp_path: Path) -> Non
         ),
         ("zip: true\nvary:\n  seed: [1, 2]\n  robot.model: [a]\n", "lengths differ (seed: 2, robot.model: 1)"),
         ("runs: 3\nseeds: [1]\n", "give runs: N (seeds 0..N-1) or seeds: [..], not both"),
+        ("runs: 3\nvary:\n  seed: [1, 2]\n", "seed: vary the seed or give runs:/seeds:, not both"),
         ("timeout: 5\n", "timeout: unknown key; did you mean 'timeout_s'?"),
         ("random:\n  seed: {poisson: [1]}\n", "unknown distribution 'poisson'"),
     ],
