@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -104,11 +105,15 @@ def _sweep(args: argparse.Namespace) -> int:
     spec = load_sweep(args.sweep)
     out = args.out if args.out is not None else Path("bags") / f"{spec.name}_sweep"
     bar = _Bar(sys.stderr)
+    # SIGTERM stops the sweep as Ctrl-C does: the cluster shuts down, its runs are told to stop,
+    # and the finished runs stay finished for the next start.
+    previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         result = run_sweep(
             spec, out_dir=out, workers=args.workers, scheduler=args.scheduler, keep_bags=args.keep_bags, progress=bar
         )
     finally:
+        signal.signal(signal.SIGTERM, previous)
         bar.close()
     files = write_reports(result)
     runs = len(result.rows)
@@ -134,6 +139,10 @@ def _sweep(args: argparse.Namespace) -> int:
             f"{100 * high:.1f} %), {runs - ok} did not; {result.out_dir / 'summary.md'}"
         )
     return 0
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
 
 
 def _outcomes(rows: tuple[dict[str, Any], ...]) -> list[str]:
