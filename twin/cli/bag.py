@@ -6,10 +6,12 @@ import argparse
 import datetime as dt
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from twin.bag import BagInfo, RecoveryReport, open_bag, recover_bag
-from twin.bag.qos import QosProfile, qos_summary
+if TYPE_CHECKING:
+    from twin.bag import BagInfo, RecoveryReport
+    from twin.bag.qos import QosProfile
+
 from twin.cli.bag_export import add_export_parser
 
 _INFO_EPILOG = """\
@@ -129,6 +131,9 @@ def info_json(info: BagInfo) -> dict[str, Any]:
 
 
 def _info(args: argparse.Namespace) -> int:
+    from twin.bag import open_bag
+    from twin.bag.qos import qos_summary
+
     info = open_bag(args.bag)
     if args.json:
         print(json.dumps(info_json(info), indent=2))
@@ -173,6 +178,8 @@ def _recover_json(report: RecoveryReport) -> dict[str, Any]:
 
 
 def _recover(args: argparse.Namespace) -> int:
+    from twin.bag import recover_bag
+
     report = recover_bag(args.dir)
     if args.json:
         print(json.dumps(_recover_json(report), indent=2))

@@ -9,24 +9,13 @@ import math
 import sys
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from twin import bag
-from twin.core.config import build, load_yaml
 from twin.core.errors import ConfigError, EstimationError
-from twin.estimation import EstimationSection
-from twin.estimation.replay import (
-    Comparison,
-    ReplayInputs,
-    ReplayResult,
-    UnitsDecision,
-    collect_inputs,
-    compare,
-    infer_velocity_units,
-    replay,
-)
+
+if TYPE_CHECKING:
+    from twin.estimation import EstimationSection
+    from twin.estimation.replay import Comparison, ReplayInputs, ReplayResult, UnitsDecision
 
 _EPILOG = """\
 examples:
@@ -121,6 +110,9 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
 
 def _load_config(path: Path | None) -> EstimationSection:
+    from twin.core.config import build, load_yaml
+    from twin.estimation import EstimationSection
+
     if path is None:
         return EstimationSection()
     node = load_yaml(path)
@@ -134,6 +126,8 @@ def _load_config(path: Path | None) -> EstimationSection:
 
 
 def _read(args: argparse.Namespace, bag: ModuleType) -> ReplayInputs:
+    from twin.estimation.replay import collect_inputs
+
     info = bag.open_bag(args.bag)
     names = {t.name for t in info.topics}
     missing = [t for t in (args.imu_topic, args.joint_topic) if t not in names]
@@ -154,6 +148,8 @@ def _read(args: argparse.Namespace, bag: ModuleType) -> ReplayInputs:
 
 
 def _write_csv(path: Path, result: ReplayResult, comparison: Comparison | None) -> None:
+    import numpy as np
+
     pose, twist = result.pose_covariance, result.twist_covariance
     columns = {
         "t_ns": result.t_ns,
@@ -244,6 +240,9 @@ def _resolve_geometry(args: argparse.Namespace, bag_mod: ModuleType) -> dict[str
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from twin import bag
+    from twin.estimation.replay import UnitsDecision, compare, infer_velocity_units, replay
+
     given = [v for v in (args.wheel_radius, args.wheel_separation) if v is not None]
     if not all(v > 0.0 for v in given):  # refused before the bag is read
         msg = (

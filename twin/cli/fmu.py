@@ -10,11 +10,13 @@ import argparse
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from twin.cosim.build import build_all, cache_dir, resolve_fmu
-from twin.cosim.contract import FmuMapping, Profile, check_contract, load_mapping
-from twin.cosim.fmu import read_fmu_info
+if TYPE_CHECKING:
+    from twin.cosim.contract import FmuMapping
+
+# twin.cosim.contract.Profile's values, spelled here so `--help` need not import fmpy (a test compares).
+PROFILES = ("voltage", "velocity-servo")
 
 _BUILD_EPILOG = """\
 examples:
@@ -76,7 +78,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         parents=[common],
     )
     check.add_argument("fmu", metavar="FMU", help=".fmu file or builtin:NAME")
-    check.add_argument("--profile", choices=[p.value for p in Profile], default=Profile.VOLTAGE.value)
+    check.add_argument("--profile", choices=PROFILES, default=PROFILES[0])
     check.add_argument("--map", type=Path, metavar="FILE", help="mapping file (roles, parameters, start_values)")
     check.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built-in (default 2)")
     check.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -106,6 +108,8 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
 
 def _build(args: argparse.Namespace) -> int:
+    from twin.cosim.build import build_all, cache_dir
+
     built = build_all(force=args.force)
     if args.json:
         rows = [{"name": b.variant, "fmi": b.fmi_version, "path": str(b.path), "rebuilt": b.rebuilt} for b in built]
@@ -118,10 +122,16 @@ def _build(args: argparse.Namespace) -> int:
 
 
 def _mapping(path: Path | None) -> FmuMapping:
+    from twin.cosim.contract import FmuMapping, load_mapping
+
     return load_mapping(path) if path is not None else FmuMapping()
 
 
 def _check(args: argparse.Namespace) -> int:
+    from twin.cosim.build import resolve_fmu
+    from twin.cosim.contract import Profile, check_contract
+    from twin.cosim.fmu import read_fmu_info
+
     path = resolve_fmu(args.fmu, fmi_version=args.fmi)
     info = read_fmu_info(path)
     report = check_contract(info, _mapping(args.map), Profile(args.profile))
@@ -192,6 +202,7 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _step_response(args: argparse.Namespace) -> int:
+    from twin.cosim.build import resolve_fmu
     from twin.robot.drivetrain import fmu_step_response
 
     path = resolve_fmu(args.fmu, fmi_version=args.fmi)

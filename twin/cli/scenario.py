@@ -8,8 +8,6 @@ import json
 from pathlib import Path
 from typing import Any
 
-from twin.sim.scenario import load_scenario
-
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     """Add the `scenario` command group."""
@@ -47,6 +45,8 @@ def _plain(value: Any) -> Any:
 
 
 def _check(args: argparse.Namespace) -> int:
+    from twin.sim.scenario import load_scenario
+
     scenario = load_scenario(args.file)
     if args.json:
         print(json.dumps(_plain(scenario), indent=2))

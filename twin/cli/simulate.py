@@ -12,12 +12,14 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twin.cli.progress import Progress
 from twin.core.errors import ConfigError, Interrupted, TwinError
-from twin.sim.scenario import Scenario, default_scenario_path, load_scenario
-from twin.sim.simulation import RunSummary, Simulation
+
+if TYPE_CHECKING:
+    from twin.sim.scenario import Scenario
+    from twin.sim.simulation import RunSummary
 
 _EPILOG = """\
 examples:
@@ -110,6 +112,9 @@ def _result(summary: RunSummary) -> str:
 
 
 def _simulate(args: argparse.Namespace) -> int:
+    from twin.sim.scenario import default_scenario_path, load_scenario
+    from twin.sim.simulation import Simulation
+
     path = args.scenario if args.scenario is not None else default_scenario_path()
     scenario = load_scenario(path)
     changes: dict[str, Any] = {}

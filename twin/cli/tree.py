@@ -8,29 +8,16 @@ import random
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from twin.bt.conformance import (
-    LeafCallRecorder,
-    ScriptedAction,
-    ScriptedCondition,
-    Step,
-    check_case,
-    load_case,
-    run_case,
-    scripted_node_class,
-)
-from twin.bt.factory import BehaviorTreeFactory
-from twin.bt.loader import TreeParser
-from twin.bt.log import StatusLog, read_jsonl, render_timeline
-from twin.bt.mission_nodes import LOCATION_FILE_KEY, ScriptedNavigator, register_mission_nodes
-from twin.bt.node import TreeNode
-from twin.bt.ports import bidirectional_port, is_allowed_port_name
-from twin.bt.status import NodeKind, NodeStatus
-from twin.bt.tree import ManualClock, Tree
-from twin.bt.validate import declare_node_models, load_for_display, validate_file
-from twin.core.clock import NS_PER_S
 from twin.core.errors import TreeError
+
+if TYPE_CHECKING:
+    from twin.bt.conformance import Step
+    from twin.bt.factory import BehaviorTreeFactory
+    from twin.bt.log import StatusLog
+    from twin.bt.node import TreeNode
+    from twin.bt.tree import Tree
 
 _DEFAULT_LOCATIONS = Path(__file__).resolve().parents[2] / "trees" / "sim_house_locations.yaml"
 
@@ -175,6 +162,10 @@ def _add_nodes_option(parser: argparse.ArgumentParser) -> None:
 
 
 def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] = ()) -> BehaviorTreeFactory:
+    from twin.bt.factory import BehaviorTreeFactory
+    from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
+    from twin.bt.validate import declare_node_models
+
     factory = BehaviorTreeFactory(nav2=True)
     register_mission_nodes(
         factory, navigator=ScriptedNavigator(polls_to_arrive=polls_to_arrive), rng=random.Random(seed)
@@ -189,6 +180,8 @@ def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] =
 
 
 def _validate(args: argparse.Namespace) -> int:
+    from twin.bt.validate import validate_file
+
     report = validate_file(args.file, _factory(nodes=args.nodes))
     if args.json:
         print(
@@ -223,6 +216,8 @@ def _validate(args: argparse.Namespace) -> int:
 
 
 def _label(node: TreeNode) -> str:
+    from twin.bt.status import NodeKind
+
     config = node.config
     text = node.registration_id
     if node.kind is NodeKind.SUBTREE:
@@ -258,6 +253,8 @@ def render_outline(tree: Tree) -> str:
 
 
 def _show(args: argparse.Namespace) -> int:
+    from twin.bt.validate import load_for_display
+
     tree = load_for_display(args.file, _factory(nodes=args.nodes), main_tree=args.main_tree)
     main = tree.subtrees[0].tree_id
     print(f"{args.file}: tree {main}, {len(tree.nodes)} nodes")
@@ -269,6 +266,8 @@ def _show(args: argparse.Namespace) -> int:
 
 
 def _conformance(args: argparse.Namespace) -> int:
+    from twin.bt.conformance import check_case, load_case
+
     results: list[dict[str, Any]] = []
     failed = 0
     for path in args.cases:
@@ -313,6 +312,9 @@ def _conformance(args: argparse.Namespace) -> int:
 
 
 def _read_scripts(text: str | None) -> dict[str, tuple[Step, ...]]:
+    from twin.bt.conformance import Step
+    from twin.bt.status import NodeStatus
+
     if not text:
         return {}
     source = Path(text)
@@ -337,6 +339,12 @@ def _read_scripts(text: str | None) -> dict[str, tuple[Step, ...]]:
 
 def _script_unknown_types(file: Path, factory: BehaviorTreeFactory, scripts: dict[str, tuple[Step, ...]]) -> None:
     """Register scripted leaves for the node types of `file` that have no implementation."""
+    from twin.bt.conformance import LeafCallRecorder, ScriptedAction, ScriptedCondition, Step, scripted_node_class
+    from twin.bt.factory import BehaviorTreeFactory
+    from twin.bt.loader import TreeParser
+    from twin.bt.ports import bidirectional_port, is_allowed_port_name
+    from twin.bt.status import NodeKind, NodeStatus
+
     parser = TreeParser(BehaviorTreeFactory(builtins=False), strict=True)
     problems: list[str] = []
     parser.report = lambda location, message: problems.append(message)
@@ -368,7 +376,7 @@ def _script_unknown_types(file: Path, factory: BehaviorTreeFactory, scripts: dic
             factory.register_node_type(cls, name, _Defaulting(scripts, default), recorder)
 
 
-class _Defaulting(dict[str, tuple[Step, ...]]):
+class _Defaulting(dict[str, tuple["Step", ...]]):
     """Leaf scripts where an unscripted path plays `default`."""
 
     def __init__(self, scripts: dict[str, tuple[Step, ...]], default: tuple[Step, ...]) -> None:
@@ -380,6 +388,11 @@ class _Defaulting(dict[str, tuple[Step, ...]]):
 
 
 def _run_xml(args: argparse.Namespace) -> StatusLog:
+    from twin.bt.log import StatusLog
+    from twin.bt.mission_nodes import LOCATION_FILE_KEY
+    from twin.bt.tree import ManualClock
+    from twin.core.clock import NS_PER_S
+
     if args.period_ms <= 0 or args.ticks <= 0:
         msg = "--period-ms and --ticks must be positive"
         raise TreeError(msg)
@@ -400,6 +413,9 @@ def _run_xml(args: argparse.Namespace) -> StatusLog:
 
 
 def _run_case(path: Path) -> StatusLog:
+    from twin.bt.conformance import load_case, run_case
+    from twin.bt.log import StatusLog
+
     case = load_case(path)
     log = StatusLog()
     run = run_case(case, listeners=(log,), tick_listener=log.mark_tick)
@@ -409,6 +425,8 @@ def _run_case(path: Path) -> StatusLog:
 
 
 def _log_command(args: argparse.Namespace) -> int:
+    from twin.bt.log import read_jsonl, render_timeline
+
     suffix = args.file.suffix.lower()
     if suffix == ".jsonl":
         log = read_jsonl(args.file)

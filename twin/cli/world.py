@@ -8,11 +8,10 @@ import os
 import sys
 from collections import Counter
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from twin.world import World, load_world
-from twin.world.scene import build_scene
-from twin.world.types import geometry_kind
+if TYPE_CHECKING:
+    from twin.world import World
 
 _EPILOG = """\
 examples:
@@ -68,6 +67,9 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
 def summarize(world: World) -> dict[str, Any]:
     """Return the facts `world info` prints, as plain data."""
+    from twin.world.scene import build_scene
+    from twin.world.types import geometry_kind
+
     scene = build_scene(world)
     shapes = Counter(geometry_kind(c.geometry) for c in world.all_collisions())
     models = []
@@ -103,6 +105,8 @@ def summarize(world: World) -> dict[str, Any]:
 
 
 def _info(args: argparse.Namespace) -> int:
+    from twin.world import load_world
+
     model_path = [Path(part) for item in args.model_path for part in str(item).split(os.pathsep) if part]
     world = load_world(args.world, model_path=model_path, missing_includes="error" if args.strict else "warn")
     facts = summarize(world)

@@ -1,0 +1,126 @@
+"""Start-up: `twin --help`, every `twin <command> --help`, and process start to the first simulated step.
+
+    python benchmarks/bench_startup.py            # prints JSON
+    python benchmarks/bench_startup.py --quick    # fewer repetitions
+
+Every figure is the median wall time of fresh processes, measured in the same run as `python -c
+pass` (the interpreter's own start-up), so a loaded machine shows in both. Targets (issue 16):
+`--help` <= 0.3 s, first step of the default scenario <= 0.6 s, on a warm cache (one untimed run
+first builds the native kernels and fills the OS file cache).
+
+"First step" runs what `twin simulate` runs (load the default scenario, build the Simulation, run)
+in a fresh process and stamps the wall clock at the loop's first progress call (k = 0, the first
+events fired); the parent stamps it just before starting the process. `simulate_whole_process_s`
+is `twin simulate --duration 0.001` from start to exit (bag closed), an upper bound.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from twin.cli import _COMMAND_MODULES  # noqa: E402
+
+_FIRST_STEP = """
+import sys, time
+from pathlib import Path
+from twin.sim.scenario import default_scenario_path, load_scenario
+from twin.sim.simulation import Simulation
+
+class _First(Exception):
+    pass
+
+def _stamp(sim_s, messages):
+    print(repr(time.time()), flush=True)
+    raise _First
+
+scenario = load_scenario(default_scenario_path())
+with Simulation(scenario, bag_path=Path(sys.argv[1]), duration_s=1.0) as sim:
+    try:
+        sim.run(progress=_stamp)
+    except _First:
+        pass
+"""
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(REPO)}
+
+
+def _wall(command: list[str], repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        subprocess.run(command, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def _first_step(repeats: int) -> float:
+    times = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(repeats):
+            start = time.time()
+            out = subprocess.run(
+                [sys.executable, "-c", _FIRST_STEP, str(Path(tmp) / f"bag{i}")],
+                env=_env(),
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            times.append(float(out.stdout.strip().splitlines()[-1]) - start)
+    return statistics.median(times)
+
+
+def main() -> None:
+    """Print the start-up figures as JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer repetitions")
+    args = parser.parse_args()
+    repeats = 3 if args.quick else 7
+    py = sys.executable
+    # Warm up: native kernels built, files cached.
+    _first_step(1)
+    _wall([py, "-m", "twin", "--help"], 1)
+    baseline = _wall([py, "-c", "pass"], repeats)
+    helps = {"twin --help": _wall([py, "-m", "twin", "--help"], repeats)}
+    for command in _COMMAND_MODULES:
+        helps[f"twin {command} --help"] = _wall([py, "-m", "twin", command, "--help"], repeats)
+    first = _first_step(repeats)
+    with tempfile.TemporaryDirectory() as tmp:
+        whole = statistics.median(
+            _wall([py, "-m", "twin", "simulate", "--duration", "0.001", "--out", str(Path(tmp) / f"b{i}")], 1)
+            for i in range(max(1, repeats // 2))
+        )
+    result: dict[str, Any] = {
+        "benchmark": "startup",
+        "repeats": repeats,
+        "python_pass_s": round(baseline, 4),
+        "help_s": {k: round(v, 4) for k, v in helps.items()},
+        "help_max_s": round(max(helps.values()), 4),
+        "help_max_over_python_s": round(max(helps.values()) - baseline, 4),
+        "first_step_s": round(first, 4),
+        "first_step_over_python_s": round(first - baseline, 4),
+        "simulate_whole_process_s": round(whole, 4),
+        "targets_s": {"help": 0.3, "first_step": 0.6},
+        "help_within_target": max(helps.values()) <= 0.3,
+        "first_step_within_target": first <= 0.6,
+        "load_average_1min": round(os.getloadavg()[0], 2),
+        "cpus": os.cpu_count(),
+    }
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,92 @@
+"""`twin --help` starts at once: building the parser imports no heavy library (timings: bench_startup.py)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import REPO, run_twin
+from twin.cli import _COMMAND_MODULES
+
+# Libraries whose import costs a tenth of a second or more; a command imports them when it runs.
+HEAVY = (
+    "numpy",
+    "scipy",
+    "filterpy",
+    "trimesh",
+    "fcl",
+    "fmpy",
+    "rosbags",
+    "matplotlib",
+    "control",
+    "dask",
+    "distributed",
+    "pyarrow",
+    "foxglove",
+    "twin.sim",
+    "twin.world",
+    "twin.nav",
+    "twin.robot",
+    "twin.estimation",
+    "twin.cosim",
+    "twin.bt",
+)
+
+
+def _imported_by(code: str) -> set[str]:
+    probe = f"import sys\n{code}\nimport json\nprint(json.dumps(sorted(sys.modules)))"
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    )
+    return set(json.loads(out.stdout.splitlines()[-1]))
+
+
+def _heavy(modules: set[str]) -> list[str]:
+    return sorted(m for m in modules if m.split(".")[0] in HEAVY or any(m.startswith(f"{h}.") for h in HEAVY))
+
+
+def test_building_the_full_parser_imports_no_heavy_library() -> None:
+    modules = _imported_by("from twin.cli import build_parser\nbuild_parser()")
+    assert _heavy(modules) == []
+
+
+@pytest.mark.parametrize("command", _COMMAND_MODULES)
+def test_each_command_help_imports_no_heavy_library(command: str) -> None:
+    code = f"from twin.cli import main\ntry:\n    main([{command!r}, '--help'])\nexcept SystemExit:\n    pass\n"
+    assert _heavy(_imported_by(code)) == []
+
+
+def test_a_named_command_loads_only_its_own_module() -> None:
+    code = "from twin.cli import main\ntry:\n    main(['scenario', '--help'])\nexcept SystemExit:\n    pass\n"
+    loaded = {m for m in _imported_by(code) if m.startswith("twin.cli.")}
+    assert loaded == {"twin.cli.scenario"}
+
+
+def test_top_level_help_still_lists_every_command() -> None:
+    result = run_twin("--help")
+    assert result.returncode == 0
+    for command in _COMMAND_MODULES:
+        assert command in result.stdout
+
+
+def test_a_mistyped_command_is_named_with_the_valid_ones() -> None:
+    result = run_twin("simulat")
+    assert result.returncode == 2
+    assert "invalid choice: 'simulat'" in result.stderr
+    assert "simulate" in result.stderr
+
+
+def test_fmu_profiles_spelled_in_the_cli_match_the_contract() -> None:
+    from twin.cli.fmu import PROFILES
+    from twin.cosim.contract import Profile
+
+    assert tuple(p.value for p in Profile) == PROFILES

@@ -1,0 +1,131 @@
+"""The sweep file: expansion into runs (grid, zip, seeds, seeded draws) and one-line errors for bad input."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tests.conftest import REPO, run_twin
+from twin.core.errors import ConfigError
+from twin.sweep import expand_runs, load_sweep, wilson_interval
+
+DEFAULT = REPO / "scenarios" / "default.yaml"
+
+
+def _sweep(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "sweep.yaml"
+    path.write_text(f"scenario: {DEFAULT}\n{text}", encoding="utf-8")
+    return path
+
+
+def test_a_grid_runs_every_combination_for_every_seed(tmp_path: Path) -> None:
+    text = "runs: 2\nvary:\n  robot.model: [turtlebot3_waffle, turtlebot3_burger]\n  max_duration_s: [5, 6, 7]\n"
+    runs = expand_runs(load_sweep(_sweep(tmp_path, text)))
+    assert len(runs) == 2 * 3 * 2
+    assert [r.run_id for r in runs[:3]] == ["r0000", "r0001", "r0002"]
+    combos = {(dict(r.values)["robot.model"], dict(r.values)["max_duration_s"], r.seed) for r in runs}
+    assert len(combos) == 12
+
+
+def test_zip_pairs_the_lists(tmp_path: Path) -> None:
+    text = "zip: true\nvary:\n  robot.model: [turtlebot3_waffle, turtlebot3_burger]\n  robot.initial_pose.x_m: [0.1, 0.2]\n"
+    runs = expand_runs(load_sweep(_sweep(tmp_path, text)))
+    assert [dict(r.values) for r in runs] == [
+        {"robot.model": "turtlebot3_waffle", "robot.initial_pose.x_m": 0.1},
+        {"robot.model": "turtlebot3_burger", "robot.initial_pose.x_m": 0.2},
+    ]
+
+
+def test_a_run_scenario_sets_its_values_and_keeps_the_base(tmp_path: Path) -> None:
+    text = "seeds: [3]\nvary:\n  robot.initial_pose.y_m: [0.25]\n  mission.tick_rate_hz: [4.0]\n"
+    (run,) = expand_runs(load_sweep(_sweep(tmp_path, text)))
+    scenario = yaml.safe_load(run.scenario_yaml)
+    assert scenario["name"] == "house_waffle"
+    assert scenario["robot"]["initial_pose"] == {"y_m": 0.25}
+    assert scenario["mission"] == {"tick_rate_hz": 4.0}
+    assert run.seed == 3
+
+
+def test_relative_paths_become_absolute_so_any_worker_reads_the_same_files(tmp_path: Path) -> None:
+    (tmp_path / "base").mkdir()
+    (tmp_path / "base" / "s.yaml").write_text("mission: {type: behavior_tree, tree: ../t.xml}\n", encoding="utf-8")
+    path = tmp_path / "sweep.yaml"
+    path.write_text("scenario: base/s.yaml\nvary:\n  world.sdf: [w.sdf]\n", encoding="utf-8")
+    (run,) = expand_runs(load_sweep(path))
+    scenario = yaml.safe_load(run.scenario_yaml)
+    assert scenario["mission"]["tree"] == str(tmp_path / "t.xml")
+    assert scenario["world"]["sdf"] == str(tmp_path / "w.sdf")
+
+
+def test_random_draws_are_seeded_within_bounds_and_repeat(tmp_path: Path) -> None:
+    text = (
+        "runs: 20\nrandom:\n  robot.initial_pose.x_m: {uniform: [-0.2, 0.2]}\n"
+        "  robot.initial_pose.yaw_rad: {normal: [0.0, 0.1]}\n"
+        "  robot.model: {choice: [turtlebot3_waffle, turtlebot3_burger]}\n"
+    )
+    first = expand_runs(load_sweep(_sweep(tmp_path, text)))
+    again = expand_runs(load_sweep(_sweep(tmp_path, text)))
+    assert [r.values for r in first] == [r.values for r in again]
+    assert [r.key for r in first] == [r.key for r in again]
+    xs = [dict(r.values)["robot.initial_pose.x_m"] for r in first]
+    assert all(-0.2 <= x <= 0.2 for x in xs)
+    assert len(set(xs)) == 20
+    assert {dict(r.values)["robot.model"] for r in first} == {"turtlebot3_waffle", "turtlebot3_burger"}
+    other = expand_runs(load_sweep(_sweep(tmp_path, text + "random_seed: 1\n")))
+    assert [r.values for r in other] != [r.values for r in first]
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (
+            "vary:\n  robot.modle: [a]\n",
+            "sweep.yaml:3: vary.robot.modle: robot has no key 'modle'; did you mean 'model'?",
+        ),
+        ("vary:\n  robot.initial_pose.x: [1]\n", "did you mean 'x_m'?"),
+        (
+            "random:\n  sensor.imu.enabled: {choice: [true]}\n",
+            "random.sensor.imu.enabled: the scenario has no key 'sensor'",
+        ),
+        ("zip: true\nvary:\n  seed: [1, 2]\n  robot.model: [a]\n", "lengths differ (seed: 2, robot.model: 1)"),
+        ("runs: 3\nseeds: [1]\n", "give runs: N (seeds 0..N-1) or seeds: [..], not both"),
+        ("runs: 3\nvary:\n  seed: [1, 2]\n", "seed: vary the seed or give runs:/seeds:, not both"),
+        ("timeout: 5\n", "timeout: unknown key; did you mean 'timeout_s'?"),
+        ("random:\n  seed: {poisson: [1]}\n", "unknown distribution 'poisson'"),
+    ],
+)
+def test_bad_sweep_files_fail_in_one_line(tmp_path: Path, text: str, expected: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        load_sweep(_sweep(tmp_path, text))
+    assert expected in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_the_cli_reports_a_bad_key_in_one_line_with_exit_2(tmp_path: Path) -> None:
+    result = run_twin("sweep", str(_sweep(tmp_path, "vary:\n  robot.modle: [a]\n")))
+    assert result.returncode == 2
+    assert result.stderr.strip().count("\n") == 0
+    assert "did you mean 'model'?" in result.stderr
+
+
+def test_an_unreachable_scheduler_names_the_address_and_how_to_start_one(tmp_path: Path) -> None:
+    result = run_twin("sweep", str(_sweep(tmp_path, "")), "--scheduler", "tcp://127.0.0.1:9")
+    assert result.returncode == 2
+    line = result.stderr.strip()
+    assert "\n" not in line
+    assert "tcp://127.0.0.1:9" in line
+    assert "`dask scheduler`" in line
+    assert "`dask worker tcp://127.0.0.1:9`" in line
+
+
+@pytest.mark.parametrize(
+    ("successes", "runs", "low", "high"),
+    [(5, 10, 0.2366, 0.7634), (0, 10, 0.0, 0.2775), (10, 10, 0.7225, 1.0), (47, 50, 0.8378, 0.9794)],
+)
+def test_wilson_interval_matches_published_values(successes: int, runs: int, low: float, high: float) -> None:
+    got = wilson_interval(successes, runs)
+    assert math.isclose(got[0], low, abs_tol=6e-5)
+    assert math.isclose(got[1], high, abs_tol=6e-5)

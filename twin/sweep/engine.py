@@ -1,0 +1,178 @@
+"""Run a sweep's runs as Dask tasks: on an embedded LocalCluster, or on a cluster by its address.
+
+Both modes share one code path: a `distributed.Client` gets one `execute_run` task per run that
+has not finished yet, and the rows come back as the tasks complete. The embedded cluster has one
+single-threaded worker process per core (a run is one process on one core) and does not retry a
+run whose worker died; a cluster of your own retries it as its `distributed.scheduler.allowed-failures`
+says, then the run is marked `worker lost`.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from twin.core.errors import ConfigError
+from twin.sweep.runner import KeepBags, RunTask, execute_run, read_result
+from twin.sweep.spec import RunSpec, SweepSpec, expand_runs
+
+__all__ = ["ProgressFn", "SweepResult", "run_sweep"]
+
+_log = logging.getLogger(__name__)
+
+ProgressFn = Callable[[int, int, int, float | None], None]
+"""Called as runs finish with (runs done, runs failed, runs in the sweep, ETA in s or None)."""
+
+_CONNECT_TIMEOUT_S = 10.0
+_WORKERS_TIMEOUT_S = 60.0
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class SweepResult:
+    """What a sweep produced: one row per run in run order, and how many were finished before."""
+
+    spec: SweepSpec
+    out_dir: Path
+    rows: tuple[dict[str, Any], ...]
+    resumed: int
+
+
+def run_sweep(
+    spec: SweepSpec,
+    *,
+    out_dir: Path,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    keep_bags: KeepBags = "all",
+    progress: ProgressFn | None = None,
+) -> SweepResult:
+    """Run every unfinished run of `spec`, each as one `twin simulate` process in a Dask task.
+
+    Args:
+        spec: The loaded sweep file.
+        out_dir: Results folder; each run gets `runs/<run id>/` (scenario, bag, stderr, result.json).
+            With `scheduler`, it must be on storage every worker shares.
+        workers: Worker processes of the embedded cluster (default: one per core).
+        scheduler: Address of an existing Dask scheduler (`tcp://HOST:8786`) instead.
+        keep_bags: Which bags to keep: `all`, `failed` (runs that did not succeed) or `none`.
+        progress: Told about each finished run.
+
+    Raises:
+        ConfigError: If the scheduler cannot be reached or has no workers.
+    """
+    out_dir = out_dir.resolve()
+    runs = expand_runs(spec)
+    rows: dict[int, dict[str, Any]] = {}
+    todo: list[tuple[RunSpec, RunTask]] = []
+    for run in runs:
+        run_dir = out_dir / "runs" / run.run_id
+        done = read_result(run_dir, run.key)
+        if done is not None:
+            rows[run.index] = done
+            continue
+        task = RunTask(
+            run_id=run.run_id,
+            key=run.key,
+            seed=run.seed,
+            scenario_yaml=run.scenario_yaml,
+            run_dir=str(run_dir),
+            timeout_s=spec.timeout_s,
+            keep_bags=keep_bags,
+        )
+        todo.append((run, task))
+    resumed = len(rows)
+    failed = sum(1 for r in rows.values() if r.get("outcome") != "success")
+    if progress is not None:
+        progress(len(rows), failed, len(runs), None)
+    if todo:
+        from distributed import as_completed
+
+        with _client(scheduler, workers) as client:
+            tag = uuid.uuid4().hex[:8]
+            futures = {
+                client.submit(execute_run, task, key=f"twin-run-{run.run_id}-{tag}", pure=False): run
+                for run, task in todo
+            }
+            start = time.monotonic()
+            for finished, future in enumerate(as_completed(futures, loop=client.loop), start=1):  # type: ignore[no-untyped-call]
+                run = futures[future]
+                row = future.result() if future.status == "finished" else _lost(run, future.exception())
+                rows[run.index] = row
+                failed += row.get("outcome") != "success"
+                if progress is not None:
+                    left = len(runs) - len(rows)
+                    eta = (time.monotonic() - start) / finished * left
+                    progress(len(rows), failed, len(runs), eta)
+    ordered = tuple(_with_inputs(rows[run.index], run) for run in runs)
+    return SweepResult(spec=spec, out_dir=out_dir, rows=ordered, resumed=resumed)
+
+
+def _with_inputs(row: dict[str, Any], run: RunSpec) -> dict[str, Any]:
+    """The row led by what the run was given: its id, seed and varied values."""
+    out: dict[str, Any] = {"run_id": run.run_id, "seed": run.seed}
+    out.update(dict(run.values))
+    out.update({k: v for k, v in row.items() if k not in out and k != "key"})
+    return out
+
+
+def _lost(run: RunSpec, err: BaseException | None) -> dict[str, Any]:
+    """The row of a run whose task did not return (its worker died, or the task itself failed)."""
+    name = type(err).__name__ if err is not None else "unknown"
+    if name == "KilledWorker":
+        reason = "the Dask worker running it died"
+        outcome = "worker lost"
+    else:
+        reason = f"the task failed: {name}: {err}".splitlines()[0]
+        outcome = "crash"
+    return {"run_id": run.run_id, "outcome": outcome, "reason": reason, "wall_s": None, "bag_path": ""}
+
+
+@contextmanager
+def _client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
+    """A Dask client on `scheduler`, or on an embedded LocalCluster of `workers` processes."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=_CONNECT_TIMEOUT_S, set_as_default=False)  # type: ignore[no-untyped-call]
+        except (OSError, TimeoutError, ValueError) as err:
+            why = str(err).splitlines()[0] if str(err) else type(err).__name__
+            msg = (
+                f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({why}); start one with "
+                f"`dask scheduler` and workers with `dask worker {scheduler}` (twin installed, --out on storage "
+                "they share), or leave out --scheduler to run on this machine"
+            )
+            raise ConfigError(msg) from None
+        with client:
+            try:
+                client.wait_for_workers(1, timeout=_WORKERS_TIMEOUT_S)
+            except TimeoutError:
+                msg = (
+                    f"--scheduler {scheduler}: the scheduler has no workers after {_WORKERS_TIMEOUT_S:g} s; "
+                    f"start some with `dask worker {scheduler}`"
+                )
+                raise ConfigError(msg) from None
+            yield client
+        return
+    n = workers if workers is not None else os.cpu_count() or 1
+    # A run is one process on one core; a worker that dies takes its run with it (marked, not retried).
+    with (
+        dask.config.set({"distributed.scheduler.allowed-failures": 0}),
+        LocalCluster(  # type: ignore[no-untyped-call]
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        ) as cluster,
+        Client(cluster, set_as_default=False) as client,  # type: ignore[no-untyped-call]
+    ):
+        yield client

@@ -1,0 +1,368 @@
+"""The sweep file: a base scenario and what varies, expanded into one `RunSpec` per run.
+
+```yaml
+scenario: ../scenarios/default.yaml      # the base, relative to this file
+runs: 50                                 # seeds 0..49 (or seeds: [3, 7, 11])
+vary:                                    # dotted scenario keys: a grid, or zip: true to pair
+  robot.model: [turtlebot3_waffle, turtlebot3_burger]
+zip: false
+random:                                  # seeded draws per run
+  robot.initial_pose.x_m: {uniform: [-0.2, 0.2]}
+random_seed: 0                           # seeds the draws (default 0)
+timeout_s: 120                           # per run, wall clock
+```
+
+Every varied key is checked against the scenario's schema before anything runs. A run's scenario
+is the base file with its values set, written out whole with every path made absolute, so the run
+reads the same scenario wherever its worker runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import json
+import math
+import os
+import random
+import types
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+
+from twin.core.config import load_yaml, location, suggest
+from twin.core.errors import ConfigError
+
+__all__ = ["Draw", "RunSpec", "SweepSpec", "expand_runs", "load_sweep"]
+
+_KEYS = ("name", "scenario", "runs", "seeds", "vary", "zip", "random", "random_seed", "timeout_s")
+_DISTRIBUTIONS = ("uniform", "normal", "choice")
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Draw:
+    """A seeded random draw for one scenario key: `uniform: [lo, hi]`, `normal: [mean, std]` or `choice: [...]`."""
+
+    key: str
+    distribution: Literal["uniform", "normal", "choice"]
+    args: tuple[Any, ...]
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class SweepSpec:
+    """A loaded sweep file (see the module docstring)."""
+
+    path: Path
+    name: str
+    scenario: Path
+    seeds: tuple[int | None, ...]
+    vary: tuple[tuple[str, tuple[Any, ...]], ...]
+    zip: bool
+    random: tuple[Draw, ...]
+    random_seed: int
+    timeout_s: float
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RunSpec:
+    """One run: its id, seed, the values it sets and the whole scenario it runs (YAML text)."""
+
+    index: int
+    run_id: str
+    seed: int | None
+    values: tuple[tuple[str, Any], ...]
+    scenario_yaml: str
+    key: str  # a digest of everything that decides the run's result: a finished run with it is not rerun
+
+
+def load_sweep(path: Path) -> SweepSpec:
+    """Load and check a sweep file.
+
+    Raises:
+        ConfigError: One line naming file, line and key: an unknown key (with a suggestion), a key to
+            vary that the scenario does not have, lists of different lengths with `zip: true`, a bad
+            draw, or a base scenario that does not load.
+    """
+    node = load_yaml(path)
+    if not isinstance(node, yaml.MappingNode):
+        msg = f"{location(node)}: a sweep file is a mapping with at least `scenario:`"
+        raise ConfigError(msg)
+    nodes: dict[str, yaml.Node] = {}
+    for key_node, value_node in node.value:
+        key = str(key_node.value)
+        if key not in _KEYS:
+            msg = f"{location(key_node)}: {key}: unknown key{suggest(key, list(_KEYS))}"
+            raise ConfigError(msg)
+        nodes[key] = value_node
+    raw = {k: yaml.safe_load(yaml.serialize(v)) for k, v in nodes.items()}
+    if "scenario" not in raw:
+        msg = f"{path}: scenario: missing; name the base scenario file (relative to {path.name})"
+        raise ConfigError(msg)
+    base_dir = path.resolve().parent  # the sweep file's paths are relative to it
+    scenario = _path(base_dir, nodes["scenario"], raw["scenario"])
+    _check_scenario(scenario, nodes["scenario"])
+    vary_raw = raw.get("vary") or {}
+    if not isinstance(vary_raw, dict):
+        _fail(nodes["vary"], "vary", "expected a mapping of dotted scenario keys to lists of values")
+    zip_flag = raw.get("zip", False)
+    if "zip" in vary_raw:  # `vary: {zip: true, ...}` reads naturally too; no scenario key is named zip
+        zip_flag = vary_raw.pop("zip")
+    if not isinstance(zip_flag, bool):
+        _fail(nodes.get("zip", node), "zip", f"expected true or false, got {zip_flag!r}")
+    vary: list[tuple[str, tuple[Any, ...]]] = []
+    for key, values in vary_raw.items():
+        where = _value_node(nodes["vary"], key)
+        if not isinstance(values, list) or not values:
+            _fail(where, f"vary.{key}", "expected a non-empty list of values")
+        kind = _schema_type(str(key), where, "vary")
+        vary.append((str(key), tuple(_fix_paths(v, kind, base_dir) for v in values)))
+    if zip_flag and len({len(v) for _, v in vary}) > 1:
+        lengths = ", ".join(f"{k}: {len(v)}" for k, v in vary)
+        _fail(
+            nodes["vary"], "vary", f"zip: true pairs the lists, but their lengths differ ({lengths}); make them equal"
+        )
+    draws = _draws(raw.get("random") or {}, nodes.get("random"))
+    seeds = _seeds(raw, nodes)
+    if seeds != (None,) and "seed" in [k for k, _ in vary] + [d.key for d in draws]:
+        _fail(nodes.get("runs", nodes.get("seeds", node)), "seed", "vary the seed or give runs:/seeds:, not both")
+    timeout_s = raw.get("timeout_s", 600.0)
+    if isinstance(timeout_s, bool) or not isinstance(timeout_s, int | float) or not 0 < timeout_s < math.inf:
+        _fail(nodes.get("timeout_s", node), "timeout_s", f"expected a positive number of seconds, got {timeout_s!r}")
+    random_seed = raw.get("random_seed", 0)
+    if isinstance(random_seed, bool) or not isinstance(random_seed, int):
+        _fail(nodes.get("random_seed", node), "random_seed", f"expected a whole number, got {random_seed!r}")
+    name = raw.get("name", path.stem)
+    return SweepSpec(
+        path=path,
+        name=str(name),
+        scenario=scenario,
+        seeds=seeds,
+        vary=tuple(vary),
+        zip=zip_flag,
+        random=draws,
+        random_seed=random_seed,
+        timeout_s=float(timeout_s),
+    )
+
+
+def expand_runs(spec: SweepSpec) -> list[RunSpec]:
+    """Return the sweep's runs in a fixed order: every combination of the varied values, then every seed.
+
+    The random draws of a run depend only on `random_seed`, the combination, the seed and the key,
+    so the same sweep file gives the same runs.
+    """
+    base = _absolute_scenario(spec.scenario)
+    keys = [k for k, _ in spec.vary]
+    lists = [v for _, v in spec.vary]
+    combos = list(zip(*lists, strict=True)) if spec.zip else list(itertools.product(*lists))
+    runs: list[RunSpec] = []
+    width = max(4, len(str(len(combos) * len(spec.seeds) - 1)))
+    for combo_index, combo in enumerate(combos):
+        for seed in spec.seeds:
+            values: list[tuple[str, Any]] = list(zip(keys, combo, strict=True))
+            for draw in spec.random:
+                rng = random.Random(f"{spec.random_seed}:{combo_index}:{seed}:{draw.key}")
+                values.append((draw.key, _sample(draw, rng)))
+            scenario = _with_values(base, values)
+            text = yaml.safe_dump(scenario, sort_keys=False)
+            index = len(runs)
+            digest = json.dumps({"scenario": text, "seed": seed, "timeout_s": spec.timeout_s}, sort_keys=True)
+            runs.append(
+                RunSpec(
+                    index=index,
+                    run_id=f"r{index:0{width}d}",
+                    seed=seed,
+                    values=tuple(values),
+                    scenario_yaml=text,
+                    key=hashlib.sha256(digest.encode()).hexdigest()[:16],
+                )
+            )
+    return runs
+
+
+# -- loading ------------------------------------------------------------------------------------
+
+
+def _fail(node: yaml.Node, key: str, problem: str) -> typing.NoReturn:
+    msg = f"{location(node)}: {key}: {problem}"
+    raise ConfigError(msg)
+
+
+def _value_node(mapping: yaml.Node, key: str) -> yaml.Node:
+    for k, _ in mapping.value:
+        if str(k.value) == key:
+            node: yaml.Node = k
+            return node
+    return mapping
+
+
+def _path(base_dir: Path, node: yaml.Node, value: Any) -> Path:
+    if not isinstance(value, str) or not value:
+        _fail(node, "scenario", f"expected a path to a scenario file, got {value!r}")
+    path = Path(value).expanduser()
+    return Path(os.path.normpath(path if path.is_absolute() else base_dir / path))
+
+
+def _check_scenario(path: Path, node: yaml.Node) -> None:
+    from twin.sim.scenario import load_scenario
+
+    if not path.is_file():
+        _fail(node, "scenario", f"{path} not found; the path is relative to the sweep file")
+    load_scenario(path)
+
+
+def _seeds(raw: dict[str, Any], nodes: dict[str, yaml.Node]) -> tuple[int | None, ...]:
+    if "runs" in raw and "seeds" in raw:
+        _fail(nodes["seeds"], "seeds", "give runs: N (seeds 0..N-1) or seeds: [..], not both")
+    if "runs" in raw:
+        runs = raw["runs"]
+        if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+            _fail(nodes["runs"], "runs", f"expected a whole number of runs (seeds 0..N-1), got {runs!r}")
+        return tuple(range(runs))
+    if "seeds" in raw:
+        seeds = raw["seeds"]
+        if not isinstance(seeds, list) or not seeds or not all(type(s) is int for s in seeds):
+            _fail(nodes["seeds"], "seeds", f"expected a non-empty list of whole numbers, got {seeds!r}")
+        return tuple(seeds)
+    return (None,)  # one run per combination, with the scenario's own seed
+
+
+def _draws(raw: Any, node: yaml.Node | None) -> tuple[Draw, ...]:
+    if not raw:
+        return ()
+    assert node is not None
+    if not isinstance(raw, dict):
+        _fail(node, "random", "expected a mapping of dotted scenario keys to {uniform|normal|choice: [...]}")
+    draws = []
+    for key, how in raw.items():
+        where = _value_node(node, key)
+        _schema_type(str(key), where, "random")
+        if not isinstance(how, dict) or len(how) != 1:
+            _fail(where, f"random.{key}", "expected one of {uniform: [lo, hi]}, {normal: [mean, std]}, {choice: [..]}")
+        ((kind, args),) = how.items()
+        if kind not in _DISTRIBUTIONS:
+            _fail(where, f"random.{key}", f"unknown distribution {kind!r}{suggest(str(kind), list(_DISTRIBUTIONS))}")
+        if not isinstance(args, list) or not args:
+            _fail(where, f"random.{key}.{kind}", "expected a list")
+        if kind != "choice" and (
+            len(args) != 2 or not all(isinstance(a, int | float) and not isinstance(a, bool) for a in args)
+        ):
+            _fail(where, f"random.{key}.{kind}", f"expected two numbers, got {args!r}")
+        draws.append(Draw(key=str(key), distribution=kind, args=tuple(args)))
+    return tuple(draws)
+
+
+def _sample(draw: Draw, rng: random.Random) -> Any:
+    if draw.distribution == "uniform":
+        return rng.uniform(float(draw.args[0]), float(draw.args[1]))
+    if draw.distribution == "normal":
+        return rng.gauss(float(draw.args[0]), float(draw.args[1]))
+    return draw.args[rng.randrange(len(draw.args))]
+
+
+# -- the scenario schema ------------------------------------------------------------------------
+
+
+def _members(tp: Any) -> list[Any]:
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        return [a for a in typing.get_args(tp) if a is not type(None)]
+    return [tp]
+
+
+def _is_dataclass(tp: Any) -> bool:
+    return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+
+
+def _fields(tp: Any) -> dict[str, Any] | None:
+    """The settings a type takes by name (the union of its variants'), or None if it is not a section."""
+    sections = [m for m in _members(tp) if _is_dataclass(m)]
+    if not sections:
+        return None
+    out: dict[str, Any] = {}
+    for cls in sections:
+        hints = typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):
+            if f.init and f.name not in out:
+                out[f.name] = hints[f.name]
+    return out
+
+
+def _schema_type(dotted: str, node: yaml.Node, section: str) -> Any:
+    """Return the type the scenario declares for a dotted key, or fail naming the nearest valid key."""
+    from twin.sim.scenario import Scenario
+
+    tp: Any = Scenario
+    walked: list[str] = []
+    for part in dotted.split("."):
+        mappings = [m for m in _members(tp) if typing.get_origin(m) in (dict, Mapping)]
+        if mappings:  # a free mapping (e.g. an FMU's start values): any key
+            tp = typing.get_args(mappings[0])[1] if typing.get_args(mappings[0]) else Any
+            walked.append(part)
+            continue
+        fields = _fields(tp)
+        where = ".".join(walked) or "the scenario"
+        if fields is None:
+            msg = f"{location(node)}: {section}.{dotted}: {where} is a value, not a section; vary {where} itself"
+            raise ConfigError(msg)
+        if part not in fields:
+            hint = suggest(part, list(fields))
+            msg = f"{location(node)}: {section}.{dotted}: {where} has no key {part!r}{hint}"
+            raise ConfigError(msg)
+        tp = fields[part]
+        walked.append(part)
+    return tp
+
+
+def _fix_paths(value: Any, tp: Any, base_dir: Path) -> Any:
+    """Make the relative paths in a value of type `tp` absolute, relative to `base_dir`."""
+    members = _members(tp)
+    if isinstance(value, str):
+        if Path in members:
+            path = Path(value).expanduser()
+            return os.path.normpath(path if path.is_absolute() else base_dir / path)
+        return value
+    if isinstance(value, dict):
+        fields = _fields(tp)
+        if fields is not None:
+            return {k: _fix_paths(v, fields.get(str(k), Any), base_dir) for k, v in value.items()}
+        mappings = [m for m in members if typing.get_origin(m) in (dict, Mapping)]
+        item = typing.get_args(mappings[0])[1] if mappings and typing.get_args(mappings[0]) else Any
+        return {k: _fix_paths(v, item, base_dir) for k, v in value.items()}
+    if isinstance(value, list):
+        sequences = [m for m in members if typing.get_origin(m) in (tuple, list, Sequence)]
+        args = typing.get_args(sequences[0]) if sequences else ()
+        if (len(args) == 2 and args[1] is Ellipsis) or len(args) == 1:
+            return [_fix_paths(v, args[0], base_dir) for v in value]
+        if args and len(args) == len(value):
+            return [_fix_paths(v, a, base_dir) for v, a in zip(value, args, strict=True)]
+        return value
+    return value
+
+
+def _absolute_scenario(path: Path) -> dict[str, Any]:
+    """The base scenario file as a mapping, with its relative paths made absolute."""
+    from twin.sim.scenario import Scenario
+
+    raw = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    fixed: dict[str, Any] = _fix_paths(raw, Scenario, path.parent)
+    return fixed
+
+
+def _with_values(base: dict[str, Any], values: Sequence[tuple[str, Any]]) -> dict[str, Any]:
+    out = json.loads(json.dumps(base))  # a deep copy of plain YAML data
+    for dotted, value in values:
+        *parents, last = dotted.split(".")
+        section = out
+        for part in parents:
+            child = section.get(part)
+            if not isinstance(child, dict):
+                child = section[part] = {}
+            section = child
+        section[last] = value
+    result: dict[str, Any] = out
+    return result
