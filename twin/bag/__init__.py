@@ -34,7 +34,7 @@ from twin.bag.qos import (
     Reliability,
     default_qos,
 )
-from twin.bag.reader import BagInfo, BagMessage, TopicInfo, open_bag, read_messages
+from twin.bag.reader import BagInfo, BagMessage, TopicInfo, message_definitions, open_bag, read_messages
 from twin.bag.recorder import STORAGES, Recorder, TopicHandle
 from twin.bag.recover import RecoveryReport, recover_bag
 
@@ -72,6 +72,7 @@ __all__ = [
     "TopicInfo",
     "TwistEncoder",
     "default_qos",
+    "message_definitions",
     "open_bag",
     "read_messages",
     "recover_bag",

@@ -22,7 +22,7 @@ __all__ = ["main", "run"]
 _log = logging.getLogger("twin")
 
 # Command-group modules under twin.cli, in the order `twin --help` lists them.
-_COMMAND_MODULES: tuple[str, ...] = ("simulate", "scenario", "world", "fmu", "tree", "bag", "ekf")
+_COMMAND_MODULES: tuple[str, ...] = ("simulate", "scenario", "world", "fmu", "tree", "bag", "ekf", "play")
 
 _EPILOG = """\
 examples:
@@ -30,6 +30,8 @@ examples:
   twin simulate scenarios/house_fmu.yaml --duration 60 --out /tmp/run1
   twin scenario check scenarios/house_burger.yaml
   twin bag info bags/<run>              what a bag holds
+  twin simulate --live                  watch the run in Foxglove (ws://127.0.0.1:8765), in real time
+  twin play bags/<run> --speed 2        serve a bag to Foxglove
   twin tree validate trees/tree.xml
   twin world info ../shared/fixtures/gazebo_classic/worlds/turtlebot3_house.world \\
       --model-path ../shared/fixtures/gazebo_classic/models

@@ -46,7 +46,7 @@ from twin.robot.encoders import EncoderModel, EncoderSpec
 from twin.robot.imu import ImuModel, imu_model_spec
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
 from twin.robot.lidar import Lidar
-from twin.sim.bus import Bus, Publisher
+from twin.sim.bus import Bus, Publisher, Sink
 from twin.sim.mission import CmdVelScript, TreeMission, WaypointFollower
 from twin.sim.rng import RngStreams
 from twin.sim.scenario import (
@@ -208,6 +208,8 @@ class Simulation:
             mission's end, at most `scenario.max_duration_s`).
         profile: Time each subsystem (for benchmarks; adds a little overhead).
         write_log: For crash tests: the recorder appends `topic t_ns monotonic_ns` per message here.
+        wrap_sink: Given the recorder, returns the sink the bus writes to instead (the live view's
+            `twin.live.LiveSink`, which tees to the recorder, a server and a pacer).
 
     Raises:
         TwinError: If any input (world, robot, scenario values) is wrong; nothing is left open.
@@ -221,6 +223,7 @@ class Simulation:
         duration_s: float | None = None,
         profile: bool = False,
         write_log: Path | None = None,
+        wrap_sink: Callable[[Sink], Sink] | None = None,
     ) -> None:
         self.scenario = scenario
         self.step_ns = s_to_ns(scenario.physics.step_s)
@@ -275,7 +278,7 @@ class Simulation:
             self.drive.close()
             raise
         try:
-            self.bus = Bus(self.recorder)
+            self.bus = Bus(self.recorder if wrap_sink is None else wrap_sink(self.recorder))
             self.scheduler = Scheduler(self.step_ns)
             self._rosout = _RosoutHandler(
                 self.bus.advertise("/rosout", LogEncoder.msgtype), lambda: self._k * self.step_ns
