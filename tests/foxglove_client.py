@@ -34,6 +34,7 @@ class Watch:
     messages: dict[str, list[tuple[int, bytes]]] = field(default_factory=dict)  # topic -> (log time ns, CDR)
     times_ns: list[int] = field(default_factory=list)
     closed_by_server: bool = False
+    retried_subscriptions: int = 0  # subscriptions sent again after the server did not know the channel yet
 
     def decode(self, topic: str, payload: bytes) -> Any:
         """Decode a payload with rosbags against the schema the server advertised for `topic`."""
@@ -81,6 +82,16 @@ async def watch(
                 message = json.loads(frame)
                 if message["op"] == "serverInfo":
                     seen.server_info = message
+                elif message["op"] == "status" and message["message"].startswith("Unknown channel ID"):
+                    # foxglove-sdk 0.30 can send a channel's advertisement a moment before it accepts
+                    # subscriptions to it (channels created while a client is connected): ask again.
+                    seen.retried_subscriptions += 1
+                    channel_id = int(message["message"].rsplit(" ", 1)[1])
+                    sub_id = next(i for i, t in subscriptions.items() if seen.channels[t]["id"] == channel_id)
+                    await asyncio.sleep(0.05)
+                    await ws.send(
+                        json.dumps({"op": "subscribe", "subscriptions": [{"id": sub_id, "channelId": channel_id}]})
+                    )
                 elif message["op"] == "advertise":
                     wanted = []
                     for channel in message["channels"]:
