@@ -243,3 +243,28 @@ def test_speed_1_holds_real_time_within_2_percent_over_30_s(tmp_path: Path) -> N
     (wall0, t0), (wall1, t1) = arrivals[0], arrivals[-1]
     assert (t1 - t0) / 1e9 >= 29.0  # the client saw the whole run
     assert (wall1 - wall0) == pytest.approx((t1 - t0) / 1e9, rel=0.02)
+
+
+# Topics the layout shows that arrive with later parts (map_server, costmaps, AMCL).
+LATER = {"/map", "/global_costmap/costmap", "/local_costmap/costmap", "/particle_cloud"}
+
+
+def test_the_shipped_layout_shows_topics_and_fields_a_live_run_serves(live_run: tuple[Path, Watch, Watch, str]) -> None:
+    bag, first, _, _ = live_run
+    layout = json.loads((REPO / "docs" / "foxglove_layout.json").read_text())
+    panels = layout["configById"]
+    assert {key.split("!")[0] for key in panels} >= {"3D", "Plot", "RawMessages"}
+    three_d = next(v for k, v in panels.items() if k.startswith("3D!"))
+    assert three_d["followTf"] == "base_footprint"
+    paths = [p["value"] for k, v in panels.items() if k.startswith("Plot!") for p in v["paths"]]
+    paths += [v["topicPath"] for k, v in panels.items() if k.startswith("RawMessages!")]
+    topics = set(three_d["topics"]) | {p.split(".", 1)[0] for p in paths}
+    assert {"/scan", "/robot_description", "/plan", "/map", "/cmd_vel", "/odom", "/behavior_tree_log"} <= topics
+    assert topics - LATER <= set(first.channels)
+    recorded = bag_messages(bag)
+    for path in paths:
+        topic, *fields = path.split(".")
+        value = recorded[topic][-1][2]
+        for name in fields:
+            value = getattr(value, name)
+        assert value is not None, path

@@ -9,8 +9,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from twin.cli.simulate import live_banner, speed_arg
-
 _EPILOG = """\
 examples:
   twin play bags/<run>                                       the twin's own bag, in real time
@@ -24,6 +22,26 @@ sent as foxglove_bridge sends them (CDR with ros2msg schemas); latched topics (/
 MCAP or sqlite3, metadata versions 4 to 9; a topic whose type is defined nowhere is left out.
 Ctrl-C stops. Exit codes: 0 done, 2 bad option or port in use, 5 bag error, 130 interrupted.
 """
+
+
+def speed_arg(text: str) -> float:
+    """Parse `--speed`: a positive real-time factor, or `max` (as fast as possible, math.inf)."""
+    if text.strip().lower() == "max":
+        return math.inf
+    try:
+        speed = float(text)
+    except ValueError:
+        speed = math.nan
+    if not (math.isfinite(speed) and speed > 0):
+        msg = f"--speed must be a positive number (1 = real time, 5 = five times faster) or max, got {text!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return speed
+
+
+def live_banner(url: str, speed: float) -> str:
+    """The line that tells where the live view is served."""
+    pace = "as fast as possible" if speed == math.inf else f"{speed:g}x real time"
+    return f"twin: live on {url} ({pace}); in Foxglove: Open connection > Foxglove WebSocket > {url}"
 
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:

@@ -15,6 +15,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from twin.cli.play import live_banner, speed_arg
 from twin.cli.progress import Progress
 from twin.core.errors import ConfigError, Interrupted, TwinError
 from twin.sim.bus import Sink
@@ -124,26 +125,6 @@ def _summary_line(summary: RunSummary) -> str:
 
 def _result(summary: RunSummary) -> str:
     return f" (tree {summary.mission_result})" if summary.mission_result in ("SUCCESS", "FAILURE") else ""
-
-
-def speed_arg(text: str) -> float:
-    """Parse `--speed`: a positive real-time factor, or `max` (as fast as possible, math.inf)."""
-    if text.strip().lower() == "max":
-        return math.inf
-    try:
-        speed = float(text)
-    except ValueError:
-        speed = math.nan
-    if not (math.isfinite(speed) and speed > 0):
-        msg = f"--speed must be a positive number (1 = real time, 5 = five times faster) or max, got {text!r}"
-        raise argparse.ArgumentTypeError(msg)
-    return speed
-
-
-def live_banner(url: str, speed: float) -> str:
-    """The line that tells where the live view is served."""
-    pace = "as fast as possible" if speed == math.inf else f"{speed:g}x real time"
-    return f"twin: live on {url} ({pace}); in Foxglove: Open connection > Foxglove WebSocket > {url}"
 
 
 def _simulate(args: argparse.Namespace) -> int:
