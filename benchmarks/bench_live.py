@@ -1,8 +1,8 @@
 """Live view: how well pacing holds real time, and what serving a run costs when it runs flat out.
 
-Prints JSON with two parts, for the default scenario run in process (a Simulation whose bus writes
-to a `LiveSink` around the recorder, as `twin simulate --live` wires it), with a WebSocket client
-subscribed to /clock and /scan as Foxglove would be:
+Prints JSON with two parts, for the default scenario run in process (a Simulation whose executor
+hands every recorded message to the recorder, then to a `LiveSink`, as `twin simulate --live` wires
+it), with a WebSocket client subscribed to /clock and /scan as Foxglove would be:
   pacing    for each speed: sim seconds, wall seconds, the error against sim/speed in percent, and
             the client's view (wall time between the first and last /clock it received against the
             sim time they carry)
@@ -61,8 +61,8 @@ def run(sim_s: float, *, speed: float | None, live: bool, client_topics: list[st
         server = LiveServer(port=0) if live else None
         try:
             pacer = Pacer(speed) if speed is not None else None
-            wrap = (lambda rec: LiveSink(rec, server, pacer=pacer)) if (live or pacer) else None
-            with Simulation(scenario, bag_path=Path(tmp) / "bag", duration_s=sim_s, wrap_sink=wrap) as sim:
+            sinks = [LiveSink(server, pacer=pacer)] if (live or pacer) else []
+            with Simulation(scenario, bag_path=Path(tmp) / "bag", duration_s=sim_s, sinks=sinks) as sim:
                 client = None
                 if server is not None and client_topics is not None:
                     client = Client(server.url, client_topics)

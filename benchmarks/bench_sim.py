@@ -8,6 +8,12 @@ for two configurations of the same scenario:
 Speed is compared as ratios within one run (this machine is shared and noisy), never asserted.
 
     python benchmarks/bench_sim.py [--sim-s 60] [--scenario FILE] [--drive kinematic|fmu] [--repeat 3]
+    python benchmarks/bench_sim.py --baseline REV [--pairs 5]
+
+`--baseline REV` compares this tree with an earlier commit in the same run: it checks REV out into
+a temporary git worktree and runs the whole default mission alternately in both trees (fresh
+processes, same scenario file and seed), then prints each tree's best and median real-time factor
+and their ratio. Alternating cancels most of a shared machine's drift.
 """
 
 from __future__ import annotations
@@ -68,13 +74,79 @@ def measure(scenario, sim_s: float, repeat: int) -> dict[str, object]:  # type: 
     }
 
 
+_ONE_RUN = """
+import json, sys, tempfile, time
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+from twin.sim.scenario import load_scenario
+from twin.sim.simulation import Simulation
+scenario = load_scenario(Path(sys.argv[2]))
+with tempfile.TemporaryDirectory() as tmp, Simulation(scenario, bag_path=Path(tmp) / "bag") as sim:
+    cpu0 = time.process_time()
+    s = sim.run()
+    cpu = time.process_time() - cpu0
+print(json.dumps({"sim_s": s.sim_s, "wall_s": s.wall_s, "cpu_s": cpu, "messages": s.messages}))
+"""
+
+
+def compare_with(rev: str, scenario: Path, pairs: int) -> dict[str, object]:
+    """Run the default mission alternately in this tree and in `rev`, `pairs` times each."""
+    import statistics
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp) / "baseline"
+        subprocess.run(
+            ["git", "-C", str(root), "worktree", "add", "--detach", str(base), rev], check=True, capture_output=True
+        )
+        try:
+            runs: dict[str, list[dict[str, float]]] = {"current": [], "baseline": []}
+            for _ in range(pairs):
+                for name, tree in (("current", root), ("baseline", base)):
+                    out = subprocess.run(
+                        [sys.executable, "-c", _ONE_RUN, str(tree), str(scenario)],
+                        check=True,
+                        capture_output=True,
+                        text=True,
+                    )
+                    runs[name].append(json.loads(out.stdout.strip().splitlines()[-1]))
+        finally:
+            subprocess.run(
+                ["git", "-C", str(root), "worktree", "remove", "--force", str(base)], check=False, capture_output=True
+            )
+    result: dict[str, object] = {"benchmark": "node_graph_vs_baseline", "baseline_rev": rev, "pairs": pairs}
+    for name, rs in runs.items():
+        rtf = [r["sim_s"] / r["wall_s"] for r in rs]
+        cpu = [1000 * r["cpu_s"] / r["sim_s"] for r in rs]
+        result[name] = {
+            "sim_s": rs[0]["sim_s"],
+            "messages": rs[0]["messages"],
+            "real_time_factor_best": round(max(rtf), 1),
+            "real_time_factor_median": round(statistics.median(rtf), 1),
+            "cpu_ms_per_sim_s_best": round(min(cpu), 3),
+        }
+    cur, old = result["current"], result["baseline"]
+    result["current_over_baseline_rtf_best"] = round(cur["real_time_factor_best"] / old["real_time_factor_best"], 3)  # type: ignore[index]
+    result["current_over_baseline_rtf_median"] = round(  # type: ignore[index]
+        cur["real_time_factor_median"] / old["real_time_factor_median"],
+        3,  # type: ignore[index]
+    )
+    return result
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--baseline", metavar="REV", help="compare the default mission with this git revision")
+    parser.add_argument("--pairs", type=int, default=5, help="alternating runs per tree with --baseline")
     parser.add_argument("--sim-s", type=float, default=60.0)
     parser.add_argument("--scenario", type=Path, default=default_scenario_path())
     parser.add_argument("--drive", choices=("kinematic", "fmu"), default="kinematic")
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
+    if args.baseline:
+        print(json.dumps(compare_with(args.baseline, args.scenario, args.pairs), indent=2))
+        return 0
     scenario = load_scenario(args.scenario)
     if args.drive == "fmu":
         scenario = dataclasses.replace(scenario, drive=FmuDrive())

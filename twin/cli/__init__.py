@@ -22,13 +22,25 @@ __all__ = ["main", "run"]
 _log = logging.getLogger("twin")
 
 # Command-group modules under twin.cli, in the order `twin --help` lists them.
-_COMMAND_MODULES: tuple[str, ...] = ("simulate", "scenario", "world", "fmu", "tree", "bag", "ekf", "play")
+_COMMAND_MODULES: tuple[str, ...] = (
+    "simulate",
+    "scenario",
+    "graph",
+    "world",
+    "map",
+    "fmu",
+    "tree",
+    "bag",
+    "ekf",
+    "play",
+)
 
 _EPILOG = """\
 examples:
   twin simulate                         the thesis's mission in the house; a bag in bags/
   twin simulate scenarios/house_fmu.yaml --duration 60 --out /tmp/run1
   twin scenario check scenarios/house_burger.yaml
+  twin graph                            the default scenario's nodes and topics
   twin bag info bags/<run>              what a bag holds
   twin simulate --live                  watch the run in Foxglove (ws://127.0.0.1:8765), in real time
   twin play bags/<run> --speed 2        serve a bag to Foxglove

@@ -10,7 +10,7 @@ import math
 import os
 import signal
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -18,7 +18,7 @@ from typing import Any
 from twin.cli.play import live_banner, speed_arg
 from twin.cli.progress import Progress
 from twin.core.errors import ConfigError, Interrupted, TwinError
-from twin.sim.bus import Sink
+from twin.sim.executor import Sink
 from twin.sim.scenario import Scenario, default_scenario_path, load_scenario
 from twin.sim.simulation import RunSummary, Simulation
 
@@ -147,30 +147,30 @@ def _simulate(args: argparse.Namespace) -> int:
     bag_path = _bag_path(scenario, args.out)
 
     flag = _StopFlag()
-    with _live_view(args, flag) as wrap_sink:
-        return _run(args, path, scenario, bag_path, flag=flag, wrap_sink=wrap_sink)
+    with _live_view(args, flag) as sinks:
+        return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks)
 
 
 @contextmanager
-def _live_view(args: argparse.Namespace, flag: _StopFlag) -> Iterator[Callable[[Sink], Sink] | None]:
-    """The live server and the pacer `--live`, `--speed` ask for, as a wrapper of the recorder."""
+def _live_view(args: argparse.Namespace, flag: _StopFlag) -> Iterator[list[Sink]]:
+    """The live server and the pacer `--live`, `--speed` ask for, as sinks after the recorder."""
     if not args.live and (args.host is not None or args.port is not None):
         msg = "--host and --port serve the live view; add --live"
         raise ConfigError(msg)
     speed = args.speed if args.speed is not None else (1.0 if args.live else math.inf)
     if not args.live and speed == math.inf:
-        yield None
+        yield []
         return
     from twin.live import DEFAULT_HOST, DEFAULT_PORT, LiveServer, LiveSink, Pacer
 
     pacer = Pacer(speed, should_stop=flag) if speed != math.inf else None
     if not args.live:
-        yield lambda recorder: LiveSink(recorder, None, pacer=pacer)
+        yield [LiveSink(None, pacer=pacer)]
         return
     port = DEFAULT_PORT if args.port is None else args.port
     with LiveServer(host=args.host or DEFAULT_HOST, port=port) as server:
         print(live_banner(server.url, speed), file=sys.stderr)
-        yield lambda recorder: LiveSink(recorder, server, pacer=pacer)
+        yield [LiveSink(server, pacer=pacer)]
 
 
 def _run(
@@ -180,7 +180,7 @@ def _run(
     bag_path: Path,
     *,
     flag: _StopFlag,
-    wrap_sink: Callable[[Sink], Sink] | None,
+    sinks: list[Sink],
 ) -> int:
     progress = Progress(args.duration or scenario.max_duration_s)
     # Crash tests set TWIN_BAG_WRITE_LOG to learn what the recorder was handed, and when.
@@ -191,7 +191,7 @@ def _run(
             bag_path=bag_path,
             duration_s=args.duration,
             write_log=Path(write_log) if write_log else None,
-            wrap_sink=wrap_sink,
+            sinks=sinks,
         )
     except ConfigError as err:
         text = str(err)

@@ -6,10 +6,13 @@ the working directory, like a shell's output path.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from twin.core.config import load_config
 from twin.estimation import EstimationSection
@@ -18,7 +21,7 @@ from twin.nav.navigator import ProgressParams
 from twin.robot.disturbances import Disturbances
 from twin.robot.drivetrain import FmuDrive
 
-__all__ = ["Scenario", "default_scenario_path", "load_scenario"]
+__all__ = ["NodeSpec", "Scenario", "default_scenario_path", "load_scenario"]
 
 _DATA = Path(__file__).resolve().parent.parent / "data"
 DEFAULTS_PATH = _DATA / "scenario_defaults.yaml"
@@ -189,12 +192,54 @@ class BehaviorTreeMission:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class NoMission:
+    """No mission: the robot does what nodes on `/cmd_vel` tell it (a user's node drives it)."""
+
+    type: Literal["none"] = "none"
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class TopicSelection:
+    """Which topics the bag records, as `ros2 bag record` takes them; empty `include`: every topic."""
+
+    include: tuple[str, ...] = ()
+    include_regex: str = ""
+    exclude: tuple[str, ...] = ()
+    exclude_regex: str = ""
+
+    def __post_init__(self) -> None:
+        for key in ("include_regex", "exclude_regex"):
+            pattern = getattr(self, key)
+            try:
+                re.compile(pattern)
+            except re.error as err:
+                msg = f"{key}: {pattern!r} is not a regular expression: {err}"
+                raise ValueError(msg) from None
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class RecordingSection:
     """Where and how the bag is written."""
 
     out_dir: str = "bags"
     storage: Literal["mcap", "sqlite3"] = "mcap"
     distro: Literal["humble", "iron", "jazzy", "kilted", "rolling"] = "humble"
+    topics: TopicSelection = field(default_factory=TopicSelection)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class NodeSpec:
+    """A node to run beside the robot, as a launch file lists one.
+
+    `plugin` is `module:Class` (a module beside the scenario file is importable) or the name of an
+    entry point in the `twin.nodes` group of an installed package.
+    """
+
+    plugin: str
+    name: str | None = None  # overrides the node's own name
+    namespace: str = ""
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    remappings: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -204,7 +249,7 @@ class Scenario:
     name: str
     world: WorldSection
     robot: RobotSection
-    mission: BehaviorTreeMission | CmdVelScriptMission | WaypointsMission
+    mission: BehaviorTreeMission | CmdVelScriptMission | WaypointsMission | NoMission
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
     drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)
@@ -212,8 +257,10 @@ class Scenario:
     estimation: EstimationSection = field(default_factory=EstimationSection)
     disturbances: Disturbances = field(default_factory=Disturbances)
     recording: RecordingSection = field(default_factory=RecordingSection)
+    nodes: tuple[NodeSpec, ...] = ()
     seed: int = 0
     max_duration_s: float = 600.0
+    source_path: Path | None = None  # the scenario file (set by the loader; user modules are found beside it)
 
 
 def default_scenario_path() -> Path:
@@ -227,4 +274,5 @@ def load_scenario(path: Path) -> Scenario:
     Raises:
         ConfigError: Naming file, line and key, if the file is unreadable or any key is wrong.
     """
-    return load_config(Scenario, path, defaults=DEFAULTS_PATH)
+    scenario = load_config(Scenario, path, defaults=DEFAULTS_PATH)
+    return dataclasses.replace(scenario, source_path=Path(path).resolve())

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import socket
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -80,29 +79,17 @@ def test_a_port_in_use_is_a_config_error_naming_the_address_and_the_fix() -> Non
     assert "\n" not in text and err.value.exit_code == 2
 
 
-class Inner:
-    def __init__(self) -> None:
-        self.topics: list[tuple[str, str, Any]] = []
-        self.writes: list[tuple[Any, int, bytes]] = []
-
-    def add_topic(self, topic: str, msgtype: str, *, qos: Any = None) -> int:
-        self.topics.append((topic, msgtype, qos))
-        return len(self.topics) * 10
-
-    def write(self, handle: Any, t_ns: int, data: bytes) -> None:
-        self.writes.append((handle, t_ns, data))
-
-
-def test_the_sink_hands_every_topic_and_message_to_the_recorder_unchanged() -> None:
-    inner = Inner()
+def test_the_sink_advertises_each_topic_latched_as_its_qos_says_and_publishes_its_messages() -> None:
+    encoder = StringEncoder()
     with LiveServer(port=0) as server:
-        sink = LiveSink(inner, server)
-        a = sink.add_topic("/a", "std_msgs/msg/String")
-        b = sink.add_topic("/b", "std_msgs/msg/String", qos=(QOS_LATCHED,))
-        sink.write(a, 5, b"x")
-        sink.write(b, 6, b"y")
-    assert inner.topics == [("/a", "std_msgs/msg/String", None), ("/b", "std_msgs/msg/String", (QOS_LATCHED,))]
-    assert inner.writes == [(10, 5, b"x"), (20, 6, b"y")]
+        sink = LiveSink(server)
+        a = sink.add_topic("/a", encoder.msgtype)
+        b = sink.add_topic("/b", encoder.msgtype, qos=(QOS_LATCHED,))
+        sink.write(a, 5, encoder.encode("volatile"))
+        sink.write(b, 6, encoder.encode("latched"))
+        seen = asyncio.run(watch(server.url, ["/a", "/b"], stop=lambda w: bool(w.messages["/b"]), timeout_s=10))
+    assert seen.messages["/a"] == []
+    assert [(t, seen.decode("/b", p).data) for t, p in seen.messages["/b"]] == [(6, "latched")]
 
 
 def test_latched_means_every_offered_profile_is_transient_local() -> None:

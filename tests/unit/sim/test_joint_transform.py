@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from twin.core.geometry import Pose, matrix_from_pose, pose_from_matrix, quat_from_rpy
-from twin.sim.simulation import _JointTransform
+from twin.robot.nodes import _JointTransform
 
 
 def rotation_about(axis: tuple[float, float, float], angle: float) -> np.ndarray:

@@ -1,0 +1,100 @@
+"""The rclpy-shaped node API: names, remappings, parameters, clock and message classes."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+import twin.msgs as msgs
+from twin.core.errors import ConfigError
+from twin.msgs import Header, LaserScan, PoseWithCovarianceStamped, Twist
+from twin.node import LaunchArguments, Node, ParameterNotDeclaredError, Time, launch_context, resolve_topic_name
+
+
+class Talker(Node):
+    def __init__(self) -> None:
+        super().__init__("talker")
+        self.gain = self.declare_parameter("gain", 0.5).value
+        self.count = self.declare_parameter("count", 3).value
+        self.pub = self.create_publisher(Twist, "cmd_vel", 10)
+
+
+def test_relative_private_and_absolute_topic_names_resolve_as_rcl_does() -> None:
+    assert resolve_topic_name("scan", node_name="n", namespace="") == "/scan"
+    assert resolve_topic_name("scan", node_name="n", namespace="/robot1") == "/robot1/scan"
+    assert resolve_topic_name("~/debug", node_name="n", namespace="/robot1") == "/robot1/n/debug"
+    assert resolve_topic_name("/tf", node_name="n", namespace="/robot1") == "/tf"
+
+
+@pytest.mark.parametrize("bad", ["", "/", "2scan", "/a//b", "scan/", "sc an", "a-b"])
+def test_invalid_topic_names_are_refused(bad: str) -> None:
+    with pytest.raises(ConfigError):
+        resolve_topic_name(bad, node_name="n", namespace="")
+
+
+def test_launch_arguments_reach_a_node_built_with_no_arguments() -> None:
+    args = LaunchArguments(name="driver", namespace="robot1", parameters={"gain": 2}, remappings={"cmd_vel": "/raw"})
+    with launch_context(args):
+        node = Talker()
+    assert node.get_name() == "driver"
+    assert node.get_fully_qualified_name() == "/robot1/driver"
+    assert node.gain == 2.0 and isinstance(node.gain, float)  # an int given for a float parameter
+    assert node.count == 3  # the default where nothing is given
+    assert node.pub.topic_name == "/raw"  # /robot1/cmd_vel remapped
+
+
+def test_a_parameter_of_the_wrong_type_is_refused_with_its_name() -> None:
+    with launch_context(LaunchArguments(parameters={"count": "three"})), pytest.raises(ConfigError, match="count"):
+        Talker()
+
+
+def test_reading_an_undeclared_parameter_names_it() -> None:
+    node = Talker()
+    with pytest.raises(ParameterNotDeclaredError, match="'speed'"):
+        node.get_parameter("speed")
+    assert node.get_parameter("gain").value == 0.5
+
+
+def test_remapping_to_a_name_that_is_not_a_topic_name_is_refused() -> None:
+    with (
+        launch_context(LaunchArguments(remappings={"/cmd_vel": "cmd vel"})),
+        pytest.raises(ConfigError, match="cmd vel"),
+    ):
+        Talker()
+
+
+def test_publishing_before_the_node_is_in_a_graph_says_so() -> None:
+    node = Talker()
+    with pytest.raises(RuntimeError, match="not in a running graph"):
+        node.pub.publish(Twist())
+
+
+def test_time_converts_to_a_ros_time_message() -> None:
+    t = Time(seconds=1.25)
+    assert t.nanoseconds == 1_250_000_000
+    msg = t.to_msg()
+    assert (msg.sec, msg.nanosec) == (1, 250_000_000)
+    assert Time(nanoseconds=3_000_000_000) - t == pytest.approx(1.75)
+
+
+def test_message_classes_have_rclpy_defaults_and_round_trip_through_cdr() -> None:
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = "map"
+    msg.pose.pose.position.x = -2.0
+    msg.pose.pose.orientation.w = math.cos(0.25)
+    msg.pose.covariance = [0.25 if i in (0, 7, 35) else 0.0 for i in range(36)]  # a list, as rclpy users write
+    back = msgs.deserialize(msgs.serialize(msg), "geometry_msgs/msg/PoseWithCovarianceStamped")
+    assert back.header.frame_id == "map"
+    assert back.pose.pose.position.x == -2.0
+    assert back.pose.covariance[35] == 0.25
+    assert len(LaserScan().ranges) == 0
+    assert Header().stamp.sec == 0
+
+
+def test_short_and_full_message_names_and_a_misspelling() -> None:
+    assert msgs.get_message("Twist") is msgs.get_message("geometry_msgs/msg/Twist")
+    assert msgs.get_message("geometry_msgs/Twist").__msgtype__ == "geometry_msgs/msg/Twist"
+    assert msgs.get_message("ParticleCloud").__msgtype__ == "nav2_msgs/msg/ParticleCloud"
+    with pytest.raises(ConfigError, match="did you mean 'LaserScan'"):
+        msgs.get_message("LaserScn")

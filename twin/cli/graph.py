@@ -1,0 +1,129 @@
+"""`twin graph [SCENARIO]`: a scenario's node graph, as `ros2 node list`, `ros2 topic list -v` and rqt_graph show it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+_EPILOG = """\
+examples:
+  twin graph                                   the default scenario's nodes and topics
+  twin graph examples/nodes/wall_follower.yaml a user's node driving the robot
+  twin graph --json                            the same as JSON, for scripts
+  twin graph --dot > graph.dot && dot -Tpng graph.dot -o graph.png   (Graphviz draws it)
+"""
+
+
+def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
+    """Add the `graph` command."""
+    parser = subparsers.add_parser(
+        "graph",
+        help="show a scenario's nodes, topics, types and rates",
+        description=(
+            "Build the scenario's node graph and run it for a few simulated seconds (nothing is recorded) "
+            "to measure each topic's rate; print each node with what it publishes and subscribes, and each "
+            "topic with its type, rate, publishers and subscribers."
+        ),
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        parents=[common],
+    )
+    parser.add_argument(
+        "scenario", nargs="?", type=Path, metavar="SCENARIO", help="scenario YAML (default: the default scenario)"
+    )
+    parser.add_argument("--json", action="store_true", help="print the graph as JSON")
+    parser.add_argument(
+        "--dot", action="store_true", help="print Graphviz dot text (nodes as boxes, topics as ellipses)"
+    )
+    parser.add_argument(
+        "--measure-s",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="simulated seconds to run to measure rates (default 5; 0: none)",
+    )
+    parser.set_defaults(func=_graph)
+
+
+def graph_data(scenario_path: Path | None, measure_s: float) -> dict[str, Any]:
+    """Return {"nodes": [...], "topics": [...]} of a scenario, with rates measured over `measure_s`."""
+    from twin.core.errors import ConfigError
+    from twin.sim.scenario import default_scenario_path, load_scenario
+    from twin.sim.simulation import Simulation
+
+    if not measure_s >= 0.0 or measure_s == float("inf"):
+        msg = f"--measure-s must be a finite number of seconds >= 0, got {measure_s}"
+        raise ConfigError(msg)
+    scenario = load_scenario(scenario_path or default_scenario_path())
+    with Simulation(scenario, bag_path=None, duration_s=measure_s) as sim:
+        if measure_s > 0:
+            sim.run()
+        executor = sim.executor
+        nodes = executor.describe()
+        topics = []
+        for name, topic in sorted(executor.topics.items()):
+            rate = topic.count / measure_s if measure_s > 0 and topic.publishers else None
+            topics.append(
+                {
+                    "topic": name,
+                    "type": topic.msgtype,
+                    "rate_hz": round(rate, 2) if rate is not None else None,
+                    "publishers": topic.publishers,
+                    "subscribers": topic.subscribers,
+                    "latched": topic.latch_depth > 0,
+                }
+            )
+    return {"scenario": scenario.name, "measured_s": measure_s, "nodes": nodes, "topics": topics}
+
+
+def _dot(data: dict[str, Any]) -> str:
+    lines = [f'digraph "{data["scenario"]}" {{', "  rankdir=LR;", "  node [fontname=Helvetica];"]
+    for node in data["nodes"]:
+        lines.append(f'  "{node["node"]}" [shape=box, style=rounded];')
+    for topic in data["topics"]:
+        rate = f"\\n{topic['rate_hz']:g} Hz" if topic["rate_hz"] else ""
+        lines.append(f'  "{topic["topic"]}" [shape=ellipse, label="{topic["topic"]}\\n{topic["type"]}{rate}"];')
+        for pub in topic["publishers"]:
+            lines.append(f'  "{pub}" -> "{topic["topic"]}";')
+        for sub in topic["subscribers"]:
+            lines.append(f'  "{topic["topic"]}" -> "{sub}";')
+    lines.append("}")
+    return "\n".join(lines)
+
+
+def _text(data: dict[str, Any]) -> str:
+    out = [f"scenario {data['scenario']}: {len(data['nodes'])} nodes, {len(data['topics'])} topics"]
+    out.append("")
+    out.append("nodes:")
+    for node in data["nodes"]:
+        out.append(f"  {node['node']}  ({node['class']})")
+        for pub in node["publishes"]:
+            out.append(f"    publishes  {pub['topic']} [{pub['type']}]")
+        for sub in node["subscribes"]:
+            out.append(f"    subscribes {sub['topic']} [{sub['type']}]")
+        rates = [f"{r:g} Hz" if r else "once" for r in node["timers_hz"]]
+        if rates:
+            out.append(f"    timers     {', '.join(rates)}")
+    out.append("")
+    out.append(f"topics (rates over {data['measured_s']:g} simulated s):")
+    width = max((len(t["topic"]) for t in data["topics"]), default=10)
+    for topic in data["topics"]:
+        rate = "latched" if topic["latched"] else f"{topic['rate_hz']:g} Hz" if topic["rate_hz"] is not None else "-"
+        out.append(
+            f"  {topic['topic']:<{width}}  {topic['type']:<36} {rate:>9}  "
+            f"pub: {', '.join(topic['publishers']) or '-'}; sub: {', '.join(topic['subscribers']) or '-'}"
+        )
+    return "\n".join(out)
+
+
+def _graph(args: argparse.Namespace) -> int:
+    data = graph_data(args.scenario, args.measure_s)
+    if args.json:
+        print(json.dumps(data, indent=2))
+    elif args.dot:
+        print(_dot(data))
+    else:
+        print(_text(data))
+    return 0

@@ -1,0 +1,455 @@
+"""AMCL as Nav2 Humble runs it: a particle filter on the map, fed odometry and laser scans.
+
+What it does, step for step as `nav2_amcl` (amcl_node, pf, DifferentialMotionModel,
+LikelihoodFieldModel), vectorised over particles and beams:
+
+- **Gating.** Scans are ignored until an initial pose is set. The first scan after one only
+  weighs the particles; later scans update the filter only once odometry has moved more than
+  `update_min_d` along x or along y, or turned more than `update_min_a` since the last update.
+- **Motion** (differential model, alpha1..alpha4): the odometry change is split into rotate,
+  translate, rotate; each particle gets that change with Gaussian noise of standard deviation
+  `sqrt(alpha1 rot^2 + alpha2 trans^2)` on the rotations and `sqrt(alpha3 trans^2 + alpha4 (rot1^2
+  + rot2^2))` on the translation (rotations folded to the nearer of forward and backward motion).
+- **Laser** (likelihood field): `max_beams` beams, every `(n - 1) // (max_beams - 1)`-th; ranges
+  at or below range_min count as range_max, and range_max readings are skipped. Each endpoint's
+  distance `z` to the nearest occupied map cell (capped at `laser_likelihood_max_dist`; off the
+  map it is the cap) gives `pz = z_hit exp(-z^2 / (2 sigma_hit^2)) + z_rand / range_max`, and a
+  particle's weight is multiplied by `1 + sum(pz^3)`. Map cells are looked up as AMCL does,
+  rounding (not flooring) world / resolution.
+- **Resampling** every `resample_interval` updates, KLD-sampling: particles are drawn by weight
+  (or, with recovery alphas, uniformly in free space with probability `1 - w_fast / w_slow`) until
+  their count exceeds the KLD bound for the number of occupied (0.5 m, 0.5 m, 10 deg) histogram
+  bins, `ceil((k - 1) / (2 pf_err) (1 - 2 / (9 (k - 1)) + sqrt(2 / (9 (k - 1))) pf_z)^3)`, within
+  [min_particles, max_particles]. `pf_z` is used as given (0.99), as Nav2 does.
+- **Estimate**: particles are clustered by connected histogram bins; the pose is the mean of the
+  heaviest cluster (yaw a circular mean); the covariance is the whole set's (x, y block and
+  the circular variance `-2 ln R` of yaw), as `amcl_pose` carries them.
+- **map -> odom** is the estimate composed with the inverse of the odometry pose of the scan that
+  produced it; Nav2 re-sends it on every scan stamped scan time + transform_tolerance.
+
+Random numbers come from the `numpy.random.Generator` passed in (seeded by the caller).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from twin.core.errors import ConfigError
+from twin.nav._native import load_kernel
+from twin.nav.map_server import OccupancyMap
+from twin.nav.params import AmclParams
+from twin.world.robot_model import LidarSpec
+
+__all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField"]
+
+F64 = NDArray[np.float64]
+
+_BIN_XY_M = 0.5
+_BIN_YAW_RAD = math.radians(10.0)
+
+
+def _wrap(angle: F64) -> F64:
+    """Fold angles into [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _angle_diff(a: float, b: float) -> float:
+    """Nav2's angle_diff: a - b folded into [-pi, pi]."""
+    d = math.atan2(math.sin(a), math.cos(a)) - math.atan2(math.sin(b), math.cos(b))
+    d1 = d
+    d2 = 2.0 * math.pi - abs(d1)
+    if d1 > 0.0:
+        d2 *= -1.0
+    return d1 if abs(d1) < abs(d2) else d2
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class LaserGeometry:
+    """A LaserScan's fixed fields and the laser's mount in the robot base frame.
+
+    Beam i points at `mount_yaw_rad + angle_min_rad + i * angle_increment_rad` in the base frame;
+    for a lidar mounted upside down (rolled by pi) pass `-angle_min` and `-angle_increment`, as
+    AMCL does when it transforms the scan's angles into the base frame.
+    """
+
+    angle_min_rad: float
+    angle_increment_rad: float
+    range_min_m: float
+    range_max_m: float
+    mount_x_m: float = 0.0
+    mount_y_m: float = 0.0
+    mount_yaw_rad: float = 0.0
+
+    @classmethod
+    def from_spec(cls, spec: LidarSpec) -> LaserGeometry:
+        """Return the geometry of a robot's lidar as its scans are published (mirrored if mounted upside down)."""
+        mount = spec.mount
+        sweep = 1.0 if math.cos(mount.roll_rad) * math.cos(mount.pitch_rad) >= 0.0 else -1.0
+        return cls(
+            angle_min_rad=sweep * spec.angle_min_rad,
+            angle_increment_rad=sweep * spec.angle_increment_rad,
+            range_min_m=spec.range_min_m,
+            range_max_m=spec.range_max_m,
+            mount_x_m=mount.x_m,
+            mount_y_m=mount.y_m,
+            mount_yaw_rad=mount.yaw_rad,
+        )
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class AmclEstimate:
+    """AMCL's pose in the map frame with its covariance (x, y, yaw; 3x3), and the map->odom it implies."""
+
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    covariance: F64
+    map_odom: tuple[float, float, float]
+    particles: int
+
+    def covariance_6x6(self) -> list[float]:
+        """Return the 36 values of PoseWithCovariance.covariance as amcl_pose fills them."""
+        out = [0.0] * 36
+        c = self.covariance
+        for i in range(2):
+            for j in range(2):
+                out[6 * i + j] = float(c[i, j])
+        out[35] = float(c[2, 2])
+        return out
+
+
+def _bin_keys(bins: NDArray[np.int64]) -> NDArray[np.int64]:
+    """One integer per (x, y, yaw) histogram bin."""
+    local = bins - bins.min(axis=0)
+    span = local.max(axis=0) + 1
+    return np.asarray((local[:, 0] * span[1] + local[:, 1]) * span[2] + local[:, 2], dtype=np.int64)
+
+
+class LikelihoodField:
+    """The map's distance to the nearest occupied cell, and per-cell beam likelihood cubes.
+
+    Args:
+        occupancy: The map (cells equal to 100 are obstacles, as AMCL reads them).
+        max_dist_m: `laser_likelihood_max_dist`: distances are capped here (and off the map).
+    """
+
+    def __init__(self, occupancy: OccupancyMap, max_dist_m: float) -> None:
+        occupied = occupancy.data == 100
+        res = occupancy.resolution_m
+        if occupied.any():
+            dist = np.asarray(ndimage.distance_transform_edt(~occupied), dtype=np.float64) * res
+        else:
+            dist = np.full(occupied.shape, np.inf)
+        self.max_dist_m = float(max_dist_m)
+        self.distance_m: F64 = np.minimum(dist, self.max_dist_m)
+        self.resolution_m = res
+        self.origin_x_m = occupancy.origin_x_m
+        self.origin_y_m = occupancy.origin_y_m
+        self.free_cells = np.argwhere(occupancy.data == 0)  # (row, col) for uniform pose draws
+        self._cubes: dict[tuple[float, float, float, float], tuple[F64, int]] = {}
+
+    def cubes(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, int]:
+        """Return (pz^3 per cell, padded by `pad` cells of the off-map value on every side, pad)."""
+        key = (z_hit, z_rand, sigma_hit_m, range_max_m)
+        if key not in self._cubes:
+            pad = math.ceil(range_max_m / self.resolution_m) + 2
+            field = np.pad(self.distance_m, pad, constant_values=self.max_dist_m)
+            pz = z_hit * np.exp(-(field**2) / (2.0 * sigma_hit_m**2)) + z_rand / range_max_m
+            self._cubes[key] = (np.ascontiguousarray(pz**3), pad)
+        return self._cubes[key]
+
+
+class Amcl:
+    """Nav2's AMCL filter: set an initial pose, then feed every scan with the odometry pose at its time.
+
+    Args:
+        params: The `amcl` node's parameters.
+        occupancy: The map it localises against (`/map`).
+        laser: The scan's geometry and the laser's mount in the base frame.
+        rng: The filter's random numbers (seed it from the scenario seed).
+        native: Use the C kernel for the laser model when it can be built (else numpy).
+    """
+
+    def __init__(
+        self,
+        params: AmclParams,
+        occupancy: OccupancyMap,
+        laser: LaserGeometry,
+        rng: np.random.Generator,
+        *,
+        native: bool = True,
+    ) -> None:
+        self._lib = load_kernel() if native else None
+        self.params = params
+        self.map = occupancy
+        self.laser = laser
+        self._rng = rng
+        self.field = LikelihoodField(occupancy, params.laser_likelihood_max_dist_m)
+        range_max = laser.range_max_m
+        if params.laser_max_range_m > 0.0:
+            range_max = min(range_max, params.laser_max_range_m)
+        self._range_max = range_max
+        self._range_min = max(laser.range_min_m, params.laser_min_range_m)
+        self._cubes, self._pad = self.field.cubes(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
+        self.poses: F64 = np.zeros((0, 3))
+        self.weights: F64 = np.zeros(0)
+        self._w_slow = 0.0
+        self._w_fast = 0.0
+        self._initialised = False  # an initial pose was given
+        self._pf_init = False  # the first scan after it was taken (odometry reference set)
+        self._odom_ref = (0.0, 0.0, 0.0)
+        self._resample_count = 0
+        self.estimate: AmclEstimate | None = None
+
+    # --- inputs -------------------------------------------------------------------------------
+
+    def set_initial_pose(self, x_m: float, y_m: float, yaw_rad: float, covariance: F64) -> None:
+        """Spread `max_particles` particles from a Gaussian around a map pose (/initialpose).
+
+        Args:
+            x_m: Map x.
+            y_m: Map y.
+            yaw_rad: Map yaw.
+            covariance: 3x3 covariance of (x, y, yaw), or the message's 36 values (6x6 row-major).
+
+        Raises:
+            ConfigError: If the pose lies outside the map or the covariance is not symmetric positive semi-definite.
+        """
+        if self.map.world_to_cell(x_m, y_m) is None:
+            msg = (
+                f"initial pose ({x_m:.3f}, {y_m:.3f}) lies outside the map (x from {self.map.origin_x_m:.2f}, "
+                f"y from {self.map.origin_y_m:.2f}, {self.map.width} x {self.map.height} cells of "
+                f"{self.map.resolution_m} m); give a pose on the map"
+            )
+            raise ConfigError(msg)
+        cov = np.asarray(covariance, dtype=np.float64)
+        if cov.size == 36:
+            full = cov.reshape(6, 6)
+            cov = np.array([[full[0, 0], full[0, 1], 0.0], [full[1, 0], full[1, 1], 0.0], [0.0, 0.0, full[5, 5]]])
+        cov = cov.reshape(3, 3)
+        values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
+        if not np.all(np.isfinite(values)) or values.min() < -1e-12:
+            msg = f"initial pose covariance {cov.tolist()} is not positive semi-definite; fix the covariance"
+            raise ConfigError(msg)
+        n = self.params.max_particles
+        draws = self._rng.standard_normal((n, 3)) * np.sqrt(np.maximum(values, 0.0))
+        poses = np.array([x_m, y_m, yaw_rad]) + draws @ vectors.T
+        poses[:, 2] = _wrap(poses[:, 2])
+        self.poses = poses
+        self.weights = np.full(n, 1.0 / n)
+        self._w_slow = self._w_fast = 0.0
+        self._initialised = True
+        self._pf_init = False
+        self._resample_count = 0
+
+    def process_scan(self, odom_pose: tuple[float, float, float], ranges: NDArray[np.floating]) -> AmclEstimate | None:
+        """Take one scan with the odometry pose (odom frame, base) at its stamp.
+
+        Returns:
+            The new estimate when the filter updated (then `amcl_pose` and `particle_cloud` are
+            published), else None. Before an initial pose every scan is ignored. `map_odom()`
+            holds the transform to broadcast on every scan once an estimate exists.
+        """
+        if not self._initialised:
+            return None
+        p = self.params
+        x, y, yaw = odom_pose
+        if not self._pf_init:
+            self._odom_ref = (x, y, yaw)
+            self._pf_init = True
+            self._resample_count = 0
+        else:
+            rx, ry, ryaw = self._odom_ref
+            dx, dy, dyaw = x - rx, y - ry, _angle_diff(yaw, ryaw)
+            if not (abs(dx) > p.update_min_d_m or abs(dy) > p.update_min_d_m or abs(dyaw) > p.update_min_a_rad):
+                return None
+            self._motion(dx, dy, dyaw, ryaw)
+        if p.max_beams >= 2:  # Nav2's likelihood model refuses fewer than two beams (no weighting)
+            self._sensor(np.asarray(ranges, dtype=np.float64))
+        self._odom_ref = (x, y, yaw)
+        self._resample_count += 1
+        if self._resample_count % p.resample_interval == 0:
+            self._resample()
+        self.estimate = self._estimate(odom_pose)
+        return self.estimate
+
+    def map_odom(self) -> tuple[float, float, float] | None:
+        """Return the latest map->odom (x, y, yaw), or None before the first estimate."""
+        return None if self.estimate is None else self.estimate.map_odom
+
+    # --- the filter ---------------------------------------------------------------------------
+
+    def _motion(self, dx: float, dy: float, dyaw: float, old_yaw: float) -> None:
+        p = self.params
+        trans = math.hypot(dx, dy)
+        rot1 = 0.0 if trans < 0.01 else _angle_diff(math.atan2(dy, dx), old_yaw)
+        rot2 = _angle_diff(dyaw, rot1)
+        rot1_noise = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, math.pi)))
+        rot2_noise = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, math.pi)))
+        n = len(self.poses)
+        noise = self._rng.standard_normal((n, 3))
+        sd_rot1 = math.sqrt(p.alpha1 * rot1_noise**2 + p.alpha2 * trans**2)
+        sd_trans = math.sqrt(p.alpha3 * trans**2 + p.alpha4 * rot1_noise**2 + p.alpha4 * rot2_noise**2)
+        sd_rot2 = math.sqrt(p.alpha1 * rot2_noise**2 + p.alpha2 * trans**2)
+        rot1_hat = _wrap(rot1 - noise[:, 0] * sd_rot1)
+        trans_hat = trans - noise[:, 1] * sd_trans
+        rot2_hat = _wrap(rot2 - noise[:, 2] * sd_rot2)
+        heading = self.poses[:, 2] + rot1_hat
+        self.poses[:, 0] += trans_hat * np.cos(heading)
+        self.poses[:, 1] += trans_hat * np.sin(heading)
+        self.poses[:, 2] = _wrap(self.poses[:, 2] + rot1_hat + rot2_hat)
+
+    def _beams(self, ranges: F64) -> tuple[F64, F64]:
+        """Return the used beams' endpoints in the base frame (bx, by)."""
+        p, laser = self.params, self.laser
+        count = len(ranges)
+        step = max(1, (count - 1) // (p.max_beams - 1)) if p.max_beams > 1 else max(1, count)
+        index = np.arange(0, count, step)
+        r = ranges[index].copy()
+        r[r <= self._range_min] = self._range_max
+        keep = (r < self._range_max) & ~np.isnan(r)
+        r, index = r[keep], index[keep]
+        angle = laser.mount_yaw_rad + laser.angle_min_rad + index * laser.angle_increment_rad
+        return laser.mount_x_m + r * np.cos(angle), laser.mount_y_m + r * np.sin(angle)
+
+    def _sensor(self, ranges: F64) -> None:
+        bx, by = self._beams(ranges)
+        poses = self.poses
+        if len(bx) and self._lib is not None:
+            poses = np.ascontiguousarray(poses)
+            self.poses = poses
+            bx, by = np.ascontiguousarray(bx), np.ascontiguousarray(by)
+            cubes = self._cubes
+            likelihood = np.empty(len(poses))
+            status = self._lib.twin_amcl_likelihood(
+                poses.ctypes.data, len(poses), bx.ctypes.data, by.ctypes.data, len(bx),
+                cubes.ctypes.data, cubes.shape[0], cubes.shape[1], self._pad,
+                self.field.origin_x_m, self.field.origin_y_m, self.field.resolution_m, likelihood.ctypes.data,
+            )  # fmt: skip
+            if status != 0:
+                raise MemoryError("amcl likelihood: out of memory")
+        elif len(bx):
+            c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+            res = self.field.resolution_m
+            hx = poses[:, 0:1] + c * bx - s * by
+            hy = poses[:, 1:2] + s * bx + c * by
+            cubes, pad = self._cubes, self._pad
+            col = np.floor((hx - self.field.origin_x_m) / res + 0.5).astype(np.intp) + pad
+            row = np.floor((hy - self.field.origin_y_m) / res + 0.5).astype(np.intp) + pad
+            np.clip(col, 0, cubes.shape[1] - 1, out=col)
+            np.clip(row, 0, cubes.shape[0] - 1, out=row)
+            likelihood = 1.0 + cubes[row, col].sum(axis=1)
+        else:
+            likelihood = np.ones(len(poses))
+        weights = self.weights * likelihood
+        total = float(weights.sum())
+        p = self.params
+        if total > 0.0 and math.isfinite(total):
+            self.weights = weights / total
+            w_avg = total / len(weights)
+            self._w_slow = (
+                w_avg if self._w_slow == 0.0 else self._w_slow + p.recovery_alpha_slow * (w_avg - self._w_slow)
+            )
+            self._w_fast = (
+                w_avg if self._w_fast == 0.0 else self._w_fast + p.recovery_alpha_fast * (w_avg - self._w_fast)
+            )
+        else:
+            self.weights = np.full(len(weights), 1.0 / len(weights))
+
+    def _bins(self, poses: F64) -> NDArray[np.int64]:
+        return np.stack(
+            [
+                np.floor(poses[:, 0] / _BIN_XY_M),
+                np.floor(poses[:, 1] / _BIN_XY_M),
+                np.floor(poses[:, 2] / _BIN_YAW_RAD),
+            ],
+            axis=1,
+        ).astype(np.int64)
+
+    def _kld_limit(self, k: NDArray[np.int64]) -> NDArray[np.float64]:
+        p = self.params
+        kk = np.maximum(k - 1, 1).astype(np.float64)
+        b = 2.0 / (9.0 * kk)
+        x = 1.0 - b + np.sqrt(b) * p.pf_z
+        n = np.ceil(kk / (2.0 * p.pf_err) * x**3)
+        n = np.clip(n, p.min_particles, p.max_particles)
+        return np.where(k <= 1, float(p.max_particles), n)
+
+    def _resample(self) -> None:
+        p = self.params
+        rng = self._rng
+        m = p.max_particles
+        w_diff = 0.0
+        if self._w_slow > 0.0:
+            w_diff = max(0.0, 1.0 - self._w_fast / self._w_slow)
+        cumulative = np.cumsum(self.weights)
+        cumulative /= cumulative[-1]
+        pick = np.minimum(np.searchsorted(cumulative, rng.random(m), side="right"), len(cumulative) - 1)
+        new = self.poses[pick]
+        if w_diff > 0.0 and len(self.field.free_cells):
+            random = rng.random(m) < w_diff
+            count = int(random.sum())
+            if count:
+                cells = self.field.free_cells[rng.integers(0, len(self.field.free_cells), count)]
+                res = self.field.resolution_m
+                new[random, 0] = self.field.origin_x_m + cells[:, 1] * res
+                new[random, 1] = self.field.origin_y_m + cells[:, 0] * res
+                new[random, 2] = rng.uniform(-math.pi, math.pi, count)
+            self._w_slow = self._w_fast = 0.0
+        bins = self._bins(new)
+        _, first = np.unique(_bin_keys(bins), return_index=True)
+        is_first = np.zeros(m, dtype=bool)
+        is_first[first] = True
+        leaves = np.cumsum(is_first)
+        n_drawn = np.arange(1, m + 1)
+        stop = np.nonzero(n_drawn > self._kld_limit(leaves))[0]
+        n = int(stop[0]) + 1 if len(stop) else m
+        self.poses = np.ascontiguousarray(new[:n])
+        self.weights = np.full(n, 1.0 / n)
+
+    def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
+        poses, w = self.poses, self.weights
+        bins = self._bins(poses)
+        lo = bins.min(axis=0)
+        shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
+        grid = np.zeros(shape, dtype=bool)
+        local = bins - lo
+        grid[local[:, 0], local[:, 1], local[:, 2]] = True
+        labels, count = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
+        cluster = labels[local[:, 0], local[:, 1], local[:, 2]]
+        cw = np.bincount(cluster, weights=w, minlength=count + 1)
+        best = int(np.argmax(cw))
+        mask = cluster == best
+        wc = w[mask]
+        total = float(wc.sum())
+        mx = float((wc * poses[mask, 0]).sum() / total)
+        my = float((wc * poses[mask, 1]).sum() / total)
+        myaw = math.atan2(float((wc * np.sin(poses[mask, 2])).sum()), float((wc * np.cos(poses[mask, 2])).sum()))
+        # The whole set's covariance, as amcl_pose carries it.
+        wt = float(w.sum())
+        sx, sy = float((w * poses[:, 0]).sum() / wt), float((w * poses[:, 1]).sum() / wt)
+        cov = np.zeros((3, 3))
+        cov[0, 0] = float((w * poses[:, 0] ** 2).sum() / wt) - sx * sx
+        cov[1, 1] = float((w * poses[:, 1] ** 2).sum() / wt) - sy * sy
+        cov[0, 1] = cov[1, 0] = float((w * poses[:, 0] * poses[:, 1]).sum() / wt) - sx * sy
+        mc, ms = float((w * np.cos(poses[:, 2])).sum() / wt), float((w * np.sin(poses[:, 2])).sum() / wt)
+        cov[2, 2] = -2.0 * math.log(max(math.hypot(mc, ms), 1e-300))
+        ox, oy, oyaw = odom_pose
+        # map->odom = map->base * (odom->base)^-1
+        tyaw = myaw - oyaw
+        c, s = math.cos(tyaw), math.sin(tyaw)
+        tx = mx - (c * ox - s * oy)
+        ty = my - (s * ox + c * oy)
+        return AmclEstimate(
+            x_m=mx,
+            y_m=my,
+            yaw_rad=myaw,
+            covariance=cov,
+            map_odom=(tx, ty, math.atan2(math.sin(tyaw), math.cos(tyaw))),
+            particles=len(poses),
+        )

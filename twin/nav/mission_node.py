@@ -1,0 +1,121 @@
+"""The mission as a node: the thesis's autonomy node, ticking its tree and commanding the robot.
+
+It steers on the pose the robot believes it has (the latest `/odom`), publishes `/cmd_vel` at
+its controller rate and, for a behaviour-tree mission, ticks the tree at its own rate and
+publishes the tree's status changes on `/behavior_tree_log` and each new plan on `/plan`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Protocol
+
+from twin.bag import BehaviorTreeLogEncoder, PathEncoder, TwistEncoder
+from twin.node import PRIORITY_COMMAND, PRIORITY_TREE, Encoded, Node
+from twin.node.readers import odometry_pose
+
+__all__ = ["MissionLike", "MissionNode", "TreeMissionLike"]
+
+
+class MissionLike(Protocol):
+    """A mission the node asks for a command at its rate."""
+
+    done: bool
+    result: str
+
+    def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
+        """Return (linear m/s, angular rad/s) for now."""
+        ...
+
+
+class _StatusChange(Protocol):
+    t_ns: int
+    uid: int
+
+    @property
+    def prev(self) -> Any: ...
+
+    @property
+    def new(self) -> Any: ...
+
+
+class _Navigator(Protocol):
+    plans: int
+    path: Sequence[tuple[float, float]]
+
+
+class TreeMissionLike(MissionLike, Protocol):
+    """A behaviour-tree mission: ticked at its own rate, with a navigator that plans."""
+
+    navigator: _Navigator
+
+    def tick(self, t_ns: int) -> Sequence[_StatusChange]:
+        """Tick the tree; return the status changes since the last tick."""
+        ...
+
+    def node_name(self, uid: int) -> str:
+        """The tree node's name for the log."""
+        ...
+
+
+class MissionNode(Node):
+    """Commands `/cmd_vel` from a mission; ticks a tree mission and logs it (see the module docstring).
+
+    Args:
+        mission: The mission object.
+        initial_pose: The pose believed until the first `/odom` message.
+        command_rate_hz: Rate of `/cmd_vel`.
+        tree_rate_hz: Tick rate of a tree mission (None for other missions).
+    """
+
+    def __init__(
+        self,
+        mission: MissionLike,
+        *,
+        initial_pose: tuple[float, float, float],
+        command_rate_hz: float,
+        tree_rate_hz: float | None = None,
+    ) -> None:
+        super().__init__("mission")
+        self.mission = mission
+        pose = list(initial_pose)
+
+        def on_odom(msg: Any) -> None:
+            if type(msg) is Encoded:
+                pose[0], pose[1], pose[2] = msg[2][:3]
+            else:
+                pose[0], pose[1], pose[2] = odometry_pose(msg)
+
+        if tree_rate_hz is not None:
+            self._add_tree(mission, tree_rate_hz)  # type: ignore[arg-type]
+        cmd_pub = self.create_publisher(TwistEncoder.msgtype, "/cmd_vel", 10)
+        encode = TwistEncoder().encode
+        command = mission.command
+
+        def on_timer(t_ns: int) -> None:
+            v, w = command(t_ns, pose[0], pose[1], pose[2])
+            cmd_pub.publish(Encoded((encode, (v, w), (v, w))))
+
+        self.create_rate_timer(command_rate_hz, on_timer, priority=PRIORITY_COMMAND)
+        self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
+
+    def _add_tree(self, mission: TreeMissionLike, rate_hz: float) -> None:
+        bt_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "/behavior_tree_log", 10)
+        bt_encode = BehaviorTreeLogEncoder().encode
+        plan_pub = self.create_publisher(PathEncoder.msgtype, "/plan", 10)
+        plan_encode = PathEncoder("map").encode
+        navigator = mission.navigator
+        plans = [0]
+
+        def tick(t_ns: int) -> None:
+            changes = mission.tick(t_ns)
+            if changes:
+                events = [(c.t_ns, mission.node_name(c.uid), c.prev.name, c.new.name) for c in changes]
+                bt_pub.publish(Encoded((bt_encode, (t_ns, events), events)))
+            if navigator.plans != plans[0]:
+                plans[0] = navigator.plans
+                if navigator.path:
+                    poses = [(x, y, 0.0) for x, y in navigator.path]
+                    plan_pub.publish(Encoded((plan_encode, (t_ns, poses), poses)))
+
+        self.create_rate_timer(rate_hz, tick, priority=PRIORITY_TREE)

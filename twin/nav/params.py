@@ -1,0 +1,616 @@
+"""Nav2 parameter files as they are: the `ros__parameters` layout, read into the values the twin's nodes use.
+
+A Nav2 params YAML maps node names to `{ros__parameters: {...}}`. A key may be a plain node name
+(`amcl`), a path (`/amcl`, `global_costmap/global_costmap`), nested namespaces (`global_costmap:
+global_costmap: ros__parameters:`), or the wildcard `/**` whose parameters apply to every node.
+Parameters nest as ROS 2 flattens them: `inflation_layer: {inflation_radius: 0.55}` is the
+parameter `inflation_layer.inflation_radius`.
+
+`load_nav2_params` reads one file, applies single-value overrides, and returns `Nav2Params`: frozen
+specs for the nodes this lane runs (AMCL, the global and local costmaps), the flattened raw
+parameters of every node (the navigation lane reads planner, controller, behaviours,
+bt_navigator and velocity smoother from there), and the keys nothing in the twin reads. Values a
+file leaves out take Nav2 Humble's code defaults. TurtleBot3's Humble files ship in
+`twin/data/nav2/` as the default per robot model.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import yaml
+
+from twin.core.errors import ConfigError
+
+__all__ = [
+    "AmclParams",
+    "CostmapParams",
+    "InflationParams",
+    "Nav2Params",
+    "ObservationSource",
+    "ObstacleLayerParams",
+    "StaticLayerParams",
+    "default_params_path",
+    "load_nav2_params",
+]
+
+ParamValue = bool | int | float | str | list[Any]
+
+_DATA = Path(__file__).resolve().parent.parent / "data" / "nav2"
+_MODELS = {"burger": "burger.yaml", "waffle": "waffle.yaml", "waffle_pi": "waffle_pi.yaml"}
+
+# Nodes whose parameters the navigation lane reads from `Nav2Params.raw` (not listed as unused here).
+NAV_LANE_NODES = (
+    "planner_server",
+    "controller_server",
+    "behavior_server",
+    "bt_navigator",
+    "velocity_smoother",
+    "smoother_server",
+)
+# Parameters every node has and the twin satisfies by construction (it always runs on sim time).
+_ALWAYS_USED = frozenset({"use_sim_time"})
+
+
+def default_params_path(model: str) -> Path:
+    """Return the packaged TurtleBot3 Humble params file for a robot model (`burger`, `waffle`, `waffle_pi`).
+
+    A model name with a `turtlebot3_` prefix is accepted.
+
+    Raises:
+        ConfigError: If the model has no packaged file.
+    """
+    key = model.removeprefix("turtlebot3_")
+    if key not in _MODELS:
+        msg = f"no packaged Nav2 params for robot model {model!r}; name one of {sorted(_MODELS)} or a params file"
+        raise ConfigError(msg)
+    return _DATA / _MODELS[key]
+
+
+# --- specs ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class AmclParams:
+    """The `amcl` node's parameters (Nav2 Humble names; units added)."""
+
+    alpha1: float = 0.2
+    alpha2: float = 0.2
+    alpha3: float = 0.2
+    alpha4: float = 0.2
+    alpha5: float = 0.2
+    base_frame_id: str = "base_footprint"
+    global_frame_id: str = "map"
+    odom_frame_id: str = "odom"
+    laser_model_type: str = "likelihood_field"
+    robot_model_type: str = "nav2_amcl::DifferentialMotionModel"
+    laser_likelihood_max_dist_m: float = 2.0
+    laser_max_range_m: float = 100.0
+    laser_min_range_m: float = -1.0
+    max_beams: int = 60
+    min_particles: int = 500
+    max_particles: int = 2000
+    pf_err: float = 0.05
+    pf_z: float = 0.99
+    recovery_alpha_slow: float = 0.0
+    recovery_alpha_fast: float = 0.0
+    resample_interval: int = 1
+    sigma_hit_m: float = 0.2
+    z_hit: float = 0.5
+    z_rand: float = 0.5
+    z_max: float = 0.05
+    z_short: float = 0.05
+    lambda_short: float = 0.1
+    update_min_d_m: float = 0.25
+    update_min_a_rad: float = 0.2
+    transform_tolerance_s: float = 1.0
+    tf_broadcast: bool = True
+    save_pose_rate_hz: float = 0.5
+    scan_topic: str = "scan"
+    set_initial_pose: bool = False
+    initial_pose_x_m: float = 0.0
+    initial_pose_y_m: float = 0.0
+    initial_pose_yaw_rad: float = 0.0
+    do_beamskip: bool = False
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class ObservationSource:
+    """One sensor source of an obstacle layer (`observation_sources: scan` and its `scan:` block)."""
+
+    name: str
+    topic: str = ""
+    data_type: str = "LaserScan"
+    marking: bool = True
+    clearing: bool = False
+    obstacle_max_range_m: float = 2.5
+    obstacle_min_range_m: float = 0.0
+    raytrace_max_range_m: float = 3.0
+    raytrace_min_range_m: float = 0.0
+    min_obstacle_height_m: float = 0.0
+    max_obstacle_height_m: float = 0.0
+    inf_is_valid: bool = False
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class ObstacleLayerParams:
+    """An ObstacleLayer or VoxelLayer (the twin's lidar is planar, so a voxel layer acts as an obstacle layer)."""
+
+    name: str
+    plugin: str
+    enabled: bool = True
+    footprint_clearing_enabled: bool = True
+    max_obstacle_height_m: float = 2.0
+    sources: tuple[ObservationSource, ...] = ()
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class StaticLayerParams:
+    """A StaticLayer."""
+
+    name: str
+    enabled: bool = True
+    map_topic: str = "map"
+    map_subscribe_transient_local: bool = True
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class InflationParams:
+    """An InflationLayer."""
+
+    name: str
+    enabled: bool = True
+    inflation_radius_m: float = 0.55
+    cost_scaling_factor: float = 10.0
+    inflate_unknown: bool = False
+    inflate_around_unknown: bool = False
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class CostmapParams:
+    """A costmap node's parameters (`global_costmap` or `local_costmap`) and its layers in plugin order."""
+
+    name: str
+    update_frequency_hz: float = 5.0
+    publish_frequency_hz: float = 1.0
+    global_frame: str = "map"
+    robot_base_frame: str = "base_link"
+    rolling_window: bool = False
+    width_m: float = 5.0
+    height_m: float = 5.0
+    resolution_m: float = 0.1
+    origin_x_m: float = 0.0
+    origin_y_m: float = 0.0
+    robot_radius_m: float = 0.1
+    footprint: tuple[tuple[float, float], ...] = ()
+    footprint_padding_m: float = 0.01
+    track_unknown_space: bool = False
+    lethal_cost_threshold: int = 100
+    unknown_cost_value: int = 255
+    trinary_costmap: bool = True
+    always_send_full_costmap: bool = False
+    plugins: tuple[str, ...] = ("static_layer", "obstacle_layer", "inflation_layer")
+    static_layer: StaticLayerParams | None = None
+    obstacle_layers: tuple[ObstacleLayerParams, ...] = ()
+    inflation: InflationParams | None = None
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Nav2Params:
+    """One Nav2 params file, read: specs for this lane's nodes, raw parameters of every node, unused keys.
+
+    `raw[node]` holds a node's parameters flattened to ROS 2 names (`inflation_layer.inflation_radius`)
+    with the `/**` wildcard's applied; node names are the file's without a leading `/`
+    (`global_costmap/global_costmap`, `amcl`).
+    """
+
+    source: str
+    amcl: AmclParams
+    global_costmap: CostmapParams
+    local_costmap: CostmapParams
+    raw: Mapping[str, Mapping[str, ParamValue]]
+    unused_keys: tuple[str, ...] = field(default=())
+
+    def node(self, name: str) -> Mapping[str, ParamValue]:
+        """Return a node's flattened parameters (empty when the file has none); `name` as in `raw` or its last part."""
+        if name in self.raw:
+            return self.raw[name]
+        for key, params in self.raw.items():
+            if key.rsplit("/", 1)[-1] == name:
+                return params
+        return MappingProxyType({})
+
+    def warning(self, used_elsewhere: Mapping[str, Iterable[str]] | None = None) -> str | None:
+        """Return the one warning line listing the keys the twin does not use, or None when all are used.
+
+        Args:
+            used_elsewhere: Parameters of the navigation lane's nodes it reads, per node name
+                (`{"controller_server": ["controller_frequency", ...]}`); the other keys of those
+                nodes are then listed as unused too.
+        """
+        unused = list(self.unused_keys)
+        for node, used in (used_elsewhere or {}).items():
+            taken = set(used) | _ALWAYS_USED
+            unused.extend(f"{node}.{key}" for key in self.node(node) if key not in taken)
+        if not unused:
+            return None
+        return f"{self.source}: {len(unused)} Nav2 parameter(s) not used by the twin: {', '.join(sorted(unused))}"
+
+
+# --- reading -------------------------------------------------------------------------------------
+
+
+def _flatten(prefix: str, value: Any, out: dict[str, ParamValue], where: str) -> None:
+    if isinstance(value, Mapping):
+        for key, item in value.items():
+            _flatten(f"{prefix}.{key}" if prefix else str(key), item, out, where)
+        return
+    if value is None or not isinstance(value, bool | int | float | str | list):
+        msg = f"{where}: parameter {prefix!r} has no usable value ({value!r}); give a number, bool, string or list"
+        raise ConfigError(msg)
+    out[prefix] = value
+
+
+def _collect_nodes(
+    tree: Mapping[str, Any], namespace: str, nodes: dict[str, dict[str, ParamValue]], where: str
+) -> None:
+    for raw_key, body in tree.items():
+        key = str(raw_key).strip("/") if str(raw_key) != "/**" else "**"
+        name = f"{namespace}/{key}" if namespace else key
+        if not isinstance(body, Mapping):
+            msg = f"{where}: {name!r} must be a mapping holding 'ros__parameters' or nested node names"
+            raise ConfigError(msg)
+        for sub_key, sub in body.items():
+            if sub_key == "ros__parameters":
+                if not isinstance(sub, Mapping):
+                    msg = f"{where}: {name}.ros__parameters must be a mapping of parameter names to values"
+                    raise ConfigError(msg)
+                params = nodes.setdefault(name, {})
+                _flatten("", sub, params, f"{where}: node {name}")
+            else:
+                _collect_nodes({sub_key: sub}, name, nodes, where)
+
+
+def _read_file(path: Path) -> dict[str, dict[str, ParamValue]]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        msg = f"{path}: cannot read Nav2 params ({err.strerror or err}); check the path"
+        raise ConfigError(msg) from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        line = f":{mark.line + 1}" if mark is not None else ""
+        problem = getattr(err, "problem", None) or "invalid YAML"
+        msg = f"{path}{line}: malformed Nav2 params YAML ({problem}); fix the YAML syntax"
+        raise ConfigError(msg) from None
+    if doc is None:
+        doc = {}
+    if not isinstance(doc, Mapping):
+        msg = f"{path}: a Nav2 params file must map node names to 'ros__parameters', got {type(doc).__name__}"
+        raise ConfigError(msg)
+    nodes: dict[str, dict[str, ParamValue]] = {}
+    _collect_nodes(doc, "", nodes, str(path))
+    return nodes
+
+
+class _Reader:
+    """Typed access to one node's flattened parameters, recording which keys were read."""
+
+    def __init__(self, source: str, node: str, params: Mapping[str, ParamValue]) -> None:
+        self.source = source
+        self.node = node
+        self.params = params
+        self.used: set[str] = set(_ALWAYS_USED)
+
+    def _fail(self, key: str, want: str, value: object) -> ConfigError:
+        return ConfigError(f"{self.source}: {self.node}.{key}: expected {want}, got {value!r}; fix the value")
+
+    def has(self, key: str) -> bool:
+        return key in self.params
+
+    def number(self, key: str, default: float) -> float:
+        self.used.add(key)
+        value = self.params.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise self._fail(key, "a finite number", value)
+        return float(value)
+
+    def integer(self, key: str, default: int) -> int:
+        self.used.add(key)
+        value = self.params.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self._fail(key, "an integer", value)
+        return value
+
+    def flag(self, key: str, default: bool) -> bool:
+        self.used.add(key)
+        value = self.params.get(key, default)
+        if not isinstance(value, bool):
+            raise self._fail(key, "true or false", value)
+        return value
+
+    def text(self, key: str, default: str) -> str:
+        self.used.add(key)
+        value = self.params.get(key, default)
+        if not isinstance(value, str):
+            raise self._fail(key, "a string", value)
+        return value
+
+    def str_list(self, key: str, default: tuple[str, ...]) -> tuple[str, ...]:
+        self.used.add(key)
+        value = self.params.get(key, list(default))
+        if isinstance(value, str):  # `observation_sources: scan bump` is a space-separated list
+            return tuple(value.split())
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise self._fail(key, "a list of strings", value)
+        return tuple(value)
+
+    def unused(self) -> list[str]:
+        return [f"{self.node}.{key}" for key in self.params if key not in self.used]
+
+
+def _amcl(r: _Reader) -> AmclParams:
+    model = r.text("laser_model_type", "likelihood_field")
+    if model != "likelihood_field":
+        msg = (
+            f"{r.source}: amcl.laser_model_type: the twin runs 'likelihood_field' only, got {model!r}; "
+            "use likelihood_field"
+        )
+        raise ConfigError(msg)
+    motion = r.text("robot_model_type", "nav2_amcl::DifferentialMotionModel")
+    if not motion.endswith("DifferentialMotionModel"):
+        msg = (
+            f"{r.source}: amcl.robot_model_type: the twin runs the differential motion model only, got {motion!r}; "
+            "use nav2_amcl::DifferentialMotionModel"
+        )
+        raise ConfigError(msg)
+    spec = AmclParams(
+        alpha1=r.number("alpha1", 0.2),
+        alpha2=r.number("alpha2", 0.2),
+        alpha3=r.number("alpha3", 0.2),
+        alpha4=r.number("alpha4", 0.2),
+        alpha5=r.number("alpha5", 0.2),
+        base_frame_id=r.text("base_frame_id", "base_footprint"),
+        global_frame_id=r.text("global_frame_id", "map"),
+        odom_frame_id=r.text("odom_frame_id", "odom"),
+        laser_model_type=model,
+        robot_model_type=motion,
+        laser_likelihood_max_dist_m=r.number("laser_likelihood_max_dist", 2.0),
+        laser_max_range_m=r.number("laser_max_range", 100.0),
+        laser_min_range_m=r.number("laser_min_range", -1.0),
+        max_beams=r.integer("max_beams", 60),
+        min_particles=r.integer("min_particles", 500),
+        max_particles=r.integer("max_particles", 2000),
+        pf_err=r.number("pf_err", 0.05),
+        pf_z=r.number("pf_z", 0.99),
+        recovery_alpha_slow=r.number("recovery_alpha_slow", 0.0),
+        recovery_alpha_fast=r.number("recovery_alpha_fast", 0.0),
+        resample_interval=r.integer("resample_interval", 1),
+        sigma_hit_m=r.number("sigma_hit", 0.2),
+        z_hit=r.number("z_hit", 0.5),
+        z_rand=r.number("z_rand", 0.5),
+        z_max=r.number("z_max", 0.05),
+        z_short=r.number("z_short", 0.05),
+        lambda_short=r.number("lambda_short", 0.1),
+        update_min_d_m=r.number("update_min_d", 0.25),
+        update_min_a_rad=r.number("update_min_a", 0.2),
+        transform_tolerance_s=r.number("transform_tolerance", 1.0),
+        tf_broadcast=r.flag("tf_broadcast", True),
+        save_pose_rate_hz=r.number("save_pose_rate", 0.5),
+        scan_topic=r.text("scan_topic", "scan"),
+        set_initial_pose=r.flag("set_initial_pose", False),
+        initial_pose_x_m=r.number("initial_pose.x", 0.0),
+        initial_pose_y_m=r.number("initial_pose.y", 0.0),
+        initial_pose_yaw_rad=r.number("initial_pose.yaw", 0.0),
+        do_beamskip=r.flag("do_beamskip", False),
+    )
+    for key in ("initial_pose.z", "z_max", "z_short", "lambda_short"):
+        r.used.discard(key)  # beam-model parameters: read for completeness, unused by likelihood_field
+    for key in ("max_beams", "min_particles", "max_particles", "resample_interval"):
+        if getattr(spec, key) < 1:
+            raise r._fail(key, "an integer >= 1", getattr(spec, key))
+    if spec.min_particles > spec.max_particles:
+        msg = (
+            f"{r.source}: amcl.min_particles ({spec.min_particles}) exceeds max_particles "
+            f"({spec.max_particles}); swap them"
+        )
+        raise ConfigError(msg)
+    if spec.sigma_hit_m <= 0.0:
+        raise r._fail("sigma_hit", "a number > 0", spec.sigma_hit_m)
+    return spec
+
+
+def _footprint(r: _Reader) -> tuple[tuple[float, float], ...]:
+    text = r.text("footprint", "[]")
+    try:
+        points = yaml.safe_load(text)
+    except yaml.YAMLError:
+        points = None
+    if points in (None, []):
+        return ()
+    ok = isinstance(points, list) and len(points) >= 3
+    ok = ok and all(isinstance(p, list) and len(p) == 2 and all(isinstance(v, int | float) for v in p) for p in points)
+    if not ok:
+        raise r._fail("footprint", "a string '[[x, y], [x, y], [x, y], ...]' of at least 3 points", text)
+    return tuple((float(p[0]), float(p[1])) for p in points)
+
+
+def _source(r: _Reader, layer: str, name: str) -> ObservationSource:
+    p = f"{layer}.{name}."
+    return ObservationSource(
+        name=name,
+        topic=r.text(p + "topic", ""),
+        data_type=r.text(p + "data_type", "LaserScan"),
+        marking=r.flag(p + "marking", True),
+        clearing=r.flag(p + "clearing", False),
+        obstacle_max_range_m=r.number(p + "obstacle_max_range", 2.5),
+        obstacle_min_range_m=r.number(p + "obstacle_min_range", 0.0),
+        raytrace_max_range_m=r.number(p + "raytrace_max_range", 3.0),
+        raytrace_min_range_m=r.number(p + "raytrace_min_range", 0.0),
+        min_obstacle_height_m=r.number(p + "min_obstacle_height", 0.0),
+        max_obstacle_height_m=r.number(p + "max_obstacle_height", 0.0),
+        inf_is_valid=r.flag(p + "inf_is_valid", False),
+    )
+
+
+# Plugin type when a layer names none (`plugin:` missing), from the layer name TB3's files use.
+_PLUGIN_BY_NAME = {
+    "static_layer": "nav2_costmap_2d::StaticLayer",
+    "obstacle_layer": "nav2_costmap_2d::ObstacleLayer",
+    "voxel_layer": "nav2_costmap_2d::VoxelLayer",
+    "inflation_layer": "nav2_costmap_2d::InflationLayer",
+}
+
+
+def _costmap(r: _Reader, name: str) -> CostmapParams:
+    plugins = r.str_list("plugins", ("static_layer", "obstacle_layer", "inflation_layer"))
+    static: StaticLayerParams | None = None
+    obstacles: list[ObstacleLayerParams] = []
+    inflation: InflationParams | None = None
+    for layer in plugins:
+        plugin = r.text(f"{layer}.plugin", _PLUGIN_BY_NAME.get(layer, ""))
+        kind = plugin.rsplit("::", 1)[-1].rsplit("/", 1)[-1]
+        if kind == "StaticLayer":
+            static = StaticLayerParams(
+                name=layer,
+                enabled=r.flag(f"{layer}.enabled", True),
+                map_topic=r.text(f"{layer}.map_topic", "map"),
+                map_subscribe_transient_local=r.flag(f"{layer}.map_subscribe_transient_local", True),
+            )
+        elif kind in ("ObstacleLayer", "VoxelLayer"):
+            sources = r.str_list(f"{layer}.observation_sources", ())
+            obstacles.append(
+                ObstacleLayerParams(
+                    name=layer,
+                    plugin=plugin,
+                    enabled=r.flag(f"{layer}.enabled", True),
+                    footprint_clearing_enabled=r.flag(f"{layer}.footprint_clearing_enabled", True),
+                    max_obstacle_height_m=r.number(f"{layer}.max_obstacle_height", 2.0),
+                    sources=tuple(_source(r, layer, s) for s in sources),
+                )
+            )
+        elif kind == "InflationLayer":
+            inflation = InflationParams(
+                name=layer,
+                enabled=r.flag(f"{layer}.enabled", True),
+                inflation_radius_m=r.number(f"{layer}.inflation_radius", 0.55),
+                cost_scaling_factor=r.number(f"{layer}.cost_scaling_factor", 10.0),
+                inflate_unknown=r.flag(f"{layer}.inflate_unknown", False),
+                inflate_around_unknown=r.flag(f"{layer}.inflate_around_unknown", False),
+            )
+        else:
+            msg = (
+                f"{r.source}: {r.node}.{layer}.plugin: the twin has no costmap layer {plugin!r}; "
+                "use StaticLayer, ObstacleLayer, VoxelLayer or InflationLayer"
+            )
+            raise ConfigError(msg)
+    spec = CostmapParams(
+        name=name,
+        update_frequency_hz=r.number("update_frequency", 5.0),
+        publish_frequency_hz=r.number("publish_frequency", 1.0),
+        global_frame=r.text("global_frame", "map"),
+        robot_base_frame=r.text("robot_base_frame", "base_link"),
+        rolling_window=r.flag("rolling_window", False),
+        width_m=r.number("width", 5.0),
+        height_m=r.number("height", 5.0),
+        resolution_m=r.number("resolution", 0.1),
+        origin_x_m=r.number("origin_x", 0.0),
+        origin_y_m=r.number("origin_y", 0.0),
+        robot_radius_m=r.number("robot_radius", 0.1),
+        footprint=_footprint(r),
+        footprint_padding_m=r.number("footprint_padding", 0.01),
+        track_unknown_space=r.flag("track_unknown_space", False),
+        lethal_cost_threshold=r.integer("lethal_cost_threshold", 100),
+        unknown_cost_value=r.integer("unknown_cost_value", 255),
+        trinary_costmap=r.flag("trinary_costmap", True),
+        always_send_full_costmap=r.flag("always_send_full_costmap", False),
+        plugins=plugins,
+        static_layer=static,
+        obstacle_layers=tuple(obstacles),
+        inflation=inflation,
+    )
+    for key in ("resolution", "update_frequency", "width", "height"):
+        if r.params.get(key, 1.0) <= 0.0:  # type: ignore[operator]
+            raise r._fail(key, "a number > 0", r.params[key])
+    return spec
+
+
+def _costmap_node(nodes: Mapping[str, Any], name: str) -> str:
+    for candidate in (f"{name}/{name}", name):
+        if candidate in nodes:
+            return candidate
+    return f"{name}/{name}"
+
+
+def _set_override(nodes: dict[str, dict[str, ParamValue]], key: str, value: Any, where: str) -> None:
+    node_short, _, param = key.partition(".")
+    if not param:
+        msg = f"{where}: override {key!r} must name node and parameter ('amcl.max_particles'); fix the key"
+        raise ConfigError(msg)
+    matches = [n for n in nodes if n == node_short or n.rsplit("/", 1)[-1] == node_short]
+    node = matches[0] if matches else (f"{node_short}/{node_short}" if node_short.endswith("costmap") else node_short)
+    flat: dict[str, ParamValue] = {}
+    _flatten(param, value, flat, f"{where}: override {key}")
+    nodes.setdefault(node, {}).update(flat)
+
+
+def load_nav2_params(path: str | Path, *, overrides: Mapping[str, Any] | None = None) -> Nav2Params:
+    """Read a Nav2 params YAML and apply single-value overrides.
+
+    Args:
+        path: The params file (TB3's `param/humble/waffle.yaml`, Nav2's `nav2_params.yaml`, ...).
+        overrides: Values that replace the file's, keyed `node.param` (`amcl.max_particles`,
+            `local_costmap.inflation_layer.inflation_radius`), or nested mappings of the same.
+
+    Raises:
+        ConfigError: If the file cannot be read or parsed, a node's section is not a mapping, or a
+            parameter the twin uses has the wrong type or an unusable value (one line naming file and key).
+    """
+    path = Path(path)
+    where = str(path)
+    nodes = _read_file(path)
+    flat_overrides: dict[str, ParamValue] = {}
+    if overrides:
+        _flatten("", overrides, flat_overrides, f"{where}: overrides")
+    for key, value in flat_overrides.items():
+        _set_override(nodes, key, value, where)
+    wildcard = nodes.pop("**", {})
+    merged = {name: {**wildcard, **params} for name, params in nodes.items()}
+    amcl_name = "amcl" if "amcl" in merged else next((n for n in merged if n.endswith("/amcl")), "amcl")
+    amcl_reader = _Reader(where, amcl_name, merged.get(amcl_name, dict(wildcard)))
+    amcl = _amcl(amcl_reader)
+    readers = [amcl_reader]
+    costmaps: dict[str, CostmapParams] = {}
+    for short in ("global_costmap", "local_costmap"):
+        node = _costmap_node(merged, short)
+        reader = _Reader(where, node, merged.get(node, dict(wildcard)))
+        costmaps[short] = _costmap(reader, short)
+        readers.append(reader)
+    unused: list[str] = []
+    for reader in readers:
+        unused.extend(reader.unused())
+    ran = {reader.node for reader in readers}
+    nav_lane = {n for n in merged if n.rsplit("/", 1)[-1] in NAV_LANE_NODES}
+    for node, params in merged.items():
+        if node in ran or node in nav_lane:
+            continue
+        if node == "map_server":
+            unused.extend(f"{node}.{k}" for k in params if k not in _ALWAYS_USED and k != "yaml_filename")
+            continue
+        unused.extend(f"{node}.{k}" for k in params if k not in _ALWAYS_USED)
+    raw = MappingProxyType({name: MappingProxyType(dict(params)) for name, params in merged.items()})
+    return Nav2Params(
+        source=where,
+        amcl=amcl,
+        global_costmap=costmaps["global_costmap"],
+        local_costmap=costmaps["local_costmap"],
+        raw=raw,
+        unused_keys=tuple(unused),
+    )

@@ -1,0 +1,60 @@
+"""`/rosout`: the twin's log lines and every node's, stamped with sim time, as rcl publishes them.
+
+A node's logger (`twin.node.<name>`) logs under the node's name; the twin's own library lines log
+as `twin`. The bridge is a node, so its lines reach the recorder like any other topic's.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from twin.core.errors import TwinError
+from twin.node.node import Node
+
+__all__ = ["RosoutBridge"]
+
+_LEVELS = ((logging.CRITICAL, 50), (logging.ERROR, 40), (logging.WARNING, 30), (logging.INFO, 20))
+_NODE_PREFIX = "twin.node."
+
+
+class RosoutBridge(Node):
+    """Publishes the log records of its `handler` (INFO and above) on `/rosout`; attach it while the run goes on."""
+
+    builtin = True
+
+    def __init__(self) -> None:
+        super().__init__("rosout")
+        from twin.msgs import get_message
+
+        self._log_msg = get_message("rcl_interfaces/msg/Log")
+        self._time_msg = get_message("builtin_interfaces/msg/Time")
+        self._pub = self.create_publisher(self._log_msg, "/rosout", 1000)
+        self.handler = _Handler(self)
+
+    def publish_record(self, record: logging.LogRecord) -> None:
+        """Publish one log record."""
+        level = next((ros for py, ros in _LEVELS if record.levelno >= py), 10)
+        name = record.name[len(_NODE_PREFIX) :] if record.name.startswith(_NODE_PREFIX) else "twin"
+        sec, nanosec = divmod(self._graph_now(), 1_000_000_000)
+        msg = self._log_msg(
+            stamp=self._time_msg(sec=sec, nanosec=nanosec),
+            level=level,
+            name=name,
+            msg=record.getMessage(),
+            file=record.pathname,
+            function=record.funcName,
+            line=record.lineno,
+        )
+        self._pub.publish(msg)
+
+
+class _Handler(logging.Handler):
+    def __init__(self, bridge: RosoutBridge) -> None:
+        super().__init__(level=logging.INFO)
+        self._bridge = bridge
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self._bridge.publish_record(record)
+        except TwinError:
+            self.handleError(record)

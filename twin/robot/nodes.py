@@ -1,0 +1,412 @@
+"""The robot's nodes: what Gazebo's plugins and robot_state_publisher are in a ROS 2 system.
+
+Each node reads the simulated robot (the drivetrain's chassis and wheels, the lidar's ray caster)
+as a Gazebo plugin reads the physics engine, and talks to everything else only over topics:
+
+| node | publishes | subscribes |
+|---|---|---|
+| `diff_drive` | `/contacts`, `/motor_state` (FMU drives) | `/cmd_vel` |
+| `lidar` | `/scan` | |
+| `imu` | `/imu` | |
+| `joint_states` | `/joint_states` | |
+| `gazebo_odometry` (odometry: ground_truth) | `/odom`, `/tf` odom→base | |
+| `ground_truth` | `/ground_truth/odom` | |
+| `robot_state_publisher` | `/tf_static`, `/robot_description`, `/tf` (wheels) | `/joint_states` |
+| `clock` | `/clock` | |
+
+Built-in nodes publish `Encoded` messages: their fast CDR encoder runs once, for the recorder, and
+in-process subscribers read `Encoded.data`, documented per topic below. A message object from a user
+node's publisher (a `twin.msgs` class) is read field by field instead.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from twin.bag import (
+    ClockEncoder,
+    ContactEncoder,
+    ImuEncoder,
+    JointStateEncoder,
+    MotorStateEncoder,
+    OdometryEncoder,
+    ScanEncoder,
+    StringEncoder,
+    TFEncoder,
+)
+from twin.core.clock import ns_to_s
+from twin.core.geometry import Mat4, quat_from_rpy, rpy_from_matrix
+from twin.node import PRIORITY_CLOCK, PRIORITY_SENSOR, PRIORITY_STATE, Encoded, Node, QoSProfile
+from twin.node.readers import joint_positions, twist_of
+from twin.robot.chassis import ChassisState
+from twin.robot.drivetrain import Drivetrain, WheelState
+from twin.robot.encoders import EncoderModel
+from twin.robot.imu import ImuModel
+from twin.robot.lidar import Lidar
+from twin.world.scene import CollisionMonitor, Contact
+
+__all__ = [
+    "ClockNode",
+    "ContactTracker",
+    "DiffDriveNode",
+    "GazeboOdometryNode",
+    "GroundTruthNode",
+    "ImuNode",
+    "JointStateNode",
+    "LidarNode",
+    "RobotStatePublisher",
+    "tf_pose",
+]
+
+_log = logging.getLogger(__name__)
+
+LATCHED = QoSProfile(depth=1, durability="transient_local")
+SENSOR_DATA = QoSProfile(depth=5, reliability="best_effort")
+
+# A contact ends once the robot has moved this far from where the world last refused it.
+_CONTACT_RELEASE_M = 0.002
+
+_ODOM_COV = (1e-5, 1e-5, 1e12, 1e12, 1e12, 1e-3)  # gazebo_ros_diff_drive's covariance diagonal
+
+Pose7 = tuple[float, float, float, float, float, float, float]
+
+
+class ContactTracker:
+    """The robot's contact sensor: asks the world whether a pose touches it, and remembers the episode.
+
+    The drivetrain calls `touches` for every pose it would move to; `DiffDriveNode` reports an
+    episode's beginning and end on `/contacts`.
+    """
+
+    def __init__(self, monitor: CollisionMonitor) -> None:
+        self.monitor = monitor
+        self.contact: tuple[Contact, ...] = ()
+        self.in_contact = False  # a contact episode is open
+        self.pending = False  # the node must track the open episode (after each physics advance)
+
+    def touches(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        """Whether the robot at this pose touches the world (opens an episode when it starts)."""
+        contacts = self.monitor.check(x_m, y_m, yaw_rad)
+        if contacts:
+            if not self.in_contact:
+                self.in_contact = True
+                self.contact = contacts
+                self.pending = True
+            return True
+        return False
+
+
+class DiffDriveNode(Node):
+    """Gazebo's diff-drive plugin: `/cmd_vel` in, the drivetrain stepped by the executor, contacts out.
+
+    Also the motor signals of an FMU drive on `/motor_state` at `motor_rate_hz`.
+    """
+
+    def __init__(
+        self,
+        drive: Drivetrain,
+        tracker: ContactTracker,
+        *,
+        motor_joints: Sequence[str] = (),
+        motor_rate_hz: float = 30.0,
+    ) -> None:
+        super().__init__("diff_drive")
+        self.drive = drive
+        self.tracker = tracker
+        self.contacts = 0
+        self._reported = False
+        self._release_from = (0.0, 0.0)
+        set_cmd_vel = drive.set_cmd_vel
+
+        def on_cmd_vel(msg: Any) -> None:
+            if type(msg) is Encoded:
+                set_cmd_vel(*msg[2])
+            else:
+                set_cmd_vel(*twist_of(msg))
+
+        self.create_subscription("geometry_msgs/msg/Twist", "/cmd_vel", on_cmd_vel, 10, raw=True)
+        self._contact_pub = self.create_publisher(ContactEncoder.msgtype, "/contacts", 10)
+        self._contact_enc = ContactEncoder("map")
+        if motor_joints:
+            motor_pub = self.create_publisher(MotorStateEncoder.msgtype, "/motor_state", 10)
+            encode = MotorStateEncoder(list(motor_joints)).encode
+            wheel_state = drive.wheel_state
+
+            def motors(t_ns: int) -> None:
+                ws = wheel_state()
+                motor_pub.publish(
+                    Encoded((encode, (t_ns, ws.voltage_v, ws.current_a, ws.effort_nm, ws.speed_radps), ws))
+                )
+
+            self.create_rate_timer(motor_rate_hz, motors, priority=PRIORITY_STATE)
+
+        # The executor steps the drivetrain `n_steps` physics steps between events.
+        self.advance: Callable[[int], None] = drive.advance
+
+    def after_advance(self, t_ns: int) -> None:
+        """Report a contact's beginning, and its end once the robot is clear of it again."""
+        tracker = self.tracker
+        s = self.drive.chassis_state()
+        if not self._reported:
+            self._report(t_ns, begin=True)
+            self._reported = True
+            self._release_from = (s.x_m, s.y_m)
+            return
+        if s.blocked:
+            self._release_from = (s.x_m, s.y_m)
+            return
+        x0, y0 = self._release_from
+        if math.hypot(s.x_m - x0, s.y_m - y0) >= _CONTACT_RELEASE_M:
+            self._report(t_ns, begin=False)
+            tracker.in_contact = tracker.pending = self._reported = False
+
+    def _report(self, t_ns: int, *, begin: bool) -> None:
+        c = self.tracker.contact[0]
+        event = ContactEncoder.BEGIN if begin else ContactEncoder.END
+        args = (t_ns, event)
+        kwargs: dict[str, Any] = {
+            "robot_collision": c.robot_link,
+            "world_collision": f"{c.model}::{c.link}::{c.collision}",
+            "position_m": c.point,
+            "normal": c.normal,
+            "depth_m": c.depth_m,
+        }
+        self._contact_pub.publish(
+            Encoded((functools.partial(self._contact_enc.encode, *args, **kwargs), (), (event, c)))
+        )
+        if begin:
+            self.contacts += 1
+            _log.warning("t=%.3f s: contact with %s::%s; the robot stops", ns_to_s(t_ns), c.model, c.link)
+        else:
+            _log.info("t=%.3f s: contact with %s::%s ended", ns_to_s(t_ns), c.model, c.link)
+
+
+class LidarNode(Node):
+    """Gazebo's ray sensor plugin: a scan of the world at the lidar's rate on `/scan`. Data: the ranges (float32)."""
+
+    def __init__(self, lidar: Lidar, frame_id: str, rate_hz: float, chassis: Callable[[], ChassisState]) -> None:
+        super().__init__("lidar")
+        geo = lidar.geometry
+        encode = ScanEncoder(
+            frame_id,
+            angle_min_rad=geo.angle_min_rad,
+            angle_max_rad=geo.angle_max_rad,
+            angle_increment_rad=geo.angle_increment_rad,
+            time_increment_s=geo.time_increment_s,
+            scan_time_s=geo.scan_time_s,
+            range_min_m=geo.range_min_m,
+            range_max_m=geo.range_max_m,
+            samples=geo.num_ranges,
+        ).encode
+        pub = self.create_publisher(ScanEncoder.msgtype, "/scan", SENSOR_DATA)
+        scan = lidar.scan
+
+        def on_timer(t_ns: int) -> None:
+            s = chassis()
+            ranges = scan(s.x_m, s.y_m, s.yaw_rad)
+            pub.publish(Encoded((encode, (t_ns, ranges), ranges)))
+
+        self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_SENSOR)
+
+
+class ImuNode(Node):
+    """Gazebo's IMU plugin on `/imu`. Data: (t_ns, reading) with the `ImuModel` reading's fields.
+
+    The gyro reports its mean rate over each sample period (an integrating MEMS gyro behind its
+    low-pass filter), so its samples add up to the true heading change.
+    """
+
+    def __init__(self, imu: ImuModel, chassis: Callable[[], ChassisState], initial_yaw_rad: float) -> None:
+        super().__init__("imu")
+        encode = ImuEncoder(
+            imu.spec.frame_id,
+            orientation_covariance=imu.orientation_covariance,
+            angular_velocity_covariance=imu.angular_velocity_covariance,
+            linear_acceleration_covariance=imu.linear_acceleration_covariance,
+        ).encode
+        pub = self.create_publisher(ImuEncoder.msgtype, "/imu", SENSOR_DATA)
+        sample = imu.sample
+        last_t_ns, last_yaw = 0, initial_yaw_rad
+
+        def on_timer(t_ns: int) -> None:
+            nonlocal last_t_ns, last_yaw
+            s = chassis()
+            yaw, dt_ns = s.yaw_rad, t_ns - last_t_ns
+            rate = math.remainder(yaw - last_yaw, math.tau) * 1e9 / dt_ns if dt_ns > 0 else s.yaw_rate_radps
+            last_t_ns, last_yaw = t_ns, yaw
+            r = sample(yaw, rate, s.yaw_accel_radps2, s.ax_mps2, s.ay_mps2)
+            pub.publish(Encoded((encode, (t_ns, *r), (t_ns, r))))
+
+        self.create_rate_timer(imu.spec.rate_hz, on_timer, priority=PRIORITY_SENSOR)
+
+
+class JointStateNode(Node):
+    """Gazebo's joint-state publisher on `/joint_states`: the wheels through their encoders, or exact.
+
+    Data: (t_ns, (left, right) positions rad, (left, right) velocities, efforts or None).
+    """
+
+    def __init__(
+        self,
+        names: Sequence[str],
+        rate_hz: float,
+        wheel_state: Callable[[], WheelState],
+        encoders: EncoderModel | None,
+        *,
+        with_effort: bool,
+    ) -> None:
+        super().__init__("joint_states")
+        encode = JointStateEncoder(list(names), with_effort=with_effort).encode
+        pub = self.create_publisher(JointStateEncoder.msgtype, "/joint_states", 10)
+
+        def on_timer(t_ns: int) -> None:
+            ws = wheel_state()
+            if encoders is None:  # Gazebo's joint states: the exact joint angles and speeds
+                positions, velocities = ws.angle_rad, ws.speed_radps
+            else:
+                js = encoders.read(t_ns, ws.angle_rad[0], ws.angle_rad[1])
+                positions = (js.position_left_rad, js.position_right_rad)
+                velocities = (js.velocity_left, js.velocity_right)
+            if with_effort:
+                pub.publish(
+                    Encoded((encode, (t_ns, positions, velocities, ws.effort_nm), (t_ns, positions, velocities)))
+                )
+            else:
+                pub.publish(Encoded((encode, (t_ns, positions, velocities), (t_ns, positions, velocities))))
+
+        self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_STATE)
+
+
+class GazeboOdometryNode(Node):
+    """Gazebo diff drive's perfect odometry (`odometry: ground_truth`): `/odom` and odom→base from the chassis.
+
+    Data: (x, y, yaw, v, yaw rate) in the odom frame.
+    """
+
+    def __init__(self, base_frame: str, rate_hz: float, chassis: Callable[[], ChassisState]) -> None:
+        super().__init__("gazebo_odometry")
+        cov = np.diag(_ODOM_COV)
+        encode_odom = OdometryEncoder("odom", base_frame, pose_covariance=cov, twist_covariance=cov).encode
+        encode_tf = TFEncoder([("odom", base_frame)]).encode_planar
+        odom_pub = self.create_publisher(OdometryEncoder.msgtype, "/odom", 10)
+        tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
+
+        def on_timer(t_ns: int) -> None:
+            s = chassis()
+            state = (s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps)
+            odom_pub.publish(Encoded((encode_odom, (t_ns, *state), state)))
+            tf_pub.publish(Encoded((encode_tf, (t_ns, s.x_m, s.y_m, s.yaw_rad), None)))
+
+        self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_STATE)
+
+
+class GroundTruthNode(Node):
+    """Gazebo's p3d plugin: the true pose on `/ground_truth/odom`, map frame. Data: (x, y, yaw, v, yaw rate)."""
+
+    def __init__(self, base_frame: str, rate_hz: float, chassis: Callable[[], ChassisState]) -> None:
+        super().__init__("ground_truth")
+        encode = OdometryEncoder("map", base_frame).encode
+        pub = self.create_publisher(OdometryEncoder.msgtype, "/ground_truth/odom", 10)
+
+        def on_timer(t_ns: int) -> None:
+            s = chassis()
+            state = (s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps)
+            pub.publish(Encoded((encode, (t_ns, *state), state)))
+
+        self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_STATE)
+
+
+class ClockNode(Node):
+    """Gazebo's `/clock` at its rate. Data: t_ns."""
+
+    def __init__(self, rate_hz: float) -> None:
+        super().__init__("clock")
+        encode = ClockEncoder().encode
+        pub = self.create_publisher(ClockEncoder.msgtype, "/clock", SENSOR_DATA)
+
+        def on_timer(t_ns: int) -> None:
+            pub.publish(Encoded((encode, (t_ns,), t_ns)))
+
+        self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_CLOCK)
+
+
+class _JointTransform:
+    """The transform of a revolving joint at an angle, as (x, y, z, qx, qy, qz, qw), with no matrices per call."""
+
+    __slots__ = ("_ax", "_ay", "_az", "_q", "_t")
+
+    def __init__(self, T_parent: Mat4, axis: tuple[float, float, float]) -> None:
+        self._t = (float(T_parent[0, 3]), float(T_parent[1, 3]), float(T_parent[2, 3]))
+        self._q = quat_from_rpy(*rpy_from_matrix(T_parent))
+        n = math.sqrt(sum(a * a for a in axis)) or 1.0
+        self._ax, self._ay, self._az = (a / n for a in axis)
+
+    def at(self, angle_rad: float) -> Pose7:
+        """Return the parent-to-child pose with the joint at `angle_rad`: q_parent * q_axis(angle)."""
+        s, c = math.sin(0.5 * angle_rad), math.cos(0.5 * angle_rad)
+        bx, by, bz, bw = self._ax * s, self._ay * s, self._az * s, c
+        ax, ay, az, aw = self._q
+        return (
+            *self._t,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        )
+
+
+def tf_pose(T: Mat4) -> Pose7:
+    """Return a 4x4 transform as (x, y, z, qx, qy, qz, qw)."""
+    qx, qy, qz, qw = quat_from_rpy(*rpy_from_matrix(T))
+    return (float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), qx, qy, qz, qw)
+
+
+class RobotStatePublisher(Node):
+    """robot_state_publisher: the URDF on `/robot_description`, fixed joints on `/tf_static`, wheels on `/tf`.
+
+    `static` holds (parent, child, pose) of every fixed transform (with map→odom while nothing
+    localises the robot); `wheels` holds (joint, parent, child, T_parent, axis) of the revolving
+    wheel joints, whose transforms follow each `/joint_states` message.
+    """
+
+    def __init__(
+        self,
+        urdf: str,
+        static: Sequence[tuple[str, str, Pose7]],
+        wheels: Sequence[tuple[str, str, str, Mat4, tuple[float, float, float]]],
+    ) -> None:
+        super().__init__("robot_state_publisher")
+        static_encoder = TFEncoder([(p, c) for p, c, _ in static])
+        poses = [pose for _, _, pose in static]
+        tf_static = self.create_publisher(TFEncoder.msgtype, "/tf_static", LATCHED)
+        description = self.create_publisher(StringEncoder.msgtype, "/robot_description", LATCHED)
+
+        def publish_static(t_ns: int) -> None:
+            tf_static.publish(Encoded((static_encoder.encode, (t_ns, poses), None)))
+            description.publish(Encoded((StringEncoder().encode, (urdf,), urdf)))
+
+        self.create_one_shot(publish_static, priority=PRIORITY_STATE)
+        if len(wheels) != 2:
+            return
+        names = [w[0] for w in wheels]
+        encode = TFEncoder([(w[1], w[2]) for w in wheels]).encode
+        left, right = (_JointTransform(w[3], w[4]) for w in wheels)
+        tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
+
+        def on_joint_states(msg: Any) -> None:
+            if type(msg) is Encoded:
+                t_ns, (pl, pr), _ = msg[2]
+            else:
+                read = joint_positions(msg, names)
+                if read is None:
+                    return
+                t_ns, (pl, pr) = read
+            tf_pub.publish(Encoded((encode, (t_ns, (left.at(pl), right.at(pr))), None)))
+
+        self.create_subscription(JointStateEncoder.msgtype, "/joint_states", on_joint_states, 10, raw=True)
