@@ -1,7 +1,7 @@
 """Layer 3: the live view. A Foxglove WebSocket server for a running simulation or a bag, paced to real time.
 
 `LiveServer` publishes ROS 2 topics (CDR bytes, `ros2msg` schemas) as foxglove_bridge does;
-`LiveSink` tees a run's publications from the recorder to it; `Pacer` holds sim time to the wall
+`LiveSink` is one more of a run's sinks, after the recorder, publishing to it; `Pacer` holds sim time to the wall
 clock at any speed; `play_bag` serves a recorded bag. The only package that imports foxglove-sdk.
 """
 
