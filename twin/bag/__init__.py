@@ -35,7 +35,7 @@ from twin.bag.qos import (
     default_qos,
 )
 from twin.bag.raw import read_raw
-from twin.bag.reader import BagInfo, BagMessage, TopicInfo, open_bag, read_messages
+from twin.bag.reader import BagInfo, BagMessage, TopicInfo, message_definitions, open_bag, read_messages
 from twin.bag.recorder import STORAGES, Recorder, TopicHandle
 from twin.bag.recover import RecoveryReport, recover_bag
 
@@ -73,6 +73,7 @@ __all__ = [
     "TopicInfo",
     "TwistEncoder",
     "default_qos",
+    "message_definitions",
     "open_bag",
     "read_messages",
     "read_raw",

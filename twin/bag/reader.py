@@ -33,10 +33,10 @@ from rosbags.typesys.base import TypesysError
 
 from twin.bag.metadata import BagMetadata, read_metadata
 from twin.bag.qos import QosProfile
-from twin.bag.typesys import TypeRegistry
+from twin.bag.typesys import MessageDefinition, TypeRegistry
 from twin.core.errors import BagError
 
-__all__ = ["BagFile", "BagInfo", "BagMessage", "TopicInfo", "open_bag", "read_messages"]
+__all__ = ["BagFile", "BagInfo", "BagMessage", "TopicInfo", "message_definitions", "open_bag", "read_messages"]
 
 _log = logging.getLogger(__name__)
 
@@ -293,3 +293,30 @@ def read_messages(
         raise BagError(msg) from None
     finally:
         reader.close()
+
+
+def message_definitions(path: str | os.PathLike[str]) -> dict[str, MessageDefinition]:
+    """Return the `ros2msg` definition of each message type in the bag that can be decoded.
+
+    A definition embedded in the bag wins over the type store's (Humble's standard types,
+    nav2_msgs, twin_msgs); types defined nowhere are left out. The text is what a rosbag2 MCAP
+    embeds, whatever the bag's own format (MCAP `ros2msg`/`ros2idl`, or none in sqlite3).
+
+    Raises:
+        BagError: If the folder is not a readable bag.
+    """
+    bag = _bag_dir(path)
+    reader = _open_reader(bag)
+    try:
+        registry, _ = _typestore_for(reader.connections)
+        definitions: dict[str, MessageDefinition] = {}
+        for conn in reader.connections:
+            if conn.msgtype in definitions or not registry.knows(conn.msgtype):
+                continue
+            try:
+                definitions[conn.msgtype] = registry.definition(conn.msgtype)
+            except (BagError, TypesysError, KeyError, ValueError) as err:
+                _log.warning("%s: no usable definition of %s (%s)", bag, conn.msgtype, err)
+    finally:
+        reader.close()
+    return definitions

@@ -41,6 +41,7 @@ _COMMAND_MODULES: tuple[str, ...] = (
     "analyze",
     "replay",
     "sweep",
+    "play",
 )
 
 _EPILOG = """\
@@ -50,6 +51,8 @@ examples:
   twin scenario check scenarios/house_burger.yaml
   twin graph                            the default scenario's nodes and topics
   twin bag info bags/<run>              what a bag holds
+  twin simulate --live                  watch the run in Foxglove (ws://127.0.0.1:8765), in real time
+  twin play bags/<run> --speed 2        serve a bag to Foxglove
   twin tree validate trees/tree.xml
   twin world info ../shared/fixtures/gazebo_classic/worlds/turtlebot3_house.world \\
       --model-path ../shared/fixtures/gazebo_classic/models

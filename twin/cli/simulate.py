@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import datetime
 import json
+import math
 import os
 import signal
 import sys
@@ -14,10 +15,12 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from twin.cli.play import live_banner, speed_arg
 from twin.cli.progress import Progress
 from twin.core.errors import ConfigError, Interrupted, TwinError
 
 if TYPE_CHECKING:
+    from twin.sim.executor import Sink
     from twin.sim.scenario import Scenario
     from twin.sim.simulation import RunSummary
 
@@ -27,6 +30,8 @@ examples:
   twin simulate scenarios/default.yaml --duration 60 --out /tmp/run1
   twin simulate my.yaml --seed 7 --storage sqlite3 --distro jazzy
   twin simulate --json | jq .bag_path             a machine-readable summary on stdout
+  twin simulate --live                            watch it in Foxglove (ws://127.0.0.1:8765), in real time
+  twin simulate --live --speed 5 --port 9000      five times faster, on another port
 
 The run ends when the mission ends, at --duration (or the scenario's max_duration_s), or on
 Ctrl-C / SIGTERM; in every case the bag is closed and readable. Exit codes: 0 done, 2 scenario
@@ -59,6 +64,19 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         "--distro", choices=("humble", "iron", "jazzy", "kilted", "rolling"), help="ROS 2 distro the bag targets"
     )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON on stdout")
+    live = parser.add_argument_group("live view (docs/live.md)")
+    live.add_argument(
+        "--live", action="store_true", help="serve the run to Foxglove over WebSocket while it runs (paced, --speed 1)"
+    )
+    live.add_argument("--host", default=None, metavar="ADDR", help="address to serve on (default 127.0.0.1)")
+    live.add_argument("--port", type=int, default=None, metavar="N", help="port to serve on (default 8765)")
+    live.add_argument(
+        "--speed",
+        type=speed_arg,
+        metavar="X",
+        help="sim seconds per wall second: 1 real time, 5 five times faster, max as fast as possible "
+        "(default: max, or 1 with --live)",
+    )
     parser.set_defaults(func=_simulate)
 
 
@@ -113,7 +131,6 @@ def _result(summary: RunSummary) -> str:
 
 def _simulate(args: argparse.Namespace) -> int:
     from twin.sim.scenario import default_scenario_path, load_scenario
-    from twin.sim.simulation import Simulation
 
     path = args.scenario if args.scenario is not None else default_scenario_path()
     scenario = load_scenario(path)
@@ -134,12 +151,53 @@ def _simulate(args: argparse.Namespace) -> int:
     bag_path = _bag_path(scenario, args.out)
 
     flag = _StopFlag()
+    with _live_view(args, flag) as sinks:
+        return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks)
+
+
+@contextmanager
+def _live_view(args: argparse.Namespace, flag: _StopFlag) -> Iterator[list[Sink]]:
+    """The live server and the pacer `--live`, `--speed` ask for, as sinks after the recorder."""
+    if not args.live and (args.host is not None or args.port is not None):
+        msg = "--host and --port serve the live view; add --live"
+        raise ConfigError(msg)
+    speed = args.speed if args.speed is not None else (1.0 if args.live else math.inf)
+    if not args.live and speed == math.inf:
+        yield []
+        return
+    from twin.live import DEFAULT_HOST, DEFAULT_PORT, LiveServer, LiveSink, Pacer
+
+    pacer = Pacer(speed, should_stop=flag) if speed != math.inf else None
+    if not args.live:
+        yield [LiveSink(None, pacer=pacer)]
+        return
+    port = DEFAULT_PORT if args.port is None else args.port
+    with LiveServer(host=args.host or DEFAULT_HOST, port=port) as server:
+        print(live_banner(server.url, speed), file=sys.stderr)
+        yield [LiveSink(server, pacer=pacer)]
+
+
+def _run(
+    args: argparse.Namespace,
+    path: Path,
+    scenario: Scenario,
+    bag_path: Path,
+    *,
+    flag: _StopFlag,
+    sinks: list[Sink],
+) -> int:
+    from twin.sim.simulation import Simulation
+
     progress = Progress(args.duration or scenario.max_duration_s)
     # Crash tests set TWIN_BAG_WRITE_LOG to learn what the recorder was handed, and when.
     write_log = os.environ.get("TWIN_BAG_WRITE_LOG")
     try:
         simulation = Simulation(
-            scenario, bag_path=bag_path, duration_s=args.duration, write_log=Path(write_log) if write_log else None
+            scenario,
+            bag_path=bag_path,
+            duration_s=args.duration,
+            write_log=Path(write_log) if write_log else None,
+            sinks=sinks,
         )
     except ConfigError as err:
         text = str(err)
