@@ -64,6 +64,7 @@ class Comparison:
     rpe_m: float | None
     rpe_interval_s: float
     rates: list[dict[str, Any]]
+    fields: list[dict[str, Any]]
     track_a: F64
     track_b: F64
 
@@ -105,6 +106,7 @@ class Comparison:
                 {"t_s": float(t), "error_m": self.error_at(float(t))} for t in marks if len(self.t_s)
             ],
             "topic_rates": self.rates,
+            "field_differences": self.fields,
         }
 
     def summary_lines(self) -> list[str]:
@@ -121,6 +123,8 @@ class Comparison:
             f"  ATE {self.ate_m:.4f} m"
             + (f", RPE ({self.rpe_interval_s:g} s) {self.rpe_m:.4f} m" if self.rpe_m is not None else ""),
         ]
+        for f in self.fields:
+            lines.append(f"  {f['topic']} {f['field']}: RMS diff {f['rms_diff']:.4f}, max {f['max_abs_diff']:.4f}")
         for r in self.rates:
             if r["rate_a_hz"] is not None and r["rate_b_hz"] is not None:
                 diff = r["rate_b_hz"] - r["rate_a_hz"]
@@ -196,6 +200,7 @@ def compare_bags(
         raise BagError(msg)
     ate = float(math.sqrt(float(np.mean(err * err))))
     rpe = _rpe(t, xy_a, yaw_a, xy_b, yaw_b, interval_s=rpe_interval_s)
+    fields = _field_differences(data_a, data_b, ta, tb, t)
     rates = []
     for name in sorted(set(data_a.health) | set(data_b.health)):
         ha, hb = data_a.health.get(name), data_b.health.get(name)
@@ -225,9 +230,69 @@ def compare_bags(
         rpe_m=rpe,
         rpe_interval_s=rpe_interval_s,
         rates=rates,
+        fields=fields,
         track_a=va[:, :2],
         track_b=track_b,
     )
+
+
+def _field_differences(a: BagData, b: BagData, ta: str, tb: str, t: F64) -> list[dict[str, Any]]:
+    """RMS and max differences of the velocity fields both bags carry, over the matched span.
+
+    The pose topics' twist (`twist.twist.linear.x`, `twist.twist.angular.z`) where both are
+    Odometry, interpolated at A's times; `/cmd_vel` (`linear.x`, `angular.z`) as held commands,
+    both on the same clock (from each bag's first pose).
+    """
+    out: list[dict[str, Any]] = []
+    t_a, va = _relative(a.poses[ta])
+    t_b, vb = _relative(b.poses[tb])
+    for col, field in ((3, "twist.twist.linear.x"), (4, "twist.twist.angular.z")):
+        if np.isnan(va[:, col]).all() or np.isnan(vb[:, col]).all():
+            continue
+        xa = np.interp(t, t_a, va[:, col])
+        xb = np.interp(t, t_b, vb[:, col])
+        d = xb - xa
+        out.append(
+            {
+                "topic": f"{ta} | {tb}" if ta != tb else ta,
+                "field": field,
+                "rms_diff": float(np.sqrt(np.mean(d * d))),
+                "max_abs_diff": float(np.abs(d).max()),
+            }
+        )
+    if a.cmd is not None and b.cmd is not None and len(a.cmd[0]) and len(b.cmd[0]):
+        ca = [np.frombuffer(x, dtype=np.float64) for x in a.cmd]
+        cb = [np.frombuffer(x, dtype=np.float64) for x in b.cmd]
+        cta, ctb = _command_times(a, ta, ca[0]), _command_times(b, tb, cb[0])
+        for k, field in ((1, "linear.x"), (2, "angular.z")):
+            xa = _held(cta, ca[k], t)
+            xb = _held(ctb, cb[k], t)
+            d = xb - xa
+            out.append(
+                {
+                    "topic": "/cmd_vel",
+                    "field": field,
+                    "rms_diff": float(np.sqrt(np.mean(d * d))),
+                    "max_abs_diff": float(np.abs(d).max()),
+                }
+            )
+    return out
+
+
+def _command_times(data: BagData, pose_topic: str, t_s: F64) -> F64:
+    """Command times on the pose topic's clock: sim time through /clock when the bag has it, from its first pose."""
+    record_ns = data.start_ns + t_s * 1e9
+    stamps = data.poses[pose_topic].stamp_ns
+    sim = data.clock_at(record_ns.astype(np.int64))
+    if sim is None:  # no /clock: record times, from the pose topic's first record time
+        return (record_ns - float(data.poses[pose_topic].t_ns.min())) * 1e-9
+    return (sim - int(stamps.min())).astype(np.float64) * 1e-9
+
+
+def _held(times: F64, values: F64, at: F64) -> F64:
+    """The last value at or before each time in `at` (0 before the first)."""
+    i = np.searchsorted(times, at, side="right") - 1
+    return np.where(i >= 0, values[np.clip(i, 0, None)], 0.0)
 
 
 def _rpe(t: F64, xy_a: F64, yaw_a: F64, xy_b: F64, yaw_b: F64, *, interval_s: float) -> float | None:

@@ -44,7 +44,7 @@ examples:
 
 Reads any rosbag2 bag (MCAP or sqlite3, metadata 4 to 9, any distro) in one streaming pass. A
 section whose topics the bag lacks says what it needs; the rest still runs. The report (default
-folder: BAG_report next to the bag) holds report.md, report.json, report.html (self-contained,
+folder: bags/<BAG name>_report) holds report.md, report.json, report.html (self-contained,
 plots inline) and the PNG plots. Exit codes: 0 done, 5 unreadable bag (a truncated one: run
 `twin bag recover`).
 """
@@ -79,7 +79,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("bag", metavar="BAG", help="bag folder to analyse (or `compare`, see below)")
     parser.add_argument("rest", nargs="*", metavar="B", help=argparse.SUPPRESS)
-    parser.add_argument("--out", type=Path, metavar="DIR", help="report folder (default: BAG_report beside the bag)")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="report folder (default: bags/<BAG name>_report)")
     parser.add_argument("--json", action="store_true", help="print the report (or comparison) as JSON on stdout")
     parser.add_argument("--world", type=Path, metavar="SDF", help="draw this world's walls on the map")
     parser.add_argument(
@@ -93,6 +93,17 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         "--max-position-error", type=float, metavar="M", help="exit 1 when the final or max position error exceeds M"
     )
     parser.set_defaults(func=_analyze)
+
+
+def _writing(out: Path, write: Any) -> Any:
+    """Run `write()`, turning a folder that cannot be written into one error line."""
+    from twin.core.errors import BagError
+
+    try:
+        return write()
+    except OSError as err:
+        msg = f"{out}: cannot write the report ({err.strerror or err}); choose another --out"
+        raise BagError(msg) from None
 
 
 def _walls(args: argparse.Namespace) -> Any:
@@ -124,8 +135,8 @@ def _analyze(args: argparse.Namespace) -> int:
             plots_enabled=not args.no_plots,
             progress=bar.update,
         )
-    out = args.out if args.out is not None else bag.resolve().parent / f"{bag.resolve().name}_report"
-    files = write_report(report, out)
+    out = args.out if args.out is not None else Path("bags") / f"{bag.resolve().name}_report"
+    files = _writing(out, lambda: write_report(report, out))
     if args.json:
         print(json.dumps({**report.to_dict(), "files": [str(f) for f in files]}, indent=2))
     else:
@@ -149,7 +160,8 @@ def _compare(args: argparse.Namespace) -> int:
     result = compare_bags(a, b, topics=topics, align=args.align)
     out = args.out
     if out is not None:
-        write_comparison(result, out, walls=_walls(args))
+        walls = _walls(args)
+        _writing(out, lambda: write_comparison(result, out, walls=walls))
     d = result.to_dict()
     over = args.max_position_error is not None and result.max_position_error_m > args.max_position_error
     d["threshold_m"] = args.max_position_error

@@ -32,17 +32,22 @@ def add_export_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", type=Path, metavar="BAG", help="bag folder")
     parser.add_argument("--topics", nargs="+", required=True, metavar="TOPIC", help="topics to export")
     parser.add_argument("--format", choices=("csv", "parquet"), default="csv", help="table format (default: csv)")
-    parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: BAG_export beside the bag)")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: bags/<BAG name>_export)")
     parser.add_argument("--json", action="store_true", help="print the files written as JSON")
     parser.set_defaults(func=_export)
 
 
 def _export(args: argparse.Namespace) -> int:
     from twin.analysis.export import export_topics
+    from twin.core.errors import BagError
 
     bag: Path = args.bag
-    out = args.out if args.out is not None else bag.resolve().parent / f"{bag.resolve().name}_export"
-    written = export_topics(bag, args.topics, out, fmt=args.format)
+    out = args.out if args.out is not None else Path("bags") / f"{bag.resolve().name}_export"
+    try:
+        written = export_topics(bag, args.topics, out, fmt=args.format)
+    except OSError as err:
+        msg = f"{out}: cannot write the tables ({err.strerror or err}); choose another --out"
+        raise BagError(msg) from None
     if args.json:
         print(json.dumps({t: {"file": str(p), "rows": n} for t, (p, n) in written.items()}, indent=2))
     else:

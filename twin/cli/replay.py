@@ -15,7 +15,7 @@ examples:
       --model-path ../shared/fixtures/gazebo_classic/models --out /tmp/replay
   twin replay BAG --world W --model-path M --drive fmu      the FMU drivetrain instead of ideal wheels
 
-Writes into --out (default: BAG_replay beside the bag): scenario.yaml (the replay as a scenario
+Writes into --out (default: bags/<BAG name>_replay): scenario.yaml (the replay as a scenario
 `twin simulate` runs again), bag/ (the twin's run) and the comparison of the twin's
 /ground_truth/odom against the bag's pose topic: comparison.json, overlay.png,
 compare_error.png. The robot defaults to the model named in the bag's /robot_description when
@@ -52,7 +52,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--pose-topic", metavar="TOPIC", help="the bag's pose topic (default: /ground_truth/odom, else /odom)"
     )
-    parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: BAG_replay beside the bag)")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: bags/<BAG name>_replay)")
     parser.add_argument(
         "--max-position-error", type=float, metavar="M", help="exit 1 if the final or max error exceeds M"
     )
@@ -80,12 +80,17 @@ def _yaml_path(p: Path) -> str:
 def _replay(args: argparse.Namespace) -> int:
     from twin.analysis.compare import compare_bags, write_comparison
     from twin.analysis.report import world_walls
+    from twin.core.errors import ConfigError
     from twin.sim.scenario import load_scenario
     from twin.sim.simulation import Simulation
 
     bag = args.bag
-    out = args.out if args.out is not None else bag.resolve().parent / f"{bag.resolve().name}_replay"
-    out.mkdir(parents=True, exist_ok=True)
+    out = args.out if args.out is not None else Path("bags") / f"{bag.resolve().name}_replay"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        msg = f"{out}: cannot create the output folder ({err.strerror or err}); choose another --out"
+        raise ConfigError(msg) from None
     robot = args.robot or _robot_name(bag, args.model_path) or "turtlebot3_waffle"
     drive = "{type: kinematic}" if args.drive == "kinematic" else _FMU_DRIVE
     model_path = "[" + ", ".join(_yaml_path(p) for p in args.model_path) + "]"

@@ -56,6 +56,28 @@ def test_twin_default_bag_in_both_storages(storage: str, twin_bag: Path, twin_ba
     assert health["/scan"]["count"] == open_bag(bag).topic("/scan").message_count
 
 
+def _fixture_bags() -> list[Path]:
+    from tests.conftest import FIXTURES
+
+    return sorted(p for p in (FIXTURES / "bags").iterdir() if (p / "metadata.yaml").exists())
+
+
+@pytest.mark.parametrize("bag", _fixture_bags(), ids=lambda p: p.name)
+def test_every_fixture_bag_analyzes(bag: Path, tmp_path: Path) -> None:
+    report = _analyze(bag, tmp_path / "r")
+    assert report["summary"]["messages"] == open_bag(bag).message_count
+    assert any(s["available"] for s in report["sections"])
+
+
+def test_jazzy_bag_metadata_version_9(tmp_path: Path) -> None:
+    bag = tmp_path / "jazzy"
+    proc = run_twin("simulate", "--duration", "5", "--distro", "jazzy", "--out", str(bag))
+    assert proc.returncode == 0, proc.stderr
+    report = _analyze(bag, tmp_path / "r")
+    assert report["summary"]["metadata_version"] == 9
+    assert report["metrics"]["path_length_m"] == pytest.approx(_odom_path_length(bag, "/ground_truth/odom"), rel=1e-9)
+
+
 def test_report_files_are_self_contained(twin_bag: Path, tmp_path: Path) -> None:
     out = tmp_path / "r"
     report = _analyze(twin_bag, out)
