@@ -84,5 +84,7 @@ def replay(run: GazeboRun, drive: Drivetrain, at_s: tuple[float, ...]) -> list[R
         _, x, y, yaw = run.odom[k]
         s = drive.chassis_state()
         dyaw = math.remainder(s.yaw_rad - yaw, math.tau)
-        errors.append(ReplayError(t_s=t_s, position_m=math.hypot(s.x_m - x, s.y_m - y), yaw_deg=math.degrees(abs(dyaw))))
+        errors.append(
+            ReplayError(t_s=t_s, position_m=math.hypot(s.x_m - x, s.y_m - y), yaw_deg=math.degrees(abs(dyaw)))
+        )
     return errors

@@ -80,9 +80,10 @@ def test_setpoints_ramp_at_the_wheel_acceleration_limit(api: str) -> None:
 
 def test_burger_commanded_beyond_its_motors_is_clamped_and_warned_once(caplog: pytest.LogCaptureFixture) -> None:
     drive = FmuDrive(fmu="builtin:xl430_w250_servo", profile="velocity-servo")
-    with caplog.at_level(logging.WARNING, logger="twin"), FmuDrivetrain(
-        drive, ChassisParams.tb3_burger(), step_ns=STEP_NS
-    ) as d:
+    with (
+        caplog.at_level(logging.WARNING, logger="twin"),
+        FmuDrivetrain(drive, ChassisParams.tb3_burger(), step_ns=STEP_NS) as d,
+    ):
         cap = d.supply_speed_radps
         assert cap is not None and 0.205 < cap * 0.033 < 0.212  # XL430: 61 rpm no-load at 12 V
         for k in range(20):
