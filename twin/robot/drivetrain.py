@@ -21,6 +21,7 @@ each step.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Mapping
@@ -62,6 +63,7 @@ __all__ = [
     "Saturation",
     "SpeedLoopTargets",
     "WheelState",
+    "builtin_motor",
     "fmu_step_response",
     "motor_constants",
     "wheel_setpoints",
@@ -149,7 +151,9 @@ class FmuDrive:
     """Drive section `type: fmu`: wheels stepped as FMUs (one instance per wheel)."""
 
     type: Literal["fmu"] = "fmu"
-    fmu: str = "builtin:xm430_w210"  # a built-in (builtin:NAME), used when `fmu_file` is null
+    # A built-in (builtin:NAME), used when `fmu_file` is null; `auto`: the robot's own motors (TurtleBot3
+    # Burger: XL430-W250, else the Waffle's XM430-W210), in the profile's variant.
+    fmu: str = "builtin:xm430_w210"
     fmu_file: Path | None = None  # a .fmu file (relative to the scenario); overrides `fmu`
     fmi_version: Literal[2, 3] = 2  # for built-ins
     profile: Literal["voltage", "velocity-servo"] = "voltage"
@@ -171,8 +175,8 @@ class FmuDrive:
     api: Literal["native", "lowlevel", "convenience"] = "native"
 
     def __post_init__(self) -> None:
-        if self.fmu_file is None and not self.fmu.startswith("builtin:"):
-            msg = f"fmu: {self.fmu!r} is not builtin:NAME; give a file as fmu_file"
+        if self.fmu_file is None and not (self.fmu.startswith("builtin:") or self.fmu == "auto"):
+            msg = f"fmu: {self.fmu!r} is not builtin:NAME or auto; give a file as fmu_file"
             raise ValueError(msg)
         if self.communication_step_s is not None and not self.communication_step_s > 0.0:
             msg = f"communication_step_s must be positive, got {self.communication_step_s}"
@@ -188,6 +192,12 @@ class FmuDrive:
             ConfigError: If the mapping file is wrong.
         """
         return load_mapping(self.mapping) if isinstance(self.mapping, Path) else self.mapping
+
+
+def builtin_motor(robot_name: str, profile: str) -> str:
+    """The built-in FMU of a TurtleBot3's wheel motors: Burger XL430-W250-T, Waffle (Pi) XM430-W210-T."""
+    base = "xl430_w250" if "burger" in robot_name.lower() else "xm430_w210"
+    return f"builtin:{base}_servo" if profile == "velocity-servo" else f"builtin:{base}"
 
 
 def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits: CommandLimits) -> tuple[float, float]:
@@ -289,6 +299,7 @@ class FmuDrivetrain:
         free_distance: DistanceFn | None = None,
         bounding_radius_m: float = 0.0,
         plugin_wheel_acceleration_mps2: float | None = None,
+        robot_name: str = "",
     ) -> None:
         """Build (on first use), load and bind the FMU, design the speed loop, instantiate both wheels.
 
@@ -305,6 +316,7 @@ class FmuDrivetrain:
                 of the robot's collision shape from its base frame).
             plugin_wheel_acceleration_mps2: The robot SDF diff-drive plugin's `max_wheel_acceleration`
                 (rim, m/s²), used when `drive.max_wheel_acceleration_mps2` is null; None or 0: none.
+            robot_name: The robot model's name, for `fmu: auto`.
 
         Raises:
             FmuError: If the FMU cannot be built, loaded, bound to the profile or initialised.
@@ -312,6 +324,8 @@ class FmuDrivetrain:
             ValueError: If `bounding_radius_m` is negative.
         """
         self.step_ns = step_ns
+        if drive.fmu == "auto":
+            drive = dataclasses.replace(drive, fmu=builtin_motor(robot_name, drive.profile))
         if bounding_radius_m < 0.0:
             msg = f"bounding_radius_m must not be negative, got {bounding_radius_m}"
             raise ValueError(msg)

@@ -127,7 +127,7 @@ def fmu_fallback(drive: FmuDrive) -> KinematicDrive | None:
     _log.warning(
         "drive: no C compiler to build %s (tried %s; install one, e.g. apt-get install gcc, or set CC): "
         "running the kinematic drive instead (ideal wheels, %g m/s^2 wheel acceleration)",
-        drive.fmu,
+        "the robot's motor FMUs" if drive.fmu == "auto" else drive.fmu,
         ", ".join(compiler_candidates()),
         fallback.max_wheel_acceleration_mps2,
     )
@@ -230,7 +230,8 @@ class Scenario:
     mission: BehaviorTreeMission | CmdVelScriptMission | WaypointsMission
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
-    drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)
+    # The robot's own motors as FMUs in velocity mode (the TB3's DYNAMIXELs); {type: kinematic}: ideal wheels.
+    drive: KinematicDrive | FmuDrive = field(default_factory=lambda: FmuDrive(fmu="auto", profile="velocity-servo"))
     odometry: Literal["ekf", "ground_truth"] = "ekf"
     estimation: EstimationSection = field(default_factory=EstimationSection)
     disturbances: Disturbances = field(default_factory=Disturbances)

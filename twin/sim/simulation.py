@@ -393,6 +393,7 @@ class Simulation:
             free_distance=self._monitor.free_m,
             bounding_radius_m=bounding_radius_m,
             plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2,
+            robot_name=robot.name,
         )
 
     @property
