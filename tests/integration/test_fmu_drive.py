@@ -9,7 +9,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import REPO, run_twin
-from tests.unit.cosim.helpers import acme
+from tests.unit.cosim.helpers import FAULTS, acme, faulty
 
 VENDOR_DRIVE = """\
 drive:
@@ -138,3 +138,32 @@ def test_burger_above_its_motors_warns_once_and_motor_state_shows_the_saturation
     assert all(m.velocity_command_rad_s[0] == pytest.approx(0.28 / 0.033) for m in flagged)
     assert max(m.velocity_rad_s[0] for m in motors) < 0.212 / 0.033  # never beyond the motors' reach
     assert not any(m.saturated[0] for m in motors if m not in flagged)
+
+
+@pytest.mark.parametrize("mode", ["segfault", "hang"])
+def test_isolated_fmu_that_crashes_or_hangs_ends_the_run_with_one_line_exit_4_and_a_readable_bag(
+    mode: str, tmp_path: Path
+) -> None:
+    scenario = tmp_path / f"{mode}.yaml"
+    scenario.write_text(
+        f"name: {mode}\n"
+        "drive:\n"
+        "  type: fmu\n"
+        f"  fmu_file: {faulty()}\n"
+        "  profile: velocity-servo\n"
+        f"  mapping: {{parameters: {{fault_mode: {FAULTS[mode]}, fault_time: 1.0}}}}\n"
+        "  isolation: process\n"
+        "  step_timeout_s: 2.0\n"
+    )
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--duration", "5", "--out", str(bag))
+    assert result.returncode == 4, result.stderr
+    lines = [line for line in result.stderr.strip().splitlines() if "WARNING" not in line]
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    what = "died with SIGSEGV" if mode == "segfault" else "did not finish a step within 2 s (hung)"
+    assert f"in its own process {what} at t = 1.000000 s" in lines[0]
+    assert str(bag) in lines[0]
+    msgs = topics(bag)
+    clock = msgs["/clock"]
+    assert 95 <= len(clock) <= 101  # /clock at 100 Hz: everything up to the fault is in the bag
+    assert len(msgs["/motor_state"]) >= 29

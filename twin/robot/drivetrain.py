@@ -37,6 +37,7 @@ from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
 from twin.cosim.drive_loop import DriveLoop
 from twin.cosim.fmu import Api, FmuFile, FmuInfo, StepGroup, Stepper
+from twin.cosim.isolated import IsolatedGroup
 from twin.robot.chassis import (
     Chassis,
     ChassisDynamics,
@@ -170,6 +171,11 @@ class FmuDrive:
     # to what it can, and report it (needs the motor model); false: pass them on to the FMU as given.
     clamp_to_supply: bool = True
     slip: SlipModel = field(default_factory=SlipModel)
+    # none: the FMU's code runs in the twin's process; process: in a child process, so that its crash
+    # or hang (a step longer than step_timeout_s of wall time) ends the run with one line and a valid bag.
+    # The step loop then runs in Python, one round trip to the child per step for both wheels.
+    isolation: Literal["none", "process"] = "none"
+    step_timeout_s: float = 10.0
     # native: the per-step path compiled (the fast one); lowlevel: the Python reference path with the
     # FMUs stepped by the compiled shim; convenience: the Python path through FMPy's wrappers.
     api: Literal["native", "lowlevel", "convenience"] = "native"
@@ -180,6 +186,9 @@ class FmuDrive:
             raise ValueError(msg)
         if self.communication_step_s is not None and not self.communication_step_s > 0.0:
             msg = f"communication_step_s must be positive, got {self.communication_step_s}"
+            raise ValueError(msg)
+        if not self.step_timeout_s > 0.0:
+            msg = f"step_timeout_s must be positive, got {self.step_timeout_s}"
             raise ValueError(msg)
         if self.max_wheel_acceleration_mps2 is not None and not self.max_wheel_acceleration_mps2 >= 0.0:
             msg = f"max_wheel_acceleration_mps2 must be 0 (none) or positive, got {self.max_wheel_acceleration_mps2}"
@@ -356,10 +365,11 @@ class FmuDrivetrain:
         name = drive.fmu.removeprefix("builtin:") if drive.fmu_file is None else path.name
         self._fmu_name = name
         self.label = f"fmu {name} (FMI {self._file.info.major_version}, {drive.profile})"
+        self._isolated: IsolatedGroup | None = None
         try:
             self._setup(drive, chassis, pose, contact)
         except BaseException:
-            self._file.close()
+            self.close()
             raise
 
     def _setup(
@@ -398,17 +408,39 @@ class FmuDrivetrain:
         in_vrs = [b.value_reference for b in binding.inputs]
         out_vrs = [b.value_reference for b in outputs]
         wheel_inertia = drive.wheel_inertia_kgm2
+        if wheel_inertia is None and self.motor is None and drive.isolation == "process":
+            msg = (
+                "drive.wheel_inertia_kgm2: give it (or drive.motor) with isolation: process; "
+                "the twin does not probe an isolated FMU in its own process"
+            )
+            raise ConfigError(msg)
         if wheel_inertia is None:
             wheel_inertia = self.motor.wheel_inertia_kgm2 if self.motor is not None else self._probe(binding)
         self.wheel_inertia_kgm2 = wheel_inertia
         api: Api = "lowlevel" if drive.api == "native" else drive.api
-        self._left: Stepper = self._file.instantiate(
-            "left", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
-        )
-        self._right: Stepper = self._file.instantiate(
-            "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
-        )
-        self._group = StepGroup((self._left, self._right), step_s=self._h)
+        self._group: StepGroup | IsolatedGroup
+        self._left: Stepper
+        self._right: Stepper
+        if drive.isolation == "process":
+            self._isolated = self._group = IsolatedGroup(
+                self._file.path,
+                self._file.label,
+                ("left", "right"),
+                step_s=self._h,
+                inputs=in_vrs,
+                outputs=out_vrs,
+                start=binding.start,
+                timeout_s=drive.step_timeout_s,
+            )
+            self._left, self._right = self._isolated.steppers
+        else:
+            self._left = self._file.instantiate(
+                "left", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
+            )
+            self._right = self._file.instantiate(
+                "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
+            )
+            self._group = StepGroup((self._left, self._right), step_s=self._h)
         self._chassis = Chassis(
             chassis, step_s=self._h, wheel_inertia_kgm2=wheel_inertia, pose=pose, contact=contact, slip=drive.slip
         )
@@ -436,7 +468,7 @@ class FmuDrivetrain:
             self._run_python = self._run_servo
         self._run = self._run_python
         self._loop: DriveLoop | None = None
-        if drive.api == "native":
+        if drive.api == "native" and isinstance(self._group, StepGroup):
             try:
                 self._loop = self._native_loop()
             except FmuError as err:
@@ -450,6 +482,7 @@ class FmuDrivetrain:
         regions = None
         if slip is not None:
             regions = [(r.x_min_m, r.x_max_m, r.y_min_m, r.y_max_m, r.slip) for r in slip.regions]
+        assert isinstance(self._group, StepGroup)
         loop = DriveLoop(self._group, slip_regions=regions)
         loop.write(
             servo=self.speed_loop is None,
@@ -774,7 +807,9 @@ class FmuDrivetrain:
         return self._file.info
 
     def close(self) -> None:
-        """Terminate and free both instances and remove the extracted FMU."""
+        """Terminate and free both instances (stop their process when isolated) and remove the extracted FMU."""
+        if self._isolated is not None:
+            self._isolated.close()
         self._file.close()
 
     def __enter__(self) -> Self:
