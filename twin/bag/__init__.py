@@ -24,6 +24,7 @@ from twin.bag.encoders import (
     TwistEncoder,
 )
 from twin.bag.profiles import DISTROS
+from twin.bag.provenance import read_provenance
 from twin.bag.qos import (
     QOS_BEST_EFFORT,
     QOS_LATCHED,
@@ -74,5 +75,6 @@ __all__ = [
     "default_qos",
     "open_bag",
     "read_messages",
+    "read_provenance",
     "recover_bag",
 ]

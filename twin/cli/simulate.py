@@ -9,11 +9,13 @@ import json
 import os
 import signal
 import sys
-from collections.abc import Iterator
+import tempfile
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from twin.bag import read_provenance
 from twin.cli.progress import Progress
 from twin.core.errors import ConfigError, Interrupted, TwinError
 from twin.sim.scenario import Scenario, default_scenario_path, load_scenario
@@ -25,6 +27,7 @@ examples:
   twin simulate scenarios/default.yaml --duration 60 --out /tmp/run1
   twin simulate my.yaml --seed 7 --storage sqlite3 --distro jazzy
   twin simulate --json | jq .bag_path             a machine-readable summary on stdout
+  twin simulate --from-bag bags/run1 --out /tmp/rerun   re-run the scenario, seed and duration a bag recorded
 
 The run ends when the mission ends, at --duration (or the scenario's max_duration_s), or on
 Ctrl-C / SIGTERM; in every case the bag is closed and readable. Exit codes: 0 done, 2 scenario
@@ -55,6 +58,12 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), help="bag storage (overrides the scenario)")
     parser.add_argument(
         "--distro", choices=("humble", "iron", "jazzy", "kilted", "rolling"), help="ROS 2 distro the bag targets"
+    )
+    parser.add_argument(
+        "--from-bag",
+        type=Path,
+        metavar="BAG",
+        help="re-run exactly the scenario a twin bag recorded (its seed and duration too; same messages)",
     )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON on stdout")
     parser.set_defaults(func=_simulate)
@@ -111,9 +120,46 @@ def _result(summary: RunSummary) -> str:
     return f" (tree {summary.mission_result})" if summary.mission_result in ("SUCCESS", "FAILURE") else ""
 
 
+def _from_bag(bag: Path) -> tuple[Scenario, float | None, Mapping[str, str]]:
+    """The scenario, duration limit and provenance a twin bag recorded."""
+    provenance = read_provenance(bag)
+    if provenance is None or "scenario_yaml" not in provenance:
+        msg = f"{bag}: --from-bag: the bag has no twin provenance (an older twin's bag, or another tool's)"
+        raise ConfigError(msg)
+    with tempfile.TemporaryDirectory(prefix="twin-from-bag-") as tmp:
+        recorded = Path(tmp) / "scenario.yaml"
+        recorded.write_text(provenance["scenario_yaml"], encoding="utf-8")
+        scenario = load_scenario(recorded)
+    duration = provenance.get("duration_s", "")
+    return scenario, (float(duration) if duration else None), provenance
+
+
+def _check_fmus(recorded: Mapping[str, str], bag: Path) -> None:
+    """Warn when a re-run's FMU binaries differ from the recorded ones (e.g. built by another compiler)."""
+    now = read_provenance(bag) or {}
+    before = {f["file"]: f["sha256"] for f in json.loads(recorded.get("fmus", "[]"))}
+    after = {f["file"]: f["sha256"] for f in json.loads(now.get("fmus", "[]"))}
+    if before != after:
+        print(
+            f"twin: warning: the FMUs differ from the recorded run's ({sorted(before)} -> {sorted(after)}); "
+            "the messages may differ too",
+            file=sys.stderr,
+        )
+
+
 def _simulate(args: argparse.Namespace) -> int:
-    path = args.scenario if args.scenario is not None else default_scenario_path()
-    scenario = load_scenario(path)
+    provenance: Mapping[str, str] | None = None
+    if args.from_bag is not None:
+        if args.scenario is not None:
+            msg = f"give a SCENARIO or --from-bag {args.from_bag}, not both"
+            raise ConfigError(msg)
+        path = args.from_bag
+        scenario, recorded_duration, provenance = _from_bag(args.from_bag)
+        if args.duration is None:
+            args.duration = recorded_duration
+    else:
+        path = args.scenario if args.scenario is not None else default_scenario_path()
+        scenario = load_scenario(path)
     changes: dict[str, Any] = {}
     if args.seed is not None:
         changes["seed"] = args.seed
@@ -155,6 +201,8 @@ def _simulate(args: argparse.Namespace) -> int:
             raise type(err)(msg) from err
         finally:
             progress.close()
+    if provenance is not None:
+        _check_fmus(provenance, summary.bag_path)
     if args.json:
         print(json.dumps({**dataclasses.asdict(summary), "bag_path": str(summary.bag_path)}, indent=2))
     else:

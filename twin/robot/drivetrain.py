@@ -806,6 +806,11 @@ class FmuDrivetrain:
         """The FMU's model description."""
         return self._file.info
 
+    @property
+    def fmu_path(self) -> Path:
+        """The .fmu file the wheels run."""
+        return self._file.path
+
     def close(self) -> None:
         """Terminate and free both instances (stop their process when isolated) and remove the extracted FMU."""
         if self._isolated is not None:

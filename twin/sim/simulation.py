@@ -48,6 +48,7 @@ from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
 from twin.robot.lidar import Lidar
 from twin.sim.bus import Bus, Publisher
 from twin.sim.mission import CmdVelScript, TreeMission, WaypointFollower
+from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.rng import RngStreams
 from twin.sim.scenario import (
     BehaviorTreeMission,
@@ -278,6 +279,7 @@ class Simulation:
             self.drive.close()
             raise
         try:
+            self.recorder.add_provenance(run_provenance(scenario, duration_s=duration_s, fmus=self._fmu_records()))
             self.bus = Bus(self.recorder)
             self.scheduler = Scheduler(self.step_ns)
             self._rosout = _RosoutHandler(
@@ -354,6 +356,13 @@ class Simulation:
             gyro_samples="interval_mean",
         )
         return encoders, ekf
+
+    def _fmu_records(self) -> list[dict[str, str]]:
+        """Provenance of the FMUs the drive loaded (none for the kinematic drive)."""
+        if not isinstance(self.drive, FmuDrivetrain):
+            return []
+        info = self.drive.fmu_info
+        return [fmu_record(self.drive.fmu_path, model_name=info.model_name, guid=info.guid)]
 
     def _make_drive(self, bounding_radius_m: float) -> Drivetrain:
         sc, robot = self.scenario, self.robot
