@@ -61,6 +61,7 @@ class VariableInfo:
     unit: str | None
     start: str | None
     description: str
+    dimensions: int = 0  # FMI 3 array dimensions (0: a scalar)
 
 
 def _identifier(interface: object) -> str | None:
@@ -123,6 +124,7 @@ def read_fmu_info(path: Path) -> FmuInfo:
             unit=unit,
             start=None if v.start is None else str(v.start),
             description=v.description or "",
+            dimensions=len(getattr(v, "dimensions", None) or ()),
         )
     units: dict[str, Unit] = {}
     for u in md.unitDefinitions or ():

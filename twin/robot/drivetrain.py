@@ -405,6 +405,11 @@ class FmuDrivetrain:
             role: next(((k, b.factor, b.offset) for k, b in enumerate(outputs) if b.role == role), None)
             for role in _OUTPUT_ORDER[1:]
         }
+        # Without a motor_torque output, the effort is the current times the torque constant at the wheel
+        # (N Kt) when the FMU gives the current and the motor model is known; else there is none.
+        self._torque_per_amp: float | None = None
+        if self._reading["motor_torque"] is None and self._reading["current"] is not None and self.motor is not None:
+            self._torque_per_amp = self.motor.gear_ratio * self.motor.torque_constant_nm_per_a
         in_vrs = [b.value_reference for b in binding.inputs]
         out_vrs = [b.value_reference for b in outputs]
         wheel_inertia = drive.wheel_inertia_kgm2
@@ -793,10 +798,14 @@ class FmuDrivetrain:
             angles = (s.wheel_angle_left_rad, s.wheel_angle_right_rad)
         if self.profile is not Profile.VOLTAGE:
             own_volts = (nan, nan)
+        effort = self._signal("motor_torque", (nan, nan))
+        if self._reading["motor_torque"] is None and self._torque_per_amp is not None:
+            current = self._signal("current", (nan, nan))
+            effort = (self._torque_per_amp * current[0], self._torque_per_amp * current[1])
         return WheelState(
             angle_rad=self._signal("wheel_angle", angles),
             speed_radps=speeds,
-            effort_nm=self._signal("motor_torque", (nan, nan)),
+            effort_nm=effort,
             voltage_v=self._signal("applied_voltage", own_volts),
             current_a=self._signal("current", (nan, nan)),
         )
@@ -805,6 +814,11 @@ class FmuDrivetrain:
     def fmu_info(self) -> FmuInfo:
         """The FMU's model description."""
         return self._file.info
+
+    @property
+    def has_effort(self) -> bool:
+        """Whether the wheels report a drive torque: the FMU's motor_torque, or current x the torque constant."""
+        return self._reading["motor_torque"] is not None or self._torque_per_amp is not None
 
     @property
     def fmu_path(self) -> Path:

@@ -629,7 +629,7 @@ class Simulation:
         robot, bus = self.robot, self.bus
         assert robot.drive is not None and self._encoders is not None
         names = [w[0] for w in self._wheels]
-        with_effort = isinstance(self.drive, FmuDrivetrain)
+        with_effort = isinstance(self.drive, FmuDrivetrain) and self.drive.has_effort
         joint_pub = bus.advertise("/joint_states", JointStateEncoder.msgtype)
         joint_enc = JointStateEncoder(names, with_effort=with_effort)
         tf_pub = bus.advertise("/tf", TFEncoder.msgtype)
