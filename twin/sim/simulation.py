@@ -61,7 +61,7 @@ from twin.sim.scenario import (
 from twin.sim.scheduler import Scheduler
 from twin.world import RobotModelSpec, build_scene, load_robot, load_world, urdf_from_robot
 from twin.world.scene import CollisionMonitor, Contact, RobotBody, Scene
-from twin.world.types import JointType
+from twin.world.tf_static import static_frames
 
 __all__ = ["RunSummary", "Simulation"]
 
@@ -452,10 +452,9 @@ class Simulation:
         # Latched, once at t = 0: the robot's fixed frames and its description.
         static_pairs = [("map", "odom")]
         static_poses = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)]
-        for frame in robot.frames:
-            if frame.joint_type is JointType.FIXED:
-                static_pairs.append((frame.parent, frame.name))
-                static_poses.append(_tf_pose(frame.T_parent))
+        for parent, child, T_parent in static_frames(robot):  # as robot_state_publisher: casters, optical frames
+            static_pairs.append((parent, child))
+            static_poses.append(_tf_pose(T_parent))
         tf_static = bus.advertise("/tf_static", TFEncoder.msgtype)
         description = bus.advertise("/robot_description", StringEncoder.msgtype)
         static_encoder = TFEncoder(static_pairs)
