@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -167,3 +170,16 @@ def test_isolated_fmu_that_crashes_or_hangs_ends_the_run_with_one_line_exit_4_an
     clock = msgs["/clock"]
     assert 95 <= len(clock) <= 101  # /clock at 100 Hz: everything up to the fault is in the bag
     assert len(msgs["/motor_state"]) >= 29
+
+
+def test_without_a_c_compiler_the_default_run_says_so_once_and_drives_kinematic(tmp_path: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(REPO), "PATH": str(tmp_path), "CC": "no-such-compiler"}
+    env["TWIN_CACHE_DIR"] = str(tmp_path / "cache")  # nothing built yet, nothing can be
+    result = subprocess.run(
+        [sys.executable, "-m", "twin", "simulate", "--duration", "2", "--out", str(tmp_path / "bag")],
+        cwd=REPO, env=env, capture_output=True, text=True, timeout=600, check=False,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    said = [line for line in result.stderr.splitlines() if "no C compiler to build the robot's motor FMUs" in line]
+    assert len(said) == 1 and "running the kinematic drive instead" in said[0]
+    assert "kinematic drive" in result.stdout
