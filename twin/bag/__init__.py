@@ -24,6 +24,7 @@ from twin.bag.encoders import (
     TwistEncoder,
 )
 from twin.bag.profiles import DISTROS
+from twin.bag.provenance import read_provenance
 from twin.bag.qos import (
     QOS_BEST_EFFORT,
     QOS_LATCHED,
@@ -76,6 +77,7 @@ __all__ = [
     "message_definitions",
     "open_bag",
     "read_messages",
+    "read_provenance",
     "read_raw",
     "recover_bag",
 ]

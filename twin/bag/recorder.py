@@ -25,21 +25,24 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import json
 import logging
 import os
 import sqlite3
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any, NewType, NoReturn, Protocol
 
 from twin import __version__
+from twin.bag.encoders import StringEncoder
 from twin.bag.mcap_file import McapWriter
 from twin.bag.metadata import BagMetadata, FileInformation, TopicMetadata, render_metadata, write_metadata
 from twin.bag.profiles import DistroProfile, distro_profile
-from twin.bag.qos import QosProfile, default_qos, qos_profiles_to_yaml
+from twin.bag.provenance import PROVENANCE_NAME, PROVENANCE_TOPIC
+from twin.bag.qos import QOS_LATCHED, QosProfile, default_qos, qos_profiles_to_yaml
 from twin.bag.sqlite_file import Sqlite3Writer, sqlite_topic_stats
 from twin.bag.typesys import MessageDefinition, TypeRegistry
 from twin.core.errors import BagError
@@ -251,6 +254,25 @@ class Recorder:
     def topics(self) -> dict[str, TopicHandle]:
         """Recorded topic names and their handles."""
         return {name: TopicHandle(h) for name, h in self._topic_names.items()}
+
+    def add_provenance(self, values: Mapping[str, str]) -> None:
+        """Record how the bag was made (`twin.bag.provenance`).
+
+        MCAP: a Metadata record; sqlite3: a latched `/twin/provenance` message at t = 0 holding the
+        values as JSON.
+
+        Raises:
+            BagError: If the bag is closed or cannot be written.
+        """
+        self._check_open()
+        if self._mcap is not None:
+            try:
+                self._mcap.add_metadata(PROVENANCE_NAME, {str(k): str(v) for k, v in values.items()})
+            except OSError as err:
+                self._fail(err)
+            return
+        handle = self.add_topic(PROVENANCE_TOPIC, StringEncoder.msgtype, qos=(QOS_LATCHED,))
+        self.write(handle, 0, StringEncoder().encode(json.dumps(dict(values), sort_keys=True)))
 
     # -- writing --------------------------------------------------------------------------------
 

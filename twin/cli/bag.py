@@ -130,13 +130,33 @@ def info_json(info: BagInfo) -> dict[str, Any]:
     }
 
 
+def _provenance_lines(provenance: Any) -> list[str]:
+    """`twin bag info`'s lines for a twin run's provenance."""
+    lines = [
+        f"twin {provenance.get('twin_version', '?')}, seed {provenance.get('seed', '?')}"
+        + (f", duration {provenance['duration_s']} s" if provenance.get("duration_s") else "")
+        + " (re-run: twin simulate --from-bag BAG)"
+    ]
+    name = next(
+        (line[6:] for line in provenance.get("scenario_yaml", "").splitlines() if line.startswith("name: ")), ""
+    )
+    if name:
+        lines.append(f"scenario {name} (resolved YAML recorded)")
+    lines.extend(
+        f"FMU {f.get('file')} | model {f.get('model_name')} | GUID {f.get('guid')} | SHA-256 {f.get('sha256')}"
+        for f in json.loads(provenance.get("fmus", "[]"))
+    )
+    return lines
+
+
 def _info(args: argparse.Namespace) -> int:
-    from twin.bag import open_bag
+    from twin.bag import open_bag, read_provenance
     from twin.bag.qos import qos_summary
 
     info = open_bag(args.bag)
+    provenance = read_provenance(info.path)
     if args.json:
-        print(json.dumps(info_json(info), indent=2))
+        print(json.dumps({**info_json(info), "provenance": dict(provenance) if provenance else None}, indent=2))
         return 0
     label = "{:<19}".format
     print(label("Files:") + ("\n" + " " * 19).join(f.path for f in info.files))
@@ -156,6 +176,8 @@ def _info(args: argparse.Namespace) -> int:
         for t in info.topics
     ]
     print(label("Topic information:") + ("\n" + " " * 19).join(lines or ["(none)"]))
+    if provenance is not None:
+        print(label("Twin provenance:") + ("\n" + " " * 19).join(_provenance_lines(provenance)))
     undecodable = [t for t in info.topics if not t.decodable]
     if undecodable:
         names = ", ".join(f"{t.name} ({t.msgtype})" for t in undecodable)

@@ -196,8 +196,12 @@ def _check(args: argparse.Namespace) -> int:
     if report.ok:
         print(f"  satisfies the {report.profile.value} contract")
         return 0
-    missing = ", ".join(report.missing) or "none"
-    print(f"  does NOT satisfy the {report.profile.value} contract; missing roles: {missing}")
+    reasons = []
+    if report.missing:
+        reasons.append(f"missing roles: {', '.join(report.missing)}")
+    if report.problems:
+        reasons.append(f"{len(report.problems)} problem(s) above")
+    print(f"  does NOT satisfy the {report.profile.value} contract; {'; '.join(reasons)}")
     return 4
 
 

@@ -10,7 +10,8 @@ import math
 import os
 import signal
 import sys
-from collections.abc import Iterator
+import tempfile
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,6 +33,7 @@ examples:
   twin simulate --json | jq .bag_path             a machine-readable summary on stdout
   twin simulate --live                            watch it in Foxglove (ws://127.0.0.1:8765), in real time
   twin simulate --live --speed 5 --port 9000      five times faster, on another port
+  twin simulate --from-bag bags/run1 --out /tmp/rerun   re-run the scenario, seed and duration a bag recorded
 
 The run ends when the mission ends, at --duration (or the scenario's max_duration_s), or on
 Ctrl-C / SIGTERM; in every case the bag is closed and readable. Exit codes: 0 done, 2 scenario
@@ -62,6 +64,12 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), help="bag storage (overrides the scenario)")
     parser.add_argument(
         "--distro", choices=("humble", "iron", "jazzy", "kilted", "rolling"), help="ROS 2 distro the bag targets"
+    )
+    parser.add_argument(
+        "--from-bag",
+        type=Path,
+        metavar="BAG",
+        help="re-run exactly the scenario a twin bag recorded (its seed and duration too; same messages)",
     )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON on stdout")
     live = parser.add_argument_group("live view (docs/live.md)")
@@ -120,7 +128,9 @@ def _graceful_signals(flag: _StopFlag) -> Iterator[None]:
 def _summary_line(summary: RunSummary) -> str:
     return (
         f"simulated {summary.sim_s:.1f} s in {summary.wall_s:.2f} s ({summary.real_time_factor:.0f}x real time), "
-        f"{summary.messages} messages, {summary.contacts} contacts, {summary.ended_by}"
+        f"{summary.messages} messages, {summary.contacts} contacts, "
+        f"{f'{summary.drive} drive, ' if summary.drive else ''}"
+        f"{f'{summary.drive_notes}, ' if summary.drive_notes else ''}{summary.ended_by}"
         f"{_result(summary)}: {summary.bag_path}"
     )
 
@@ -129,11 +139,53 @@ def _result(summary: RunSummary) -> str:
     return f" (tree {summary.mission_result})" if summary.mission_result in ("SUCCESS", "FAILURE") else ""
 
 
+def _from_bag(bag: Path) -> tuple[Scenario, float | None, Mapping[str, str]]:
+    """The scenario, duration limit and provenance a twin bag recorded."""
+    from twin.bag import read_provenance
+    from twin.sim.scenario import load_scenario
+
+    provenance = read_provenance(bag)
+    if provenance is None or "scenario_yaml" not in provenance:
+        msg = f"{bag}: --from-bag: the bag has no twin provenance (an older twin's bag, or another tool's)"
+        raise ConfigError(msg)
+    with tempfile.TemporaryDirectory(prefix="twin-from-bag-") as tmp:
+        recorded = Path(tmp) / "scenario.yaml"
+        recorded.write_text(provenance["scenario_yaml"], encoding="utf-8")
+        scenario = load_scenario(recorded)
+    duration = provenance.get("duration_s", "")
+    return scenario, (float(duration) if duration else None), provenance
+
+
+def _check_fmus(recorded: Mapping[str, str], bag: Path) -> None:
+    """Warn when a re-run's FMU binaries differ from the recorded ones (e.g. built by another compiler)."""
+    from twin.bag import read_provenance
+
+    now = read_provenance(bag) or {}
+    before = {f["file"]: f["sha256"] for f in json.loads(recorded.get("fmus", "[]"))}
+    after = {f["file"]: f["sha256"] for f in json.loads(now.get("fmus", "[]"))}
+    if before != after:
+        print(
+            f"twin: warning: the FMUs differ from the recorded run's ({sorted(before)} -> {sorted(after)}); "
+            "the messages may differ too",
+            file=sys.stderr,
+        )
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from twin.sim.scenario import default_scenario_path, load_scenario
 
-    path = args.scenario if args.scenario is not None else default_scenario_path()
-    scenario = load_scenario(path)
+    provenance: Mapping[str, str] | None = None
+    if args.from_bag is not None:
+        if args.scenario is not None:
+            msg = f"give a SCENARIO or --from-bag {args.from_bag}, not both"
+            raise ConfigError(msg)
+        path = args.from_bag
+        scenario, recorded_duration, provenance = _from_bag(args.from_bag)
+        if args.duration is None:
+            args.duration = recorded_duration
+    else:
+        path = args.scenario if args.scenario is not None else default_scenario_path()
+        scenario = load_scenario(path)
     changes: dict[str, Any] = {}
     if args.seed is not None:
         changes["seed"] = args.seed
@@ -152,7 +204,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
     flag = _StopFlag()
     with _live_view(args, flag) as sinks:
-        return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks)
+        return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks, provenance=provenance)
 
 
 @contextmanager
@@ -185,6 +237,7 @@ def _run(
     *,
     flag: _StopFlag,
     sinks: list[Sink],
+    provenance: Mapping[str, str] | None,
 ) -> int:
     from twin.sim.simulation import Simulation
 
@@ -216,6 +269,8 @@ def _run(
             raise type(err)(msg) from err
         finally:
             progress.close()
+    if provenance is not None and summary.bag_path is not None:
+        _check_fmus(provenance, summary.bag_path)
     if args.json:
         print(json.dumps({**dataclasses.asdict(summary), "bag_path": str(summary.bag_path)}, indent=2))
     else:

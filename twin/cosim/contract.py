@@ -216,6 +216,9 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
     required = _REQUIRED[profile]
     roles = [*required, *OPTIONAL_ROLES]
     reports = []
+    problems = []
+    bound_to: dict[str, str] = {}  # variable -> the role it is bound to
+    given = mapping.roles.given()
     for role in roles:
         spec = ROLES[role]
         bind_to = mapping.binding(role)
@@ -232,12 +235,20 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
                 problem = f"{var.name!r} is a {var.causality}, the role needs an {spec.direction}"
             elif var.type not in ("Real", "Float64"):
                 problem = f"{var.name!r} is a {var.type}, the role needs a Real/Float64"
+            elif var.dimensions:
+                problem = f"{var.name!r} is an array ({var.dimensions}-D), the role needs a scalar"
+            elif var.name in bound_to:
+                problem = f"{var.name!r} is already bound to role {bound_to[var.name]}; a variable serves one role"
             else:
                 _, problem = _unit_for(info, unit_name, spec)
+            if problem is None:
+                bound_to[var.name] = role
+        if problem is not None and role in given and role not in required:
+            # An optional role the mapping names explicitly must bind: a wrong name is not silently dropped.
+            problems.append(f"roles.{role}: {problem}")
         reports.append(
             RoleReport(role=role, required=role in required, variable=bind_to.name, unit=unit_name, problem=problem)
         )
-    problems = []
     if info.co_simulation is None:
         only = [
             n
@@ -253,6 +264,8 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
             problems.append(f"no variable {name!r} to set{suggest(name, list(info.variables))}")
         elif var.variability == "constant" or var.causality in ("independent",):
             problems.append(f"{name!r} ({var.causality}, {var.variability}) cannot be set")
+        elif var.dimensions:
+            problems.append(f"{name!r} is an array ({var.dimensions}-D); the mapping sets scalars only")
     return ContractReport(profile=profile, roles=tuple(reports), problems=tuple(problems))
 
 

@@ -3,7 +3,9 @@
 It does to a TurtleBot3 what Gazebo's `gazebo_ros_diff_drive` does (wheel-rim speed changes limited
 to `max_wheel_acceleration_mps2`) without the motor dynamics of the FMU drivetrain. It implements
 `twin.robot.drivetrain.Drivetrain`. Contact with the world is a pose refusal: a step whose end pose
-the `contact` callable reports as penetrating is not taken, and the wheels stop.
+the `contact` callable reports as penetrating is not taken. Its turn alone is still taken when that
+pose is free (a robot against a wall can turn in place, and then back away, which does not deepen the
+contact); otherwise the wheels stop.
 """
 
 from __future__ import annotations
@@ -60,6 +62,7 @@ class KinematicDrivetrain:
                 fractions looked up where the robot is at the start of each piece of motion.
         """
         self.params = params
+        self.label = "kinematic"
         no_slip = slip is None or (slip.is_uniform and slip.left_fraction == 0.0 and slip.right_fraction == 0.0)
         self._slip = None if no_slip else slip
         self._free = free_distance
@@ -127,8 +130,17 @@ class KinematicDrivetrain:
                 elif self._move(v, w, n * dt, contact):
                     budget, used = (free(self.x_m, self.y_m, self.yaw_rad) if free else 0.0), 0.0
                 else:
-                    rim[0] = rim[1] = 0.0
-                    v = w = 0.0
+                    # The move is refused. The turn alone (the wheels' differential mode) is kept when
+                    # its pose is free; the forward mode stays blocked. The differential ramps on
+                    # towards the command's, so a robot against a wall can turn in place.
+                    diff = 0.5 * (rim[1] - rim[0])
+                    if self._turn(2.0 * diff * inv_track * n * dt, contact):
+                        v, w = 0.0, 2.0 * diff * inv_track
+                    else:
+                        v = w = diff = 0.0
+                    goal = 0.5 * (target[1] - target[0])
+                    diff = goal if abs(goal - diff) <= dv_max else diff + math.copysign(dv_max, goal - diff)
+                    rim[0], rim[1] = -diff, diff
             steps_left -= n
             self.v_mps, self.w_radps = v, w
         total_dt = n_steps * dt
@@ -157,6 +169,20 @@ class KinematicDrivetrain:
         inv_r = 1.0 / self.params.wheel_radius_m
         self.angle_rad[0] += self._rim[0] * dt * inv_r  # the wheels turn with their rims, slip or not
         self.angle_rad[1] += self._rim[1] * dt * inv_r
+        return True
+
+    def _turn(self, dyaw: float, contact: ContactFn | None) -> bool:
+        """Turn in place by `dyaw` if `contact` allows that pose; the robot stays blocked (it touches)."""
+        if dyaw == 0.0:
+            return False
+        nyaw = math.remainder(self.yaw_rad + dyaw, math.tau)
+        if contact is not None and contact(self.x_m, self.y_m, nyaw):
+            return False
+        self.yaw_rad = nyaw
+        self.blocked = True
+        half = 0.5 * dyaw * self.params.wheel_separation_m / self.params.wheel_radius_m
+        self.angle_rad[0] -= half  # the wheels turn against each other, the rims slide forward no further
+        self.angle_rad[1] += half
         return True
 
     def chassis_state(self) -> ChassisState:

@@ -138,11 +138,18 @@ class DiffDriveNode(Node):
             encode = MotorStateEncoder(list(motor_joints)).encode
             wheel_state = drive.wheel_state
 
+            saturation = getattr(drive, "saturation", None)
+
             def motors(t_ns: int) -> None:
                 ws = wheel_state()
-                motor_pub.publish(
-                    Encoded((encode, (t_ns, ws.voltage_v, ws.current_a, ws.effort_nm, ws.speed_radps), ws))
-                )
+                extra: dict[str, Any] = {}
+                if saturation is not None:  # an FMU drive: the commanded wheel speeds and whether they are reachable
+                    extra = {
+                        "velocity_command_rad_s": drive.command_radps,  # type: ignore[attr-defined]
+                        "saturated": (saturation.active,) * 2,
+                    }
+                args = (t_ns, ws.voltage_v, ws.current_a, ws.effort_nm, ws.speed_radps)
+                motor_pub.publish(Encoded((functools.partial(encode, *args, **extra), (), ws)))
 
             self.create_rate_timer(motor_rate_hz, motors, priority=PRIORITY_STATE)
 

@@ -54,6 +54,7 @@ from twin.robot.nodes import (
 from twin.sim.executor import Executor, RecordFilter, Sink
 from twin.sim.launch import load_nodes
 from twin.sim.mission import BagReplay, CmdVelScript, TreeMission, WaypointFollower
+from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.replay import start_moving
 from twin.sim.rng import RngStreams
 from twin.sim.scenario import (
@@ -64,10 +65,11 @@ from twin.sim.scenario import (
     ReplayMission,
     Scenario,
     WaypointsMission,
+    fmu_fallback,
 )
 from twin.world import RobotModelSpec, build_scene, load_robot, load_world, urdf_from_robot
 from twin.world.scene import CollisionMonitor, RobotBody, Scene
-from twin.world.types import JointType
+from twin.world.tf_static import static_frames
 
 __all__ = ["RunSummary", "Simulation"]
 
@@ -91,6 +93,8 @@ class RunSummary:
     mission_result: str
     seed: int
     breakdown_s: dict[str, float]
+    drive: str = ""  # the drive that ran, e.g. `fmu xm430_w210_servo (FMI 2, velocity-servo)` or `kinematic`
+    drive_notes: str = ""  # e.g. commands clamped to the motors' reach ('' when none)
 
 
 def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
@@ -222,6 +226,7 @@ class Simulation:
                 self.recorder = Recorder(
                     bag_path, storage=scenario.recording.storage, distro=scenario.recording.distro, write_log=write_log
                 )
+                self.recorder.add_provenance(run_provenance(scenario, duration_s=duration_s, fmus=self._fmu_records()))
             for sink in ([self.recorder] if self.recorder is not None else []) + list(sinks):
                 self.executor.add_sink(sink, keep)
             self._rosout = RosoutBridge()
@@ -317,12 +322,22 @@ class Simulation:
         )
         return encoders, ekf
 
+    def _fmu_records(self) -> list[dict[str, str]]:
+        """Provenance of the FMUs the drive loaded (none for the kinematic drive)."""
+        if not isinstance(self.drive, FmuDrivetrain):
+            return []
+        info = self.drive.fmu_info
+        return [fmu_record(self.drive.fmu_path, model_name=info.model_name, guid=info.guid)]
+
     def _make_drive(self, bounding_radius_m: float, monitor: CollisionMonitor) -> Drivetrain:
         sc, robot = self.scenario, self.robot
         assert robot.drive is not None
         pose = (sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m, sc.robot.initial_pose.yaw_rad)
-        if sc.drive.type == "kinematic":
-            accel = sc.drive.max_wheel_acceleration_mps2
+        drive_spec = sc.drive
+        if isinstance(drive_spec, FmuDrive) and (fallback := fmu_fallback(drive_spec)) is not None:
+            drive_spec = fallback
+        if drive_spec.type == "kinematic":
+            accel = drive_spec.max_wheel_acceleration_mps2
             params = KinematicParams(
                 wheel_radius_m=robot.drive.wheel_radius_m,
                 wheel_separation_m=robot.drive.wheel_separation_m,
@@ -351,6 +366,8 @@ class Simulation:
             contact=self._tracker.touches,
             free_distance=monitor.free_m,
             bounding_radius_m=bounding_radius_m,
+            plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2,
+            robot_name=robot.name,
         )
 
     # -- the nodes -------------------------------------------------------------------------------
@@ -365,7 +382,7 @@ class Simulation:
         # Latched, once at t = 0: the robot's fixed frames (and map -> odom, which nothing
         # localises yet) and its description; the wheels' transforms on every joint state.
         static = [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
-        static += [(f.parent, f.name, tf_pose(f.T_parent)) for f in robot.frames if f.joint_type is JointType.FIXED]
+        static += [(parent, child, tf_pose(T)) for parent, child, T in static_frames(robot)]  # casters, optical frames
         nodes.append(RobotStatePublisher(urdf_from_robot(robot), static, self._wheels))
 
         pose = sc.robot.initial_pose
@@ -386,10 +403,11 @@ class Simulation:
 
         names = [w[0] for w in self._wheels]
         fmu = isinstance(self.drive, FmuDrivetrain) and len(self._wheels) == 2
+        with_effort = fmu and isinstance(self.drive, FmuDrivetrain) and self.drive.has_effort
         if self._encoders is not None:
             rate = self._encoders.spec.rate_hz
             encoders = self._encoders if self._ekf is not None else None
-            nodes.append(JointStateNode(names, rate, self.drive.wheel_state, encoders, with_effort=fmu))
+            nodes.append(JointStateNode(names, rate, self.drive.wheel_state, encoders, with_effort=with_effort))
             if self._ekf is None:
                 nodes.append(GazeboOdometryNode(robot.base_frame, rate, chassis))
 
@@ -493,4 +511,6 @@ class Simulation:
             mission_result=self.mission.result if self.mission is not None else "none",
             seed=self.scenario.seed,
             breakdown_s=breakdown,
+            drive=self.drive.label,
+            drive_notes=self.drive.saturation.describe() if isinstance(self.drive, FmuDrivetrain) else "",
         )

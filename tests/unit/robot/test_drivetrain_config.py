@@ -66,7 +66,7 @@ def test_mapping_may_be_a_file(tmp_path: Path) -> None:
         ),
         (
             "type: fmu\nfmu: motor.fmu\n",
-            r"drive\.yaml:1: fmu: 'motor\.fmu' is not builtin:NAME; give a file as fmu_file",
+            r"drive\.yaml:1: fmu: 'motor\.fmu' is not builtin:NAME or auto; give a file as fmu_file",
         ),
         (
             "type: fmu\nspeed_loop: {bandwith_hz: 5}\n",

@@ -117,3 +117,25 @@ def test_uneven_slip_turns_the_robot_although_the_wheels_turn_alike() -> None:
     left, right = drive.wheel_state().angle_rad
     assert left == pytest.approx(right)
     assert drive.chassis_state().yaw_rad == pytest.approx(0.3 * 0.2 / 0.287, rel=1e-2)
+
+
+def test_against_a_wall_the_robot_still_turns_and_backs_away() -> None:
+    wall_x = 0.5
+    # A footprint whose reach ahead grows with the yaw: turning from 0 to 1 rad stays clear of the wall.
+    drive = KinematicDrivetrain(
+        WAFFLE, step_ns=STEP_NS, contact=lambda x, y, yaw: x + 0.2 * math.cos(yaw) ** 2 >= wall_x
+    )
+    drive.set_cmd_vel(0.2, 0.0)
+    drive.advance(3000)
+    at_wall = drive.chassis_state()
+    assert at_wall.blocked and at_wall.yaw_rad == 0.0
+    drive.set_cmd_vel(0.2, 0.5)  # forward into the wall while turning: the turn is kept
+    drive.advance(1000)
+    turned = drive.chassis_state()
+    assert turned.yaw_rad > 0.3  # the yaw does not freeze
+    assert turned.x_m + 0.2 * math.cos(turned.yaw_rad) ** 2 < wall_x  # and the contact does not deepen
+    left, right = drive.wheel_state().angle_rad
+    assert right > left  # the wheels turned against each other
+    drive.set_cmd_vel(-0.1, 0.0)
+    drive.advance(1000)
+    assert drive.chassis_state().x_m < turned.x_m - 0.05
