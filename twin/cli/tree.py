@@ -175,7 +175,9 @@ def _add_nodes_option(parser: argparse.ArgumentParser) -> None:
 
 
 def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] = ()) -> BehaviorTreeFactory:
-    factory = BehaviorTreeFactory(nav2=True)
+    from twin.nav.bt_nodes import nav2_factory
+
+    factory = nav2_factory()
     register_mission_nodes(
         factory, navigator=ScriptedNavigator(polls_to_arrive=polls_to_arrive), rng=random.Random(seed)
     )
