@@ -31,13 +31,16 @@ All samples are scored at once with numpy (trajectory poses in closed form by cu
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import distance_transform_cdt
 
+from twin.nav._dwb_native import load_dwb_kernel
 from twin.nav.costmap_grid import CostGrid
 
 __all__ = [
@@ -180,8 +183,10 @@ def prune_and_transform_plan(
 class DwbController:
     """DWB's per-cycle velocity choice; keeps the plan and the critics' state between cycles."""
 
-    def __init__(self, params: DwbParams | None = None) -> None:
+    def __init__(self, params: DwbParams | None = None, *, native: bool = True) -> None:
         self.params = params or DwbParams()
+        #: Roll trajectories out and check obstacles in C when the kernel can be built.
+        self.native = native
         self._plan = np.zeros((0, 3))
         self.plan_to_costmap: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._rotate = _RotateState()
@@ -197,8 +202,8 @@ class DwbController:
         self._rotate = _RotateState()
         self._osc = _OscillationState()
 
-    def sample(self, velocity: tuple[float, float]) -> Trajectories:
-        """The cycle's trajectories from the robot at the origin (x, y, yaw = 0) moving at `velocity`."""
+    def _commands(self, velocity: tuple[float, float]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """The sampled commands (n, 2) and each one's number of time steps."""
         p = self.params
         dt = 1.0 / p.controller_frequency_hz
         vx = _window(
@@ -231,6 +236,13 @@ class DwbController:
             ),
             1,
         ).astype(np.int64)
+        return np.column_stack([cmd_x, cmd_w]), steps
+
+    def _trajectories(
+        self, cmd: NDArray[np.float64], steps: NDArray[np.int64], velocity: tuple[float, float]
+    ) -> Trajectories:
+        p = self.params
+        cmd_x, cmd_w = cmd[:, 0], cmd[:, 1]
         n_max = int(steps.max()) if len(steps) else 1
         k = np.arange(1, n_max + 1)
         step_dt = p.sim_time_s / steps
@@ -245,7 +257,56 @@ class DwbController:
         y = np.cumsum(v * np.sin(yaw_before) * dts, axis=1)
         poses = np.zeros((len(cmd_x), n_max + 1, 3))
         poses[:, 1:, 0], poses[:, 1:, 1], poses[:, 1:, 2] = x, y, yaw_after
-        return Trajectories(velocity=np.column_stack([cmd_x, cmd_w]), poses=poses, steps=steps)
+        return Trajectories(velocity=cmd, poses=poses, steps=steps)
+
+    def sample(self, velocity: tuple[float, float]) -> Trajectories:
+        """The cycle's trajectories from the robot at the origin (x, y, yaw = 0) moving at `velocity`."""
+        cmd, steps = self._commands(velocity)
+        return self._trajectories(cmd, steps, velocity)
+
+    def _rollout(
+        self,
+        cmd: NDArray[np.float64],
+        steps: NDArray[np.int64],
+        velocity: tuple[float, float],
+        pose: tuple[float, float, float],
+        costmap: CostGrid,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """Each trajectory's end pose (costmap frame), max cost along the way, and whether BaseObstacle allows it."""
+        kernel = None if not self.native else load_dwb_kernel()
+        n = len(cmd)
+        if kernel is not None:
+            p = self.params
+            ends = np.empty((n, 3))
+            max_cost = np.empty(n)
+            flags = np.empty(n, dtype=np.uint8)
+            cost = np.ascontiguousarray(costmap.cost)
+            lim = np.array(
+                [p.acc_lim_x, p.decel_lim_x, p.acc_lim_theta, p.decel_lim_theta, p.sim_time_s, velocity[0], velocity[1]]
+            )
+            geo = np.array([pose[0], pose[1], pose[2], costmap.origin_x_m, costmap.origin_y_m, costmap.resolution_m])
+            kernel.twin_dwb_rollout(
+                n,
+                _ptr(np.ascontiguousarray(cmd), ctypes.c_double),
+                _ptr(np.ascontiguousarray(steps), ctypes.c_long),
+                _ptr(lim, ctypes.c_double),
+                _ptr(geo, ctypes.c_double),
+                _ptr(cost, ctypes.c_ubyte),
+                costmap.rows,
+                costmap.cols,
+                _ptr(ends, ctypes.c_double),
+                _ptr(max_cost, ctypes.c_double),
+                _ptr(flags, ctypes.c_ubyte),
+            )
+            return ends, max_cost, flags.astype(bool)
+        world = _to_frame(self._trajectories(cmd, steps, velocity).poses, pose)
+        ends = world[np.arange(n), steps]
+        rows, cols, inside = _cells(costmap, world[..., 0], world[..., 1])
+        costs = np.where(
+            inside, costmap.cost[np.clip(rows, 0, costmap.rows - 1), np.clip(cols, 0, costmap.cols - 1)], 255
+        )
+        ok = np.asarray(inside.all(axis=1) & (costs < _INVALID_COST).all(axis=1), dtype=bool)
+        return ends, costs.max(axis=1).astype(np.float64), ok
 
     def compute_velocity(
         self, pose: tuple[float, float, float], velocity: tuple[float, float], costmap: CostGrid
@@ -269,25 +330,36 @@ class DwbController:
         if p.prune_plan and begin > 0:
             self._plan = self._plan[begin:]
         self.transformed_plan = local
-        traj = self.sample(velocity)
-        world = _to_frame(traj.poses, pose)
+        commands, steps = self._commands(velocity)
+        ends, max_cost, obstacle_ok = self._rollout(commands, steps, velocity, pose, costmap)
         goal = local[-1]
         total, legal = self._score(
-            traj=traj, world=world, local=local, goal=goal, pose=pose, velocity=velocity, costmap=costmap
+            commands=commands,
+            ends=ends,
+            max_cost=max_cost,
+            obstacle_ok=obstacle_ok,
+            local=local,
+            goal=goal,
+            pose=pose,
+            velocity=velocity,
+            costmap=costmap,
         )
         if not legal.any():
             raise NoValidTrajectory(f"No valid trajectories out of {len(legal)}!")
         best = int(np.argmin(np.where(legal, total, np.inf)))
-        self.local_plan = world[best, : traj.steps[best] + 1]
-        cmd = (float(traj.velocity[best, 0]), float(traj.velocity[best, 1]))
+        best_traj = self._trajectories(commands[best : best + 1], steps[best : best + 1], velocity)
+        self.local_plan = _to_frame(best_traj.poses, pose)[0]
+        cmd = (float(commands[best, 0]), float(commands[best, 1]))
         self._osc.debrief(cmd, pose, p)
         return cmd
 
     def _score(
         self,
         *,
-        traj: Trajectories,
-        world: NDArray[np.float64],
+        commands: NDArray[np.float64],
+        ends: NDArray[np.float64],
+        max_cost: NDArray[np.float64],
+        obstacle_ok: NDArray[np.bool_],
         local: NDArray[np.float64],
         goal: NDArray[np.float64],
         pose: tuple[float, float, float],
@@ -295,10 +367,9 @@ class DwbController:
         costmap: CostGrid,
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         p = self.params
-        n = len(traj.velocity)
+        n = len(commands)
         legal = np.ones(n, dtype=bool)
         total = np.zeros(n)
-        ends = world[np.arange(n), traj.steps]
         # RotateToGoal
         rot = self._rotate
         d_goal = math.hypot(pose[0] - goal[0], pose[1] - goal[1])
@@ -307,23 +378,18 @@ class DwbController:
         rot.rotating = rot.rotating or (rot.in_window and speed_sq <= p.trans_stopped_velocity**2)
         if rot.in_window:
             yaw_err = np.abs(_wrap(ends[:, 2] - goal[2]))
-            cmd_sq = traj.velocity[:, 0] ** 2
+            cmd_sq = commands[:, 0] ** 2
             if not rot.rotating:
                 legal &= cmd_sq < speed_sq
                 total += p.rotate_to_goal_scale * (cmd_sq * p.rotate_to_goal_slowing_factor + yaw_err)
             else:
-                legal &= traj.velocity[:, 0] == 0.0
+                legal &= commands[:, 0] == 0.0
                 total += p.rotate_to_goal_scale * yaw_err
         # Oscillation
-        legal &= ~self._osc.oscillating(traj.velocity, pose, p)
+        legal &= ~self._osc.oscillating(commands, pose, p)
         # BaseObstacle
-        rows, cols, inside = _cells(costmap, world[..., 0], world[..., 1])
-        legal &= inside.all(axis=1)
-        costs = np.where(
-            inside, costmap.cost[np.clip(rows, 0, costmap.rows - 1), np.clip(cols, 0, costmap.cols - 1)], 255
-        )
-        legal &= (costs < _INVALID_COST).all(axis=1)
-        total += p.base_obstacle_scale * costs.max(axis=1)
+        legal &= obstacle_ok
+        total += p.base_obstacle_scale * max_cost
         # Map-grid critics
         blocked = costmap.cost >= _INVALID_COST
         path_map = _distance_map(costmap, local[:, :2], blocked)
@@ -464,3 +530,7 @@ def _distance_map(costmap: CostGrid, points: NDArray[np.float64], blocked: NDArr
     dist: NDArray[np.float64] = np.asarray(distance_transform_cdt(seeds, metric="taxicab"), dtype=np.float64)
     dist[blocked] = np.inf
     return dist
+
+
+def _ptr(array: NDArray[Any], ctype: Any) -> Any:
+    return array.ctypes.data_as(ctypes.POINTER(ctype))

@@ -127,3 +127,16 @@ def test_controller_plugin_by_name() -> None:
     assert isinstance(rpp, RppController)
     with pytest.raises(ConfigError, match="unknown controller plugin 'mppi'; the twin has dwb_core"):
         controller_for_plugin("mppi", {})
+
+
+def test_dwb_native_and_numpy_rollouts_choose_the_same_commands() -> None:
+    occupied = np.zeros((120, 120), dtype=bool)
+    occupied[40:60, 70:80] = True
+    costmap = grid(inflate(occupied, 0.05, inscribed_m=0.22, inflation_m=1.0))
+    plan = _curve()
+    fast, slow = DwbController(native=True), DwbController(native=False)
+    fast.set_plan(plan)
+    slow.set_plan(plan)
+    for pose, vel in [((1.0, 1.0, 0.0), (0.0, 0.0)), ((2.0, 1.3, 0.5), (0.2, 0.3)), ((2.8, 2.2, 1.2), (0.22, -0.5))]:
+        assert fast.compute_velocity(pose, vel, costmap) == slow.compute_velocity(pose, vel, costmap)
+        assert np.allclose(fast.local_plan, slow.local_plan)
