@@ -405,9 +405,10 @@ class DwbController:
             px = ends[:, 0] + fpd * np.cos(ends[:, 2])
             py = ends[:, 1] + fpd * np.sin(ends[:, 2])
             r, c, ins = _cells(costmap, px, py)
-            score = np.where(ins, dist_map[np.clip(r, 0, costmap.rows - 1), np.clip(c, 0, costmap.cols - 1)], np.inf)
-            legal &= np.isfinite(score)
-            total += scale * np.where(np.isfinite(score), score, 0.0)
+            score = np.where(ins, dist_map.ravel()[np.where(ins, r * costmap.cols + c, 0)], np.inf)
+            finite = np.isfinite(score)
+            legal &= finite
+            total += scale * np.where(finite, score, 0.0)
         return total, legal
 
 
