@@ -41,7 +41,7 @@ from twin.bt import (  # noqa: E402
 )
 from twin.bt.log import StatusChangeBuffer  # noqa: E402
 from twin.bt.mission_nodes import NavigationStatus, Pose2D, register_mission_nodes  # noqa: E402
-from twin.bt.nav2 import NAV2_LEAVES  # noqa: E402
+from twin.nav.bt_nodes import NAV2_LEAVES, nav2_factory  # noqa: E402
 
 TREES = REPO / "trees"
 BUDGET_MS_PER_SIM_S = 10.0
@@ -94,7 +94,7 @@ def with_ports(cls: type, node_id: str) -> type:
 
 
 def nav2_tree(follow: type) -> tuple[Tree, ManualClock]:
-    factory = BehaviorTreeFactory(nav2=True)
+    factory = nav2_factory()
     roles = {"ComputePathToPose": Instant, "FollowPath": follow, "GoalUpdated": No}
     for node_id, (kind, _) in NAV2_LEAVES.items():
         factory.unregister(node_id)

@@ -105,11 +105,12 @@ class BehaviorTreeFactory:
 
     Args:
         builtins: register BT.CPP 4.x's built-in nodes (and the v3 BlackboardCheck nodes).
-        nav2: also register Nav2's control nodes (PipelineSequence, RecoveryNode, RoundRobin,
-            RateController) and declare Nav2's action/condition leaves (validation only).
+
+    Nav2's control nodes and leaves live in `twin.nav.bt_nodes` (`nav2_factory`, `register_nav2_nodes`),
+    registered as BT.CPP plugins are; the engine itself knows nothing of Nav2.
     """
 
-    def __init__(self, *, builtins: bool = True, nav2: bool = False) -> None:
+    def __init__(self, *, builtins: bool = True) -> None:
         self._builders: dict[str, NodeBuilder | None] = {}
         self._manifests: dict[str, NodeManifest] = {}
         self.enums: dict[str, int] = {}
@@ -118,11 +119,6 @@ class BehaviorTreeFactory:
             for node_id, cls, args in (*_builtin_types(), *_v3_types()):
                 self.register_node_type(cls, node_id, *args)
         self.builtin_ids: frozenset[str] = frozenset(self._manifests)
-        if nav2:
-            from twin.bt.nav2 import declare_nav2_leaves, register_nav2_controls
-
-            register_nav2_controls(self)
-            declare_nav2_leaves(self)
 
     # -- registration --------------------------------------------------------------------------
 

@@ -162,11 +162,11 @@ def _add_nodes_option(parser: argparse.ArgumentParser) -> None:
 
 
 def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] = ()) -> BehaviorTreeFactory:
-    from twin.bt.factory import BehaviorTreeFactory
     from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
     from twin.bt.validate import declare_node_models
+    from twin.nav.bt_nodes import nav2_factory
 
-    factory = BehaviorTreeFactory(nav2=True)
+    factory = nav2_factory()
     register_mission_nodes(
         factory, navigator=ScriptedNavigator(polls_to_arrive=polls_to_arrive), rng=random.Random(seed)
     )

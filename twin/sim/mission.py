@@ -12,10 +12,11 @@ import random
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
-from twin.bt import BehaviorTreeFactory, NodeStatus
+from twin.bt import NodeStatus
 from twin.bt.log import StatusChange, StatusChangeBuffer
 from twin.bt.mission_nodes import LOCATION_FILE_KEY, register_mission_nodes
 from twin.core.clock import s_to_ns
+from twin.nav.bt_nodes import nav2_factory
 from twin.nav.follower import PathFollower
 from twin.nav.navigator import GridNavigator
 from twin.sim.replay import load_commands
@@ -148,7 +149,7 @@ class TreeMission:
     ) -> None:
         self.spec = spec
         self.navigator = navigator
-        factory = BehaviorTreeFactory(nav2=True)
+        factory = nav2_factory()
         register_mission_nodes(factory, navigator=navigator, rng=random.Random(seed))
         factory.load_plugins()
         self.tree = factory.create_tree_from_file(spec.tree, main_tree=spec.main_tree, clock=clock)

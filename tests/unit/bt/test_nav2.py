@@ -6,8 +6,8 @@ from pathlib import Path
 
 from twin.bt import BehaviorTreeFactory, ManualClock, NodeKind, NodeStatus
 from twin.bt.conformance import LeafCallRecorder, ScriptedAction, ScriptedCondition, Step, scripted_node_class
-from twin.bt.nav2 import NAV2_LEAVES
 from twin.bt.validate import validate_file
+from twin.nav.bt_nodes import NAV2_LEAVES, nav2_factory
 
 from .helpers import v4
 
@@ -16,7 +16,7 @@ NAV2_TREE = Path(__file__).resolve().parents[3] / "trees" / "navigate_to_pose_w_
 
 
 def nav2_rig(rig, xml: str, scripts: dict[str, list[str]]):
-    return rig(xml, scripts, factory=BehaviorTreeFactory(nav2=True))
+    return rig(xml, scripts, factory=nav2_factory())
 
 
 def test_pipeline_sequence_reticks_earlier_children_while_a_later_one_runs(rig) -> None:
@@ -97,7 +97,7 @@ def test_rate_controller_ticks_its_child_at_the_rate_on_the_simulation_clock(rig
 
 
 def _stand_in_factory(scripts: dict[str, tuple[Step, ...]]) -> tuple[BehaviorTreeFactory, LeafCallRecorder]:
-    factory = BehaviorTreeFactory(nav2=True)
+    factory = nav2_factory()
     recorder = LeafCallRecorder()
     for node_id, (kind, ports) in NAV2_LEAVES.items():
         factory.unregister(node_id)
@@ -107,7 +107,7 @@ def _stand_in_factory(scripts: dict[str, tuple[Step, ...]]) -> tuple[BehaviorTre
 
 
 def test_the_default_nav2_tree_validates_with_the_nav2_nodes_declared() -> None:
-    report = validate_file(NAV2_TREE, BehaviorTreeFactory(nav2=True))
+    report = validate_file(NAV2_TREE, nav2_factory())
     assert report.ok, report.problems
     assert "ComputePathToPose" in report.declared_only
 

@@ -10,13 +10,14 @@ import pytest
 from twin.bt import BehaviorTreeFactory
 from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
 from twin.bt.validate import validate_file, validate_text
+from twin.nav.bt_nodes import nav2_factory
 
 TREES = Path(__file__).resolve().parents[3] / "trees"
 
 
 @pytest.fixture
 def factory() -> BehaviorTreeFactory:
-    factory = BehaviorTreeFactory(nav2=True)
+    factory = nav2_factory()
     register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
     return factory
 

@@ -1,0 +1,94 @@
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tests.unit.nav.costmaps import grid
+from twin.nav.behaviors import BehaviorStatus, make_behavior
+from twin.nav.smoother import SmootherParams, VelocitySmoother
+
+MS = 1_000_000
+
+
+def test_smoother_limits_acceleration_per_20hz_cycle() -> None:
+    smoother = VelocitySmoother()
+    smoother.command(0.22, 1.0, 0)
+    out = [smoother.step(k * 50 * MS) for k in range(1, 6)]
+    assert out[0] == pytest.approx((0.125, 0.16))  # 2.5 / 20 and 3.2 / 20
+    assert out[1] == pytest.approx((0.22, 0.32))
+    assert out[4] == pytest.approx((0.22, 0.8))
+
+
+def test_smoother_clamps_to_code_default_limits_and_deadband() -> None:
+    smoother = VelocitySmoother(SmootherParams(deadband_velocity=(0.05, 0.0)))
+    smoother.command(0.9, 0.0, 0)
+    for k in range(1, 20):
+        out = smoother.step(k * 50 * MS)
+    assert out == pytest.approx((0.5, 0.0))
+    smoother.command(0.04, 0.0, 1000 * MS)
+    assert smoother.step(1050 * MS) == pytest.approx((0.375, 0.0))  # decelerating towards 0 (deadband)
+
+
+def test_smoother_ramps_down_after_the_timeout_then_stops_publishing() -> None:
+    smoother = VelocitySmoother()
+    assert smoother.step(0) is None  # nothing received yet
+    smoother.command(0.2, 0.0, 0)
+    for k in range(1, 21):
+        smoother.step(k * 50 * MS)  # 1.0 s, still within the timeout
+    assert smoother.step(1050 * MS) == pytest.approx((0.075, 0.0))
+    assert smoother.step(1100 * MS) == pytest.approx((0.0, 0.0))
+    assert smoother.step(1150 * MS) is None
+
+
+def _empty():  # type: ignore[no-untyped-def]
+    return grid(np.zeros((100, 100), dtype=np.uint8))
+
+
+def _run(server: str, request: dict, costmap, pose=(2.5, 2.5, 0.0)):  # type: ignore[no-untyped-def]
+    behavior = make_behavior(server)
+    behavior.start(request, pose, 0)
+    x, y, yaw = pose
+    cmds = []
+    for k in range(400):
+        step = behavior.step(k * 100 * MS, (x, y, yaw), costmap)
+        if step.status is not BehaviorStatus.RUNNING:
+            return step, (x, y, yaw), cmds, k
+        v, w = step.cmd
+        cmds.append(step.cmd)
+        x += v * math.cos(yaw) * 0.1
+        y += v * math.sin(yaw) * 0.1
+        yaw += w * 0.1
+    raise AssertionError("did not finish")
+
+
+def test_spin_turns_the_requested_angle_within_speed_limits() -> None:
+    step, pose, cmds, _ = _run("spin", {"target_yaw": 1.57, "time_allowance": 10.0}, _empty())
+    assert step.status is BehaviorStatus.SUCCEEDED
+    assert pose[2] == pytest.approx(1.57, abs=0.1)
+    w = np.array(cmds)[:, 1]
+    assert (w >= 0.4 - 1e-9).all() and (w <= 1.0 + 1e-9).all()
+
+
+def test_backup_reverses_the_distance_at_the_speed() -> None:
+    step, pose, cmds, k = _run("backup", {"target_x": 0.30, "speed": 0.05, "time_allowance": 10.0}, _empty())
+    assert step.status is BehaviorStatus.SUCCEEDED
+    assert pose[0] == pytest.approx(2.2, abs=0.01)
+    assert {c[0] for c in cmds} == {-0.05}
+    assert k == pytest.approx(60, abs=1)
+
+
+def test_drive_on_heading_stops_before_an_obstacle_ahead() -> None:
+    cost = np.zeros((100, 100), dtype=np.uint8)
+    cost[:, 60:] = 254  # a wall at x = 3 m
+    step, pose, _, _ = _run("drive_on_heading", {"target_x": 2.0, "speed": 0.2, "time_allowance": 20.0}, grid(cost))
+    assert step.status is BehaviorStatus.FAILED and "Collision Ahead" in step.reason
+    assert pose[0] < 3.0
+
+
+def test_wait_lasts_its_duration_and_times_out_are_failures() -> None:
+    step, _, cmds, k = _run("wait", {"time_s": 5.0}, _empty())
+    assert step.status is BehaviorStatus.SUCCEEDED and k == 50 and cmds == [(0.0, 0.0)] * 50
+    slow, _, _, _ = _run("drive_on_heading", {"target_x": 2.0, "speed": 0.05, "time_allowance": 5.0}, _empty())
+    assert slow.status is BehaviorStatus.FAILED

@@ -1,0 +1,78 @@
+"""Nav2 Humble's velocity_smoother in OPEN_LOOP mode: cmd_vel_nav in, /cmd_vel out at 20 Hz.
+
+TB3's yaml has no velocity_smoother section, so Nav2's code defaults hold (TB3_FACTS §4.2):
+max_velocity [0.5, 0, 2.5], min [-0.5, 0, -2.5], max_accel [2.5, 0, 3.2], max_decel [-2.5, 0,
+-3.2], deadband 0, velocity_timeout 1.0 s, scale_velocities false. Each cycle clamps the latest
+command to the velocity limits, zeroes values inside the deadband, and moves the last output (open
+loop: the smoother's own previous command is the current velocity) towards it by at most one cycle
+of acceleration (accelerating while the speed grows without changing sign, else decelerating).
+Without a command for `velocity_timeout_s` it ramps the target to zero and, once the output is zero,
+stops publishing (`step` returns None).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["SmootherParams", "VelocitySmoother"]
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class SmootherParams:
+    """velocity_smoother parameters for (vx, wz); Nav2 Humble code defaults."""
+
+    smoothing_frequency_hz: float = 20.0
+    max_velocity: tuple[float, float] = (0.5, 2.5)
+    min_velocity: tuple[float, float] = (-0.5, -2.5)
+    max_accel: tuple[float, float] = (2.5, 3.2)
+    max_decel: tuple[float, float] = (-2.5, -3.2)
+    deadband_velocity: tuple[float, float] = (0.0, 0.0)
+    velocity_timeout_s: float = 1.0
+
+
+def _limit(current: float, command: float, accel: float, decel: float, rate_hz: float) -> float:
+    if abs(command) >= abs(current) and current * command >= 0.0:
+        hi, lo = accel / rate_hz, -accel / rate_hz
+    else:
+        hi, lo = -decel / rate_hz, decel / rate_hz
+    return current + min(max(command - current, lo), hi)
+
+
+class VelocitySmoother:
+    """One smoother; `command` on each cmd_vel_nav message, `step` at `smoothing_frequency_hz`."""
+
+    def __init__(self, params: SmootherParams | None = None) -> None:
+        self.params = params or SmootherParams()
+        self._target = (0.0, 0.0)
+        self._last_cmd_ns: int | None = None
+        self._out = (0.0, 0.0)
+        self._stopped = True
+
+    def command(self, vx: float, wz: float, t_ns: int) -> None:
+        """Take a new command (cmd_vel_nav) received at `t_ns`."""
+        p = self.params
+        target = []
+        for i, raw in enumerate((vx, wz)):
+            v = min(max(raw, p.min_velocity[i]), p.max_velocity[i])
+            target.append(0.0 if abs(v) < p.deadband_velocity[i] else v)
+        self._target = (target[0], target[1])
+        self._last_cmd_ns = t_ns
+        self._stopped = False
+
+    def step(self, t_ns: int) -> tuple[float, float] | None:
+        """Return the (vx, wz) to publish on /cmd_vel at `t_ns`, or None when nothing is published."""
+        p = self.params
+        if self._last_cmd_ns is None:
+            return None
+        target = self._target
+        if t_ns - self._last_cmd_ns > round(p.velocity_timeout_s * 1e9):
+            if self._out == (0.0, 0.0) or self._stopped:
+                self._stopped = True
+                return None
+            target = (0.0, 0.0)
+        rate = p.smoothing_frequency_hz
+        self._out = (
+            _limit(self._out[0], target[0], p.max_accel[0], p.max_decel[0], rate),
+            _limit(self._out[1], target[1], p.max_accel[1], p.max_decel[1], rate),
+        )
+        return self._out
