@@ -54,7 +54,7 @@ def _previous_metadata(bag: Path) -> BagMetadata | None:
         return None
     try:
         return parse_metadata(path.read_text(encoding="utf-8"), path)
-    except (BagError, OSError) as err:
+    except (BagError, OSError, UnicodeDecodeError) as err:
         _log.warning("%s: ignoring unreadable metadata (%s)", path, err)
         return None
 

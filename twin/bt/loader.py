@@ -33,7 +33,7 @@ from twin.bt.script import Script, ScriptSyntaxError, parse_script
 from twin.bt.status import NodeKind, PortDirection
 from twin.bt.tree import SubtreeInstance, Tree
 from twin.bt.values import ConversionError, PortType
-from twin.core.config import suggest
+from twin.core.config import read_text_file, suggest
 from twin.core.errors import TreeError
 
 if TYPE_CHECKING:
@@ -306,13 +306,9 @@ class TreeParser:
             msg = f"{where}<include> loops back to a file being loaded ({chain})"
             raise TreeError(msg)
         try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            msg = f"{where}{path}: file not found"
-            raise TreeError(msg) from None
-        except OSError as err:
-            msg = f"{where}{path}: cannot read ({err.strerror})"
-            raise TreeError(msg) from None
+            text = read_text_file(path, TreeError, what="a BehaviorTree.CPP XML file")
+        except TreeError as err:
+            raise err.with_context(before=where) from None
         self._loading.append(resolved)
         try:
             return self.load_text(text, source=str(path), base_dir=resolved.parent)

@@ -6,18 +6,23 @@ import argparse
 import dataclasses
 import datetime
 import json
+import math
 import os
+import shutil
 import signal
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from twin.cli.progress import Progress
-from twin.core.errors import ConfigError, Interrupted, TwinError
+from twin.core.errors import ConfigError, Interrupted, SimulationError, TwinError
+from twin.sim.check import check_scenario
 from twin.sim.scenario import Scenario, default_scenario_path, load_scenario
 from twin.sim.simulation import RunSummary, Simulation
+from twin.sim.watchdog import StuckReport, Watchdog, WatchdogAbort, interrupt_main_thread
 
 _EPILOG = """\
 examples:
@@ -26,10 +31,31 @@ examples:
   twin simulate my.yaml --seed 7 --storage sqlite3 --distro jazzy
   twin simulate --json | jq .bag_path             a machine-readable summary on stdout
 
-The run ends when the mission ends, at --duration (or the scenario's max_duration_s), or on
-Ctrl-C / SIGTERM; in every case the bag is closed and readable. Exit codes: 0 done, 2 scenario
-error, 3 world error, 4 FMU error, 5 bag error, 6 tree error, 130 interrupted.
+The run ends when the mission ends, at --duration (or the scenario's max_duration_s), on
+Ctrl-C / SIGTERM, or when the watchdog finds a step that has not returned for --watchdog-s wall
+seconds (a hung FMU, a tree that never returns); in every case the bag is closed and readable.
+The scenario is checked first (as `twin scenario check` does): a refused run creates no bag folder.
+
+exit codes:
+  0    the run ended: mission SUCCESS, --duration reached, or a mission with no result
+  1    the mission ended in FAILURE (the summary names the goal and why; the bag is complete)
+  2    scenario or option error (a value that cannot be honoured, a missing or broken file)
+  3    world error (SDF world or robot model)
+  4    FMU error
+  5    bag error (cannot write the bag folder, disk full)
+  6    behaviour-tree error (the tree file, or a node failing while it ticks)
+  7    estimation error
+  8    the simulation cannot continue, e.g. the watchdog found a stuck step (what, and where)
+  70   internal error (a bug in twin: please report it with the --debug output)
+  130  interrupted by Ctrl-C (SIGINT); the bag is complete
+  143  stopped by SIGTERM; the bag is complete
 """
+
+
+_WATCHDOG_S = 10.0
+# After the watchdog asks a stuck main thread to unwind, how long it waits before it closes the bag
+# itself and ends the process (the thread is then inside a C call, e.g. an FMU's doStep).
+_UNWIND_S = 2.0
 
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
@@ -55,6 +81,13 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), help="bag storage (overrides the scenario)")
     parser.add_argument(
         "--distro", choices=("humble", "iron", "jazzy", "kilted", "rolling"), help="ROS 2 distro the bag targets"
+    )
+    parser.add_argument(
+        "--watchdog-s",
+        type=float,
+        default=_WATCHDOG_S,
+        metavar="S",
+        help=f"end the run (exit 8) when a step has not returned for S wall seconds (default {_WATCHDOG_S:g})",
     )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON on stdout")
     parser.set_defaults(func=_simulate)
@@ -109,7 +142,75 @@ def _result(summary: RunSummary) -> str:
     return f" (tree {summary.mission_result})" if summary.mission_result in ("SUCCESS", "FAILURE") else ""
 
 
+def _check_options(args: argparse.Namespace) -> None:
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        msg = f"--duration must be a positive, finite number of seconds, got {args.duration}"
+        raise ConfigError(msg)
+    if not args.watchdog_s > 0:  # NaN too; inf turns the stuck-step check off
+        msg = f"--watchdog-s must be a positive number of seconds (inf: no watchdog), got {args.watchdog_s}"
+        raise ConfigError(msg)
+    if args.seed is not None and args.seed < 0:
+        msg = f"--seed must be a non-negative whole number, got {args.seed}"
+        raise ConfigError(msg)
+
+
+class _Guard:
+    """The watchdog's actions for `twin simulate`: unwind the main thread, else save the bag and exit."""
+
+    def __init__(self, sim: Simulation, *, debug: bool) -> None:
+        self.sim = sim
+        self.debug = debug
+        self.main = threading.get_ident()
+        self.done = threading.Event()  # set by the main thread once the bag is closed
+        self.report: StuckReport | None = None
+        self.signum: int | None = None
+
+    def message(self) -> str:
+        report = self.report
+        assert report is not None
+        bag = self.sim.recorder.path
+        if self.signum is None:
+            return (
+                f"the step at t={report.sim_t_s:.3f} s has not returned for {report.stuck_s:.1f} s of wall time "
+                f"(watchdog): stuck in {report.where}; the bag up to t={report.sim_t_s:.3f} s is in {bag}"
+            )
+        name = signal.Signals(self.signum).name
+        return (
+            f"stopped by {name} while the step at t={report.sim_t_s:.3f} s was stuck in {report.where}; "
+            f"the bag up to t={report.sim_t_s:.3f} s is in {bag}"
+        )
+
+    def exit_code(self) -> int:
+        if self.signum is None:
+            return SimulationError.exit_code
+        return Interrupted.exit_code if self.signum == signal.SIGINT else 128 + self.signum
+
+    def on_stuck(self, report: StuckReport) -> None:
+        self._abort(report, None)
+
+    def on_signal(self, signum: int, report: StuckReport) -> None:
+        self._abort(report, signum)
+
+    def _abort(self, report: StuckReport, signum: int | None) -> None:
+        self.report, self.signum = report, signum
+        interrupt_main_thread(self.main, signum)  # a Python loop unwinds: the main thread closes the bag
+        if self.done.wait(_UNWIND_S):
+            return
+        # The main thread is inside a C call and cannot unwind: save the bag from here and end the process.
+        try:
+            self.sim.recorder.close()
+        except BaseException as err:  # the process ends either way; say what happened
+            print(f"twin: error: closing the bag failed: {err}", file=sys.stderr)
+        if self.debug:
+            print(f"twin: stuck main thread:\n{report.stack}", file=sys.stderr, end="")
+        print(f"twin: error: {self.message()}", file=sys.stderr)
+        sys.stderr.flush()
+        sys.stdout.flush()
+        os._exit(self.exit_code())
+
+
 def _simulate(args: argparse.Namespace) -> int:
+    _check_options(args)
     path = args.scenario if args.scenario is not None else default_scenario_path()
     scenario = load_scenario(path)
     changes: dict[str, Any] = {}
@@ -123,10 +224,9 @@ def _simulate(args: argparse.Namespace) -> int:
     if recording:
         changes["recording"] = dataclasses.replace(scenario.recording, **recording)
     scenario = dataclasses.replace(scenario, **changes)
-    if args.duration is not None and not args.duration > 0:
-        msg = f"--duration must be a positive number of seconds, got {args.duration}"
-        raise ConfigError(msg)
+    check_scenario(scenario, path)
     bag_path = _bag_path(scenario, args.out)
+    existed = bag_path.exists()
 
     flag = _StopFlag()
     progress = Progress(args.duration or scenario.max_duration_s)
@@ -136,23 +236,41 @@ def _simulate(args: argparse.Namespace) -> int:
         simulation = Simulation(
             scenario, bag_path=bag_path, duration_s=args.duration, write_log=Path(write_log) if write_log else None
         )
-    except ConfigError as err:
+    except BaseException as err:
+        if not existed and bag_path.is_dir():  # refused after the bag folder was made: leave nothing behind
+            shutil.rmtree(bag_path, ignore_errors=True)
+        if not isinstance(err, ConfigError):
+            raise
         text = str(err)
         if not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text or text.startswith("/"):
             raise
         # A scenario value the loaded world or robot refuses: name the scenario file too.
-        msg = f"{path}: {text}"
-        raise ConfigError(msg) from err
-    with _graceful_signals(flag), simulation as sim:
-        try:
-            summary = sim.run(should_stop=flag, progress=progress.update)
-        except TwinError as err:
-            progress.close()
-            t_s = sim.t_s
-            msg = f"{err} (the bag up to t={t_s:.3f} s is in {bag_path})"
-            raise type(err)(msg) from err
-        finally:
-            progress.close()
+        raise err.with_context(before=f"{path}: ") from err
+    guard = _Guard(simulation, debug=bool(getattr(args, "debug", False)))
+    try:
+        with _graceful_signals(flag), simulation as sim:
+            watchdog = Watchdog(
+                lambda: sim.t_s, timeout_s=args.watchdog_s, on_stuck=guard.on_stuck, on_signal=guard.on_signal
+            )
+            try:
+                with watchdog:
+                    summary = sim.run(should_stop=flag, progress=progress.update)
+            except TwinError as err:
+                progress.close()
+                t_s = sim.t_s
+                raise err.with_context(after=f" (the bag up to t={t_s:.3f} s is in {bag_path})") from err
+            finally:
+                progress.close()
+    except WatchdogAbort:
+        guard.done.set()
+        if guard.report is None:  # not ours: cannot happen, but never hide an exception
+            raise
+        if guard.debug:
+            print(f"twin: stuck main thread:\n{guard.report.stack}", file=sys.stderr, end="")
+        print(f"twin: error: {guard.message()}", file=sys.stderr)
+        return guard.exit_code()
+    finally:
+        guard.done.set()
     if args.json:
         print(json.dumps({**dataclasses.asdict(summary), "bag_path": str(summary.bag_path)}, indent=2))
     else:
@@ -160,4 +278,8 @@ def _simulate(args: argparse.Namespace) -> int:
     if flag.signum is not None:
         print(f"twin: stopped by {signal.Signals(flag.signum).name}; the bag is complete", file=sys.stderr)
         return Interrupted.exit_code if flag.signum == signal.SIGINT else 128 + flag.signum
+    if summary.mission_result == "FAILURE":
+        failure = getattr(simulation.mission, "failure", "") or "the mission returned FAILURE"
+        print(f"twin: mission FAILURE: {failure}; the bag is complete: {summary.bag_path}", file=sys.stderr)
+        return 1
     return 0

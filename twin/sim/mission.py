@@ -132,6 +132,20 @@ class TreeMission:
                 _log.warning("Navigation Failed")
         return self._changes.flush()
 
+    @property
+    def failure(self) -> str:
+        """Which goal failed last and why, once the tree has returned FAILURE (else empty)."""
+        if self.result != "FAILURE":
+            return ""
+        failures: list[tuple[int, str]] = []
+        for _, node in self.tree.walk():
+            failure = getattr(node, "failure", None)
+            if isinstance(failure, tuple):
+                failures.append(failure)
+        if not failures:
+            return "the tree returned FAILURE with no failed goal"
+        return str(max(failures)[1])
+
     def node_name(self, uid: int) -> str:
         """The name of a node, as Nav2's BT log carries it."""
         return self.tree.node_by_uid(uid).name
