@@ -15,8 +15,10 @@ with Recorder("bags/run1") as rec:               # MCAP, Humble-readable metadat
 ```
 
 `write()` only appends to a list. Every `flush_interval_s` of wall time (checked on writes, see
-`poll()`), or every `chunk_messages` messages, the batch goes to disk: one MCAP chunk with its
-indexes in a single write, or one committed sqlite3 transaction. A killed process therefore loses
+`poll()`), every `flush_interval_sim_s` of message time (a run at 100x real time loses no more
+simulated time to a kill than one at real time), or every `chunk_messages` messages, the batch
+goes to disk: one MCAP chunk with its indexes in a single write, or one committed sqlite3
+transaction. A killed process therefore loses
 at most the last interval; `twin bag recover` makes what it left a complete bag. Closing (also on
 an exception inside the `with` block) writes the summary and `metadata.yaml`.
 """
@@ -54,6 +56,7 @@ TopicHandle = NewType("TopicHandle", int)
 STORAGES = ("mcap", "sqlite3")
 _EXTENSIONS = {"mcap": ".mcap", "sqlite3": ".db3"}
 _MAX_STEP = 64  # most writes between two looks at the clock
+_NEVER = 2**63  # beyond any int64 time
 _DISK_FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
 
@@ -88,6 +91,7 @@ class Recorder:
         storage: str = "mcap",
         distro: str = "humble",
         flush_interval_s: float = 0.25,
+        flush_interval_sim_s: float | None = 0.4,
         chunk_messages: int = 4096,
         fsync: bool = False,
         custom_data: dict[str, str] | None = None,
@@ -102,6 +106,9 @@ class Recorder:
             distro: Whose rosbag2 the bag imitates: `humble` (default; metadata version 8, read by
                 every distro from Humble on), `iron`, or `jazzy`/`kilted`/`rolling` (version 9).
             flush_interval_s: Longest wall time a written message waits before reaching the disk.
+            flush_interval_sim_s: Longest message time (`t_ns`) a batch spans before it goes to disk,
+                so a run far faster than real time loses at most this much simulated time to a
+                kill (None: by wall time only).
             chunk_messages: Messages per MCAP chunk / sqlite3 transaction (a batch may run a few
                 dozen over while the recorder is not looking).
             fsync: Also fsync each flush (survives power loss, not just a killed process).
@@ -119,6 +126,12 @@ class Recorder:
         if not flush_interval_s > 0:
             msg = f"flush_interval_s must be positive, got {flush_interval_s}"
             raise BagError(msg)
+        if flush_interval_sim_s is not None and not flush_interval_sim_s > 0:
+            msg = f"flush_interval_sim_s must be positive, got {flush_interval_sim_s}"
+            raise BagError(msg)
+        # Past this message time the pending batch is flushed (set from each flushed batch's last time).
+        self._sim_interval_ns = round(flush_interval_sim_s * 1e9) if flush_interval_sim_s is not None else None
+        self._sim_deadline_ns = self._sim_interval_ns if self._sim_interval_ns is not None else _NEVER
         self.profile = distro_profile(distro)
         self.path = Path(path)
         self.storage_id = storage
@@ -262,7 +275,13 @@ class Recorder:
         """
         pending = self._pending
         pending.append((handle, t_ns, data))
-        if len(pending) >= self._next_check:
+        try:
+            due = t_ns >= self._sim_deadline_ns
+        except TypeError:  # not a time: flush now, which names the bad write
+            due = True
+        if due:
+            self.flush()
+        elif len(pending) >= self._next_check:
             self._check(len(pending))
 
     def _write_and_log(self, handle: TopicHandle, t_ns: int, data: bytes) -> None:
@@ -310,6 +329,9 @@ class Recorder:
         self._next_check = self._step
         if not batch:
             return
+        if self._sim_interval_ns is not None:
+            last_t = batch[-1][1]
+            self._sim_deadline_ns = (last_t if isinstance(last_t, int) else 0) + self._sim_interval_ns
         try:
             self._storage.write_batch(batch)
         except (KeyboardInterrupt, SystemExit):
