@@ -330,7 +330,7 @@ class Recorder:
         if not batch:
             return
         if self._sim_interval_ns is not None:
-            last_t = batch[-1][1]
+            last_t: object = batch[-1][1]  # checked by the storage below; may be bad input here
             self._sim_deadline_ns = (last_t if isinstance(last_t, int) else 0) + self._sim_interval_ns
         try:
             self._storage.write_batch(batch)
