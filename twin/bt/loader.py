@@ -109,6 +109,10 @@ class XmlElement:
         return f"<{self.tag} {self.attrs} @{self.location}>"
 
 
+MAX_XML_DEPTH: Final = 100
+"""Deepest element nesting a tree file may have (the loader and ticks recurse per level)."""
+
+
 def parse_xml(text: str, source: str) -> XmlElement:
     """Parse XML text into elements with line numbers.
 
@@ -120,6 +124,12 @@ def parse_xml(text: str, source: str) -> XmlElement:
     roots: list[XmlElement] = []
 
     def start(tag: str, attrs: dict[str, str]) -> None:
+        if len(stack) >= MAX_XML_DEPTH:
+            msg = (
+                f"{source}:{parser.CurrentLineNumber}: elements nested deeper than {MAX_XML_DEPTH} levels; "
+                "twin reads trees up to that depth: split the tree into <SubTree>s"
+            )
+            raise TreeError(msg)
         element = XmlElement(tag, dict(attrs), parser.CurrentLineNumber, source)
         (stack[-1].children if stack else roots).append(element)
         stack.append(element)
@@ -478,6 +488,12 @@ class TreeParser:
             raise TreeError(msg)
         first = self.documents[0]
         if first.main_tree_to_execute:
+            if first.main_tree_to_execute not in self.tree_roots:
+                msg = (
+                    f"{first.root.location}: main_tree_to_execute={first.main_tree_to_execute!r} names no tree "
+                    f"in the file{suggest(first.main_tree_to_execute, list(self.tree_roots)) or ' (it has none)'}"
+                )
+                raise TreeError(msg)
             return first.main_tree_to_execute
         if len(self.tree_roots) == 1:
             return next(iter(self.tree_roots))

@@ -271,15 +271,18 @@ def _simulate(args: argparse.Namespace) -> int:
         return guard.exit_code()
     finally:
         guard.done.set()
+    failure = ""
+    if summary.mission_result == "FAILURE":
+        failure = getattr(simulation.mission, "failure", "") or "the mission returned FAILURE"
     if args.json:
-        print(json.dumps({**dataclasses.asdict(summary), "bag_path": str(summary.bag_path)}, indent=2))
+        doc = {**dataclasses.asdict(summary), "bag_path": str(summary.bag_path), "mission_failure": failure}
+        print(json.dumps(doc, indent=2))
     else:
         print(_summary_line(summary))
     if flag.signum is not None:
         print(f"twin: stopped by {signal.Signals(flag.signum).name}; the bag is complete", file=sys.stderr)
         return Interrupted.exit_code if flag.signum == signal.SIGINT else 128 + flag.signum
-    if summary.mission_result == "FAILURE":
-        failure = getattr(simulation.mission, "failure", "") or "the mission returned FAILURE"
+    if failure:
         print(f"twin: mission FAILURE: {failure}; the bag is complete: {summary.bag_path}", file=sys.stderr)
         return 1
     return 0

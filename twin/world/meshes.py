@@ -51,6 +51,8 @@ class MeshCache:
             WorldError: If the file cannot be read as a mesh.
         """
         if path not in self._files:
+            if path.suffix.lower() == ".stl":
+                _check_stl(path, where)
             try:
                 loaded = trimesh.load(str(path), force="scene", process=False)
             except Exception as err:  # trimesh raises many kinds; all mean "not a mesh we can read"
@@ -105,6 +107,37 @@ class MeshCache:
         if geometry.scale != (1.0, 1.0, 1.0):
             mesh.apply_scale(np.asarray(geometry.scale, dtype=float))  # type: ignore[no-untyped-call]
         return mesh
+
+
+def _check_stl(path: Path, where: str) -> None:
+    """Refuse a file that is neither a binary STL (its size matches its triangle count) nor ASCII STL.
+
+    trimesh would otherwise guess the text encoding of any non-binary file, and fail on that.
+
+    Raises:
+        WorldError: Naming the file and what it is not.
+    """
+    try:
+        with path.open("rb") as stream:
+            head = stream.read(84)
+            size = path.stat().st_size
+            if len(head) == 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little"):
+                return  # binary STL
+            text = head + stream.read(4096)
+    except OSError as err:
+        msg = f"{where}: cannot read mesh {path}: {err.strerror}"
+        raise WorldError(msg) from None
+    if text.lstrip().lower().startswith(b"solid"):
+        try:
+            text.decode("ascii")
+            return
+        except UnicodeDecodeError:
+            pass
+    msg = (
+        f"{where}: mesh {path} is not an STL file: neither binary STL (its {size} bytes do not match the "
+        "triangle count in its header) nor ASCII STL (text starting with 'solid'); re-export it"
+    )
+    raise WorldError(msg)
 
 
 def _collada_unit(path: Path) -> float:
