@@ -24,6 +24,10 @@ __all__ = ["check_inputs", "check_scenario"]
 
 # Numbers that may be infinite (none today: every number of a scenario must be finite).
 _MAY_BE_INFINITE: frozenset[str] = frozenset()
+# Below this a publication would fire less than once in 16 minutes: surely a typo (and 1/rate must fit in ns).
+_MIN_RATE_HZ = 1e-3
+# More rays per scan than any real lidar has (the TB3's LDS-01 has 360); each costs memory and time.
+_MAX_SAMPLES = 100_000
 # Numbers that cannot be negative: durations, distances, rates, gains, limits, noise levels.
 _UNSIGNED_SUFFIXES = ("_hz", "_s", "_m", "_kgm2", "_per_rev", "gain", "samples", "precision", "_fraction")
 _SIGNED_LEAVES = frozenset(("x_m", "y_m"))
@@ -66,8 +70,8 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
             if math.isinf(value) and key not in _MAY_BE_INFINITE:
                 raise _refuse(path, key, f"is {value}; give a finite number")
         if key.endswith("_hz") and isinstance(value, int | float) and not isinstance(value, bool):
-            if not value > 0:
-                raise _refuse(path, key, f"must be a positive rate, got {value}")
+            if not value >= _MIN_RATE_HZ:
+                raise _refuse(path, key, f"must be a rate of at least {_MIN_RATE_HZ:g} Hz, got {value}")
             if value > physics_hz + 1e-9:
                 raise _refuse(
                     path,
@@ -85,8 +89,8 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
     if not scenario.max_duration_s > 0:
         raise _refuse(path, "max_duration_s", f"must be a positive number of seconds, got {scenario.max_duration_s}")
     lidar = scenario.sensors.lidar
-    if lidar.samples is not None and lidar.samples < 1:
-        raise _refuse(path, "sensors.lidar.samples", f"must be at least 1, got {lidar.samples}")
+    if lidar.samples is not None and not 1 <= lidar.samples <= _MAX_SAMPLES:
+        raise _refuse(path, "sensors.lidar.samples", f"must be between 1 and {_MAX_SAMPLES}, got {lidar.samples}")
     if lidar.range_min_m is not None and lidar.range_max_m is not None and lidar.range_min_m >= lidar.range_max_m:
         raise _refuse(
             path,
@@ -104,6 +108,32 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
             f"{lidar.angle_min_rad} is not below angle_max_rad {lidar.angle_max_rad}",
         )
     _check_files(scenario, path)
+    _check_lidar_of_robot(scenario, path)
+
+
+def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
+    """Check the lidar overrides against the robot's own SDF values (one override may contradict the other)."""
+    lidar = scenario.sensors.lidar
+    if lidar.range_min_m is None and lidar.range_max_m is None:
+        return
+    from twin.world import load_robot
+
+    try:
+        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+    except TwinError as err:
+        raise err.with_context(before=f"{path}: robot.model: ") from None
+    if robot.lidar is None:
+        return  # simulate names this itself
+    range_min = lidar.range_min_m if lidar.range_min_m is not None else robot.lidar.range_min_m
+    range_max = lidar.range_max_m if lidar.range_max_m is not None else robot.lidar.range_max_m
+    if not range_min < range_max:
+        key = "sensors.lidar.range_min_m" if lidar.range_min_m is not None else "sensors.lidar.range_max_m"
+        raise _refuse(
+            path,
+            key,
+            f"the lidar's range would be {range_min:g} .. {range_max:g} m (the robot's SDF gives the other end); "
+            "make range_min_m < range_max_m",
+        )
 
 
 def _check_files(scenario: Scenario, path: Path) -> None:
