@@ -173,6 +173,20 @@ DECODE_CASES: dict[str, tuple[list[str], str, bytes, int, str]] = {
         "UTF-8",
     ),
     "bag_info_metadata_binary": (["bag", "info", "{d}"], "metadata.yaml", BINARY, 5, "metadata.yaml"),
+    "bag_info_metadata_bad_count": (
+        ["bag", "info", "{d}"],
+        "metadata.yaml",
+        b"rosbag2_bagfile_information:\n  version: 8\n  message_count: 1 1534\n",
+        5,
+        "metadata.yaml",
+    ),
+    "bag_recover_metadata_bad_count": (
+        ["bag", "recover", "{d}"],
+        "metadata.yaml",
+        b"rosbag2_bagfile_information:\n  version: 8\n  message_count: 1 1534\n",
+        5,
+        "no .mcap or .db3",
+    ),
 }
 
 

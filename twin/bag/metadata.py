@@ -208,6 +208,17 @@ def parse_metadata(text: str, path: Path) -> BagMetadata:
         BagError: Naming `path` and the problem, if the text is not rosbag2 metadata.
     """
     try:
+        return _parse_metadata(text, path)
+    except (ValueError, TypeError, KeyError, AttributeError) as err:  # a value of the wrong kind
+        msg = f"{path}: not valid rosbag2 metadata ({type(err).__name__}: {err}); `twin bag recover` rebuilds it"
+        raise BagError(msg) from None
+    except RecursionError:
+        msg = f"{path}: not valid rosbag2 metadata (nested too deeply)"
+        raise BagError(msg) from None
+
+
+def _parse_metadata(text: str, path: Path) -> BagMetadata:
+    try:
         doc = safe_load(text)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
