@@ -5,8 +5,11 @@ compiled (`native`) and in Python (`lowlevel`, `convenience`). Prints JSON.
 The drivetrain is advanced in batches of 5 steps, as the simulation loop does between its events
 (IMU at 200 Hz), on open floor: the contact check says free and the free distance is 10 m.
 `native_one_call` runs the whole measurement in one `advance`: the compiled loop's own cost.
+`velocity-servo_lowlevel_isolated` runs the FMUs in a child process (`drive: {isolation: process}`);
+`isolation_overhead_us_per_wheel_step` is its wall time over the same Python loop in-process, per
+wheel per step (`--isolation-only` measures just these two).
 
-    python benchmarks/bench_drivetrain.py [--seconds 5] [--fmi 2|3]
+    python benchmarks/bench_drivetrain.py [--seconds 5] [--fmi 2|3] [--isolation-only]
 """
 
 from __future__ import annotations
@@ -81,9 +84,9 @@ def chassis_only(steps: int) -> float:
     return _best(run)
 
 
-def drivetrain(fmi: int, api: str, profile: str, steps: int, batch: int = 5) -> float:
+def drivetrain(fmi: int, api: str, profile: str, steps: int, batch: int = 5, isolation: str = "none") -> float:
     fmu = "builtin:xm430_w210" if profile == "voltage" else "builtin:xm430_w210_servo"
-    drive = FmuDrive(fmu=fmu, fmi_version=fmi, profile=profile, api=api)
+    drive = FmuDrive(fmu=fmu, fmi_version=fmi, profile=profile, api=api, isolation=isolation)  # type: ignore[arg-type]
     with FmuDrivetrain(
         drive,
         ChassisParams.tb3_waffle(),
@@ -92,7 +95,7 @@ def drivetrain(fmi: int, api: str, profile: str, steps: int, batch: int = 5) -> 
         free_distance=lambda x, y, a: 10.0,
         bounding_radius_m=0.3,
     ) as dt:
-        assert dt.native == (api == "native")
+        assert dt.native == (api == "native" and isolation == "none")
         dt.set_cmd_vel(0.2, 0.3)
 
         def run() -> None:
@@ -102,12 +105,32 @@ def drivetrain(fmi: int, api: str, profile: str, steps: int, batch: int = 5) -> 
         return _best(run)
 
 
+def isolation_cost(fmi: int, steps: int, per_s: float) -> dict[str, object]:
+    """The velocity-servo drive's Python loop with the FMUs in-process and in a child process."""
+    in_process = drivetrain(fmi, "lowlevel", "velocity-servo", steps) * per_s
+    isolated = drivetrain(fmi, "lowlevel", "velocity-servo", steps, isolation="process") * per_s
+    return {
+        "ms_wall_per_sim_s_isolation": {
+            "velocity-servo_lowlevel": round(in_process, 3),
+            "velocity-servo_lowlevel_isolated": round(isolated, 3),
+        },
+        # ms per simulated second at 1 ms steps = µs per step; two wheels per step.
+        "isolation_overhead_us_per_wheel_step": round((isolated - in_process) / 2.0, 3),
+        "isolated_over_in_process": round(isolated / in_process, 1),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds per measurement")
     parser.add_argument("--fmi", type=int, choices=(2, 3), default=2)
+    parser.add_argument("--isolation-only", action="store_true", help="measure only the isolated drive's overhead")
     args = parser.parse_args()
     steps = round(args.seconds / STEP_S)
+    isolated = isolation_cost(args.fmi, steps, 1e3 / args.seconds)
+    if args.isolation_only:
+        print(json.dumps({"benchmark": "drivetrain_isolation", "fmi_version": args.fmi, **isolated}, indent=2))
+        return
     path = resolve_fmu("builtin:xm430_w210", fmi_version=args.fmi)
     per_s = 1e3 / args.seconds  # seconds measured → ms per simulated second
     shim = fmu_only(path, "shim", steps) * per_s
@@ -151,6 +174,7 @@ def main() -> None:
                 whole["velocity-servo_lowlevel"] / whole["velocity-servo_native"], 1
             ),
         },
+        **isolated,
         "real_time_factor_drivetrain_voltage_native": round(1e3 / whole["voltage_native"], 1),
         "real_time_factor_drivetrain_voltage_lowlevel": round(1e3 / whole["voltage_lowlevel"], 1),
     }

@@ -7,7 +7,10 @@ for two configurations of the same scenario:
   full        the default scenario as shipped: IMU at 200 Hz, encoders, EKF /odom, ground truth
 Speed is compared as ratios within one run (this machine is shared and noisy), never asserted.
 
-    python benchmarks/bench_sim.py [--sim-s 60] [--scenario FILE] [--drive kinematic|fmu] [--repeat 3]
+    python benchmarks/bench_sim.py [--sim-s 60] [--scenario FILE] [--drive scenario|kinematic|fmu] [--repeat 3]
+
+`--drive scenario` (the default) keeps the scenario's drive: the FMU drive of the robot's own motors in
+velocity mode for the default scenario. `kinematic` swaps in ideal wheels, `fmu` the default FMU drive.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from twin.robot.drivetrain import FmuDrive
-from twin.sim.scenario import default_scenario_path, load_scenario
+from twin.sim.scenario import KinematicDrive, default_scenario_path, load_scenario
 from twin.sim.simulation import Simulation
 
 
@@ -72,14 +75,17 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sim-s", type=float, default=60.0)
     parser.add_argument("--scenario", type=Path, default=default_scenario_path())
-    parser.add_argument("--drive", choices=("kinematic", "fmu"), default="kinematic")
+    parser.add_argument("--drive", choices=("scenario", "kinematic", "fmu"), default="scenario")
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
     scenario = load_scenario(args.scenario)
     if args.drive == "fmu":
-        scenario = dataclasses.replace(scenario, drive=FmuDrive())
+        scenario = dataclasses.replace(scenario, drive=FmuDrive(fmu="auto", profile="velocity-servo"))
+    elif args.drive == "kinematic":
+        scenario = dataclasses.replace(scenario, drive=KinematicDrive())
     configs = {"foundation": foundation(scenario), "full": scenario}
-    out: dict[str, object] = {"benchmark": "default_scenario", "scenario": str(args.scenario), "drive": args.drive}
+    drive = scenario.drive.type if args.drive == "scenario" else args.drive
+    out: dict[str, object] = {"benchmark": "default_scenario", "scenario": str(args.scenario), "drive": drive}
     for name, config in configs.items():
         out[name] = measure(config, args.sim_s, args.repeat)
     full, base = out["full"], out["foundation"]

@@ -2,8 +2,8 @@
  *
  * Not part of any FMU. It does, step for step and operation for operation, what the Python reference
  * does (FmuDrivetrain._run_voltage / _run_servo in twin/robot/drivetrain.py and Chassis.update in
- * twin/robot/chassis.py): the wheel-speed PI with conditional integration (profile voltage) or the
- * speed setpoint (profile velocity-servo), the unit conversions, one step of both FMUs through the
+ * twin/robot/chassis.py): the setpoints' acceleration ramp, the wheel-speed PI with conditional
+ * integration (profile voltage) or the speed setpoint (profile velocity-servo), the unit conversions, one step of both FMUs through the
  * shim's slots, then the chassis: slip, midpoint integration, the drive-torque estimate, rolling
  * resistance and the load torques of the coupled modes, with the holding torque of a blocked mode.
  * Keep the two in step: the tests compare them to the last bits. Build without -ffast-math and
@@ -45,8 +45,10 @@ typedef struct {
     double hold_damping;         /* fraction of a blocked mode's speed removed per step */
     double slip;                 /* outside the regions */
     double reach_m;              /* bounding radius for the motion bound */
+    double ramp_radps;           /* largest change of a speed setpoint per step, rad/s (INFINITY: none) */
     /* Wheels. */
-    double ref_left, ref_right;  /* speed setpoints, rad/s */
+    double target_left, target_right; /* commanded wheel speeds, rad/s, after the limits */
+    double ref_left, ref_right;  /* speed setpoints, rad/s: the targets reached under the ramp */
     double w_left, w_right;      /* FMU wheel speeds, rad/s */
     double int_left, int_right;  /* PI integrators, rad */
     double volt_left, volt_right;
@@ -65,6 +67,13 @@ static double pi_volts(const TwinDrive *d, double ref, double w, double *integra
     const double v = u > d->v_max ? d->v_max : (u < -d->v_max ? -d->v_max : u);
     if (v == u || (u > 0.0) != (e > 0.0)) *integral += e * d->step_s; /* no wind-up while saturated */
     return v;
+}
+
+/* One step of the setpoint towards the target, at most `step` (gazebo_ros_diff_drive's
+ * max_wheel_acceleration, and the TB3 firmware's profile acceleration). */
+static double ramp_to(double ref, double target, double step) {
+    const double err = target - ref;
+    return fabs(err) <= step ? target : ref + copysign(step, err);
 }
 
 static double slip_at(const TwinDrive *d, double x, double y) {
@@ -142,6 +151,8 @@ int twin_drive_run(TwinDrive *d, int count) {
     d->failed = -1;
     d->stopped_on_budget = 0;
     for (int k = 0; k < count; k++) {
+        d->ref_left = ramp_to(d->ref_left, d->target_left, d->ramp_radps);
+        d->ref_right = ramp_to(d->ref_right, d->target_right, d->ramp_radps);
         if (d->servo) {
             in_left[0] = (d->ref_left - d->cmd_offset) * d->cmd_scale;
             in_right[0] = (d->ref_right - d->cmd_offset) * d->cmd_scale;

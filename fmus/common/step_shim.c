@@ -4,6 +4,7 @@
  * communication step instead of three FMI calls per instance from Python, which is what the per-step
  * cost is made of. Each slot holds an instance and its FMI 2 or FMI 3 function pointers.
  */
+#include <math.h>
 #include <stdbool.h>
 
 #include "step_shim.h"
@@ -32,6 +33,12 @@ int twin_step_slots(TwinSlot *slots, int n, double t, double h) {
             s->terminate = terminate;
         }
         if ((s->status[0] | s->status[1] | s->status[2]) > 1 || s->terminate) return k;
+        for (size_t j = 0; j < s->n_out; j++) {
+            if (!isfinite(s->out[j])) {
+                s->status[2] = TWIN_STATUS_NONFINITE;
+                return k;
+            }
+        }
     }
     return -1;
 }

@@ -9,6 +9,9 @@
 
 #include <stddef.h>
 
+/* Reported in status[2] (the get call) when the FMU returned OK but an output is NaN or infinite. */
+#define TWIN_STATUS_NONFINITE 6
+
 /* One FMU instance with its FMI 2 or FMI 3 function pointers and its input/output buffers. */
 typedef struct {
     int fmi_version;
@@ -27,7 +30,8 @@ typedef struct {
 } TwinSlot;
 
 /* Step every slot from t by h. Returns -1 when all calls succeeded (status OK or Warning), else the
- * index of the first slot with a worse status or a termination request; later slots are not stepped. */
+ * index of the first slot with a worse status, a non-finite output (TWIN_STATUS_NONFINITE) or a
+ * termination request; later slots are not stepped. */
 int twin_step_slots(TwinSlot *slots, int n, double t, double h);
 
 /* Step every slot from t = *step_index * h by h and count the step. Returns as twin_step_slots;

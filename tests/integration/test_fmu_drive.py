@@ -9,7 +9,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import REPO, run_twin
-from tests.unit.cosim.helpers import acme
+from tests.unit.cosim.helpers import FAULTS, acme, faulty
 
 VENDOR_DRIVE = """\
 drive:
@@ -100,8 +100,70 @@ def test_fmu_error_mid_run_ends_with_one_line_exit_4_and_a_readable_bag(tmp_path
     bag = tmp_path / "bag"
     result = run_twin("simulate", str(scenario), "--duration", "10", "--out", str(bag))
     assert result.returncode == 4, result.stderr
-    lines = result.stderr.strip().splitlines()
+    # One error line (the mission's turns ask more than Acme's motor reaches at 12 V: one warning may precede it).
+    lines = [line for line in result.stderr.strip().splitlines() if "WARNING" not in line]
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
     assert "t=3.0" in lines[0] and str(bag) in lines[0]
     clock = topics(bag)["/clock"]
     assert 290 <= len(clock) <= 301  # everything up to the fault is in the bag
+
+
+def test_burger_above_its_motors_warns_once_and_motor_state_shows_the_saturation(tmp_path: Path) -> None:
+    scenario = tmp_path / "burger_fast.yaml"
+    scenario.write_text(
+        "name: burger_fast\n"
+        "robot: {model: turtlebot3_burger}\n"
+        "drive: {type: fmu, fmu: builtin:xl430_w250_servo, profile: velocity-servo}\n"
+        "mission:\n"
+        "  type: cmd_vel_script\n"
+        "  segments:\n"
+        "    - {duration_s: 2.0, linear_mps: 0.15}\n"
+        "    - {duration_s: 2.0, linear_mps: 0.28}\n"  # a Burger's motors reach 0.21 m/s at 12 V
+        "    - {duration_s: 1.0, linear_mps: 0.0}\n"
+    )
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag))
+    assert result.returncode == 0, result.stderr
+    assert "fmu xl430_w250_servo (FMI 2, velocity-servo) drive" in result.stdout
+    assert "cmd_vel clamped to the motors' 6.3" in result.stdout
+    assert sum("clamped" in line for line in result.stderr.splitlines()) == 1
+    msgs = topics(bag)
+    logs = [m for m in msgs["/rosout"] if "clamped" in m.msg]
+    assert len(logs) == 1 and logs[0].level == 30
+    motors = msgs["/motor_state"]
+    flagged = [m for m in motors if m.saturated[0]]
+    t_flagged = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in flagged]
+    assert 55 <= len(flagged) <= 62  # the 2 s at 0.28 m/s, at 30 Hz
+    assert min(t_flagged) > 1.95 and max(t_flagged) < 4.05
+    assert all(m.velocity_command_rad_s[0] == pytest.approx(0.28 / 0.033) for m in flagged)
+    assert max(m.velocity_rad_s[0] for m in motors) < 0.212 / 0.033  # never beyond the motors' reach
+    assert not any(m.saturated[0] for m in motors if m not in flagged)
+
+
+@pytest.mark.parametrize("mode", ["segfault", "hang"])
+def test_isolated_fmu_that_crashes_or_hangs_ends_the_run_with_one_line_exit_4_and_a_readable_bag(
+    mode: str, tmp_path: Path
+) -> None:
+    scenario = tmp_path / f"{mode}.yaml"
+    scenario.write_text(
+        f"name: {mode}\n"
+        "drive:\n"
+        "  type: fmu\n"
+        f"  fmu_file: {faulty()}\n"
+        "  profile: velocity-servo\n"
+        f"  mapping: {{parameters: {{fault_mode: {FAULTS[mode]}, fault_time: 1.0}}}}\n"
+        "  isolation: process\n"
+        "  step_timeout_s: 2.0\n"
+    )
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--duration", "5", "--out", str(bag))
+    assert result.returncode == 4, result.stderr
+    lines = [line for line in result.stderr.strip().splitlines() if "WARNING" not in line]
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    what = "died with SIGSEGV" if mode == "segfault" else "did not finish a step within 2 s (hung)"
+    assert f"in its own process {what} at t = 1.000000 s" in lines[0]
+    assert str(bag) in lines[0]
+    msgs = topics(bag)
+    clock = msgs["/clock"]
+    assert 95 <= len(clock) <= 101  # /clock at 100 Hz: everything up to the fault is in the bag
+    assert len(msgs["/motor_state"]) >= 29

@@ -74,6 +74,7 @@ def simulate(scenario: Scenario, bag: Path) -> Run:
 DRIVE = """\
 name: ekf_drive
 world: {{sdf: {world}}}
+drive: {{type: kinematic}}          # per-wheel slip (below) is the kinematic drive's; the FMU chassis slips both alike
 mission:
   type: cmd_vel_script
   segments:                         # 120 s: straights, arcs both ways, turns in place, stops

@@ -336,9 +336,11 @@ class MotorStateEncoder:
         layout.const_count(n)
         for name in names:
             layout.const_string(name)
-        for field in ("voltage_v", "current_a", "torque_nm", "velocity_rad_s"):
+        for field in ("voltage_v", "current_a", "torque_nm", "velocity_rad_s", "velocity_command_rad_s"):
             layout.const_count(n)
             layout.var(field, "d", n)
+        layout.const_count(n)
+        layout.var("saturated", "?", n)
         packer, self._c = layout.build()
         self._pack = packer.pack
         self.names = tuple(names)
@@ -350,13 +352,33 @@ class MotorStateEncoder:
         current_a: Sequence[float] | NDArray[np.float64],
         torque_nm: Sequence[float] | NDArray[np.float64],
         velocity_rad_s: Sequence[float] | NDArray[np.float64],
+        *,
+        velocity_command_rad_s: Sequence[float] | NDArray[np.float64] | None = None,
+        saturated: Sequence[bool] | None = None,
     ) -> bytes:
-        """Encode one value per joint for each quantity."""
+        """Encode one value per joint for each quantity (the command defaults to NaN, saturated to false)."""
         sec, nanosec = divmod(stamp_ns, _NS)
         c = self._c
+        n = len(self.names)
+        command = (math.nan,) * n if velocity_command_rad_s is None else velocity_command_rad_s
+        flags = (False,) * n if saturated is None else saturated
         try:
             return self._pack(
-                c[0], sec, nanosec, c[1], *voltage_v, c[2], *current_a, c[3], *torque_nm, c[4], *velocity_rad_s
+                c[0],
+                sec,
+                nanosec,
+                c[1],
+                *voltage_v,
+                c[2],
+                *current_a,
+                c[3],
+                *torque_nm,
+                c[4],
+                *velocity_rad_s,
+                c[5],
+                *command,
+                c[6],
+                *flags,
             )
         except struct.error:
             msg = f"MotorStateEncoder for {len(self.names)} joints got arrays of another length"

@@ -57,6 +57,8 @@ float64[] voltage_v           # terminal voltage applied to the motor
 float64[] current_a           # armature current
 float64[] torque_nm           # torque delivered at the wheel
 float64[] velocity_rad_s      # wheel angular velocity
+float64[] velocity_command_rad_s  # wheel speed the cmd_vel asked for, after the velocity limits
+bool[] saturated              # true while that command is beyond the motor's reach at its supply voltage
 """
 _TWIN_CONTACT = """\
 # The robot touching the world, as the twin's collision check reports it.

@@ -133,7 +133,9 @@ def _graceful_signals(flag: _StopFlag) -> Iterator[None]:
 def _summary_line(summary: RunSummary) -> str:
     return (
         f"simulated {summary.sim_s:.1f} s in {summary.wall_s:.2f} s ({summary.real_time_factor:.0f}x real time), "
-        f"{summary.messages} messages, {summary.contacts} contacts, {summary.ended_by}"
+        f"{summary.messages} messages, {summary.contacts} contacts, "
+        f"{f'{summary.drive} drive, ' if summary.drive else ''}"
+        f"{f'{summary.drive_notes}, ' if summary.drive_notes else ''}{summary.ended_by}"
         f"{_result(summary)}: {summary.bag_path}"
     )
 

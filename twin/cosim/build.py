@@ -113,6 +113,9 @@ class FmuSourceSpec:
     model_name: str
     description: str = ""
     sources: tuple[str, ...]
+    # Folders (relative to the model directory) searched for included files; their .c and .h files
+    # enter the build hash (a model that compiles in another model's source names its folder here).
+    include_dirs: tuple[str, ...] = ()
     variables: tuple[VariableSpec, ...]
     variants: Mapping[str, VariantSpec]
 
@@ -253,6 +256,12 @@ def build_shim() -> Path:
 
 def _input_files(model_dir: Path, spec: FmuSourceSpec) -> list[Path]:
     files = [model_dir / "fmu.yaml", *(model_dir / s for s in spec.sources)]
+    for extra in spec.include_dirs:
+        folder = (model_dir / extra).resolve()
+        if not folder.is_dir():
+            msg = f"{model_dir / 'fmu.yaml'}: include_dirs: {extra} is not a folder"
+            raise FmuError(msg)
+        files.extend(sorted(p for p in folder.iterdir() if p.suffix in {".c", ".h"}))
     for folder in (FMUS_DIR / "common", FMUS_DIR / "include"):
         files.extend(sorted(p for p in folder.iterdir() if p.suffix in {".c", ".h"} and p.name not in _SHIM_FILES))
     for path in files:
@@ -301,6 +310,7 @@ def _compile(  # noqa: PLR0917 - one private call site
         *(f"-D{d}=1" for d in variant_spec.defines),
         f"-I{gen_dir}",
         f"-I{model_dir}",
+        *(f"-I{(model_dir / extra).resolve()}" for extra in spec.include_dirs),
         f"-I{common}",
         f"-I{FMUS_DIR / 'include'}",
     ]

@@ -19,6 +19,7 @@ import collections
 import ctypes
 import functools
 import logging
+import math
 import shutil
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
@@ -42,6 +43,9 @@ _log = logging.getLogger(__name__)
 Api = Literal["lowlevel", "convenience"]
 
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+# Not an FMI status: the get call succeeded but an output is NaN or infinite (TWIN_STATUS_NONFINITE
+# in fmus/common/step_shim.h).
+_NONFINITE = 6
 _REAL_TYPES = frozenset({"Real", "Float64", "Float32"})
 
 
@@ -388,11 +392,13 @@ class FmuFile:
             msg = f"{label}: cannot load the binary for {platform}: {err}"
             raise FmuError(msg) from None
         stepper: _Base
+        by_vr = {v.value_reference: v.name for v in self.info.variables.values() if v.type in _REAL_TYPES}
         try:
             if self.info.major_version == 2:
                 stepper = _Fmi2(fmu, label, messages, step_s, inputs, outputs, api)
             else:
                 stepper = _Fmi3(fmu, label, messages, step_s, inputs, outputs, api)
+            stepper.output_names = tuple(by_vr.get(vr, f"vr {vr}") for vr in outputs)
             stepper.initialize(self.info, start or {}, start_time_s)
         except FmuError:
             raise
@@ -432,11 +438,30 @@ class _Base:
     def fail(self, function: str, status: int, t_s: float) -> None:
         """Raise the FmuError for a bad status."""
         self._failed = True
+        if status == _NONFINITE:
+            bad = [(k, v) for k, v in enumerate(self.outputs[: len(self._out_vr)]) if not math.isfinite(v)]
+            named = ", ".join(f"{self._output_name(k)} = {v}" for k, v in bad) or "an output"
+            msg = (
+                f"{self.name} failed at t = {t_s:.6f} s: {function} returned a non-finite output ({named}); "
+                "the FMU's model diverged or is faulty"
+            )
+            raise FmuError(msg)
         text = _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
         detail = self._messages.last()
         msg = f"{self.name} failed at t = {t_s:.6f} s: {function} returned {text}" + (f" ({detail})" if detail else "")
         raise FmuError(msg)
 
+    def _output_name(self, k: int) -> str:
+        names = self.output_names
+        return names[k] if k < len(names) else f"output vr {self._out_vr[k]}"
+
+    def _check_finite(self, function: str, t_s: float) -> None:
+        """Raise if an output is NaN or infinite (the Python step paths; the shim checks in C)."""
+        total = sum(self.outputs[: self._n_out])
+        if not math.isfinite(total) and not all(math.isfinite(v) for v in self.outputs[: self._n_out]):
+            self.fail(function, _NONFINITE, t_s)
+
+    output_names: tuple[str, ...] = ()
     step_s: float = 0.0
     _version: int = 0
     # Set by the adapters' `initialize`.
@@ -529,6 +554,7 @@ class _Base:
             self.fail(err.function, int(err.status), t_s)
         for k, value in enumerate(values):
             self.outputs[k] = value
+        self._check_finite(self._FUNCTIONS[2], t_s)
 
     def close(self) -> None:
         if not self._open:
@@ -630,6 +656,7 @@ class _Fmi2(_Base):
         get_status = self._get(c, self._out_refs, self._n_out, self.outputs)
         if (set_status | step_status | get_status) > 1:
             self._raise_first(("fmi2SetReal", "fmi2DoStep", "fmi2GetReal"), (set_status, step_status, get_status), t_s)
+        self._check_finite("fmi2GetReal", t_s)
 
     def read_outputs(self) -> None:
         status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs)
@@ -734,6 +761,7 @@ class _Fmi3(_Base):
             self._raise_first(
                 ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"), (set_status, step_status, get_status), t_s
             )
+        self._check_finite("fmi3GetFloat64", t_s)
 
     def read_outputs(self) -> None:
         status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs, self._n_out)

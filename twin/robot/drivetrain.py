@@ -21,6 +21,7 @@ each step.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Mapping
@@ -36,6 +37,7 @@ from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
 from twin.cosim.drive_loop import DriveLoop
 from twin.cosim.fmu import Api, FmuFile, FmuInfo, StepGroup, Stepper
+from twin.cosim.isolated import IsolatedGroup
 from twin.robot.chassis import (
     Chassis,
     ChassisDynamics,
@@ -59,8 +61,10 @@ __all__ = [
     "FmuDrive",
     "FmuDrivetrain",
     "MotorModel",
+    "Saturation",
     "SpeedLoopTargets",
     "WheelState",
+    "builtin_motor",
     "fmu_step_response",
     "motor_constants",
     "wheel_setpoints",
@@ -83,6 +87,7 @@ class Drivetrain(Protocol):
     """What the simulation loop steps. Time advances only through `advance`."""
 
     step_ns: int
+    label: str  # what a run's summary calls the drive, e.g. `kinematic`
 
     def set_cmd_vel(self, v_mps: float, w_radps: float) -> None:
         """Take a new body velocity command (held until the next one)."""
@@ -147,7 +152,9 @@ class FmuDrive:
     """Drive section `type: fmu`: wheels stepped as FMUs (one instance per wheel)."""
 
     type: Literal["fmu"] = "fmu"
-    fmu: str = "builtin:xm430_w210"  # a built-in (builtin:NAME), used when `fmu_file` is null
+    # A built-in (builtin:NAME), used when `fmu_file` is null; `auto`: the robot's own motors (TurtleBot3
+    # Burger: XL430-W250, else the Waffle's XM430-W210), in the profile's variant.
+    fmu: str = "builtin:xm430_w210"
     fmu_file: Path | None = None  # a .fmu file (relative to the scenario); overrides `fmu`
     fmi_version: Literal[2, 3] = 2  # for built-ins
     profile: Literal["voltage", "velocity-servo"] = "voltage"
@@ -157,17 +164,34 @@ class FmuDrive:
     speed_loop: SpeedLoopTargets = field(default_factory=SpeedLoopTargets)
     wheel_inertia_kgm2: float | None = None  # the drive's inertia at the wheel; null: from motor, or probed
     limits: CommandLimits = field(default_factory=CommandLimits)
+    # The wheels' rim acceleration limit, as gazebo_ros_diff_drive's max_wheel_acceleration: null takes
+    # the robot SDF's diff-drive plugin value, 0 means none.
+    max_wheel_acceleration_mps2: float | None = None
+    # Clamp wheel-speed commands the motor cannot reach at the supply voltage (speed_loop.voltage_limit_v)
+    # to what it can, and report it (needs the motor model); false: pass them on to the FMU as given.
+    clamp_to_supply: bool = True
     slip: SlipModel = field(default_factory=SlipModel)
+    # none: the FMU's code runs in the twin's process; process: in a child process, so that its crash
+    # or hang (a step longer than step_timeout_s of wall time) ends the run with one line and a valid bag.
+    # The step loop then runs in Python, one round trip to the child per step for both wheels.
+    isolation: Literal["none", "process"] = "none"
+    step_timeout_s: float = 10.0
     # native: the per-step path compiled (the fast one); lowlevel: the Python reference path with the
     # FMUs stepped by the compiled shim; convenience: the Python path through FMPy's wrappers.
     api: Literal["native", "lowlevel", "convenience"] = "native"
 
     def __post_init__(self) -> None:
-        if self.fmu_file is None and not self.fmu.startswith("builtin:"):
-            msg = f"fmu: {self.fmu!r} is not builtin:NAME; give a file as fmu_file"
+        if self.fmu_file is None and not (self.fmu.startswith("builtin:") or self.fmu == "auto"):
+            msg = f"fmu: {self.fmu!r} is not builtin:NAME or auto; give a file as fmu_file"
             raise ValueError(msg)
         if self.communication_step_s is not None and not self.communication_step_s > 0.0:
             msg = f"communication_step_s must be positive, got {self.communication_step_s}"
+            raise ValueError(msg)
+        if not self.step_timeout_s > 0.0:
+            msg = f"step_timeout_s must be positive, got {self.step_timeout_s}"
+            raise ValueError(msg)
+        if self.max_wheel_acceleration_mps2 is not None and not self.max_wheel_acceleration_mps2 >= 0.0:
+            msg = f"max_wheel_acceleration_mps2 must be 0 (none) or positive, got {self.max_wheel_acceleration_mps2}"
             raise ValueError(msg)
 
     def resolved_mapping(self) -> FmuMapping:
@@ -177,6 +201,12 @@ class FmuDrive:
             ConfigError: If the mapping file is wrong.
         """
         return load_mapping(self.mapping) if isinstance(self.mapping, Path) else self.mapping
+
+
+def builtin_motor(robot_name: str, profile: str) -> str:
+    """The built-in FMU of a TurtleBot3's wheel motors: Burger XL430-W250-T, Waffle (Pi) XM430-W210-T."""
+    base = "xl430_w250" if "burger" in robot_name.lower() else "xm430_w210"
+    return f"builtin:{base}_servo" if profile == "velocity-servo" else f"builtin:{base}"
 
 
 def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits: CommandLimits) -> tuple[float, float]:
@@ -197,9 +227,41 @@ def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits
 # --- the FMU drivetrain --------------------------------------------------------------------------
 
 
+@dataclass(kw_only=True, slots=True)
+class Saturation:
+    """Commands beyond the motor's reach at the supply voltage, as the drive clamped them (a run's tally)."""
+
+    cap_radps: float | None  # the wheel speed the motor reaches at the supply voltage (None: unknown)
+    supply_v: float
+    count: int = 0  # commands clamped
+    first_t_s: float | None = None  # sim time of the first
+    max_requested_radps: float = 0.0  # the largest wheel speed asked for
+    active: bool = False  # the current command is clamped
+
+    def describe(self) -> str:
+        """One phrase for a run's summary ('' when nothing was clamped)."""
+        if not self.count or self.cap_radps is None:
+            return ""
+        return (
+            f"{self.count} cmd_vel clamped to the motors' {self.cap_radps:.2f} rad/s at {self.supply_v:g} V "
+            f"(first at {self.first_t_s:.2f} s, asked up to {self.max_requested_radps:.2f} rad/s)"
+        )
+
+
 _OUTPUT_ORDER = ("wheel_speed", "wheel_angle", "current", "motor_torque", "applied_voltage")
 # The wheels' state in the compiled loop (`FmuDrivetrain` keeps each as `_<name>`).
-_WHEEL_STATE = ("ref_left", "ref_right", "w_left", "w_right", "int_left", "int_right", "volt_left", "volt_right")
+_WHEEL_STATE = (
+    "target_left",
+    "target_right",
+    "ref_left",
+    "ref_right",
+    "w_left",
+    "w_right",
+    "int_left",
+    "int_right",
+    "volt_left",
+    "volt_right",
+)
 
 
 def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]) -> MotorConstants:
@@ -245,6 +307,8 @@ class FmuDrivetrain:
         contact: ContactFn | None = None,
         free_distance: DistanceFn | None = None,
         bounding_radius_m: float = 0.0,
+        plugin_wheel_acceleration_mps2: float | None = None,
+        robot_name: str = "",
     ) -> None:
         """Build (on first use), load and bind the FMU, design the speed loop, instantiate both wheels.
 
@@ -259,6 +323,9 @@ class FmuDrivetrain:
                 every moving step checks contact on the Python path.
             bounding_radius_m: The radius `free_distance` counts rotation with (the farthest point
                 of the robot's collision shape from its base frame).
+            plugin_wheel_acceleration_mps2: The robot SDF diff-drive plugin's `max_wheel_acceleration`
+                (rim, m/s²), used when `drive.max_wheel_acceleration_mps2` is null; None or 0: none.
+            robot_name: The robot model's name, for `fmu: auto`.
 
         Raises:
             FmuError: If the FMU cannot be built, loaded, bound to the profile or initialised.
@@ -266,6 +333,8 @@ class FmuDrivetrain:
             ValueError: If `bounding_radius_m` is negative.
         """
         self.step_ns = step_ns
+        if drive.fmu == "auto":
+            drive = dataclasses.replace(drive, fmu=builtin_motor(robot_name, drive.profile))
         if bounding_radius_m < 0.0:
             msg = f"bounding_radius_m must not be negative, got {bounding_radius_m}"
             raise ValueError(msg)
@@ -283,15 +352,24 @@ class FmuDrivetrain:
         self._ratio = round(ratio)
         self._pending = 0
         self._h = comm_s
+        accel = drive.max_wheel_acceleration_mps2
+        if accel is None:
+            accel = plugin_wheel_acceleration_mps2
+        self.max_wheel_acceleration_mps2 = accel if accel else math.inf
+        self._ramp_radps = self.max_wheel_acceleration_mps2 / chassis.wheel_radius_m * comm_s
         self.drive = drive
         self.params = chassis
         self.profile = Profile(drive.profile)
         path = resolve_fmu(drive.fmu_file or drive.fmu, fmi_version=drive.fmi_version)
         self._file = FmuFile(path)
+        name = drive.fmu.removeprefix("builtin:") if drive.fmu_file is None else path.name
+        self._fmu_name = name
+        self.label = f"fmu {name} (FMI {self._file.info.major_version}, {drive.profile})"
+        self._isolated: IsolatedGroup | None = None
         try:
             self._setup(drive, chassis, pose, contact)
         except BaseException:
-            self._file.close()
+            self.close()
             raise
 
     def _setup(
@@ -303,7 +381,7 @@ class FmuDrivetrain:
         self.binding = binding
         self.motor: MotorConstants | None = None
         self.speed_loop: SpeedLoop | None = None
-        if drive.motor is not None and (self.profile is Profile.VOLTAGE or drive.wheel_inertia_kgm2 is None):
+        if drive.motor is not None:
             try:
                 self.motor = motor_constants(drive.motor, info, binding.start)
             except ConfigError:
@@ -330,17 +408,39 @@ class FmuDrivetrain:
         in_vrs = [b.value_reference for b in binding.inputs]
         out_vrs = [b.value_reference for b in outputs]
         wheel_inertia = drive.wheel_inertia_kgm2
+        if wheel_inertia is None and self.motor is None and drive.isolation == "process":
+            msg = (
+                "drive.wheel_inertia_kgm2: give it (or drive.motor) with isolation: process; "
+                "the twin does not probe an isolated FMU in its own process"
+            )
+            raise ConfigError(msg)
         if wheel_inertia is None:
             wheel_inertia = self.motor.wheel_inertia_kgm2 if self.motor is not None else self._probe(binding)
         self.wheel_inertia_kgm2 = wheel_inertia
         api: Api = "lowlevel" if drive.api == "native" else drive.api
-        self._left: Stepper = self._file.instantiate(
-            "left", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
-        )
-        self._right: Stepper = self._file.instantiate(
-            "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
-        )
-        self._group = StepGroup((self._left, self._right), step_s=self._h)
+        self._group: StepGroup | IsolatedGroup
+        self._left: Stepper
+        self._right: Stepper
+        if drive.isolation == "process":
+            self._isolated = self._group = IsolatedGroup(
+                self._file.path,
+                self._file.label,
+                ("left", "right"),
+                step_s=self._h,
+                inputs=in_vrs,
+                outputs=out_vrs,
+                start=binding.start,
+                timeout_s=drive.step_timeout_s,
+            )
+            self._left, self._right = self._isolated.steppers
+        else:
+            self._left = self._file.instantiate(
+                "left", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
+            )
+            self._right = self._file.instantiate(
+                "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
+            )
+            self._group = StepGroup((self._left, self._right), step_s=self._h)
         self._chassis = Chassis(
             chassis, step_s=self._h, wheel_inertia_kgm2=wheel_inertia, pose=pose, contact=contact, slip=drive.slip
         )
@@ -349,8 +449,12 @@ class FmuDrivetrain:
         self._load_scale, self._load_offset = 1.0 / load.factor, load.offset
         speed = binding.outputs["wheel_speed"]
         self._speed_factor, self._speed_offset = speed.factor, speed.offset
+        self._target_left = self._target_right = 0.0
         self._ref_left = self._ref_right = 0.0
         self._int_left = self._int_right = 0.0
+        self.supply_speed_radps = self._supply_speed(drive)
+        self.saturation = Saturation(cap_radps=self.supply_speed_radps, supply_v=drive.speed_loop.voltage_limit_v)
+        self.command_radps = (0.0, 0.0)  # the last command's wheel speeds, before the supply clamp
         self._volt_left = self._volt_right = 0.0
         self._w_left = self._speed(self._left)
         self._w_right = self._speed(self._right)
@@ -364,7 +468,7 @@ class FmuDrivetrain:
             self._run_python = self._run_servo
         self._run = self._run_python
         self._loop: DriveLoop | None = None
-        if drive.api == "native":
+        if drive.api == "native" and isinstance(self._group, StepGroup):
             try:
                 self._loop = self._native_loop()
             except FmuError as err:
@@ -378,6 +482,7 @@ class FmuDrivetrain:
         regions = None
         if slip is not None:
             regions = [(r.x_min_m, r.x_max_m, r.y_min_m, r.y_max_m, r.slip) for r in slip.regions]
+        assert isinstance(self._group, StepGroup)
         loop = DriveLoop(self._group, slip_regions=regions)
         loop.write(
             servo=self.speed_loop is None,
@@ -392,6 +497,7 @@ class FmuDrivetrain:
             speed_offset=self._speed_offset,
             slip=slip.slip if slip is not None else 0.0,
             reach_m=self._reach_m,
+            ramp_radps=self._ramp_radps,
             **self._chassis.coefficients()._asdict(),
         )
         self._loop = loop
@@ -402,6 +508,8 @@ class FmuDrivetrain:
         """Hand the wheels' and the chassis' state to the compiled loop."""
         assert self._loop is not None
         self._loop.write(
+            target_left=self._target_left,
+            target_right=self._target_right,
             ref_left=self._ref_left,
             ref_right=self._ref_right,
             w_left=self._w_left,
@@ -417,6 +525,8 @@ class FmuDrivetrain:
         """Take the wheels' and the chassis' state back from the compiled loop."""
         assert self._loop is not None
         (
+            self._target_left,
+            self._target_right,
             self._ref_left,
             self._ref_right,
             self._w_left,
@@ -465,12 +575,58 @@ class FmuDrivetrain:
         return round(self._group.index * self._h * 1e9)
 
     def set_cmd_vel(self, v_mps: float, w_radps: float) -> None:
-        """Take a body velocity command; the wheels' setpoints follow with the firmware's clamps."""
+        """Take a body velocity command: the velocity limits, then the motor's reach at the supply voltage.
+
+        The wheels' setpoints then follow the result under the acceleration limit, step by step.
+        A command beyond what the motor can reach is scaled down (both wheels alike, so the path's
+        curvature stays) and counted in `saturation`; the first one is logged as a warning.
+        """
         left, right = wheel_setpoints(v_mps, w_radps, self.params, self.drive.limits)
-        self._ref_left, self._ref_right = left, right
+        self.command_radps = (left, right)
+        cap = self.supply_speed_radps
+        if cap is not None and self.drive.clamp_to_supply:
+            peak = max(abs(left), abs(right))
+            if peak > cap:
+                scale = cap / peak
+                left, right = left * scale, right * scale
+                self._report_saturation(v_mps, w_radps, peak)
+            else:
+                self.saturation.active = False
+        self._target_left, self._target_right = left, right
         if self._loop is not None:
-            self._loop.state.ref_left = left
-            self._loop.state.ref_right = right
+            self._loop.state.target_left = left
+            self._loop.state.target_right = right
+
+    def _report_saturation(self, v_mps: float, w_radps: float, peak_radps: float) -> None:
+        sat = self.saturation
+        sat.active = True
+        sat.count += 1
+        sat.max_requested_radps = max(sat.max_requested_radps, peak_radps)
+        if sat.count == 1:
+            sat.first_t_s = self.t_ns * 1e-9
+            _log.warning(
+                "drive: cmd_vel (%.3f m/s, %.3f rad/s) at t = %.3f s asks %.2f rad/s of a wheel, but %s reaches "
+                "%.2f rad/s (%.3f m/s) at %g V: clamped to that (reported once per run; /motor_state marks "
+                "every clamped command)",
+                v_mps,
+                w_radps,
+                sat.first_t_s,
+                peak_radps,
+                self._fmu_name,
+                sat.cap_radps or 0.0,
+                (sat.cap_radps or 0.0) * self.params.wheel_radius_m,
+                sat.supply_v,
+            )
+
+    def _supply_speed(self, drive: FmuDrive) -> float | None:
+        """The wheel speed the motor reaches at the supply voltage against rolling resistance (None: unknown)."""
+        m = self.motor
+        if m is None:
+            return None
+        n, kt, ke, r = m.gear_ratio, m.torque_constant_nm_per_a, m.back_emf_vs_per_rad, m.resistance_ohm
+        volts = drive.speed_loop.voltage_limit_v
+        rolling_nm = self._chassis.coefficients().roll_nm
+        return (n * kt * volts - r * rolling_nm) / (r * m.wheel_friction_nms_per_rad + n * n * kt * ke)
 
     def advance(self, n_steps: int) -> None:
         """Run `n_steps` physics steps (one FMU step per wheel each `communication_step_s`).
@@ -537,12 +693,17 @@ class FmuDrivetrain:
         step_next, chassis = group.step_next, self._chassis
         update = chassis.update
         ref_left, ref_right = self._ref_left, self._ref_right
+        target_left, target_right, ramp = self._target_left, self._target_right, self._ramp_radps
         w_left, w_right = self._w_left, self._w_right
         int_left, int_right = self._int_left, self._int_right
         v_left = self._volt_left
         v_right = self._volt_right
         try:
             for _ in range(count):
+                e = target_left - ref_left
+                ref_left = target_left if abs(e) <= ramp else ref_left + math.copysign(ramp, e)
+                e = target_right - ref_right
+                ref_right = target_right if abs(e) <= ramp else ref_right + math.copysign(ramp, e)
                 # PI per wheel with conditional integration (no wind-up while saturated).
                 e = ref_left - w_left
                 u = kp * e + ki * int_left
@@ -565,6 +726,7 @@ class FmuDrivetrain:
                 w_right = sf * out_right[0] + so
                 update(w_left, w_right)
         finally:
+            self._ref_left, self._ref_right = ref_left, ref_right
             self._w_left, self._w_right = w_left, w_right
             self._int_left, self._int_right = int_left, int_right
             self._volt_left, self._volt_right = v_left, v_right
@@ -577,11 +739,17 @@ class FmuDrivetrain:
         group = self._group
         step_next, chassis = group.step_next, self._chassis
         update = chassis.update
-        in_left[0] = (self._ref_left - co) * cs
-        in_right[0] = (self._ref_right - co) * cs
+        ref_left, ref_right = self._ref_left, self._ref_right
+        target_left, target_right, ramp = self._target_left, self._target_right, self._ramp_radps
         w_left, w_right = self._w_left, self._w_right
         try:
             for _ in range(count):
+                e = target_left - ref_left
+                ref_left = target_left if abs(e) <= ramp else ref_left + math.copysign(ramp, e)
+                e = target_right - ref_right
+                ref_right = target_right if abs(e) <= ramp else ref_right + math.copysign(ramp, e)
+                in_left[0] = (ref_left - co) * cs
+                in_right[0] = (ref_right - co) * cs
                 in_left[1] = (chassis.load_left_nm - lo) * ls
                 in_right[1] = (chassis.load_right_nm - lo) * ls
                 failed = step_next()
@@ -591,6 +759,7 @@ class FmuDrivetrain:
                 w_right = sf * out_right[0] + so
                 update(w_left, w_right)
         finally:
+            self._ref_left, self._ref_right = ref_left, ref_right
             self._w_left, self._w_right = w_left, w_right
 
     def chassis_state(self) -> ChassisState:
@@ -638,7 +807,9 @@ class FmuDrivetrain:
         return self._file.info
 
     def close(self) -> None:
-        """Terminate and free both instances and remove the extracted FMU."""
+        """Terminate and free both instances (stop their process when isolated) and remove the extracted FMU."""
+        if self._isolated is not None:
+            self._isolated.close()
         self._file.close()
 
     def __enter__(self) -> Self:

@@ -60,6 +60,7 @@ class KinematicDrivetrain:
                 fractions looked up where the robot is at the start of each piece of motion.
         """
         self.params = params
+        self.label = "kinematic"
         no_slip = slip is None or (slip.is_uniform and slip.left_fraction == 0.0 and slip.right_fraction == 0.0)
         self._slip = None if no_slip else slip
         self._free = free_distance

@@ -6,19 +6,23 @@ the working directory, like a shell's output path.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
 from twin.core.config import load_config
+from twin.core.native import compiler_candidates, find_compiler
 from twin.estimation import EstimationSection
 from twin.nav.follower import FollowerParams
 from twin.nav.navigator import ProgressParams
 from twin.robot.disturbances import Disturbances
 from twin.robot.drivetrain import FmuDrive
 
-__all__ = ["Scenario", "default_scenario_path", "load_scenario"]
+__all__ = ["Scenario", "default_scenario_path", "fmu_fallback", "load_scenario"]
+
+_log = logging.getLogger(__name__)
 
 _DATA = Path(__file__).resolve().parent.parent / "data"
 DEFAULTS_PATH = _DATA / "scenario_defaults.yaml"
@@ -109,6 +113,25 @@ class KinematicDrive:
 
     type: Literal["kinematic"] = "kinematic"
     max_wheel_acceleration_mps2: float = 1.0
+
+
+def fmu_fallback(drive: FmuDrive) -> KinematicDrive | None:
+    """The drive to run instead of a built-in FMU that cannot be built here (no C compiler), else None.
+
+    Says so once, as a warning naming the fallback. A drive given as an `fmu_file` needs no compiler.
+    """
+    if drive.fmu_file is not None or find_compiler() is not None:
+        return None
+    accel = drive.max_wheel_acceleration_mps2
+    fallback = KinematicDrive() if accel is None else KinematicDrive(max_wheel_acceleration_mps2=accel)
+    _log.warning(
+        "drive: no C compiler to build %s (tried %s; install one, e.g. apt-get install gcc, or set CC): "
+        "running the kinematic drive instead (ideal wheels, %g m/s^2 wheel acceleration)",
+        "the robot's motor FMUs" if drive.fmu == "auto" else drive.fmu,
+        ", ".join(compiler_candidates()),
+        fallback.max_wheel_acceleration_mps2,
+    )
+    return fallback
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -207,7 +230,8 @@ class Scenario:
     mission: BehaviorTreeMission | CmdVelScriptMission | WaypointsMission
     sensors: SensorsSection = field(default_factory=SensorsSection)
     physics: PhysicsSection = field(default_factory=PhysicsSection)
-    drive: KinematicDrive | FmuDrive = field(default_factory=KinematicDrive)
+    # The robot's own motors as FMUs in velocity mode (the TB3's DYNAMIXELs); {type: kinematic}: ideal wheels.
+    drive: KinematicDrive | FmuDrive = field(default_factory=lambda: FmuDrive(fmu="auto", profile="velocity-servo"))
     odometry: Literal["ekf", "ground_truth"] = "ekf"
     estimation: EstimationSection = field(default_factory=EstimationSection)
     disturbances: Disturbances = field(default_factory=Disturbances)

@@ -55,6 +55,7 @@ from twin.sim.scenario import (
     LidarSection,
     Scenario,
     WaypointsMission,
+    fmu_fallback,
 )
 from twin.sim.scheduler import Scheduler
 from twin.world import RobotModelSpec, build_scene, load_robot, load_world, urdf_from_robot
@@ -94,6 +95,8 @@ class RunSummary:
     mission_result: str
     seed: int
     breakdown_s: dict[str, float]
+    drive: str = ""  # the drive that ran, e.g. `fmu xm430_w210_servo (FMI 2, velocity-servo)` or `kinematic`
+    drive_notes: str = ""  # e.g. commands clamped to the motors' reach ('' when none)
 
 
 def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
@@ -356,8 +359,11 @@ class Simulation:
         sc, robot = self.scenario, self.robot
         assert robot.drive is not None
         pose = (sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m, sc.robot.initial_pose.yaw_rad)
-        if sc.drive.type == "kinematic":
-            accel = sc.drive.max_wheel_acceleration_mps2
+        drive_spec = sc.drive
+        if isinstance(drive_spec, FmuDrive) and (fallback := fmu_fallback(drive_spec)) is not None:
+            drive_spec = fallback
+        if drive_spec.type == "kinematic":
+            accel = drive_spec.max_wheel_acceleration_mps2
             params = KinematicParams(
                 wheel_radius_m=robot.drive.wheel_radius_m,
                 wheel_separation_m=robot.drive.wheel_separation_m,
@@ -386,6 +392,8 @@ class Simulation:
             contact=self._touches,
             free_distance=self._monitor.free_m,
             bounding_radius_m=bounding_radius_m,
+            plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2,
+            robot_name=robot.name,
         )
 
     @property
@@ -551,11 +559,22 @@ class Simulation:
             motor_pub = bus.advertise("/motor_state", MotorStateEncoder.msgtype)
             motor_enc = MotorStateEncoder([w[0] for w in self._wheels])
             wheel_signals = self.drive.wheel_state
+            fmu_drive = self.drive
 
             def motors(t_ns: int) -> None:
                 ws = wheel_signals()
+                saturated = (fmu_drive.saturation.active,) * 2
                 motor_pub.publish(
-                    t_ns, motor_enc.encode(t_ns, ws.voltage_v, ws.current_a, ws.effort_nm, ws.speed_radps)
+                    t_ns,
+                    motor_enc.encode(
+                        t_ns,
+                        ws.voltage_v,
+                        ws.current_a,
+                        ws.effort_nm,
+                        ws.speed_radps,
+                        velocity_command_rad_s=fmu_drive.command_radps,
+                        saturated=saturated,
+                    ),
                 )
 
             rate = robot.joint_states.rate_hz if robot.joint_states is not None else 30.0
@@ -788,4 +807,6 @@ class Simulation:
             mission_result=self.mission.result,
             seed=self.scenario.seed,
             breakdown_s=breakdown,
+            drive=self.drive.label,
+            drive_notes=self.drive.saturation.describe() if isinstance(self.drive, FmuDrivetrain) else "",
         )

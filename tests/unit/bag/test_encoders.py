@@ -160,7 +160,8 @@ def test_joint_state(t: int, frame: str, joints: list[str], data: st.DataObject,
 @given(stamps, frames, names, st.data())
 def test_motor_state(t: int, frame: str, joints: list[str], data: st.DataObject) -> None:
     n = len(joints)
-    arrays = [np.array(data.draw(st.lists(floats, min_size=n, max_size=n))) for _ in range(4)]
+    arrays = [np.array(data.draw(st.lists(floats, min_size=n, max_size=n))) for _ in range(5)]
+    saturated = np.array(data.draw(st.lists(st.booleans(), min_size=n, max_size=n)), dtype=bool)
     expected = T["twin_msgs/msg/MotorState"](
         header=header(t, frame),
         name=joints,
@@ -168,8 +169,23 @@ def test_motor_state(t: int, frame: str, joints: list[str], data: st.DataObject)
         current_a=arrays[1],
         torque_nm=arrays[2],
         velocity_rad_s=arrays[3],
+        velocity_command_rad_s=arrays[4],
+        saturated=saturated,
     )
-    assert E.MotorStateEncoder(joints, frame).encode(t, *arrays) == ser(expected)
+    enc = E.MotorStateEncoder(joints, frame)
+    assert enc.encode(t, *arrays[:4], velocity_command_rad_s=arrays[4], saturated=list(saturated)) == ser(expected)
+    # Without the command, it reads NaN and not saturated.
+    plain = T["twin_msgs/msg/MotorState"](
+        header=header(t, frame),
+        name=joints,
+        voltage_v=arrays[0],
+        current_a=arrays[1],
+        torque_nm=arrays[2],
+        velocity_rad_s=arrays[3],
+        velocity_command_rad_s=np.full(n, np.nan),
+        saturated=np.zeros(n, dtype=bool),
+    )
+    assert enc.encode(t, *arrays[:4]) == ser(plain)
 
 
 @given(

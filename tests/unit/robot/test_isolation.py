@@ -1,0 +1,72 @@
+"""FMUs in a child process (`drive: {isolation: process}`): the same numbers as in-process, and a
+segfault, an abort or a hang in the FMU raises one FmuError naming what happened and when."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.unit.cosim.helpers import FAULTS, faulty
+from twin.core.errors import FmuError
+from twin.cosim.contract import FmuMapping
+from twin.robot.chassis import ChassisParams
+from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
+
+MS = 1_000_000
+
+
+def _drive(mode: str, *, isolation: str = "process", fault_time_s: float = 0.2, **extra: object) -> FmuDrive:
+    return FmuDrive(
+        fmu_file=faulty(),
+        profile="velocity-servo",
+        mapping=FmuMapping(parameters={"fault_mode": FAULTS[mode], "fault_time": fault_time_s}),
+        isolation=isolation,  # type: ignore[arg-type]
+        **extra,  # type: ignore[arg-type]
+    )
+
+
+def _drive_for(drive: FmuDrive, steps: int) -> tuple[float, float, float]:
+    with FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS, plugin_wheel_acceleration_mps2=1.0) as dt:
+        dt.set_cmd_vel(0.2, 0.5)
+        dt.advance(steps)
+        s = dt.chassis_state()
+    return s.x_m, s.y_m, s.yaw_rad
+
+
+def test_an_isolated_fmu_drives_exactly_as_in_process() -> None:
+    isolated = _drive_for(_drive("none", fault_time_s=99.0), 300)
+    in_process = _drive_for(_drive("none", isolation="none", fault_time_s=99.0, api="lowlevel"), 300)
+    assert isolated == in_process
+    assert isolated[0] > 0.01
+
+
+@pytest.mark.parametrize(
+    ("mode", "what"),
+    [
+        ("segfault", "died with SIGSEGV"),
+        ("abort", "died with SIGABRT"),
+        ("hang", "did not finish a step within 1 s (hung)"),
+    ],
+)
+def test_a_crashing_or_hanging_fmu_ends_the_drive_with_one_error_naming_it(mode: str, what: str) -> None:
+    drive = _drive(mode, step_timeout_s=1.0)
+    with FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS) as dt:
+        dt.set_cmd_vel(0.2, 0.0)
+        dt.advance(150)
+        assert dt.chassis_state().x_m > 0.0
+        with pytest.raises(FmuError) as err:
+            dt.advance(100)
+        assert dt.t_ns == 200 * MS  # every step before the fault was taken
+    text = str(err.value)
+    assert "\n" not in text
+    assert f"in its own process {what} at t = 0.200000 s" in text
+    assert "faulty_motor_servo" in text or "FaultyDcMotorWheel" in text
+
+
+def test_an_fmu_error_status_in_the_child_is_reported_as_in_process() -> None:
+    drive = _drive("nan", fault_time_s=0.05)
+    with FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS) as dt:
+        dt.set_cmd_vel(0.1, 0.0)
+        with pytest.raises(
+            FmuError, match=r"instance 'left' failed at t = 0\.050000 s.*non-finite output \(wheel_speed"
+        ):
+            dt.advance(100)
