@@ -1,11 +1,13 @@
 """A step that never returns: the watchdog ends the run by itself (exit 8), and SIGTERM/SIGINT still work.
 
-Two kinds of stuck step, both as a user meets them:
+Three kinds of stuck step, as a user meets them:
 - a behaviour tree whose `Repeat num_cycles="-1"` over `AlwaysSuccess` never leaves its first tick
   (the main thread spins in Python);
-- a step stuck in native code that releases the GIL, as a vendor FMU's `doStep` called through
-  ctypes does: a C busy loop compiled here and called from the drive's step once sim time passes
-  1 s (injected with a `sitecustomize` module, so the `twin simulate` process itself is unchanged).
+- a vendor FMU that hangs in `doStep` (the project's faulty test motor, `fault_mode` hang: it waits
+  in `pause()` forever, in the same process: `drive.isolation: none`);
+- a step stuck in native code that releases the GIL, as ctypes calls do: a C busy loop compiled
+  here and called from the kinematic drive's step once sim time passes 1 s (injected with a
+  `sitecustomize` module, so the `twin simulate` process itself is unchanged).
 
 In every case the process ends with the documented exit code, one error line naming where it was
 stuck, and a bag that reads back; its memory does not grow while it is stuck.
@@ -24,6 +26,7 @@ import pytest
 
 from tests.conftest import REPO
 from tests.robustness.helpers import DATA, assert_bag_reads_back, assert_one_line_error
+from tests.unit.cosim.helpers import FAULTS, faulty
 from twin.bag import open_bag
 from twin.core.native import compile_shared, find_compiler
 
@@ -122,9 +125,55 @@ def test_a_tree_that_never_returns_stops_on_a_signal(tmp_path: Path, signum: int
     assert_bag_reads_back(bag)
 
 
+def _kinematic(tmp_path: Path) -> str:
+    scenario = tmp_path / "kinematic.yaml"
+    scenario.write_text("name: kinematic\ndrive: {type: kinematic}\n")
+    return str(scenario)
+
+
+def _hung_fmu(tmp_path: Path) -> str:
+    scenario = tmp_path / "hung_fmu.yaml"
+    scenario.write_text(
+        "name: hung_fmu\n"
+        "drive:\n"
+        "  type: fmu\n"
+        f"  fmu_file: {faulty()}\n"
+        "  profile: velocity-servo\n"
+        f"  mapping: {{parameters: {{fault_mode: {FAULTS['hang']}, fault_time: 1.0}}}}\n"
+        "  isolation: none\n"
+    )
+    return str(scenario)
+
+
+def test_an_fmu_hung_in_do_step_ends_by_the_watchdog(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    proc = _start([_hung_fmu(tmp_path), "--duration", "30", "--watchdog-s", "2", "--out", str(bag)])
+    _, err = proc.communicate(timeout=180)
+    assert proc.returncode == 8, err
+    line = assert_one_line_error(err, contains="has not returned for")
+    assert "t=1.0" in line and str(bag) in line
+    assert_bag_reads_back(bag)
+    assert open_bag(bag).end_ns >= 900_000_000  # what was recorded before the hang is kept
+
+
+def test_an_fmu_hung_in_do_step_stops_on_sigterm(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    proc = _start([_hung_fmu(tmp_path), "--duration", "30", "--out", str(bag)])  # default watchdog: 10 s
+    _wait_stuck(proc, bag)
+    rss0 = _rss_kib(proc.pid)
+    time.sleep(1.0)
+    assert _rss_kib(proc.pid) - rss0 < 20_000
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert_one_line_error(err, contains="stopped by SIGTERM")
+    assert_bag_reads_back(bag)
+    assert open_bag(bag).end_ns >= 900_000_000
+
+
 def test_a_step_hung_in_c_ends_by_the_watchdog(tmp_path: Path, hang_env: dict[str, str]) -> None:
     bag = tmp_path / "bag"
-    proc = _start(["--duration", "30", "--watchdog-s", "2", "--out", str(bag)], hang_env)
+    proc = _start([_kinematic(tmp_path), "--duration", "30", "--watchdog-s", "2", "--out", str(bag)], hang_env)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 8, err
     line = assert_one_line_error(err, contains="has not returned for")
@@ -135,7 +184,7 @@ def test_a_step_hung_in_c_ends_by_the_watchdog(tmp_path: Path, hang_env: dict[st
 
 def test_a_step_hung_in_c_stops_on_sigterm(tmp_path: Path, hang_env: dict[str, str]) -> None:
     bag = tmp_path / "bag"
-    proc = _start(["--duration", "30", "--out", str(bag)], hang_env)  # default watchdog: 10 s
+    proc = _start([_kinematic(tmp_path), "--duration", "30", "--out", str(bag)], hang_env)  # watchdog: 10 s
     _wait_stuck(proc, bag)
     rss0 = _rss_kib(proc.pid)
     time.sleep(1.0)
