@@ -309,3 +309,57 @@ def test_a_script_error_inside_a_tick_keeps_its_message(tmp_path: Path, capsys: 
     assert code == 6, err
     assert_one_line_error(err, contains="missing")
     assert_bag_reads_back(bag)
+
+
+# -- other commands' options and outputs ---------------------------------------------------------------
+
+CLI_CASES: dict[str, tuple[list[str], int, str]] = {
+    "step_response_step_zero": (["fmu", "step-response", "builtin:xm430_w210", "--step-ms", "0"], 2, "--step-ms"),
+    "step_response_step_nan": (["fmu", "step-response", "builtin:xm430_w210", "--step-ms", "nan"], 2, "--step-ms"),
+    "step_response_duration_negative": (
+        ["fmu", "step-response", "builtin:xm430_w210", "--duration-s", "-1"],
+        2,
+        "--duration-s",
+    ),
+    "step_response_out_unwritable": (
+        ["fmu", "step-response", "builtin:xm430_w210", "--out", "/proc/twin-step.png"],
+        5,
+        "cannot write the plot",
+    ),
+    "step_response_out_folder": (["fmu", "step-response", "builtin:xm430_w210", "--out", "{d}"], 2, "--out"),
+    "ekf_replay_out_unwritable": (
+        ["ekf", "replay", "{fixtures}/bags/tb3_waffle_gazebo_humble", "--out", "/proc/twin-ekf"],
+        5,
+        "cannot write",
+    ),
+    "fmu_check_missing": (["fmu", "check", "{d}/nowhere.fmu"], 4, "nowhere.fmu"),
+    "bag_info_missing": (["bag", "info", "{d}/nowhere"], 5, "nowhere"),
+    "world_info_missing": (["world", "info", "{d}/nowhere.world"], 3, "nowhere.world"),
+    "tree_validate_missing": (["tree", "validate", "{d}/nowhere.xml"], 6, "nowhere.xml"),
+}
+
+
+@pytest.mark.parametrize("case", CLI_CASES, ids=str)
+def test_other_commands_refuse_with_one_line(
+    case: str, tmp_path: Path, fixtures: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv, exit_code, contains = CLI_CASES[case]
+    args = [a.replace("{d}", str(tmp_path)).replace("{fixtures}", str(fixtures)) for a in argv]
+    code, out, err = run(args, capsys)
+    assert code == exit_code, out + err
+    if "twin: error:" in err:
+        assert_one_line_error(err, contains=contains)
+    else:  # tree validate reports its problems one per line, then a count
+        assert contains in out + err and "Traceback" not in out + err
+
+
+def test_ekf_replay_default_output_does_not_collide(
+    tmp_path: Path, fixtures: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    bag = str(fixtures / "bags" / "tb3_waffle_gazebo_humble")
+    for _ in range(2):
+        code, _, err = run(["ekf", "replay", bag, "--json"], capsys)
+        assert code == 0, err
+    names = sorted(p.name for p in (tmp_path / "bags").iterdir())
+    assert names == ["tb3_waffle_gazebo_humble_ekf", "tb3_waffle_gazebo_humble_ekf_2"]
