@@ -363,3 +363,20 @@ def test_ekf_replay_default_output_does_not_collide(
         assert code == 0, err
     names = sorted(p.name for p in (tmp_path / "bags").iterdir())
     assert names == ["tb3_waffle_gazebo_humble_ekf", "tb3_waffle_gazebo_humble_ekf_2"]
+
+
+def test_model_uri_cannot_escape_the_model_path(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "secret").mkdir()
+    (tmp_path / "secret" / "x.stl").write_bytes(bytes(84))  # a valid, empty binary STL outside the models
+    model = tmp_path / "models" / "m"
+    model.mkdir(parents=True)
+    (model / "model.sdf").write_text(
+        "<sdf version='1.6'><model name='m'><link name='l'><collision name='c'><geometry><mesh>"
+        "<uri>model://m/../../secret/x.stl</uri></mesh></geometry></collision></link></model></sdf>"
+    )
+    world = tmp_path / "w.world"
+    world.write_text("<sdf version='1.6'><world name='w'><include><uri>model://m</uri></include></world></sdf>")
+    code, _, err = run(["world", "info", str(world), "--model-path", str(tmp_path / "models")], capsys)
+    assert code == 3, err
+    assert "model://m/../../secret/x.stl: refused: '..' would leave the model path" in err
+    assert_one_line_error(err, contains="not found")
