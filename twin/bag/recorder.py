@@ -29,6 +29,7 @@ import contextlib
 import errno
 import logging
 import os
+import shutil
 import sqlite3
 import time
 from collections.abc import Sequence
@@ -148,6 +149,7 @@ class Recorder:
         self._closed = False
         self._failed = False
         self._written = 0
+        self._end_ns: int | None = None  # the latest message time on disk
         if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
             msg = f"{self.path}: the bag folder exists and is not empty; choose a new output folder"
             raise BagError(msg)
@@ -345,6 +347,9 @@ class Recorder:
         except (OSError, sqlite3.Error) as err:
             self._fail(err)
         self._written += len(batch)
+        batch_end: object = batch[-1][1]
+        if isinstance(batch_end, int) and (self._end_ns is None or batch_end > self._end_ns):
+            self._end_ns = batch_end
 
     def _describe_bad_batch(self, batch: Sequence[tuple[Any, Any, Any]], err: ValueError) -> str:
         """Name the first bad `write()` call of a batch the storage refused."""
@@ -483,15 +488,16 @@ class Recorder:
         if self._mcap is not None:
             with contextlib.suppress(OSError):
                 self._mcap.truncate_to_good_end()
-        disk_full = _is_disk_full(err)
+        what = _reason(err, self.path)
+        end = f"t={self._end_ns / 1e9:.3f} s" if self._end_ns is not None else "its start"
         try:
             self._finish()
-            outcome = f"the bag was closed with the {self.message_count} messages that fit"
+            outcome = f"the bag was closed with the {self.message_count} messages that fit: it ends at {end}"
         except BagError:
-            outcome = f"free space, then `twin bag recover {self.path}` completes it"
+            fix = "raise the limit" if _is_size_limit(err) else "free space"
+            outcome = f"what was written ends at {end}; {fix}, then `twin bag recover {self.path}` completes it"
         self._closed = True
         self._pending = _ClosedBatch(self.path)
-        what = "the disk is full" if disk_full else _reason(err)
         msg = f"{self.file_path}: cannot write: {what}; {outcome}"
         raise BagError(msg) from None
 
@@ -508,13 +514,24 @@ class _ClosedBatch(list[tuple[int, int, bytes]]):
         raise BagError(msg)
 
 
-def _is_disk_full(err: BaseException) -> bool:
-    if isinstance(err, OSError):
-        return err.errno in _DISK_FULL
-    return isinstance(err, sqlite3.Error) and "full" in str(err).lower()
+def _is_size_limit(err: BaseException) -> bool:
+    return isinstance(err, OSError) and err.errno == errno.EFBIG
 
 
-def _reason(err: BaseException) -> str:
+def _reason(err: BaseException, folder: Path | None = None) -> str:
     if isinstance(err, OSError):
-        return f"{err.strerror or err}" + (" (disk full)" if err.errno in _DISK_FULL else "")
+        if err.errno == errno.ENOSPC:
+            return "the disk is full"
+        if err.errno == errno.EDQUOT:
+            return "the disk quota is exceeded"
+        if err.errno == errno.EFBIG:
+            return "the file-size limit was reached (ulimit -f, or the file system's largest file), not a full disk"
+        return f"{err.strerror or err}"
+    if "full" in str(err).lower():
+        return f"the disk is full ({err})"
+    if folder is not None:  # sqlite3 says "disk I/O error" for a size limit too: look at the disk
+        with contextlib.suppress(OSError):
+            free = shutil.disk_usage(folder).free
+            if free > 16 * 2**20:
+                return f"{err} with {free / 2**30:.1f} GiB free, so not a full disk (a file-size limit, ulimit -f?)"
     return str(err)
