@@ -380,3 +380,14 @@ def test_model_uri_cannot_escape_the_model_path(tmp_path: Path, capsys: pytest.C
     assert code == 3, err
     assert "model://m/../../secret/x.stl: refused: '..' would leave the model path" in err
     assert_one_line_error(err, contains="not found")
+
+
+def test_signed_values_are_not_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    values = {
+        "robot.initial_pose.x_m": -1.0,
+        "robot.initial_pose.yaw_rad": -3.0,
+        "drive.type": "fmu",
+        "drive.slip.regions": [{"x_min_m": -2.0, "x_max_m": -1.5, "y_min_m": -1.0, "y_max_m": 1.0, "slip": 0.3}],
+    }
+    code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
+    assert code == 0, err

@@ -30,7 +30,7 @@ _MIN_RATE_HZ = 1e-3
 _MAX_SAMPLES = 100_000
 # Numbers that cannot be negative: durations, distances, rates, gains, limits, noise levels.
 _UNSIGNED_SUFFIXES = ("_hz", "_s", "_m", "_kgm2", "_per_rev", "gain", "samples", "precision", "_fraction")
-_SIGNED_LEAVES = frozenset(("x_m", "y_m"))
+_SIGNED_PREFIXES = ("x_", "y_", "z_")  # coordinates: x_m, x_min_m, y_max_m, ...
 
 
 def _values(value: Any, key: str) -> Iterator[tuple[str, Any]]:
@@ -82,7 +82,7 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
         if isinstance(value, int | float) and not isinstance(value, bool) and value < 0:
             leaf = key.rsplit(".", 1)[-1]
             unsigned = leaf.endswith(_UNSIGNED_SUFFIXES) or "std" in leaf or leaf.startswith("max_")
-            if unsigned and leaf not in _SIGNED_LEAVES and "[" not in leaf:
+            if unsigned and not leaf.startswith(_SIGNED_PREFIXES) and "[" not in leaf:
                 raise _refuse(path, key, f"must not be negative, got {value}")
     if scenario.seed < 0:
         raise _refuse(path, "seed", f"must be a non-negative whole number, got {scenario.seed}")
