@@ -47,7 +47,7 @@ values = st.one_of(
 )
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(key=st.sampled_from(KEYS), value=values)
 def test_check_and_simulate_agree_on_any_value(
     key: str, value: float | int, capsys: pytest.CaptureFixture[str]
