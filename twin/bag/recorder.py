@@ -336,16 +336,16 @@ class Recorder:
             self._sim_deadline_ns = (last_t if isinstance(last_t, int) else 0) + self._sim_interval_ns
         try:
             self._storage.write_batch(batch)
-        except (KeyboardInterrupt, SystemExit):
-            # Interrupted mid-write: the storage is back at its last complete batch; keep these
-            # messages so that closing the bag still writes them.
-            self._pending = batch + self._pending
-            raise
         except ValueError as err:
             msg = f"{self.file_path}: {self._describe_bad_batch(batch, err)}"
             raise BagError(msg) from None
         except (OSError, sqlite3.Error) as err:
             self._fail(err)
+        except BaseException:
+            # Interrupted mid-write (Ctrl-C, or the watchdog unwinding a stuck run): the storage is
+            # back at its last complete batch; keep these messages so that closing still writes them.
+            self._pending = batch + self._pending
+            raise
         self._written += len(batch)
         batch_end: object = batch[-1][1]
         if isinstance(batch_end, int) and (self._end_ns is None or batch_end > self._end_ns):
