@@ -43,6 +43,9 @@ class MeshCache:
     def __init__(self) -> None:
         self._files: dict[Path, trimesh.Scene] = {}
         self._units: dict[Path, float] = {}
+        # Primitive shapes by value: a world of 10,000 equal boxes builds one box mesh (callers copy
+        # before they transform, never change a mesh they are given).
+        self.primitives: dict[object, trimesh.Trimesh] = {}
 
     def scene(self, path: Path, where: str) -> tuple[trimesh.Scene, float]:
         """Return the file's meshes as a trimesh Scene and its unit scale (metres per unit).
@@ -168,13 +171,8 @@ def _submesh_geometry_names(path: Path, name: str) -> set[str]:
     return out or {name}
 
 
-def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trimesh.Trimesh | None:
-    """Return a triangle mesh of a geometry in its own frame (None for infinite planes).
-
-    Raises:
-        WorldError: If a mesh file cannot be used.
-    """
-    out: Any = None
+def _primitive_mesh(geometry: Box | Cylinder | Sphere | Capsule | Ellipsoid) -> trimesh.Trimesh:
+    out: Any
     match geometry:
         case Box(size_m=size):
             out = trimesh.creation.box(extents=size)
@@ -187,6 +185,23 @@ def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trim
         case Ellipsoid(radii_m=radii):
             out = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
             out.apply_scale(np.asarray(radii))
+    return out  # type: ignore[no-any-return]
+
+
+def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trimesh.Trimesh | None:
+    """Return a triangle mesh of a geometry in its own frame (None for infinite planes).
+
+    Raises:
+        WorldError: If a mesh file cannot be used.
+    """
+    if isinstance(geometry, Box | Cylinder | Sphere | Capsule | Ellipsoid):
+        cached = cache.primitives.get(geometry)
+        if cached is None:
+            cached = _primitive_mesh(geometry)
+            cache.primitives[geometry] = cached
+        return cached
+    out: Any = None
+    match geometry:
         case Polyline():
             out = polyline_mesh(geometry)
         case Mesh():
