@@ -20,6 +20,7 @@ import yaml
 
 from twin.bag.qos import QosProfile, parse_qos_profiles, qos_profiles_to_yaml, qos_yaml_string_scalar
 from twin.core.errors import BagError
+from twin.core.yaml_numbers import safe_load
 
 __all__ = ["BagMetadata", "FileInformation", "TopicMetadata", "read_metadata", "render_metadata", "write_metadata"]
 
@@ -207,7 +208,18 @@ def parse_metadata(text: str, path: Path) -> BagMetadata:
         BagError: Naming `path` and the problem, if the text is not rosbag2 metadata.
     """
     try:
-        doc = yaml.safe_load(text)
+        return _parse_metadata(text, path)
+    except (ValueError, TypeError, KeyError, AttributeError) as err:  # a value of the wrong kind
+        msg = f"{path}: not valid rosbag2 metadata ({type(err).__name__}: {err}); `twin bag recover` rebuilds it"
+        raise BagError(msg) from None
+    except RecursionError:
+        msg = f"{path}: not valid rosbag2 metadata (nested too deeply)"
+        raise BagError(msg) from None
+
+
+def _parse_metadata(text: str, path: Path) -> BagMetadata:
+    try:
+        doc = safe_load(text)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f":{mark.line + 1}" if mark is not None else ""
@@ -280,6 +292,9 @@ def read_metadata(bag_dir: Path) -> BagMetadata:
         raise BagError(msg) from None
     except OSError as err:
         msg = f"{path}: cannot read: {err.strerror}"
+        raise BagError(msg) from None
+    except UnicodeDecodeError as err:
+        msg = f"{path}: not UTF-8 text (byte offset {err.start}); not rosbag2 metadata"
         raise BagError(msg) from None
     return parse_metadata(text, path)
 

@@ -227,9 +227,9 @@ def parse_qos_profiles(value: Any) -> tuple[QosProfile, ...]:
     Raises:
         ValueError: If the value is not a list of QoS profiles.
     """
-    import yaml
+    from twin.core.yaml_numbers import safe_load
 
-    items: Any = yaml.safe_load(value) if isinstance(value, str) else value
+    items: Any = safe_load(value) if isinstance(value, str) else value
     if items is None or items == "":
         return ()
     if not isinstance(items, Iterable) or isinstance(items, str | bytes | Mapping):

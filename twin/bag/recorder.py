@@ -15,8 +15,10 @@ with Recorder("bags/run1") as rec:               # MCAP, Humble-readable metadat
 ```
 
 `write()` only appends to a list. Every `flush_interval_s` of wall time (checked on writes, see
-`poll()`), or every `chunk_messages` messages, the batch goes to disk: one MCAP chunk with its
-indexes in a single write, or one committed sqlite3 transaction. A killed process therefore loses
+`poll()`), every `flush_interval_sim_s` of message time (a run at 100x real time loses no more
+simulated time to a kill than one at real time), or every `chunk_messages` messages, the batch
+goes to disk: one MCAP chunk with its indexes in a single write, or one committed sqlite3
+transaction. A killed process therefore loses
 at most the last interval; `twin bag recover` makes what it left a complete bag. Closing (also on
 an exception inside the `with` block) writes the summary and `metadata.yaml`.
 """
@@ -28,6 +30,7 @@ import errno
 import json
 import logging
 import os
+import shutil
 import sqlite3
 import time
 from collections.abc import Mapping, Sequence
@@ -57,6 +60,7 @@ TopicHandle = NewType("TopicHandle", int)
 STORAGES = ("mcap", "sqlite3")
 _EXTENSIONS = {"mcap": ".mcap", "sqlite3": ".db3"}
 _MAX_STEP = 64  # most writes between two looks at the clock
+_NEVER = 2**63  # beyond any int64 time
 _DISK_FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
 
@@ -91,6 +95,7 @@ class Recorder:
         storage: str = "mcap",
         distro: str = "humble",
         flush_interval_s: float = 0.25,
+        flush_interval_sim_s: float | None = 0.4,
         chunk_messages: int = 4096,
         fsync: bool = False,
         custom_data: dict[str, str] | None = None,
@@ -105,6 +110,9 @@ class Recorder:
             distro: Whose rosbag2 the bag imitates: `humble` (default; metadata version 8, read by
                 every distro from Humble on), `iron`, or `jazzy`/`kilted`/`rolling` (version 9).
             flush_interval_s: Longest wall time a written message waits before reaching the disk.
+            flush_interval_sim_s: Longest message time (`t_ns`) a batch spans before it goes to disk,
+                so a run far faster than real time loses at most this much simulated time to a
+                kill (None: by wall time only).
             chunk_messages: Messages per MCAP chunk / sqlite3 transaction (a batch may run a few
                 dozen over while the recorder is not looking).
             fsync: Also fsync each flush (survives power loss, not just a killed process).
@@ -122,6 +130,12 @@ class Recorder:
         if not flush_interval_s > 0:
             msg = f"flush_interval_s must be positive, got {flush_interval_s}"
             raise BagError(msg)
+        if flush_interval_sim_s is not None and not flush_interval_sim_s > 0:
+            msg = f"flush_interval_sim_s must be positive, got {flush_interval_sim_s}"
+            raise BagError(msg)
+        # Past this message time the pending batch is flushed (set from each flushed batch's last time).
+        self._sim_interval_ns = round(flush_interval_sim_s * 1e9) if flush_interval_sim_s is not None else None
+        self._sim_deadline_ns = self._sim_interval_ns if self._sim_interval_ns is not None else _NEVER
         self.profile = distro_profile(distro)
         self.path = Path(path)
         self.storage_id = storage
@@ -138,6 +152,7 @@ class Recorder:
         self._closed = False
         self._failed = False
         self._written = 0
+        self._end_ns: int | None = None  # the latest message time on disk
         if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
             msg = f"{self.path}: the bag folder exists and is not empty; choose a new output folder"
             raise BagError(msg)
@@ -284,7 +299,13 @@ class Recorder:
         """
         pending = self._pending
         pending.append((handle, t_ns, data))
-        if len(pending) >= self._next_check:
+        try:
+            due = t_ns >= self._sim_deadline_ns
+        except TypeError:  # not a time: flush now, which names the bad write
+            due = True
+        if due:
+            self.flush()
+        elif len(pending) >= self._next_check:
             self._check(len(pending))
 
     def _write_and_log(self, handle: TopicHandle, t_ns: int, data: bytes) -> None:
@@ -332,19 +353,25 @@ class Recorder:
         self._next_check = self._step
         if not batch:
             return
+        if self._sim_interval_ns is not None:
+            last_t: object = batch[-1][1]  # checked by the storage below; may be bad input here
+            self._sim_deadline_ns = (last_t if isinstance(last_t, int) else 0) + self._sim_interval_ns
         try:
             self._storage.write_batch(batch)
-        except (KeyboardInterrupt, SystemExit):
-            # Interrupted mid-write: the storage is back at its last complete batch; keep these
-            # messages so that closing the bag still writes them.
-            self._pending = batch + self._pending
-            raise
         except ValueError as err:
             msg = f"{self.file_path}: {self._describe_bad_batch(batch, err)}"
             raise BagError(msg) from None
         except (OSError, sqlite3.Error) as err:
             self._fail(err)
+        except BaseException:
+            # Interrupted mid-write (Ctrl-C, or the watchdog unwinding a stuck run): the storage is
+            # back at its last complete batch; keep these messages so that closing still writes them.
+            self._pending = batch + self._pending
+            raise
         self._written += len(batch)
+        batch_end: object = batch[-1][1]
+        if isinstance(batch_end, int) and (self._end_ns is None or batch_end > self._end_ns):
+            self._end_ns = batch_end
 
     def _describe_bad_batch(self, batch: Sequence[tuple[Any, Any, Any]], err: ValueError) -> str:
         """Name the first bad `write()` call of a batch the storage refused."""
@@ -483,15 +510,16 @@ class Recorder:
         if self._mcap is not None:
             with contextlib.suppress(OSError):
                 self._mcap.truncate_to_good_end()
-        disk_full = _is_disk_full(err)
+        what = _reason(err, self.path)
+        end = f"t={self._end_ns / 1e9:.3f} s" if self._end_ns is not None else "its start"
         try:
             self._finish()
-            outcome = f"the bag was closed with the {self.message_count} messages that fit"
+            outcome = f"the bag was closed with the {self.message_count} messages that fit: it ends at {end}"
         except BagError:
-            outcome = f"free space, then `twin bag recover {self.path}` completes it"
+            fix = "raise the limit" if _is_size_limit(err) else "free space"
+            outcome = f"what was written ends at {end}; {fix}, then `twin bag recover {self.path}` completes it"
         self._closed = True
         self._pending = _ClosedBatch(self.path)
-        what = "the disk is full" if disk_full else _reason(err)
         msg = f"{self.file_path}: cannot write: {what}; {outcome}"
         raise BagError(msg) from None
 
@@ -508,13 +536,24 @@ class _ClosedBatch(list[tuple[int, int, bytes]]):
         raise BagError(msg)
 
 
-def _is_disk_full(err: BaseException) -> bool:
-    if isinstance(err, OSError):
-        return err.errno in _DISK_FULL
-    return isinstance(err, sqlite3.Error) and "full" in str(err).lower()
+def _is_size_limit(err: BaseException) -> bool:
+    return isinstance(err, OSError) and err.errno == errno.EFBIG
 
 
-def _reason(err: BaseException) -> str:
+def _reason(err: BaseException, folder: Path | None = None) -> str:
     if isinstance(err, OSError):
-        return f"{err.strerror or err}" + (" (disk full)" if err.errno in _DISK_FULL else "")
+        if err.errno == errno.ENOSPC:
+            return "the disk is full"
+        if err.errno == errno.EDQUOT:
+            return "the disk quota is exceeded"
+        if err.errno == errno.EFBIG:
+            return "the file-size limit was reached (ulimit -f, or the file system's largest file), not a full disk"
+        return f"{err.strerror or err}"
+    if "full" in str(err).lower():
+        return f"the disk is full ({err})"
+    if folder is not None:  # sqlite3 says "disk I/O error" for a size limit too: look at the disk
+        with contextlib.suppress(OSError):
+            free = shutil.disk_usage(folder).free
+            if free > 16 * 2**20:
+                return f"{err} with {free / 2**30:.1f} GiB free, so not a full disk (a file-size limit, ulimit -f?)"
     return str(err)

@@ -3,7 +3,10 @@
 A killed recorder leaves the storage file without its end (MCAP: no summary or footer, maybe a
 partial chunk; sqlite3: maybe a hot journal) and no `metadata.yaml`. Recovery completes the
 storage file in place, keeping every complete record, and rebuilds `metadata.yaml` from it, in
-the distro form the recording used. Running it on a complete bag only rewrites `metadata.yaml`.
+the distro form the recording used. A complete bag (complete storage files and a `metadata.yaml`
+that counts the same messages) is reported as complete and left untouched, whatever its metadata
+version or distro. When `metadata.yaml` must be rewritten, the original is kept beside it as
+`metadata.yaml.orig` (`.orig.2`, ... if that exists).
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.bag.mcap_file import recover_mcap
+from twin.bag.mcap_file import recover_mcap, scan_mcap
 from twin.bag.metadata import (
     METADATA_FILE,
     BagMetadata,
@@ -54,7 +57,7 @@ def _previous_metadata(bag: Path) -> BagMetadata | None:
         return None
     try:
         return parse_metadata(path.read_text(encoding="utf-8"), path)
-    except (BagError, OSError) as err:
+    except (BagError, OSError, UnicodeDecodeError) as err:
         _log.warning("%s: ignoring unreadable metadata (%s)", path, err)
         return None
 
@@ -82,9 +85,68 @@ def recover_bag(path: str | os.PathLike[str]) -> RecoveryReport:
         msg = f"{bag}: no .mcap or .db3 storage file to recover"
         raise BagError(msg)
     previous = _previous_metadata(bag)
+    if previous is not None:
+        untouched = _complete_report(bag, mcaps, dbs, previous)
+        if untouched is not None:
+            return untouched
+        _backup_metadata(bag)
     if mcaps:
         return _recover_mcap_bag(bag, mcaps, previous)
     return _recover_sqlite_bag(bag, dbs, previous)
+
+
+def _backup_metadata(bag: Path) -> Path | None:
+    """Copy `metadata.yaml` to `metadata.yaml.orig` (or the next free `.orig.N`) before it is rewritten."""
+    source = bag / METADATA_FILE
+    if not source.exists():
+        return None
+    target, n = bag / f"{METADATA_FILE}.orig", 1
+    while target.exists():
+        n += 1
+        target = bag / f"{METADATA_FILE}.orig.{n}"
+    try:
+        target.write_bytes(source.read_bytes())
+    except OSError as err:
+        msg = f"{bag}: cannot keep the original {METADATA_FILE} as {target.name}: {err.strerror}; nothing was changed"
+        raise BagError(msg) from None
+    _log.info("%s: original metadata kept as %s", bag, target.name)
+    return target
+
+
+def _complete_report(bag: Path, mcaps: list[Path], dbs: list[Path], previous: BagMetadata) -> RecoveryReport | None:
+    """A report for a bag that needs nothing (read-only checks), or None if it must be recovered."""
+    names = {f.name for f in (*mcaps, *dbs)}
+    if set(previous.relative_file_paths) != names:
+        return None
+    total = 0
+    try:
+        for file in mcaps:
+            scan = scan_mcap(file)
+            if not scan.complete:
+                return None
+            total += scan.stats().message_count
+        for file in dbs:
+            if file.with_name(file.name + "-journal").exists() or file.with_name(file.name + "-wal").exists():
+                return None
+            db = sqlite3.connect(f"{file.resolve().as_uri()}?mode=ro", uri=True)
+            try:
+                total += int(db.execute("SELECT count(*) FROM messages").fetchone()[0])
+            finally:
+                db.close()
+    except (ValueError, OSError, sqlite3.Error):
+        return None  # the recovery proper names the problem
+    if total != previous.message_count:
+        return None
+    return RecoveryReport(
+        path=bag,
+        storage="mcap" if mcaps else "sqlite3",
+        files=tuple(sorted(names)),
+        message_count=total,
+        topic_counts=tuple((t.name, t.message_count) for t in previous.topics),
+        was_complete=True,
+        dropped_bytes=0,
+        metadata=previous,
+    )
 
 
 def _file_info(name: str, start: int, end: int, count: int) -> FileInformation:
@@ -241,7 +303,9 @@ def _finish(
     was_complete: bool,
     dropped: int,
 ) -> RecoveryReport:
-    was_complete = was_complete and previous is not None
+    total = sum(counts.values())
+    # Complete means nothing had to change; a bag reaching here had its metadata rewritten.
+    was_complete = was_complete and previous is not None and previous.message_count == total
     profile = distro_profile(_distro(distro))
     version = previous.version if previous and previous.version >= 8 else profile.metadata_version
     start = min(starts) if starts else 0

@@ -33,7 +33,7 @@ from twin.bt.script import Script, ScriptSyntaxError, parse_script
 from twin.bt.status import NodeKind, PortDirection
 from twin.bt.tree import SubtreeInstance, Tree
 from twin.bt.values import ConversionError, PortType
-from twin.core.config import suggest
+from twin.core.config import read_text_file, suggest
 from twin.core.errors import TreeError
 
 if TYPE_CHECKING:
@@ -109,6 +109,10 @@ class XmlElement:
         return f"<{self.tag} {self.attrs} @{self.location}>"
 
 
+MAX_XML_DEPTH: Final = 100
+"""Deepest element nesting a tree file may have (the loader and ticks recurse per level)."""
+
+
 def parse_xml(text: str, source: str) -> XmlElement:
     """Parse XML text into elements with line numbers.
 
@@ -120,6 +124,12 @@ def parse_xml(text: str, source: str) -> XmlElement:
     roots: list[XmlElement] = []
 
     def start(tag: str, attrs: dict[str, str]) -> None:
+        if len(stack) >= MAX_XML_DEPTH:
+            msg = (
+                f"{source}:{parser.CurrentLineNumber}: elements nested deeper than {MAX_XML_DEPTH} levels; "
+                "twin reads trees up to that depth: split the tree into <SubTree>s"
+            )
+            raise TreeError(msg)
         element = XmlElement(tag, dict(attrs), parser.CurrentLineNumber, source)
         (stack[-1].children if stack else roots).append(element)
         stack.append(element)
@@ -306,13 +316,9 @@ class TreeParser:
             msg = f"{where}<include> loops back to a file being loaded ({chain})"
             raise TreeError(msg)
         try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            msg = f"{where}{path}: file not found"
-            raise TreeError(msg) from None
-        except OSError as err:
-            msg = f"{where}{path}: cannot read ({err.strerror})"
-            raise TreeError(msg) from None
+            text = read_text_file(path, TreeError, what="a BehaviorTree.CPP XML file")
+        except TreeError as err:
+            raise err.with_context(before=where) from None
         self._loading.append(resolved)
         try:
             return self.load_text(text, source=str(path), base_dir=resolved.parent)
@@ -482,6 +488,12 @@ class TreeParser:
             raise TreeError(msg)
         first = self.documents[0]
         if first.main_tree_to_execute:
+            if first.main_tree_to_execute not in self.tree_roots:
+                msg = (
+                    f"{first.root.location}: main_tree_to_execute={first.main_tree_to_execute!r} names no tree "
+                    f"in the file{suggest(first.main_tree_to_execute, list(self.tree_roots)) or ' (it has none)'}"
+                )
+                raise TreeError(msg)
             return first.main_tree_to_execute
         if len(self.tree_roots) == 1:
             return next(iter(self.tree_roots))

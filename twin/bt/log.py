@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from twin.bt.status import NodeStatus
+from twin.core.config import read_text_file
 from twin.core.errors import TreeError
 
 __all__ = ["StatusChange", "StatusChangeBuffer", "StatusLog", "TickMark", "read_jsonl", "render_timeline"]
@@ -92,11 +93,7 @@ def read_jsonl(path: Path) -> StatusLog:
         TreeError: `file:line: ...` if a line is not a change or a tick mark.
     """
     log = StatusLog()
-    try:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
-    except OSError as err:
-        msg = f"{path}: cannot read ({err.strerror})"
-        raise TreeError(msg) from None
+    lines = read_text_file(Path(path), TreeError, what="a tree status log").splitlines()
     for number, line in enumerate(lines, start=1):
         if not line.strip():
             continue

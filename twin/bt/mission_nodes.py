@@ -185,6 +185,9 @@ class GoToPose(StatefulActionNode):
         self._navigator = navigator
         self._goal_id: int | None = None
         self._file_cache: dict[Path, dict[str, Pose2D]] = {}
+        self._location = ""
+        self.failure: tuple[int, str] | None = None
+        """(tree time, why) of this node's last failed goal, for the run's summary."""
 
     def _poses(self) -> Mapping[str, Pose2D] | None:
         if "loc_poses" in self.config.input_ports:
@@ -208,11 +211,16 @@ class GoToPose(StatefulActionNode):
     def on_start(self) -> NodeStatus:
         """Send the goal of location `loc`."""
         ok, location = self.read_input("loc")
+        self._location = str(location)
         if not ok:
             _log.warning("%s: cannot read loc: %s", self.full_path, location)
             return NodeStatus.FAILURE
         poses = self._poses()
         if poses is None:
+            self.failure = (
+                self.now_ns(),
+                f"goal {self._location!r} ({self.full_path}): no location poses (see the warning above)",
+            )
             return NodeStatus.FAILURE
         if location not in poses:
             msg = f"unknown location {location!r}; the locations are {', '.join(sorted(poses))}"
@@ -232,6 +240,12 @@ class GoToPose(StatefulActionNode):
         if status is NavigationStatus.SUCCEEDED:
             _log.info("%s: goal reached", self.full_path)
             return NodeStatus.SUCCESS
+        reason_of = getattr(self._navigator, "failure_reason", None)
+        reason = reason_of(self._goal_id) if reason_of is not None else ""
+        self.failure = (
+            self.now_ns(),
+            f"goal {self._location!r} ({self.full_path}) failed: {reason or 'the navigator reported failure'}",
+        )
         _log.info("%s: failed to reach the goal", self.full_path)
         return NodeStatus.FAILURE
 

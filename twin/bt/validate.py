@@ -23,7 +23,7 @@ from twin.bt.script import ScriptSyntaxError, parse_script
 from twin.bt.status import NodeKind, NodeStatus
 from twin.bt.tree import ManualClock, Tree
 from twin.bt.values import ConversionError, PortType
-from twin.core.config import suggest
+from twin.core.config import read_text_file, suggest
 from twin.core.errors import TreeError
 
 __all__ = [
@@ -225,11 +225,7 @@ def declare_node_models(factory: BehaviorTreeFactory, path: Path) -> list[str]:
         TreeError: If the file cannot be read, is malformed, has no `<TreeNodesModel>`, or an
             entry has no ID (each `file:line: ...`).
     """
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as err:
-        msg = f"{path}: cannot read: {err.strerror or err}"
-        raise TreeError(msg) from None
+    text = read_text_file(Path(path), TreeError, what="a TreeNodesModel XML file")
     root = parse_xml(text, str(path))
     models = [root] if root.tag == "TreeNodesModel" else [c for c in root.children if c.tag == "TreeNodesModel"]
     if not models:

@@ -17,11 +17,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 
 from twin import __version__
-from twin.core.errors import TwinError
+from twin.core.errors import Interrupted, TwinError
 
 __all__ = ["main", "run"]
 
@@ -64,12 +67,14 @@ class _Formatter(argparse.RawDescriptionHelpFormatter):
     pass
 
 
-def _common_parser() -> argparse.ArgumentParser:
+def _common_parser(*, top: bool) -> argparse.ArgumentParser:
+    """The global options; a subcommand's copy leaves unset options alone, so they work on either side."""
     common = argparse.ArgumentParser(add_help=False)
     group = common.add_argument_group("output")
-    group.add_argument("--debug", action="store_true", help="show tracebacks and debug logs")
-    group.add_argument("-v", "--verbose", action="store_true", help="show info logs")
-    group.add_argument("-q", "--quiet", action="store_true", help="show only errors")
+    default: object = False if top else argparse.SUPPRESS
+    group.add_argument("--debug", action="store_true", default=default, help="show tracebacks and debug logs")
+    group.add_argument("-v", "--verbose", action="store_true", default=default, help="show info logs")
+    group.add_argument("-q", "--quiet", action="store_true", default=default, help="show only errors")
     return common
 
 
@@ -78,7 +83,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     `main` and the docs use the full parser; `main` builds only the command argv names.
     """
-    common = _common_parser()
+    common = _common_parser(top=False)
     parser = argparse.ArgumentParser(
         prog="twin",
         description=(
@@ -87,7 +92,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         ),
         epilog=_EPILOG,
         formatter_class=_Formatter,
-        parents=[common],
+        parents=[_common_parser(top=True)],
     )
     parser.add_argument("--version", action="version", version=f"twin {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -129,12 +134,26 @@ def _configure_logging(args: argparse.Namespace) -> None:
     logging.captureWarnings(True)
 
 
+def _interrupted_at_start(signum: int, frame: object) -> None:
+    # Start-up (imports, parsing) holds nothing to save: one line and exit at once.
+    os.write(2, b"twin: interrupted\n")
+    os._exit(Interrupted.exit_code)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line and return its exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(_named_command(argv))
-    args = parser.parse_args(argv)
-    _configure_logging(args)
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    if in_main_thread:
+        previous = signal.signal(signal.SIGINT, _interrupted_at_start)
+    try:
+        parser = build_parser(_named_command(argv))
+        args = parser.parse_args(argv)
+        _configure_logging(args)
+    finally:
+        if in_main_thread:
+            restore = previous if previous is not _interrupted_at_start else signal.default_int_handler
+            signal.signal(signal.SIGINT, restore)
     debug = bool(getattr(args, "debug", False))
     try:
         code: int = args.func(args)
@@ -146,7 +165,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return err.exit_code
     except KeyboardInterrupt:
         print("twin: interrupted", file=sys.stderr)
-        return 130
+        return Interrupted.exit_code
     except BrokenPipeError:
         return 0
     except Exception as err:

@@ -207,7 +207,7 @@ def _recover(args: argparse.Namespace) -> int:
         print(json.dumps(_recover_json(report), indent=2))
         return 0
     if report.was_complete:
-        state = "was complete; metadata.yaml rewritten"
+        state = "complete (nothing changed)"
     elif report.dropped_bytes:
         state = f"recovered ({_size(report.dropped_bytes)} of partial records cut)"
     else:

@@ -6,12 +6,13 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
-from twin.core.errors import ConfigError, EstimationError
+from twin.core.errors import BagError, ConfigError, EstimationError
 
 if TYPE_CHECKING:
     from twin.estimation import EstimationSection
@@ -239,6 +240,25 @@ def _resolve_geometry(args: argparse.Namespace, bag_mod: ModuleType) -> dict[str
     return sources
 
 
+def _free_name(base: Path) -> Path:
+    """`base`, or `base_2`, `base_3`, ... : the first that does not exist (a default never collides)."""
+    path, n = base, 1
+    while path.exists():
+        n += 1
+        path = base.with_name(f"{base.name}_{n}")
+    return path
+
+
+def _check_writable(out: Path, option: str) -> None:
+    """Refuse an output folder that cannot be created or written, before any work is done."""
+    existing = out
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        msg = f"{option} {out}: cannot write in {existing} (read-only or not a folder); choose another {option}"
+        raise ConfigError(msg)
+
+
 def _replay(args: argparse.Namespace) -> int:
     from twin import bag
     from twin.estimation.replay import UnitsDecision, compare, infer_velocity_units, replay
@@ -260,11 +280,12 @@ def _replay(args: argparse.Namespace) -> int:
     config = _load_config(args.config)
     if args.no_gyro:
         config = dataclasses.replace(config, fuse_gyro=False)
-    out = args.out if args.out is not None else Path("bags") / f"{args.bag.resolve().name}_ekf"
+    out = args.out if args.out is not None else _free_name(Path("bags") / f"{args.bag.resolve().name}_ekf")
     bag_out = out / "odometry"
     if bag_out.exists() and any(bag_out.iterdir()):
         msg = f"{bag_out} exists and is not empty; choose another --out or remove it"
         raise EstimationError(msg)
+    _check_writable(out, "--out")
     inputs = _read(args, bag)
     if args.joint_velocity_units == "auto":
         units = infer_velocity_units(inputs, args.wheel_radius)
@@ -280,9 +301,13 @@ def _replay(args: argparse.Namespace) -> int:
         start_at_reference=not args.start_at_origin,
     )
     comparison = compare(result, inputs.reference) if inputs.reference is not None else None
-    out.mkdir(parents=True, exist_ok=True)
-    csv_path = out / "odometry.csv"
-    _write_csv(csv_path, result, comparison)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        csv_path = out / "odometry.csv"
+        _write_csv(csv_path, result, comparison)
+    except OSError as err:
+        msg = f"{out}: cannot write the replay's output: {err.strerror}; choose another --out"
+        raise BagError(msg) from None
     _write_bag(bag_out, result, args, bag)
     summary = _summary(
         args,

@@ -9,8 +9,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from twin.core.errors import BagError, ConfigError
 
 if TYPE_CHECKING:
     from twin.cosim.contract import FmuMapping
@@ -29,7 +32,7 @@ _CHECK_EPILOG = """\
 examples:
   twin fmu check builtin:xm430_w210
   twin fmu check builtin:xm430_w210_servo --profile velocity-servo
-  twin fmu check vendor_motor.fmu --map fmus/maps/vendor_rpm.yaml --json
+  twin fmu check vendor_motor.fmu --map fmus/maps/acme_drive.yaml --json   your FMU, its names mapped
 exit status: 0 when the FMU satisfies the contract, 4 when it does not or cannot be read.
 """
 
@@ -205,9 +208,33 @@ def _check(args: argparse.Namespace) -> int:
     return 4
 
 
+def _check_step_response_args(args: argparse.Namespace) -> None:
+    if not (math.isfinite(args.step_ms) and 0.0 < args.step_ms <= 1000.0):
+        msg = f"--step-ms must be a communication step between 0 and 1000 ms, got {args.step_ms}"
+        raise ConfigError(msg)
+    if args.duration_s is not None and not (math.isfinite(args.duration_s) and args.duration_s > 0.0):
+        msg = f"--duration-s must be a positive, finite number of seconds, got {args.duration_s}"
+        raise ConfigError(msg)
+    if args.duration_s is not None and args.duration_s / (args.step_ms * 1e-3) > 10_000_000:
+        msg = f"--duration-s {args.duration_s} at --step-ms {args.step_ms} is over 10 million steps; shorten it"
+        raise ConfigError(msg)
+    if not math.isfinite(args.voltage):
+        msg = f"--voltage must be a finite number of volts, got {args.voltage}"
+        raise ConfigError(msg)
+    if args.out is not None:
+        folder = args.out.parent if str(args.out.parent) else Path(".")
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
+        if args.out.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+            msg = f"--out {args.out}: cannot write a PNG there (read-only, or a folder); choose another --out"
+            raise ConfigError(msg)
+
+
 def _step_response(args: argparse.Namespace) -> int:
     from twin.cosim.build import resolve_fmu
     from twin.robot.drivetrain import fmu_step_response
+
+    _check_step_response_args(args)
 
     path = resolve_fmu(args.fmu, fmi_version=args.fmi)
     comparison, motor = fmu_step_response(
@@ -230,7 +257,11 @@ def _step_response(args: argparse.Namespace) -> int:
         "stall_current_model_a": motor.stall_current_a(args.voltage),
     }
     if args.out is not None:
-        _plot(c, args.out, path.name)
+        try:
+            _plot(c, args.out, path.name)
+        except OSError as err:
+            msg = f"{args.out}: cannot write the plot: {err.strerror}; choose another --out"
+            raise BagError(msg) from None
         summary["png"] = str(args.out)
     if args.json:
         print(json.dumps(summary, indent=2))

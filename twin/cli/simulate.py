@@ -8,9 +8,11 @@ import datetime
 import json
 import math
 import os
+import shutil
 import signal
 import sys
 import tempfile
+import threading
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -18,12 +20,13 @@ from typing import TYPE_CHECKING, Any
 
 from twin.cli.play import live_banner, speed_arg
 from twin.cli.progress import Progress
-from twin.core.errors import ConfigError, Interrupted, TwinError
+from twin.core.errors import ConfigError, Interrupted, SimulationError, TwinError
 
 if TYPE_CHECKING:
     from twin.sim.executor import Sink
     from twin.sim.scenario import Scenario
-    from twin.sim.simulation import RunSummary
+    from twin.sim.simulation import RunSummary, Simulation
+    from twin.sim.watchdog import StuckReport
 
 _EPILOG = """\
 examples:
@@ -35,10 +38,31 @@ examples:
   twin simulate --live --speed 5 --port 9000      five times faster, on another port
   twin simulate --from-bag bags/run1 --out /tmp/rerun   re-run the scenario, seed and duration a bag recorded
 
-The run ends when the mission ends, at --duration (or the scenario's max_duration_s), or on
-Ctrl-C / SIGTERM; in every case the bag is closed and readable. Exit codes: 0 done, 2 scenario
-error, 3 world error, 4 FMU error, 5 bag error, 6 tree error, 130 interrupted.
+The run ends when the mission ends, at --duration (or the scenario's max_duration_s), on
+Ctrl-C / SIGTERM, or when the watchdog finds a step that has not returned for --watchdog-s wall
+seconds (a hung FMU, a tree that never returns); in every case the bag is closed and readable.
+The scenario is checked first (as `twin scenario check` does): a refused run creates no bag folder.
+
+exit codes:
+  0    the run ended: mission SUCCESS, --duration reached, or a mission with no result
+  1    the mission ended in FAILURE (the summary names the goal and why; the bag is complete)
+  2    scenario or option error (a value that cannot be honoured, a missing or broken file)
+  3    world error (SDF world or robot model)
+  4    FMU error
+  5    bag error (cannot write the bag folder, disk full)
+  6    behaviour-tree error (the tree file, or a node failing while it ticks)
+  7    estimation error
+  8    the simulation cannot continue, e.g. the watchdog found a stuck step (what, and where)
+  70   internal error (a bug in twin: please report it with the --debug output)
+  130  interrupted by Ctrl-C (SIGINT); the bag is complete
+  143  stopped by SIGTERM; the bag is complete
 """
+
+
+_WATCHDOG_S = 10.0
+# After the watchdog asks a stuck main thread to unwind, how long it waits before it closes the bag
+# itself and ends the process (the thread is then inside a C call, e.g. an FMU's doStep).
+_UNWIND_S = 2.0
 
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
@@ -70,6 +94,13 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         type=Path,
         metavar="BAG",
         help="re-run exactly the scenario a twin bag recorded (its seed and duration too; same messages)",
+    )
+    parser.add_argument(
+        "--watchdog-s",
+        type=float,
+        default=_WATCHDOG_S,
+        metavar="S",
+        help=f"end the run (exit 8) when a step has not returned for S wall seconds (default {_WATCHDOG_S:g})",
     )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON on stdout")
     live = parser.add_argument_group("live view (docs/live.md)")
@@ -171,9 +202,81 @@ def _check_fmus(recorded: Mapping[str, str], bag: Path) -> None:
         )
 
 
+def _check_options(args: argparse.Namespace) -> None:
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        msg = f"--duration must be a positive, finite number of seconds, got {args.duration}"
+        raise ConfigError(msg)
+    if not args.watchdog_s > 0:  # NaN too; inf turns the stuck-step check off
+        msg = f"--watchdog-s must be a positive number of seconds (inf: no watchdog), got {args.watchdog_s}"
+        raise ConfigError(msg)
+    if args.seed is not None and args.seed < 0:
+        msg = f"--seed must be a non-negative whole number, got {args.seed}"
+        raise ConfigError(msg)
+
+
+class _Guard:
+    """The watchdog's actions for `twin simulate`: unwind the main thread, else save the bag and exit."""
+
+    def __init__(self, sim: Simulation, *, debug: bool) -> None:
+        self.sim = sim
+        self.debug = debug
+        self.main = threading.get_ident()
+        self.done = threading.Event()  # set by the main thread once the bag is closed
+        self.report: StuckReport | None = None
+        self.signum: int | None = None
+
+    def message(self) -> str:
+        report = self.report
+        assert report is not None
+        bag = self.sim.recorder.path if self.sim.recorder is not None else "no bag"
+        if self.signum is None:
+            return (
+                f"the step at t={report.sim_t_s:.3f} s has not returned for {report.stuck_s:.1f} s of wall time "
+                f"(watchdog): stuck in {report.where}; the bag up to t={report.sim_t_s:.3f} s is in {bag}"
+            )
+        name = signal.Signals(self.signum).name
+        return (
+            f"stopped by {name} while the step at t={report.sim_t_s:.3f} s was stuck in {report.where}; "
+            f"the bag up to t={report.sim_t_s:.3f} s is in {bag}"
+        )
+
+    def exit_code(self) -> int:
+        if self.signum is None:
+            return SimulationError.exit_code
+        return Interrupted.exit_code if self.signum == signal.SIGINT else 128 + self.signum
+
+    def on_stuck(self, report: StuckReport) -> None:
+        self._abort(report, None)
+
+    def on_signal(self, signum: int, report: StuckReport) -> None:
+        self._abort(report, signum)
+
+    def _abort(self, report: StuckReport, signum: int | None) -> None:
+        self.report, self.signum = report, signum
+        from twin.sim.watchdog import interrupt_main_thread
+
+        interrupt_main_thread(self.main, signum)  # a Python loop unwinds: the main thread closes the bag
+        if self.done.wait(_UNWIND_S):
+            return
+        # The main thread is inside a C call and cannot unwind: save the bag from here and end the process.
+        try:
+            if self.sim.recorder is not None:
+                self.sim.recorder.close()
+        except BaseException as err:  # the process ends either way; say what happened
+            print(f"twin: error: closing the bag failed: {err}", file=sys.stderr)
+        if self.debug:
+            print(f"twin: stuck main thread:\n{report.stack}", file=sys.stderr, end="")
+        print(f"twin: error: {self.message()}", file=sys.stderr)
+        sys.stderr.flush()
+        sys.stdout.flush()
+        os._exit(self.exit_code())
+
+
 def _simulate(args: argparse.Namespace) -> int:
+    from twin.sim.check import check_scenario
     from twin.sim.scenario import default_scenario_path, load_scenario
 
+    _check_options(args)
     provenance: Mapping[str, str] | None = None
     if args.from_bag is not None:
         if args.scenario is not None:
@@ -197,9 +300,7 @@ def _simulate(args: argparse.Namespace) -> int:
     if recording:
         changes["recording"] = dataclasses.replace(scenario.recording, **recording)
     scenario = dataclasses.replace(scenario, **changes)
-    if args.duration is not None and not args.duration > 0:
-        msg = f"--duration must be a positive number of seconds, got {args.duration}"
-        raise ConfigError(msg)
+    check_scenario(scenario, path)
     bag_path = _bag_path(scenario, args.out)
 
     flag = _StopFlag()
@@ -240,7 +341,9 @@ def _run(
     provenance: Mapping[str, str] | None,
 ) -> int:
     from twin.sim.simulation import Simulation
+    from twin.sim.watchdog import Watchdog, WatchdogAbort
 
+    existed = bag_path.exists()
     progress = Progress(args.duration or scenario.max_duration_s)
     # Crash tests set TWIN_BAG_WRITE_LOG to learn what the recorder was handed, and when.
     write_log = os.environ.get("TWIN_BAG_WRITE_LOG")
@@ -252,30 +355,55 @@ def _run(
             write_log=Path(write_log) if write_log else None,
             sinks=sinks,
         )
-    except ConfigError as err:
+    except BaseException as err:
+        if not existed and bag_path.is_dir():  # refused after the bag folder was made: leave nothing behind
+            shutil.rmtree(bag_path, ignore_errors=True)
+        if not isinstance(err, ConfigError):
+            raise
         text = str(err)
         if not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text or text.startswith("/"):
             raise
         # A scenario value the loaded world or robot refuses: name the scenario file too.
-        msg = f"{path}: {text}"
-        raise ConfigError(msg) from err
-    with _graceful_signals(flag), simulation as sim:
-        try:
-            summary = sim.run(should_stop=flag, progress=progress.update)
-        except TwinError as err:
-            progress.close()
-            t_s = sim.t_s
-            msg = f"{err} (the bag up to t={t_s:.3f} s is in {bag_path})"
-            raise type(err)(msg) from err
-        finally:
-            progress.close()
+        raise err.with_context(before=f"{path}: ") from err
+    guard = _Guard(simulation, debug=bool(getattr(args, "debug", False)))
+    try:
+        with _graceful_signals(flag), simulation as sim:
+            watchdog = Watchdog(
+                lambda: sim.t_s, timeout_s=args.watchdog_s, on_stuck=guard.on_stuck, on_signal=guard.on_signal
+            )
+            try:
+                with watchdog:
+                    summary = sim.run(should_stop=flag, progress=progress.update)
+            except TwinError as err:
+                progress.close()
+                t_s = sim.t_s
+                raise err.with_context(after=f" (the bag up to t={t_s:.3f} s is in {bag_path})") from err
+            finally:
+                progress.close()
+    except WatchdogAbort:
+        guard.done.set()
+        if guard.report is None:  # not ours: cannot happen, but never hide an exception
+            raise
+        if guard.debug:
+            print(f"twin: stuck main thread:\n{guard.report.stack}", file=sys.stderr, end="")
+        print(f"twin: error: {guard.message()}", file=sys.stderr)
+        return guard.exit_code()
+    finally:
+        guard.done.set()
     if provenance is not None and summary.bag_path is not None:
         _check_fmus(provenance, summary.bag_path)
+    failure = ""
+    if summary.mission_result == "FAILURE":
+        failure = getattr(simulation.mission, "failure", "") or "the mission returned FAILURE"
     if args.json:
-        print(json.dumps({**dataclasses.asdict(summary), "bag_path": str(summary.bag_path)}, indent=2))
+        doc = {**dataclasses.asdict(summary), "bag_path": str(summary.bag_path), "mission_failure": failure}
+        print(json.dumps(doc, indent=2))
     else:
         print(_summary_line(summary))
     if flag.signum is not None:
         print(f"twin: stopped by {signal.Signals(flag.signum).name}; the bag is complete", file=sys.stderr)
         return Interrupted.exit_code if flag.signum == signal.SIGINT else 128 + flag.signum
+    if failure:
+        print(f"twin: mission FAILURE: {failure}; the bag is complete: {summary.bag_path}", file=sys.stderr)
+        return 1
     return 0

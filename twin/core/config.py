@@ -16,6 +16,7 @@ import dataclasses
 import difflib
 import enum
 import os
+import sys
 import types
 import typing
 from collections.abc import Mapping, Sequence
@@ -24,9 +25,10 @@ from typing import Any, TypeVar
 
 import yaml
 
-from twin.core.errors import ConfigError
+from twin.core.errors import ConfigError, TwinError
+from twin.core.yaml_numbers import Loader as _Loader
 
-__all__ = ["ConfigNode", "build", "load_config", "load_yaml", "location", "suggest"]
+__all__ = ["ConfigNode", "build", "load_config", "load_yaml", "location", "read_text_file", "suggest"]
 
 T = TypeVar("T")
 
@@ -57,21 +59,44 @@ def location(node: yaml.Node) -> str:
     return f"{mark.name}:{mark.line + 1}"
 
 
+def read_text_file(path: Path, error: type[TwinError], *, what: str) -> str:
+    """Read a text file as UTF-8, every failure one `error` line naming the file.
+
+    Args:
+        path: The file.
+        error: The `TwinError` subclass to raise (its exit code tells the file's role).
+        what: What the file should be, for the message (e.g. "a UTF-8 YAML file").
+    """
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        msg = f"{path}: file not found"
+        raise error(msg) from None
+    except IsADirectoryError:
+        msg = f"{path}: is a folder; give {what}"
+        raise error(msg) from None
+    except OSError as err:
+        msg = f"{path}: cannot read ({err.strerror})"
+        raise error(msg) from None
+    if b"\0" in data[:8192]:
+        msg = f"{path}: is a binary file, not {what}"
+        raise error(msg)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = data[: err.start].count(b"\n") + 1
+        msg = f"{path}:{line}: not UTF-8 (byte 0x{data[err.start]:02x} at offset {err.start}); save it as UTF-8"
+        raise error(msg) from None
+
+
 def load_yaml(path: Path) -> yaml.Node:
     """Read a YAML file into a node tree that keeps file and line of every value.
 
     Raises:
         ConfigError: If the file cannot be read or is not valid YAML.
     """
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        msg = f"{path}: file not found"
-        raise ConfigError(msg) from None
-    except OSError as err:
-        msg = f"{path}: cannot read ({err.strerror})"
-        raise ConfigError(msg) from None
-    loader = yaml.SafeLoader(text)
+    text = read_text_file(path, ConfigError, what="a UTF-8 YAML file")
+    loader = _Loader(text)
     loader.name = str(path)
     try:
         node = loader.get_single_node()
@@ -79,6 +104,12 @@ def load_yaml(path: Path) -> yaml.Node:
         mark = err.problem_mark or err.context_mark
         where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark else str(path)
         msg = f"{where}: invalid YAML: {err.problem or err.context}"
+        raise ConfigError(msg) from None
+    except yaml.YAMLError as err:  # e.g. a control character the reader refuses
+        msg = f"{path}: invalid YAML: {err}"
+        raise ConfigError(" ".join(msg.split())) from None
+    except RecursionError:
+        msg = f"{path}: the YAML is nested too deeply to read (more than ~{sys.getrecursionlimit() // 4} levels)"
         raise ConfigError(msg) from None
     finally:
         loader.dispose()

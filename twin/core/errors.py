@@ -9,7 +9,7 @@ Subclasses also inherit the builtin they refine, so callers may catch either.
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar, Self
 
 __all__ = [
     "BagError",
@@ -24,10 +24,44 @@ __all__ = [
 ]
 
 
+def _rebuild(cls: type[TwinError], args: tuple[Any, ...], state: dict[str, Any]) -> TwinError:
+    """Unpickle a `TwinError` without calling its `__init__` (subclasses take other arguments)."""
+    err = cls.__new__(cls)
+    err.args = args
+    err.__dict__.update(state)
+    return err
+
+
 class TwinError(Exception):
-    """Base of every error twin reports to the user as one line."""
+    """Base of every error twin reports to the user as one line.
+
+    Subclasses may take any `__init__` arguments: `with_context` and pickling (Dask workers,
+    multiprocessing) never call `__init__` again, so every subclass keeps its message and attributes.
+    """
 
     exit_code: ClassVar[int] = 1
+
+    def __str__(self) -> str:
+        text = super().__str__()
+        # One line, always: a message built from file contents may carry newlines.
+        return " ".join(text.split("\n")) if "\n" in text else text
+
+    def with_context(self, *, before: str = "", after: str = "") -> Self:
+        """Return a copy of this error, same class and attributes, with text added around its message.
+
+        Use it to re-raise with context: `raise err.with_context(after=" (at t=3.2 s)") from err`.
+
+        Args:
+            before: Text put before the message (e.g. `"scenario.yaml: "`).
+            after: Text put after the message.
+        """
+        copy = type(self).__new__(type(self))
+        copy.__dict__.update(self.__dict__)
+        copy.args = (f"{before}{self}{after}",)
+        return copy
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_rebuild, (type(self), self.args, dict(self.__dict__)))
 
 
 class ConfigError(TwinError, ValueError):

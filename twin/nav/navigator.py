@@ -43,6 +43,7 @@ class GridNavigator:
         self._goal: Pose2D | None = None
         self._planned = False
         self._status: dict[int, NavigationStatus] = {}
+        self._reasons: dict[int, str] = {}
         self._anchor: tuple[float, float, int] | None = None
         self.path: list[tuple[float, float]] = []
         """The current plan's waypoints (for recording as /plan)."""
@@ -54,6 +55,7 @@ class GridNavigator:
         """Accept a goal in `frame_id` (the map; the world frame here) and return its id."""
         if self._goal is not None and self._status.get(self._goal_id) is NavigationStatus.RUNNING:
             self._status[self._goal_id] = NavigationStatus.FAILED  # preempted, as an aborted action
+            self._reasons[self._goal_id] = "preempted by a new goal"
         self._goal_id += 1
         self._goal = pose
         self._planned = False
@@ -64,6 +66,10 @@ class GridNavigator:
     def goal_status(self, goal_id: int) -> NavigationStatus:
         """Return how goal `goal_id` stands."""
         return self._status.get(goal_id, NavigationStatus.FAILED)
+
+    def failure_reason(self, goal_id: int) -> str:
+        """Why goal `goal_id` failed (empty if it did not, or is unknown)."""
+        return self._reasons.get(goal_id, "")
 
     # -- the controller's side -------------------------------------------------------------------
 
@@ -91,7 +97,8 @@ class GridNavigator:
                     goal.x_m,
                     goal.y_m,
                 )
-                return self._end(NavigationStatus.FAILED)
+                reason = f"no path from ({x_m:.2f}, {y_m:.2f}) to ({goal.x_m:.2f}, {goal.y_m:.2f})"
+                return self._end(NavigationStatus.FAILED, reason)
             self.path = [(x_m, y_m), *path]
             self._follower.set_path(path, goal.yaw_rad)
             self._anchor = (x_m, y_m, t_ns)
@@ -109,10 +116,13 @@ class GridNavigator:
                 self._goal_id,
                 self._progress.movement_time_allowance_s,
             )
-            return self._end(NavigationStatus.FAILED)
+            allowance = self._progress.movement_time_allowance_s
+            return self._end(NavigationStatus.FAILED, f"no progress in {allowance:.0f} s (blocked?)")
         return (v, w)
 
-    def _end(self, status: NavigationStatus) -> tuple[float, float]:
+    def _end(self, status: NavigationStatus, reason: str = "") -> tuple[float, float]:
         self._status[self._goal_id] = status
+        if reason:
+            self._reasons[self._goal_id] = reason
         self._goal = None
         return (0.0, 0.0)

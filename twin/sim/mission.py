@@ -160,6 +160,7 @@ class TreeMission:
         self.done = False
         self.result = "running"
         self.ticks = 0
+        self._failed_uid: int | None = None
         _log.info("BT created from %s", spec.tree)
 
     def tick(self, t_ns: int) -> Sequence[StatusChange]:
@@ -175,7 +176,32 @@ class TreeMission:
                 _log.info("Finished Navigation")
             else:
                 _log.warning("Navigation Failed")
+                changes = self._changes.flush()
+                # Children fail before their parents: the first FAILURE of the last tick is the cause.
+                first = next((c for c in changes if c.new is NodeStatus.FAILURE), None)
+                self._failed_uid = first.uid if first is not None else None
+                return changes
         return self._changes.flush()
+
+    @property
+    def failure(self) -> str:
+        """Which goal failed last and why, once the tree has returned FAILURE (else empty)."""
+        if self.result != "FAILURE":
+            return ""
+        if self._failed_uid is not None:
+            node = self.tree.node_by_uid(self._failed_uid)
+            failure = getattr(node, "failure", None)
+            if isinstance(failure, tuple):
+                return str(failure[1])
+            return f"node '{node.full_path}' ({type(node).__name__}) returned FAILURE"
+        failures: list[tuple[int, str]] = []
+        for _, node in self.tree.walk():
+            failure = getattr(node, "failure", None)
+            if isinstance(failure, tuple):
+                failures.append(failure)
+        if not failures:
+            return "the tree returned FAILURE with no failed goal"
+        return str(max(failures)[1])
 
     def node_name(self, uid: int) -> str:
         """The name of a node, as Nav2's BT log carries it."""

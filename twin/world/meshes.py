@@ -43,6 +43,9 @@ class MeshCache:
     def __init__(self) -> None:
         self._files: dict[Path, trimesh.Scene] = {}
         self._units: dict[Path, float] = {}
+        # Primitive shapes by value: a world of 10,000 equal boxes builds one box mesh (callers copy
+        # before they transform, never change a mesh they are given).
+        self.primitives: dict[object, trimesh.Trimesh] = {}
 
     def scene(self, path: Path, where: str) -> tuple[trimesh.Scene, float]:
         """Return the file's meshes as a trimesh Scene and its unit scale (metres per unit).
@@ -51,6 +54,8 @@ class MeshCache:
             WorldError: If the file cannot be read as a mesh.
         """
         if path not in self._files:
+            if path.suffix.lower() == ".stl":
+                _check_stl(path, where)
             try:
                 loaded = trimesh.load(str(path), force="scene", process=False)
             except Exception as err:  # trimesh raises many kinds; all mean "not a mesh we can read"
@@ -107,6 +112,37 @@ class MeshCache:
         return mesh
 
 
+def _check_stl(path: Path, where: str) -> None:
+    """Refuse a file that is neither a binary STL (its size matches its triangle count) nor ASCII STL.
+
+    trimesh would otherwise guess the text encoding of any non-binary file, and fail on that.
+
+    Raises:
+        WorldError: Naming the file and what it is not.
+    """
+    try:
+        with path.open("rb") as stream:
+            head = stream.read(84)
+            size = path.stat().st_size
+            if len(head) == 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little"):
+                return  # binary STL
+            text = head + stream.read(4096)
+    except OSError as err:
+        msg = f"{where}: cannot read mesh {path}: {err.strerror}"
+        raise WorldError(msg) from None
+    if text.lstrip().lower().startswith(b"solid"):
+        try:
+            text.decode("ascii")
+            return
+        except UnicodeDecodeError:
+            pass
+    msg = (
+        f"{where}: mesh {path} is not an STL file: neither binary STL (its {size} bytes do not match the "
+        "triangle count in its header) nor ASCII STL (text starting with 'solid'); re-export it"
+    )
+    raise WorldError(msg)
+
+
 def _collada_unit(path: Path) -> float:
     """Return COLLADA's `<asset><unit meter=...>` (1.0 when absent)."""
     try:
@@ -135,13 +171,8 @@ def _submesh_geometry_names(path: Path, name: str) -> set[str]:
     return out or {name}
 
 
-def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trimesh.Trimesh | None:
-    """Return a triangle mesh of a geometry in its own frame (None for infinite planes).
-
-    Raises:
-        WorldError: If a mesh file cannot be used.
-    """
-    out: Any = None
+def _primitive_mesh(geometry: Box | Cylinder | Sphere | Capsule | Ellipsoid) -> trimesh.Trimesh:
+    out: Any
     match geometry:
         case Box(size_m=size):
             out = trimesh.creation.box(extents=size)
@@ -154,6 +185,23 @@ def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trim
         case Ellipsoid(radii_m=radii):
             out = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
             out.apply_scale(np.asarray(radii))
+    return out  # type: ignore[no-any-return]
+
+
+def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trimesh.Trimesh | None:
+    """Return a triangle mesh of a geometry in its own frame (None for infinite planes).
+
+    Raises:
+        WorldError: If a mesh file cannot be used.
+    """
+    if isinstance(geometry, Box | Cylinder | Sphere | Capsule | Ellipsoid):
+        cached = cache.primitives.get(geometry)
+        if cached is None:
+            cached = _primitive_mesh(geometry)
+            cache.primitives[geometry] = cached
+        return cached
+    out: Any = None
+    match geometry:
         case Polyline():
             out = polyline_mesh(geometry)
         case Mesh():

@@ -7,6 +7,7 @@ set up for Gazebo Classic (`GAZEBO_MODEL_PATH`) or gz-sim (`GZ_SIM_RESOURCE_PATH
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -27,6 +28,8 @@ __all__ = [
     "sdf_version",
     "search_path",
 ]
+
+_log = logging.getLogger(__name__)
 
 #: The newest SDFormat version this loader knows.
 MAX_SDF_VERSION = (1, 11)
@@ -79,13 +82,26 @@ def find_model_dir(name: str, search: Sequence[Path]) -> Path | None:
     `name` may have several parts (`turtlebot3_dqn_world/inner_walls`).
     """
     name = name.strip("/")
-    if not name:
+    if not name or _escapes(f"model://{name}", name):
         return None
     for base in search:
         candidate = base / name
         if candidate.is_dir():
             return candidate
     return None
+
+
+def _escapes(uri: str, rest: str) -> bool:
+    """True (and a warning) if `rest` climbs out of the model path with `..`: such a URI is refused."""
+    if ".." not in rest.replace("\\", "/").split("/"):
+        return False
+    if uri not in _WARNED_ESCAPES:
+        _WARNED_ESCAPES.add(uri)
+        _log.warning("%s: refused: '..' would leave the model path (name the file inside a model folder)", uri)
+    return True
+
+
+_WARNED_ESCAPES: set[str] = set()
 
 
 def model_file(model_dir: Path) -> Path:
@@ -135,6 +151,8 @@ def resolve_resource(uri: str, *, base_dir: Path, search: Sequence[Path]) -> Pat
     for scheme in ("model://", "package://"):
         if uri.startswith(scheme):
             rest = uri[len(scheme) :].lstrip("/")
+            if _escapes(uri, rest):
+                return None
             for base in search:
                 candidate = base / rest
                 if candidate.exists():

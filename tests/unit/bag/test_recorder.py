@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import sqlite3
 import struct
 import subprocess
@@ -188,6 +189,9 @@ def test_disk_full_in_the_middle_of_a_recording(tmp_path: Path, storage: str) ->
     assert run.returncode == 0, run.stderr
     lines = run.stdout.splitlines()
     assert lines[0].startswith("ERROR") and "cannot write" in lines[0], run.stdout
+    # RLIMIT_FSIZE gives EFBIG: told apart from a full disk, and where the bag ends is stated
+    assert "file-size limit" in lines[0] and "not a full disk" in lines[0], lines[0]  # sqlite3: from free space
+    assert re.search(r"ends at t=\d+\.\d{3} s", lines[0]), lines[0]
     assert lines[1].startswith("CLOSED True")
     kept = int(lines[1].split()[-1])
     assert 100 < kept < 10_000

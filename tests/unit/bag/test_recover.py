@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+import re
 import shutil
 import sqlite3
 from pathlib import Path
@@ -188,3 +189,38 @@ def test_another_writers_zstd_chunks_holding_their_schemas_recover(tmp_path: Pat
     _valid_everywhere(bag, expected)
     meta = (bag / "metadata.yaml").read_text()
     assert "name: /chatter" in meta and "type: std_msgs/msg/String" in meta
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_complete_bag_is_reported_complete_and_left_untouched(tmp_path: Path, storage: str) -> None:
+    bag = tmp_path / "ok"
+    _record_in_chunks(bag, storage=storage, distro="jazzy")
+    before = {f.name: f.read_bytes() for f in bag.iterdir()}
+    report = recover_bag(bag)
+    assert report.was_complete
+    assert {f.name: f.read_bytes() for f in bag.iterdir()} == before  # no file changed, none added
+
+
+def test_a_real_humble_bag_is_left_untouched(tmp_path: Path, fixtures: Path) -> None:
+    import shutil
+
+    bag = tmp_path / "real"
+    shutil.copytree(fixtures / "bags" / "tb3_waffle_gazebo_humble", bag)
+    before = {f.name: f.read_bytes() for f in bag.iterdir()}
+    assert recover_bag(bag).was_complete
+    assert {f.name: f.read_bytes() for f in bag.iterdir()} == before
+
+
+def test_a_rewrite_keeps_the_original_metadata_as_a_backup(tmp_path: Path) -> None:
+    bag = tmp_path / "stale"
+    _record_in_chunks(bag)
+    text = (bag / "metadata.yaml").read_text()
+    count = re.search(r"^  message_count: (\d+)$", text, re.MULTILINE)
+    assert count is not None
+    stale = text.replace(count.group(0), f"  message_count: {int(count.group(1)) + 1}")
+    (bag / "metadata.yaml").write_text(stale)  # a count that does not match the storage
+    report = recover_bag(bag)
+    assert not report.was_complete
+    assert (bag / "metadata.yaml.orig").read_text() == stale
+    recover_bag(bag)  # now complete: no second backup
+    assert not (bag / "metadata.yaml.orig.2").exists()

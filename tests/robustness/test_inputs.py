@@ -1,0 +1,393 @@
+"""Bad inputs, by class: every one is refused with its exit code and one line, never a traceback or exit 70.
+
+Classes (the hardening issue's): scenario values that cannot be honoured, referenced files missing
+or broken, files that do not decode (non-UTF-8, binary, nested too deeply), options that cannot be
+honoured, YAML numbers as people write them, and whole runs (a failed mission exits 1 with a bag
+that reads back). A refused `simulate` leaves no bag folder. Cases run in-process through
+`twin.cli.main`, the same path as the `twin` command (the watchdog and kill tests use processes).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from tests.conftest import REPO
+from tests.robustness.helpers import DATA, assert_bag_reads_back, assert_one_line_error
+from twin.cli import main
+
+SCENARIOS = REPO / "scenarios"
+TREES = REPO / "trees"
+
+
+def overlay(values: dict[str, Any]) -> dict[str, Any]:
+    """{"a.b": 1} -> {"a": {"b": 1}}."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        node = out
+        *parents, leaf = key.split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    return out
+
+
+def write_scenario(folder: Path, values: dict[str, Any], text: str | None = None) -> Path:
+    path = folder / "scenario.yaml"
+    path.write_text(text if text is not None else yaml.safe_dump({"name": "case", **overlay(values)}))
+    return path
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = main(argv)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+# -- scenario values: `scenario check` and `simulate` refuse them alike, simulate before any bag ------
+
+NAN, INF = float("nan"), float("inf")
+VALUE_CASES: dict[str, tuple[dict[str, Any], str]] = {
+    "nan_step": ({"physics.step_s": NAN}, "step_s"),
+    "nan_pose": ({"robot.initial_pose.x_m": NAN}, "is NaN"),
+    "inf_duration": ({"max_duration_s": INF}, "max_duration_s"),
+    "minus_inf_yaw": ({"robot.initial_pose.yaw_rad": -INF}, "finite"),
+    "negative_seed": ({"seed": -1}, "seed"),
+    "zero_clock_rate": ({"sensors.clock.rate_hz": 0.0}, "rate_hz"),
+    "negative_tick_rate": ({"mission.tick_rate_hz": -2.0}, "tick_rate_hz"),
+    "range_min_above_max": ({"sensors.lidar.range_min_m": 5.0, "sensors.lidar.range_max_m": 1.0}, "range_min_m"),
+    "range_min_equals_max": ({"sensors.lidar.range_min_m": 2.0, "sensors.lidar.range_max_m": 2.0}, "range_min_m"),
+    "zero_samples": ({"sensors.lidar.samples": 0}, "samples"),
+    "huge_samples": ({"sensors.lidar.samples": 2**40}, "samples"),
+    "tiny_rate": ({"sensors.clock.rate_hz": 2.2e-311}, "rate_hz"),
+    "range_min_above_sdf_max": ({"sensors.lidar.range_min_m": 5.0}, "range_min_m"),
+    "range_max_below_sdf_min": ({"sensors.lidar.range_max_m": 1e-9}, "range_max_m"),
+    "negative_samples": ({"sensors.lidar.samples": -360}, "samples"),
+    "lidar_above_physics": ({"sensors.lidar.rate_hz": 2000.0}, "above the physics rate"),
+    "clock_above_physics": ({"physics.step_s": 0.01, "sensors.clock.rate_hz": 200.0}, "above the physics rate"),
+    "negative_noise": ({"sensors.lidar.noise_std_m": -0.01}, "noise_std_m"),
+    "negative_tolerance": ({"mission.follower.tolerance_m": -0.1}, "tolerance_m"),
+    "zero_max_duration": ({"max_duration_s": 0.0}, "max_duration_s"),
+    "angle_min_above_max": ({"sensors.lidar.angle_min_rad": 1.0, "sensors.lidar.angle_max_rad": -1.0}, "angle_min"),
+    "seed_text": ({"seed": "seven"}, "seed"),
+}
+
+
+@pytest.mark.parametrize("case", VALUE_CASES, ids=str)
+def test_scenario_value_is_refused_by_check_and_by_simulate(
+    case: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    values, contains = VALUE_CASES[case]
+    path = write_scenario(tmp_path, values)
+    code, _, err = run(["scenario", "check", str(path)], capsys)
+    assert code == 2, err
+    assert_one_line_error(err, contains=contains)
+    bag = tmp_path / "bag"
+    code, _, err = run(["simulate", str(path), "--duration", "0.5", "--out", str(bag)], capsys)
+    assert code == 2, err
+    assert_one_line_error(err, contains=contains)
+    assert not bag.exists()
+
+
+# -- referenced files -----------------------------------------------------------------------------
+
+FILE_CASES: dict[str, tuple[dict[str, Any], int, str]] = {
+    "world_missing": ({"world.sdf": "nowhere.sdf"}, 2, "world.sdf"),
+    "tree_missing": ({"mission.tree": "nowhere.xml"}, 2, "mission.tree"),
+    "locations_missing": ({"mission.locations": "nowhere.yaml"}, 2, "mission.locations"),
+    "locations_not_a_mapping": ({"mission.locations": "locations_list.yaml"}, 2, "mission.locations"),
+    "locations_empty": ({"mission.locations": "locations_empty.yaml"}, 2, "holds no locations"),
+    "mapping_missing": ({"drive.type": "fmu", "drive.mapping": "nowhere.yaml"}, 2, "drive.mapping"),
+    "mapping_binary": ({"drive.type": "fmu", "drive.mapping": "binary.bin"}, 2, "binary file"),
+    "fmu_file_missing": ({"drive.type": "fmu", "drive.fmu_file": "nowhere.fmu"}, 2, "drive.fmu_file"),
+    "model_path_missing": ({"world.model_path": ["no_models_here"]}, 2, "world.model_path"),
+    "tree_binary": ({"mission.tree": "binary.bin"}, 6, "binary file"),
+    "tree_latin1": ({"mission.tree": "latin1.xml"}, 6, "not UTF-8"),
+    "tree_no_main": ({"mission.tree": "no_main.xml"}, 6, "names no tree"),
+    "tree_too_deep": ({"mission.tree": "deep.xml"}, 6, "nested deeper than"),
+    "world_binary": ({"world.sdf": "binary.bin"}, 3, "binary.bin"),
+}
+
+
+def _fixture_files(folder: Path) -> None:
+    (folder / "locations_list.yaml").write_text("- [1.0, 2.0, 0.0]\n")
+    (folder / "locations_empty.yaml").write_text("{}\n")
+    (folder / "binary.bin").write_bytes(bytes(range(256)) * 8)
+    (folder / "latin1.xml").write_bytes(
+        b'<root BTCPP_format="4"><BehaviorTree ID="A"><AlwaysSuccess name="caf\xe9"/></BehaviorTree></root>'
+    )
+    (folder / "no_main.xml").write_text(
+        '<root BTCPP_format="4" main_tree_to_execute="Main"><BehaviorTree ID="A"><AlwaysSuccess/></BehaviorTree></root>'
+    )
+    depth = 5000
+    (folder / "deep.xml").write_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="A">'
+        + "<Sequence>" * depth
+        + "<AlwaysSuccess/>"
+        + "</Sequence>" * depth
+        + "</BehaviorTree></root>"
+    )
+
+
+@pytest.mark.parametrize("case", FILE_CASES, ids=str)
+def test_referenced_file_problem_is_one_line(case: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    values, exit_code, contains = FILE_CASES[case]
+    _fixture_files(tmp_path)
+    path = write_scenario(tmp_path, values)
+    code, _, err = run(["scenario", "check", str(path)], capsys)
+    assert code == exit_code, err
+    assert_one_line_error(err, contains=contains)
+    bag = tmp_path / "bag"
+    code, _, err = run(["simulate", str(path), "--duration", "0.5", "--out", str(bag)], capsys)
+    assert code == exit_code, err
+    assert_one_line_error(err, contains=contains)
+    assert not bag.exists()
+
+
+# -- files that do not decode, for every command that reads one -----------------------------------
+
+LATIN1_YAML = b"name: caf\xe9\n"
+BINARY = bytes(range(256)) * 8
+DEEP_YAML = ("a: " + "[" * 3000 + "]" * 3000 + "\n").encode()
+
+DECODE_CASES: dict[str, tuple[list[str], str, bytes, int, str]] = {
+    # name: (argv with {f} for the file, file name, content, exit code, text in the line)
+    "scenario_latin1": (["scenario", "check", "{f}"], "s.yaml", LATIN1_YAML, 2, "not UTF-8"),
+    "scenario_binary": (["scenario", "check", "{f}"], "s.yaml", BINARY, 2, "binary file"),
+    "scenario_deep": (["scenario", "check", "{f}"], "s.yaml", DEEP_YAML, 2, "nested too deeply"),
+    "scenario_folder": (["scenario", "check", "{d}"], "s.yaml", b"", 2, "is a folder"),
+    "simulate_latin1": (["simulate", "{f}", "--out", "{d}/bag"], "s.yaml", LATIN1_YAML, 2, "not UTF-8"),
+    "simulate_binary": (["simulate", "{f}", "--out", "{d}/bag"], "s.yaml", BINARY, 2, "binary file"),
+    "world_info_binary": (["world", "info", "{f}"], "w.world", BINARY, 3, "w.world"),
+    "world_info_latin1": (["world", "info", "{f}"], "w.world", b"<sdf version='1.6'>\xe9</sdf>", 3, "w.world"),
+    "fmu_check_binary": (["fmu", "check", "{f}"], "x.fmu", BINARY, 4, "x.fmu"),
+    "bag_info_metadata_latin1": (
+        ["bag", "info", "{d}"],
+        "metadata.yaml",
+        b"rosbag2_bagfile_information: \xe9\n",
+        5,
+        "UTF-8",
+    ),
+    "bag_info_metadata_binary": (["bag", "info", "{d}"], "metadata.yaml", BINARY, 5, "metadata.yaml"),
+    "bag_info_metadata_bad_count": (
+        ["bag", "info", "{d}"],
+        "metadata.yaml",
+        b"rosbag2_bagfile_information:\n  version: 8\n  message_count: 1 1534\n",
+        5,
+        "metadata.yaml",
+    ),
+    "bag_recover_metadata_bad_count": (
+        ["bag", "recover", "{d}"],
+        "metadata.yaml",
+        b"rosbag2_bagfile_information:\n  version: 8\n  message_count: 1 1534\n",
+        5,
+        "no .mcap or .db3",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", DECODE_CASES, ids=str)
+def test_a_file_that_does_not_decode_is_one_line(case: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    argv, name, content, exit_code, contains = DECODE_CASES[case]
+    (tmp_path / name).write_bytes(content)
+    args = [a.replace("{f}", str(tmp_path / name)).replace("{d}", str(tmp_path)) for a in argv]
+    code, _, err = run(args, capsys)
+    assert code == exit_code, err
+    assert_one_line_error(err, contains=contains)
+    assert not (tmp_path / "bag").exists()
+
+
+def test_tree_validate_fails_when_main_tree_to_execute_names_no_tree(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _fixture_files(tmp_path)
+    code, out, err = run(["tree", "validate", str(tmp_path / "no_main.xml")], capsys)
+    assert code == 6
+    assert "main_tree_to_execute='Main' names no tree" in out + err
+    assert "Traceback" not in out + err
+
+
+# -- options ----------------------------------------------------------------------------------------
+
+OPTION_CASES: dict[str, tuple[list[str], str]] = {
+    "duration_inf": (["--duration", "inf"], "--duration"),
+    "duration_nan": (["--duration", "nan"], "--duration"),
+    "duration_negative": (["--duration", "-1"], "--duration"),
+    "duration_zero": (["--duration", "0"], "--duration"),
+    "seed_negative": (["--seed", "-3"], "--seed"),
+    "watchdog_zero": (["--watchdog-s", "0"], "--watchdog-s"),
+    "watchdog_nan": (["--watchdog-s", "nan"], "--watchdog-s"),
+}
+
+
+@pytest.mark.parametrize("case", OPTION_CASES, ids=str)
+def test_an_option_that_cannot_be_honoured_is_exit_2(
+    case: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    options, contains = OPTION_CASES[case]
+    bag = tmp_path / "bag"
+    code, _, err = run(["simulate", *options, "--out", str(bag)], capsys)
+    assert code == 2, err
+    assert_one_line_error(err, contains=contains)
+    assert not bag.exists()
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_global_options_work_before_and_after_the_command(
+    where: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write_scenario(tmp_path, {"seed": -1})
+    argv = (
+        ["--debug", "scenario", "check", str(path)]
+        if where == "before"
+        else ["scenario", "check", str(path), "--debug"]
+    )
+    code, _, err = run(argv, capsys)
+    assert code == 2
+    assert "Traceback" in err  # --debug shows it, on either side
+
+
+def test_simulate_help_documents_every_exit_code(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["simulate", "--help"])
+    text = capsys.readouterr().out
+    section = text[text.index("exit codes:") :]
+    for code in ("0", "1", "2", "3", "4", "5", "6", "7", "8", "70", "130", "143"):
+        assert f"\n  {code} " in section, code
+
+
+# -- YAML numbers as people write them --------------------------------------------------------------
+
+
+@pytest.mark.parametrize("text", ["1e1", "1.0e1", "1e+1", "10.0e0"])
+def test_yaml_exponent_numbers_are_numbers(text: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = write_scenario(tmp_path, {}, text=f"name: numbers\nmax_duration_s: {text}\n")
+    code, out, err = run(["scenario", "check", str(path), "--json"], capsys)
+    assert code == 0, err
+    assert json.loads(out)["max_duration_s"] == 10.0
+
+
+# -- whole runs ------------------------------------------------------------------------------------
+
+
+def test_a_failed_mission_exits_1_naming_the_goal_and_why(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = tmp_path / "bag"
+    code, out, err = run(["simulate", str(DATA / "unreachable.yaml"), "--out", str(bag), "--json"], capsys)
+    assert code == 1, err
+    summary = json.loads(out)
+    assert summary["mission_result"] == "FAILURE"
+    assert "'far_away'" in summary["mission_failure"] and "no path" in summary["mission_failure"]
+    assert "twin: mission FAILURE: goal 'far_away'" in err and "Traceback" not in err
+    assert_bag_reads_back(bag)
+
+
+def test_an_error_inside_a_tick_keeps_its_message(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    tree = tmp_path / "unknown.xml"
+    tree.write_text('<root BTCPP_format="4"><BehaviorTree ID="A"><GoToPose loc="nowhere"/></BehaviorTree></root>')
+    path = write_scenario(
+        tmp_path, {"mission.tree": str(tree), "mission.locations": str(DATA / "unreachable_locations.yaml")}
+    )
+    bag = tmp_path / "bag"
+    code, _, err = run(["simulate", str(path), "--out", str(bag)], capsys)
+    assert code == 6, err
+    assert_one_line_error(err, contains="unknown location 'nowhere'; the locations are far_away")
+    assert_bag_reads_back(bag)
+
+
+def test_a_script_error_inside_a_tick_keeps_its_message(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    tree = tmp_path / "script.xml"
+    tree.write_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="A"><Script code="x := missing + 1"/></BehaviorTree></root>'
+    )
+    path = write_scenario(tmp_path, {"mission.tree": str(tree)})
+    bag = tmp_path / "bag"
+    code, _, err = run(["simulate", str(path), "--out", str(bag)], capsys)
+    assert code == 6, err
+    assert_one_line_error(err, contains="missing")
+    assert_bag_reads_back(bag)
+
+
+# -- other commands' options and outputs ---------------------------------------------------------------
+
+CLI_CASES: dict[str, tuple[list[str], int, str]] = {
+    "step_response_step_zero": (["fmu", "step-response", "builtin:xm430_w210", "--step-ms", "0"], 2, "--step-ms"),
+    "step_response_step_nan": (["fmu", "step-response", "builtin:xm430_w210", "--step-ms", "nan"], 2, "--step-ms"),
+    "step_response_duration_negative": (
+        ["fmu", "step-response", "builtin:xm430_w210", "--duration-s", "-1"],
+        2,
+        "--duration-s",
+    ),
+    "step_response_out_unwritable": (
+        ["fmu", "step-response", "builtin:xm430_w210", "--out", "/proc/twin-step.png"],
+        5,
+        "cannot write the plot",
+    ),
+    "step_response_out_folder": (["fmu", "step-response", "builtin:xm430_w210", "--out", "{d}"], 2, "--out"),
+    "ekf_replay_out_unwritable": (
+        ["ekf", "replay", "{fixtures}/bags/tb3_waffle_gazebo_humble", "--out", "/proc/twin-ekf"],
+        5,
+        "cannot write",
+    ),
+    "fmu_check_missing": (["fmu", "check", "{d}/nowhere.fmu"], 4, "nowhere.fmu"),
+    "bag_info_missing": (["bag", "info", "{d}/nowhere"], 5, "nowhere"),
+    "world_info_missing": (["world", "info", "{d}/nowhere.world"], 3, "nowhere.world"),
+    "tree_validate_missing": (["tree", "validate", "{d}/nowhere.xml"], 6, "nowhere.xml"),
+}
+
+
+@pytest.mark.parametrize("case", CLI_CASES, ids=str)
+def test_other_commands_refuse_with_one_line(
+    case: str, tmp_path: Path, fixtures: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv, exit_code, contains = CLI_CASES[case]
+    args = [a.replace("{d}", str(tmp_path)).replace("{fixtures}", str(fixtures)) for a in argv]
+    code, out, err = run(args, capsys)
+    assert code == exit_code, out + err
+    if "twin: error:" in err:
+        assert_one_line_error(err, contains=contains)
+    else:  # tree validate reports its problems one per line, then a count
+        assert contains in out + err and "Traceback" not in out + err
+
+
+def test_ekf_replay_default_output_does_not_collide(
+    tmp_path: Path, fixtures: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    bag = str(fixtures / "bags" / "tb3_waffle_gazebo_humble")
+    for _ in range(2):
+        code, _, err = run(["ekf", "replay", bag, "--json"], capsys)
+        assert code == 0, err
+    names = sorted(p.name for p in (tmp_path / "bags").iterdir())
+    assert names == ["tb3_waffle_gazebo_humble_ekf", "tb3_waffle_gazebo_humble_ekf_2"]
+
+
+def test_model_uri_cannot_escape_the_model_path(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "secret").mkdir()
+    (tmp_path / "secret" / "x.stl").write_bytes(bytes(84))  # a valid, empty binary STL outside the models
+    model = tmp_path / "models" / "m"
+    model.mkdir(parents=True)
+    (model / "model.sdf").write_text(
+        "<sdf version='1.6'><model name='m'><link name='l'><collision name='c'><geometry><mesh>"
+        "<uri>model://m/../../secret/x.stl</uri></mesh></geometry></collision></link></model></sdf>"
+    )
+    world = tmp_path / "w.world"
+    world.write_text("<sdf version='1.6'><world name='w'><include><uri>model://m</uri></include></world></sdf>")
+    code, _, err = run(["world", "info", str(world), "--model-path", str(tmp_path / "models")], capsys)
+    assert code == 3, err
+    assert "model://m/../../secret/x.stl: refused: '..' would leave the model path" in err
+    assert_one_line_error(err, contains="not found")
+
+
+def test_signed_values_are_not_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    values = {
+        "robot.initial_pose.x_m": -1.0,
+        "robot.initial_pose.yaw_rad": -3.0,
+        "drive.type": "fmu",
+        "drive.slip.regions": [{"x_min_m": -2.0, "x_max_m": -1.5, "y_min_m": -1.0, "y_max_m": 1.0, "slip": 0.3}],
+    }
+    code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
+    assert code == 0, err

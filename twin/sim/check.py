@@ -1,0 +1,196 @@
+"""What `twin simulate` refuses, checked before anything runs: `twin scenario check` and `simulate` share it.
+
+`check_scenario(scenario, path)` raises a `ConfigError` naming the file, the key and the fix for
+the first value that cannot be honoured (NaN or infinite numbers, negative seeds, zero or negative
+rates, `range_min_m >= range_max_m`, sample counts below one, rates above the physics rate) and for
+the first referenced file that is missing or does not parse (locations, FMU mapping, FMU file,
+and any other path the scenario names). It is cheap (no world is loaded) so `simulate` runs it
+before it creates the bag folder. `check_inputs(scenario)` also loads what the run would load
+(world, robot, behaviour tree) for `twin scenario check`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from twin.core.errors import ConfigError, TwinError
+from twin.sim.scenario import BehaviorTreeMission, Scenario
+
+__all__ = ["check_inputs", "check_scenario"]
+
+# Numbers that may be infinite (none today: every number of a scenario must be finite).
+_MAY_BE_INFINITE: frozenset[str] = frozenset()
+# Below this a publication would fire less than once in 16 minutes: surely a typo (and 1/rate must fit in ns).
+_MIN_RATE_HZ = 1e-3
+# More rays per scan than any real lidar has (the TB3's LDS-01 has 360); each costs memory and time.
+_MAX_SAMPLES = 100_000
+# Numbers that cannot be negative: durations, distances, rates, gains, limits, noise levels.
+_UNSIGNED_SUFFIXES = ("_hz", "_s", "_m", "_kgm2", "_per_rev", "gain", "samples", "precision", "_fraction")
+_SIGNED_PREFIXES = ("x_", "y_", "z_")  # coordinates: x_m, x_min_m, y_max_m, ...
+
+
+def _values(value: Any, key: str) -> Iterator[tuple[str, Any]]:
+    """Yield (dotted key, value) of every leaf of a scenario."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        for f in dataclasses.fields(value):
+            yield from _values(getattr(value, f.name), f"{key}.{f.name}" if key else f.name)
+    elif isinstance(value, tuple | list):
+        for i, item in enumerate(value):
+            yield from _values(item, f"{key}[{i}]")
+    elif isinstance(value, dict):
+        for k, item in value.items():
+            yield from _values(item, f"{key}.{k}")
+    else:
+        yield key, value
+
+
+def _refuse(path: Path, key: str, problem: str) -> ConfigError:
+    return ConfigError(f"{path}: {key}: {problem}")
+
+
+def check_scenario(scenario: Scenario, path: Path) -> None:
+    """Refuse a scenario whose values cannot be honoured or whose files are missing or broken.
+
+    Args:
+        scenario: The loaded scenario.
+        path: Its file (for the messages).
+
+    Raises:
+        ConfigError: `FILE: key: problem; fix` for the first problem.
+    """
+    physics_hz = 1.0 / scenario.physics.step_s
+    for key, value in _values(scenario, ""):
+        if isinstance(value, float) and not isinstance(value, bool):
+            if math.isnan(value):
+                raise _refuse(path, key, "is NaN; give a number")
+            if math.isinf(value) and key not in _MAY_BE_INFINITE:
+                raise _refuse(path, key, f"is {value}; give a finite number")
+        if key.endswith("_hz") and isinstance(value, int | float) and not isinstance(value, bool):
+            if not value >= _MIN_RATE_HZ:
+                raise _refuse(path, key, f"must be a rate of at least {_MIN_RATE_HZ:g} Hz, got {value}")
+            if value > physics_hz + 1e-9:
+                raise _refuse(
+                    path,
+                    key,
+                    f"{value:g} Hz is above the physics rate ({physics_hz:g} Hz, physics.step_s "
+                    f"{scenario.physics.step_s:g}); lower it or shorten physics.step_s",
+                )
+        if isinstance(value, int | float) and not isinstance(value, bool) and value < 0:
+            leaf = key.rsplit(".", 1)[-1]
+            unsigned = leaf.endswith(_UNSIGNED_SUFFIXES) or "std" in leaf or leaf.startswith("max_")
+            if unsigned and not leaf.startswith(_SIGNED_PREFIXES) and "[" not in leaf:
+                raise _refuse(path, key, f"must not be negative, got {value}")
+    if scenario.seed < 0:
+        raise _refuse(path, "seed", f"must be a non-negative whole number, got {scenario.seed}")
+    if not scenario.max_duration_s > 0:
+        raise _refuse(path, "max_duration_s", f"must be a positive number of seconds, got {scenario.max_duration_s}")
+    lidar = scenario.sensors.lidar
+    if lidar.samples is not None and not 1 <= lidar.samples <= _MAX_SAMPLES:
+        raise _refuse(path, "sensors.lidar.samples", f"must be between 1 and {_MAX_SAMPLES}, got {lidar.samples}")
+    if lidar.range_min_m is not None and lidar.range_max_m is not None and lidar.range_min_m >= lidar.range_max_m:
+        raise _refuse(
+            path,
+            "sensors.lidar.range_min_m",
+            f"{lidar.range_min_m} is not below range_max_m {lidar.range_max_m}; make range_min_m < range_max_m",
+        )
+    if (
+        lidar.angle_min_rad is not None
+        and lidar.angle_max_rad is not None
+        and lidar.angle_min_rad >= lidar.angle_max_rad
+    ):
+        raise _refuse(
+            path,
+            "sensors.lidar.angle_min_rad",
+            f"{lidar.angle_min_rad} is not below angle_max_rad {lidar.angle_max_rad}",
+        )
+    _check_files(scenario, path)
+    _check_lidar_of_robot(scenario, path)
+
+
+def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
+    """Check the lidar overrides against the robot's own SDF values (one override may contradict the other)."""
+    lidar = scenario.sensors.lidar
+    if lidar.range_min_m is None and lidar.range_max_m is None:
+        return
+    from twin.world import load_robot
+
+    try:
+        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+    except TwinError as err:
+        raise err.with_context(before=f"{path}: robot.model: ") from None
+    if robot.lidar is None:
+        return  # simulate names this itself
+    range_min = lidar.range_min_m if lidar.range_min_m is not None else robot.lidar.range_min_m
+    range_max = lidar.range_max_m if lidar.range_max_m is not None else robot.lidar.range_max_m
+    if not range_min < range_max:
+        key = "sensors.lidar.range_min_m" if lidar.range_min_m is not None else "sensors.lidar.range_max_m"
+        raise _refuse(
+            path,
+            key,
+            f"the lidar's range would be {range_min:g} .. {range_max:g} m (the robot's SDF gives the other end); "
+            "make range_min_m < range_max_m",
+        )
+
+
+def _check_files(scenario: Scenario, path: Path) -> None:
+    for key, value in _values(scenario, ""):
+        in_model_path = key.startswith("world.model_path")
+        if isinstance(value, Path) and not in_model_path and not value.exists():
+            raise _refuse(path, key, f"{value}: file not found; fix the path (relative to {path.parent})")
+    for key, folder in _values(scenario.world.model_path, "world.model_path"):
+        if isinstance(folder, Path) and not folder.is_dir():
+            raise _refuse(path, key, f"{folder}: no such folder; fix the model path")
+    mission = scenario.mission
+    if isinstance(mission, BehaviorTreeMission) and mission.locations is not None:
+        from twin.bt.mission_nodes import load_locations
+
+        try:
+            locations = load_locations(mission.locations)
+        except ConfigError as err:
+            raise err.with_context(before=f"{path}: mission.locations: ") from None
+        if not locations:
+            raise _refuse(path, "mission.locations", f"{mission.locations}: holds no locations; add name: [x, y, yaw]")
+    drive = scenario.drive
+    mapping = getattr(drive, "mapping", None)
+    if isinstance(mapping, Path):
+        resolved = getattr(drive, "resolved_mapping", None)
+        if resolved is not None:
+            try:
+                resolved()
+            except ConfigError as err:
+                raise err.with_context(before=f"{path}: drive.mapping: ") from None
+
+
+def check_inputs(scenario: Scenario, path: Path) -> None:
+    """Load what the run would load (world, robot, tree) and raise its first error, naming `path`.
+
+    Raises:
+        TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
+    """
+    from twin.world import load_robot, load_world
+
+    try:
+        load_world(scenario.world.sdf, model_path=scenario.world.model_path)
+        load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+        if isinstance(scenario.mission, BehaviorTreeMission):
+            _load_tree(scenario.mission)
+    except TwinError as err:
+        if str(err).startswith(str(path)):
+            raise
+        raise err.with_context(before=f"{path}: ") from None
+
+
+def _load_tree(mission: BehaviorTreeMission) -> None:
+    import random
+
+    from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
+    from twin.nav.bt_nodes import nav2_factory
+
+    factory = nav2_factory()
+    register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
+    factory.load_plugins()
+    factory.create_tree_from_file(mission.tree, main_tree=mission.main_tree, clock=lambda: 0)
