@@ -139,6 +139,8 @@ def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
 def _check_files(scenario: Scenario, path: Path) -> None:
     for key, value in _values(scenario, ""):
         in_model_path = key.startswith("world.model_path")
+        if key == "source_path":  # where the scenario came from (a bag's re-run may name a file gone since)
+            continue
         if isinstance(value, Path) and not in_model_path and not value.exists():
             raise _refuse(path, key, f"{value}: file not found; fix the path (relative to {path.parent})")
     for key, folder in _values(scenario.world.model_path, "world.model_path"):

@@ -334,7 +334,9 @@ def load_scenario(path: Path) -> Scenario:
         BagError: If a replay mission's bag is unreadable or lacks its command or pose topic.
     """
     scenario = load_config(Scenario, path, defaults=DEFAULTS_PATH)
-    return with_replay_start(dataclasses.replace(scenario, source_path=Path(path).resolve()))
+    # A scenario recorded in a bag (`--from-bag`) keeps the file it came from, where its nodes' modules are.
+    source = scenario.source_path or Path(path).resolve()
+    return with_replay_start(dataclasses.replace(scenario, source_path=source))
 
 
 def with_replay_start(scenario: Scenario) -> Scenario:
