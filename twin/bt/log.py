@@ -12,6 +12,7 @@ SUCCESS and FAILURE (SKIPPED is never logged: a skipped node keeps IDLE).
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import json
 from collections.abc import Iterable, Sequence
@@ -122,16 +123,26 @@ def render_timeline(log: StatusLog, *, width: int = 36) -> str:
 
 
 class StatusChangeBuffer:
-    """Collects status changes until `flush()` (Nav2's RosTopicLogger: one message per tick)."""
+    """Collects status changes until `flush()` (Nav2's RosTopicLogger: one message per tick).
 
-    def __init__(self) -> None:
-        self._pending: list[StatusChange] = []
+    It keeps the last `max_pending` changes: a tick that never returns (a `Repeat` of -1 cycles
+    over a node that always succeeds) changes statuses without end, and must not fill the memory
+    while the watchdog waits to stop it. `dropped` counts what was let go.
+    """
+
+    def __init__(self, max_pending: int = 10_000) -> None:
+        self._pending: collections.deque[StatusChange] = collections.deque(maxlen=max_pending)
+        self.dropped = 0
 
     def __call__(self, t_ns: int, path: str, uid: int, prev: NodeStatus, new: NodeStatus) -> None:
         """Record one change (the `Tree.add_listener` signature)."""
-        self._pending.append(StatusChange(t_ns, path, uid, prev, new))
+        pending = self._pending
+        if len(pending) == pending.maxlen:
+            self.dropped += 1
+        pending.append(StatusChange(t_ns, path, uid, prev, new))
 
     def flush(self) -> Sequence[StatusChange]:
         """The changes since the last flush (empty when nothing changed: Nav2 then publishes nothing)."""
-        pending, self._pending = self._pending, []
+        pending = list(self._pending)
+        self._pending.clear()
         return pending

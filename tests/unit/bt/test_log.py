@@ -65,3 +65,16 @@ def test_the_buffer_hands_over_one_batch_per_tick(rig) -> None:
     assert buffer.flush() == []  # nothing changed: Nav2 publishes no message
     r.tick()
     assert [c.new.name for c in buffer.flush()][-1] == "IDLE"
+
+
+def test_the_status_buffer_keeps_the_last_changes_of_a_tick_that_never_ends() -> None:
+    from twin.bt.log import StatusChangeBuffer
+    from twin.bt.status import NodeStatus
+
+    buffer = StatusChangeBuffer(max_pending=3)
+    for i in range(5):
+        buffer(i, f"node{i}", i, NodeStatus.IDLE, NodeStatus.SUCCESS)
+    changes = buffer.flush()
+    assert [c.t_ns for c in changes] == [2, 3, 4]
+    assert buffer.dropped == 2
+    assert buffer.flush() == []
