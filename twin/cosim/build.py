@@ -1,8 +1,10 @@
 """Build FMUs from C sources into a cache outside git, rebuilding when any input changes.
 
 A model directory holds `fmu.yaml` (model name, C sources, variables, variants) and its C files.
-Each variant is built for FMI 2.0 or 3.0 Co-Simulation: the model description and a header of value
-references and start values are generated from `fmu.yaml`, the sources are compiled with the system
+Each variant is built for FMI 2.0 or 3.0 Co-Simulation (or, when `fmu.yaml` says
+`interface: model_exchange`, FMI 2.0 Model Exchange with the FMI layer among the model's own
+sources and `local` derivative variables naming their state in `derivative_of`): the model description and a header of
+value references and start values are generated from `fmu.yaml`, the sources are compiled with the system
 C compiler (`$CC`, else `cc`, `gcc` or `clang`) together with the FMI layer of `fmus/common`, and the
 result is zipped into `<cache>/fmus/<variant>-fmi<N>-<hash>.fmu`. The hash covers every source,
 header and build setting, so a changed input gives a new file and an unchanged one is reused.
@@ -78,18 +80,19 @@ class VariableSpec:
 
     name: str
     vr: int
-    causality: Literal["input", "output", "parameter"]
+    causality: Literal["input", "output", "parameter", "local"]
     unit: str = "1"
     start: float | None = None
     description: str = ""
     only: str | None = None  # present only when this define is set
     unless: str | None = None  # absent when this define is set
+    derivative_of: str | None = None  # Model Exchange: the state variable this is the derivative of
 
     def __post_init__(self) -> None:
         if self.vr < 0 or self.vr > 4095:
             msg = f"vr must be between 0 and 4095, got {self.vr}"
             raise ValueError(msg)
-        if self.causality != "output" and self.start is None:
+        if self.causality not in {"output", "local"} and self.start is None:
             msg = f"variable {self.name!r} ({self.causality}) needs a start value"
             raise ValueError(msg)
         if find_unit(self.unit) is None:
@@ -118,6 +121,8 @@ class FmuSourceSpec:
     include_dirs: tuple[str, ...] = ()
     variables: tuple[VariableSpec, ...]
     variants: Mapping[str, VariantSpec]
+    # model_exchange: FMI 2.0 only; the FMI layer is one of `sources` (no fmus/common layer is added).
+    interface: Literal["co_simulation", "model_exchange"] = "co_simulation"
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -200,6 +205,9 @@ def build_fmu(model_dir: Path, variant: str, *, fmi_version: FmiVersion = 2, for
     spec = load_source_spec(model_dir)
     if variant not in spec.variants:
         msg = f"{model_dir / 'fmu.yaml'}: no variant {variant!r}; variants: {', '.join(spec.variants)}"
+        raise FmuError(msg)
+    if spec.interface == "model_exchange" and fmi_version != 2:
+        msg = f"{model_dir / 'fmu.yaml'}: interface model_exchange is built for FMI 2 only, not FMI {fmi_version}"
         raise FmuError(msg)
     compiler = _compiler(variant)
     inputs = _input_files(model_dir, spec)
@@ -314,7 +322,8 @@ def _compile(  # noqa: PLR0917 - one private call site
         f"-I{common}",
         f"-I{FMUS_DIR / 'include'}",
     ]
-    sources = [*(model_dir / s for s in spec.sources), layer, common / "linsys.c"]
+    layers = [layer] if spec.interface == "co_simulation" else []
+    sources = [*(model_dir / s for s in spec.sources), *layers, common / "linsys.c"]
     try:
         diagnostics = compile_shared(compiler[0], sources, library, flags=flags)
     except NativeBuildError as err:
@@ -339,7 +348,7 @@ def _variables(spec: FmuSourceSpec, variant: VariantSpec) -> list[VariableSpec]:
     return sorted(chosen, key=lambda v: v.vr)
 
 
-_KIND = {"parameter": 1, "input": 2, "output": 3}
+_KIND = {"parameter": 1, "input": 2, "output": 3, "local": 3}  # locals: not settable
 
 
 def _header(variables: list[VariableSpec], variant: VariantSpec) -> str:
@@ -392,13 +401,22 @@ def _model_description(
             {"fmiVersion": "2.0", **common, "guid": token, "variableNamingConvention": "flat"},
         )
         root.set("numberOfEventIndicators", "0")
-        ET.SubElement(
-            root,
-            "CoSimulation",
-            modelIdentifier=variant,
-            canHandleVariableCommunicationStepSize="true",
-            canNotUseMemoryManagementFunctions="true",
-        )
+        if spec.interface == "model_exchange":
+            ET.SubElement(
+                root,
+                "ModelExchange",
+                modelIdentifier=variant,
+                completedIntegratorStepNotNeeded="true",
+                canNotUseMemoryManagementFunctions="true",
+            )
+        else:
+            ET.SubElement(
+                root,
+                "CoSimulation",
+                modelIdentifier=variant,
+                canHandleVariableCommunicationStepSize="true",
+                canNotUseMemoryManagementFunctions="true",
+            )
     else:
         root = ET.Element("fmiModelDescription", {"fmiVersion": "3.0", **common, "instantiationToken": token})
         ET.SubElement(
@@ -424,13 +442,23 @@ def _model_description(
             description="simulation time",
         )
     outputs: list[tuple[int, VariableSpec]] = []
+    derivatives: list[int] = []
+    states: list[int] = []  # calculated at initialisation like the outputs
+    index_of = {var.name: index for index, var in enumerate(variables, start=1)}
     for index, var in enumerate(variables, start=1):
         attrs = {"name": var.name, "valueReference": str(var.vr), "causality": var.causality}
         attrs["variability"] = "fixed" if var.causality == "parameter" else "continuous"
         if var.description:
             attrs["description"] = var.description
         typed = {"unit": var.unit}
-        if var.causality == "output":
+        if var.derivative_of is not None:
+            if var.derivative_of not in index_of:
+                msg = f"{variant}: {var.name}.derivative_of names {var.derivative_of!r}, not a variable of this variant"
+                raise FmuError(msg)
+            typed["derivative"] = str(index_of[var.derivative_of])
+            derivatives.append(index)
+            states.append(index_of[var.derivative_of])
+        if var.causality in {"output", "local"}:
             attrs["initial"] = "calculated"
         else:
             typed["start"] = repr(float(var.start if var.start is not None else 0.0))
@@ -446,8 +474,12 @@ def _model_description(
         out_el = ET.SubElement(structure, "Outputs")
         for index, _ in outputs:
             ET.SubElement(out_el, "Unknown", index=str(index))
+        if derivatives:
+            der_el = ET.SubElement(structure, "Derivatives")
+            for index in derivatives:
+                ET.SubElement(der_el, "Unknown", index=str(index))
         init_el = ET.SubElement(structure, "InitialUnknowns")
-        for index, _ in outputs:
+        for index in sorted({index for index, _ in outputs} | set(derivatives) | set(states)):
             ET.SubElement(init_el, "Unknown", index=str(index))
     else:
         for _, var in outputs:

@@ -36,7 +36,18 @@ from fmpy.model_description import read_model_description
 from twin.core.errors import FmuError
 from twin.cosim.units import Unit
 
-__all__ = ["Api", "FmuFile", "FmuInfo", "StepGroup", "Stepper", "VariableInfo", "read_fmu_info"]
+__all__ = [
+    "ME_SOLVER",
+    "Api",
+    "FmuFile",
+    "FmuInfo",
+    "StepGroup",
+    "Stepper",
+    "VariableInfo",
+    "read_fmu_info",
+    "stepping",
+    "stepping_problem",
+]
 
 _log = logging.getLogger(__name__)
 
@@ -84,6 +95,8 @@ class FmuInfo:
     model_exchange: str | None
     guid: str
     scheduled_execution: str | None = None  # FMI 3 Scheduled Execution (not stepped by the twin)
+    n_states: int = 0  # continuous states (Model Exchange)
+    n_event_indicators: int = 0
     variable_step: bool
     variables: Mapping[str, VariableInfo]
     units: Mapping[str, Unit]
@@ -143,10 +156,53 @@ def read_fmu_info(path: Path) -> FmuInfo:
         model_exchange=md.modelExchange.modelIdentifier if md.modelExchange is not None else None,
         guid=md.guid or "",
         scheduled_execution=_identifier(getattr(md, "scheduledExecution", None)),
+        n_states=len(md.derivatives or ()),
+        n_event_indicators=int(md.numberOfEventIndicators or 0),
         variable_step=bool(cs.canHandleVariableCommunicationStepSize) if cs is not None else False,
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),
     )
+
+
+# The solver a Model Exchange FMU is integrated with between communication points (fmpy's SUNDIALS
+# CVode: BDF with Newton iteration, so stiff motors with microsecond electrical time constants are
+# stable at any communication step; explicit Euler at the step would not be).
+ME_SOLVER = "CVode"
+ME_RELATIVE_TOLERANCE = 1e-6
+
+
+def stepping_problem(info: FmuInfo) -> str | None:
+    """Why twin cannot step this FMU (None when it can), as a phrase for a one-line error."""
+    if info.major_version not in (2, 3):
+        return f"FMI {info.fmi_version} is not supported (FMI 2.0 and 3.0 are)"
+    if info.co_simulation is not None:
+        return None
+    if info.model_exchange is None:
+        only = " (Scheduled Execution only)" if info.scheduled_execution else ""
+        return f"no Co-Simulation or Model Exchange interface{only}"
+    if info.major_version != 2:
+        return "FMI 3 Model Exchange is not supported yet (FMI 2 Model Exchange and FMI 2/3 Co-Simulation are)"
+    if info.n_event_indicators:
+        return (
+            f"Model Exchange with {info.n_event_indicators} event indicator(s) is not supported "
+            "(state events are not handled); export a Co-Simulation FMU"
+        )
+    return None
+
+
+def stepping(info: FmuInfo) -> str:
+    """How twin steps this FMU: `Co-Simulation` or `Model Exchange (solver: CVode)`.
+
+    Raises:
+        FmuError: If twin cannot step it (the reason from `stepping_problem`).
+    """
+    problem = stepping_problem(info)
+    if problem is not None:
+        msg = f"{info.path}: {problem}"
+        raise FmuError(msg)
+    if info.co_simulation is not None:
+        return "Co-Simulation"
+    return f"Model Exchange (solver: {ME_SOLVER}, relative tolerance {ME_RELATIVE_TOLERANCE:g})"
 
 
 class Stepper(Protocol):
@@ -319,8 +375,9 @@ class FmuFile:
         if self.info.major_version not in (2, 3):
             msg = f"{path}: FMI {self.info.fmi_version} is not supported (FMI 2.0 and 3.0 are)"
             raise FmuError(msg)
-        if self.info.co_simulation is None:
-            msg = f"{path}: no Co-Simulation interface (Model Exchange only); twin steps Co-Simulation FMUs"
+        problem = stepping_problem(self.info)
+        if problem is not None:
+            msg = f"{path}: {problem}"
             raise FmuError(msg)
         try:
             self._dir = Path(fmpy.extract(str(path)))
@@ -381,12 +438,15 @@ class FmuFile:
         kwargs = {
             "guid": self.info.guid,
             "unzipDirectory": str(self._dir),
-            "modelIdentifier": self.info.co_simulation,
+            "modelIdentifier": self.info.co_simulation or self.info.model_exchange,
             "instanceName": name,
         }
+        exchange = self.info.co_simulation is None
         try:
-            if self.info.major_version == 2:
-                fmu: Any = fmpy.fmi2.FMU2Slave(**kwargs)
+            if exchange:
+                fmu: Any = fmpy.fmi2.FMU2Model(**kwargs)
+            elif self.info.major_version == 2:
+                fmu = fmpy.fmi2.FMU2Slave(**kwargs)
             else:
                 fmu = fmpy.fmi3.FMU3Slave(**kwargs)
         except Exception as err:
@@ -396,7 +456,9 @@ class FmuFile:
         stepper: _Base
         by_vr = {v.value_reference: v.name for v in self.info.variables.values() if v.type in _REAL_TYPES}
         try:
-            if self.info.major_version == 2:
+            if exchange:
+                stepper = _Fmi2Exchange(fmu, label, messages, step_s, inputs, outputs, api)
+            elif self.info.major_version == 2:
                 stepper = _Fmi2(fmu, label, messages, step_s, inputs, outputs, api)
             else:
                 stepper = _Fmi3(fmu, label, messages, step_s, inputs, outputs, api)
@@ -627,15 +689,18 @@ class _Fmi2(_Base):
         uint_p = ctypes.POINTER(ctypes.c_uint)
         self._set = ctypes.CFUNCTYPE(status, pointer, uint_p, ctypes.c_size_t, dbl_p)(("fmi2SetReal", dll))
         self._get = ctypes.CFUNCTYPE(status, pointer, uint_p, ctypes.c_size_t, dbl_p)(("fmi2GetReal", dll))
-        self._do = ctypes.CFUNCTYPE(status, pointer, ctypes.c_double, ctypes.c_double, ctypes.c_int)(
-            ("fmi2DoStep", dll)
-        )
+        self._bind_step(dll)
         self._c_ptr = ctypes.c_void_p(c)
         self._n_in = len(self._in_vr)
         self._n_out = len(self._out_vr)
         if self._api == "convenience":
             self.step = self._step_convenience  # type: ignore[method-assign]
         self.read_outputs()
+
+    def _bind_step(self, dll: Any) -> None:
+        self._do = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)(
+            ("fmi2DoStep", dll)
+        )
 
     def _set_one(self, var: VariableInfo, value: float) -> None:
         fmu = self._fmu
@@ -664,6 +729,89 @@ class _Fmi2(_Base):
         status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs)
         if status > 1:
             self.fail("fmi2GetReal", status, 0.0)
+
+
+class _HeldInputs:
+    """fmpy's solvers apply an input at every evaluation; the inputs here are held over each step."""
+
+    def apply(self, time: float) -> None:
+        """Nothing to do: `step` sets the inputs before integrating."""
+
+
+class _Fmi2Exchange(_Fmi2):
+    """FMI 2.0 Model Exchange adapter: the same interface as the Co-Simulation one.
+
+    Each communication step sets the inputs (held constant over the step), restarts CVode at the
+    step's start (an input change is a discontinuity), integrates to the step's end with steps no
+    longer than the communication step, completes the integrator step and reads the outputs.
+    Stepped from Python (not by the compiled shim: `slot_fields` is None).
+    """
+
+    _FUNCTIONS = ("fmi2SetReal", f"{ME_SOLVER} integration", "fmi2GetReal")
+
+    def _bind_step(self, dll: Any) -> None:
+        fmu = self._fmu
+        new_states_needed = True
+        while new_states_needed:
+            new_states_needed, terminate, *_ = fmu.newDiscreteStates()
+            if terminate:
+                msg = f"{self.name}: the FMU asked to terminate during its initial event update"
+                raise FmuError(msg)
+        fmu.enterContinuousTimeMode()
+        from fmpy.sundials import CVodeSolver
+
+        self._solver = CVodeSolver(
+            nx=self._nx,
+            nz=0,
+            get_x=fmu.getContinuousStates,
+            set_x=fmu.setContinuousStates,
+            get_dx=fmu.getDerivatives,
+            get_z=fmu.getEventIndicators,
+            get_nominals=fmu.getNominalsOfContinuousStates,
+            set_time=fmu.setTime,
+            input=_HeldInputs(),
+            startTime=self._t0,
+            maxStep=self._h,
+            relativeTolerance=ME_RELATIVE_TOLERANCE,
+        )
+
+    def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
+        self._nx = info.n_states
+        self._t0 = start_time_s
+        if self._api == "convenience":
+            self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
+        super().initialize(info, start, start_time_s)
+
+    def slot_fields(self) -> dict[str, Any] | None:
+        """None: the compiled shim only calls doStep; Model Exchange is integrated from Python."""
+        return None
+
+    def step(self, t_s: float) -> None:
+        fmu = self._fmu
+        c = self._c_ptr
+        set_status = self._set(c, self._in_refs, self._n_in, self.inputs)
+        if set_status > 1:
+            self.fail("fmi2SetReal", set_status, t_s)
+        t_next = t_s + self._h
+        try:
+            fmu.setTime(t_s)
+            self._solver.reset(t_s)
+            self._solver.step(t_s, t_next)
+            fmu.setTime(t_next)
+            _, terminate = fmu.completedIntegratorStep()
+        except fmpy.fmi1.FMICallException as err:
+            self.fail(err.function, int(err.status), t_s)
+        except RuntimeError as err:
+            self._failed = True
+            msg = f"{self.name} failed at t = {t_s:.6f} s: {ME_SOLVER} could not integrate the step ({err})"
+            raise FmuError(msg) from None
+        if terminate:
+            self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+            self.fail("fmi2CompletedIntegratorStep", 3, t_s)
+        get_status = self._get(c, self._out_refs, self._n_out, self.outputs)
+        if get_status > 1:
+            self.fail("fmi2GetReal", get_status, t_s)
+        self._check_finite("fmi2GetReal", t_s)
 
 
 class _Fmi3(_Base):
