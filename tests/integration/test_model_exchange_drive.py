@@ -5,16 +5,19 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import pytest
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import run_twin
 from tests.unit.cosim.helpers import model_exchange
+from twin.cosim.build import FmiVersion
 
 
-def test_model_exchange_fmu_drives_a_short_simulation(tmp_path: Path) -> None:
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_model_exchange_fmu_drives_a_short_simulation(tmp_path: Path, fmi_version: FmiVersion) -> None:
     scenario = tmp_path / "me.yaml"
     scenario.write_text(
-        f"name: model_exchange\ndrive:\n  type: fmu\n  fmu_file: {model_exchange()}\n  profile: velocity-servo\n"
+        f"name: model_exchange\ndrive:\n  type: fmu\n  fmu_file: {model_exchange(fmi_version=fmi_version)}\n  profile: velocity-servo\n"
     )
     bag = tmp_path / "bag"
     result = run_twin("simulate", str(scenario), "--duration", "5", "--out", str(bag))

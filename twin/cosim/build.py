@@ -2,8 +2,8 @@
 
 A model directory holds `fmu.yaml` (model name, C sources, variables, variants) and its C files.
 Each variant is built for FMI 2.0 or 3.0 Co-Simulation (or, when `fmu.yaml` says
-`interface: model_exchange`, FMI 2.0 Model Exchange with the FMI layer among the model's own
-sources and `local` derivative variables naming their state in `derivative_of`): the model description and a header of
+`interface: model_exchange`, Model Exchange with the model's own `fmi<N>_me_layer.c` and `local`
+derivative variables naming their state in `derivative_of`): the model description and a header of
 value references and start values are generated from `fmu.yaml`, the sources are compiled with the system
 C compiler (`$CC`, else `cc`, `gcc` or `clang`) together with the FMI layer of `fmus/common`, and the
 result is zipped into `<cache>/fmus/<variant>-fmi<N>-<hash>.fmu`. The hash covers every source,
@@ -121,7 +121,8 @@ class FmuSourceSpec:
     include_dirs: tuple[str, ...] = ()
     variables: tuple[VariableSpec, ...]
     variants: Mapping[str, VariantSpec]
-    # model_exchange: FMI 2.0 only; the FMI layer is one of `sources` (no fmus/common layer is added).
+    # model_exchange: the FMI layer is the model's own fmi2_me_layer.c / fmi3_me_layer.c (not listed in
+    # `sources`) instead of fmus/common's.
     interface: Literal["co_simulation", "model_exchange"] = "co_simulation"
 
 
@@ -206,9 +207,6 @@ def build_fmu(model_dir: Path, variant: str, *, fmi_version: FmiVersion = 2, for
     if variant not in spec.variants:
         msg = f"{model_dir / 'fmu.yaml'}: no variant {variant!r}; variants: {', '.join(spec.variants)}"
         raise FmuError(msg)
-    if spec.interface == "model_exchange" and fmi_version != 2:
-        msg = f"{model_dir / 'fmu.yaml'}: interface model_exchange is built for FMI 2 only, not FMI {fmi_version}"
-        raise FmuError(msg)
     compiler = _compiler(variant)
     inputs = _input_files(model_dir, spec)
     digest = _digest(inputs, compiler, variant, fmi_version)
@@ -264,6 +262,8 @@ def build_shim() -> Path:
 
 def _input_files(model_dir: Path, spec: FmuSourceSpec) -> list[Path]:
     files = [model_dir / "fmu.yaml", *(model_dir / s for s in spec.sources)]
+    if spec.interface == "model_exchange":
+        files.extend(model_dir / f"fmi{n}_me_layer.c" for n in (2, 3))
     for extra in spec.include_dirs:
         folder = (model_dir / extra).resolve()
         if not folder.is_dir():
@@ -322,8 +322,9 @@ def _compile(  # noqa: PLR0917 - one private call site
         f"-I{common}",
         f"-I{FMUS_DIR / 'include'}",
     ]
-    layers = [layer] if spec.interface == "co_simulation" else []
-    sources = [*(model_dir / s for s in spec.sources), *layers, common / "linsys.c"]
+    if spec.interface == "model_exchange":
+        layer = model_dir / f"fmi{fmi_version}_me_layer.c"
+    sources = [*(model_dir / s for s in spec.sources), layer, common / "linsys.c"]
     try:
         diagnostics = compile_shared(compiler[0], sources, library, flags=flags)
     except NativeBuildError as err:
@@ -419,15 +420,18 @@ def _model_description(
             )
     else:
         root = ET.Element("fmiModelDescription", {"fmiVersion": "3.0", **common, "instantiationToken": token})
-        ET.SubElement(
-            root,
-            "CoSimulation",
-            modelIdentifier=variant,
-            canHandleVariableCommunicationStepSize="true",
-            providesIntermediateUpdate="false",
-            canReturnEarlyAfterIntermediateUpdate="false",
-            hasEventMode="false",
-        )
+        if spec.interface == "model_exchange":
+            ET.SubElement(root, "ModelExchange", modelIdentifier=variant, needsCompletedIntegratorStep="false")
+        else:
+            ET.SubElement(
+                root,
+                "CoSimulation",
+                modelIdentifier=variant,
+                canHandleVariableCommunicationStepSize="true",
+                providesIntermediateUpdate="false",
+                canReturnEarlyAfterIntermediateUpdate="false",
+                hasEventMode="false",
+            )
     _unit_elements(root, variables)
     ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime="1.0", stepSize="0.001")
     model_vars = ET.SubElement(root, "ModelVariables")
@@ -455,7 +459,9 @@ def _model_description(
             if var.derivative_of not in index_of:
                 msg = f"{variant}: {var.name}.derivative_of names {var.derivative_of!r}, not a variable of this variant"
                 raise FmuError(msg)
-            typed["derivative"] = str(index_of[var.derivative_of])
+            # FMI 2 names the state by its index, FMI 3 by its value reference.
+            state = variables[index_of[var.derivative_of] - 1]
+            typed["derivative"] = str(index_of[var.derivative_of] if fmi_version == 2 else state.vr)
             derivatives.append(index)
             states.append(index_of[var.derivative_of])
         if var.causality in {"output", "local"}:
@@ -484,8 +490,10 @@ def _model_description(
     else:
         for _, var in outputs:
             ET.SubElement(structure, "Output", valueReference=str(var.vr))
-        for _, var in outputs:
-            ET.SubElement(structure, "InitialUnknown", valueReference=str(var.vr))
+        for index in derivatives:
+            ET.SubElement(structure, "ContinuousStateDerivative", valueReference=str(variables[index - 1].vr))
+        for index in sorted({index for index, _ in outputs} | set(derivatives) | set(states)):
+            ET.SubElement(structure, "InitialUnknown", valueReference=str(variables[index - 1].vr))
     ET.indent(root)
     text: bytes = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
     return text

@@ -180,8 +180,6 @@ def stepping_problem(info: FmuInfo) -> str | None:
     if info.model_exchange is None:
         only = " (Scheduled Execution only)" if info.scheduled_execution else ""
         return f"no Co-Simulation or Model Exchange interface{only}"
-    if info.major_version != 2:
-        return "FMI 3 Model Exchange is not supported yet (FMI 2 Model Exchange and FMI 2/3 Co-Simulation are)"
     if info.n_event_indicators:
         return (
             f"Model Exchange with {info.n_event_indicators} event indicator(s) is not supported "
@@ -444,7 +442,8 @@ class FmuFile:
         exchange = self.info.co_simulation is None
         try:
             if exchange:
-                fmu: Any = fmpy.fmi2.FMU2Model(**kwargs)
+                model_class = fmpy.fmi2.FMU2Model if self.info.major_version == 2 else fmpy.fmi3.FMU3Model
+                fmu: Any = model_class(**kwargs)
             elif self.info.major_version == 2:
                 fmu = fmpy.fmi2.FMU2Slave(**kwargs)
             else:
@@ -456,7 +455,9 @@ class FmuFile:
         stepper: _Base
         by_vr = {v.value_reference: v.name for v in self.info.variables.values() if v.type in _REAL_TYPES}
         try:
-            if exchange:
+            if exchange and self.info.major_version == 3:
+                stepper = _Fmi3Exchange(fmu, label, messages, step_s, inputs, outputs, api)
+            elif exchange:
                 stepper = _Fmi2Exchange(fmu, label, messages, step_s, inputs, outputs, api)
             elif self.info.major_version == 2:
                 stepper = _Fmi2(fmu, label, messages, step_s, inputs, outputs, api)
@@ -758,21 +759,8 @@ class _Fmi2Exchange(_Fmi2):
                 msg = f"{self.name}: the FMU asked to terminate during its initial event update"
                 raise FmuError(msg)
         fmu.enterContinuousTimeMode()
-        from fmpy.sundials import CVodeSolver
-
-        self._solver = CVodeSolver(
-            nx=self._nx,
-            nz=0,
-            get_x=fmu.getContinuousStates,
-            set_x=fmu.setContinuousStates,
-            get_dx=fmu.getDerivatives,
-            get_z=fmu.getEventIndicators,
-            get_nominals=fmu.getNominalsOfContinuousStates,
-            set_time=fmu.setTime,
-            input=_HeldInputs(),
-            startTime=self._t0,
-            maxStep=self._h,
-            relativeTolerance=ME_RELATIVE_TOLERANCE,
+        self._solver = _cvode(
+            fmu, fmu.getDerivatives, fmu.getNominalsOfContinuousStates, nx=self._nx, t0_s=self._t0, max_step_s=self._h
         )
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
@@ -787,24 +775,11 @@ class _Fmi2Exchange(_Fmi2):
         return None
 
     def step(self, t_s: float) -> None:
-        fmu = self._fmu
         c = self._c_ptr
         set_status = self._set(c, self._in_refs, self._n_in, self.inputs)
         if set_status > 1:
             self.fail("fmi2SetReal", set_status, t_s)
-        t_next = t_s + self._h
-        try:
-            fmu.setTime(t_s)
-            self._solver.reset(t_s)
-            self._solver.step(t_s, t_next)
-            fmu.setTime(t_next)
-            _, terminate = fmu.completedIntegratorStep()
-        except fmpy.fmi1.FMICallException as err:
-            self.fail(err.function, int(err.status), t_s)
-        except RuntimeError as err:
-            self._failed = True
-            msg = f"{self.name} failed at t = {t_s:.6f} s: {ME_SOLVER} could not integrate the step ({err})"
-            raise FmuError(msg) from None
+        terminate = _integrate(self, t_s)
         if terminate:
             self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
             self.fail("fmi2CompletedIntegratorStep", 3, t_s)
@@ -819,6 +794,7 @@ class _Fmi3(_Base):
 
     _version = 3
     _FUNCTIONS = ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")
+    _INSTANTIATE = "fmi3InstantiateCoSimulation"
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         fmu = self._fmu
@@ -831,7 +807,7 @@ class _Fmi3(_Base):
             fmu.instantiate(loggingOn=False, logMessage=log_message)
         except Exception:
             detail = messages.last()
-            msg = f"{self.name}: fmi3InstantiateCoSimulation returned NULL" + (f" ({detail})" if detail else "")
+            msg = f"{self.name}: {self._INSTANTIATE} returned NULL" + (f" ({detail})" if detail else "")
             raise FmuError(msg) from None
         self._open = True
         self._set_start(info, start)
@@ -845,15 +821,12 @@ class _Fmi3(_Base):
         pointer = ctypes.c_void_p
         dbl_p = ctypes.POINTER(ctypes.c_double)
         uint_p = ctypes.POINTER(ctypes.c_uint)
-        bool_p = ctypes.POINTER(ctypes.c_bool)
         size = ctypes.c_size_t
         self._in_refs = (ctypes.c_uint * max(1, len(self._in_vr)))(*self._in_vr)
         self._out_refs = (ctypes.c_uint * max(1, len(self._out_vr)))(*self._out_vr)
         self._set = ctypes.CFUNCTYPE(status, pointer, uint_p, size, dbl_p, size)(("fmi3SetFloat64", dll))
         self._get = ctypes.CFUNCTYPE(status, pointer, uint_p, size, dbl_p, size)(("fmi3GetFloat64", dll))
-        self._do = ctypes.CFUNCTYPE(
-            status, pointer, ctypes.c_double, ctypes.c_double, ctypes.c_bool, bool_p, bool_p, bool_p, dbl_p
-        )(("fmi3DoStep", dll))
+        self._bind_step(dll)
         self._event = ctypes.c_bool(False)
         self._terminate = ctypes.c_bool(False)
         self._early = ctypes.c_bool(False)
@@ -870,6 +843,20 @@ class _Fmi3(_Base):
         if self._api == "convenience":
             self.step = self._step_convenience  # type: ignore[method-assign]
         self.read_outputs()
+
+    def _bind_step(self, dll: Any) -> None:
+        bool_p = ctypes.POINTER(ctypes.c_bool)
+        self._do = ctypes.CFUNCTYPE(
+            ctypes.c_int,
+            ctypes.c_void_p,
+            ctypes.c_double,
+            ctypes.c_double,
+            ctypes.c_bool,
+            bool_p,
+            bool_p,
+            bool_p,
+            ctypes.POINTER(ctypes.c_double),
+        )(("fmi3DoStep", dll))
 
     _SETTERS: Mapping[str, tuple[str, type]] = MappingProxyType(
         {
@@ -917,3 +904,95 @@ class _Fmi3(_Base):
         status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs, self._n_out)
         if status > 1:
             self.fail("fmi3GetFloat64", status, 0.0)
+
+
+class _Fmi3Exchange(_Fmi3):
+    """FMI 3.0 Model Exchange adapter: as `_Fmi2Exchange`, through the FMI 3 functions."""
+
+    _FUNCTIONS = ("fmi3SetFloat64", f"{ME_SOLVER} integration", "fmi3GetFloat64")
+    _INSTANTIATE = "fmi3InstantiateModelExchange"
+
+    def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
+        self._nx = info.n_states
+        self._t0 = start_time_s
+        if self._api == "convenience":
+            self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
+        super().initialize(info, start, start_time_s)
+
+    def _bind_step(self, dll: Any) -> None:
+        fmu = self._fmu
+        update_needed = True
+        while update_needed:
+            update_needed, terminate, *_ = fmu.updateDiscreteStates()
+            if terminate:
+                msg = f"{self.name}: the FMU asked to terminate during its initial event update"
+                raise FmuError(msg)
+        fmu.enterContinuousTimeMode()
+        self._solver = _cvode(
+            fmu,
+            fmu.getContinuousStateDerivatives,
+            fmu.getNominalsOfContinuousStates,
+            nx=self._nx,
+            t0_s=self._t0,
+            max_step_s=self._h,
+        )
+
+    def slot_fields(self) -> dict[str, Any] | None:
+        """None: the compiled shim only calls doStep; Model Exchange is integrated from Python."""
+        return None
+
+    def step(self, t_s: float) -> None:
+        c = self._c_ptr
+        set_status = self._set(c, self._in_refs, self._n_in, self.inputs, self._n_in)
+        if set_status > 1:
+            self.fail("fmi3SetFloat64", set_status, t_s)
+        terminate = _integrate(self, t_s)
+        if terminate:
+            self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+            self.fail("fmi3CompletedIntegratorStep", 3, t_s)
+        get_status = self._get(c, self._out_refs, self._n_out, self.outputs, self._n_out)
+        if get_status > 1:
+            self.fail("fmi3GetFloat64", get_status, t_s)
+        self._check_finite("fmi3GetFloat64", t_s)
+
+
+def _cvode(fmu: Any, get_dx: Any, get_nominals: Any, *, nx: int, t0_s: float, max_step_s: float) -> Any:
+    """The CVode solver of fmpy solver over an FMU in continuous-time mode (no event indicators)."""
+    from fmpy.sundials import CVodeSolver
+
+    return CVodeSolver(
+        nx=nx,
+        nz=0,
+        get_x=fmu.getContinuousStates,
+        set_x=fmu.setContinuousStates,
+        get_dx=get_dx,
+        get_z=fmu.getEventIndicators,
+        get_nominals=get_nominals,
+        set_time=fmu.setTime,
+        input=_HeldInputs(),
+        startTime=t0_s,
+        maxStep=max_step_s,
+        relativeTolerance=ME_RELATIVE_TOLERANCE,
+    )
+
+
+def _integrate(adapter: _Fmi2Exchange | _Fmi3Exchange, t_s: float) -> bool:
+    """Integrate `adapter`'s FMU from `t_s` over one communication step; True if it asks to terminate.
+
+    The solver restarts at the step's start: the inputs just set are a discontinuity.
+    """
+    fmu = adapter._fmu
+    t_next = t_s + adapter._h
+    try:
+        fmu.setTime(t_s)
+        adapter._solver.reset(t_s)
+        adapter._solver.step(t_s, t_next)
+        fmu.setTime(t_next)
+        _, terminate = fmu.completedIntegratorStep()
+    except fmpy.fmi1.FMICallException as err:
+        adapter.fail(err.function, int(err.status), t_s)
+    except RuntimeError as err:
+        adapter._failed = True
+        msg = f"{adapter.name} failed at t = {t_s:.6f} s: {ME_SOLVER} could not integrate the step ({err})"
+        raise FmuError(msg) from None
+    return bool(terminate)

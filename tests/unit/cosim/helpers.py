@@ -25,6 +25,6 @@ def faulty(variant: str = "faulty_motor_servo", fmi_version: FmiVersion = 2) -> 
 ME_DIR = FMUS_DIR / "testing" / "dc_motor_me"
 
 
-def model_exchange(variant: str = "xm430_w210_servo_me") -> Path:
-    """Build (or reuse) the project's motor as an FMI 2.0 Model Exchange FMU."""
-    return build_fmu(ME_DIR, variant, fmi_version=2).path
+def model_exchange(variant: str = "xm430_w210_servo_me", fmi_version: FmiVersion = 2) -> Path:
+    """Build (or reuse) the project's motor as a Model Exchange FMU."""
+    return build_fmu(ME_DIR, variant, fmi_version=fmi_version).path

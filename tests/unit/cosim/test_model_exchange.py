@@ -7,9 +7,8 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import run_twin
-from tests.unit.cosim.helpers import ME_DIR, model_exchange
-from twin.core.errors import FmuError
-from twin.cosim.build import build_fmu, resolve_fmu
+from tests.unit.cosim.helpers import model_exchange
+from twin.cosim.build import FmiVersion, resolve_fmu
 from twin.cosim.contract import FmuMapping, Profile, check_contract
 from twin.cosim.fmu import FmuFile, read_fmu_info, stepping
 
@@ -35,8 +34,9 @@ def _run(path: Path, command: str, load_nm: float, steps: int) -> list[tuple[flo
         return rows
 
 
-def test_model_exchange_build_declares_states_and_is_stepped_by_cvode() -> None:
-    info = read_fmu_info(model_exchange())
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_model_exchange_build_declares_states_and_is_stepped_by_cvode(fmi_version: FmiVersion) -> None:
+    info = read_fmu_info(model_exchange(fmi_version=fmi_version))
     assert info.co_simulation is None
     assert info.model_exchange == "xm430_w210_servo_me"
     assert info.n_states == 4  # current, wheel speed, wheel angle, the PI's integral
@@ -45,16 +45,17 @@ def test_model_exchange_build_declares_states_and_is_stepped_by_cvode() -> None:
     assert stepping(read_fmu_info(resolve_fmu("builtin:xm430_w210_servo"))) == "Co-Simulation"
 
 
+@pytest.mark.parametrize("fmi_version", [2, 3])
 @pytest.mark.parametrize(
     ("me_variant", "cs_variant", "command"),
     [("xm430_w210_me", "xm430_w210", "voltage"), ("xm430_w210_servo_me", "xm430_w210_servo", "speed_setpoint")],
 )
 def test_model_exchange_motor_steps_within_one_percent_of_co_simulation(
-    me_variant: str, cs_variant: str, command: str
+    me_variant: str, cs_variant: str, command: str, fmi_version: FmiVersion
 ) -> None:
     steps = 600
-    me = _run(model_exchange(me_variant), command, 0.02, steps)
-    cs = _run(resolve_fmu(f"builtin:{cs_variant}"), command, 0.02, steps)
+    me = _run(model_exchange(me_variant, fmi_version), command, 0.02, steps)
+    cs = _run(resolve_fmu(f"builtin:{cs_variant}", fmi_version=fmi_version), command, 0.02, steps)
     for column, name in enumerate(("wheel_speed", "current", "wheel_angle")):
         scale = max(abs(row[column]) for row in cs)
         worst = max(abs(a[column] - b[column]) for a, b in zip(me, cs, strict=True))
@@ -65,14 +66,11 @@ def test_model_exchange_motor_steps_within_one_percent_of_co_simulation(
     assert abs(me[-1][0] - cs[-1][0]) < 0.01 * abs(cs[-1][0])
 
 
-def test_fmu_check_says_model_exchange_and_the_solver() -> None:
-    result = run_twin("fmu", "check", str(model_exchange()), "--profile", "velocity-servo")
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_fmu_check_says_model_exchange_and_the_solver(fmi_version: FmiVersion) -> None:
+    path = model_exchange(fmi_version=fmi_version)
+    result = run_twin("fmu", "check", str(path), "--profile", "velocity-servo")
     assert result.returncode == 0, result.stderr
     assert "Model Exchange" in result.stdout.splitlines()[1]
     assert "stepped as: Model Exchange (solver: CVode" in result.stdout
     assert "satisfies the velocity-servo contract" in result.stdout
-
-
-def test_model_exchange_is_built_for_fmi2_only() -> None:
-    with pytest.raises(FmuError, match=r"fmu\.yaml: interface model_exchange is built for FMI 2 only, not FMI 3"):
-        build_fmu(ME_DIR, "xm430_w210_me", fmi_version=3)
