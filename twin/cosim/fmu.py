@@ -180,11 +180,6 @@ def stepping_problem(info: FmuInfo) -> str | None:
     if info.model_exchange is None:
         only = " (Scheduled Execution only)" if info.scheduled_execution else ""
         return f"no Co-Simulation or Model Exchange interface{only}"
-    if info.n_event_indicators:
-        return (
-            f"Model Exchange with {info.n_event_indicators} event indicator(s) is not supported "
-            "(state events are not handled); export a Co-Simulation FMU"
-        )
     return None
 
 
@@ -752,20 +747,26 @@ class _Fmi2Exchange(_Fmi2):
 
     def _bind_step(self, dll: Any) -> None:
         fmu = self._fmu
-        new_states_needed = True
-        while new_states_needed:
-            new_states_needed, terminate, *_ = fmu.newDiscreteStates()
-            if terminate:
-                msg = f"{self.name}: the FMU asked to terminate during its initial event update"
-                raise FmuError(msg)
+        self._update_events = fmu.newDiscreteStates
+        if _event_update(self):
+            msg = f"{self.name}: the FMU asked to terminate during its initial event update"
+            raise FmuError(msg)
         fmu.enterContinuousTimeMode()
         self._solver = _cvode(
-            fmu, fmu.getDerivatives, fmu.getNominalsOfContinuousStates, nx=self._nx, t0_s=self._t0, max_step_s=self._h
+            fmu,
+            fmu.getDerivatives,
+            fmu.getNominalsOfContinuousStates,
+            nx=self._nx,
+            nz=self._nz,
+            t0_s=self._t0,
+            max_step_s=self._h,
         )
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         self._nx = info.n_states
+        self._nz = info.n_event_indicators
         self._t0 = start_time_s
+        self._next_event_s = math.inf
         if self._api == "convenience":
             self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
         super().initialize(info, start, start_time_s)
@@ -914,25 +915,29 @@ class _Fmi3Exchange(_Fmi3):
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         self._nx = info.n_states
+        self._nz = info.n_event_indicators
         self._t0 = start_time_s
+        self._next_event_s = math.inf
         if self._api == "convenience":
             self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
         super().initialize(info, start, start_time_s)
 
     def _bind_step(self, dll: Any) -> None:
         fmu = self._fmu
-        update_needed = True
-        while update_needed:
-            update_needed, terminate, *_ = fmu.updateDiscreteStates()
-            if terminate:
-                msg = f"{self.name}: the FMU asked to terminate during its initial event update"
-                raise FmuError(msg)
+        # Array states count element by element: ask the instance (the description lists variables).
+        self._nx = int(fmu.getNumberOfContinuousStates())
+        self._nz = int(fmu.getNumberOfEventIndicators())
+        self._update_events = fmu.updateDiscreteStates
+        if _event_update(self):
+            msg = f"{self.name}: the FMU asked to terminate during its initial event update"
+            raise FmuError(msg)
         fmu.enterContinuousTimeMode()
         self._solver = _cvode(
             fmu,
             fmu.getContinuousStateDerivatives,
             fmu.getNominalsOfContinuousStates,
             nx=self._nx,
+            nz=self._nz,
             t0_s=self._t0,
             max_step_s=self._h,
         )
@@ -956,13 +961,13 @@ class _Fmi3Exchange(_Fmi3):
         self._check_finite("fmi3GetFloat64", t_s)
 
 
-def _cvode(fmu: Any, get_dx: Any, get_nominals: Any, *, nx: int, t0_s: float, max_step_s: float) -> Any:
-    """The CVode solver of fmpy solver over an FMU in continuous-time mode (no event indicators)."""
+def _cvode(fmu: Any, get_dx: Any, get_nominals: Any, *, nx: int, nz: int, t0_s: float, max_step_s: float) -> Any:
+    """CVode of fmpy over an FMU in continuous-time mode (root finding on its event indicators)."""
     from fmpy.sundials import CVodeSolver
 
     return CVodeSolver(
         nx=nx,
-        nz=0,
+        nz=nz,
         get_x=fmu.getContinuousStates,
         set_x=fmu.setContinuousStates,
         get_dx=get_dx,
@@ -976,23 +981,55 @@ def _cvode(fmu: Any, get_dx: Any, get_nominals: Any, *, nx: int, t0_s: float, ma
     )
 
 
+def _event_update(adapter: _Fmi2Exchange | _Fmi3Exchange) -> bool:
+    """Iterate the FMU's discrete states in event mode; True if it asks to terminate."""
+    needed = True
+    while needed:
+        needed, terminate, _, _, time_defined, time_s = adapter._update_events()
+        if terminate:
+            return True
+        adapter._next_event_s = float(time_s) if time_defined else math.inf
+    return False
+
+
 def _integrate(adapter: _Fmi2Exchange | _Fmi3Exchange, t_s: float) -> bool:
     """Integrate `adapter`'s FMU from `t_s` over one communication step; True if it asks to terminate.
 
-    The solver restarts at the step's start: the inputs just set are a discontinuity.
+    The solver restarts at the step's start (the inputs just set are a discontinuity) and after
+    every event: a state event (CVode's root finding on the event indicators), a time event the FMU
+    announced, or one `completedIntegratorStep` asks for. Each event is handled in event mode.
     """
     fmu = adapter._fmu
-    t_next = t_s + adapter._h
+    solver = adapter._solver
+    t_end = t_s + adapter._h
+    eps = 1e-12 * max(1.0, abs(t_end))
     try:
         fmu.setTime(t_s)
-        adapter._solver.reset(t_s)
-        adapter._solver.step(t_s, t_next)
-        fmu.setTime(t_next)
-        _, terminate = fmu.completedIntegratorStep()
+        solver.reset(t_s)
+        t = t_s
+        while t < t_end - eps:
+            target = min(t_end, adapter._next_event_s)
+            state_event, _, t_reached = solver.step(t, target)
+            fmu.setTime(t_reached)
+            step_event, terminate = fmu.completedIntegratorStep()
+            if terminate:
+                return True
+            time_event = t_reached >= adapter._next_event_s - eps
+            if state_event or time_event or step_event:
+                fmu.enterEventMode()
+                if _event_update(adapter):
+                    return True
+                fmu.enterContinuousTimeMode()
+                solver.reset(t_reached)
+            if t_reached <= t:  # no progress: an event at the same instant again and again
+                msg = f"{adapter.name} failed at t = {t:.6f} s: events at one instant without end"
+                raise FmuError(msg)
+            t = t_reached
+        fmu.setTime(t_end)
     except fmpy.fmi1.FMICallException as err:
         adapter.fail(err.function, int(err.status), t_s)
     except RuntimeError as err:
         adapter._failed = True
         msg = f"{adapter.name} failed at t = {t_s:.6f} s: {ME_SOLVER} could not integrate the step ({err})"
         raise FmuError(msg) from None
-    return bool(terminate)
+    return False
