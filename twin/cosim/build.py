@@ -1,8 +1,10 @@
 """Build FMUs from C sources into a cache outside git, rebuilding when any input changes.
 
 A model directory holds `fmu.yaml` (model name, C sources, variables, variants) and its C files.
-Each variant is built for FMI 2.0 or 3.0 Co-Simulation: the model description and a header of value
-references and start values are generated from `fmu.yaml`, the sources are compiled with the system
+Each variant is built for FMI 2.0 or 3.0 Co-Simulation (or, when `fmu.yaml` says
+`interface: model_exchange`, Model Exchange with the model's own `fmi<N>_me_layer.c` and `local`
+derivative variables naming their state in `derivative_of`): the model description and a header of
+value references and start values are generated from `fmu.yaml`, the sources are compiled with the system
 C compiler (`$CC`, else `cc`, `gcc` or `clang`) together with the FMI layer of `fmus/common`, and the
 result is zipped into `<cache>/fmus/<variant>-fmi<N>-<hash>.fmu`. The hash covers every source,
 header and build setting, so a changed input gives a new file and an unchanged one is reused.
@@ -78,18 +80,19 @@ class VariableSpec:
 
     name: str
     vr: int
-    causality: Literal["input", "output", "parameter"]
+    causality: Literal["input", "output", "parameter", "local"]
     unit: str = "1"
     start: float | None = None
     description: str = ""
     only: str | None = None  # present only when this define is set
     unless: str | None = None  # absent when this define is set
+    derivative_of: str | None = None  # Model Exchange: the state variable this is the derivative of
 
     def __post_init__(self) -> None:
         if self.vr < 0 or self.vr > 4095:
             msg = f"vr must be between 0 and 4095, got {self.vr}"
             raise ValueError(msg)
-        if self.causality != "output" and self.start is None:
+        if self.causality not in {"output", "local"} and self.start is None:
             msg = f"variable {self.name!r} ({self.causality}) needs a start value"
             raise ValueError(msg)
         if find_unit(self.unit) is None:
@@ -118,6 +121,9 @@ class FmuSourceSpec:
     include_dirs: tuple[str, ...] = ()
     variables: tuple[VariableSpec, ...]
     variants: Mapping[str, VariantSpec]
+    # model_exchange: the FMI layer is the model's own fmi2_me_layer.c / fmi3_me_layer.c (not listed in
+    # `sources`) instead of fmus/common's.
+    interface: Literal["co_simulation", "model_exchange"] = "co_simulation"
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -256,6 +262,8 @@ def build_shim() -> Path:
 
 def _input_files(model_dir: Path, spec: FmuSourceSpec) -> list[Path]:
     files = [model_dir / "fmu.yaml", *(model_dir / s for s in spec.sources)]
+    if spec.interface == "model_exchange":
+        files.extend(model_dir / f"fmi{n}_me_layer.c" for n in (2, 3))
     for extra in spec.include_dirs:
         folder = (model_dir / extra).resolve()
         if not folder.is_dir():
@@ -314,6 +322,8 @@ def _compile(  # noqa: PLR0917 - one private call site
         f"-I{common}",
         f"-I{FMUS_DIR / 'include'}",
     ]
+    if spec.interface == "model_exchange":
+        layer = model_dir / f"fmi{fmi_version}_me_layer.c"
     sources = [*(model_dir / s for s in spec.sources), layer, common / "linsys.c"]
     try:
         diagnostics = compile_shared(compiler[0], sources, library, flags=flags)
@@ -339,7 +349,7 @@ def _variables(spec: FmuSourceSpec, variant: VariantSpec) -> list[VariableSpec]:
     return sorted(chosen, key=lambda v: v.vr)
 
 
-_KIND = {"parameter": 1, "input": 2, "output": 3}
+_KIND = {"parameter": 1, "input": 2, "output": 3, "local": 3}  # locals: not settable
 
 
 def _header(variables: list[VariableSpec], variant: VariantSpec) -> str:
@@ -392,24 +402,36 @@ def _model_description(
             {"fmiVersion": "2.0", **common, "guid": token, "variableNamingConvention": "flat"},
         )
         root.set("numberOfEventIndicators", "0")
-        ET.SubElement(
-            root,
-            "CoSimulation",
-            modelIdentifier=variant,
-            canHandleVariableCommunicationStepSize="true",
-            canNotUseMemoryManagementFunctions="true",
-        )
+        if spec.interface == "model_exchange":
+            ET.SubElement(
+                root,
+                "ModelExchange",
+                modelIdentifier=variant,
+                completedIntegratorStepNotNeeded="true",
+                canNotUseMemoryManagementFunctions="true",
+            )
+        else:
+            ET.SubElement(
+                root,
+                "CoSimulation",
+                modelIdentifier=variant,
+                canHandleVariableCommunicationStepSize="true",
+                canNotUseMemoryManagementFunctions="true",
+            )
     else:
         root = ET.Element("fmiModelDescription", {"fmiVersion": "3.0", **common, "instantiationToken": token})
-        ET.SubElement(
-            root,
-            "CoSimulation",
-            modelIdentifier=variant,
-            canHandleVariableCommunicationStepSize="true",
-            providesIntermediateUpdate="false",
-            canReturnEarlyAfterIntermediateUpdate="false",
-            hasEventMode="false",
-        )
+        if spec.interface == "model_exchange":
+            ET.SubElement(root, "ModelExchange", modelIdentifier=variant, needsCompletedIntegratorStep="false")
+        else:
+            ET.SubElement(
+                root,
+                "CoSimulation",
+                modelIdentifier=variant,
+                canHandleVariableCommunicationStepSize="true",
+                providesIntermediateUpdate="false",
+                canReturnEarlyAfterIntermediateUpdate="false",
+                hasEventMode="false",
+            )
     _unit_elements(root, variables)
     ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime="1.0", stepSize="0.001")
     model_vars = ET.SubElement(root, "ModelVariables")
@@ -424,13 +446,25 @@ def _model_description(
             description="simulation time",
         )
     outputs: list[tuple[int, VariableSpec]] = []
+    derivatives: list[int] = []
+    states: list[int] = []  # calculated at initialisation like the outputs
+    index_of = {var.name: index for index, var in enumerate(variables, start=1)}
     for index, var in enumerate(variables, start=1):
         attrs = {"name": var.name, "valueReference": str(var.vr), "causality": var.causality}
         attrs["variability"] = "fixed" if var.causality == "parameter" else "continuous"
         if var.description:
             attrs["description"] = var.description
         typed = {"unit": var.unit}
-        if var.causality == "output":
+        if var.derivative_of is not None:
+            if var.derivative_of not in index_of:
+                msg = f"{variant}: {var.name}.derivative_of names {var.derivative_of!r}, not a variable of this variant"
+                raise FmuError(msg)
+            # FMI 2 names the state by its index, FMI 3 by its value reference.
+            state = variables[index_of[var.derivative_of] - 1]
+            typed["derivative"] = str(index_of[var.derivative_of] if fmi_version == 2 else state.vr)
+            derivatives.append(index)
+            states.append(index_of[var.derivative_of])
+        if var.causality in {"output", "local"}:
             attrs["initial"] = "calculated"
         else:
             typed["start"] = repr(float(var.start if var.start is not None else 0.0))
@@ -446,14 +480,20 @@ def _model_description(
         out_el = ET.SubElement(structure, "Outputs")
         for index, _ in outputs:
             ET.SubElement(out_el, "Unknown", index=str(index))
+        if derivatives:
+            der_el = ET.SubElement(structure, "Derivatives")
+            for index in derivatives:
+                ET.SubElement(der_el, "Unknown", index=str(index))
         init_el = ET.SubElement(structure, "InitialUnknowns")
-        for index, _ in outputs:
+        for index in sorted({index for index, _ in outputs} | set(derivatives) | set(states)):
             ET.SubElement(init_el, "Unknown", index=str(index))
     else:
         for _, var in outputs:
             ET.SubElement(structure, "Output", valueReference=str(var.vr))
-        for _, var in outputs:
-            ET.SubElement(structure, "InitialUnknown", valueReference=str(var.vr))
+        for index in derivatives:
+            ET.SubElement(structure, "ContinuousStateDerivative", valueReference=str(variables[index - 1].vr))
+        for index in sorted({index for index, _ in outputs} | set(derivatives) | set(states)):
+            ET.SubElement(structure, "InitialUnknown", valueReference=str(variables[index - 1].vr))
     ET.indent(root)
     text: bytes = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
     return text

@@ -28,7 +28,7 @@ from types import MappingProxyType
 
 from twin.core.config import load_config, suggest
 from twin.core.errors import FmuError
-from twin.cosim.fmu import FmuInfo
+from twin.cosim.fmu import FmuInfo, stepping_problem
 from twin.cosim.units import UNITS, Unit, find_unit
 
 __all__ = [
@@ -249,15 +249,9 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
         reports.append(
             RoleReport(role=role, required=role in required, variable=bind_to.name, unit=unit_name, problem=problem)
         )
-    if info.co_simulation is None:
-        only = [
-            n
-            for n, i in (("Model Exchange", info.model_exchange), ("Scheduled Execution", info.scheduled_execution))
-            if i
-        ]
-        problems.append("no Co-Simulation interface" + (f" ({' + '.join(only)} only)" if only else ""))
-    if info.major_version not in (2, 3):
-        problems.append(f"FMI {info.fmi_version} is not supported")
+    interface_problem = stepping_problem(info)
+    if interface_problem is not None:
+        problems.append(interface_problem)
     for name in mapping.start():
         var = info.variables.get(name)
         if var is None:

@@ -36,7 +36,18 @@ from fmpy.model_description import read_model_description
 from twin.core.errors import FmuError
 from twin.cosim.units import Unit
 
-__all__ = ["Api", "FmuFile", "FmuInfo", "StepGroup", "Stepper", "VariableInfo", "read_fmu_info"]
+__all__ = [
+    "ME_SOLVER",
+    "Api",
+    "FmuFile",
+    "FmuInfo",
+    "StepGroup",
+    "Stepper",
+    "VariableInfo",
+    "read_fmu_info",
+    "stepping",
+    "stepping_problem",
+]
 
 _log = logging.getLogger(__name__)
 
@@ -84,6 +95,8 @@ class FmuInfo:
     model_exchange: str | None
     guid: str
     scheduled_execution: str | None = None  # FMI 3 Scheduled Execution (not stepped by the twin)
+    n_states: int = 0  # continuous states (Model Exchange)
+    n_event_indicators: int = 0
     variable_step: bool
     variables: Mapping[str, VariableInfo]
     units: Mapping[str, Unit]
@@ -143,10 +156,46 @@ def read_fmu_info(path: Path) -> FmuInfo:
         model_exchange=md.modelExchange.modelIdentifier if md.modelExchange is not None else None,
         guid=md.guid or "",
         scheduled_execution=_identifier(getattr(md, "scheduledExecution", None)),
+        n_states=len(md.derivatives or ()),
+        n_event_indicators=int(md.numberOfEventIndicators or 0),
         variable_step=bool(cs.canHandleVariableCommunicationStepSize) if cs is not None else False,
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),
     )
+
+
+# The solver a Model Exchange FMU is integrated with between communication points (fmpy's SUNDIALS
+# CVode: BDF with Newton iteration, so stiff motors with microsecond electrical time constants are
+# stable at any communication step; explicit Euler at the step would not be).
+ME_SOLVER = "CVode"
+ME_RELATIVE_TOLERANCE = 1e-6
+
+
+def stepping_problem(info: FmuInfo) -> str | None:
+    """Why twin cannot step this FMU (None when it can), as a phrase for a one-line error."""
+    if info.major_version not in (2, 3):
+        return f"FMI {info.fmi_version} is not supported (FMI 2.0 and 3.0 are)"
+    if info.co_simulation is not None:
+        return None
+    if info.model_exchange is None:
+        only = " (Scheduled Execution only)" if info.scheduled_execution else ""
+        return f"no Co-Simulation or Model Exchange interface{only}"
+    return None
+
+
+def stepping(info: FmuInfo) -> str:
+    """How twin steps this FMU: `Co-Simulation` or `Model Exchange (solver: CVode)`.
+
+    Raises:
+        FmuError: If twin cannot step it (the reason from `stepping_problem`).
+    """
+    problem = stepping_problem(info)
+    if problem is not None:
+        msg = f"{info.path}: {problem}"
+        raise FmuError(msg)
+    if info.co_simulation is not None:
+        return "Co-Simulation"
+    return f"Model Exchange (solver: {ME_SOLVER}, relative tolerance {ME_RELATIVE_TOLERANCE:g})"
 
 
 class Stepper(Protocol):
@@ -319,8 +368,9 @@ class FmuFile:
         if self.info.major_version not in (2, 3):
             msg = f"{path}: FMI {self.info.fmi_version} is not supported (FMI 2.0 and 3.0 are)"
             raise FmuError(msg)
-        if self.info.co_simulation is None:
-            msg = f"{path}: no Co-Simulation interface (Model Exchange only); twin steps Co-Simulation FMUs"
+        problem = stepping_problem(self.info)
+        if problem is not None:
+            msg = f"{path}: {problem}"
             raise FmuError(msg)
         try:
             self._dir = Path(fmpy.extract(str(path)))
@@ -381,12 +431,16 @@ class FmuFile:
         kwargs = {
             "guid": self.info.guid,
             "unzipDirectory": str(self._dir),
-            "modelIdentifier": self.info.co_simulation,
+            "modelIdentifier": self.info.co_simulation or self.info.model_exchange,
             "instanceName": name,
         }
+        exchange = self.info.co_simulation is None
         try:
-            if self.info.major_version == 2:
-                fmu: Any = fmpy.fmi2.FMU2Slave(**kwargs)
+            if exchange:
+                model_class = fmpy.fmi2.FMU2Model if self.info.major_version == 2 else fmpy.fmi3.FMU3Model
+                fmu: Any = model_class(**kwargs)
+            elif self.info.major_version == 2:
+                fmu = fmpy.fmi2.FMU2Slave(**kwargs)
             else:
                 fmu = fmpy.fmi3.FMU3Slave(**kwargs)
         except Exception as err:
@@ -396,7 +450,11 @@ class FmuFile:
         stepper: _Base
         by_vr = {v.value_reference: v.name for v in self.info.variables.values() if v.type in _REAL_TYPES}
         try:
-            if self.info.major_version == 2:
+            if exchange and self.info.major_version == 3:
+                stepper = _Fmi3Exchange(fmu, label, messages, step_s, inputs, outputs, api)
+            elif exchange:
+                stepper = _Fmi2Exchange(fmu, label, messages, step_s, inputs, outputs, api)
+            elif self.info.major_version == 2:
                 stepper = _Fmi2(fmu, label, messages, step_s, inputs, outputs, api)
             else:
                 stepper = _Fmi3(fmu, label, messages, step_s, inputs, outputs, api)
@@ -627,15 +685,18 @@ class _Fmi2(_Base):
         uint_p = ctypes.POINTER(ctypes.c_uint)
         self._set = ctypes.CFUNCTYPE(status, pointer, uint_p, ctypes.c_size_t, dbl_p)(("fmi2SetReal", dll))
         self._get = ctypes.CFUNCTYPE(status, pointer, uint_p, ctypes.c_size_t, dbl_p)(("fmi2GetReal", dll))
-        self._do = ctypes.CFUNCTYPE(status, pointer, ctypes.c_double, ctypes.c_double, ctypes.c_int)(
-            ("fmi2DoStep", dll)
-        )
+        self._bind_step(dll)
         self._c_ptr = ctypes.c_void_p(c)
         self._n_in = len(self._in_vr)
         self._n_out = len(self._out_vr)
         if self._api == "convenience":
             self.step = self._step_convenience  # type: ignore[method-assign]
         self.read_outputs()
+
+    def _bind_step(self, dll: Any) -> None:
+        self._do = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)(
+            ("fmi2DoStep", dll)
+        )
 
     def _set_one(self, var: VariableInfo, value: float) -> None:
         fmu = self._fmu
@@ -666,11 +727,75 @@ class _Fmi2(_Base):
             self.fail("fmi2GetReal", status, 0.0)
 
 
+class _HeldInputs:
+    """fmpy's solvers apply an input at every evaluation; the inputs here are held over each step."""
+
+    def apply(self, time: float) -> None:
+        """Nothing to do: `step` sets the inputs before integrating."""
+
+
+class _Fmi2Exchange(_Fmi2):
+    """FMI 2.0 Model Exchange adapter: the same interface as the Co-Simulation one.
+
+    Each communication step sets the inputs (held constant over the step), restarts CVode at the
+    step's start (an input change is a discontinuity), integrates to the step's end with steps no
+    longer than the communication step, completes the integrator step and reads the outputs.
+    Stepped from Python (not by the compiled shim: `slot_fields` is None).
+    """
+
+    _FUNCTIONS = ("fmi2SetReal", f"{ME_SOLVER} integration", "fmi2GetReal")
+
+    def _bind_step(self, dll: Any) -> None:
+        fmu = self._fmu
+        self._update_events = fmu.newDiscreteStates
+        if _event_update(self):
+            msg = f"{self.name}: the FMU asked to terminate during its initial event update"
+            raise FmuError(msg)
+        fmu.enterContinuousTimeMode()
+        self._solver = _cvode(
+            fmu,
+            fmu.getDerivatives,
+            fmu.getNominalsOfContinuousStates,
+            nx=self._nx,
+            nz=self._nz,
+            t0_s=self._t0,
+            max_step_s=self._h,
+        )
+
+    def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
+        self._nx = info.n_states
+        self._nz = info.n_event_indicators
+        self._t0 = start_time_s
+        self._next_event_s = math.inf
+        if self._api == "convenience":
+            self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
+        super().initialize(info, start, start_time_s)
+
+    def slot_fields(self) -> dict[str, Any] | None:
+        """None: the compiled shim only calls doStep; Model Exchange is integrated from Python."""
+        return None
+
+    def step(self, t_s: float) -> None:
+        c = self._c_ptr
+        set_status = self._set(c, self._in_refs, self._n_in, self.inputs)
+        if set_status > 1:
+            self.fail("fmi2SetReal", set_status, t_s)
+        terminate = _integrate(self, t_s)
+        if terminate:
+            self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+            self.fail("fmi2CompletedIntegratorStep", 3, t_s)
+        get_status = self._get(c, self._out_refs, self._n_out, self.outputs)
+        if get_status > 1:
+            self.fail("fmi2GetReal", get_status, t_s)
+        self._check_finite("fmi2GetReal", t_s)
+
+
 class _Fmi3(_Base):
     """FMI 3.0 Co-Simulation adapter."""
 
     _version = 3
     _FUNCTIONS = ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")
+    _INSTANTIATE = "fmi3InstantiateCoSimulation"
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         fmu = self._fmu
@@ -683,7 +808,7 @@ class _Fmi3(_Base):
             fmu.instantiate(loggingOn=False, logMessage=log_message)
         except Exception:
             detail = messages.last()
-            msg = f"{self.name}: fmi3InstantiateCoSimulation returned NULL" + (f" ({detail})" if detail else "")
+            msg = f"{self.name}: {self._INSTANTIATE} returned NULL" + (f" ({detail})" if detail else "")
             raise FmuError(msg) from None
         self._open = True
         self._set_start(info, start)
@@ -697,15 +822,12 @@ class _Fmi3(_Base):
         pointer = ctypes.c_void_p
         dbl_p = ctypes.POINTER(ctypes.c_double)
         uint_p = ctypes.POINTER(ctypes.c_uint)
-        bool_p = ctypes.POINTER(ctypes.c_bool)
         size = ctypes.c_size_t
         self._in_refs = (ctypes.c_uint * max(1, len(self._in_vr)))(*self._in_vr)
         self._out_refs = (ctypes.c_uint * max(1, len(self._out_vr)))(*self._out_vr)
         self._set = ctypes.CFUNCTYPE(status, pointer, uint_p, size, dbl_p, size)(("fmi3SetFloat64", dll))
         self._get = ctypes.CFUNCTYPE(status, pointer, uint_p, size, dbl_p, size)(("fmi3GetFloat64", dll))
-        self._do = ctypes.CFUNCTYPE(
-            status, pointer, ctypes.c_double, ctypes.c_double, ctypes.c_bool, bool_p, bool_p, bool_p, dbl_p
-        )(("fmi3DoStep", dll))
+        self._bind_step(dll)
         self._event = ctypes.c_bool(False)
         self._terminate = ctypes.c_bool(False)
         self._early = ctypes.c_bool(False)
@@ -722,6 +844,20 @@ class _Fmi3(_Base):
         if self._api == "convenience":
             self.step = self._step_convenience  # type: ignore[method-assign]
         self.read_outputs()
+
+    def _bind_step(self, dll: Any) -> None:
+        bool_p = ctypes.POINTER(ctypes.c_bool)
+        self._do = ctypes.CFUNCTYPE(
+            ctypes.c_int,
+            ctypes.c_void_p,
+            ctypes.c_double,
+            ctypes.c_double,
+            ctypes.c_bool,
+            bool_p,
+            bool_p,
+            bool_p,
+            ctypes.POINTER(ctypes.c_double),
+        )(("fmi3DoStep", dll))
 
     _SETTERS: Mapping[str, tuple[str, type]] = MappingProxyType(
         {
@@ -769,3 +905,131 @@ class _Fmi3(_Base):
         status = self._get(self._c_ptr, self._out_refs, self._n_out, self.outputs, self._n_out)
         if status > 1:
             self.fail("fmi3GetFloat64", status, 0.0)
+
+
+class _Fmi3Exchange(_Fmi3):
+    """FMI 3.0 Model Exchange adapter: as `_Fmi2Exchange`, through the FMI 3 functions."""
+
+    _FUNCTIONS = ("fmi3SetFloat64", f"{ME_SOLVER} integration", "fmi3GetFloat64")
+    _INSTANTIATE = "fmi3InstantiateModelExchange"
+
+    def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
+        self._nx = info.n_states
+        self._nz = info.n_event_indicators
+        self._t0 = start_time_s
+        self._next_event_s = math.inf
+        if self._api == "convenience":
+            self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
+        super().initialize(info, start, start_time_s)
+
+    def _bind_step(self, dll: Any) -> None:
+        fmu = self._fmu
+        # Array states count element by element: ask the instance (the description lists variables).
+        self._nx = int(fmu.getNumberOfContinuousStates())
+        self._nz = int(fmu.getNumberOfEventIndicators())
+        self._update_events = fmu.updateDiscreteStates
+        if _event_update(self):
+            msg = f"{self.name}: the FMU asked to terminate during its initial event update"
+            raise FmuError(msg)
+        fmu.enterContinuousTimeMode()
+        self._solver = _cvode(
+            fmu,
+            fmu.getContinuousStateDerivatives,
+            fmu.getNominalsOfContinuousStates,
+            nx=self._nx,
+            nz=self._nz,
+            t0_s=self._t0,
+            max_step_s=self._h,
+        )
+
+    def slot_fields(self) -> dict[str, Any] | None:
+        """None: the compiled shim only calls doStep; Model Exchange is integrated from Python."""
+        return None
+
+    def step(self, t_s: float) -> None:
+        c = self._c_ptr
+        set_status = self._set(c, self._in_refs, self._n_in, self.inputs, self._n_in)
+        if set_status > 1:
+            self.fail("fmi3SetFloat64", set_status, t_s)
+        terminate = _integrate(self, t_s)
+        if terminate:
+            self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+            self.fail("fmi3CompletedIntegratorStep", 3, t_s)
+        get_status = self._get(c, self._out_refs, self._n_out, self.outputs, self._n_out)
+        if get_status > 1:
+            self.fail("fmi3GetFloat64", get_status, t_s)
+        self._check_finite("fmi3GetFloat64", t_s)
+
+
+def _cvode(fmu: Any, get_dx: Any, get_nominals: Any, *, nx: int, nz: int, t0_s: float, max_step_s: float) -> Any:
+    """CVode of fmpy over an FMU in continuous-time mode (root finding on its event indicators)."""
+    from fmpy.sundials import CVodeSolver
+
+    return CVodeSolver(
+        nx=nx,
+        nz=nz,
+        get_x=fmu.getContinuousStates,
+        set_x=fmu.setContinuousStates,
+        get_dx=get_dx,
+        get_z=fmu.getEventIndicators,
+        get_nominals=get_nominals,
+        set_time=fmu.setTime,
+        input=_HeldInputs(),
+        startTime=t0_s,
+        maxStep=max_step_s,
+        relativeTolerance=ME_RELATIVE_TOLERANCE,
+    )
+
+
+def _event_update(adapter: _Fmi2Exchange | _Fmi3Exchange) -> bool:
+    """Iterate the FMU's discrete states in event mode; True if it asks to terminate."""
+    needed = True
+    while needed:
+        needed, terminate, _, _, time_defined, time_s = adapter._update_events()
+        if terminate:
+            return True
+        adapter._next_event_s = float(time_s) if time_defined else math.inf
+    return False
+
+
+def _integrate(adapter: _Fmi2Exchange | _Fmi3Exchange, t_s: float) -> bool:
+    """Integrate `adapter`'s FMU from `t_s` over one communication step; True if it asks to terminate.
+
+    The solver restarts at the step's start (the inputs just set are a discontinuity) and after
+    every event: a state event (CVode's root finding on the event indicators), a time event the FMU
+    announced, or one `completedIntegratorStep` asks for. Each event is handled in event mode.
+    """
+    fmu = adapter._fmu
+    solver = adapter._solver
+    t_end = t_s + adapter._h
+    eps = 1e-12 * max(1.0, abs(t_end))
+    try:
+        fmu.setTime(t_s)
+        solver.reset(t_s)
+        t = t_s
+        while t < t_end - eps:
+            target = min(t_end, adapter._next_event_s)
+            state_event, _, t_reached = solver.step(t, target)
+            fmu.setTime(t_reached)
+            step_event, terminate = fmu.completedIntegratorStep()
+            if terminate:
+                return True
+            time_event = t_reached >= adapter._next_event_s - eps
+            if state_event or time_event or step_event:
+                fmu.enterEventMode()
+                if _event_update(adapter):
+                    return True
+                fmu.enterContinuousTimeMode()
+                solver.reset(t_reached)
+            if t_reached <= t:  # no progress: an event at the same instant again and again
+                msg = f"{adapter.name} failed at t = {t:.6f} s: events at one instant without end"
+                raise FmuError(msg)
+            t = t_reached
+        fmu.setTime(t_end)
+    except fmpy.fmi1.FMICallException as err:
+        adapter.fail(err.function, int(err.status), t_s)
+    except RuntimeError as err:
+        adapter._failed = True
+        msg = f"{adapter.name} failed at t = {t_s:.6f} s: {ME_SOLVER} could not integrate the step ({err})"
+        raise FmuError(msg) from None
+    return False

@@ -20,3 +20,11 @@ def acme(variant: str = "acme_drive", fmi_version: FmiVersion = 2) -> Path:
 def faulty(variant: str = "faulty_motor_servo", fmi_version: FmiVersion = 2) -> Path:
     """Build (or reuse) the project's motor with a fault injected (mapping parameters fault_mode, fault_time)."""
     return build_fmu(FAULTY_DIR, variant, fmi_version=fmi_version).path
+
+
+ME_DIR = FMUS_DIR / "testing" / "dc_motor_me"
+
+
+def model_exchange(variant: str = "xm430_w210_servo_me", fmi_version: FmiVersion = 2) -> Path:
+    """Build (or reuse) the project's motor as a Model Exchange FMU."""
+    return build_fmu(ME_DIR, variant, fmi_version=fmi_version).path
