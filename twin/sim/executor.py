@@ -300,7 +300,7 @@ class Executor:
     def _add_timer(self, timer: Timer, *, guarded: bool) -> None:
         node = timer.node
         callback = timer.callback
-        label = f"{node.get_name()}.{_name(callback)}"
+        label = f"{node.get_name()}.{getattr(callback, '__name__', type(callback).__name__)}"
         if timer.pass_time:
             fn: Callable[[int], None] = callback
         else:
@@ -446,4 +446,5 @@ def _rate(timer: Timer) -> float | None:
 
 def _name(fn: Callable[..., Any]) -> str:
     name = getattr(fn, "__qualname__", None) or getattr(fn, "__name__", None) or type(fn).__name__
-    return ".".join(name.replace(".<locals>", "").split(".")[-2:])  # Class.method, or outer.inner
+    parts = [p for p in name.replace(".<locals>", "").split(".") if p != "__init__"]
+    return ".".join(parts[-2:])  # Class.method, or outer.inner
