@@ -106,7 +106,7 @@ def _sweep(args: argparse.Namespace) -> int:
     spec = load_sweep(args.sweep)
     out = args.out if args.out is not None else Path("bags") / f"{spec.name}_sweep"
     if not (args.verbose or args.debug):  # Dask's own shutdown notices are not the user's business
-        logging.getLogger("distributed").setLevel(logging.ERROR)
+        logging.getLogger("distributed").setLevel(logging.CRITICAL)
     bar = _Bar(sys.stderr)
     # SIGTERM stops the sweep as Ctrl-C does: the cluster shuts down, its runs are told to stop,
     # and the finished runs stay finished for the next start.

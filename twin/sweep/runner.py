@@ -77,9 +77,9 @@ def execute_run(task: RunTask) -> dict[str, Any]:
     summary: dict[str, Any] = {}
     if timed_out:
         row |= {"outcome": "timeout", "reason": f"still running after timeout_s={task.timeout_s:g} s"}
-    elif returncode != 0:
+    elif returncode != 0 and not (returncode == 1 and stdout.lstrip().startswith("{")):
         row |= _failed(returncode, stderr)
-    else:
+    else:  # 0, or 1 with its summary: the mission ended in FAILURE and the bag is complete
         try:
             summary = json.loads(stdout)
         except ValueError:
@@ -89,7 +89,8 @@ def execute_run(task: RunTask) -> dict[str, Any]:
         if result == "SUCCESS":
             row |= {"outcome": "success", "reason": ""}
         else:
-            row |= {"outcome": "failure", "reason": f"mission {result or 'unfinished'}: {summary.get('ended_by', '')}"}
+            why = summary.get("mission_failure") or summary.get("ended_by", "")
+            row |= {"outcome": "failure", "reason": f"mission {result or 'unfinished'}: {why}"}
     # A run cut short by its timeout or a crash is not analysed (its bag, if any, is kept as asked).
     if row["outcome"] in ("success", "failure", "error") and (bag / "metadata.yaml").exists():
         try:
