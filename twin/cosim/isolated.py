@@ -53,8 +53,13 @@ class IsolatedStepper:
         self.outputs = outputs
 
     def step(self, t_s: float) -> None:
-        """Not used: the group steps all its instances in one round trip."""
-        raise NotImplementedError
+        """Refused: an isolated instance steps with its group, all instances in one round trip.
+
+        Raises:
+            RuntimeError: Always; call `IsolatedGroup.step` instead.
+        """
+        msg = f"isolated FMU instance {self.name!r} steps only with its group (IsolatedGroup.step)"
+        raise RuntimeError(msg)
 
     def read_outputs(self) -> None:
         """The child writes the outputs into the shared map; nothing to do."""

@@ -136,7 +136,9 @@ class _ServerAction(StatefulActionNode):
         self._goal_id: int | None = None
 
     def request(self) -> dict[str, Any]:
-        raise NotImplementedError
+        """The request to send to the server, from the node's input ports (each leaf defines its own)."""
+        msg = f"{type(self).__name__} does not say what it asks its server"
+        raise TypeError(msg)
 
     def on_success(self, result: Mapping[str, Any]) -> None:
         """Write outputs from the result."""
