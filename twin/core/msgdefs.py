@@ -34,8 +34,16 @@ _NAV2_BT_LOG = """\
 builtin_interfaces/Time timestamp   # when this log was published
 BehaviorTreeStatusChange[] event_log
 """
-
 # The twin's own types.
+_TWIN_NAVIGATION_FEEDBACK = """\
+# bt_navigator's NavigateToPose feedback: the fields of nav2_msgs/action/NavigateToPose_Feedback
+# (Humble), as a message type every bag reader knows.
+geometry_msgs/PoseStamped current_pose          # the robot's map pose
+builtin_interfaces/Duration navigation_time     # since the goal was accepted
+builtin_interfaces/Duration estimated_time_remaining  # distance remaining / current speed
+int16 number_of_recoveries                      # behaviours (spin, backup, wait, ...) run for this goal
+float32 distance_remaining                      # along the current path, m
+"""
 _TWIN_MOTOR_STATE = """\
 # Electrical and mechanical state of the drive motors, one array entry per joint.
 std_msgs/Header header
@@ -67,5 +75,6 @@ EXTRA_DEFINITIONS: Mapping[str, str] = {
     "nav2_msgs/msg/BehaviorTreeStatusChange": _NAV2_BT_STATUS_CHANGE,
     "nav2_msgs/msg/BehaviorTreeLog": _NAV2_BT_LOG,
     "twin_msgs/msg/MotorState": _TWIN_MOTOR_STATE,
+    "twin_msgs/msg/NavigationFeedback": _TWIN_NAVIGATION_FEEDBACK,
     "twin_msgs/msg/Contact": _TWIN_CONTACT,
 }

@@ -153,10 +153,27 @@ class FollowPathTask:
         self.controller.set_plan(plan)
 
     def step(
-        self, t_ns: int, pose: tuple[float, float, float], velocity: tuple[float, float], costmap: CostGrid
+        self,
+        t_ns: int,
+        pose: tuple[float, float, float],
+        velocity: tuple[float, float],
+        costmap: CostGrid,
+        *,
+        plan_to_costmap: tuple[float, float, float] | None = None,
     ) -> FollowStep:
-        """Run one controller cycle with the robot's pose (costmap frame) and velocity."""
-        if self.goal_checker.is_goal_reached(pose, self._goal):
+        """Run one controller cycle with the robot's pose (costmap frame) and velocity.
+
+        `plan_to_costmap` is the plan frame's pose in the costmap frame (map in odom) when they
+        differ: the controller moves the plan with it and the goal is checked in the costmap frame.
+        """
+        goal = self._goal
+        if plan_to_costmap is not None:
+            if hasattr(self.controller, "plan_to_costmap"):
+                self.controller.plan_to_costmap = plan_to_costmap
+            tx, ty, tyaw = plan_to_costmap
+            c, s = math.cos(tyaw), math.sin(tyaw)
+            goal = (tx + c * goal[0] - s * goal[1], ty + s * goal[0] + c * goal[1], goal[2] + tyaw)
+        if self.goal_checker.is_goal_reached(pose, goal):
             return FollowStep(status=FollowStatus.SUCCEEDED, cmd=(0.0, 0.0))
         if not self.progress_checker.check(pose, t_ns):
             return FollowStep(status=FollowStatus.FAILED, cmd=(0.0, 0.0), reason="Failed to make progress")

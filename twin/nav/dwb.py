@@ -145,8 +145,13 @@ def prune_and_transform_plan(
     prune_distance_m: float = 2.0,
     forward_prune_distance_m: float = 2.0,
     shorten: bool = True,
+    costmap_extent_m: float | None = None,
 ) -> tuple[NDArray[np.float64], int]:
     """Return the plan in the costmap's frame cut around the robot, and the index of its first pose in `plan`.
+
+    As DWB's `transformGlobalPlan`, poses beyond half the costmap's larger side (`costmap_extent_m`)
+    are not passed on: the plan starts at the nearest pose within that distance (and
+    `prune_distance_m`) and, with `shorten`, ends at the first pose farther than both from the robot.
 
     Args:
         plan: Global plan poses (N, 3) in the plan's frame.
@@ -155,6 +160,7 @@ def prune_and_transform_plan(
         prune_distance_m: Poses farther than this from the robot are not transformed.
         forward_prune_distance_m: Path length kept ahead of the pose nearest the robot.
         shorten: Apply `forward_prune_distance_m`.
+        costmap_extent_m: Half the costmap's larger side (None: no costmap limit).
     """
     tx, ty, tyaw = plan_to_costmap
     c, s = math.cos(tyaw), math.sin(tyaw)
@@ -163,7 +169,8 @@ def prune_and_transform_plan(
     local[:, 1] = ty + s * plan[:, 0] + c * plan[:, 1]
     local[:, 2] = plan[:, 2] + tyaw
     d = np.hypot(local[:, 0] - pose[0], local[:, 1] - pose[1])
-    near = d <= prune_distance_m
+    threshold = prune_distance_m if costmap_extent_m is None else min(prune_distance_m, costmap_extent_m)
+    near = d <= threshold
     if not near.any():
         return local[:0], len(plan)
     first_near = int(np.argmax(near))
@@ -177,6 +184,10 @@ def prune_and_transform_plan(
         seg = np.hypot(*np.diff(local[begin:end, :2], axis=0).T)
         along = np.concatenate([[0.0], np.cumsum(seg)])
         end = begin + int(np.searchsorted(along, forward_prune_distance_m, side="right"))
+        if costmap_extent_m is not None:
+            beyond = np.nonzero(d[begin:end] > threshold)[0]
+            if len(beyond):
+                end = begin + max(1, int(beyond[0]))
     return local[begin:end], begin
 
 
@@ -324,6 +335,7 @@ class DwbController:
             prune_distance_m=p.prune_distance_m,
             forward_prune_distance_m=p.forward_prune_distance_m,
             shorten=p.shorten_transformed_plan,
+            costmap_extent_m=max(costmap.cost.shape) * costmap.resolution_m / 2.0,
         )
         if len(local) == 0:
             raise NoValidTrajectory("Resulting plan has 0 poses in it.")
@@ -332,7 +344,7 @@ class DwbController:
         self.transformed_plan = local
         commands, steps = self._commands(velocity)
         ends, max_cost, obstacle_ok = self._rollout(commands, steps, velocity, pose, costmap)
-        goal = local[-1]
+        goal = _last_pose_on_costmap(local, costmap)
         total, legal = self._score(
             commands=commands,
             ends=ends,
@@ -473,6 +485,13 @@ class _OscillationState:
             flipped = self.theta.update(cmd[1]) or flipped
         if flipped:
             self.flip_pose = pose
+
+
+def _last_pose_on_costmap(local: NDArray[np.float64], costmap: CostGrid) -> NDArray[np.float64]:
+    """The goal the critics aim at: the last plan pose inside the costmap (DWB's getLastPoseOnCostmap)."""
+    _, _, inside = _cells(costmap, local[:, 0], local[:, 1])
+    idx = np.nonzero(inside)[0]
+    return np.asarray(local[int(idx[-1])] if len(idx) else local[-1], dtype=np.float64)
 
 
 def _window(

@@ -1,13 +1,16 @@
 """The mission as a node: the thesis's autonomy node, ticking its tree and commanding the robot.
 
-It steers on the pose the robot believes it has (the latest `/odom`), publishes `/cmd_vel` at
-its controller rate and, for a behaviour-tree mission, ticks the tree at its own rate and
-publishes the tree's status changes on `/behavior_tree_log` and each new plan on `/plan`.
+It steers on the pose the robot believes it has (the latest `/odom`, or the map pose when AMCL
+runs), publishes `/cmd_vel` at its controller rate and, for a behaviour-tree mission, ticks the
+tree at its own rate and publishes the tree's status changes on `/behavior_tree_log` and each new
+plan on `/plan`. When Nav2's stack carries out the goals, the mission publishes no command and no
+plan (Nav2's servers do), and its tree's log goes to `/mission/behavior_tree_log`, beside
+bt_navigator's `/behavior_tree_log`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 from twin.bag import BehaviorTreeLogEncoder, PathEncoder, TwistEncoder
@@ -73,8 +76,10 @@ class MissionNode(Node):
         mission: MissionLike,
         *,
         initial_pose: tuple[float, float, float],
-        command_rate_hz: float,
+        command_rate_hz: float | None,
         tree_rate_hz: float | None = None,
+        bt_log_topic: str = "/behavior_tree_log",
+        pose_source: Callable[[], tuple[float, float, float]] | None = None,
     ) -> None:
         super().__init__("mission")
         self.mission = mission
@@ -87,20 +92,24 @@ class MissionNode(Node):
                 pose[0], pose[1], pose[2] = odometry_pose(msg)
 
         if tree_rate_hz is not None:
-            self._add_tree(mission, tree_rate_hz)  # type: ignore[arg-type]
+            self._add_tree(mission, tree_rate_hz, bt_log_topic)  # type: ignore[arg-type]
+        if command_rate_hz is None:  # Nav2 drives the robot; the mission only sends goals
+            return
         cmd_pub = self.create_publisher(TwistEncoder.msgtype, "/cmd_vel", 10)
         encode = TwistEncoder().encode
         command = mission.command
 
         def on_timer(t_ns: int) -> None:
+            if pose_source is not None:
+                pose[0], pose[1], pose[2] = pose_source()
             v, w = command(t_ns, pose[0], pose[1], pose[2])
             cmd_pub.publish(Encoded((encode, (v, w), (v, w))))
 
         self.create_rate_timer(command_rate_hz, on_timer, priority=PRIORITY_COMMAND)
         self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
 
-    def _add_tree(self, mission: TreeMissionLike, rate_hz: float) -> None:
-        bt_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "/behavior_tree_log", 10)
+    def _add_tree(self, mission: TreeMissionLike, rate_hz: float, bt_log_topic: str) -> None:
+        bt_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, bt_log_topic, 10)
         bt_encode = BehaviorTreeLogEncoder().encode
         plan_pub = self.create_publisher(PathEncoder.msgtype, "/plan", 10)
         plan_encode = PathEncoder("map").encode

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import random
 from collections.abc import Callable, Sequence
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from twin.bt import NodeStatus
 from twin.bt.log import StatusChange, StatusChangeBuffer
@@ -18,9 +18,12 @@ from twin.bt.mission_nodes import LOCATION_FILE_KEY, register_mission_nodes
 from twin.core.clock import s_to_ns
 from twin.nav.bt_nodes import nav2_factory
 from twin.nav.follower import PathFollower
-from twin.nav.navigator import GridNavigator
 from twin.sim.replay import load_commands
 from twin.sim.scenario import BehaviorTreeMission, CmdVelScriptMission, ReplayMission, WaypointsMission
+
+if TYPE_CHECKING:
+    from twin.nav.nav2_nodes import Nav2Navigator
+    from twin.nav.navigator import GridNavigator
 
 __all__ = ["BagReplay", "CmdVelScript", "Mission", "TreeMission", "WaypointFollower"]
 
@@ -145,7 +148,12 @@ class TreeMission:
     """
 
     def __init__(
-        self, spec: BehaviorTreeMission, navigator: GridNavigator, *, clock: Callable[[], int], seed: int
+        self,
+        spec: BehaviorTreeMission,
+        navigator: GridNavigator | Nav2Navigator,
+        *,
+        clock: Callable[[], int],
+        seed: int,
     ) -> None:
         self.spec = spec
         self.navigator = navigator

@@ -297,6 +297,47 @@ class NodeSpec:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class InitialPoseEstimate:
+    """The pose published once on `/initialpose` at start (null coordinates: the spawn pose)."""
+
+    x_m: float | None = None
+    y_m: float | None = None
+    yaw_rad: float | None = None
+    xy_variance_m2: float = 0.25  # the thesis's set_init_amcl_pose.py: 0.25 on x, y and yaw
+    yaw_variance_rad2: float = 0.25
+
+    def __post_init__(self) -> None:
+        for key in ("x_m", "y_m", "yaw_rad"):
+            value = getattr(self, key)
+            if value is not None and not math.isfinite(value):
+                msg = f"{key} must be a finite number, got {value}"
+                raise ValueError(msg)
+        for key in ("xy_variance_m2", "yaw_variance_rad2"):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and value >= 0.0):
+                msg = f"{key} must be a variance >= 0, got {value}"
+                raise ValueError(msg)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class LocalizationSection:
+    """AMCL on the map (Nav2's), or none: map→odom stays the identity and the robot steers on `/odom`."""
+
+    type: Literal["amcl", "none"] = "amcl"
+    initial_pose: InitialPoseEstimate | None = field(default_factory=InitialPoseEstimate)  # null: a node sends it
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class NavigationSection:
+    """How `GoToPose` goals are carried out: Nav2's stack, or the twin's older grid follower by name."""
+
+    type: Literal["nav2", "grid"] = "grid"
+    params: Path | None = None  # a Nav2 params YAML; null: TurtleBot3's Humble file for the robot model
+    bt_xml: Path | None = None  # null: Nav2 Humble's navigate_to_pose_w_replanning_and_recovery.xml
+    set: Mapping[str, Any] = field(default_factory=dict)  # single values over the params file, `node.param: value`
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class Scenario:
     """One run: world, robot, sensors, drive, mission, recording, seed and maximum duration."""
 
@@ -313,6 +354,9 @@ class Scenario:
     disturbances: Disturbances = field(default_factory=Disturbances)
     recording: RecordingSection = field(default_factory=RecordingSection)
     nodes: tuple[NodeSpec, ...] = ()
+    map: Literal["from_world"] | Path = "from_world"  # a map_server YAML, or rasterised from the world
+    localization: LocalizationSection = field(default_factory=LocalizationSection)
+    navigation: NavigationSection = field(default_factory=NavigationSection)
     seed: int = 0
     max_duration_s: float = 600.0
     source_path: Path | None = None  # the scenario file (set by the loader; user modules are found beside it)

@@ -17,10 +17,10 @@ import logging
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Self
+from typing import Any, Self
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from twin.estimation import OdometryFilter
 from twin.estimation.node import EkfNode
 from twin.nav import GridNavigator, GridPlanner, build_grid
 from twin.nav.mission_node import MissionNode
+from twin.nav.nav2_nodes import Nav2Navigator
 from twin.node import Node
 from twin.node.rosout import RosoutBridge
 from twin.robot.chassis import ChassisParams, SlipModel
@@ -54,6 +55,7 @@ from twin.robot.nodes import (
 from twin.sim.executor import Executor, RecordFilter, Sink
 from twin.sim.launch import load_nodes
 from twin.sim.mission import BagReplay, CmdVelScript, TreeMission, WaypointFollower
+from twin.sim.navigation import NavigationStack
 from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.replay import start_moving
 from twin.sim.rng import RngStreams
@@ -95,6 +97,7 @@ class RunSummary:
     breakdown_s: dict[str, float]
     drive: str = ""  # the drive that ran, e.g. `fmu xm430_w210_servo (FMI 2, velocity-servo)` or `kinematic`
     drive_notes: str = ""  # e.g. commands clamped to the motors' reach ('' when none)
+    localization: dict[str, Any] = field(default_factory=dict)  # AMCL vs the true pose ({} without AMCL)
 
 
 def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
@@ -204,6 +207,7 @@ class Simulation:
             self._wheels = self._wheel_frames()
             self._imu = self._make_imu()
             self._encoders, self._ekf = self._make_odometry()
+            self.navigation = NavigationStack.build(scenario, robot, scene, self._rng.stream("amcl"))
             self.mission = self._make_mission(scene, body)
             user_nodes = load_nodes(scenario)
             self._run_to_limit = duration_s is not None
@@ -262,6 +266,10 @@ class Simulation:
             return replay
         if isinstance(spec, WaypointsMission):
             return WaypointFollower(spec)
+        nav = self.navigation
+        if nav is not None and nav.navigates:
+            navigator = Nav2Navigator(lambda: nav.navigator)
+            return TreeMission(spec, navigator, clock=lambda: self.executor.now_ns, seed=self.scenario.seed)
         z_lo, z_hi = body.z_range_m
         heights = tuple(float(h) for h in np.linspace(max(z_lo, 0.02), max(z_hi - 0.005, 0.03), 4))
         planner_spec = spec.planner
@@ -273,8 +281,8 @@ class Simulation:
             cost_scaling_factor=planner_spec.cost_scaling_factor,
             tolerance_m=planner_spec.tolerance_m,
         )
-        navigator = GridNavigator(planner, spec.follower, spec.progress)
-        return TreeMission(spec, navigator, clock=lambda: self.executor.now_ns, seed=self.scenario.seed)
+        grid_navigator = GridNavigator(planner, spec.follower, spec.progress)
+        return TreeMission(spec, grid_navigator, clock=lambda: self.executor.now_ns, seed=self.scenario.seed)
 
     def _wheel_frames(self) -> list[tuple[str, str, str, np.ndarray, tuple[float, float, float]]]:
         """(joint, parent, child, T_parent, axis) of the left and right wheel joints, in that order."""
@@ -381,20 +389,37 @@ class Simulation:
 
         # Latched, once at t = 0: the robot's fixed frames (and map -> odom, which nothing
         # localises yet) and its description; the wheels' transforms on every joint state.
-        static = [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
+        nav = self.navigation
+        localizes = nav is not None and nav.localizes
+        static = [] if localizes else [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
         static += [(parent, child, tf_pose(T)) for parent, child, T in static_frames(robot)]  # casters, optical frames
         nodes.append(RobotStatePublisher(urdf_from_robot(robot), static, self._wheels))
+        chassis_now = self.drive.chassis_state
+
+        def truth() -> tuple[float, float, float]:
+            c = chassis_now()
+            return (c.x_m, c.y_m, c.yaw_rad)
+
+        if nav is not None:
+            nodes += nav.nodes(now=lambda: self.executor.now_ns, truth=truth)
 
         pose = sc.robot.initial_pose
         self.mission_node: MissionNode | None = None
         if self.mission is not None:
             spec = sc.mission
             assert not isinstance(spec, NoMission)
+            by_nav2 = nav is not None and nav.navigates
+            tree = isinstance(spec, BehaviorTreeMission)
+            frames = nav.frames if nav is not None and localizes else None
             self.mission_node = MissionNode(
                 self.mission,
                 initial_pose=(pose.x_m, pose.y_m, pose.yaw_rad),
-                command_rate_hz=spec.controller_rate_hz if isinstance(spec, BehaviorTreeMission) else spec.rate_hz,
+                command_rate_hz=None
+                if by_nav2
+                else (spec.controller_rate_hz if isinstance(spec, BehaviorTreeMission) else spec.rate_hz),
                 tree_rate_hz=spec.tick_rate_hz if isinstance(spec, BehaviorTreeMission) else None,
+                bt_log_topic="/mission/behavior_tree_log" if by_nav2 else "/behavior_tree_log",
+                pose_source=frames.map_pose if frames is not None and tree else None,
             )
             nodes.append(self.mission_node)
 
@@ -513,4 +538,5 @@ class Simulation:
             breakdown_s=breakdown,
             drive=self.drive.label,
             drive_notes=self.drive.saturation.describe() if isinstance(self.drive, FmuDrivetrain) else "",
+            localization=self.navigation.log.summary() if self.navigation is not None else {},
         )

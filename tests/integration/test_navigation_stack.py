@@ -1,0 +1,225 @@
+"""Nav2's localization and navigation on the node graph, end to end through `twin simulate`, read from the bags."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+
+from tests.conftest import FIXTURES, REPO, run_twin
+
+NAV2 = FIXTURES / "nav2"
+TB3_MAP = NAV2 / "turtlebot3_navigation2_humble" / "map" / "map.yaml"
+
+
+def read(bag: Path, *topics: str) -> dict[str, list[tuple[int, object]]]:
+    out: dict[str, list[tuple[int, object]]] = {t: [] for t in topics}
+    with AnyReader([bag]) as reader:
+        cons = [c for c in reader.connections if c.topic in topics]
+        for con, t_ns, raw in reader.messages(connections=cons):
+            out[con.topic].append((t_ns, reader.deserialize(raw, con.msgtype)))
+    return out
+
+
+def topics_of(bag: Path) -> dict[str, str]:
+    with AnyReader([bag]) as reader:
+        return {c.topic: c.msgtype for c in reader.connections}
+
+
+def simulate(tmp_path: Path, name: str, body: str, *extra: str) -> tuple[object, Path]:
+    scenario = tmp_path / f"{name}.yaml"
+    scenario.write_text(f"name: {name}\n{body}")
+    bag = tmp_path / f"{name}_bag"
+    return run_twin("simulate", str(scenario), "--out", str(bag), "--json", *extra), bag
+
+
+def _yaw(q: object) -> float:
+    return 2.0 * math.atan2(q.z, q.w)  # type: ignore[attr-defined]
+
+
+# --- localization in the default mission ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, object], Path]:
+    bag = tmp_path_factory.mktemp("loc") / "default"
+    result = run_twin("simulate", "--out", str(bag), "--json")
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout), bag
+
+
+def test_the_default_mission_localises_with_amcl_on_the_map(default_run: tuple[dict[str, object], Path]) -> None:
+    summary, bag = default_run
+    types = topics_of(bag)
+    assert types["/map"] == "nav_msgs/msg/OccupancyGrid"
+    assert types["/amcl_pose"] == "geometry_msgs/msg/PoseWithCovarianceStamped"
+    assert types["/particle_cloud"] == "nav2_msgs/msg/ParticleCloud"
+    assert types["/initialpose"] == "geometry_msgs/msg/PoseWithCovarianceStamped"
+    msgs = read(bag, "/map", "/amcl_pose", "/particle_cloud", "/tf", "/tf_static", "/ground_truth/odom", "/initialpose")
+    assert len(msgs["/map"]) == 1 and len(msgs["/initialpose"]) == 1
+    grid = msgs["/map"][0][1]
+    assert grid.info.resolution == pytest.approx(0.05)  # type: ignore[attr-defined]
+    cells = np.asarray(grid.data)  # type: ignore[attr-defined]
+    assert {int(v) for v in np.unique(cells)} == {-1, 0, 100}  # a SLAM-like map: unknown outside the walls
+    # map -> odom comes from AMCL on /tf (stamped ahead by transform_tolerance), no longer a static identity
+    static = [(t.header.frame_id, t.child_frame_id) for _, m in msgs["/tf_static"] for t in m.transforms]  # type: ignore[attr-defined]
+    assert ("map", "odom") not in static
+    map_odom = [(ts, t) for ts, m in msgs["/tf"] for t in m.transforms if t.header.frame_id == "map"]  # type: ignore[attr-defined]
+    assert len(map_odom) > 100
+    ts, t = map_odom[-1]
+    assert t.header.stamp.sec * 10**9 + t.header.stamp.nanosec - ts == 10**9
+    # /amcl_pose and /particle_cloud come together, only when the filter updates (moved 0.25 m or 0.2 rad)
+    assert len(msgs["/amcl_pose"]) == len(msgs["/particle_cloud"]) > 20
+    assert len(msgs["/amcl_pose"]) < len(map_odom) / 2
+    particles = len(msgs["/particle_cloud"][-1][1].particles)  # type: ignore[attr-defined]
+    assert 500 <= particles <= 2000
+    # the estimate tracks the true pose (the summary's numbers, checked against the bag's own truth)
+    truth = msgs["/ground_truth/odom"]
+    t_truth = np.array([t for t, _ in truth])
+    errors = []
+    for t_ns, m in msgs["/amcl_pose"]:
+        p = m.pose.pose.position  # type: ignore[attr-defined]
+        g = truth[int(np.argmin(np.abs(t_truth - t_ns)))][1].pose.pose.position  # type: ignore[attr-defined]
+        errors.append(math.hypot(p.x - g.x, p.y - g.y))
+    loc = summary["localization"]
+    assert isinstance(loc, dict)
+    print(f"AMCL vs ground truth: median {loc['position_error_median_m']} m, max {loc['position_error_max_m']} m")
+    assert loc["updates"] == len(msgs["/amcl_pose"])
+    assert float(np.median(errors)) == pytest.approx(loc["position_error_median_m"], abs=0.02)
+    assert loc["position_error_median_m"] < 0.10  # localised: the robot knows which room and where in it
+    assert len(loc["series"]) == loc["updates"]
+
+
+def test_localization_none_keeps_the_static_map_to_odom(tmp_path: Path) -> None:
+    body = "localization: {type: none}\nmission: {type: cmd_vel_script, segments: [{duration_s: 2, linear_mps: 0.1}]}\n"
+    result, bag = simulate(tmp_path, "noloc", body)
+    assert result.returncode == 0, result.stderr  # type: ignore[attr-defined]
+    types = topics_of(bag)
+    assert "/amcl_pose" not in types and "/map" not in types
+    msgs = read(bag, "/tf_static")
+    static = [(t.header.frame_id, t.child_frame_id) for _, m in msgs["/tf_static"] for t in m.transforms]  # type: ignore[attr-defined]
+    assert ("map", "odom") in static
+
+
+def test_a_map_server_yaml_is_what_the_robot_localises_on(tmp_path: Path) -> None:
+    world = FIXTURES / "gazebo_classic" / "worlds" / "turtlebot3_world.world"
+    models = FIXTURES / "gazebo_classic" / "models"
+    body = (
+        f"world: {{sdf: {world}, model_path: [{models}]}}\n"
+        "robot: {initial_pose: {x_m: -2.0, y_m: -0.5}}\n"
+        f"map: {TB3_MAP}\n"
+        "mission: {type: cmd_vel_script, segments: [{duration_s: 8, linear_mps: 0.2, angular_radps: 0.15}]}\n"
+    )
+    result, bag = simulate(tmp_path, "tb3world", body)
+    assert result.returncode == 0, result.stderr  # type: ignore[attr-defined]
+    msgs = read(bag, "/map")
+    info = msgs["/map"][0][1].info  # type: ignore[attr-defined]
+    assert (info.width, info.height) == (384, 384)  # the SLAM map of the fixture, as map_server loads it
+    assert info.origin.position.x == pytest.approx(-10.0)
+    loc = json.loads(result.stdout)["localization"]  # type: ignore[attr-defined]
+    print(f"turtlebot3_world on its SLAM map: median {loc['position_error_median_m']} m over {loc['updates']} updates")
+    assert loc["updates"] >= 3
+    assert loc["position_error_final_m"] < 0.15
+
+
+@pytest.mark.parametrize(
+    ("body", "needle"),
+    [
+        ("map: missing/map.yaml\n", "map.yaml"),
+        ("localization: {initial_pose: {x_m: 90.0, y_m: 0.0}}\n", "localization.initial_pose"),
+        ("navigation: {params: broken.yaml}\n", "broken.yaml"),
+        (
+            "navigation: {type: nav2, set: {controller_server.FollowPath.plugin: my_pkg::Fancy}}\n",
+            "unknown controller plugin",
+        ),
+    ],
+)
+def test_bad_navigation_input_is_one_line_and_exit_2(tmp_path: Path, body: str, needle: str) -> None:
+    (tmp_path / "broken.yaml").write_text("amcl:\n  ros__parameters:\n    max_particles: [oops\n")
+    result, bag = simulate(tmp_path, "bad", body)
+    assert result.returncode == 2, result.stderr  # type: ignore[attr-defined]
+    lines = [ln for ln in result.stderr.splitlines() if ln.startswith("twin: error")]  # type: ignore[attr-defined]
+    assert len(lines) == 1 and needle in lines[0], result.stderr  # type: ignore[attr-defined]
+    assert "Traceback" not in result.stderr  # type: ignore[attr-defined]
+    assert not bag.exists()
+
+
+def test_a_navigator_tree_with_a_leaf_the_twin_lacks_is_refused_with_exit_6(tmp_path: Path) -> None:
+    tree = tmp_path / "nav.xml"
+    tree.write_text(
+        '<root main_tree_to_execute="MainTree"><BehaviorTree ID="MainTree">'
+        '<Sequence><ComputePathToPose goal="{goal}" path="{path}"/><TeleportRobot/></Sequence>'
+        "</BehaviorTree></root>"
+    )
+    result, _ = simulate(tmp_path, "badtree", f"navigation: {{type: nav2, bt_xml: {tree}}}\n")
+    assert result.returncode == 6, result.stderr  # type: ignore[attr-defined]
+    assert "TeleportRobot" in result.stderr and "Traceback" not in result.stderr  # type: ignore[attr-defined]
+
+
+# --- Nav2's navigation ---------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def nav2_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, object], Path]:
+    bag = tmp_path_factory.mktemp("nav2") / "house_nav2"
+    result = run_twin("simulate", str(REPO / "scenarios" / "house_nav2.yaml"), "--out", str(bag), "--json")
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout), bag
+
+
+def test_nav2_carries_out_the_thesis_mission(nav2_run: tuple[dict[str, object], Path]) -> None:
+    summary, bag = nav2_run
+    assert summary["mission_result"] == "SUCCESS" and summary["contacts"] == 0
+    msgs = read(bag, "/mission/behavior_tree_log", "/behavior_tree_log", "/plan", "/rosout")
+    mission = [
+        e.node_name for _, m in msgs["/mission/behavior_tree_log"] for e in m.event_log if e.current_status == "SUCCESS"
+    ]  # type: ignore[attr-defined]
+    assert mission == ["go_to_location1", "go_to_location2", "go_to_location3", "go_to_location4", "sequence"]
+    nav_events = [(e.node_name, e.current_status) for _, m in msgs["/behavior_tree_log"] for e in m.event_log]  # type: ignore[attr-defined]
+    names = {n for n, _ in nav_events}
+    assert {"ComputePathToPose", "FollowPath", "RateController", "NavigateRecovery"} <= names
+    # replanning at 1 Hz (the default tree's RateController): plans come about a second apart while driving
+    plan_t = np.array([t for t, _ in msgs["/plan"]]) / 1e9
+    gaps = np.diff(plan_t)
+    assert len(plan_t) > 30
+    assert float(np.median(gaps)) == pytest.approx(1.0, abs=0.05)
+    assert all(m.header.frame_id == "map" for _, m in msgs["/plan"])  # type: ignore[attr-defined]
+
+
+def test_nav2_cmd_vel_is_smoothed_at_20_hz_within_dwbs_limits(nav2_run: tuple[dict[str, object], Path]) -> None:
+    _, bag = nav2_run
+    msgs = read(bag, "/cmd_vel", "/cmd_vel_nav", "/local_plan", "/navigate_to_pose/feedback")
+    cmd = msgs["/cmd_vel"]
+    t = np.array([ts for ts, _ in cmd]) / 1e9
+    v = np.array([m.linear.x for _, m in cmd])  # type: ignore[attr-defined]
+    w = np.array([m.angular.z for _, m in cmd])  # type: ignore[attr-defined]
+    nav_t = np.array([ts for ts, _ in msgs["/cmd_vel_nav"]]) / 1e9
+    assert float(np.median(np.diff(nav_t))) == pytest.approx(0.1, abs=1e-6)  # controller_frequency 10 Hz
+    assert float(np.median(np.diff(t))) == pytest.approx(0.05, abs=1e-6)  # velocity_smoother 20 Hz
+    assert np.abs(v).max() <= 0.22 + 1e-9 and np.abs(w).max() <= 1.0 + 1e-9
+    steady = np.diff(t) < 0.051  # consecutive smoother outputs
+    assert np.all(np.abs(np.diff(v))[steady] <= 2.5 * 0.05 + 1e-9)
+    assert np.all(np.abs(np.diff(w))[steady] <= 3.2 * 0.05 + 1e-9)
+    assert len(msgs["/local_plan"]) > 100
+    feedback = [m for _, m in msgs["/navigate_to_pose/feedback"]]
+    assert len(feedback) > 100
+    assert any(f.distance_remaining > 1.0 for f in feedback)  # type: ignore[attr-defined]
+    assert min(f.distance_remaining for f in feedback) < 0.5  # type: ignore[attr-defined]
+
+
+def test_nav2_publishes_both_costmaps_with_nav2s_scaling(nav2_run: tuple[dict[str, object], Path]) -> None:
+    _, bag = nav2_run
+    msgs = read(bag, "/global_costmap/costmap", "/local_costmap/costmap")
+    glob = msgs["/global_costmap/costmap"]
+    local = msgs["/local_costmap/costmap"]
+    assert glob[-1][1].header.frame_id == "map" and local[-1][1].header.frame_id == "odom"  # type: ignore[attr-defined]
+    assert (local[-1][1].info.width, local[-1][1].info.height) == (60, 60)  # type: ignore[attr-defined]
+    values = np.unique(np.asarray(glob[-1][1].data))  # type: ignore[attr-defined]
+    assert values.min() >= -1 and values.max() == 100 and 99 in values  # lethal 100, inscribed 99
+    g_t = np.array([t for t, _ in glob]) / 1e9
+    l_t = np.array([t for t, _ in local]) / 1e9
+    assert float(np.median(np.diff(g_t))) == pytest.approx(1.0) and float(np.median(np.diff(l_t))) == pytest.approx(0.5)
