@@ -223,3 +223,89 @@ def test_nav2_publishes_both_costmaps_with_nav2s_scaling(nav2_run: tuple[dict[st
     g_t = np.array([t for t, _ in glob]) / 1e9
     l_t = np.array([t for t, _ in local]) / 1e9
     assert float(np.median(np.diff(g_t))) == pytest.approx(1.0) and float(np.median(np.diff(l_t))) == pytest.approx(0.5)
+
+
+# --- Nav2's behaviour on a synthetic map: goal tolerance, recoveries ------------------------------------
+
+EMPTY_WORLD = FIXTURES / "gazebo_classic" / "worlds" / "empty_world.world"
+
+
+def _room_map(tmp_path: Path) -> Path:
+    """A 10 x 10 m room (walls 0.1 m thick) holding a closed 2 x 2 m box around (3, 3); origin (-5, -5)."""
+    from twin.nav.map_server import OccupancyMap, save_map
+
+    data = np.zeros((200, 200), dtype=np.int8)
+    data[:2, :] = data[-2:, :] = data[:, :2] = data[:, -2:] = 100
+    data[160:162, 160:200] = 100  # the box's south wall, y = 3.0 m ... joined to the room's east wall
+    data[160:200, 160:162] = 100  # its west wall, x = 3.0 m ... up to the north wall
+    occupancy = OccupancyMap(resolution_m=0.05, origin_x_m=-5.0, origin_y_m=-5.0, data=data)
+    path = tmp_path / "room.yaml"
+    save_map(occupancy, path)
+    return path
+
+
+def _goal_run(tmp_path: Path, name: str, goal: tuple[float, float, float], *, bt_xml: Path | None = None,
+              duration: str | None = None) -> tuple[object, Path]:  # fmt: skip
+    (tmp_path / "goals.yaml").write_text(f"goal: [{goal[0]}, {goal[1]}, {goal[2]}]\n")
+    tree = tmp_path / "one_goal.xml"
+    tree.write_text(
+        '<root main_tree_to_execute="Main"><BehaviorTree ID="Main"><Sequence name="sequence">'
+        '<GoToPose name="go" loc="goal"/></Sequence></BehaviorTree></root>'
+    )
+    nav = f"navigation: {{type: nav2{', bt_xml: ' + str(bt_xml) if bt_xml else ''}}}\n"
+    body = (
+        f"world: {{sdf: {EMPTY_WORLD}}}\nmap: {_room_map(tmp_path)}\nlocalization: {{type: none}}\n{nav}"
+        f"mission: {{tree: {tree}, locations: {tmp_path / 'goals.yaml'}}}\nmax_duration_s: 300\n"
+    )
+    extra = ("--duration", duration) if duration else ()
+    return simulate(tmp_path, name, body, *extra)
+
+
+def test_a_goal_inside_a_wall_within_navfns_tolerance_is_reached(tmp_path: Path) -> None:
+    # (0, 4.97) lies in the north wall; the nearest cell the planner may use is 0.3 m south of it
+    result, bag = _goal_run(tmp_path, "near_wall", (0.0, 4.97, 1.57))
+    assert result.returncode == 0, result.stderr  # type: ignore[attr-defined]
+    last = read(bag, "/ground_truth/odom")["/ground_truth/odom"][-1][1].pose.pose.position  # type: ignore[attr-defined]
+    assert math.hypot(last.x - 0.0, last.y - 4.97) < 0.5 + 0.25  # NavFn's tolerance, then the goal checker's
+
+
+def test_an_unreachable_goal_runs_nav2s_recoveries_in_order_then_fails_after_six_retries(tmp_path: Path) -> None:
+    result, bag = _goal_run(tmp_path, "boxed", (4.0, 4.0, 0.0))  # inside the closed box, > 0.5 m from reachable cells
+    assert result.returncode == 1, result.stderr  # type: ignore[attr-defined]
+    assert "planner" in result.stderr  # type: ignore[attr-defined]  # the reason names the failed server
+    events = [
+        (e.node_name, e.current_status)  # type: ignore[attr-defined]
+        for _, m in read(bag, "/behavior_tree_log")["/behavior_tree_log"]
+        for e in m.event_log  # type: ignore[attr-defined]
+    ]
+    recoveries = [n for n, s in events if s == "RUNNING" and n in ("ClearingActions", "Spin", "Wait", "BackUp")]
+    assert recoveries[:4] == ["ClearingActions", "Spin", "Wait", "BackUp"]  # the round robin's order
+    assert len(recoveries) == 6  # NavigateRecovery retries six times, one recovery each, then gives up
+    root = [status for name, status in events if name == "NavigateRecovery" and status != "IDLE"]
+    assert root[-1] == "FAILURE"  # then bt_navigator halts the tree (back to IDLE) and aborts the goal
+    msgs = read(bag, "/cmd_vel")
+    assert any(abs(m.angular.z) > 0.3 for _, m in msgs["/cmd_vel"])  # type: ignore[attr-defined]  # the spin
+    assert any(m.linear.x < 0.0 for _, m in msgs["/cmd_vel"])  # type: ignore[attr-defined]  # the back-up
+
+
+TREES = sorted((NAV2 / "nav2_humble" / "behavior_trees").glob("*.xml"))
+
+
+@pytest.mark.parametrize("tree", TREES, ids=[t.stem for t in TREES])
+def test_every_nav2_humble_tree_runs_a_goal(tmp_path: Path, tree: Path) -> None:
+    goal = (2.0, -1.0, round(math.atan2(-1.0, 2.0), 3))  # facing along the way there: no final turn on the spot
+    follow = tree.stem == "follow_point"  # follows the goal 1 m short, until cancelled: it never ends by itself
+    calibrate = tree.stem == "odometry_calibration"  # drives squares on the spot, whatever the goal
+    result, bag = _goal_run(tmp_path, tree.stem, goal, bt_xml=tree, duration="40" if follow else None)
+    assert result.returncode == 0, result.stderr  # type: ignore[attr-defined]
+    summary = json.loads(result.stdout)  # type: ignore[attr-defined]
+    odom = read(bag, "/ground_truth/odom")["/ground_truth/odom"]
+    last = odom[-1][1].pose.pose.position  # type: ignore[attr-defined]
+    if follow:
+        assert abs(math.hypot(last.x - goal[0], last.y - goal[1]) - 1.0) < 0.35
+    elif calibrate:
+        assert summary["mission_result"] == "SUCCESS"
+        assert max(abs(m.pose.pose.position.x) for _, m in odom) > 0.5  # type: ignore[attr-defined]  # it drove
+    else:
+        assert summary["mission_result"] == "SUCCESS"
+        assert math.hypot(last.x - goal[0], last.y - goal[1]) < 0.25 + 0.05

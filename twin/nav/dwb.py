@@ -344,7 +344,12 @@ class DwbController:
         self.transformed_plan = local
         commands, steps = self._commands(velocity)
         ends, max_cost, obstacle_ok = self._rollout(commands, steps, velocity, pose, costmap)
-        goal = _last_pose_on_costmap(local, costmap)
+        # The critics' goal is the global plan's end in the costmap frame (RotateToGoal, PathAlign's quiet
+        # zone, GoalAlign's direction); GoalDist and GoalAlign seed from the last plan pose on the costmap.
+        tx, ty, tyaw = self.plan_to_costmap
+        end = self._plan[-1]
+        c, s = math.cos(tyaw), math.sin(tyaw)
+        goal = np.array([tx + c * end[0] - s * end[1], ty + s * end[0] + c * end[1], end[2] + tyaw])
         total, legal = self._score(
             commands=commands,
             ends=ends,
@@ -402,25 +407,37 @@ class DwbController:
         # BaseObstacle
         legal &= obstacle_ok
         total += p.base_obstacle_scale * max_cost
-        # Map-grid critics
-        blocked = costmap.cost >= _INVALID_COST
-        path_map = _distance_map(costmap, local[:, :2], blocked)
-        goal_map = _distance_map(costmap, goal[None, :2], blocked)
+        # Map-grid critics (Humble's MapGridCritic): Manhattan cell distances from the plan's cells (PathDist,
+        # PathAlign) or the goal's cell (GoalDist, GoalAlign), propagated over the whole costmap (obstacles are
+        # BaseObstacle's business), scored at the trajectory's last pose (the aligns: a point `fpd` ahead of
+        # it); a pose off the costmap makes the trajectory illegal. Each scale counts `0.5 * resolution` per
+        # unit, as MapGridCritic::getScale. PathAlign goes quiet within `fpd` of the goal; GoalAlign draws the
+        # nose to a point `fpd` beyond the goal along the robot's line to it.
+        unit = 0.5 * costmap.resolution_m
+        free = np.zeros(costmap.cost.shape, dtype=bool)
+        path_map = _distance_map(costmap, local[:, :2], free)
+        goal_map = _distance_map(costmap, _last_pose_on_costmap(local, costmap)[None, :2], free)
+        to_goal = math.atan2(goal[1] - pose[1], goal[0] - pose[0])
+        fpd_goal = p.goal_align_forward_point_distance_m
+        shifted = local.copy()
+        shifted[-1, 0] += fpd_goal * math.cos(to_goal)
+        shifted[-1, 1] += fpd_goal * math.sin(to_goal)
+        nose_map = _distance_map(costmap, _last_pose_on_costmap(shifted, costmap)[None, :2], free)
         for scale, dist_map, fpd in (
             (p.path_dist_scale, path_map, 0.0),
             (p.goal_dist_scale, goal_map, 0.0),
             (p.path_align_scale, path_map, p.path_align_forward_point_distance_m),
-            (p.goal_align_scale, goal_map, p.goal_align_forward_point_distance_m),
+            (p.goal_align_scale, nose_map, fpd_goal),
         ):
-            if fpd > 0.0 and d_goal <= fpd:
-                continue  # the alignment critics go quiet near the goal
+            if dist_map is path_map and fpd > 0.0 and d_goal <= fpd:
+                continue  # PathAlign goes quiet near the goal
             px = ends[:, 0] + fpd * np.cos(ends[:, 2])
             py = ends[:, 1] + fpd * np.sin(ends[:, 2])
             r, c, ins = _cells(costmap, px, py)
             score = np.where(ins, dist_map.ravel()[np.where(ins, r * costmap.cols + c, 0)], np.inf)
             finite = np.isfinite(score)
             legal &= finite
-            total += scale * np.where(finite, score, 0.0)
+            total += scale * unit * np.where(finite, score, 0.0)
         return total, legal
 
 

@@ -405,6 +405,9 @@ class Nav2Servers:
                 costmap.clear_around_robot(x, y, distance)
             else:
                 costmap.clear_except_region(x, y, distance)
+        for costmap in targets:  # the master grid again from the layers kept (the static map), at once
+            x, y, yaw = self.frames.map_pose() if costmap is self.global_costmap else self.frames.odom_pose
+            costmap.update(x, y, yaw, ())
         return True
 
     def robot_pose(self) -> Pose:

@@ -182,6 +182,8 @@ class NavigationStack:
             config = nav2_config(params)
             global_costmap = Costmap(params.global_costmap, static_map=occupancy)
             local_costmap = Costmap(params.local_costmap, robot_xy_m=(pose.x_m, pose.y_m))
+            for costmap in (global_costmap, local_costmap):  # composed before the first plan asks
+                costmap.update(pose.x_m, pose.y_m, pose.yaw_rad, ())
             bt_xml = sc.navigation.bt_xml or DEFAULT_BT_XML
         warning = params.warning(config.used if config is not None else None)
         if warning:  # the packaged TB3 files hold keys Humble ignores: a fact, said with -v; a user's file: a warning
@@ -204,7 +206,7 @@ class NavigationStack:
             return load_map(Path(sc.map))
         assert robot.lidar is not None
         pose = sc.robot.initial_pose
-        height = max(0.01, robot.lidar.mount.z_m)
+        height = max(0.01, robot.base_height_m + robot.lidar.mount.z_m)  # the beam plane, as the lidar casts it
         return map_from_scene(scene, height_m=height, resolution_m=0.05, free_xy_m=(pose.x_m, pose.y_m))
 
     def nodes(self, *, now: Any, truth: Any) -> list[Node]:
