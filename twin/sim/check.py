@@ -180,6 +180,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         load_robot(scenario.robot.model, model_path=scenario.world.model_path)
         if isinstance(scenario.mission, BehaviorTreeMission):
             _load_tree(scenario.mission)
+        _load_navigation(scenario)
     except TwinError as err:
         if str(err).startswith(str(path)):
             raise
@@ -196,3 +197,21 @@ def _load_tree(mission: BehaviorTreeMission) -> None:
     register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
     factory.load_plugins()
     factory.create_tree_from_file(mission.tree, main_tree=mission.main_tree, clock=lambda: 0)
+
+
+def _load_navigation(scenario: Scenario) -> None:
+    """Read the map, the Nav2 params file and the navigator tree the run would read."""
+    from twin.nav.bt_nodes import nav2_factory
+    from twin.nav.map_server import load_map
+    from twin.nav.nav2_nodes import nav2_config
+    from twin.nav.params import load_nav2_params
+
+    if scenario.map != "from_world":
+        load_map(Path(scenario.map))
+    nav = scenario.navigation
+    if nav.params is not None:
+        params = load_nav2_params(nav.params, overrides=dict(nav.set))
+        if nav.type == "nav2":
+            nav2_config(params)
+    if nav.type == "nav2" and nav.bt_xml is not None:
+        nav2_factory().create_tree_from_file(nav.bt_xml, clock=lambda: 0)

@@ -8,6 +8,7 @@ map_server, initial_pose, amcl, costmap and navigation-server nodes around them.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import statistics
@@ -203,11 +204,18 @@ class NavigationStack:
     @staticmethod
     def _map(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> OccupancyMap:
         if sc.map != "from_world":
-            return load_map(Path(sc.map))
-        assert robot.lidar is not None
-        pose = sc.robot.initial_pose
-        height = max(0.01, robot.base_height_m + robot.lidar.mount.z_m)  # the beam plane, as the lidar casts it
-        return map_from_scene(scene, height_m=height, resolution_m=0.05, free_xy_m=(pose.x_m, pose.y_m))
+            occupancy = load_map(Path(sc.map))
+        else:
+            assert robot.lidar is not None
+            pose = sc.robot.initial_pose
+            height = max(0.01, robot.base_height_m + robot.lidar.mount.z_m)  # the beam plane, as the lidar casts it
+            occupancy = map_from_scene(scene, height_m=height, resolution_m=0.05, free_xy_m=(pose.x_m, pose.y_m))
+        dx, dy = sc.localization.map_offset_m
+        if dx or dy:
+            occupancy = dataclasses.replace(
+                occupancy, origin_x_m=occupancy.origin_x_m + dx, origin_y_m=occupancy.origin_y_m + dy
+            )
+        return occupancy
 
     def nodes(self, *, now: Any, truth: Any) -> list[Node]:
         """The stack's nodes for one graph, in launch order (map_server, initial_pose, amcl, costmaps, servers).

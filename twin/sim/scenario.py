@@ -325,6 +325,12 @@ class LocalizationSection:
 
     type: Literal["amcl", "none"] = "amcl"
     initial_pose: InitialPoseEstimate | None = field(default_factory=InitialPoseEstimate)  # null: a node sends it
+    map_offset_m: tuple[float, float] = (0.0, 0.0)  # the map drawn this far off the world (a misaligned SLAM map)
+
+    def __post_init__(self) -> None:
+        if not all(math.isfinite(v) and abs(v) <= 100.0 for v in self.map_offset_m):
+            msg = f"map_offset_m must be two finite numbers of metres (at most 100), got {list(self.map_offset_m)}"
+            raise ValueError(msg)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

@@ -71,7 +71,7 @@ def test_twin_bag_path_length_is_the_ground_truth_polyline(twin_bag: Path) -> No
 def test_twin_bag_localization_error_matches_interpolated_truth(twin_bag: Path) -> None:
     m = run_metrics(twin_bag)
     t_ref, ref = _poses(twin_bag, "/ground_truth/odom")
-    t_est, est = _poses(twin_bag, "/odom")
+    t_est, est = _poses(twin_bag, "/amcl_pose")  # AMCL's estimate, where the robot believes it is on the map
     errors = []
     for t, row in zip(t_est, est, strict=True):
         j = int(np.searchsorted(t_ref, t))
@@ -83,7 +83,7 @@ def test_twin_bag_localization_error_matches_interpolated_truth(twin_bag: Path) 
             f = (t - t_ref[j - 1]) / (t_ref[j] - t_ref[j - 1])
             rx, ry = ref[j - 1, :2] + f * (ref[j, :2] - ref[j - 1, :2])
         errors.append(math.hypot(row[0] - rx, row[1] - ry))
-    assert m.localization_source == "/odom"
+    assert m.localization_source == "/amcl_pose"
     assert m.localization_reference == "/ground_truth/odom"
     assert m.localization_error_median_m == pytest.approx(float(np.median(errors)), rel=1e-6, abs=1e-12)
     assert m.localization_error_p95_m == pytest.approx(float(np.percentile(errors, 95)), rel=1e-6, abs=1e-12)

@@ -1,0 +1,88 @@
+"""The navigation nodes' pure parts: Nav2's cost translation, frames, the servers' parameters, path smoothing."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from twin.core.errors import ConfigError
+from twin.nav.frames import Frames, compose, invert
+from twin.nav.localization_nodes import costmap_translation
+from twin.nav.nav2_nodes import nav2_config, smooth_path
+from twin.nav.params import default_params_path, load_nav2_params
+
+
+def test_costmap_translation_is_nav2s_table() -> None:
+    table = costmap_translation()
+    assert table[0] == 0 and table[253] == 99 and table[254] == 100 and table[255] == -1
+    assert table[1] == 1 and table[252] == 98  # 1 + 97 (c - 1) / 251, integer division
+    assert table[128] == 1 + (97 * 127) // 251
+    assert np.all(np.diff(table[:255].astype(int)) >= 0)
+
+
+def test_compose_and_invert_are_planar_transforms() -> None:
+    a = (1.0, 2.0, 0.5)
+    b = (0.3, -0.4, 1.2)
+    ab = compose(a, b)
+    back = compose(invert(a), ab)
+    assert back == pytest.approx(b)
+    assert compose(a, invert(a)) == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    # a point 1 m ahead of a robot facing +y lies at +y
+    assert compose((0.0, 0.0, math.pi / 2), (1.0, 0.0, 0.0))[:2] == pytest.approx((0.0, 1.0))
+
+
+def test_frames_give_the_map_pose_through_map_to_odom() -> None:
+    frames = Frames()
+    frames.map_odom = (1.0, 0.0, math.pi / 2)
+    frames.odom_pose = (2.0, 0.0, 0.0)
+    assert frames.map_pose() == pytest.approx((1.0, 2.0, math.pi / 2))
+    assert frames.map_to_odom(frames.map_pose()) == pytest.approx(frames.odom_pose)
+
+
+def test_tb3_params_give_nav2s_server_values() -> None:
+    cfg = nav2_config(load_nav2_params(default_params_path("waffle")))
+    assert cfg.controller_frequency_hz == 10.0 and cfg.failure_tolerance_s == 0.3
+    assert list(cfg.controllers) == ["FollowPath"] and cfg.controllers["FollowPath"][0] == "dwb_core::DWBLocalPlanner"
+    checker = cfg.goal_checkers["general_goal_checker"]
+    assert (checker.xy_goal_tolerance_m, checker.yaw_goal_tolerance_rad, checker.stateful) == (0.25, 0.25, True)
+    assert (cfg.progress_radius_m, cfg.progress_allowance_s) == (0.5, 10.0)
+    assert (cfg.planner.tolerance_m, cfg.planner.use_astar, cfg.planner.allow_unknown) == (0.5, False, True)
+    assert cfg.bt_loop_duration_s == pytest.approx(0.01)
+    # no velocity_smoother or behavior_server section in TB3's file: Humble's code defaults
+    assert cfg.smoother.smoothing_frequency_hz == 20.0 and cfg.smoother.max_velocity == (0.5, 2.5)
+    assert cfg.behaviors.cycle_frequency_hz == 10.0
+
+
+def test_nav2s_own_params_file_reads_its_smoother_limits(fixtures: Path) -> None:
+    cfg = nav2_config(load_nav2_params(fixtures / "nav2" / "nav2_humble" / "nav2_params.yaml"))
+    assert cfg.controller_frequency_hz == 20.0
+    assert cfg.smoother.max_velocity == (0.26, 1.0)
+
+
+def test_an_unknown_controller_or_planner_plugin_is_a_config_error(tmp_path: Path) -> None:
+    params = load_nav2_params(
+        default_params_path("burger"), overrides={"controller_server.FollowPath.plugin": "acme::Teleporter"}
+    )
+    with pytest.raises(ConfigError, match="unknown controller plugin 'acme::Teleporter'"):
+        nav2_config(params)
+    params = load_nav2_params(
+        default_params_path("burger"), overrides={"planner_server.GridBased.plugin": "nav2_smac_planner/SmacPlanner2D"}
+    )
+    with pytest.raises(ConfigError, match="unknown planner plugin"):
+        nav2_config(params)
+
+
+def test_smooth_path_keeps_the_ends_and_pulls_corners_in() -> None:
+    path = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0], [2.0, 2.0, 0.0]])
+    out = smooth_path(path)
+    assert out[0] == pytest.approx(path[0]) and out[-1] == pytest.approx(path[-1])
+    # the corner at (1, 0) moves towards the inside of the turn, and the path gets shorter
+    assert out[1, 0] < 1.0 and out[1, 1] > 0.0
+    length = lambda p: float(np.sum(np.hypot(*np.diff(p[:, :2], axis=0).T)))  # noqa: E731
+    assert length(out) < length(path)
+    # an interior pose faces along its neighbours' chord
+    chord = out[3, :2] - out[1, :2]
+    assert out[2, 2] == pytest.approx(math.atan2(chord[1], chord[0]))
