@@ -44,6 +44,7 @@ __all__ = [
     "StepGroup",
     "Stepper",
     "VariableInfo",
+    "binary_problem",
     "read_fmu_info",
     "stepping",
     "stepping_problem",
@@ -162,6 +163,66 @@ def read_fmu_info(path: Path) -> FmuInfo:
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),
     )
+
+
+def _binary_member(info: FmuInfo) -> str:
+    """Where this platform's binary of `info` sits inside the FMU (`binaries/linux64/NAME.so`)."""
+    platform = fmpy.platform if info.major_version < 3 else fmpy.platform_tuple
+    identifier = info.co_simulation or info.model_exchange or info.model_name
+    return f"binaries/{platform}/{identifier}{fmpy.sharedLibraryExtension}"
+
+
+def _entry_point(info: FmuInfo) -> str:
+    """The instantiate function twin calls first: its absence means the binary is not this FMI version's."""
+    if info.major_version < 3:
+        return "fmi2Instantiate"
+    return "fmi3InstantiateCoSimulation" if info.co_simulation else "fmi3InstantiateModelExchange"
+
+
+def _load_problem(info: FmuInfo, library: Path, member: str) -> str | None:
+    """Why the shared library at `library` (the FMU's `member`) cannot be loaded, or None."""
+    try:
+        dll = ctypes.CDLL(str(library))
+    except OSError as err:
+        # The loader names the extracted file: say which member of the FMU it was instead.
+        text = str(err).replace(f"{library}: ", "").replace(str(library), member).strip()
+        return f"{member} cannot be loaded on this platform: {text or type(err).__name__}"
+    entry = _entry_point(info)
+    if not hasattr(dll, entry):
+        return f"{member} has no {entry} function; it is not an FMI {info.fmi_version} binary"
+    return None
+
+
+def binary_problem(info: FmuInfo, extracted: Path | None = None) -> str | None:
+    """Why this platform's binary of the FMU is missing or cannot be loaded (None when it loads).
+
+    Args:
+        info: The FMU's description (`read_fmu_info`).
+        extracted: The folder the FMU was extracted to; when None, the binary is read from the zip.
+
+    Returns:
+        A phrase for a one-line error, naming the member (`binaries/linux64/NAME.so`) and the
+        loader's message, or naming the platforms the FMU does have binaries for.
+    """
+    member = _binary_member(info)
+    with zipfile.ZipFile(info.path) as archive:
+        names = archive.namelist()
+        if member not in names:
+            others = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+            has_sources = any(n.startswith("sources/") for n in names)
+            found = f"it has binaries for {', '.join(others)} only" if others else "it has no binaries"
+            if has_sources:
+                found += " (and sources: compile them for this platform)"
+            return f"no binary for this platform: {member} is missing; {found}"
+        if extracted is not None:
+            return _load_problem(info, extracted / member, member)
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="twin-fmu-") as tmp:
+            target = Path(tmp) / Path(member).name
+            with archive.open(member) as src, target.open("wb") as dst:
+                shutil.copyfileobj(src, dst)
+            return _load_problem(info, target, member)
 
 
 # The solver a Model Exchange FMU is integrated with between communication points (fmpy's SUNDIALS
@@ -377,6 +438,11 @@ class FmuFile:
         except Exception as err:
             msg = f"{path}: cannot extract ({err})"
             raise FmuError(msg) from None
+        problem = binary_problem(self.info, self._dir)
+        if problem is not None:
+            shutil.rmtree(self._dir, ignore_errors=True)
+            msg = f"{path}: {problem}"
+            raise FmuError(msg)
         self._instances: list[Stepper] = []
 
     def __enter__(self) -> Self:
