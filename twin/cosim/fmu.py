@@ -18,9 +18,11 @@ from __future__ import annotations
 import collections
 import ctypes
 import functools
+import itertools
 import logging
 import math
 import shutil
+import weakref
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -45,6 +47,7 @@ __all__ = [
     "Stepper",
     "VariableInfo",
     "binary_problem",
+    "fmu_logger",
     "read_fmu_info",
     "stepping",
     "stepping_problem",
@@ -386,21 +389,53 @@ class StepGroup:
         adapter.fail_slot(tuple(slot.status), bool(slot.terminate), self._index.value * self._h)
 
 
-class _Messages:
-    """Keeps an instance's last log messages for error reports and forwards them to logging."""
+# The Python logging level of each FMI status (OK, Warning, Discard, Error, Fatal, Pending).
+_STATUS_LEVELS = (logging.INFO, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
+# An FMU that logs on every step would flood the console and /rosout: past this many lines an
+# instance's messages are kept for its error reports only (one line says so).
+MAX_FORWARDED_MESSAGES = 1000
 
-    def __init__(self, label: str) -> None:
+
+def fmu_logger(instance_name: str) -> logging.Logger:
+    """The logger an FMU instance's own log messages go to.
+
+    Its records reach the console (INFO with `-v`, warnings always) and, during `twin simulate`,
+    `/rosout` under the name `fmu.<instance_name>` (twin.node.rosout maps `twin.node.X` to `X`).
+    """
+    return logging.getLogger(f"twin.node.fmu.{instance_name}")
+
+
+class _Messages:
+    """Keeps an instance's last log messages for error reports and forwards them to logging.
+
+    The FMU's status picks the level: OK and Pending are INFO, Warning and Discard WARNING, Error
+    ERROR, Fatal CRITICAL.
+    """
+
+    def __init__(self, label: str, instance_name: str = "fmu") -> None:
         self.label = label
         self.recent: collections.deque[str] = collections.deque(maxlen=8)
         self._unread = 0
+        self.logger = fmu_logger(instance_name)
+        self.forwarded = 0
+
+    @property
+    def logging_on(self) -> bool:
+        """Whether to ask the FMU for its debug (OK-status) messages: when INFO records are wanted."""
+        return self.logger.isEnabledFor(logging.INFO)
 
     def add(self, status: int, category: str, message: str) -> None:
         text = message.strip()
         self.recent.append(text)
         self._unread = min(self._unread + 1, len(self.recent))
-        # Warnings are worth a line; an error's message is repeated in the FmuError that follows it.
-        level = logging.WARNING if status == 1 else logging.DEBUG
-        _log.log(level, "%s: [%s] %s", self.label, category, text)
+        if self.forwarded > MAX_FORWARDED_MESSAGES:
+            return
+        self.forwarded += 1
+        if self.forwarded > MAX_FORWARDED_MESSAGES:
+            self.logger.warning("%s: over %d log messages; no more are shown", self.label, MAX_FORWARDED_MESSAGES)
+            return
+        level = _STATUS_LEVELS[status] if 0 <= status < len(_STATUS_LEVELS) else logging.WARNING
+        self.logger.log(level, "%s: [%s] %s", self.label, category or "-", text)
 
     def last(self) -> str:
         """The first message since the last call: the one the failing call logged."""
@@ -409,6 +444,28 @@ class _Messages:
         text = self.recent[-self._unread]
         self._unread = 0
         return text
+
+
+# FMI 2 loggers are variadic; FMPy's proxy formats the message in C and calls one process-wide
+# Python logger (the last one registered). So every instance gets that same logger, kept alive
+# here, and its componentEnvironment: a number that routes the message to the instance's _Messages.
+_ROUTES: weakref.WeakValueDictionary[int, _Messages] = weakref.WeakValueDictionary()
+_ROUTE_IDS = itertools.count(1)
+
+
+def _route(messages: _Messages) -> int:
+    key = next(_ROUTE_IDS)
+    _ROUTES[key] = messages
+    return key
+
+
+def _fmi2_logger(env: int | None, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+    messages = _ROUTES.get(env or 0)
+    if messages is not None:
+        messages.add(status, _decode(category), _decode(message))
+
+
+_FMI2_LOGGER = fmpy.fmi2.fmi2CallbackLoggerTYPE(_fmi2_logger)
 
 
 def _decode(value: bytes | None) -> str:
@@ -493,7 +550,7 @@ class FmuFile:
                 names an unknown or non-settable variable, or initialisation fails.
         """
         label = f"{self.label} instance {name!r}"
-        messages = _Messages(label)
+        messages = _Messages(label, name)
         kwargs = {
             "guid": self.info.guid,
             "unzipDirectory": str(self._dir),
@@ -716,11 +773,9 @@ class _Fmi2(_Base):
         fmu = self._fmu
         messages = self._messages
 
-        def logger(env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
-            messages.add(status, _decode(category), _decode(message))
-
         callbacks = fmpy.fmi2.fmi2CallbackFunctions()
-        callbacks.logger = fmpy.fmi2.fmi2CallbackLoggerTYPE(logger)
+        callbacks.logger = _FMI2_LOGGER
+        callbacks.componentEnvironment = _route(messages)
         callbacks.allocateMemory = fmpy.fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
         callbacks.freeMemory = fmpy.fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
         from fmpy.logging import addLoggerProxy
@@ -728,7 +783,7 @@ class _Fmi2(_Base):
         addLoggerProxy(ctypes.byref(callbacks))
         self._callbacks = callbacks  # keep the ctypes callbacks alive
         try:
-            fmu.instantiate(callbacks=callbacks, loggingOn=False)
+            fmu.instantiate(callbacks=callbacks, loggingOn=messages.logging_on)
         except Exception:
             detail = messages.last()
             msg = f"{self.name}: fmi2Instantiate returned NULL" + (f" ({detail})" if detail else "")
@@ -871,7 +926,7 @@ class _Fmi3(_Base):
             messages.add(status, _decode(category), _decode(message))
 
         try:
-            fmu.instantiate(loggingOn=False, logMessage=log_message)
+            fmu.instantiate(loggingOn=messages.logging_on, logMessage=log_message)
         except Exception:
             detail = messages.last()
             msg = f"{self.name}: {self._INSTANTIATE} returned NULL" + (f" ({detail})" if detail else "")
