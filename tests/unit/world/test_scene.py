@@ -198,3 +198,43 @@ def test_grazing_inside_the_margin_queries_a_few_times_not_every_step(tmp_path: 
     for k in range(1, 1001):  # 1 m in 1 mm steps
         assert monitor.check(x, -1.0 + 0.001 * k, 0.0) == ()
     assert monitor.queries - queries < 1000  # not two queries per step, as a zero free distance would cost
+
+
+def test_a_robot_pressed_against_a_wall_is_answered_without_new_queries(tmp_path: Path) -> None:
+    scene, monitor = _robot_scene(tmp_path)
+    # Approach the wall in 0.5 mm steps, then try the same refused step again and again, as a drive
+    # pressed against it does; now and then also a refused turn in place (two poses in turn).
+    track: list[tuple[float, float, float]] = [(0.8 + 0.0005 * k, 0.0, 0.0) for k in range(200)]
+    refused_move, refused_turn = (0.8805, 0.0, 0.0), (0.8795, 0.0, 0.2)
+    for k in range(3000):
+        track.append(refused_move)
+        if k % 3 == 0:
+            track.append(refused_turn)
+    track += [(0.8 - 0.001 * k, 0.0, 0.0) for k in range(50)]  # backing off
+    answers = []
+    queries_at_wall = 0
+    for k, pose in enumerate(track):
+        answers.append(monitor.check(*pose))
+        if k == 200:
+            queries_at_wall = monitor.queries
+    assert scene.collides(monitor.body, *refused_move)  # the repeated poses are in contact
+    assert scene.collides(monitor.body, *refused_turn)
+    assert monitor.queries - queries_at_wall <= 8  # the 4000 repeats cost no FCL queries
+    assert monitor.repeats >= 3900
+    # The same answers as a monitor asked about each pose once (no memory of earlier poses).
+    for pose, answer in zip(track[195:215] + track[-60:], answers[195:215] + answers[-60:], strict=True):
+        fresh = CollisionMonitor(scene, monitor.body)
+        assert fresh.check(*pose) == answer
+    for pose, answer in zip(track[200:], answers[200:], strict=True):
+        if pose in (refused_move, refused_turn):
+            assert answer == scene.collides(monitor.body, *pose)
+
+
+def test_the_monitor_answers_a_repeated_pose_with_the_same_free_distance(tmp_path: Path) -> None:
+    _, monitor = _robot_scene(tmp_path)
+    near = (0.95 - 0.073 - 0.003, 0.0, 0.0)  # 3 mm from the wall: inside the margin
+    assert monitor.check(*near) == ()
+    free = monitor.free_m(*near)
+    assert monitor.check(0.5, 0.0, 0.0) == ()  # far away: a new query
+    assert monitor.check(*near) == ()
+    assert monitor.free_m(*near) == free
