@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -45,7 +45,7 @@ from twin.world.types import (
     geometry_kind,
 )
 
-__all__ = ["CollisionMonitor", "Contact", "RayCaster", "RobotBody", "Scene", "build_scene"]
+__all__ = ["CollisionMonitor", "Contact", "RayCaster", "RobotBody", "Scene", "build_scene", "obstacle_extent"]
 
 _log = logging.getLogger(__name__)
 
@@ -794,6 +794,57 @@ class CollisionMonitor:
         return scene.collides(body, x_m, y_m, yaw_rad)
 
 
+def _placed_obstacles(
+    world: World, exclude_models: Iterable[str], floor_height_m: float, cache: MeshCache
+) -> Iterator[tuple[Collision, trimesh.Trimesh, F64]]:
+    """Yield (collision, mesh in its own frame, its world-frame vertices) of every obstacle of `world`.
+
+    Planes, shapes with no mesh and floor-level shapes (top at or below `floor_height_m`) are left out.
+    """
+    excluded = set(exclude_models)
+    skipped_floor = 0
+    for model in world.all_models():
+        if excluded and (
+            model.name in excluded
+            or model.scoped_name in excluded
+            or any(model.scoped_name.startswith(f"{name}::") for name in excluded)
+        ):
+            continue
+        for link in model.links:
+            for collision in link.collisions:
+                if isinstance(collision.geometry, Plane):
+                    continue
+                local = geometry_mesh(collision.geometry, cache, collision.where)
+                if local is None:
+                    continue
+                T = np.asarray(collision.T_world)
+                vertices = local.vertices.view(np.ndarray) @ T[:3, :3].T + T[:3, 3]
+                if vertices[:, 2].max() <= floor_height_m:
+                    skipped_floor += 1
+                    continue
+                yield collision, local, vertices
+    if skipped_floor:
+        _log.debug("%d floor-level collisions left out of the scene", skipped_floor)
+
+
+def obstacle_extent(
+    world: World, *, exclude_models: Iterable[str] = (), floor_height_m: float = 0.01
+) -> tuple[int, tuple[tuple[float, float, float], tuple[float, float, float]] | None]:
+    """Return how many obstacles `build_scene` would make of `world`, and their bounds (`Scene.bounds`).
+
+    Cheap: no collision objects are built, so `twin world info` on a big world need not build them.
+
+    Raises:
+        WorldError: If a collision mesh cannot be read.
+    """
+    placed = [vertices for _, _, vertices in _placed_obstacles(world, exclude_models, floor_height_m, MeshCache())]
+    if not placed:
+        return 0, None
+    every = np.concatenate(placed)
+    lo, hi = every.min(axis=0), every.max(axis=0)
+    return len(placed), ((float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]), float(hi[2])))
+
+
 def build_scene(world: World, *, exclude_models: Iterable[str] = (), floor_height_m: float = 0.01) -> Scene:
     """Build the Scene of a world.
 
@@ -807,42 +858,20 @@ def build_scene(world: World, *, exclude_models: Iterable[str] = (), floor_heigh
     Raises:
         WorldError: If a collision mesh cannot be read.
     """
-    excluded = set(exclude_models)
-    cache = MeshCache()
     obstacles: list[_Obstacle] = []
-    skipped_floor = 0
-    for model in world.all_models():
-        if (
-            model.name in excluded
-            or model.scoped_name in excluded
-            or any(model.scoped_name.startswith(f"{name}::") for name in excluded)
-        ):
+    for collision, local, vertices in _placed_obstacles(world, exclude_models, floor_height_m, MeshCache()):
+        geometry = _fcl_geometry(collision.geometry, local)
+        if geometry is None:
             continue
-        for link in model.links:
-            for collision in link.collisions:
-                if isinstance(collision.geometry, Plane):
-                    continue
-                local = geometry_mesh(collision.geometry, cache, collision.where)
-                if local is None:
-                    continue
-                mesh = local.copy()
-                mesh.apply_transform(np.asarray(collision.T_world))
-                if mesh.bounds[1, 2] <= floor_height_m:
-                    skipped_floor += 1
-                    continue
-                geometry = _fcl_geometry(collision.geometry, local)
-                if geometry is None:
-                    continue
-                obstacles.append(
-                    _Obstacle(
-                        collision=collision,
-                        mesh=mesh,
-                        fcl_object=fcl.CollisionObject(geometry, _fcl_transform(collision.T_world)),
-                        fcl_geometry=geometry,
-                    )
-                )
-    if skipped_floor:
-        _log.debug("%d floor-level collisions left out of the scene", skipped_floor)
+        mesh = trimesh.Trimesh(vertices=vertices, faces=local.faces, process=False)
+        obstacles.append(
+            _Obstacle(
+                collision=collision,
+                mesh=mesh,
+                fcl_object=fcl.CollisionObject(geometry, _fcl_transform(collision.T_world)),
+                fcl_geometry=geometry,
+            )
+        )
     _log.debug(
         "scene of %s: %d obstacles (%s)",
         world.name,

@@ -8,8 +8,9 @@ import pytest
 import trimesh
 
 from twin.world import load_world
+from twin.world.meshes import MeshCache, geometry_mesh
 from twin.world.robot_model import load_robot
-from twin.world.scene import CollisionMonitor, RayCaster, Scene, build_scene
+from twin.world.scene import CollisionMonitor, RayCaster, Scene, build_scene, obstacle_extent
 
 REPO = Path(__file__).resolve().parents[3]
 FIXTURES = REPO.parent / "shared" / "fixtures"
@@ -238,3 +239,45 @@ def test_the_monitor_answers_a_repeated_pose_with_the_same_free_distance(tmp_pat
     assert monitor.check(0.5, 0.0, 0.0) == ()  # far away: a new query
     assert monitor.check(*near) == ()
     assert monitor.free_m(*near) == free
+
+
+@pytest.mark.parametrize("name", ["turtlebot3_world.world", "turtlebot3_house.world", "empty_world.world"])
+def test_obstacle_extent_is_what_the_scene_holds(name: str) -> None:
+    world = load_world(
+        FIXTURES / "gazebo_classic" / "worlds" / name,
+        model_path=[FIXTURES / "gazebo_classic" / "models"],
+        missing_includes="warn",
+    )
+    scene = build_scene(world)
+    count, bounds = obstacle_extent(world)
+    assert count == len(scene.obstacles)
+    if scene.bounds is None:
+        assert bounds is None
+        return
+    assert bounds is not None
+    for mine, theirs in zip(bounds, scene.bounds, strict=True):
+        assert mine == pytest.approx(theirs, abs=1e-12)
+    # Each obstacle's mesh is its collision's own mesh, placed in the world (as trimesh places it).
+    cache = MeshCache()
+    for obstacle, mesh in zip(scene.obstacles, scene.meshes(), strict=True):
+        expected = geometry_mesh(obstacle.geometry, cache, obstacle.where)
+        assert expected is not None
+        expected = expected.copy()
+        expected.apply_transform(np.asarray(obstacle.T_world))
+        assert np.array_equal(mesh.faces, expected.faces)
+        assert np.allclose(mesh.vertices, expected.vertices, rtol=0.0, atol=1e-12)
+
+
+def test_obstacle_extent_leaves_out_planes_floor_slabs_and_excluded_models(tmp_path: Path) -> None:
+    body = (
+        _static("ground", "0 0 0 0 0 0", "<plane><normal>0 0 1</normal><size>10 10</size></plane>")
+        + _static("slab", "0 0 0.004 0 0 0", "<box><size>4 4 0.008</size></box>")
+        + _static("wall", "1 0 0.5 0 0 0.3", "<box><size>0.1 4 1</size></box>")
+        + _static("post", "-2 1 0.25 0 0 0", "<cylinder><radius>0.1</radius><length>0.5</length></cylinder>")
+    )
+    (tmp_path / "w.world").write_text(f"<sdf version='1.7'><world name='w'>{body}</world></sdf>")
+    world = load_world(tmp_path / "w.world")
+    count, bounds = obstacle_extent(world)
+    assert count == len(build_scene(world).obstacles) == 2
+    assert bounds == build_scene(world).bounds
+    assert obstacle_extent(world, exclude_models=["wall"])[0] == 1
