@@ -1,6 +1,7 @@
 """An FMU's own log messages (the fmi2 logger / fmi3 logMessage callback) reach the console and `/rosout`.
 
-The faulty test motor with `fault_mode` warn is the motor, but logs a warning through the FMU's
+In the simulate process, or forwarded from the child process of an isolated FMU. The faulty test
+motor with `fault_mode` warn is the motor, but logs a warning through the FMU's
 logger every simulated second; with INFO enabled the FMU is instantiated with logging on and also
 logs its OK-status "initialized" message. Levels follow the FMU's status.
 """
@@ -72,7 +73,10 @@ def test_fmu_errors_are_logged_at_error_level(caplog: pytest.LogCaptureFixture) 
     assert "fault_mode 9 is not one of 0 to 5" in records[0].getMessage()
 
 
-def test_simulate_records_the_fmu_messages_on_rosout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("isolation", ["none", "process"])
+def test_simulate_records_the_fmu_messages_on_rosout(
+    isolation: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     scenario = tmp_path / "warn.yaml"
     scenario.write_text(
         "name: fmu_warns\n"
@@ -81,7 +85,7 @@ def test_simulate_records_the_fmu_messages_on_rosout(tmp_path: Path, capsys: pyt
         f"  fmu_file: {faulty()}\n"
         "  profile: velocity-servo\n"
         f"  mapping: {{parameters: {{fault_mode: {WARN}, fault_time: 0.0}}}}\n"
-        "  isolation: none\n"
+        f"  isolation: {isolation}\n"
     )
     bag = tmp_path / "bag"
     code = main(["-v", "simulate", str(scenario), "--duration", "2.5", "--out", str(bag)])
