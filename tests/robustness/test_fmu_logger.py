@@ -59,18 +59,20 @@ def test_with_info_enabled_the_fmu_logs_its_debug_messages_at_info(
     assert "[logEvents] initialized; stepping from t = 0 s" in records[0].getMessage()
 
 
-def test_fmu_errors_are_logged_at_error_level(caplog: pytest.LogCaptureFixture) -> None:
-    caplog.set_level(logging.WARNING, logger="twin")
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_an_fmu_error_is_said_once_in_the_fmu_error(fmi_version: int, caplog: pytest.LogCaptureFixture) -> None:
+    # INFO on: the FMU also logs its OK-status "initialized", which must not become the error's detail.
+    caplog.set_level(logging.DEBUG, logger="twin")
     from twin.core.errors import FmuError
 
-    with FmuFile(faulty("faulty_motor")) as fmu:
+    with FmuFile(faulty("faulty_motor", fmi_version=fmi_version)) as fmu:
         start = {"fault_mode": 9.0, "fault_time": 0.0}
         stepper = fmu.instantiate("left", step_s=1e-3, inputs=[0], outputs=[3], start=start)
-        with pytest.raises(FmuError, match="fault_mode 9 is not one of 0 to 5"):
+        with pytest.raises(FmuError, match=r"DoStep returned Error \(fmi3DoStep|DoStep returned Error \(fmi2DoStep"):
             stepper.step(0.0)
     records = _fmu_records(caplog)
-    assert [r.levelno for r in records] == [logging.ERROR]
-    assert "fault_mode 9 is not one of 0 to 5" in records[0].getMessage()
+    assert [r.levelno for r in records] == [logging.INFO, logging.DEBUG]  # the error: not a second line
+    assert "fault_mode 9 is not one of 0 to 5" in records[1].getMessage()
 
 
 @pytest.mark.parametrize("isolation", ["none", "process"])

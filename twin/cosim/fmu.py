@@ -389,8 +389,9 @@ class StepGroup:
         adapter.fail_slot(tuple(slot.status), bool(slot.terminate), self._index.value * self._h)
 
 
-# The Python logging level of each FMI status (OK, Warning, Discard, Error, Fatal, Pending).
-_STATUS_LEVELS = (logging.INFO, logging.WARNING, logging.WARNING, logging.ERROR, logging.CRITICAL, logging.INFO)
+# The Python logging level of each FMI status (OK, Warning, Discard, Error, Fatal, Pending). Error
+# and Fatal messages are DEBUG: twin raises an FmuError carrying that message (one line, not two).
+_STATUS_LEVELS = (logging.INFO, logging.WARNING, logging.WARNING, logging.DEBUG, logging.DEBUG, logging.INFO)
 # An FMU that logs on every step would flood the console and /rosout: past this many lines an
 # instance's messages are kept for its error reports only (one line says so).
 MAX_FORWARDED_MESSAGES = 1000
@@ -408,13 +409,13 @@ def fmu_logger(instance_name: str) -> logging.Logger:
 class _Messages:
     """Keeps an instance's last log messages for error reports and forwards them to logging.
 
-    The FMU's status picks the level: OK and Pending are INFO, Warning and Discard WARNING, Error
-    ERROR, Fatal CRITICAL.
+    The FMU's status picks the level: OK and Pending are INFO, Warning and Discard WARNING; Error and
+    Fatal are DEBUG, since the FmuError that follows them repeats the message.
     """
 
     def __init__(self, label: str, instance_name: str = "fmu") -> None:
         self.label = label
-        self.recent: collections.deque[str] = collections.deque(maxlen=8)
+        self.recent: collections.deque[tuple[int, str]] = collections.deque(maxlen=8)
         self._unread = 0
         self.logger = fmu_logger(instance_name)
         self.forwarded = 0
@@ -426,7 +427,7 @@ class _Messages:
 
     def add(self, status: int, category: str, message: str) -> None:
         text = message.strip()
-        self.recent.append(text)
+        self.recent.append((status, text))
         self._unread = min(self._unread + 1, len(self.recent))
         if self.forwarded > MAX_FORWARDED_MESSAGES:
             return
@@ -438,12 +439,13 @@ class _Messages:
         self.logger.log(level, "%s: [%s] %s", self.label, category or "-", text)
 
     def last(self) -> str:
-        """The first message since the last call: the one the failing call logged."""
+        """The message the failing call logged: the first since the last call of the worst status."""
         if not self._unread:
             return ""
-        text = self.recent[-self._unread]
+        unread = list(self.recent)[-self._unread :]
         self._unread = 0
-        return text
+        worst = max(status for status, _ in unread)
+        return next(text for status, text in unread if status == worst)
 
 
 # FMI 2 loggers are variadic; FMPy's proxy formats the message in C and calls one process-wide
