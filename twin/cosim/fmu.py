@@ -205,8 +205,11 @@ def binary_problem(info: FmuInfo, extracted: Path | None = None) -> str | None:
 
     Returns:
         A phrase for a one-line error, naming the member (`binaries/linux64/NAME.so`) and the
-        loader's message, or naming the platforms the FMU does have binaries for.
+        loader's message, or naming the platforms the FMU does have binaries for. None as well
+        for FMI versions twin does not step (`stepping_problem` names those).
     """
+    if info.major_version not in (2, 3):
+        return None  # not steppable anyway: `stepping_problem` says why
     member = _binary_member(info)
     with zipfile.ZipFile(info.path) as archive:
         names = archive.namelist()
