@@ -29,7 +29,7 @@ typedef struct {
 } Instance;
 
 static void say(Instance *inst, fmi2Status status, const char *category, const char *text) {
-    if (inst->cb.logger != NULL && (inst->logging || status > fmi2Warning)) {
+    if (inst->cb.logger != NULL && (inst->logging || status >= fmi2Warning)) {
         inst->cb.logger(inst->cb.componentEnvironment, inst->name, status, category, "%s", text);
     }
 }
@@ -47,6 +47,10 @@ static fmi2Status fail(Instance *inst, fmi2Status status, const char *fmt, ...) 
 
 static fmi2Status from_model(Instance *inst, int code, const char *where) {
     if (code == MODEL_OK) return fmi2OK;
+    if (code == MODEL_WARNING) {
+        say(inst, fmi2Warning, "logStatusWarning", inst->msg);
+        return fmi2Warning;
+    }
     if (code == MODEL_DISCARD) {
         say(inst, fmi2Discard, "logStatusDiscard", inst->msg);
         return fmi2Discard;
@@ -135,7 +139,14 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     if (inst == NULL) return fmi2Error;
     if (inst->phase != ST_INIT) return fail(inst, fmi2Error, "fmi2ExitInitializationMode: not allowed now");
     fmi2Status status = from_model(inst, model_initialize(inst->model, inst->msg), "initialization");
-    if (status == fmi2OK) inst->phase = ST_STEP;
+    if (status == fmi2OK) {
+        inst->phase = ST_STEP;
+        if (inst->logging) {
+            char text[96];
+            snprintf(text, sizeof text, "initialized; stepping from t = %g s", inst->time_s);
+            say(inst, fmi2OK, "logEvents", text);
+        }
+    }
     return status == fmi2Discard ? fail(inst, fmi2Error, "initialization: %s", inst->msg) : status;
 }
 
@@ -263,7 +274,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     }
     fmi2Status status = from_model(inst, model_do_step(inst->model, currentCommunicationPoint,
                                                        communicationStepSize, inst->msg), "fmi2DoStep");
-    if (status == fmi2OK) inst->time_s = currentCommunicationPoint + communicationStepSize;
+    if (status == fmi2OK || status == fmi2Warning) inst->time_s = currentCommunicationPoint + communicationStepSize;
     return status;
 }
 

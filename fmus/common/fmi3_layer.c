@@ -30,7 +30,7 @@ typedef struct {
 } Instance;
 
 static void say(Instance *inst, fmi3Status status, const char *category, const char *text) {
-    if (inst->log != NULL && (inst->logging || status > fmi3Warning)) inst->log(inst->env, status, category, text);
+    if (inst->log != NULL && (inst->logging || status >= fmi3Warning)) inst->log(inst->env, status, category, text);
 }
 
 static fmi3Status fail(Instance *inst, fmi3Status status, const char *fmt, ...) {
@@ -47,6 +47,10 @@ static fmi3Status fail(Instance *inst, fmi3Status status, const char *fmt, ...) 
 
 static fmi3Status from_model(Instance *inst, int code, const char *where) {
     if (code == MODEL_OK) return fmi3OK;
+    if (code == MODEL_WARNING) {
+        say(inst, fmi3Warning, "logStatusWarning", inst->msg);
+        return fmi3Warning;
+    }
     if (code == MODEL_DISCARD) {
         say(inst, fmi3Discard, "logStatusDiscard", inst->msg);
         return fmi3Discard;
@@ -166,7 +170,14 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
     if (inst == NULL) return fmi3Error;
     if (inst->phase != ST_INIT) return fail(inst, fmi3Error, "fmi3ExitInitializationMode: not allowed now");
     fmi3Status status = from_model(inst, model_initialize(inst->model, inst->msg), "initialization");
-    if (status == fmi3OK) inst->phase = ST_STEP;
+    if (status == fmi3OK) {
+        inst->phase = ST_STEP;
+        if (inst->logging) {
+            char text[96];
+            snprintf(text, sizeof text, "initialized; stepping from t = %g s", inst->time_s);
+            say(inst, fmi3OK, "logEvents", text);
+        }
+    }
     return status == fmi3Discard ? fail(inst, fmi3Error, "initialization: %s", inst->msg) : status;
 }
 
@@ -523,7 +534,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     }
     fmi3Status status = from_model(inst, model_do_step(inst->model, currentCommunicationPoint,
                                                        communicationStepSize, inst->msg), "fmi3DoStep");
-    if (status == fmi3OK) inst->time_s = currentCommunicationPoint + communicationStepSize;
+    if (status == fmi3OK || status == fmi3Warning) inst->time_s = currentCommunicationPoint + communicationStepSize;
     if (lastSuccessfulTime) *lastSuccessfulTime = inst->time_s;
     return status;
 }

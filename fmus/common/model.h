@@ -2,8 +2,9 @@
  *
  * A model implements these functions for its Float64 (FMI 2: Real) variables only; the layers
  * translate the FMI calls and states. Status codes: MODEL_OK, MODEL_DISCARD (the step was not
- * taken), MODEL_ERROR (the instance is unusable until reset). A failing function writes a
- * one-line reason to `msg` (at most MODEL_MSG_LEN bytes, NUL-terminated).
+ * taken), MODEL_ERROR (the instance is unusable until reset), MODEL_WARNING (done, with a warning
+ * the layers pass to the FMU's logger). A failing or warning function writes a one-line reason to
+ * `msg` (at most MODEL_MSG_LEN bytes, NUL-terminated).
  */
 #ifndef TWIN_MODEL_H
 #define TWIN_MODEL_H
@@ -13,6 +14,7 @@
 #define MODEL_OK 0
 #define MODEL_DISCARD 1
 #define MODEL_ERROR 2
+#define MODEL_WARNING 3
 #define MODEL_MSG_LEN 256
 /* Value reference of the independent variable `time` that FMI 3 model descriptions declare. */
 #define MODEL_TIME_VR 4096u

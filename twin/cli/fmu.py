@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twin.core.errors import BagError, ConfigError
+from twin.core.errors import BagError, ConfigError, FmuError
 
 if TYPE_CHECKING:
     from twin.cosim.contract import FmuMapping
@@ -33,7 +33,8 @@ examples:
   twin fmu check builtin:xm430_w210
   twin fmu check builtin:xm430_w210_servo --profile velocity-servo
   twin fmu check vendor_motor.fmu --map fmus/maps/acme_drive.yaml --json   your FMU, its names mapped
-exit status: 0 when the FMU satisfies the contract, 4 when it does not or cannot be read.
+exit status: 0 when the FMU satisfies the contract, 4 when it does not, cannot be read, or has no
+loadable binary for this platform (binaries/linux64/NAME.so for FMI 2.0, binaries/x86_64-linux/ for 3.0).
 """
 
 _STEP_EPILOG = """\
@@ -133,10 +134,14 @@ def _mapping(path: Path | None) -> FmuMapping:
 def _check(args: argparse.Namespace) -> int:
     from twin.cosim.build import resolve_fmu
     from twin.cosim.contract import Profile, check_contract
-    from twin.cosim.fmu import read_fmu_info, stepping, stepping_problem
+    from twin.cosim.fmu import binary_problem, read_fmu_info, stepping, stepping_problem
 
     path = resolve_fmu(args.fmu, fmi_version=args.fmi)
     info = read_fmu_info(path)
+    problem = binary_problem(info)
+    if problem is not None:
+        msg = f"{path}: {problem}"
+        raise FmuError(msg)
     report = check_contract(info, _mapping(args.map), Profile(args.profile))
     stepped_as = None if stepping_problem(info) is not None else stepping(info)
     if args.json:

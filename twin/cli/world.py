@@ -67,10 +67,10 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
 def summarize(world: World) -> dict[str, Any]:
     """Return the facts `world info` prints, as plain data."""
-    from twin.world.scene import build_scene
+    from twin.world.scene import obstacle_extent
     from twin.world.types import geometry_kind
 
-    scene = build_scene(world)
+    obstacles, bounds = obstacle_extent(world)
     shapes = Counter(geometry_kind(c.geometry) for c in world.all_collisions())
     models = []
     for model in world.all_models():
@@ -85,7 +85,6 @@ def summarize(world: World) -> dict[str, Any]:
                 "source": str(model.source) if model.source else None,
             }
         )
-    bounds = scene.bounds
     return {
         "file": str(world.source),
         "name": world.name,
@@ -93,7 +92,7 @@ def summarize(world: World) -> dict[str, Any]:
         "models": models,
         "links": sum(len(m.links) for m in world.all_models()),
         "collisions": dict(sorted(shapes.items())),
-        "obstacles": len(scene.obstacles),
+        "obstacles": obstacles,
         "bounds_m": None if bounds is None else {"min": list(bounds[0]), "max": list(bounds[1])},
         "physics": {
             "max_step_size_s": world.physics.max_step_size_s,

@@ -18,9 +18,11 @@ from __future__ import annotations
 import collections
 import ctypes
 import functools
+import itertools
 import logging
 import math
 import shutil
+import weakref
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -44,6 +46,8 @@ __all__ = [
     "StepGroup",
     "Stepper",
     "VariableInfo",
+    "binary_problem",
+    "fmu_logger",
     "read_fmu_info",
     "stepping",
     "stepping_problem",
@@ -162,6 +166,69 @@ def read_fmu_info(path: Path) -> FmuInfo:
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),
     )
+
+
+def _binary_member(info: FmuInfo) -> str:
+    """Where this platform's binary of `info` sits inside the FMU (`binaries/linux64/NAME.so`)."""
+    platform = fmpy.platform if info.major_version < 3 else fmpy.platform_tuple
+    identifier = info.co_simulation or info.model_exchange or info.model_name
+    return f"binaries/{platform}/{identifier}{fmpy.sharedLibraryExtension}"
+
+
+def _entry_point(info: FmuInfo) -> str:
+    """The instantiate function twin calls first: its absence means the binary is not this FMI version's."""
+    if info.major_version < 3:
+        return "fmi2Instantiate"
+    return "fmi3InstantiateCoSimulation" if info.co_simulation else "fmi3InstantiateModelExchange"
+
+
+def _load_problem(info: FmuInfo, library: Path, member: str) -> str | None:
+    """Why the shared library at `library` (the FMU's `member`) cannot be loaded, or None."""
+    try:
+        dll = ctypes.CDLL(str(library))
+    except OSError as err:
+        # The loader names the extracted file: say which member of the FMU it was instead.
+        text = str(err).replace(f"{library}: ", "").replace(str(library), member).strip()
+        return f"{member} cannot be loaded on this platform: {text or type(err).__name__}"
+    entry = _entry_point(info)
+    if not hasattr(dll, entry):
+        return f"{member} has no {entry} function; it is not an FMI {info.fmi_version} binary"
+    return None
+
+
+def binary_problem(info: FmuInfo, extracted: Path | None = None) -> str | None:
+    """Why this platform's binary of the FMU is missing or cannot be loaded (None when it loads).
+
+    Args:
+        info: The FMU's description (`read_fmu_info`).
+        extracted: The folder the FMU was extracted to; when None, the binary is read from the zip.
+
+    Returns:
+        A phrase for a one-line error, naming the member (`binaries/linux64/NAME.so`) and the
+        loader's message, or naming the platforms the FMU does have binaries for. None as well
+        for FMI versions twin does not step (`stepping_problem` names those).
+    """
+    if info.major_version not in (2, 3):
+        return None  # not steppable anyway: `stepping_problem` says why
+    member = _binary_member(info)
+    with zipfile.ZipFile(info.path) as archive:
+        names = archive.namelist()
+        if member not in names:
+            others = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+            has_sources = any(n.startswith("sources/") for n in names)
+            found = f"it has binaries for {', '.join(others)} only" if others else "it has no binaries"
+            if has_sources:
+                found += " (and sources: compile them for this platform)"
+            return f"no binary for this platform: {member} is missing; {found}"
+        if extracted is not None:
+            return _load_problem(info, extracted / member, member)
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="twin-fmu-") as tmp:
+            target = Path(tmp) / Path(member).name
+            with archive.open(member) as src, target.open("wb") as dst:
+                shutil.copyfileobj(src, dst)
+            return _load_problem(info, target, member)
 
 
 # The solver a Model Exchange FMU is integrated with between communication points (fmpy's SUNDIALS
@@ -325,29 +392,85 @@ class StepGroup:
         adapter.fail_slot(tuple(slot.status), bool(slot.terminate), self._index.value * self._h)
 
 
-class _Messages:
-    """Keeps an instance's last log messages for error reports and forwards them to logging."""
+# The Python logging level of each FMI status (OK, Warning, Discard, Error, Fatal, Pending). Error
+# and Fatal messages are DEBUG: twin raises an FmuError carrying that message (one line, not two).
+_STATUS_LEVELS = (logging.INFO, logging.WARNING, logging.WARNING, logging.DEBUG, logging.DEBUG, logging.INFO)
+# An FMU that logs on every step would flood the console and /rosout: past this many lines an
+# instance's messages are kept for its error reports only (one line says so).
+MAX_FORWARDED_MESSAGES = 1000
 
-    def __init__(self, label: str) -> None:
+
+def fmu_logger(instance_name: str) -> logging.Logger:
+    """The logger an FMU instance's own log messages go to.
+
+    Its records reach the console (INFO with `-v`, warnings always) and, during `twin simulate`,
+    `/rosout` under the name `fmu.<instance_name>` (twin.node.rosout maps `twin.node.X` to `X`).
+    """
+    return logging.getLogger(f"twin.node.fmu.{instance_name}")
+
+
+class _Messages:
+    """Keeps an instance's last log messages for error reports and forwards them to logging.
+
+    The FMU's status picks the level: OK and Pending are INFO, Warning and Discard WARNING; Error and
+    Fatal are DEBUG, since the FmuError that follows them repeats the message.
+    """
+
+    def __init__(self, label: str, instance_name: str = "fmu") -> None:
         self.label = label
-        self.recent: collections.deque[str] = collections.deque(maxlen=8)
+        self.recent: collections.deque[tuple[int, str]] = collections.deque(maxlen=8)
         self._unread = 0
+        self.logger = fmu_logger(instance_name)
+        self.forwarded = 0
+
+    @property
+    def logging_on(self) -> bool:
+        """Whether to ask the FMU for its debug (OK-status) messages: when INFO records are wanted."""
+        return self.logger.isEnabledFor(logging.INFO)
 
     def add(self, status: int, category: str, message: str) -> None:
         text = message.strip()
-        self.recent.append(text)
+        self.recent.append((status, text))
         self._unread = min(self._unread + 1, len(self.recent))
-        # Warnings are worth a line; an error's message is repeated in the FmuError that follows it.
-        level = logging.WARNING if status == 1 else logging.DEBUG
-        _log.log(level, "%s: [%s] %s", self.label, category, text)
+        if self.forwarded > MAX_FORWARDED_MESSAGES:
+            return
+        self.forwarded += 1
+        if self.forwarded > MAX_FORWARDED_MESSAGES:
+            self.logger.warning("%s: over %d log messages; no more are shown", self.label, MAX_FORWARDED_MESSAGES)
+            return
+        level = _STATUS_LEVELS[status] if 0 <= status < len(_STATUS_LEVELS) else logging.WARNING
+        self.logger.log(level, "%s: [%s] %s", self.label, category or "-", text)
 
     def last(self) -> str:
-        """The first message since the last call: the one the failing call logged."""
+        """The message the failing call logged: the first since the last call of the worst status."""
         if not self._unread:
             return ""
-        text = self.recent[-self._unread]
+        unread = list(self.recent)[-self._unread :]
         self._unread = 0
-        return text
+        worst = max(status for status, _ in unread)
+        return next(text for status, text in unread if status == worst)
+
+
+# FMI 2 loggers are variadic; FMPy's proxy formats the message in C and calls one process-wide
+# Python logger (the last one registered). So every instance gets that same logger, kept alive
+# here, and its componentEnvironment: a number that routes the message to the instance's _Messages.
+_ROUTES: weakref.WeakValueDictionary[int, _Messages] = weakref.WeakValueDictionary()
+_ROUTE_IDS = itertools.count(1)
+
+
+def _route(messages: _Messages) -> int:
+    key = next(_ROUTE_IDS)
+    _ROUTES[key] = messages
+    return key
+
+
+def _fmi2_logger(env: int | None, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+    messages = _ROUTES.get(env or 0)
+    if messages is not None:
+        messages.add(status, _decode(category), _decode(message))
+
+
+_FMI2_LOGGER = fmpy.fmi2.fmi2CallbackLoggerTYPE(_fmi2_logger)
 
 
 def _decode(value: bytes | None) -> str:
@@ -377,6 +500,11 @@ class FmuFile:
         except Exception as err:
             msg = f"{path}: cannot extract ({err})"
             raise FmuError(msg) from None
+        problem = binary_problem(self.info, self._dir)
+        if problem is not None:
+            shutil.rmtree(self._dir, ignore_errors=True)
+            msg = f"{path}: {problem}"
+            raise FmuError(msg)
         self._instances: list[Stepper] = []
 
     def __enter__(self) -> Self:
@@ -427,7 +555,7 @@ class FmuFile:
                 names an unknown or non-settable variable, or initialisation fails.
         """
         label = f"{self.label} instance {name!r}"
-        messages = _Messages(label)
+        messages = _Messages(label, name)
         kwargs = {
             "guid": self.info.guid,
             "unzipDirectory": str(self._dir),
@@ -650,11 +778,9 @@ class _Fmi2(_Base):
         fmu = self._fmu
         messages = self._messages
 
-        def logger(env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
-            messages.add(status, _decode(category), _decode(message))
-
         callbacks = fmpy.fmi2.fmi2CallbackFunctions()
-        callbacks.logger = fmpy.fmi2.fmi2CallbackLoggerTYPE(logger)
+        callbacks.logger = _FMI2_LOGGER
+        callbacks.componentEnvironment = _route(messages)
         callbacks.allocateMemory = fmpy.fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
         callbacks.freeMemory = fmpy.fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
         from fmpy.logging import addLoggerProxy
@@ -662,7 +788,7 @@ class _Fmi2(_Base):
         addLoggerProxy(ctypes.byref(callbacks))
         self._callbacks = callbacks  # keep the ctypes callbacks alive
         try:
-            fmu.instantiate(callbacks=callbacks, loggingOn=False)
+            fmu.instantiate(callbacks=callbacks, loggingOn=messages.logging_on)
         except Exception:
             detail = messages.last()
             msg = f"{self.name}: fmi2Instantiate returned NULL" + (f" ({detail})" if detail else "")
@@ -805,7 +931,7 @@ class _Fmi3(_Base):
             messages.add(status, _decode(category), _decode(message))
 
         try:
-            fmu.instantiate(loggingOn=False, logMessage=log_message)
+            fmu.instantiate(loggingOn=messages.logging_on, logMessage=log_message)
         except Exception:
             detail = messages.last()
             msg = f"{self.name}: {self._INSTANTIATE} returned NULL" + (f" ({detail})" if detail else "")

@@ -6,7 +6,8 @@ parent writes the inputs into `Stepper.inputs`, `step_next` sends one byte throu
 steps every instance and answers with one byte, and the parent reads `Stepper.outputs`. A child
 that dies (a segfault, an abort) or does not answer within `timeout_s` (a hang) raises `FmuError`
 naming the FMU, the sim time and what happened; the child is killed. An FMU that reports an error
-status is reported as in-process (`twin.cosim.fmu`).
+status is reported as in-process (`twin.cosim.fmu`). The FMU's own log messages are sent to the
+parent ahead of each reply and logged there (so they reach the console and `/rosout` as in-process).
 
 The group has the interface of `twin.cosim.fmu.StepGroup` that the Python step loops use
 (`step_next`, `raise_failure`, `index`, `compiled`, `shim`), so the drivetrain steps it unchanged.
@@ -37,6 +38,7 @@ _log = logging.getLogger(__name__)
 _STEP = b"s"
 _OK = b"k"
 _CLOSE = b"c"
+_LOG = b"\x01"  # a log record of the FMU, forwarded before the reply: level, logger name, message
 _D = ctypes.sizeof(ctypes.c_double)
 _START_TIMEOUT_S = 120.0  # the child imports fmpy and twin.cosim, and loads the FMU
 
@@ -142,6 +144,7 @@ class IsolatedGroup:
             "inputs": list(inputs),
             "outputs": list(outputs),
             "start": dict(start),
+            "fmu_log_level": logging.getLogger("twin.node.fmu").getEffectiveLevel(),
         }
         self._process: Any = context.Process(target=_child_main, args=(spec, child_conn), daemon=True)
         try:
@@ -149,7 +152,7 @@ class IsolatedGroup:
             child_conn.close()
             if not self._conn.poll(_START_TIMEOUT_S):
                 self._fail_hard("did not start", 0.0)
-            reply = self._receive(0.0, "starting")
+            reply = self._reply(0.0, "starting", _START_TIMEOUT_S)
             if reply != _OK:
                 self.close()
                 raise FmuError(reply.decode("utf-8", "replace"))
@@ -191,7 +194,7 @@ class IsolatedGroup:
             self._fail_hard(_signal_name(self._process.exitcode), t_s)
         if not self._conn.poll(self._timeout_s):
             self._fail_hard(f"did not finish a step within {self._timeout_s:g} s (hung)", t_s)
-        reply = self._receive(t_s, "stepping")
+        reply = self._reply(t_s, "stepping", self._timeout_s)
         if reply == _OK:
             self._index += 1
             return -1
@@ -212,6 +215,17 @@ class IsolatedGroup:
     def raise_failure(self, failed: int) -> None:
         """Raise the FmuError the child reported for instance `failed`."""
         raise FmuError(self._failure or f"{self.steppers[failed].name} failed at t = {self._index * self._h:.6f} s")
+
+    def _reply(self, t_s: float, doing: str, timeout_s: float) -> bytes:
+        """Receive the child's reply, logging the FMU's log records it sends first."""
+        reply = self._receive(t_s, doing)
+        while reply[:1] == _LOG:
+            level, name, text = reply[1:].decode("utf-8", "replace").split("\0", 2)
+            logging.getLogger(name).log(int(level), "%s", text)
+            if not self._conn.poll(timeout_s):
+                self._fail_hard(f"did not finish a step within {timeout_s:g} s (hung)", t_s, doing)
+            reply = self._receive(t_s, doing)
+        return reply
 
     def _receive(self, t_s: float, doing: str) -> bytes:
         try:
@@ -242,9 +256,25 @@ class IsolatedGroup:
         self._conn.close()
 
 
+class _Forward(logging.Handler):
+    """In the child: sends each FMU log record to the parent, ahead of the reply it belongs to."""
+
+    def __init__(self, conn: multiprocessing.connection.Connection) -> None:
+        super().__init__()
+        self._conn = conn
+
+    def emit(self, record: logging.LogRecord) -> None:
+        with contextlib.suppress(OSError):  # the parent is gone: the step loop ends on its own
+            self._conn.send_bytes(_LOG + f"{record.levelno}\0{record.name}\0{record.getMessage()}".encode())
+
+
 def _child_main(spec: dict[str, Any], conn: multiprocessing.connection.Connection) -> None:
     """The child: load the FMU, answer each step request, exit on close or when the parent goes away."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and closes the child
+    fmu_log = logging.getLogger("twin.node.fmu")
+    fmu_log.setLevel(spec["fmu_log_level"])
+    fmu_log.propagate = False
+    fmu_log.addHandler(_Forward(conn))
     names, n = spec["names"], len(spec["names"])
     n_in, n_out = max(1, len(spec["inputs"])), max(1, len(spec["outputs"]))
     with open(spec["map_path"], "r+b") as f:

@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from twin.core.errors import ConfigError, TwinError
+from twin.core.errors import ConfigError, FmuError, TwinError
 from twin.sim.scenario import BehaviorTreeMission, Scenario
 
 __all__ = ["check_inputs", "check_scenario"]
@@ -157,6 +157,9 @@ def _check_files(scenario: Scenario, path: Path) -> None:
         if not locations:
             raise _refuse(path, "mission.locations", f"{mission.locations}: holds no locations; add name: [x, y, yaw]")
     drive = scenario.drive
+    fmu_file = getattr(drive, "fmu_file", None)
+    if isinstance(fmu_file, Path):
+        _check_fmu_file(fmu_file, path)
     mapping = getattr(drive, "mapping", None)
     if isinstance(mapping, Path):
         resolved = getattr(drive, "resolved_mapping", None)
@@ -165,6 +168,19 @@ def _check_files(scenario: Scenario, path: Path) -> None:
                 resolved()
             except ConfigError as err:
                 raise err.with_context(before=f"{path}: drive.mapping: ") from None
+
+
+def _check_fmu_file(fmu_file: Path, path: Path) -> None:
+    """Refuse an FMU file whose description does not read or whose binary does not load here."""
+    from twin.cosim.fmu import binary_problem, read_fmu_info
+
+    try:
+        problem = binary_problem(read_fmu_info(fmu_file))
+    except FmuError as err:
+        raise err.with_context(before=f"{path}: drive.fmu_file: ") from None
+    if problem is not None:
+        msg = f"{path}: drive.fmu_file: {fmu_file}: {problem}"
+        raise FmuError(msg)
 
 
 def check_inputs(scenario: Scenario, path: Path) -> None:

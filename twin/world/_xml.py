@@ -20,6 +20,8 @@ from twin.core.geometry import Mat4, Pose, matrix_from_pose
 
 __all__ = ["XmlNode", "parse_file", "parse_string"]
 
+_EYE4 = np.eye(4)  # copied: faster than np.eye for the many small matrices of a big world
+
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class XmlNode:
@@ -120,7 +122,7 @@ class XmlNode:
             WorldError: If a value is not a number or the count is wrong.
         """
         try:
-            values = tuple(float(v) for v in self.text.split())
+            values = tuple(map(float, self.text.split()))
         except ValueError:
             msg = f"{self.where}: <{self.tag}> must be numbers, got {self.text!r}"
             raise WorldError(msg) from None
@@ -145,16 +147,23 @@ def _escape(text: str) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
 
 
-def _convert(elem: etree._Element, file: Path | None, line_offset: int = 0) -> XmlNode:
-    children = tuple(_convert(child, file, line_offset) for child in elem if isinstance(child.tag, str))
-    return XmlNode(
-        tag=str(elem.tag),
-        attrib=tuple((str(k), str(v)) for k, v in elem.attrib.items()),
-        text=(elem.text or "").strip(),
-        children=children,
-        file=file,
-        line=(elem.sourceline or 0) + line_offset,
-    )
+def _convert(root: etree._Element, file: Path | None, line_offset: int = 0) -> XmlNode:
+    # The hot part of loading a big world: children are filtered in lxml (elements only: no
+    # comments, processing instructions or entities), lists are built by comprehension.
+    only_elements = etree.Element
+
+    def convert(elem: etree._Element) -> XmlNode:
+        attrib = elem.attrib
+        return XmlNode(
+            tag=elem.tag,
+            attrib=tuple(attrib.items()) if attrib else (),
+            text=(elem.text or "").strip(),
+            children=tuple([convert(child) for child in elem.iterchildren(only_elements)]),
+            file=file,
+            line=(elem.sourceline or 0) + line_offset,
+        )
+
+    return convert(root)
 
 
 def _parser() -> etree.XMLParser:
@@ -235,7 +244,7 @@ def parse_pose(node: XmlNode | None) -> Mat4:
         WorldError: If the numbers are malformed.
     """
     if node is None or not node.text:
-        return np.eye(4)
+        return _EYE4.copy()
     values = node.as_floats()
     if not all(math.isfinite(v) for v in values):
         msg = f"{node.where}: <pose> has a non-finite number: {node.text!r}"
@@ -262,7 +271,7 @@ def _matrix_from_quat(xyz: tuple[float, ...], q: tuple[float, ...]) -> Mat4:
     qx, qy, qz, qw = q
     n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) or 1.0
     qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
-    out = np.eye(4)
+    out = _EYE4.copy()
     out[:3, :3] = [
         [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
         [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],

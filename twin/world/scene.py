@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -45,7 +45,7 @@ from twin.world.types import (
     geometry_kind,
 )
 
-__all__ = ["CollisionMonitor", "Contact", "RayCaster", "RobotBody", "Scene", "build_scene"]
+__all__ = ["CollisionMonitor", "Contact", "RayCaster", "RobotBody", "Scene", "build_scene", "obstacle_extent"]
 
 _log = logging.getLogger(__name__)
 
@@ -723,7 +723,15 @@ class CollisionMonitor:
     After each clearance query the monitor knows a distance `d` the robot can move before it may
     touch anything; while the motion since then (translation plus the body radius times the
     rotation) stays below `d`, `check` returns no contacts after a few float operations.
+
+    A robot pressed against a wall asks about the same refused pose step after step (the drive
+    stays where it was and tries the same step again). The scene does not move, so the answers of
+    the last few queried poses are kept and a pose asked again is answered from them: the same
+    contacts and the same free distance as a new query, without FCL.
     """
+
+    RECENT_POSES = 8
+    """How many queried poses' answers are kept."""
 
     def __init__(self, scene: Scene, body: RobotBody, *, margin_m: float = 0.005) -> None:
         self.scene = scene
@@ -733,8 +741,11 @@ class CollisionMonitor:
         self._y = math.nan
         self._yaw = 0.0
         self._free_m = -1.0
+        self._recent: dict[tuple[float, float, float], tuple[tuple[Contact, ...], float]] = {}
         self.queries = 0
         """How many FCL queries were made (for benchmarks)."""
+        self.repeats = 0
+        """How many checks were answered from the poses asked before."""
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may still move from this pose with no contact possible (0 if unknown)."""
@@ -747,6 +758,22 @@ class CollisionMonitor:
         moved = math.hypot(x_m - self._x, y_m - self._y) + self.body.radius_m * abs(yaw_rad - self._yaw)
         if moved < self._free_m:
             return ()
+        pose = (x_m, y_m, yaw_rad)
+        known = self._recent.get(pose)
+        if known is not None:
+            self.repeats += 1
+            self._x, self._y, self._yaw = pose
+            contacts, self._free_m = known
+            return contacts
+        contacts = self._query(x_m, y_m, yaw_rad)
+        recent = self._recent
+        if len(recent) >= self.RECENT_POSES:
+            del recent[next(iter(recent))]  # the oldest
+        recent[pose] = (contacts, self._free_m)
+        return contacts
+
+    def _query(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
+        """Ask FCL about this pose; set the free distance from it."""
         self.queries += 1
         scene, body = self.scene, self.body
         clearance = scene.clearance(body, x_m, y_m, yaw_rad)  # the bounding cylinder: one cheap query
@@ -767,6 +794,57 @@ class CollisionMonitor:
         return scene.collides(body, x_m, y_m, yaw_rad)
 
 
+def _placed_obstacles(
+    world: World, exclude_models: Iterable[str], floor_height_m: float, cache: MeshCache
+) -> Iterator[tuple[Collision, trimesh.Trimesh, F64]]:
+    """Yield (collision, mesh in its own frame, its world-frame vertices) of every obstacle of `world`.
+
+    Planes, shapes with no mesh and floor-level shapes (top at or below `floor_height_m`) are left out.
+    """
+    excluded = set(exclude_models)
+    skipped_floor = 0
+    for model in world.all_models():
+        if excluded and (
+            model.name in excluded
+            or model.scoped_name in excluded
+            or any(model.scoped_name.startswith(f"{name}::") for name in excluded)
+        ):
+            continue
+        for link in model.links:
+            for collision in link.collisions:
+                if isinstance(collision.geometry, Plane):
+                    continue
+                local = geometry_mesh(collision.geometry, cache, collision.where)
+                if local is None:
+                    continue
+                T = np.asarray(collision.T_world)
+                vertices = local.vertices.view(np.ndarray) @ T[:3, :3].T + T[:3, 3]
+                if vertices[:, 2].max() <= floor_height_m:
+                    skipped_floor += 1
+                    continue
+                yield collision, local, vertices
+    if skipped_floor:
+        _log.debug("%d floor-level collisions left out of the scene", skipped_floor)
+
+
+def obstacle_extent(
+    world: World, *, exclude_models: Iterable[str] = (), floor_height_m: float = 0.01
+) -> tuple[int, tuple[tuple[float, float, float], tuple[float, float, float]] | None]:
+    """Return how many obstacles `build_scene` would make of `world`, and their bounds (`Scene.bounds`).
+
+    Cheap: no collision objects are built, so `twin world info` on a big world need not build them.
+
+    Raises:
+        WorldError: If a collision mesh cannot be read.
+    """
+    placed = [vertices for _, _, vertices in _placed_obstacles(world, exclude_models, floor_height_m, MeshCache())]
+    if not placed:
+        return 0, None
+    every = np.concatenate(placed)
+    lo, hi = every.min(axis=0), every.max(axis=0)
+    return len(placed), ((float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]), float(hi[2])))
+
+
 def build_scene(world: World, *, exclude_models: Iterable[str] = (), floor_height_m: float = 0.01) -> Scene:
     """Build the Scene of a world.
 
@@ -780,42 +858,20 @@ def build_scene(world: World, *, exclude_models: Iterable[str] = (), floor_heigh
     Raises:
         WorldError: If a collision mesh cannot be read.
     """
-    excluded = set(exclude_models)
-    cache = MeshCache()
     obstacles: list[_Obstacle] = []
-    skipped_floor = 0
-    for model in world.all_models():
-        if (
-            model.name in excluded
-            or model.scoped_name in excluded
-            or any(model.scoped_name.startswith(f"{name}::") for name in excluded)
-        ):
+    for collision, local, vertices in _placed_obstacles(world, exclude_models, floor_height_m, MeshCache()):
+        geometry = _fcl_geometry(collision.geometry, local)
+        if geometry is None:
             continue
-        for link in model.links:
-            for collision in link.collisions:
-                if isinstance(collision.geometry, Plane):
-                    continue
-                local = geometry_mesh(collision.geometry, cache, collision.where)
-                if local is None:
-                    continue
-                mesh = local.copy()
-                mesh.apply_transform(np.asarray(collision.T_world))
-                if mesh.bounds[1, 2] <= floor_height_m:
-                    skipped_floor += 1
-                    continue
-                geometry = _fcl_geometry(collision.geometry, local)
-                if geometry is None:
-                    continue
-                obstacles.append(
-                    _Obstacle(
-                        collision=collision,
-                        mesh=mesh,
-                        fcl_object=fcl.CollisionObject(geometry, _fcl_transform(collision.T_world)),
-                        fcl_geometry=geometry,
-                    )
-                )
-    if skipped_floor:
-        _log.debug("%d floor-level collisions left out of the scene", skipped_floor)
+        mesh = trimesh.Trimesh(vertices=vertices, faces=local.faces, process=False)
+        obstacles.append(
+            _Obstacle(
+                collision=collision,
+                mesh=mesh,
+                fcl_object=fcl.CollisionObject(geometry, _fcl_transform(collision.T_world)),
+                fcl_geometry=geometry,
+            )
+        )
     _log.debug(
         "scene of %s: %d obstacles (%s)",
         world.name,

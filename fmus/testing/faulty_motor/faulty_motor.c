@@ -2,7 +2,9 @@
  * the tests of how twin survives a vendor FMU that misbehaves.
  *
  * fault_mode: 0 none, 1 segfault (a write through a NULL pointer), 2 abort(), 3 hang (doStep never
- * returns), 4 NaN (doStep returns OK with wheel_speed, current and motor_torque NaN).
+ * returns), 4 NaN (doStep returns OK with wheel_speed, current and motor_torque NaN), 5 warn (the
+ * motor, but every doStep that reaches a whole second of sim time logs a warning through the FMU's
+ * logger and returns Warning).
  * The fault happens in the first doStep that starts at or after fault_time (s); before that the
  * model is the motor itself, to the bit.
  */
@@ -17,7 +19,7 @@
 #include "dc_motor.c"
 #undef model_do_step
 
-enum { FAULT_NONE = 0, FAULT_SEGFAULT = 1, FAULT_ABORT = 2, FAULT_HANG = 3, FAULT_NAN = 4 };
+enum { FAULT_NONE = 0, FAULT_SEGFAULT = 1, FAULT_ABORT = 2, FAULT_HANG = 3, FAULT_NAN = 4, FAULT_WARN = 5 };
 
 int model_do_step(void *p, double t_s, double h_s, char *msg);
 
@@ -42,9 +44,17 @@ int model_do_step(void *p, double t_s, double h_s, char *msg) {
         v[VR_current] = NAN;
         v[VR_motor_torque] = NAN;
         return MODEL_OK;
+    case FAULT_WARN: {
+        const int code = motor_do_step(p, t_s, h_s, msg);
+        const double second = floor(t_s + h_s + 1e-9);
+        if (code != MODEL_OK || second <= floor(t_s + 1e-9)) return code;
+        snprintf(msg, MODEL_MSG_LEN, "winding temperature check at t = %.0f s: current %.3f A", second,
+                 v[VR_current]);
+        return MODEL_WARNING;
+    }
     default:
         break;
     }
-    snprintf(msg, MODEL_MSG_LEN, "fault_mode %d is not one of 0 to 4", mode);
+    snprintf(msg, MODEL_MSG_LEN, "fault_mode %d is not one of 0 to 5", mode);
     return MODEL_ERROR;
 }

@@ -8,8 +8,9 @@ import pytest
 import trimesh
 
 from twin.world import load_world
+from twin.world.meshes import MeshCache, geometry_mesh
 from twin.world.robot_model import load_robot
-from twin.world.scene import CollisionMonitor, RayCaster, Scene, build_scene
+from twin.world.scene import CollisionMonitor, RayCaster, Scene, build_scene, obstacle_extent
 
 REPO = Path(__file__).resolve().parents[3]
 FIXTURES = REPO.parent / "shared" / "fixtures"
@@ -198,3 +199,85 @@ def test_grazing_inside_the_margin_queries_a_few_times_not_every_step(tmp_path: 
     for k in range(1, 1001):  # 1 m in 1 mm steps
         assert monitor.check(x, -1.0 + 0.001 * k, 0.0) == ()
     assert monitor.queries - queries < 1000  # not two queries per step, as a zero free distance would cost
+
+
+def test_a_robot_pressed_against_a_wall_is_answered_without_new_queries(tmp_path: Path) -> None:
+    scene, monitor = _robot_scene(tmp_path)
+    # Approach the wall in 0.5 mm steps, then try the same refused step again and again, as a drive
+    # pressed against it does; now and then also a refused turn in place (two poses in turn).
+    track: list[tuple[float, float, float]] = [(0.8 + 0.0005 * k, 0.0, 0.0) for k in range(200)]
+    refused_move, refused_turn = (0.8805, 0.0, 0.0), (0.8795, 0.0, 0.2)
+    for k in range(3000):
+        track.append(refused_move)
+        if k % 3 == 0:
+            track.append(refused_turn)
+    track += [(0.8 - 0.001 * k, 0.0, 0.0) for k in range(50)]  # backing off
+    answers = []
+    queries_at_wall = 0
+    for k, pose in enumerate(track):
+        answers.append(monitor.check(*pose))
+        if k == 200:
+            queries_at_wall = monitor.queries
+    assert scene.collides(monitor.body, *refused_move)  # the repeated poses are in contact
+    assert scene.collides(monitor.body, *refused_turn)
+    assert monitor.queries - queries_at_wall <= 8  # the 4000 repeats cost no FCL queries
+    assert monitor.repeats >= 3900
+    # The same answers as a monitor asked about each pose once (no memory of earlier poses).
+    for pose, answer in zip(track[195:215] + track[-60:], answers[195:215] + answers[-60:], strict=True):
+        fresh = CollisionMonitor(scene, monitor.body)
+        assert fresh.check(*pose) == answer
+    for pose, answer in zip(track[200:], answers[200:], strict=True):
+        if pose in (refused_move, refused_turn):
+            assert answer == scene.collides(monitor.body, *pose)
+
+
+def test_the_monitor_answers_a_repeated_pose_with_the_same_free_distance(tmp_path: Path) -> None:
+    _, monitor = _robot_scene(tmp_path)
+    near = (0.95 - 0.073 - 0.003, 0.0, 0.0)  # 3 mm from the wall: inside the margin
+    assert monitor.check(*near) == ()
+    free = monitor.free_m(*near)
+    assert monitor.check(0.5, 0.0, 0.0) == ()  # far away: a new query
+    assert monitor.check(*near) == ()
+    assert monitor.free_m(*near) == free
+
+
+@pytest.mark.parametrize("name", ["turtlebot3_world.world", "turtlebot3_house.world", "empty_world.world"])
+def test_obstacle_extent_is_what_the_scene_holds(name: str) -> None:
+    world = load_world(
+        FIXTURES / "gazebo_classic" / "worlds" / name,
+        model_path=[FIXTURES / "gazebo_classic" / "models"],
+        missing_includes="warn",
+    )
+    scene = build_scene(world)
+    count, bounds = obstacle_extent(world)
+    assert count == len(scene.obstacles)
+    if scene.bounds is None:
+        assert bounds is None
+        return
+    assert bounds is not None
+    for mine, theirs in zip(bounds, scene.bounds, strict=True):
+        assert mine == pytest.approx(theirs, abs=1e-12)
+    # Each obstacle's mesh is its collision's own mesh, placed in the world (as trimesh places it).
+    cache = MeshCache()
+    for obstacle, mesh in zip(scene.obstacles, scene.meshes(), strict=True):
+        expected = geometry_mesh(obstacle.geometry, cache, obstacle.where)
+        assert expected is not None
+        expected = expected.copy()
+        expected.apply_transform(np.asarray(obstacle.T_world))
+        assert np.array_equal(mesh.faces, expected.faces)
+        assert np.allclose(mesh.vertices, expected.vertices, rtol=0.0, atol=1e-12)
+
+
+def test_obstacle_extent_leaves_out_planes_floor_slabs_and_excluded_models(tmp_path: Path) -> None:
+    body = (
+        _static("ground", "0 0 0 0 0 0", "<plane><normal>0 0 1</normal><size>10 10</size></plane>")
+        + _static("slab", "0 0 0.004 0 0 0", "<box><size>4 4 0.008</size></box>")
+        + _static("wall", "1 0 0.5 0 0 0.3", "<box><size>0.1 4 1</size></box>")
+        + _static("post", "-2 1 0.25 0 0 0", "<cylinder><radius>0.1</radius><length>0.5</length></cylinder>")
+    )
+    (tmp_path / "w.world").write_text(f"<sdf version='1.7'><world name='w'>{body}</world></sdf>")
+    world = load_world(tmp_path / "w.world")
+    count, bounds = obstacle_extent(world)
+    assert count == len(build_scene(world).obstacles) == 2
+    assert bounds == build_scene(world).bounds
+    assert obstacle_extent(world, exclude_models=["wall"])[0] == 1
