@@ -75,7 +75,11 @@ def test_the_queue_tree_shuffles_by_seed_and_ends_in_failure_by_design(tmp_path:
     orders = []
     for seed in (1, 1, 2):
         scenario = tmp_path / "queue.yaml"
-        scenario.write_text(f"name: queue\nseed: {seed}\nmission: {{tree: {REPO / 'trees' / 'nav_tree_queue.xml'}}}\n")
+        # the subject is the tree's seeded shuffle: steer on /odom, not on AMCL's estimate
+        scenario.write_text(
+            f"name: queue\nseed: {seed}\nlocalization: {{type: none}}\n"
+            f"mission: {{tree: {REPO / 'trees' / 'nav_tree_queue.xml'}}}\n"
+        )
         bag = tmp_path / f"q{len(orders)}"
         result = run_twin("simulate", str(scenario), "--out", str(bag))
         assert result.returncode == 1, result.stderr  # a failed mission exits 1 (CI tells it from a good run)
