@@ -37,8 +37,12 @@ int twin_amcl_likelihood(const double *poses, long n, const double *bx, const do
         for (long j = 0; j < n; ++j) {
             double hx = poses[3 * j] + cs[j] * ex - sn[j] * ey;
             double hy = poses[3 * j + 1] + sn[j] * ex + cs[j] * ey;
-            long col = (long)floor((hx - ox) / res + 0.5) + pad;
-            long row = (long)floor((hy - oy) / res + 0.5) + pad;
+            double fc = (hx - ox) / res + 0.5, fr = (hy - oy) / res + 0.5;
+            long col = (long)fc, row = (long)fr;   /* floor without a libm call: truncate, step down below 0 */
+            col -= (double)col > fc;
+            row -= (double)row > fr;
+            col += pad;
+            row += pad;
             if (col < 0) col = 0;
             if (col > cols - 1) col = cols - 1;
             if (row < 0) row = 0;
