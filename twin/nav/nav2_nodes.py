@@ -86,6 +86,7 @@ class Nav2Config:
 
     controller_frequency_hz: float = 10.0
     failure_tolerance_s: float = 0.3
+    velocity_thresholds: tuple[float, float] = (0.001, 0.001)
     controllers: Mapping[str, tuple[str, Mapping[str, object]]] = field(default_factory=dict)
     goal_checkers: Mapping[str, SimpleGoalChecker] = field(default_factory=dict)
     progress_radius_m: float = 0.5
@@ -141,11 +142,13 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     used: dict[str, list[str]] = {"controller_server": [], "planner_server": [], "bt_navigator": []}
     cu = used["controller_server"]
     plugins = _names(cs, "controller_plugins", ("FollowPath",), where)
+    frequency = _num(cs, "controller_frequency", 20.0, where)
     controllers: dict[str, tuple[str, Mapping[str, object]]] = {}
     for name in plugins:
         section = _sub(cs, name)
         plugin = str(section.get("plugin", "dwb_core::DWBLocalPlanner"))
-        controller_for_plugin(plugin, section, where=f"{where}.{name}.plugin")  # refuses unknown plugins now
+        # refuses unknown plugins, critics and bad values now, before the run
+        controller_for_plugin(plugin, section, where=f"{where}.{name}", controller_frequency_hz=frequency)
         controllers[name] = (plugin, section)
         cu.extend(f"{name}.{k}" for k in section)
     checker_names = _names(cs, "goal_checker_plugins", (), where) or (
@@ -164,6 +167,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     progress = _sub(cs, progress_name)
     cu.extend(f"{progress_name}.{k}" for k in progress)
     cu += ["controller_frequency", "failure_tolerance", "controller_plugins", "goal_checker_plugins"]
+    cu += ["min_x_velocity_threshold", "min_theta_velocity_threshold"]
     cu += ["goal_checker_plugin", "progress_checker_plugin"]
     ps = params.node("planner_server")
     pwhere = f"{src}: planner_server"
@@ -215,8 +219,12 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         "cycle_frequency", "simulate_ahead_time", "max_rotational_vel", "min_rotational_vel", "rotational_acc_lim",
     ]  # fmt: skip
     return Nav2Config(
-        controller_frequency_hz=_num(cs, "controller_frequency", 20.0, where),
+        controller_frequency_hz=frequency,
         failure_tolerance_s=_num(cs, "failure_tolerance", 0.0, where),
+        velocity_thresholds=(
+            _num(cs, "min_x_velocity_threshold", 0.0001, where),
+            _num(cs, "min_theta_velocity_threshold", 0.0001, where),
+        ),
         controllers=controllers,
         goal_checkers=checkers,
         progress_radius_m=_num(progress, "required_movement_radius", 0.5, f"{where}.{progress_name}"),
@@ -301,7 +309,12 @@ class Nav2Servers:
         self.controllers: dict[str, Controller] = {}
         self._tasks: dict[str, FollowPathTask] = {}
         for name, (plugin, section) in config.controllers.items():
-            controller = controller_for_plugin(plugin, section)
+            controller = controller_for_plugin(
+                plugin,
+                section,
+                where=f"controller_server.{name}",
+                controller_frequency_hz=config.controller_frequency_hz,
+            )
             self.controllers[name] = controller
             checker = next(iter(config.goal_checkers.values()), SimpleGoalChecker())
             progress = SimpleProgressChecker(
@@ -309,7 +322,11 @@ class Nav2Servers:
                 movement_time_allowance_s=config.progress_allowance_s,
             )
             self._tasks[name] = FollowPathTask(
-                controller, checker, progress, failure_tolerance_s=config.failure_tolerance_s
+                controller,
+                checker,
+                progress,
+                failure_tolerance_s=config.failure_tolerance_s,
+                velocity_thresholds=config.velocity_thresholds,
             )
         self._goals: dict[int, _Goal] = {}
         self._next_id = 0
