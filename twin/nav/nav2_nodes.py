@@ -335,6 +335,7 @@ class Nav2Servers:
         self._behavior: int | None = None
         self._behavior_impl: Any = None
         self.recoveries = 0
+        self._generation = 0
         #: Called with (t_ns, path) for every computed path (planner_server publishes `/plan`).
         self.on_plan: Callable[[int, F64], None] | None = None
         #: The last failure any server reported (the navigator's failure reason).
@@ -342,8 +343,14 @@ class Nav2Servers:
 
     # -- NavigationServices ---------------------------------------------------------------------
 
+    @property
+    def generation(self) -> int:
+        """Changes whenever a goal is sent, updated, canceled or finished (what a leaf's poll can see)."""
+        return self._generation
+
     def send_goal(self, server: str, request: Mapping[str, Any]) -> int:
         """Accept a goal on an action server (see `twin.nav.bt_leaves.NavigationServices`)."""
+        self._generation += 1
         self._next_id += 1
         goal = _Goal(server=server, request=dict(request))
         self._goals[self._next_id] = goal
@@ -374,6 +381,7 @@ class Nav2Servers:
         goal = self._goals.get(goal_id)
         if goal is None or goal.state is not ActionState.RUNNING:
             return
+        self._generation += 1
         goal.request = dict(request)
         if goal_id == self._follow and self._follow_task is not None:
             self._follow_task.update_plan(np.asarray(request["path"], dtype=np.float64))
@@ -390,6 +398,7 @@ class Nav2Servers:
         goal = self._goals.get(goal_id)
         if goal is None or goal.state is not ActionState.RUNNING:
             return
+        self._generation += 1
         goal.state = ActionState.FAILED
         goal.reason = "canceled"
         if goal_id == self._follow:
@@ -571,6 +580,7 @@ class Nav2Servers:
         return None if goal.server == "wait" else (0.0, 0.0)
 
     def _finish(self, goal: _Goal, state: ActionState, *, reason: str = "", **result: Any) -> None:
+        self._generation += 1
         goal.state = state
         goal.result = result
         goal.reason = reason
@@ -636,8 +646,9 @@ class BtNavigator:
         """One bt_navigator loop iteration (only while a goal runs); True while the goal still runs."""
         if not self.active:
             return False
-        status = self.tree.tick_once()
-        if status is NodeStatus.RUNNING:
+        servers = self.servers
+        status = self.tree.tick_unless_settled(lambda: servers.generation)
+        if status is None or status is NodeStatus.RUNNING:  # None: the tick would have repeated the last one
             return True
         self.tree.halt_tree()
         self.active = False
