@@ -30,6 +30,7 @@ __all__ = [
     "JointStateEncoder",
     "LogEncoder",
     "MotorStateEncoder",
+    "NavigationFeedbackEncoder",
     "OccupancyGridEncoder",
     "OdometryEncoder",
     "ParticleCloudEncoder",
@@ -631,39 +632,94 @@ class PathEncoder:
     def __init__(self, frame_id: str = "map") -> None:
         """Paths in `frame_id`."""
         self.frame_id = frame_id
-        # Every PoseStamped after the first starts 8-aligned: stamp, frame id, padding, 7 doubles.
+        # Every PoseStamped after the first starts 8-aligned: stamp, frame id, padding, 7 doubles. A
+        # block is a whole number of doubles: the header's bytes are written as doubles (a view).
         frame = string_bytes(frame_id)
         frame += bytes((-(8 + len(frame))) % 8)
-        self._frame = np.frombuffer(frame, dtype=np.uint8)
-        self._block = np.dtype(
-            {
-                "names": ["sec", "nanosec", "frame", "pose"],
-                "formats": ["<i4", "<u4", ("u1", (len(frame),)), ("<f8", (7,))],
-                "offsets": [0, 4, 8, 8 + len(frame)],
-                "itemsize": 8 + len(frame) + 56,
-            }
-        )
+        self._frame = frame
+        self._head = (8 + len(frame)) // 8  # doubles of header in a block
 
     def encode(self, stamp_ns: int, poses: ArrayLike) -> bytes:
         """Encode poses given as `(N, 3)` x, y, yaw or `(N, 7)` x, y, z, qx, qy, qz, qw."""
-        arr = _planar_poses(poses)
+        arr = np.asarray(poses, dtype=np.float64)
+        n = arr.shape[0] if arr.ndim == 2 else 0
+        planar = arr.ndim == 2 and arr.shape[1] == 3
+        if not planar:
+            arr = _planar_poses(arr)
         w = CdrWriter()
         w.header(stamp_ns, self.frame_id)
-        w.count(arr.shape[0])
-        if arr.shape[0] == 0:
+        w.count(n)
+        if n == 0:
             return w.getvalue()
         # The first pose starts 4-aligned and may need padding that the others do not.
         w.header(stamp_ns, self.frame_id)
-        w.pack("d", *arr[0])
-        if arr.shape[0] > 1:
+        first = arr[0]
+        if planar:
+            w.pack("d", first[0], first[1], 0.0, 0.0, 0.0, math.sin(0.5 * first[2]), math.cos(0.5 * first[2]))
+        else:
+            w.pack("d", *first)
+        if n > 1:
             sec, nanosec = divmod(stamp_ns, _NS)
-            blocks = np.empty(arr.shape[0] - 1, dtype=self._block)
-            blocks["sec"] = sec
-            blocks["nanosec"] = nanosec
-            blocks["frame"] = self._frame
-            blocks["pose"] = arr[1:]
+            head = np.frombuffer(struct.pack("<iI", sec, nanosec) + self._frame, dtype=_F64)
+            h = self._head
+            blocks = np.zeros((n - 1, h + 7))
+            blocks[:, :h] = head
+            if planar:
+                blocks[:, h : h + 2] = arr[1:, :2]
+                half = 0.5 * arr[1:, 2]
+                blocks[:, h + 5] = np.sin(half)
+                blocks[:, h + 6] = np.cos(half)
+            else:
+                blocks[:, h:] = arr[1:]
             w.raw(blocks.tobytes(), align=8)
         return w.getvalue()
+
+
+class NavigationFeedbackEncoder:
+    """`twin_msgs/msg/NavigationFeedback` (`/navigate_to_pose/feedback`): NavigateToPose's feedback fields."""
+
+    msgtype: ClassVar[str] = "twin_msgs/msg/NavigationFeedback"
+
+    def __init__(self, frame_id: str = "map") -> None:
+        """The current pose in `frame_id`."""
+        layout = Layout()
+        layout.var_time()
+        layout.const_string(frame_id)
+        layout.var("pose", "d", 7)
+        layout.var_time("navigation_time")
+        layout.var_time("estimated_time_remaining")
+        layout.var("number_of_recoveries", "h")
+        layout.var("distance_remaining", "f")
+        packer, self._consts = layout.build()
+        self._pack = packer.pack
+
+    def encode(
+        self,
+        stamp_ns: int,
+        pose: tuple[float, float, float],
+        times_ns: tuple[int, int],
+        recoveries: int,
+        distance_remaining_m: float,
+    ) -> bytes:
+        """Encode the feedback.
+
+        Args:
+            stamp_ns: The header stamp.
+            pose: The robot's planar map pose (x m, y m, yaw rad).
+            times_ns: Navigation time and estimated time remaining, ns.
+            recoveries: Behaviours run for this goal.
+            distance_remaining_m: Along the current path.
+        """
+        navigation_time_ns, eta_ns = times_ns
+        sec, nanosec = divmod(stamp_ns, _NS)
+        nav_sec, nav_ns = divmod(navigation_time_ns, _NS)
+        eta_sec, eta_ns_part = divmod(eta_ns, _NS)
+        qz, qw = _planar_quat(pose[2])
+        c = self._consts
+        return self._pack(
+            c[0], sec, nanosec, c[1], pose[0], pose[1], 0.0, 0.0, 0.0, qz, qw,
+            nav_sec, nav_ns, eta_sec, eta_ns_part, recoveries, distance_remaining_m,
+        )  # fmt: skip
 
 
 class ParticleCloudEncoder:

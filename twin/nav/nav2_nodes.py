@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.bag import BehaviorTreeLogEncoder, PathEncoder, TwistEncoder
+from twin.bag import BehaviorTreeLogEncoder, NavigationFeedbackEncoder, PathEncoder, TwistEncoder
 from twin.bt.log import StatusChangeBuffer
 from twin.bt.mission_nodes import NavigationStatus, Pose2D
 from twin.bt.status import NodeStatus
@@ -613,6 +613,9 @@ class BtNavigator:
         self.goal: Pose = (0.0, 0.0, 0.0)
         self.started_ns = 0
         self.recoveries_at_start = 0
+        self._path_seen: Any = None
+        self._path_xy: F64 = np.zeros((0, 2))
+        self._path_left: F64 = np.zeros(0)
 
     def navigate(self, pose: Pose) -> int:
         """Accept a NavigateToPose goal; a running goal is preempted (the tree sees the new goal)."""
@@ -664,21 +667,20 @@ class BtNavigator:
 
     def distance_remaining(self, pose: Pose) -> float:
         """Along the current path from the pose nearest the robot to its end (Nav2's feedback)."""
-        path = self.tree.root_blackboard.get("path") if self._has("path") else None
+        entry = self.tree.root_blackboard.get_entry("path")
+        path = entry.value if entry is not None else None
         if path is None:
             return math.hypot(self.goal[0] - pose[0], self.goal[1] - pose[1])
-        p = np.asarray(path, dtype=np.float64).reshape(-1, 3)
-        if len(p) == 0:
+        if path is not self._path_seen:  # each plan is a new array: its lengths once
+            p = np.asarray(path, dtype=np.float64).reshape(-1, 3)
+            seg = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
+            self._path_seen, self._path_xy = path, p[:, :2]
+            self._path_left = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]]) if len(p) else np.zeros(0)
+        if len(self._path_xy) == 0:
             return 0.0
-        i = int(np.argmin(np.hypot(p[:, 0] - pose[0], p[:, 1] - pose[1])))
-        return float(np.sum(np.hypot(*np.diff(p[i:, :2], axis=0).T))) if i < len(p) - 1 else 0.0
-
-    def _has(self, key: str) -> bool:
-        try:
-            self.tree.root_blackboard.get(key)
-        except (KeyError, LookupError, ValueError):
-            return False
-        return True
+        d = self._path_xy - (pose[0], pose[1])
+        i = int(np.argmin(np.einsum("ij,ij->i", d, d)))
+        return float(self._path_left[i])
 
 
 class Nav2Navigator:
@@ -808,12 +810,10 @@ class BtNavigatorNode(Node):
 
     def __init__(self, navigator: BtNavigator, frames: Frames) -> None:
         super().__init__("bt_navigator")
-        from twin.msgs import get_message
-
         log_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "/behavior_tree_log", 10)
         log_encode = BehaviorTreeLogEncoder().encode
-        feedback_type = get_message("twin_msgs/msg/NavigationFeedback")
-        feedback_pub = self.create_publisher(feedback_type, self.FEEDBACK_TOPIC, 10)
+        feedback_pub = self.create_publisher(NavigationFeedbackEncoder.msgtype, self.FEEDBACK_TOPIC, 10)
+        feedback_encode = NavigationFeedbackEncoder().encode
         tree = navigator.tree
         changes = navigator.changes
         loops = [0]
@@ -829,28 +829,18 @@ class BtNavigatorNode(Node):
                 log_pub.publish(Encoded((log_encode, (t_ns, events), events)))
             loops[0] += 1
             if running and loops[0] % period == 0:
-                feedback_pub.publish(self._feedback(feedback_type, navigator, frames, t_ns))
+                args = self._feedback(navigator, frames, t_ns)
+                feedback_pub.publish(Encoded((feedback_encode, args, args)))
 
         rate = 1.0 / navigator.servers.config.bt_loop_duration_s
         self.create_rate_timer(rate, on_timer, priority=PRIORITY_TREE + 1)
 
     @staticmethod
-    def _feedback(msg_class: Any, navigator: BtNavigator, frames: Frames, t_ns: int) -> Any:
-        msg = msg_class()
-        x, y, yaw = frames.map_pose()
-        fb = msg
-        fb.current_pose.header.frame_id = "map"
-        fb.current_pose.header.stamp.sec, fb.current_pose.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
-        fb.current_pose.pose.position.x = x
-        fb.current_pose.pose.position.y = y
-        fb.current_pose.pose.orientation.z = math.sin(yaw / 2.0)
-        fb.current_pose.pose.orientation.w = math.cos(yaw / 2.0)
-        elapsed = max(0, t_ns - navigator.started_ns)
-        fb.navigation_time.sec, fb.navigation_time.nanosec = divmod(elapsed, 1_000_000_000)
-        remaining = navigator.distance_remaining((x, y, yaw))
-        fb.distance_remaining = remaining
+    def _feedback(navigator: BtNavigator, frames: Frames, t_ns: int) -> tuple[Any, ...]:
+        """NavigateToPose's feedback now, as NavigationFeedbackEncoder.encode takes it."""
+        pose = frames.map_pose()
+        remaining = navigator.distance_remaining(pose)
         speed = abs(frames.velocity[0])
         eta_ns = round(remaining / speed * 1e9) if speed > 0.01 else 0
-        fb.estimated_time_remaining.sec, fb.estimated_time_remaining.nanosec = divmod(eta_ns, 1_000_000_000)
-        fb.number_of_recoveries = navigator.servers.recoveries - navigator.recoveries_at_start
-        return msg
+        recoveries = navigator.servers.recoveries - navigator.recoveries_at_start
+        return (t_ns, pose, (max(0, t_ns - navigator.started_ns), eta_ns), recoveries, remaining)

@@ -376,3 +376,30 @@ def test_wrong_sizes_raise_bag_errors_naming_the_encoder() -> None:
         E.OdometryEncoder().encode(0, 0, 0, 0, 0, 0, np.zeros(6))
     with pytest.raises(BagError, match="4x3 cells got 11"):
         E.OccupancyGridEncoder("map", 0.05, 4, 3).encode(0, np.zeros(11, np.int8))
+
+
+@given(
+    stamps,
+    frames,
+    st.lists(floats, min_size=3, max_size=3),
+    st.integers(0, 10**12),
+    st.integers(0, 10**12),
+    st.integers(0, 32767),
+    st.floats(width=32, allow_nan=False),
+)
+def test_navigation_feedback(
+    t: int, frame: str, v: list[float], nav_ns: int, eta_ns: int, recoveries: int, remaining: float
+) -> None:
+    x, y, yaw = v
+    if not math.isfinite(yaw):
+        yaw = 0.0
+    duration = T["builtin_interfaces/msg/Duration"]
+    expected = T["twin_msgs/msg/NavigationFeedback"](
+        current_pose=T["geometry_msgs/msg/PoseStamped"](header=header(t, frame), pose=planar(x, y, yaw)),
+        navigation_time=duration(sec=nav_ns // 10**9, nanosec=nav_ns % 10**9),
+        estimated_time_remaining=duration(sec=eta_ns // 10**9, nanosec=eta_ns % 10**9),
+        number_of_recoveries=recoveries,
+        distance_remaining=remaining,
+    )
+    data = E.NavigationFeedbackEncoder(frame).encode(t, (x, y, yaw), (nav_ns, eta_ns), recoveries, remaining)
+    assert data == ser(expected)
