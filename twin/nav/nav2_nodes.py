@@ -618,7 +618,17 @@ class BtNavigator:
         self._path_left: F64 = np.zeros(0)
 
     def navigate(self, pose: Pose) -> int:
-        """Accept a NavigateToPose goal; a running goal is preempted (the tree sees the new goal)."""
+        """Accept a NavigateToPose goal; a running goal is preempted (the tree sees the new goal).
+
+        As Nav2's bt_navigator, a goal sent before the robot's pose in the map is known (AMCL without
+        an initial pose yet) is rejected: it fails at once.
+        """
+        if not self.servers.frames.localized:
+            self._goal_id += 1
+            self._status[self._goal_id] = NavigationStatus.FAILED
+            self._reasons[self._goal_id] = "Initial robot pose is not available (AMCL has no initial pose yet)"
+            _log.warning("NavigateToPose goal rejected: the robot's pose in map is not available yet")
+            return self._goal_id
         if self.active:
             self._status[self._goal_id] = NavigationStatus.FAILED
             self._reasons[self._goal_id] = "preempted by a new goal"

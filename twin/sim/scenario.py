@@ -337,7 +337,7 @@ class LocalizationSection:
 class NavigationSection:
     """How `GoToPose` goals are carried out: Nav2's stack, or the twin's older grid follower by name."""
 
-    type: Literal["nav2", "grid"] = "grid"
+    type: Literal["nav2", "grid"] = "nav2"
     params: Path | None = None  # a Nav2 params YAML; null: TurtleBot3's Humble file for the robot model
     bt_xml: Path | None = None  # null: Nav2 Humble's navigate_to_pose_w_replanning_and_recovery.xml
     set: Mapping[str, Any] = field(default_factory=dict)  # single values over the params file, `node.param: value`

@@ -420,6 +420,7 @@ class Simulation:
                 tree_rate_hz=spec.tick_rate_hz if isinstance(spec, BehaviorTreeMission) else None,
                 bt_log_topic="/mission/behavior_tree_log" if by_nav2 else "/behavior_tree_log",
                 pose_source=frames.map_pose if frames is not None and tree else None,
+                ready=(lambda: frames.localized) if frames is not None and tree else None,
             )
             nodes.append(self.mission_node)
 
