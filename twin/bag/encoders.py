@@ -29,6 +29,7 @@ __all__ = [
     "ImuEncoder",
     "JointStateEncoder",
     "LogEncoder",
+    "MarkerArrayEncoder",
     "MotorStateEncoder",
     "OccupancyGridEncoder",
     "OdometryEncoder",
@@ -745,3 +746,66 @@ class OccupancyGridEncoder:
         w.count(data.size)
         w.raw(data.tobytes(), align=1)
         return w.getvalue()
+
+
+class MarkerArrayEncoder:
+    """`visualization_msgs/msg/MarkerArray` of solid shapes (e.g. `/obstacles`), the whole set each message.
+
+    Each message starts with a DELETEALL marker, then one ADD marker per shape, so a viewer that
+    reads only the latest message (a latched topic) draws exactly the shapes present then.
+    """
+
+    msgtype: ClassVar[str] = "visualization_msgs/msg/MarkerArray"
+    CUBE: ClassVar[int] = 1
+    CYLINDER: ClassVar[int] = 3
+    _ADD: ClassVar[int] = 0
+    _DELETEALL: ClassVar[int] = 3
+
+    def __init__(self, frame_id: str = "map", namespace: str = "obstacles") -> None:
+        """Markers in `frame_id`, in marker namespace `namespace`."""
+        self.frame_id = frame_id
+        self.namespace = namespace
+
+    def encode(
+        self,
+        stamp_ns: int,
+        markers: Sequence[
+            tuple[int, int, Sequence[float], Sequence[float], Sequence[float], str]
+        ],  # (id, type, pose x y z qx qy qz qw, scale x y z, rgba, text)
+    ) -> bytes:
+        """Encode a DELETEALL, then each marker as (id, type, pose (7), scale (3), rgba (4), text)."""
+        w = CdrWriter()
+        w.count(len(markers) + 1)
+        self._marker(w, stamp_ns, self._DELETEALL, (0, 0, (0.0,) * 6 + (1.0,), (0.0,) * 3, (0.0,) * 4, ""))
+        for marker in markers:
+            self._marker(w, stamp_ns, self._ADD, marker)
+        return w.getvalue()
+
+    def _marker(
+        self,
+        w: CdrWriter,
+        stamp_ns: int,
+        action: int,
+        marker: tuple[int, int, Sequence[float], Sequence[float], Sequence[float], str],
+    ) -> None:
+        marker_id, kind, pose, scale, rgba, text = marker
+        w.header(stamp_ns, self.frame_id)
+        w.string(self.namespace)
+        w.pack("i", marker_id, kind, action)
+        w.pack("d", *pose, *scale)
+        w.pack("f", *rgba)
+        w.pack("i", 0)  # lifetime: 0, forever
+        w.pack("I", 0)
+        w.pack("B", 0)  # frame_locked
+        w.count(0)  # points
+        w.count(0)  # colors
+        w.string("")  # texture_resource
+        w.header(0, "")  # texture: an empty sensor_msgs/CompressedImage
+        w.string("")
+        w.count(0)
+        w.count(0)  # uv_coordinates
+        w.string(text)
+        w.string("")  # mesh_resource
+        w.string("")  # mesh_file: filename, data
+        w.count(0)
+        w.pack("B", 0)  # mesh_use_embedded_materials
