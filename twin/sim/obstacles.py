@@ -43,7 +43,10 @@ def block_obstacles(
         return ()
     names = list(locations)
     if blocks.count > len(names):
-        msg = f"blocks.count: {blocks.count} blocks need as many locations; the mission has {len(names)}"
+        msg = (
+            f"blocks.count: {blocks.count} blocks need as many locations, the mission has {len(names)}; "
+            f"give count {len(names)} or less"
+        )
         raise ConfigError(msg)
     chosen = rng.choice(len(names), size=blocks.count, replace=False)
     out = []
