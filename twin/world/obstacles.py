@@ -9,7 +9,7 @@ back, back and forth for as long as it is present (`loop: true`).
 The field answers what the static `Scene` answers for the world's fixed geometry, for the obstacles
 present at the time of its last `update`:
 
-- `caster(height_m)`: a `RayCaster` over the obstacles' horizontal section at a lidar's height
+- `caster(height_m)`: an `ObstacleCaster` over the obstacles' horizontal section at a lidar's height
   (boxes give four segments, cylinders a circle: analytic, as the world's upright shapes);
 - `check(x, y, yaw)` / `free_m(x, y, yaw)`: contacts of the robot's collision shapes with the
   obstacles (FCL), and the distance the robot may move with none possible, as `CollisionMonitor`
@@ -31,9 +31,11 @@ from typing import Literal, NamedTuple
 import fcl
 import numpy as np
 
-from twin.world.scene import CollisionMonitor, Contact, RayCaster, RobotBody, _Slice
+from twin.world._native import load_kernel
+from twin.world.scene import F64, CollisionMonitor, Contact, RayCaster, RobotBody, _Slice
 
 __all__ = [
+    "ObstacleCaster",
     "ObstacleField",
     "ObstacleMarker",
     "ObstacleMonitor",
@@ -45,6 +47,7 @@ _NS_PER_S = 1_000_000_000
 # What an FCL distance between the robot's shapes and an obstacle may be off by, m (as for the world).
 _DISTANCE_TOLERANCE_M = 1e-4
 _GREY = (0.6, 0.6, 0.6, 1.0)
+_NEVER = 2**63 - 1
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -128,6 +131,9 @@ def _path_length(points: Sequence[tuple[float, float]]) -> float:
     return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in itertools.pairwise(points))
 
 
+_Section = tuple[list[tuple[float, float, float, float]], list[tuple[float, float, float]]]
+
+
 class ObstacleMarker(NamedTuple):
     """An obstacle as a bag shows it: id, shape, pose (x, y, z, qx, qy, qz, qw), scale (x, y, z), colour, name."""
 
@@ -180,7 +186,10 @@ class _Obstacle:
         else:
             assert spec.pose is not None
             self.stop_ns = self.walk_start_ns
+        self.walks = spec.path_xy_m is not None
         self.x = self.y = self.yaw = math.nan
+        self.stale = True
+        self._section: _Section | None = None
 
     def present(self, t_ns: int) -> bool:
         return self.appear_ns <= t_ns and (self.vanish_ns is None or t_ns < self.vanish_ns)
@@ -209,13 +218,26 @@ class _Obstacle:
         return x0 + s * (x1 - x0), y0 + s * (y1 - y0), yaw
 
     def place(self, x: float, y: float, yaw: float) -> None:
+        """Move it; its FCL object follows only when a contact check needs it (`sync`)."""
         self.x, self.y, self.yaw = x, y, yaw
-        c, s = math.cos(yaw), math.sin(yaw)
-        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        self.object.setTransform(fcl.Transform(rot, np.array([x, y, 0.5 * self.top_m])))
+        self.stale = True
+        self._section = None
 
-    def section(self) -> tuple[list[tuple[float, float, float, float]], list[tuple[float, float, float]]]:
+    def sync(self) -> None:
+        """Put the FCL object where the obstacle is."""
+        if self.stale:
+            c, s = math.cos(self.yaw), math.sin(self.yaw)
+            rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            self.object.setTransform(fcl.Transform(rot, np.array([self.x, self.y, 0.5 * self.top_m])))
+            self.stale = False
+
+    def section(self) -> _Section:
         """Its outline on the floor plane: four segments (box) or a circle (cylinder)."""
+        if self._section is None:
+            self._section = self._outline()
+        return self._section
+
+    def _outline(self) -> _Section:
         if self.spec.shape == "cylinder":
             return [], [(self.x, self.y, self.half[0])]
         c, s = math.cos(self.yaw), math.sin(self.yaw)
@@ -238,6 +260,73 @@ class _Obstacle:
 
 def _ceil_to(t_ns: int, step_ns: int) -> int:
     return -(-t_ns // step_ns) * step_ns
+
+
+class ObstacleCaster:
+    """Casts rays against a handful of shapes (segments and circles), each against every beam of a fan.
+
+    `RayCaster` indexes a world's thousands of segments in a grid; a few obstacles need no index, and
+    a walking one changes the section every update, so this is built per change for a few
+    microseconds and answers with the same compiled kernel (or `RayCaster`'s numpy code without it).
+    """
+
+    def __init__(
+        self,
+        segments: Sequence[tuple[float, float, float, float]],
+        circles: Sequence[tuple[float, float, float]],
+        height_m: float,
+    ) -> None:
+        self.height_m = height_m
+        self._seg = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
+        self._circ = np.ascontiguousarray(circles, dtype=np.float64).reshape(-1, 3)
+        self._seg_idx = np.arange(len(self._seg), dtype=np.int64)
+        self._circ_idx = np.arange(len(self._circ), dtype=np.int64)
+        self._lib = load_kernel()
+        self._grid: RayCaster | None = None
+
+    def _grid_caster(self) -> RayCaster:
+        if self._grid is None:
+            section = _Slice(
+                segments=self._seg,
+                circles=self._circ,
+                segment_owner=np.zeros(len(self._seg), dtype=np.int64),
+                circle_owner=np.zeros(len(self._circ), dtype=np.int64),
+            )
+            self._grid = RayCaster(section, self.height_m, ["obstacle"], native=self._lib is not None)
+        return self._grid
+
+    def cast_fan(
+        self,
+        origin_xy: tuple[float, float],
+        start_rad: float,
+        increment_rad: float,
+        count: int,
+        max_range_m: float,
+        *,
+        min_range_m: float = 0.0,
+    ) -> F64:
+        """Return ranges for `count` beams at `start_rad + i * increment_rad`, as `RayCaster.cast_fan`."""
+        lib = self._lib
+        if lib is None or increment_rad <= 0.0 or count < 1:
+            return self._grid_caster().cast_fan(
+                origin_xy, start_rad, increment_rad, count, max_range_m, min_range_m=min_range_m
+            )
+        out = np.empty(count)
+        status = lib.twin_cast_fan(
+            self._seg.ctypes.data, self._seg_idx.ctypes.data, len(self._seg),
+            self._circ.ctypes.data, self._circ_idx.ctypes.data, len(self._circ),
+            float(origin_xy[0]), float(origin_xy[1]), float(start_rad), float(increment_rad), int(count),
+            min_range_m, max_range_m, out.ctypes.data,
+        )  # fmt: skip
+        if status != 0:
+            raise MemoryError("ray caster kernel could not allocate its beam buffer")
+        return out
+
+    def cast_rays(
+        self, origin_xy: tuple[float, float], angles_rad: F64, max_range_m: float, *, min_range_m: float = 0.0
+    ) -> F64:
+        """Return the range along each beam (world-frame angles), as `RayCaster.cast_rays`."""
+        return self._grid_caster().cast_rays(origin_xy, angles_rad, max_range_m, min_range_m=min_range_m)
 
 
 class ObstacleField:
@@ -264,8 +353,12 @@ class ObstacleField:
         self.active: tuple[_Obstacle, ...] = ()
         self.version = 0
         """Counts the updates that changed anything (what is present, or where)."""
-        self._casters: dict[float, tuple[int, RayCaster | None]] = {}
+        self._casters: dict[float, tuple[int, ObstacleCaster | None]] = {}
         self._t_ns = -1
+        vanish = {ob.vanish_ns for ob in self.obstacles if ob.vanish_ns is not None}
+        self._events = sorted({ob.appear_ns for ob in self.obstacles} | vanish)
+        self._next_event_ns = -1
+        self._walking: tuple[_Obstacle, ...] = ()
         self._anchor = (0.0, 0.0, 0.0)
         self._free_m = math.inf  # nothing present yet
         self.queries = 0
@@ -274,44 +367,47 @@ class ObstacleField:
     # -- time ---------------------------------------------------------------------------------------
 
     def next_change_ns(self, t_ns: int) -> int | None:
-        """The first time at or after `t_ns` when an obstacle may appear, vanish or move (None: never)."""
-        times: list[int] = []
-        for ob in self.obstacles:
-            if ob.vanish_ns is not None and ob.vanish_ns < t_ns:
-                continue
-            if t_ns < ob.appear_ns:
-                times.append(ob.appear_ns)
-                continue
-            if ob.stop_ns is None or t_ns <= ob.stop_ns:
-                return t_ns  # walking now
-            if ob.vanish_ns is not None:
-                times.append(ob.vanish_ns)
-        return min(times) if times else None
+        """The first time at or after `t_ns` when an obstacle may appear, vanish or move (None: never).
+
+        Exact after an `update` at an earlier time (it answers from that update's state).
+        """
+        if self._walking:
+            return t_ns
+        following = [e for e in self._events if e >= t_ns]
+        return following[0] if following else None
 
     def update(self, t_ns: int, robot_pose: tuple[float, float, float]) -> tuple[bool, tuple[Contact, ...]]:
         """Move the obstacles to their places at `t_ns`; return whether anything changed and the contacts now.
 
         The contacts are those of the robot at `robot_pose` with the obstacles (an obstacle walking or
         appearing into a robot standing still touches it); the field's free distance is measured
-        from that pose.
+        from that pose. Only walking obstacles are visited between appearances and vanishings.
         """
         if t_ns == self._t_ns:
             return False, ()
+        back_in_time = t_ns < self._t_ns
         self._t_ns = t_ns
-        active = []
         changed = False
-        for ob in self.obstacles:
-            if not ob.present(t_ns):
-                continue
-            active.append(ob)
-            pose = ob.pose_at(t_ns)
-            if pose != (ob.x, ob.y, ob.yaw):
-                ob.place(*pose)
+        if t_ns >= self._next_event_ns or back_in_time:
+            active = tuple(ob for ob in self.obstacles if ob.present(t_ns))
+            if active != self.active:
                 changed = True
-        active_t = tuple(active)
-        if active_t != self.active:
-            changed = True
-            self.active = active_t
+                self.active = active
+                for ob in active:
+                    if not ob.walks:
+                        ob.place(*ob.pose_at(t_ns))
+            self._walking = tuple(ob for ob in active if ob.walks)
+            self._next_event_ns = next((e for e in self._events if e > t_ns), _NEVER)
+        if self._walking:
+            still = []
+            for ob in self._walking:
+                pose = ob.pose_at(t_ns)
+                if pose != (ob.x, ob.y, ob.yaw):
+                    ob.place(*pose)
+                    changed = True
+                if ob.stop_ns is None or t_ns < ob.stop_ns:
+                    still.append(ob)
+            self._walking = tuple(still)
         if not changed:
             return False, ()
         self.version += 1
@@ -319,7 +415,7 @@ class ObstacleField:
 
     # -- the lidar -------------------------------------------------------------------------------------
 
-    def caster(self, height_m: float) -> RayCaster | None:
+    def caster(self, height_m: float) -> ObstacleCaster | None:
         """Return a ray caster over the present obstacles' section at `height_m`, or None when none reach it."""
         key = round(float(height_m), 9)
         cached = self._casters.get(key)
@@ -327,25 +423,12 @@ class ObstacleField:
             return cached[1]
         segments: list[tuple[float, float, float, float]] = []
         circles: list[tuple[float, float, float]] = []
-        seg_owner: list[int] = []
-        circ_owner: list[int] = []
         for ob in self.active:
-            if not 0.0 <= key <= ob.top_m:
-                continue
-            segs, circs = ob.section()
-            segments += segs
-            circles += circs
-            seg_owner += [ob.index] * len(segs)
-            circ_owner += [ob.index] * len(circs)
-        caster = None
-        if segments or circles:
-            section = _Slice(
-                segments=np.array(segments, dtype=np.float64).reshape(-1, 4),
-                circles=np.array(circles, dtype=np.float64).reshape(-1, 3),
-                segment_owner=np.array(seg_owner, dtype=np.int64),
-                circle_owner=np.array(circ_owner, dtype=np.int64),
-            )
-            caster = RayCaster(section, key, [ob.name for ob in self.obstacles], cell_m=1.0)
+            if 0.0 <= key <= ob.top_m:
+                segs, circs = ob.section()
+                segments += segs
+                circles += circs
+        caster = ObstacleCaster(segments, circles, key) if segments or circles else None
         self._casters[key] = (self.version, caster)
         return caster
 
@@ -384,6 +467,7 @@ class ObstacleField:
                 body._place(x_m, y_m, yaw_rad)
                 placed = True
             self.queries += 1
+            ob.sync()
             data = fcl.DistanceData()
             body._manager.distance(ob.object, data, fcl.defaultDistanceCallback)
             distance = max(0.0, float(data.result.min_distance))
@@ -447,6 +531,6 @@ class ObstacleMonitor:
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor an obstacle."""
         walls = self.walls.free_m(x_m, y_m, yaw_rad)
-        if walls <= 0.0:
-            return 0.0
+        if walls <= 0.0 or not self.field.active:
+            return walls
         return min(walls, self.field.free_m(x_m, y_m, yaw_rad))
