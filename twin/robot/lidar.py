@@ -146,7 +146,7 @@ class Lidar:
         else:  # mirrored: beam i points at heading - (start + i * step); cast in increasing order
             first = heading - self._start - self._ray_step * (spec.samples - 1)
         dynamic = self._obstacles.caster(self._caster.height_m) if self._obstacles is not None else None
-        if spec.count == spec.samples and self._sweep > 0.0 and dynamic is None:
+        if spec.count == spec.samples and self._sweep > 0.0 and (dynamic is None or self._caster.native):
             return self._caster.cast_scan(
                 (ox, oy),
                 first,
@@ -155,6 +155,7 @@ class Lidar:
                 range_min_m=spec.range_min_m,
                 range_max_m=spec.range_max_m,
                 noise_m=noise,
+                also=None if dynamic is None else dynamic.shapes,
             )
         ranges = self._caster.cast_fan(
             (ox, oy), first, self._ray_step, spec.samples, spec.range_max_m, min_range_m=spec.range_min_m

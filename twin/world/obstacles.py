@@ -284,6 +284,11 @@ class ObstacleCaster:
         self._lib = load_kernel()
         self._grid: RayCaster | None = None
 
+    @property
+    def shapes(self) -> tuple[F64, F64]:
+        """Its segments (M, 4) and circles (K, 3), contiguous float64 (for `RayCaster.cast_scan(also=...)`)."""
+        return self._seg, self._circ
+
     def _grid_caster(self) -> RayCaster:
         if self._grid is None:
             section = _Slice(
@@ -387,31 +392,35 @@ class ObstacleField:
             return False, ()
         back_in_time = t_ns < self._t_ns
         self._t_ns = t_ns
-        changed = False
+        appeared = False  # what is present changed: the free distance is measured again
+        moved_m = 0.0  # how far any point of a walker moved: the free distance shrinks by at most this
         if t_ns >= self._next_event_ns or back_in_time:
             active = tuple(ob for ob in self.obstacles if ob.present(t_ns))
-            if active != self.active:
-                changed = True
+            if active != self.active or back_in_time:
+                appeared = True
                 self.active = active
                 for ob in active:
-                    if not ob.walks:
-                        ob.place(*ob.pose_at(t_ns))
+                    ob.place(*ob.pose_at(t_ns))
             self._walking = tuple(ob for ob in active if ob.walks)
             self._next_event_ns = next((e for e in self._events if e > t_ns), _NEVER)
         if self._walking:
             still = []
             for ob in self._walking:
-                pose = ob.pose_at(t_ns)
-                if pose != (ob.x, ob.y, ob.yaw):
-                    ob.place(*pose)
-                    changed = True
+                x, y, yaw = ob.pose_at(t_ns)
+                if (x, y, yaw) != (ob.x, ob.y, ob.yaw):
+                    step = math.hypot(x - ob.x, y - ob.y) + ob.bound_m * abs(math.remainder(yaw - ob.yaw, math.tau))
+                    moved_m = max(moved_m, step)
+                    ob.place(x, y, yaw)
                 if ob.stop_ns is None or t_ns < ob.stop_ns:
                     still.append(ob)
             self._walking = tuple(still)
-        if not changed:
+        if not appeared and moved_m == 0.0:
             return False, ()
         self.version += 1
-        return True, self._query(*robot_pose)
+        self._free_m -= moved_m
+        if appeared or self.free_m(*robot_pose) <= 0.0:
+            return True, self._query(*robot_pose)
+        return True, ()
 
     # -- the lidar -------------------------------------------------------------------------------------
 
