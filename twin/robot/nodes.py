@@ -242,22 +242,24 @@ class ObstacleNode(Node):
         marker_period_ns = round(marker_period_s * 1e9)
         next_ns: int | None = 0
         next_marker_ns = 0
-        shown: tuple[int, ...] | None = None
+        shown = -1  # the field's membership count last published
+
+        def robot_pose() -> tuple[float, float, float]:
+            s = chassis()
+            return s.x_m, s.y_m, s.yaw_rad
 
         def on_timer(t_ns: int) -> None:
             nonlocal next_ns, next_marker_ns, shown
             if next_ns is None or t_ns < next_ns:  # nothing appears, vanishes or moves before then
                 return
-            s = chassis()
-            changed, contacts = field.update(t_ns, (s.x_m, s.y_m, s.yaw_rad))
+            changed, contacts = field.update(t_ns, robot_pose)
             next_ns = field.next_change_ns(t_ns + 1)
             if contacts:
                 tracker.touched_by(contacts)
             elif changed and tracker.by_obstacle and tracker.in_contact:
                 tracker.released = True
-            present = tuple(ob.index for ob in field.active)
-            if present != shown or (changed and t_ns >= next_marker_ns):
-                shown = present
+            if field.membership != shown or (changed and t_ns >= next_marker_ns):
+                shown = field.membership
                 next_marker_ns = t_ns + marker_period_ns
                 markers = field.markers()
                 rows = [(m.id, kinds[m.shape], m.pose, m.scale, m.color_rgba, m.name) for m in markers]

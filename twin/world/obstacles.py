@@ -24,7 +24,7 @@ from __future__ import annotations
 import bisect
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
@@ -279,8 +279,6 @@ class ObstacleCaster:
         self.height_m = height_m
         self._seg = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
         self._circ = np.ascontiguousarray(circles, dtype=np.float64).reshape(-1, 3)
-        self._seg_idx = np.arange(len(self._seg), dtype=np.int64)
-        self._circ_idx = np.arange(len(self._circ), dtype=np.int64)
         self._lib = load_kernel()
         self._grid: RayCaster | None = None
 
@@ -318,8 +316,8 @@ class ObstacleCaster:
             )
         out = np.empty(count)
         status = lib.twin_cast_fan(
-            self._seg.ctypes.data, self._seg_idx.ctypes.data, len(self._seg),
-            self._circ.ctypes.data, self._circ_idx.ctypes.data, len(self._circ),
+            self._seg.ctypes.data, np.arange(len(self._seg), dtype=np.int64).ctypes.data, len(self._seg),
+            self._circ.ctypes.data, np.arange(len(self._circ), dtype=np.int64).ctypes.data, len(self._circ),
             float(origin_xy[0]), float(origin_xy[1]), float(start_rad), float(increment_rad), int(count),
             min_range_m, max_range_m, out.ctypes.data,
         )  # fmt: skip
@@ -358,6 +356,8 @@ class ObstacleField:
         self.active: tuple[_Obstacle, ...] = ()
         self.version = 0
         """Counts the updates that changed anything (what is present, or where)."""
+        self.membership = 0
+        """Counts the updates that changed what is present."""
         self._casters: dict[float, tuple[int, ObstacleCaster | None]] = {}
         self._t_ns = -1
         vanish = {ob.vanish_ns for ob in self.obstacles if ob.vanish_ns is not None}
@@ -381,12 +381,15 @@ class ObstacleField:
         following = [e for e in self._events if e >= t_ns]
         return following[0] if following else None
 
-    def update(self, t_ns: int, robot_pose: tuple[float, float, float]) -> tuple[bool, tuple[Contact, ...]]:
+    def update(
+        self, t_ns: int, robot_pose: tuple[float, float, float] | Callable[[], tuple[float, float, float]]
+    ) -> tuple[bool, tuple[Contact, ...]]:
         """Move the obstacles to their places at `t_ns`; return whether anything changed and the contacts now.
 
-        The contacts are those of the robot at `robot_pose` with the obstacles (an obstacle walking or
-        appearing into a robot standing still touches it); the field's free distance is measured
-        from that pose. Only walking obstacles are visited between appearances and vanishings.
+        The contacts are those of the robot at `robot_pose` (or what the callable returns, asked only
+        when needed) with the obstacles: an obstacle walking or appearing into a robot standing still
+        touches it. Only walking obstacles are visited between appearances and vanishings, and FCL
+        is asked only once their steps have used up the free distance.
         """
         if t_ns == self._t_ns:
             return False, ()
@@ -399,6 +402,7 @@ class ObstacleField:
             if active != self.active or back_in_time:
                 appeared = True
                 self.active = active
+                self.membership += 1
                 for ob in active:
                     ob.place(*ob.pose_at(t_ns))
             self._walking = tuple(ob for ob in active if ob.walks)
@@ -418,8 +422,9 @@ class ObstacleField:
             return False, ()
         self.version += 1
         self._free_m -= moved_m
-        if appeared or self.free_m(*robot_pose) <= 0.0:
-            return True, self._query(*robot_pose)
+        pose = robot_pose() if callable(robot_pose) else robot_pose
+        if appeared or self.free_m(*pose) <= 0.0:
+            return True, self._query(*pose)
         return True, ()
 
     # -- the lidar -------------------------------------------------------------------------------------
