@@ -199,3 +199,35 @@ def test_robot_driven_into_a_box_stops_with_a_contact(contact_bag: dict[str, lis
     assert after and max(after) - min(after) < 0.002  # stopped
     # Its front (the Waffle's base box reaches 0.069 m ahead of the base frame) at the crate's face, 1.05 m.
     assert after[-1] == pytest.approx(1.05 - 0.069, abs=0.01)
+
+
+COSTMAP = """
+name: obstacles_costmap
+localization: {type: none}
+navigation: {type: nav2}
+obstacles:
+  - {shape: box, size_m: [0.3, 0.3, 0.5], pose: {x_m: 1.0, y_m: 0.0}, name: crate}
+"""
+
+
+def _cells(grid: Any, x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
+    """The cells of an OccupancyGrid (axis-aligned origin) covering [x0, x1] x [y0, y1] (m, its frame)."""
+    info = grid.info
+    data = np.asarray(grid.data, dtype=np.int16).reshape(info.height, info.width)
+    res, ox, oy = info.resolution, info.origin.position.x, info.origin.position.y
+    i0, i1 = int((x0 - ox) // res), int((x1 - ox) // res)
+    j0, j1 = int((y0 - oy) // res), int((y1 - oy) // res)
+    return data[j0 : j1 + 1, i0 : i1 + 1]
+
+
+def test_nav2_costmaps_learn_an_obstacle_from_the_scan_and_the_map_does_not_hold_it(tmp_path: Path) -> None:
+    """The thesis's mission through Nav2 in the house, a crate 1 m ahead of the spawn pose."""
+    messages = _run(tmp_path, COSTMAP, "--duration", "3")
+    (_, world_map), *_ = messages["/map"]
+    crate = (0.85, 1.15, -0.15, 0.15)
+    assert (_cells(world_map, *crate) == 0).all()  # free on the map made from the world
+    _, local = messages["/local_costmap/costmap"][-1]
+    assert local.header.frame_id == "odom"  # odom = map here (localization: none, spawned at the origin)
+    assert _cells(local, *crate).max() == 100  # lethal where the scan hits the crate
+    _, global_costmap = messages["/global_costmap/costmap"][-1]
+    assert _cells(global_costmap, *crate).max() == 100
