@@ -219,11 +219,12 @@ class DiffDriveNode(Node):
 class ObstacleNode(Node):
     """The world's moving parts, as a Gazebo world plugin moves models: the scenario's obstacles.
 
-    At `rate_hz` (from t = 0, before the sensors of the same instant) it moves the obstacles to
-    their places (`ObstacleField.update`), reports an obstacle that moved or appeared into the robot
-    as a contact (the robot is not pushed) and ends that contact once it has left, and publishes the
-    obstacles present as a `visualization_msgs/MarkerArray` on `/obstacles` (latched) when the set
-    changes, and at most every `marker_period_s` while one moves. Data: the `ObstacleMarker`s.
+    On a `rate_hz` grid (from t = 0, before the sensors of the same instant), when the field says
+    something may change (`ObstacleField.next_update_ns`), it moves the obstacles to their places,
+    reports an obstacle that moved or appeared into the robot as a contact (the robot is not pushed)
+    and ends that contact once it has left, and publishes the obstacles present as a
+    `visualization_msgs/MarkerArray` on `/obstacles` (latched) when the set changes, and at most
+    every `marker_period_s` while one moves. Data: the `ObstacleMarker`s.
     """
 
     def __init__(
@@ -253,7 +254,7 @@ class ObstacleNode(Node):
             if next_ns is None or t_ns < next_ns:  # nothing appears, vanishes or moves before then
                 return
             changed, contacts = field.update(t_ns, robot_pose)
-            next_ns = field.next_change_ns(t_ns + 1)
+            next_ns = field.next_update_ns(t_ns)
             if contacts:
                 tracker.touched_by(contacts)
             elif changed and tracker.by_obstacle and tracker.in_contact:

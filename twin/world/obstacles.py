@@ -344,14 +344,26 @@ class ObstacleField:
     """
 
     def __init__(
-        self, specs: Sequence[ObstacleSpec], body: RobotBody, *, update_period_ns: int, margin_m: float = 0.005
+        self,
+        specs: Sequence[ObstacleSpec],
+        body: RobotBody,
+        *,
+        update_period_ns: int,
+        coarse_steps: int = 10,
+        robot_speed_bound_mps: float = 1.0,
+        margin_m: float = 0.005,
     ) -> None:
-        if update_period_ns <= 0:
-            msg = f"update_period_ns must be positive, got {update_period_ns}"
+        if update_period_ns <= 0 or coarse_steps < 1:
+            msg = f"update_period_ns and coarse_steps must be positive, got {update_period_ns}, {coarse_steps}"
             raise ValueError(msg)
         self.body = body
         self.margin_m = margin_m
         self.update_period_ns = update_period_ns
+        self.coarse_period_ns = coarse_steps * update_period_ns
+        """Walkers far from the robot step at this period (see `next_update_ns`)."""
+        self.robot_speed_bound_mps = robot_speed_bound_mps
+        """No point of the robot moves faster than this, m/s (a TurtleBot3's reach about 0.6)."""
+        self._free_now = 0.0
         self.obstacles = tuple(_Obstacle(i, spec, update_period_ns) for i, spec in enumerate(specs))
         self.active: tuple[_Obstacle, ...] = ()
         self.version = 0
@@ -380,6 +392,31 @@ class ObstacleField:
             return t_ns
         following = [e for e in self._events if e >= t_ns]
         return following[0] if following else None
+
+    def next_update_ns(self, t_ns: int) -> int | None:
+        """When to call `update` next, after an update at `t_ns` (None: nothing changes any more).
+
+        At the next appearance or vanishing; while obstacles walk, every update period when one
+        could reach the robot before a coarser step, otherwise at the next multiple of
+        `coarse_period_ns` (walkers far from the robot step every 0.1 s: the same positions at
+        every multiple of it, so a 5 Hz lidar sees them where they are, and no contact can be
+        missed: the step is shorter than the time a walker and the robot need to close the free
+        distance, at the walkers' speeds and `robot_speed_bound_mps`).
+        """
+        following = self.next_change_ns(t_ns + 1)
+        if following is None or not self._walking:
+            return following
+        period, coarse = self.update_period_ns, self.coarse_period_ns
+        reach_s = math.inf
+        for ob in self._walking:
+            turn_m = 2.0 * ob.bound_m if ob.spec.shape == "box" else 0.0  # a box turning at a corner
+            reach_s = min(reach_s, (self._free_now - turn_m) / (ob.speed_mps + self.robot_speed_bound_mps))
+        steps = 1
+        if reach_s > 0.0:
+            steps = max(1, min(coarse // period, int(reach_s * _NS_PER_S) // period))
+        grid = (t_ns // coarse + 1) * coarse
+        event = next((e for e in self._events if e > t_ns), _NEVER)
+        return min(t_ns + steps * period, grid, event)
 
     def update(
         self, t_ns: int, robot_pose: tuple[float, float, float] | Callable[[], tuple[float, float, float]]
@@ -423,8 +460,11 @@ class ObstacleField:
         self.version += 1
         self._free_m -= moved_m
         pose = robot_pose() if callable(robot_pose) else robot_pose
-        if appeared or self.free_m(*pose) <= 0.0:
-            return True, self._query(*pose)
+        self._free_now = self.free_m(*pose)
+        if appeared or self._free_now <= 0.0:
+            contacts = self._query(*pose)
+            self._free_now = max(0.0, self._free_m)
+            return True, contacts
         return True, ()
 
     # -- the lidar -------------------------------------------------------------------------------------

@@ -146,3 +146,26 @@ def test_a_walker_reaching_a_standing_robot_is_reported_by_update() -> None:
 def test_a_walker_in_the_empty_world_fixture_blocks_nothing_else() -> None:
     scene = build_scene(load_world(EMPTY_WORLD))
     assert scene.obstacles == ()  # only the ground plane: every range in the integration tests is an obstacle's
+
+
+def test_far_walkers_step_every_0_1_s_near_ones_every_10_ms_and_no_contact_is_missed() -> None:
+    walker = ObstacleSpec(
+        shape="box", size_m=(0.4, 0.3, 1.7), path_xy_m=((0, -4), (0, 4)), speed_mps=0.5, name="w"
+    )  # a box, so turning at a corner counts too
+    robot = (0.0, 0.0, 0.0)
+    every = ObstacleField([walker], _body(), update_period_ns=PERIOD_NS)
+    first_every = next(k * PERIOD_NS for k in range(2000) if every.update(k * PERIOD_NS, robot)[1])
+    field = ObstacleField([walker], _body(), update_period_ns=PERIOD_NS)
+    t, steps, first = 0, [], None
+    while t is not None and t < 16_000_000_000 and first is None:
+        _, contacts = field.update(t, robot)
+        if contacts:
+            first = t
+        nxt = field.next_update_ns(t)
+        if nxt is not None:
+            steps.append(nxt - t)
+        t = nxt
+    assert first == first_every  # the coarse schedule finds the contact at the same update
+    assert steps[0] == 100 * 1_000_000  # 3.6 m away at first: the next multiple of 0.1 s
+    assert steps[-1] == PERIOD_NS  # within reach: every 10 ms
+    assert len(steps) < first_every // PERIOD_NS // 2  # far fewer updates than every 10 ms
