@@ -80,7 +80,7 @@ __all__ = ["RunSummary", "Simulation"]
 
 _log = logging.getLogger(__name__)
 
-# Obstacles move, appear and vanish in steps of this period (the /clock period): a 0.5 m/s walker steps 5 mm.
+# Obstacles appear and vanish on this grid (the /clock period); walkers near the robot step at it (5 mm at 0.5 m/s).
 _OBSTACLE_PERIOD_NS = 10_000_000
 
 
