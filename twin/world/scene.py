@@ -11,7 +11,8 @@ Built once from a `World` at start-up:
   loop a contact check whose per-step cost is a few arithmetic operations while the robot is
   far from obstacles.
 
-Models that are not static are obstacles too: nothing but the robot moves in the twin.
+Models that are not static are obstacles too: nothing in the world file moves in the twin. A
+scenario's obstacles that appear, vanish and walk live beside the Scene (`twin.world.obstacles`).
 """
 
 from __future__ import annotations
