@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -29,6 +29,7 @@ __all__ = [
     "ImuEncoder",
     "JointStateEncoder",
     "LogEncoder",
+    "MarkerArrayEncoder",
     "MotorStateEncoder",
     "NavigationFeedbackEncoder",
     "OccupancyGridEncoder",
@@ -801,3 +802,84 @@ class OccupancyGridEncoder:
         w.count(data.size)
         w.raw(data.tobytes(), align=1)
         return w.getvalue()
+
+
+class MarkerArrayEncoder:
+    """`visualization_msgs/msg/MarkerArray` of solid shapes (e.g. `/obstacles`), the whole set each message.
+
+    Each message starts with a DELETEALL marker, then one ADD marker per shape, so a viewer that
+    reads only the latest message (a latched topic) draws exactly the shapes present then. A
+    marker's bytes are one `struct` pack (stamp and pose vary, the rest is constant), built once
+    per marker and alignment and reused.
+    """
+
+    msgtype: ClassVar[str] = "visualization_msgs/msg/MarkerArray"
+    CUBE: ClassVar[int] = 1
+    CYLINDER: ClassVar[int] = 3
+    _ADD: ClassVar[int] = 0
+    _DELETEALL: ClassVar[int] = 3
+    _COUNT = struct.Struct("<I")
+
+    def __init__(self, frame_id: str = "map", namespace: str = "obstacles") -> None:
+        """Markers in `frame_id`, in marker namespace `namespace`."""
+        self.frame_id = frame_id
+        self.namespace = namespace
+        self._layouts: dict[tuple[object, ...], tuple[Callable[..., bytes], bytes, bytes, int]] = {}
+
+    def encode(
+        self,
+        stamp_ns: int,
+        markers: Sequence[
+            tuple[int, int, Sequence[float], Sequence[float], Sequence[float], str]
+        ],  # (id, type, pose x y z qx qy qz qw, scale x y z, rgba, text)
+    ) -> bytes:
+        """Encode a DELETEALL, then each marker as (id, type, pose (7), scale (3), rgba (4), text)."""
+        sec, nanosec = divmod(stamp_ns, _NS)
+        parts = [ENCAPSULATION, self._COUNT.pack(len(markers) + 1)]
+        offset = 4
+        delete_all = (0, 0, (0.0,) * 6 + (1.0,), (0.0,) * 3, (0.0,) * 4, "")
+        for action, marker in [(self._DELETEALL, delete_all)] + [(self._ADD, m) for m in markers]:
+            marker_id, kind, pose, scale, rgba, text = marker
+            key = (marker_id, kind, action, tuple(scale), tuple(rgba), text, offset % 8)
+            layout = self._layouts.get(key)
+            if layout is None:
+                layout = self._layouts[key] = self._layout(key, offset % 8)
+            pack, head, tail, size = layout
+            parts.append(pack(sec, nanosec, head, *pose, tail))
+            offset += size
+        return b"".join(parts)
+
+    def _layout(self, key: tuple[object, ...], start: int) -> tuple[Callable[..., bytes], bytes, bytes, int]:
+        """One marker's struct at `start` (mod 8) from the CDR origin: (pack, constant runs, its size)."""
+        marker_id, kind, action, scale, rgba, text, _ = key
+        assert isinstance(scale, tuple) and isinstance(rgba, tuple) and isinstance(text, str)
+        # Start at 8 + start so the leading padding to 4 is counted from the right place.
+        origin = 8 + start
+        layout = Layout(offset=origin)
+        layout.var_time()
+        layout.const_string(self.frame_id)
+        layout.const_string(self.namespace)
+        layout.const("i", int(marker_id), int(kind), int(action))  # type: ignore[call-overload]
+        layout.var("pose", "d", 7)
+        layout.const("d", *scale)
+        layout.const("f", *rgba)
+        layout.const("i", 0)  # lifetime: 0, forever
+        layout.const("I", 0)
+        layout.const("B", 0)  # frame_locked
+        layout.const_count(0)  # points
+        layout.const_count(0)  # colors
+        layout.const_string("")  # texture_resource
+        layout.const("i", 0)  # texture: an empty sensor_msgs/CompressedImage (header, format, data)
+        layout.const("I", 0)
+        layout.const_string("")
+        layout.const_string("")
+        layout.const_count(0)
+        layout.const_count(0)  # uv_coordinates
+        layout.const_string(text)
+        layout.const_string("")  # mesh_resource
+        layout.const_string("")  # mesh_file: filename, data
+        layout.const_count(0)
+        layout.const("B", 0)  # mesh_use_embedded_materials
+        packer, consts = layout.build()
+        assert layout.slots == ["stamp.sec", "stamp.nanosec", "const"] + ["pose"] * 7 + ["const"], layout.slots
+        return packer.pack, consts[0], consts[1], layout.offset - origin
