@@ -126,7 +126,7 @@ class MissionNode(Node):
             if ready is not None and not ready():
                 if not waiting[0]:
                     waiting[0] = True
-                    self.get_logger().info("waiting for the robot's map pose (AMCL's initial pose) to start the mission")
+                    self.get_logger().info("waiting for the robot's map pose (AMCL's initial pose) to start")
                 return
             changes = mission.tick(t_ns)
             if changes:

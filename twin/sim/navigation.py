@@ -8,6 +8,7 @@ map_server, initial_pose, amcl, costmap and navigation-server nodes around them.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import math
@@ -265,17 +266,18 @@ class NavigationStack:
 
 
 def _map_bounds(sc: Scenario, scene: Scene, *, margin_m: float = 1.0) -> tuple[float, float, float, float]:
-    """What a SLAM map of the mission covers: the world's obstacles (0.5 m around), and `margin_m` around
-    the spawn point and every place the mission names, so that the robot's way across an open floor
-    is on the map (a world of one box is not mapped around the box alone)."""
+    """What a SLAM map of the mission covers: the world's obstacles, and the places the robot goes.
+
+    The obstacles' bounds 0.5 m around, and `margin_m` around the spawn point and every place the
+    mission names, so that the robot's way across an open floor is on the map (a world of one box
+    is not mapped around the box alone).
+    """
     points = [(sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m)]
     if isinstance(sc.mission, BehaviorTreeMission) and sc.mission.locations is not None:
         from twin.bt.mission_nodes import load_locations
 
-        try:
+        with contextlib.suppress(OSError, ValueError, TypeError):  # the mission reports a bad file itself
             points += [(p.x_m, p.y_m) for p in load_locations(sc.mission.locations).values()]
-        except (OSError, ValueError, TypeError):
-            pass  # the mission reports an unreadable location file itself
     xs = [x for x, _ in points]
     ys = [y for _, y in points]
     x0, y0, x1, y1 = min(xs) - margin_m, min(ys) - margin_m, max(xs) + margin_m, max(ys) + margin_m
