@@ -106,6 +106,14 @@ def _num(section: Mapping[str, Any], key: str, default: float, where: str) -> fl
     return float(value)
 
 
+def _flag(section: Mapping[str, Any], key: str, default: bool, where: str) -> bool:
+    value = section.get(key, default)
+    if not isinstance(value, bool):
+        msg = f"{where}.{key}: expected true or false, got {value!r}; fix the params file"
+        raise ConfigError(msg)
+    return value
+
+
 def _names(section: Mapping[str, Any], key: str, default: Sequence[str], where: str) -> tuple[str, ...]:
     value = section.get(key, list(default))
     if isinstance(value, str):
@@ -191,6 +199,9 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     used["bt_navigator"] = ["bt_loop_duration", "global_frame", "robot_base_frame", "odom_topic"]
     vs = params.node("velocity_smoother")
     vwhere = f"{src}: velocity_smoother"
+    if str(vs.get("feedback", "OPEN_LOOP")) != "OPEN_LOOP":
+        msg = f"{vwhere}.feedback: only OPEN_LOOP (Nav2's default) is implemented, got {vs['feedback']!r}"
+        raise ConfigError(msg)
     defaults = SmootherParams()
     smoother = SmootherParams(
         smoothing_frequency_hz=_num(vs, "smoothing_frequency", defaults.smoothing_frequency_hz, vwhere),
@@ -200,10 +211,11 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         max_decel=_triple(vs, "max_decel", defaults.max_decel, vwhere),
         deadband_velocity=_triple(vs, "deadband_velocity", defaults.deadband_velocity, vwhere),
         velocity_timeout_s=_num(vs, "velocity_timeout", defaults.velocity_timeout_s, vwhere),
+        scale_velocities=_flag(vs, "scale_velocities", defaults.scale_velocities, vwhere),
     )
     used["velocity_smoother"] = [
         "smoothing_frequency", "max_velocity", "min_velocity", "max_accel", "max_decel",
-        "deadband_velocity", "velocity_timeout", "feedback",
+        "deadband_velocity", "velocity_timeout", "feedback", "scale_velocities",
     ]  # fmt: skip
     bs = params.node("behavior_server")
     bwhere = f"{src}: behavior_server"
