@@ -11,6 +11,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import FIXTURES, REPO, run_twin
+from tests.integration.test_nav2_replanning import check_recoveries
 
 NAV2 = FIXTURES / "nav2"
 TB3_MAP = NAV2 / "turtlebot3_navigation2_humble" / "map" / "map.yaml"
@@ -283,9 +284,17 @@ def test_an_unreachable_goal_runs_nav2s_recoveries_in_order_then_fails_after_six
     assert len(recoveries) == 6  # NavigateRecovery retries six times, one recovery each, then gives up
     root = [status for name, status in events if name == "NavigateRecovery" and status != "IDLE"]
     assert root[-1] == "FAILURE"  # then bt_navigator halts the tree (back to IDLE) and aborts the goal
-    msgs = read(bag, "/cmd_vel")
+    msgs = read(bag, "/cmd_vel", "/ground_truth/odom", "/rosout")
     assert any(abs(m.angular.z) > 0.3 for _, m in msgs["/cmd_vel"])  # type: ignore[attr-defined]  # the spin
     assert any(m.linear.x < 0.0 for _, m in msgs["/cmd_vel"])  # type: ignore[attr-defined]  # the back-up
+    # in the open room every recovery has room: spin 1.57 rad, wait 5 s, back up 0.30 m, measured
+    timed = [
+        (t, e.node_name, e.current_status)  # type: ignore[attr-defined]
+        for t, m in read(bag, "/behavior_tree_log")["/behavior_tree_log"]
+        for e in m.event_log  # type: ignore[attr-defined]
+    ]
+    assert not any(s == "FAILURE" and n in ("Spin", "BackUp") for _, n, s in timed)
+    check_recoveries(timed, msgs["/ground_truth/odom"], msgs["/rosout"])
 
 
 TREES = sorted((NAV2 / "nav2_humble" / "behavior_trees").glob("*.xml"))

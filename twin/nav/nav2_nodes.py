@@ -21,6 +21,7 @@ The mission's `GoToPose` reaches the navigator through `Nav2Navigator` (send_goa
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -569,7 +570,9 @@ class Nav2Servers:
         request = dict(goal.request)
         if goal.server == "wait" and "time_s" not in request:
             request["time_s"] = request.get("wait_duration", 1.0)
-        behavior = make_behavior(goal.server, self.config.behaviors)
+        # the behaviours check the local costmap's footprint, as behavior_server reads it from that costmap
+        params = dataclasses.replace(self.config.behaviors, footprint=tuple(self.local_costmap.footprint))
+        behavior = make_behavior(goal.server, params)
         behavior.start(request, self.frames.odom_pose, t_ns)
         self._behavior, self._behavior_impl = gid, behavior
         self.recoveries += 1
