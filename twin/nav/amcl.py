@@ -10,6 +10,8 @@ LikelihoodFieldModel), vectorised over particles and beams:
   translate, rotate; each particle gets that change with Gaussian noise of standard deviation
   `sqrt(alpha1 rot^2 + alpha2 trans^2)` on the rotations and `sqrt(alpha3 trans^2 + alpha4 (rot1^2
   + rot2^2))` on the translation (rotations folded to the nearer of forward and backward motion).
+  Particle yaws are never folded into [-pi, pi), as in Nav2's filter: a cloud heading west stays
+  one histogram cluster instead of splitting at the seam.
 - **Laser** (likelihood field): `max_beams` beams, every `(n - 1) // (max_beams - 1)`-th; ranges
   at or below range_min count as range_max, and range_max readings are skipped. Each endpoint's
   distance `z` to the nearest occupied map cell (capped at `laser_likelihood_max_dist`; off the
@@ -51,11 +53,6 @@ F64 = NDArray[np.float64]
 
 _BIN_XY_M = 0.5
 _BIN_YAW_RAD = math.radians(10.0)
-
-
-def _wrap(angle: F64) -> F64:
-    """Fold angles into [-pi, pi)."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _angle_diff(a: float, b: float) -> float:
@@ -239,7 +236,6 @@ class Amcl:
         n = self.params.max_particles
         draws = self._rng.standard_normal((n, 3)) * np.sqrt(np.maximum(values, 0.0))
         poses = np.array([x_m, y_m, yaw_rad]) + draws @ vectors.T
-        poses[:, 2] = _wrap(poses[:, 2])
         self.poses = poses
         self.weights = np.full(n, 1.0 / n)
         self._w_slow = self._w_fast = 0.0
@@ -296,13 +292,13 @@ class Amcl:
         sd_rot1 = math.sqrt(p.alpha1 * rot1_noise**2 + p.alpha2 * trans**2)
         sd_trans = math.sqrt(p.alpha3 * trans**2 + p.alpha4 * rot1_noise**2 + p.alpha4 * rot2_noise**2)
         sd_rot2 = math.sqrt(p.alpha1 * rot2_noise**2 + p.alpha2 * trans**2)
-        rot1_hat = _wrap(rot1 - noise[:, 0] * sd_rot1)
+        rot1_hat = rot1 - noise[:, 0] * sd_rot1
         trans_hat = trans - noise[:, 1] * sd_trans
-        rot2_hat = _wrap(rot2 - noise[:, 2] * sd_rot2)
+        rot2_hat = rot2 - noise[:, 2] * sd_rot2
         heading = self.poses[:, 2] + rot1_hat
         self.poses[:, 0] += trans_hat * np.cos(heading)
         self.poses[:, 1] += trans_hat * np.sin(heading)
-        self.poses[:, 2] = _wrap(self.poses[:, 2] + rot1_hat + rot2_hat)
+        self.poses[:, 2] += rot1_hat + rot2_hat
 
     def _beams(self, ranges: F64) -> tuple[F64, F64]:
         """Return the used beams' endpoints in the base frame (bx, by)."""

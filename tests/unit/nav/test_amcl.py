@@ -53,6 +53,21 @@ def test_kld_sampling_shrinks_the_set_once_it_concentrates() -> None:
     assert estimate.covariance_6x6()[0] < 1e-3
 
 
+def test_a_cloud_heading_west_stays_one_cluster_across_the_yaw_seam() -> None:
+    # Nav2 never folds particle yaws: a cloud around +-pi must not split into two histogram
+    # clusters (one each side of the seam) whose heavier half would pull the estimate ~10 deg off.
+    amcl = _amcl()
+    amcl.set_initial_pose(-2.0, -0.5, math.pi, np.diag([1e-4, 1e-4, 0.0685]))
+    no_beams = np.full(360, np.inf, dtype=np.float32)
+    for odom in ((0.0, 0.0, 0.0), (0.0, 0.0, 0.25), (0.0, 0.0, 0.5)):  # turning left, further past the seam
+        estimate = amcl.process_scan(odom, no_beams)
+        assert estimate is not None
+        expected = math.pi + odom[2]
+        error_deg = math.degrees(abs(math.remainder(estimate.yaw_rad - expected, 2.0 * math.pi)))
+        assert error_deg < 3.0, error_deg
+        assert -math.pi <= estimate.yaw_rad <= math.pi
+
+
 def test_initial_pose_outside_the_map_is_one_line_config_error() -> None:
     amcl = _amcl()
     with pytest.raises(ConfigError, match=r"initial pose \(50\.000, 0\.000\) lies outside the map") as info:
