@@ -51,8 +51,7 @@ __all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField"]
 
 F64 = NDArray[np.float64]
 
-_BIN_XY_M = 0.5
-_BIN_YAW_RAD = math.radians(10.0)
+_BIN_SIZE = np.array([0.5, 0.5, math.radians(10.0)])  # pf_kdtree's histogram: x m, y m, yaw rad
 
 
 def _angle_diff(a: float, b: float) -> float:
@@ -148,16 +147,16 @@ class LikelihoodField:
         self.origin_x_m = occupancy.origin_x_m
         self.origin_y_m = occupancy.origin_y_m
         self.free_cells = np.argwhere(occupancy.data == 0)  # (row, col) for uniform pose draws
-        self._cubes: dict[tuple[float, float, float, float], tuple[F64, int]] = {}
+        self._cubes: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
 
-    def cubes(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, int]:
-        """Return (pz^3 per cell, padded by `pad` cells of the off-map value on every side, pad)."""
+    def cubes(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
+        """Return (pz^3 per map cell, pz^3 of an endpoint off the map), pz as the likelihood-field model's."""
         key = (z_hit, z_rand, sigma_hit_m, range_max_m)
         if key not in self._cubes:
-            pad = math.ceil(range_max_m / self.resolution_m) + 2
-            field = np.pad(self.distance_m, pad, constant_values=self.max_dist_m)
-            pz = z_hit * np.exp(-(field**2) / (2.0 * sigma_hit_m**2)) + z_rand / range_max_m
-            self._cubes[key] = (np.ascontiguousarray(pz**3), pad)
+            denominator = 2.0 * sigma_hit_m**2
+            pz = z_hit * np.exp(-(self.distance_m**2) / denominator) + z_rand / range_max_m
+            off = z_hit * math.exp(-(self.max_dist_m**2) / denominator) + z_rand / range_max_m
+            self._cubes[key] = (np.ascontiguousarray(pz**3), off**3)
         return self._cubes[key]
 
 
@@ -192,7 +191,9 @@ class Amcl:
             range_max = min(range_max, params.laser_max_range_m)
         self._range_max = range_max
         self._range_min = max(laser.range_min_m, params.laser_min_range_m)
-        self._cubes, self._pad = self.field.cubes(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
+        self._cubes, self._off_map = self.field.cubes(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
+        # KLD-sampling's particle bound for k occupied bins, k = 0 .. max_particles (one table, both paths)
+        self._kld_limits = np.ascontiguousarray(self._kld_limit(np.arange(params.max_particles + 1)))
         self.poses: F64 = np.zeros((0, 3))
         self.weights: F64 = np.zeros(0)
         self._w_slow = 0.0
@@ -316,32 +317,32 @@ class Amcl:
     def _sensor(self, ranges: F64) -> None:
         bx, by = self._beams(ranges)
         poses = self.poses
-        if len(bx) and self._lib is not None:
-            poses = np.ascontiguousarray(poses)
-            self.poses = poses
-            bx, by = np.ascontiguousarray(bx), np.ascontiguousarray(by)
+        n = len(poses)
+        if len(bx):
+            field = self.field
+            inv_res = 1.0 / field.resolution_m
+            # grid coordinates of each particle (AMCL rounds: +0.5 then floor) and of each beam's endpoint
+            gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
+            gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
+            c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+            ex, ey = bx * inv_res, by * inv_res
             cubes = self._cubes
-            likelihood = np.empty(len(poses))
-            status = self._lib.twin_amcl_likelihood(
-                poses.ctypes.data, len(poses), bx.ctypes.data, by.ctypes.data, len(bx),
-                cubes.ctypes.data, cubes.shape[0], cubes.shape[1], self._pad,
-                self.field.origin_x_m, self.field.origin_y_m, self.field.resolution_m, likelihood.ctypes.data,
-            )  # fmt: skip
-            if status != 0:
-                raise MemoryError("amcl likelihood: out of memory")
-        elif len(bx):
-            c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-            res = self.field.resolution_m
-            hx = poses[:, 0:1] + c * bx - s * by
-            hy = poses[:, 1:2] + s * bx + c * by
-            cubes, pad = self._cubes, self._pad
-            col = np.floor((hx - self.field.origin_x_m) / res + 0.5).astype(np.intp) + pad
-            row = np.floor((hy - self.field.origin_y_m) / res + 0.5).astype(np.intp) + pad
-            np.clip(col, 0, cubes.shape[1] - 1, out=col)
-            np.clip(row, 0, cubes.shape[0] - 1, out=row)
-            likelihood = 1.0 + cubes[row, col].sum(axis=1)
+            rows, cols = cubes.shape
+            if self._lib is not None:
+                likelihood = np.empty(n)
+                self._lib.twin_amcl_likelihood(
+                    gx.ctypes.data, gy.ctypes.data, c.ctypes.data, s.ctypes.data, n,
+                    np.ascontiguousarray(ex).ctypes.data, np.ascontiguousarray(ey).ctypes.data, len(ex),
+                    cubes.ctypes.data, rows, cols, self._off_map, likelihood.ctypes.data,
+                )  # fmt: skip
+            else:
+                col = np.floor(gx[:, None] + c[:, None] * ex - s[:, None] * ey).astype(np.intp)
+                row = np.floor(gy[:, None] + s[:, None] * ex + c[:, None] * ey).astype(np.intp)
+                inside = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
+                values = cubes[np.clip(row, 0, rows - 1), np.clip(col, 0, cols - 1)]
+                likelihood = 1.0 + np.where(inside, values, self._off_map).sum(axis=1)
         else:
-            likelihood = np.ones(len(poses))
+            likelihood = np.ones(n)
         weights = self.weights * likelihood
         total = float(weights.sum())
         p = self.params
@@ -358,14 +359,9 @@ class Amcl:
             self.weights = np.full(len(weights), 1.0 / len(weights))
 
     def _bins(self, poses: F64) -> NDArray[np.int64]:
-        return np.stack(
-            [
-                np.floor(poses[:, 0] / _BIN_XY_M),
-                np.floor(poses[:, 1] / _BIN_XY_M),
-                np.floor(poses[:, 2] / _BIN_YAW_RAD),
-            ],
-            axis=1,
-        ).astype(np.int64)
+        """Each particle's (x, y, yaw) histogram bin, as pf_kdtree keys them (floor of pose / bin size)."""
+        keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
+        return keys
 
     def _kld_limit(self, k: NDArray[np.int64]) -> NDArray[np.float64]:
         p = self.params
@@ -385,9 +381,24 @@ class Amcl:
             w_diff = max(0.0, 1.0 - self._w_fast / self._w_slow)
         cumulative = np.cumsum(self.weights)
         cumulative /= cumulative[-1]
-        pick = np.minimum(np.searchsorted(cumulative, rng.random(m), side="right"), len(cumulative) - 1)
+        draws = rng.random(m)
+        recovering = w_diff > 0.0 and len(self.field.free_cells) > 0
+        if self._lib is not None and not recovering:  # draw, histogram and stop in one pass
+            out = np.empty((m, 3))
+            n = int(
+                self._lib.twin_pf_resample(
+                    self.poses.ctypes.data, len(self.poses), cumulative.ctypes.data, draws.ctypes.data, m,
+                    _BIN_SIZE.ctypes.data, self._kld_limits.ctypes.data, out.ctypes.data,
+                )
+            )  # fmt: skip
+            if n < 0:
+                raise MemoryError("amcl resampling: out of memory")
+            self.poses = out[:n]
+            self.weights = np.full(n, 1.0 / n)
+            return
+        pick = np.minimum(np.searchsorted(cumulative, draws, side="right"), len(cumulative) - 1)
         new = self.poses[pick]
-        if w_diff > 0.0 and len(self.field.free_cells):
+        if recovering:
             random = rng.random(m) < w_diff
             count = int(random.sum())
             if count:
@@ -397,44 +408,70 @@ class Amcl:
                 new[random, 1] = self.field.origin_y_m + cells[:, 0] * res
                 new[random, 2] = rng.uniform(-math.pi, math.pi, count)
             self._w_slow = self._w_fast = 0.0
-        bins = self._bins(new)
+        n = self._kld_count(self._bins(new))
+        self.poses = new[:n]
+        self.weights = np.full(n, 1.0 / n)
+
+    def _kld_count(self, bins: NDArray[np.int64]) -> int:
+        """How many of the drawn particles KLD-sampling keeps: the first n with n > limit(bins among them)."""
+        m = len(bins)
+        if self._lib is not None:
+            n = int(self._lib.twin_kld_count(bins.ctypes.data, m, self._kld_limits.ctypes.data))
+            if n < 0:
+                raise MemoryError("amcl resampling: out of memory")
+            return n
         _, first = np.unique(_bin_keys(bins), return_index=True)
         is_first = np.zeros(m, dtype=bool)
         is_first[first] = True
         leaves = np.cumsum(is_first)
-        n_drawn = np.arange(1, m + 1)
-        stop = np.nonzero(n_drawn > self._kld_limit(leaves))[0]
-        n = int(stop[0]) + 1 if len(stop) else m
-        self.poses = np.ascontiguousarray(new[:n])
-        self.weights = np.full(n, 1.0 / n)
+        stop = np.nonzero(np.arange(1, m + 1) > self._kld_limits[leaves])[0]
+        return int(stop[0]) + 1 if len(stop) else m
 
-    def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
-        poses, w = self.poses, self.weights
-        bins = self._bins(poses)
+    def _clusters(self, bins: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]:
+        """Each particle's cluster (bins that touch, 26-neighbourhood), numbered from 1 in raster order of the bins."""
+        if self._lib is not None:
+            labels = np.empty(len(bins), dtype=np.int64)
+            count = int(self._lib.twin_pf_clusters(bins.ctypes.data, len(bins), labels.ctypes.data))
+            if count < 0:
+                raise MemoryError("amcl clustering: out of memory")
+            return labels, count
         lo = bins.min(axis=0)
         shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
         grid = np.zeros(shape, dtype=bool)
         local = bins - lo
         grid[local[:, 0], local[:, 1], local[:, 2]] = True
         labels, count = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
-        cluster = labels[local[:, 0], local[:, 1], local[:, 2]]
-        cw = np.bincount(cluster, weights=w, minlength=count + 1)
-        best = int(np.argmax(cw))
-        mask = cluster == best
-        wc = w[mask]
-        total = float(wc.sum())
-        mx = float((wc * poses[mask, 0]).sum() / total)
-        my = float((wc * poses[mask, 1]).sum() / total)
-        myaw = math.atan2(float((wc * np.sin(poses[mask, 2])).sum()), float((wc * np.cos(poses[mask, 2])).sum()))
-        # The whole set's covariance, as amcl_pose carries it.
-        wt = float(w.sum())
-        sx, sy = float((w * poses[:, 0]).sum() / wt), float((w * poses[:, 1]).sum() / wt)
+        return np.asarray(labels[local[:, 0], local[:, 1], local[:, 2]], dtype=np.int64), int(count)
+
+    def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
+        poses, w = self.poses, self.weights
+        cluster, count = self._clusters(self._bins(poses))
         cov = np.zeros((3, 3))
-        cov[0, 0] = float((w * poses[:, 0] ** 2).sum() / wt) - sx * sx
-        cov[1, 1] = float((w * poses[:, 1] ** 2).sum() / wt) - sy * sy
-        cov[0, 1] = cov[1, 0] = float((w * poses[:, 0] * poses[:, 1]).sum() / wt) - sx * sy
-        mc, ms = float((w * np.cos(poses[:, 2])).sum() / wt), float((w * np.sin(poses[:, 2])).sum() / wt)
-        cov[2, 2] = -2.0 * math.log(max(math.hypot(mc, ms), 1e-300))
+        if self._lib is not None:
+            out = np.empty(7)
+            if self._lib.twin_pf_estimate(
+                poses.ctypes.data, w.ctypes.data, len(w), cluster.ctypes.data, count, out.ctypes.data
+            ):
+                raise MemoryError("amcl estimate: out of memory")
+            mx, my, myaw = float(out[0]), float(out[1]), float(out[2])
+            cov[0, 0], cov[1, 1], cov[0, 1], cov[2, 2] = out[3], out[4], out[5], out[6]
+            cov[1, 0] = cov[0, 1]
+        else:
+            cw = np.bincount(cluster, weights=w, minlength=count + 1)
+            mask = cluster == int(np.argmax(cw))
+            wc = w[mask]
+            total = float(wc.sum())
+            mx = float((wc * poses[mask, 0]).sum() / total)
+            my = float((wc * poses[mask, 1]).sum() / total)
+            myaw = math.atan2(float((wc * np.sin(poses[mask, 2])).sum()), float((wc * np.cos(poses[mask, 2])).sum()))
+            # The whole set's covariance, as amcl_pose carries it.
+            wt = float(w.sum())
+            sx, sy = float((w * poses[:, 0]).sum() / wt), float((w * poses[:, 1]).sum() / wt)
+            cov[0, 0] = float((w * poses[:, 0] ** 2).sum() / wt) - sx * sx
+            cov[1, 1] = float((w * poses[:, 1] ** 2).sum() / wt) - sy * sy
+            cov[0, 1] = cov[1, 0] = float((w * poses[:, 0] * poses[:, 1]).sum() / wt) - sx * sy
+            mc, ms = float((w * np.cos(poses[:, 2])).sum() / wt), float((w * np.sin(poses[:, 2])).sum() / wt)
+            cov[2, 2] = -2.0 * math.log(max(math.hypot(mc, ms), 1e-300))
         ox, oy, oyaw = odom_pose
         # map->odom = map->base * (odom->base)^-1
         tyaw = myaw - oyaw

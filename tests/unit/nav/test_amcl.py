@@ -120,3 +120,28 @@ def test_the_c_kernel_weighs_particles_as_numpy_does() -> None:
         amcl._sensor(ranges)
     assert np.array_equal(native.poses, numpy_only.poses)
     assert np.allclose(native.weights, numpy_only.weights, rtol=1e-12, atol=0.0)
+
+
+def test_the_c_kernels_cluster_and_count_bins_as_numpy_does() -> None:
+    native, numpy_only = _amcl(), _amcl()
+    numpy_only._lib = None
+    assert native._lib is not None
+    rng = np.random.default_rng(5)
+    for trial in range(60):
+        n = int(rng.integers(1, 2000))
+        poses = rng.normal(0.0, [0.2, 1.0, 5.0][trial % 3], (n, 3))
+        poses[:, 2] += [0.0, math.pi, 40.0][trial % 3]  # yaws are never folded: around the seam and far past it
+        bins = native._bins(poses)
+        labels, count = native._clusters(bins)
+        expected_labels, expected_count = numpy_only._clusters(bins)
+        assert count == expected_count and np.array_equal(labels, expected_labels)
+        assert native._kld_count(bins) == numpy_only._kld_count(bins)
+    assert count > 1  # the widest clouds break into several clusters
+
+
+def test_the_c_kernels_and_numpy_run_the_same_filter() -> None:
+    # resampling draws the same particles and stops at the same count, so the whole track agrees
+    native = drive(4, 20.0, initial=START, native=True)
+    numpy_only = drive(4, 20.0, initial=START, native=False)
+    assert native.updates == numpy_only.updates > 10
+    assert np.allclose(native.estimate, numpy_only.estimate, rtol=0.0, atol=1e-9)
