@@ -335,6 +335,33 @@ void twin_obstacle_update(unsigned char *cost, long rows, long cols, double gx, 
     }
 }
 
+/* twin_obstacle_update for a LaserScan: beam i (range r, direction cos_a[i], sin_a[i] in the sensor
+   frame) gives the point (sx + r (c cos_a - s sin_a), sy + r (s cos_a + c sin_a)) when
+   range_min <= r < range_max, as scan_observation projects it (the same roundings); then the
+   points are cleared and marked as twin_obstacle_update does. Returns -1 when memory runs out. */
+int twin_scan_update(unsigned char *cost, long rows, long cols, double gx, double gy, double res,
+                     const double *ranges, long n, const double *cos_a, const double *sin_a,
+                     double range_min, double range_max, double sx, double sy, double c, double s,
+                     int clearing, int marking, double ray_max_cells, double ray_min_cells,
+                     double mark_max_m, double mark_min_m, long *bounds) {
+    double *pts = malloc(2 * sizeof(double) * (size_t)(n > 0 ? n : 1));
+    if (!pts) return -1;
+    long m = 0;
+    for (long i = 0; i < n; ++i) {
+        double r = ranges[i];
+        if (r >= range_min && r < range_max) {
+            double ca = cos_a[i], sa = sin_a[i];
+            pts[2 * m] = sx + r * (c * ca - s * sa);
+            pts[2 * m + 1] = sy + r * (s * ca + c * sa);
+            ++m;
+        }
+    }
+    twin_obstacle_update(cost, rows, cols, gx, gy, res, sx, sy, pts, m, clearing, marking, ray_max_cells,
+                         ray_min_cells, mark_max_m, mark_min_m, bounds);
+    free(pts);
+    return 0;
+}
+
 /* The inflation of twin_costmap_compose with squared distances of type T (`far`: no seed in reach).
    Loops are written without data-dependent branches, so the compiler can vectorise them. */
 #define TWIN_INFLATE(T, far_value)                                                                   \
@@ -484,6 +511,25 @@ void twin_fill_polygon(unsigned char *cost, long rows, long cols, double ox, dou
         }
     }
 }
+
+
+/* The footprint (fp: n points in the robot frame) placed at (x, y) with heading cos c, sin s
+   (x + c fx - s fy, y + s fx + c fy), filled with `value` as twin_fill_polygon does. Returns -1
+   when memory runs out. */
+int twin_fill_footprint(unsigned char *cost, long rows, long cols, double ox, double oy, double res,
+                        const double *fp, long n, double x, double y, double c, double s,
+                        unsigned char value, long *bounds) {
+    if (n < 1) return 0;
+    double *poly = malloc(2 * sizeof(double) * (size_t)n);
+    if (!poly) return -1;
+    for (long i = 0; i < n; ++i) {
+        poly[2 * i] = x + c * fp[2 * i] - s * fp[2 * i + 1];
+        poly[2 * i + 1] = y + s * fp[2 * i] + c * fp[2 * i + 1];
+    }
+    twin_fill_polygon(cost, rows, cols, ox, oy, res, poly, n, value, bounds);
+    free(poly);
+    return 0;
+}
 """
 
 
@@ -517,6 +563,15 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_costmap_compose.argtypes = [
         ptr, ctypes.c_ubyte, ptr, long_, long_, long_, long_, long_, long_, long_, long_, long_, long_, long_,
         ctypes.c_int, long_, ptr, ctypes.c_int, ctypes.c_int, ptr,
+    ]  # fmt: skip
+    lib.twin_scan_update.restype = ctypes.c_int
+    lib.twin_scan_update.argtypes = [
+        ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ptr, ptr, dbl, dbl, dbl, dbl, dbl, dbl,
+        ctypes.c_int, ctypes.c_int, dbl, dbl, dbl, dbl, ptr,
+    ]  # fmt: skip
+    lib.twin_fill_footprint.restype = ctypes.c_int
+    lib.twin_fill_footprint.argtypes = [
+        ptr, long_, long_, dbl, dbl, dbl, ptr, long_, dbl, dbl, dbl, dbl, ctypes.c_ubyte, ptr,
     ]  # fmt: skip
     lib.twin_fill_polygon.restype = None
     lib.twin_fill_polygon.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ctypes.c_ubyte, ptr]

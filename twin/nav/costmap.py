@@ -33,7 +33,7 @@ import ctypes
 import functools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,13 +61,54 @@ _Addresses = tuple[int | None, "ctypes.Array[ctypes.c_void_p]", int, int]
 _NO_CELLS: tuple[NDArray[np.intp], NDArray[np.intp]] = (np.zeros(0, np.intp), np.zeros(0, np.intp))
 
 
-@dataclass(frozen=True, kw_only=True, slots=True, eq=False)
-class Observation:
-    """One scan as the obstacle layer sees it: the sensor's origin and the hit points, in the costmap's frame."""
+class _Scan(NamedTuple):
+    """A LaserScan's ranges with what projects them: beam directions in the sensor frame, range limits, heading."""
 
-    origin_x_m: float
-    origin_y_m: float
-    points_xy_m: F64  # (n, 2)
+    ranges: F64
+    cos_a: F64
+    sin_a: F64
+    range_min_m: float
+    range_max_m: float
+    cos_yaw: float
+    sin_yaw: float
+
+
+class Observation:
+    """One scan as the obstacle layer sees it: the sensor's origin and the hit points, in the costmap's frame.
+
+    Args:
+        origin_x_m: The sensor's x in the costmap's frame.
+        origin_y_m: The sensor's y.
+        points_xy_m: The hit points (n, 2); None for a scan made by `scan_observation`, whose points are
+            projected when first asked for (the C kernel projects the ranges itself, with the same roundings).
+        scan: The scan the points come from.
+    """
+
+    __slots__ = ("_points", "origin_x_m", "origin_y_m", "scan")
+
+    def __init__(
+        self, *, origin_x_m: float, origin_y_m: float, points_xy_m: F64 | None = None, scan: _Scan | None = None
+    ) -> None:
+        if points_xy_m is None and scan is None:
+            raise ValueError("an observation needs its points or its scan")
+        self.origin_x_m = origin_x_m
+        self.origin_y_m = origin_y_m
+        self._points = points_xy_m
+        self.scan = scan
+
+    @property
+    def points_xy_m(self) -> F64:
+        """The hit points (n, 2) in the costmap's frame."""
+        if self._points is None:
+            assert self.scan is not None
+            r, cos_a, sin_a, lo, hi, c, s = self.scan
+            index = np.flatnonzero((r >= lo) & (r < hi))  # false for nan and +-inf
+            ca, sa, rk = cos_a[index], sin_a[index], r[index]
+            points = np.empty((len(index), 2))
+            points[:, 0] = self.origin_x_m + rk * (c * ca - s * sa)
+            points[:, 1] = self.origin_y_m + rk * (s * ca + c * sa)
+            self._points = points
+        return self._points
 
 
 def scan_observation(
@@ -86,15 +127,10 @@ def scan_observation(
     Ranges that are not finite or lie outside [range_min, range_max) give no point, as
     laser_geometry's projection does for Nav2's obstacle layer (`inf_is_valid` false).
     """
-    r = np.asarray(ranges, dtype=np.float64)
-    index = np.flatnonzero((r >= range_min_m) & (r < range_max_m))  # false for nan and +-inf
+    r = np.ascontiguousarray(ranges, dtype=np.float64)
     cos_a, sin_a = _beam_directions(angle_min_rad, angle_increment_rad, len(r))
-    c, s = math.cos(sensor_yaw_rad), math.sin(sensor_yaw_rad)
-    ca, sa, rk = cos_a[index], sin_a[index], r[index]
-    points = np.empty((len(index), 2))
-    points[:, 0] = sensor_x_m + rk * (c * ca - s * sa)
-    points[:, 1] = sensor_y_m + rk * (s * ca + c * sa)
-    return Observation(origin_x_m=sensor_x_m, origin_y_m=sensor_y_m, points_xy_m=points)
+    scan = _Scan(r, cos_a, sin_a, range_min_m, range_max_m, math.cos(sensor_yaw_rad), math.sin(sensor_yaw_rad))
+    return Observation(origin_x_m=sensor_x_m, origin_y_m=sensor_y_m, scan=scan)
 
 
 @functools.lru_cache(maxsize=8)
@@ -185,6 +221,7 @@ class Costmap:
         self._lib = load_kernel() if native else None
         self.inscribed_radius_m, self.circumscribed_radius_m, self.footprint = footprint_radii(params)
         self._footprint_xy = np.array(self.footprint, dtype=np.float64).reshape(-1, 2)
+        self._footprint_address = self._footprint_xy.ctypes.data
         self._bounds = np.zeros(4, dtype=np.int64)
         self._bounds_address = self._bounds.ctypes.data
         self._address_cache: tuple[tuple[U8 | None, ...], _Addresses] | None = None
@@ -358,14 +395,26 @@ class Costmap:
         g = self.grid
         res = g.resolution_m
         rows, cols = cost.shape
+        ray_max = float(max(0.0, math.ceil(source.raytrace_max_range_m / res)))
+        ray_min = float(max(0.0, math.ceil(source.raytrace_min_range_m / res)))
+        scan = obs.scan
+        if scan is not None:  # the kernel projects the ranges
+            status = self._lib.twin_scan_update(
+                cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res,
+                scan.ranges.ctypes.data, len(scan.ranges), scan.cos_a.ctypes.data, scan.sin_a.ctypes.data,
+                scan.range_min_m, scan.range_max_m, obs.origin_x_m, obs.origin_y_m, scan.cos_yaw, scan.sin_yaw,
+                int(clearing), int(marking), ray_max, ray_min,
+                source.obstacle_max_range_m, source.obstacle_min_range_m, self._bounds_address,
+            )  # fmt: skip
+            if status != 0:
+                raise MemoryError("costmap obstacle layer: out of memory")
+            return
         pts = obs.points_xy_m
         if not pts.flags.c_contiguous or pts.dtype != np.float64:
             pts = np.ascontiguousarray(pts, dtype=np.float64)
         self._lib.twin_obstacle_update(
             cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res, obs.origin_x_m, obs.origin_y_m,
-            pts.ctypes.data, len(pts), int(clearing), int(marking),
-            float(max(0.0, math.ceil(source.raytrace_max_range_m / res))),
-            float(max(0.0, math.ceil(source.raytrace_min_range_m / res))),
+            pts.ctypes.data, len(pts), int(clearing), int(marking), ray_max, ray_min,
             source.obstacle_max_range_m, source.obstacle_min_range_m, self._bounds_address,
         )  # fmt: skip
 
@@ -427,18 +476,20 @@ class Costmap:
     def _clear_footprint(self, cost: U8, x: float, y: float, yaw: float) -> None:
         g = self.grid
         c, s = math.cos(yaw), math.sin(yaw)
+        res = g.resolution_m
+        rows, cols = cost.shape
+        if self._lib is not None:
+            status = self._lib.twin_fill_footprint(
+                cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res,
+                self._footprint_address, len(self._footprint_xy), x, y, c, s, FREE_SPACE, self._bounds_address,
+            )  # fmt: skip
+            if status != 0:
+                raise MemoryError("costmap footprint clearing: out of memory")
+            return
         fx, fy = self._footprint_xy[:, 0], self._footprint_xy[:, 1]
         poly = np.empty((len(fx), 2))
         poly[:, 0] = x + c * fx - s * fy
         poly[:, 1] = y + s * fx + c * fy
-        res = g.resolution_m
-        rows, cols = cost.shape
-        if self._lib is not None:
-            self._lib.twin_fill_polygon(
-                cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res,
-                poly.ctypes.data, len(poly), FREE_SPACE, self._bounds_address,
-            )  # fmt: skip
-            return
         c0 = max(0, int((poly[:, 0].min() - g.origin_x_m) / res))
         c1 = min(cols, int((poly[:, 0].max() - g.origin_x_m) / res) + 1)
         r0 = max(0, int((poly[:, 1].min() - g.origin_y_m) / res))
