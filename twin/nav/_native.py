@@ -49,6 +49,86 @@ void twin_amcl_likelihood(const double *gx, const double *gy, const double *c, c
     for (long j = 0; j < n; ++j) out[j] += 1.0;
 }
 
+/* Nav2 AMCL's likelihood-field distances (map_update_cspace): every occupied cell starts at 0 in a
+   priority queue (a binary heap kept as libstdc++'s std::priority_queue keeps it: push_heap and
+   pop_heap, smallest distance on top), pushed column by column; while the queue is not empty the
+   top cell's four neighbours (x - 1, y - 1, x + 1, y + 1) not yet reached take the distance in cells
+   from the top cell's source (sqrt(dx^2 + dy^2), if it is at most int(max_dist / scale)) times
+   scale and join the queue, then the top is popped (whichever cell is on top by then). Cells never
+   reached keep max_dist. occupied and out are row-major (row = y). Returns -1 when memory runs out. */
+typedef struct { double key; int i, j, si, sj; } twin_cell;
+
+static void cell_push(twin_cell *h, long hole, long top, twin_cell v) {   /* std::__push_heap */
+    long parent = (hole - 1) / 2;
+    while (hole > top && h[parent].key > v.key) { h[hole] = h[parent]; hole = parent; parent = (hole - 1) / 2; }
+    h[hole] = v;
+}
+
+static void cell_pop(twin_cell *h, long len) {   /* std::pop_heap: __pop_heap then __adjust_heap */
+    if (len < 2) return;
+    long last = len - 1;
+    twin_cell v = h[last];
+    h[last] = h[0];
+    long n = last, hole = 0, child = 0;
+    while (child < (n - 1) / 2) {
+        child = 2 * (child + 1);
+        if (h[child].key > h[child - 1].key) child--;   /* comp(right, left): right is "less" */
+        h[hole] = h[child];
+        hole = child;
+    }
+    if ((n & 1) == 0 && child == (n - 2) / 2) {
+        child = 2 * (child + 1);
+        h[hole] = h[child - 1];
+        hole = child - 1;
+    }
+    cell_push(h, hole, 0, v);
+}
+
+int twin_amcl_distances(const unsigned char *occupied, long width, long height, double scale, double max_dist,
+                        double *out) {
+    long cells = width * height;
+    int radius = (int)(max_dist / scale);
+    unsigned char *marked = calloc((size_t)(cells > 0 ? cells : 1), 1);
+    twin_cell *heap = malloc(sizeof(twin_cell) * (size_t)(cells > 0 ? cells : 1));
+    double *table = malloc(sizeof(double) * (size_t)(radius + 2) * (size_t)(radius + 2));
+    if (!marked || !heap || !table) { free(marked); free(heap); free(table); return -1; }
+    for (int a = 0; a <= radius + 1; ++a)
+        for (int b = 0; b <= radius + 1; ++b) table[a * (radius + 2) + b] = sqrt((double)(a * a + b * b));
+    long len = 0;
+    for (long i = 0; i < width; ++i) {
+        for (long j = 0; j < height; ++j) {
+            long k = j * width + i;
+            if (occupied[k]) {
+                out[k] = 0.0;
+                marked[k] = 1;
+                twin_cell c = {0.0, (int)i, (int)j, (int)i, (int)j};
+                cell_push(heap, len++, 0, c);
+            } else {
+                out[k] = max_dist;
+            }
+        }
+    }
+    while (len > 0) {
+        twin_cell cur = heap[0];
+        for (int nb = 0; nb < 4; ++nb) {
+            long i = cur.i + (nb == 0 ? -1 : nb == 2 ? 1 : 0), j = cur.j + (nb == 1 ? -1 : nb == 3 ? 1 : 0);
+            if (i < 0 || j < 0 || i >= width || j >= height) continue;
+            long k = j * width + i;
+            if (marked[k]) continue;
+            long di = i > cur.si ? i - cur.si : cur.si - i, dj = j > cur.sj ? j - cur.sj : cur.sj - j;
+            double d = table[di * (radius + 2) + dj];
+            if (d > radius) continue;
+            out[k] = d * scale;
+            twin_cell c = {out[k], (int)i, (int)j, cur.si, cur.sj};
+            cell_push(heap, len++, 0, c);
+            marked[k] = 1;
+        }
+        cell_pop(heap, len--);
+    }
+    free(marked); free(heap); free(table);
+    return 0;
+}
+
 /* KLD-sampling's stop (pf_update_resample): particles are taken in order, each counted into its
    (x, y, yaw) histogram bin (keys, 3 per particle); the count stops at the first n with
    n > limit[k], k the bins occupied by the first n. Returns n (m when it never stops), or -1 when
@@ -542,6 +622,8 @@ def load_kernel() -> ctypes.CDLL | None:
     ptr, long_, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
     lib.twin_amcl_likelihood.restype = None
     lib.twin_amcl_likelihood.argtypes = [ptr, ptr, ptr, ptr, long_, ptr, ptr, long_, ptr, long_, long_, dbl, ptr]
+    lib.twin_amcl_distances.restype = ctypes.c_int
+    lib.twin_amcl_distances.argtypes = [ptr, long_, long_, dbl, dbl, ptr]
     lib.twin_kld_count.restype = long_
     lib.twin_kld_count.argtypes = [ptr, long_, ptr]
     lib.twin_pf_clusters.restype = long_

@@ -47,7 +47,7 @@ from twin.nav.map_server import OccupancyMap
 from twin.nav.params import AmclParams
 from twin.world.robot_model import LidarSpec
 
-__all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField"]
+__all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField", "nav2_distances"]
 
 F64 = NDArray[np.float64]
 
@@ -126,23 +126,113 @@ def _bin_keys(bins: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.asarray((local[:, 0] * span[1] + local[:, 1]) * span[2] + local[:, 2], dtype=np.int64)
 
 
+def nav2_distances(occupied: NDArray[np.bool_], resolution_m: float, max_dist_m: float, *, native: bool = True) -> F64:
+    """Distances (m) from each cell to an occupied one, spread as Nav2's `map_update_cspace` spreads them.
+
+    Every occupied cell enters a priority queue at 0 (column by column, each column bottom to top);
+    while the queue holds cells, the top cell's neighbours at x - 1, y - 1, x + 1, y + 1 that no cell
+    has reached take the distance to the top cell's source, if it is at most `int(max_dist /
+    resolution)` cells, and join the queue; then the top is popped, whichever cell is on top by then.
+    The queue is a binary heap kept as libstdc++'s `std::priority_queue` keeps it, so cells of equal
+    distance leave it in Nav2's order. Cells never reached are `max_dist_m` away.
+
+    Args:
+        occupied: (rows, cols) obstacle cells, row = y.
+        resolution_m: Cell size.
+        max_dist_m: `laser_likelihood_max_dist`.
+        native: Use the C kernel when it can be built.
+    """
+    rows, cols = occupied.shape
+    out = np.empty((rows, cols))
+    lib = load_kernel() if native else None
+    if lib is not None:
+        cells = np.ascontiguousarray(occupied, dtype=np.uint8)
+        if lib.twin_amcl_distances(cells.ctypes.data, cols, rows, resolution_m, max_dist_m, out.ctypes.data):
+            raise MemoryError("amcl likelihood field: out of memory")
+        return out
+    radius = int(max_dist_m / resolution_m)
+    table = np.sqrt(np.add.outer(np.arange(radius + 2) ** 2, np.arange(radius + 2) ** 2).astype(np.float64))
+    dist = np.full(rows * cols, max_dist_m)
+    marked = occupied.reshape(-1).copy()
+    dist[marked] = 0.0
+    heap: list[tuple[float, int, int, int, int]] = []  # (distance, x, y, source x, source y)
+    for i, j in zip(*np.nonzero(occupied.T), strict=True):  # x outer, y inner, as Nav2 pushes them
+        _heap_push(heap, (0.0, int(i), int(j), int(i), int(j)))
+    while heap:
+        _, i, j, si, sj = heap[0]
+        for x, y in ((i - 1, j), (i, j - 1), (i + 1, j), (i, j + 1)):
+            if x < 0 or y < 0 or x >= cols or y >= rows or marked[y * cols + x]:
+                continue
+            d = float(table[abs(x - si), abs(y - sj)])
+            if d > radius:
+                continue
+            dist[y * cols + x] = d * resolution_m
+            _heap_push(heap, (d * resolution_m, x, y, si, sj))
+            marked[y * cols + x] = True
+        _heap_pop(heap)
+    return dist.reshape(rows, cols)
+
+
+_Cell = tuple[float, int, int, int, int]
+
+
+def _heap_push(heap: list[_Cell], value: _Cell) -> None:
+    """std::push_heap with the smallest distance on top."""
+    heap.append(value)
+    _sift_up(heap, len(heap) - 1, value)
+
+
+def _sift_up(heap: list[_Cell], hole: int, value: _Cell) -> None:
+    parent = (hole - 1) // 2
+    while hole > 0 and heap[parent][0] > value[0]:
+        heap[hole] = heap[parent]
+        hole = parent
+        parent = (hole - 1) // 2
+    heap[hole] = value
+
+
+def _heap_pop(heap: list[_Cell]) -> None:
+    """std::pop_heap (libstdc++'s __adjust_heap: the hole goes down to a leaf, then the last value up)."""
+    n = len(heap) - 1
+    if n < 1:
+        heap.pop()
+        return
+    value = heap[n]
+    heap[n] = heap[0]
+    hole = child = 0
+    while child < (n - 1) // 2:
+        child = 2 * (child + 1)
+        if heap[child][0] > heap[child - 1][0]:
+            child -= 1
+        heap[hole] = heap[child]
+        hole = child
+    if n % 2 == 0 and child == (n - 2) // 2:
+        child = 2 * (child + 1)
+        heap[hole] = heap[child - 1]
+        hole = child - 1
+    _sift_up(heap, hole, value)
+    heap.pop()
+
+
 class LikelihoodField:
-    """The map's distance to the nearest occupied cell, and per-cell beam likelihood cubes.
+    """The map's distance to the nearest occupied cell as Nav2's AMCL computes it, and per-cell likelihood cubes.
+
+    Nav2 (`map_update_cspace`) does not take the exact distance transform: it spreads distances from
+    the occupied cells through a priority queue, each cell taking the distance to the source of the
+    first neighbour that reaches it (up to `int(max_dist / resolution)` cells). About one cell in ten
+    then lies up to a few centimetres further from the wall than it is; the filter's statistics
+    follow, so the twin spreads them the same way, in the same order (`nav2_distances`).
 
     Args:
         occupancy: The map (cells equal to 100 are obstacles, as AMCL reads them).
         max_dist_m: `laser_likelihood_max_dist`: distances are capped here (and off the map).
+        native: Use the C kernel when it can be built (else the same steps in Python, much slower).
     """
 
-    def __init__(self, occupancy: OccupancyMap, max_dist_m: float) -> None:
-        occupied = occupancy.data == 100
+    def __init__(self, occupancy: OccupancyMap, max_dist_m: float, *, native: bool = True) -> None:
         res = occupancy.resolution_m
-        if occupied.any():
-            dist = np.asarray(ndimage.distance_transform_edt(~occupied), dtype=np.float64) * res
-        else:
-            dist = np.full(occupied.shape, np.inf)
         self.max_dist_m = float(max_dist_m)
-        self.distance_m: F64 = np.minimum(dist, self.max_dist_m)
+        self.distance_m: F64 = nav2_distances(occupancy.data == 100, res, self.max_dist_m, native=native)
         self.resolution_m = res
         self.origin_x_m = occupancy.origin_x_m
         self.origin_y_m = occupancy.origin_y_m
@@ -185,7 +275,7 @@ class Amcl:
         self.map = occupancy
         self.laser = laser
         self._rng = rng
-        self.field = LikelihoodField(occupancy, params.laser_likelihood_max_dist_m)
+        self.field = LikelihoodField(occupancy, params.laser_likelihood_max_dist_m, native=native)
         range_max = laser.range_max_m
         if params.laser_max_range_m > 0.0:
             range_max = min(range_max, params.laser_max_range_m)
@@ -274,6 +364,11 @@ class Amcl:
             self._resample()
         self.estimate = self._estimate(odom_pose)
         return self.estimate
+
+    @property
+    def has_initial_pose(self) -> bool:
+        """True once an initial pose was set (before it, scans are ignored)."""
+        return self._initialised
 
     def map_odom(self) -> tuple[float, float, float] | None:
         """Return the latest map->odom (x, y, yaw), or None before the first estimate."""
