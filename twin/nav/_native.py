@@ -26,15 +26,25 @@ _SOURCE = r"""
 #include <stdlib.h>
 
 /* AMCL likelihood field: out[j] = 1 + sum_i pz3[row, col] over the beams' endpoints, in beam order.
-   Particle j's grid position (gx, gy: (x - origin) / res + 0.5) and heading (c, s: cos, sin); beam i's
-   endpoint in the base frame in cells (ex, ey). The endpoint's cell is (floor(gx + c ex - s ey),
-   floor(gy + s ex + c ey)), AMCL's rounding lookup; off the map it weighs `off_value`. Beam by beam
-   over all particles: one beam's endpoints from a cluster of particles fall in a few neighbouring
-   cells, which keeps the lookups in cache. */
-void twin_amcl_likelihood(const double *gx, const double *gy, const double *c, const double *s, long n,
-                          const double *ex, const double *ey, long nb,
-                          const double *pz3, long rows, long cols, double off_value, double *out) {
-    for (long j = 0; j < n; ++j) out[j] = 0.0;
+   Particle j at poses[j] = (x, y, yaw) has the grid position gx = (x - ox) * inv_res + 0.5 (likewise
+   gy) and heading cos, sin; beam i's endpoint in the base frame in cells is (ex, ey). The endpoint's
+   cell is (floor(gx + c ex - s ey), floor(gy + s ex + c ey)), AMCL's rounding lookup; off the map it
+   weighs `off_value`. Beam by beam over all particles: one beam's endpoints from a cluster of
+   particles fall in a few neighbouring cells, which keeps the lookups in cache. Returns -1 when
+   memory runs out. */
+int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, double inv_res,
+                         const double *ex, const double *ey, long nb,
+                         const double *pz3, long rows, long cols, double off_value, double *out) {
+    double *buf = malloc(4 * sizeof(double) * (size_t)(n > 0 ? n : 1));
+    if (!buf) return -1;
+    double *gx = buf, *gy = buf + n, *c = buf + 2 * n, *s = buf + 3 * n;
+    for (long j = 0; j < n; ++j) {
+        gx[j] = (poses[3 * j] - ox) * inv_res + 0.5;
+        gy[j] = (poses[3 * j + 1] - oy) * inv_res + 0.5;
+        c[j] = cos(poses[3 * j + 2]);
+        s[j] = sin(poses[3 * j + 2]);
+        out[j] = 0.0;
+    }
     for (long i = 0; i < nb; ++i) {
         double bx = ex[i], by = ey[i];
         for (long j = 0; j < n; ++j) {
@@ -47,6 +57,24 @@ void twin_amcl_likelihood(const double *gx, const double *gy, const double *c, c
         }
     }
     for (long j = 0; j < n; ++j) out[j] += 1.0;
+    free(buf);
+    return 0;
+}
+
+/* The differential motion model's sampling (DifferentialMotionModel::odometryUpdate) given the
+   standard normal draws (3 per particle): rot1 - n0 sd_rot1, trans - n1 sd_trans, rot2 - n2 sd_rot2
+   applied to each pose; headings are not folded. */
+void twin_amcl_motion(double *poses, long n, const double *noise, double rot1, double trans, double rot2,
+                      double sd_rot1, double sd_trans, double sd_rot2) {
+    for (long j = 0; j < n; ++j) {
+        double r1 = rot1 - noise[3 * j] * sd_rot1;
+        double t = trans - noise[3 * j + 1] * sd_trans;
+        double r2 = rot2 - noise[3 * j + 2] * sd_rot2;
+        double heading = poses[3 * j + 2] + r1;
+        poses[3 * j] += t * cos(heading);
+        poses[3 * j + 1] += t * sin(heading);
+        poses[3 * j + 2] += r1 + r2;
+    }
 }
 
 /* Nav2 AMCL's likelihood-field distances (map_update_cspace): every occupied cell starts at 0 in a
@@ -620,8 +648,10 @@ def load_kernel() -> ctypes.CDLL | None:
     if lib is None:
         return None
     ptr, long_, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
-    lib.twin_amcl_likelihood.restype = None
-    lib.twin_amcl_likelihood.argtypes = [ptr, ptr, ptr, ptr, long_, ptr, ptr, long_, ptr, long_, long_, dbl, ptr]
+    lib.twin_amcl_likelihood.restype = ctypes.c_int
+    lib.twin_amcl_likelihood.argtypes = [ptr, long_, dbl, dbl, dbl, ptr, ptr, long_, ptr, long_, long_, dbl, ptr]
+    lib.twin_amcl_motion.restype = None
+    lib.twin_amcl_motion.argtypes = [ptr, long_, ptr, dbl, dbl, dbl, dbl, dbl, dbl]
     lib.twin_amcl_distances.restype = ctypes.c_int
     lib.twin_amcl_distances.argtypes = [ptr, long_, long_, dbl, dbl, ptr]
     lib.twin_kld_count.restype = long_

@@ -388,6 +388,13 @@ class Amcl:
         sd_rot1 = math.sqrt(p.alpha1 * rot1_noise**2 + p.alpha2 * trans**2)
         sd_trans = math.sqrt(p.alpha3 * trans**2 + p.alpha4 * rot1_noise**2 + p.alpha4 * rot2_noise**2)
         sd_rot2 = math.sqrt(p.alpha1 * rot2_noise**2 + p.alpha2 * trans**2)
+        if self._lib is not None:
+            poses = np.ascontiguousarray(self.poses)
+            self._lib.twin_amcl_motion(
+                poses.ctypes.data, n, noise.ctypes.data, rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2
+            )
+            self.poses = poses
+            return
         rot1_hat = rot1 - noise[:, 0] * sd_rot1
         trans_hat = trans - noise[:, 1] * sd_trans
         rot2_hat = rot2 - noise[:, 2] * sd_rot2
@@ -416,21 +423,25 @@ class Amcl:
         if len(bx):
             field = self.field
             inv_res = 1.0 / field.resolution_m
-            # grid coordinates of each particle (AMCL rounds: +0.5 then floor) and of each beam's endpoint
-            gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
-            gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
-            c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-            ex, ey = bx * inv_res, by * inv_res
+            ex, ey = bx * inv_res, by * inv_res  # each beam's endpoint in the base frame, in cells
             cubes = self._cubes
             rows, cols = cubes.shape
             if self._lib is not None:
+                poses = np.ascontiguousarray(poses)
+                self.poses = poses
                 likelihood = np.empty(n)
-                self._lib.twin_amcl_likelihood(
-                    gx.ctypes.data, gy.ctypes.data, c.ctypes.data, s.ctypes.data, n,
-                    np.ascontiguousarray(ex).ctypes.data, np.ascontiguousarray(ey).ctypes.data, len(ex),
+                status = self._lib.twin_amcl_likelihood(
+                    poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
+                    ex.ctypes.data, ey.ctypes.data, len(ex),
                     cubes.ctypes.data, rows, cols, self._off_map, likelihood.ctypes.data,
                 )  # fmt: skip
+                if status != 0:
+                    raise MemoryError("amcl likelihood: out of memory")
             else:
+                # grid coordinates of each particle (AMCL rounds: +0.5 then floor), its heading
+                gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
+                gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
+                c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
                 col = np.floor(gx[:, None] + c[:, None] * ex - s[:, None] * ey).astype(np.intp)
                 row = np.floor(gy[:, None] + s[:, None] * ex + c[:, None] * ey).astype(np.intp)
                 inside = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
