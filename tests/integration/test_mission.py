@@ -44,14 +44,16 @@ def test_the_thesis_tree_visits_the_four_locations_in_order(thesis_bag: Path) ->
     successes = [name for name, _, new in events if new == "SUCCESS"]
     assert successes == ["go_to_location1", "go_to_location2", "go_to_location3", "go_to_location4", "sequence"]
     assert events[0] == ("sequence", "IDLE", "RUNNING")
-    # Each GoToPose succeeded with the robot at its location (the follower's 0.1 m / 0.1 rad).
+    # Each GoToPose succeeded with the robot at its location: within the follower's 0.1 m of it on the
+    # map pose it steers on (AMCL's), which Nav2's filter keeps within ~0.2 m of the truth
+    # (docs/navigation.md), so the true pose is within 0.3 m.
     truth = msgs["/ground_truth/odom"]
     for t_ns, msg in msgs["/behavior_tree_log"]:
         for e in msg.event_log:
             if e.node_name.startswith("go_to_") and e.current_status == "SUCCESS":
                 x, y, _ = LOCATIONS[e.node_name.removeprefix("go_to_")]
                 pose = min(truth, key=lambda m: abs(m[0] - t_ns))[1].pose.pose
-                assert math.hypot(pose.position.x - x, pose.position.y - y) < 0.15
+                assert math.hypot(pose.position.x - x, pose.position.y - y) < 0.3
     logs = [m.msg for _, m in msgs["/rosout"]]
     assert any("Finished Navigation" in line for line in logs)
     assert sum("goal reached" in line for line in logs) == 4
