@@ -638,6 +638,41 @@ int twin_fill_footprint(unsigned char *cost, long rows, long cols, double ox, do
     free(poly);
     return 0;
 }
+
+/* One whole costmap update for the common case, in one call: a single obstacle layer fed a single
+   LaserScan source that both clears and marks (twin_scan_update), then its footprint cleared
+   (twin_fill_footprint), then the master composed (twin_costmap_compose) over everything when
+   `full`, else over the cells written grown by `pad` (twice: the window, then its obstacles).
+   d: gx, gy, res, range_min, range_max, sx, sy, c, s, ray_max_cells, ray_min_cells, mark_max_m,
+      mark_min_m, robot x, robot y, robot cos, robot sin;
+   k: rows, cols, ranges, footprint points, fill, full, inflate, radius, inflate_unknown,
+      around_unknown, pad.
+   bounds (4) receives the cells written. Returns -1 when memory runs out. */
+int twin_costmap_scan_update(unsigned char *layer, const unsigned char *base, unsigned char *master,
+                             const unsigned char *table, const double *ranges, const double *cos_a,
+                             const double *sin_a, const double *footprint, const double *d, const long *k,
+                             long *bounds) {
+    long rows = k[0], cols = k[1];
+    bounds[0] = rows; bounds[1] = -1; bounds[2] = cols; bounds[3] = -1;
+    if (twin_scan_update(layer, rows, cols, d[0], d[1], d[2], ranges, k[2], cos_a, sin_a, d[3], d[4], d[5], d[6],
+                         d[7], d[8], 1, 1, d[9], d[10], d[11], d[12], bounds))
+        return -1;
+    if (k[3] > 0 && twin_fill_footprint(layer, rows, cols, d[0], d[1], d[2], footprint, k[3], d[13], d[14], d[15],
+                                        d[16], 0, bounds))
+        return -1;
+    long r0, r1, c0, c1;
+    if (k[5]) { r0 = 0; r1 = rows; c0 = 0; c1 = cols; }
+    else if (bounds[1] < 0) return 0;
+    else { r0 = bounds[0]; r1 = bounds[1] + 1; c0 = bounds[2]; c1 = bounds[3] + 1; }
+    long pad = k[10];
+    long w0 = r0 - pad < 0 ? 0 : r0 - pad, w1 = r1 + pad > rows ? rows : r1 + pad;
+    long v0 = c0 - pad < 0 ? 0 : c0 - pad, v1 = c1 + pad > cols ? cols : c1 + pad;
+    long e0 = w0 - pad < 0 ? 0 : w0 - pad, e1 = w1 + pad > rows ? rows : w1 + pad;
+    long f0 = v0 - pad < 0 ? 0 : v0 - pad, f1 = v1 + pad > cols ? cols : v1 + pad;
+    const unsigned char *layers[1] = {layer};
+    return twin_costmap_compose(base, (unsigned char)k[4], layers, 1, rows, cols, w0, w1, v0, v1, e0, e1, f0, f1,
+                                (int)k[6], k[7], table, (int)k[8], (int)k[9], master);
+}
 """
 
 
@@ -685,6 +720,8 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_fill_footprint.argtypes = [
         ptr, long_, long_, dbl, dbl, dbl, ptr, long_, dbl, dbl, dbl, dbl, ctypes.c_ubyte, ptr,
     ]  # fmt: skip
+    lib.twin_costmap_scan_update.restype = ctypes.c_int
+    lib.twin_costmap_scan_update.argtypes = [ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr]
     lib.twin_fill_polygon.restype = None
     lib.twin_fill_polygon.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ctypes.c_ubyte, ptr]
     return lib

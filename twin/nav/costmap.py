@@ -225,6 +225,9 @@ class Costmap:
         self._bounds = np.zeros(4, dtype=np.int64)
         self._bounds_address = self._bounds.ctypes.data
         self._address_cache: tuple[tuple[U8 | None, ...], _Addresses] | None = None
+        self._doubles = np.zeros(17)
+        self._longs = np.zeros(11, dtype=np.int64)
+        self._doubles_address, self._longs_address = self._doubles.ctypes.data, self._longs.ctypes.data
         self._default = NO_INFORMATION if params.track_unknown_space else FREE_SPACE
         self._static: U8 | None = None
         self._obstacles: list[_ObstacleLayer] = []
@@ -251,6 +254,11 @@ class Costmap:
                 self._obstacles.append(
                     _ObstacleLayer(layer.sources, layer.footprint_clearing_enabled, (rows, cols), self._default)
                 )
+        # the one-call update: one obstacle layer fed one source that clears and marks (TB3's costmaps)
+        self._single_source: ObservationSource | None = None
+        if self._lib is not None and len(self._obstacles) == 1 and len(self._obstacles[0].sources) == 1:
+            only = self._obstacles[0].sources[0]
+            self._single_source = only if only.clearing and only.marking else None
         inflation = params.inflation
         self._inflate = inflation is not None and inflation.enabled
         self._radius_cells = math.ceil(inflation.inflation_radius_m / res) if inflation is not None else 0
@@ -292,6 +300,10 @@ class Costmap:
         """Run one update cycle with the robot's pose and the observations since the last one (costmap frame)."""
         if self.params.rolling_window:
             self._roll(robot_x_m, robot_y_m)
+        source = self._single_source
+        if source is not None and len(observations) == 1 and observations[0].scan is not None:
+            self._scan_update(robot_x_m, robot_y_m, robot_yaw_rad, observations[0], source)
+            return
         bounds = self._apply_observations(robot_x_m, robot_y_m, robot_yaw_rad, observations)
         rows, cols = self.grid.cost.shape
         if self._full_update or self.params.rolling_window:
@@ -353,6 +365,39 @@ class Costmap:
         for layer in self._obstacles:
             _shift(layer.cost, cy, cx, layer.default)
         # the master needs no shift: a rolling window's update recomposes all of it
+
+    def _scan_update(self, x: float, y: float, yaw: float, obs: Observation, source: ObservationSource) -> None:
+        """The whole update in one C call: one layer, one scan source that clears and marks (TB3's costmaps)."""
+        assert self._lib is not None and obs.scan is not None
+        g = self.grid
+        res = g.resolution_m
+        rows, cols = g.cost.shape
+        scan = obs.scan
+        layer = self._obstacles[0]
+        base, pointers, table, master = self._addresses()
+        full = self._full_update or self.params.rolling_window
+        self._full_update = False
+        infl = self.params.inflation if self._inflate else None
+        self._doubles[:] = (
+            g.origin_x_m, g.origin_y_m, res, scan.range_min_m, scan.range_max_m,
+            obs.origin_x_m, obs.origin_y_m, scan.cos_yaw, scan.sin_yaw,
+            float(max(0.0, math.ceil(source.raytrace_max_range_m / res))),
+            float(max(0.0, math.ceil(source.raytrace_min_range_m / res))),
+            source.obstacle_max_range_m, source.obstacle_min_range_m, x, y, math.cos(yaw), math.sin(yaw),
+        )  # fmt: skip
+        self._longs[:] = (
+            rows, cols, len(scan.ranges), len(self._footprint_xy) if layer.footprint_clearing else 0,
+            self._default, int(full), int(infl is not None), self._radius_cells,
+            int(infl is not None and infl.inflate_unknown), int(infl is not None and infl.inflate_around_unknown),
+            self._radius_cells + 1 if infl is not None else 0,
+        )  # fmt: skip
+        status = self._lib.twin_costmap_scan_update(
+            pointers[0], base, master, table, scan.ranges.ctypes.data, scan.cos_a.ctypes.data,
+            scan.sin_a.ctypes.data, self._footprint_address, self._doubles_address, self._longs_address,
+            self._bounds_address,
+        )  # fmt: skip
+        if status != 0:
+            raise MemoryError("costmap update: out of memory")
 
     def _apply_observations(
         self, x: float, y: float, yaw: float, observations: Sequence[Observation]
