@@ -580,8 +580,9 @@ int twin_costmap_compose(const unsigned char *base, unsigned char fill, const un
     return 0;
 }
 
-/* Set the cells whose centres lie inside a polygon (even-odd) to `value`; bounds grow as in raytrace. */
-void twin_fill_polygon(unsigned char *cost, long rows, long cols, double ox, double oy, double res,
+/* Set the cells whose centres lie inside a polygon (even-odd) to `value`; bounds grow as in raytrace.
+   Returns -1 when memory runs out. */
+int twin_fill_polygon(unsigned char *cost, long rows, long cols, double ox, double oy, double res,
                        const double *poly, long n, unsigned char value, long *bounds) {
     double xmin = poly[0], xmax = poly[0], ymin = poly[1], ymax = poly[1];
     for (long i = 1; i < n; ++i) {
@@ -596,19 +597,20 @@ void twin_fill_polygon(unsigned char *cost, long rows, long cols, double ox, dou
     if (r0 < 0) r0 = 0;
     if (c1 > cols) c1 = cols;
     if (r1 > rows) r1 = rows;
+    double *cross = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
+    if (!cross) return -1;
     for (long r = r0; r < r1; ++r) {
         double y = oy + (r + 0.5) * res;
+        long m = 0;   /* where the row's centre line crosses the edges (once per row, not per cell) */
+        for (long i = 0; i < n; ++i) {
+            double x1 = poly[2 * i], y1 = poly[2 * i + 1];
+            double x2 = poly[2 * ((i + 1) % n)], y2 = poly[2 * ((i + 1) % n) + 1];
+            if ((y1 > y) != (y2 > y)) cross[m++] = x1 + (y - y1) * (x2 - x1) / (y2 - y1);
+        }
         for (long c = c0; c < c1; ++c) {
             double x = ox + (c + 0.5) * res;
             int inside = 0;
-            for (long i = 0; i < n; ++i) {
-                double x1 = poly[2 * i], y1 = poly[2 * i + 1];
-                double x2 = poly[2 * ((i + 1) % n)], y2 = poly[2 * ((i + 1) % n) + 1];
-                if ((y1 > y) != (y2 > y)) {
-                    double xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1);
-                    if (x < xc) inside = !inside;
-                }
-            }
+            for (long i = 0; i < m; ++i) inside ^= x < cross[i];
             if (inside) {
                 cost[r * cols + c] = value;
                 if (r < bounds[0]) bounds[0] = r;
@@ -618,6 +620,8 @@ void twin_fill_polygon(unsigned char *cost, long rows, long cols, double ox, dou
             }
         }
     }
+    free(cross);
+    return 0;
 }
 
 
@@ -634,9 +638,9 @@ int twin_fill_footprint(unsigned char *cost, long rows, long cols, double ox, do
         poly[2 * i] = x + c * fp[2 * i] - s * fp[2 * i + 1];
         poly[2 * i + 1] = y + s * fp[2 * i] + c * fp[2 * i + 1];
     }
-    twin_fill_polygon(cost, rows, cols, ox, oy, res, poly, n, value, bounds);
+    int status = twin_fill_polygon(cost, rows, cols, ox, oy, res, poly, n, value, bounds);
     free(poly);
-    return 0;
+    return status;
 }
 
 /* One whole costmap update for the common case, in one call: a single obstacle layer fed a single
@@ -722,6 +726,6 @@ def load_kernel() -> ctypes.CDLL | None:
     ]  # fmt: skip
     lib.twin_costmap_scan_update.restype = ctypes.c_int
     lib.twin_costmap_scan_update.argtypes = [ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr]
-    lib.twin_fill_polygon.restype = None
+    lib.twin_fill_polygon.restype = ctypes.c_int
     lib.twin_fill_polygon.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ctypes.c_ubyte, ptr]
     return lib
