@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.core.errors import ConfigError
 from twin.nav._native import load_kernel
@@ -139,6 +138,8 @@ class LikelihoodField:
     """
 
     def __init__(self, occupancy: OccupancyMap, max_dist_m: float) -> None:
+        from scipy import ndimage
+
         occupied = occupancy.data == 100
         res = occupancy.resolution_m
         if occupied.any():
@@ -413,6 +414,8 @@ class Amcl:
         self.weights = np.full(n, 1.0 / n)
 
     def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
+        from scipy import ndimage
+
         poses, w = self.poses, self.weights
         bins = self._bins(poses)
         lo = bins.min(axis=0)

@@ -35,7 +35,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.nav._native import load_kernel
 from twin.nav.costmap_grid import (
@@ -424,6 +423,8 @@ class Costmap:
         return [rr, cc]
 
     def _compose(self, bounds: tuple[int, int, int, int]) -> None:
+        from scipy import ndimage
+
         r0, r1, c0, c1 = bounds
         rows, cols = self.grid.cost.shape
         pad = self._radius_cells + 1 if self._inflate else 0

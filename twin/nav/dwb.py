@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import distance_transform_cdt
 
 from twin.nav._dwb_native import load_dwb_kernel
 from twin.nav.costmap_grid import CostGrid
@@ -559,6 +558,8 @@ def _cells(
 
 def _distance_map(costmap: CostGrid, points: NDArray[np.float64], blocked: NDArray[np.bool_]) -> NDArray[np.float64]:
     """Manhattan cell distance to the cells the points fall in; inf on blocked cells (and everywhere if none inside)."""
+    from scipy.ndimage import distance_transform_cdt
+
     rows, cols, inside = _cells(costmap, points[:, 0], points[:, 1])
     if not inside.any():
         return np.full(costmap.cost.shape, np.inf)
