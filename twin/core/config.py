@@ -26,7 +26,7 @@ from typing import Any, TypeVar
 import yaml
 
 from twin.core.errors import ConfigError, TwinError
-from twin.core.yaml_numbers import Loader as _Loader
+from twin.core.yaml_numbers import compose
 
 __all__ = ["ConfigNode", "build", "load_config", "load_yaml", "location", "read_text_file", "suggest"]
 
@@ -96,10 +96,8 @@ def load_yaml(path: Path) -> yaml.Node:
         ConfigError: If the file cannot be read or is not valid YAML.
     """
     text = read_text_file(path, ConfigError, what="a UTF-8 YAML file")
-    loader = _Loader(text)
-    loader.name = str(path)
     try:
-        node = loader.get_single_node()
+        node = compose(text, str(path))
     except yaml.MarkedYAMLError as err:
         mark = err.problem_mark or err.context_mark
         where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark else str(path)
@@ -111,8 +109,6 @@ def load_yaml(path: Path) -> yaml.Node:
     except RecursionError:
         msg = f"{path}: the YAML is nested too deeply to read (more than ~{sys.getrecursionlimit() // 4} levels)"
         raise ConfigError(msg) from None
-    finally:
-        loader.dispose()
     if node is None:
         node = yaml.MappingNode("tag:yaml.org,2002:map", [])
         node.start_mark = yaml.Mark(str(path), 0, 0, 0, "", 0)
