@@ -60,7 +60,12 @@ class MeshArrays(NamedTuple):
 
     def bounds(self) -> NDArray[np.float64]:
         """Return the (2, 3) min and max corners of the vertices the faces use (as `trimesh.Trimesh.bounds`)."""
-        used = self.vertices[np.unique(self.faces)] if len(self.faces) else self.vertices
+        used = self.vertices
+        if len(self.faces):
+            referenced = np.zeros(len(used), dtype=bool)
+            referenced[self.faces.ravel()] = True
+            if not referenced.all():
+                used = used[referenced]
         return np.array([used.min(axis=0), used.max(axis=0)])
 
     def to_trimesh(self) -> trimesh.Trimesh:
