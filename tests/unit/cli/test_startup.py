@@ -94,12 +94,16 @@ def test_fmu_profiles_spelled_in_the_cli_match_the_contract() -> None:
 
 
 # What a default run does not use, so its first step must not wait for their import (each costs
-# 0.1 s to 1 s): trimesh (the house is boxes), scipy.signal and scipy.stats (the IMU's drift is
-# computed without them), filterpy (the reference EKF), plots, Dask.
+# 0.02 s to 1 s): trimesh (the house is boxes), scipy.signal and scipy.stats (the IMU's drift is
+# computed without them), the bag readers (a run only writes), urllib (URDF quoting), filterpy (the
+# reference EKF), plots, Dask.
 NOT_FOR_A_DEFAULT_RUN = (
     "trimesh",
     "scipy.signal",
     "scipy.stats",
+    "rosbags.rosbag2",
+    "twin.bag.reader",
+    "urllib.request",
     "filterpy",
     "control",
     "matplotlib",
