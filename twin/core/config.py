@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import enum
+import functools
 import os
 import sys
 import types
@@ -180,8 +181,19 @@ def _is_dataclass_type(tp: Any) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
 
 
+@functools.cache
+def _type_hints(cls: type) -> dict[str, Any]:
+    """`typing.get_type_hints(cls)`, evaluated once per class (it compiles every string annotation)."""
+    return typing.get_type_hints(cls)
+
+
+@functools.cache
+def _init_fields(cls: type) -> dict[str, dataclasses.Field[Any]]:
+    return {f.name: f for f in dataclasses.fields(cls) if f.init}
+
+
 def _variant_tag(cls: type) -> tuple[str, ...]:
-    hints = typing.get_type_hints(cls)
+    hints = _type_hints(cls)
     tp = hints.get("type")
     if tp is None or typing.get_origin(tp) is not typing.Literal:
         return ()
@@ -312,8 +324,8 @@ def _build_mapping(args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
 def _build_dataclass(cls: type, node: yaml.Node, key: str) -> Any:
     if not isinstance(node, yaml.MappingNode):
         _fail(node, key, f"expected a mapping of {cls.__name__} settings")
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints = _type_hints(cls)
+    fields = _init_fields(cls)
     kwargs: dict[str, Any] = {}
     for k, v in node.value:
         name = str(_scalar(k, key))
