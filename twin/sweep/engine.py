@@ -12,19 +12,21 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import TracebackType
+from typing import Any, Self
 
 from twin.core.errors import ConfigError
 from twin.sweep.runner import KeepBags, RunTask, execute_run, read_result
 from twin.sweep.spec import RunSpec, SweepSpec, expand_runs
 
-__all__ = ["ProgressFn", "SweepResult", "run_sweep"]
+__all__ = ["Cluster", "ProgressFn", "SweepResult", "run_sweep"]
 
 _log = logging.getLogger(__name__)
 
@@ -45,6 +47,60 @@ class SweepResult:
     resumed: int
 
 
+class Cluster:
+    """A Dask client started in the background: an embedded LocalCluster, or a scheduler by address.
+
+    Starting a cluster takes a second or more (worker processes, Dask's imports); started when the
+    command starts, it comes up while the sweep file is read and checked. `client()` waits for it.
+    Closing stops the embedded cluster (or disconnects from the scheduler). A failure to start (an
+    unreachable scheduler) is raised by `client()`, so a sweep whose runs are all finished never
+    needs the cluster and never fails for it.
+
+    Args:
+        workers: Worker processes of the embedded cluster (default: one per core).
+        scheduler: Address of an existing Dask scheduler (`tcp://HOST:8786`) instead.
+    """
+
+    def __init__(self, *, workers: int | None = None, scheduler: str | None = None) -> None:
+        self._workers = workers
+        self._scheduler = scheduler
+        self._stack = ExitStack()
+        self._client: Any = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._start, name="twin-sweep-cluster", daemon=True)
+        self._thread.start()
+
+    def _start(self) -> None:
+        try:
+            self._client = self._stack.enter_context(_client(self._scheduler, self._workers))
+        except BaseException as err:  # handed to the caller by client()
+            self._error = err
+
+    def client(self) -> Any:
+        """Return the `distributed.Client` once the cluster is up.
+
+        Raises:
+            ConfigError: If the scheduler cannot be reached or has no workers.
+        """
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._client
+
+    def close(self) -> None:
+        """Stop the embedded cluster (after it finished starting), or disconnect from the scheduler."""
+        self._thread.join()
+        self._stack.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
 def run_sweep(
     spec: SweepSpec,
     *,
@@ -53,6 +109,7 @@ def run_sweep(
     scheduler: str | None = None,
     keep_bags: KeepBags = "all",
     progress: ProgressFn | None = None,
+    cluster: Cluster | None = None,
 ) -> SweepResult:
     """Run every unfinished run of `spec`, each as one `twin simulate` process in a Dask task.
 
@@ -64,6 +121,8 @@ def run_sweep(
         scheduler: Address of an existing Dask scheduler (`tcp://HOST:8786`) instead.
         keep_bags: Which bags to keep: `all`, `failed` (runs that did not succeed) or `none`.
         progress: Told about each finished run.
+        cluster: A cluster already being started (`workers` and `scheduler` are then its own); the
+            caller closes it. Without one, a cluster is started for the runs and stopped after them.
 
     Raises:
         ConfigError: If the scheduler cannot be reached or has no workers.
@@ -95,7 +154,10 @@ def run_sweep(
     if todo:
         from distributed import as_completed
 
-        with _client(scheduler, workers) as client:
+        with ExitStack() as stack:
+            if cluster is None:
+                cluster = stack.enter_context(Cluster(workers=workers, scheduler=scheduler))
+            client = cluster.client()
             tag = uuid.uuid4().hex[:8]
             futures = {
                 client.submit(execute_run, task, key=f"twin-run-{run.run_id}-{tag}", pure=False): run
