@@ -230,10 +230,14 @@ def _client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
     # Workers fork from a server process that imported Dask once, instead of each starting a new
     # interpreter that imports it (about 0.7 s of CPU per worker, paid while the runs wait), and a
     # forked worker exits without tearing an interpreter down (0.2-1 s at shutdown with `spawn`).
+    # A worker is given its next run only when it is free (saturation 1: Dask's default 1.1 queues
+    # a second run on each one-thread worker, which can leave the last run waiting behind a busy
+    # worker while another is idle).
     with (
         dask.config.set(
             {
                 "distributed.scheduler.allowed-failures": 0,
+                "distributed.scheduler.worker-saturation": 1.0,
                 "distributed.worker.multiprocessing-method": "forkserver",
             }
         ),
