@@ -24,6 +24,7 @@ import argparse
 import compileall
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -62,7 +63,13 @@ def _measure(folder: Path, runs: int, workers: int) -> dict[str, Any]:
         spec = load_sweep(sweep)
         out = folder / f"out_{workers}"
         result = run_sweep(spec, out_dir=out, keep_bags="none", progress=progress, cluster=cluster)
-    wall = time.perf_counter() - start
+        ran = time.perf_counter()
+        # CPU seconds, which other processes on the machine disturb less than wall time: each
+        # worker's own (its share of Dask, reading the metrics) and its runs' (reaped children).
+        cpu = cluster.client().run(_cpu_s)
+        stop = time.perf_counter()
+    wall = (ran - start) + (time.perf_counter() - stop)  # the CPU query is not the sweep's
+    client_cpu = resource.getrusage(resource.RUSAGE_SELF)
     steady = finished[-1] - finished[0] if len(finished) > 1 else float("nan")
     run_walls = [r["wall_s"] for r in result.rows if isinstance(r.get("wall_s"), float)]
     return {
@@ -74,9 +81,20 @@ def _measure(folder: Path, runs: int, workers: int) -> dict[str, Any]:
         "steady_runs_per_minute": round(60.0 * (len(finished) - 1) / steady, 2) if len(finished) > 1 else None,
         "mean_run_wall_s": round(sum(run_walls) / len(run_walls), 2) if run_walls else None,
         "outcomes": sorted({str(r["outcome"]) for r in result.rows}),
+        "cpu_runs_s": round(sum(c[1] for c in cpu.values()), 2),
+        "cpu_per_run_s": round(sum(c[1] for c in cpu.values()) / runs, 3),
+        "cpu_workers_s": round(sum(c[0] for c in cpu.values()), 2),
+        "cpu_client_s": round(client_cpu.ru_utime + client_cpu.ru_stime, 2),
         "load_average_1min_before": round(load_before, 2),
         "load_average_1min_after": round(os.getloadavg()[0], 2),
     }
+
+
+def _cpu_s() -> tuple[float, float]:
+    """In a worker: its own CPU seconds and those of the processes it started and reaped (its runs)."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    runs = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime, runs.ru_utime + runs.ru_stime
 
 
 def _fresh(folder: Path, runs: int, workers: int) -> dict[str, Any]:
