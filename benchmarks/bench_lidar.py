@@ -21,7 +21,71 @@ sys.path.insert(0, str(REPO))
 
 from twin.robot.lidar import Lidar  # noqa: E402
 from twin.world import build_scene, load_robot, load_world  # noqa: E402
-from twin.world.scene import CollisionMonitor  # noqa: E402
+from twin.world.obstacles import ObstacleField, ObstacleMonitor, ObstaclePose, ObstacleSpec  # noqa: E402
+from twin.world.scene import CollisionMonitor, RobotBody, Scene  # noqa: E402
+
+OBSTACLE_PERIOD_NS = 10_000_000  # the simulation's obstacle update period
+
+
+def _five_obstacles(x0: float, y0: float) -> list[ObstacleSpec]:
+    """Three standing boxes and two walkers (a handful) around (x0, y0)."""
+    boxes = [
+        ObstacleSpec(shape="box", size_m=(0.3, 0.3, 0.4), pose=ObstaclePose(x_m=x0 + dx, y_m=y0 + dy, yaw_rad=0.3))
+        for dx, dy in ((1.0, 0.3), (-0.8, 0.6), (0.4, -1.0))
+    ]
+    walkers = [
+        ObstacleSpec(
+            shape="cylinder",
+            radius_m=0.2,
+            height_m=1.7,
+            path_xy_m=((x0 - 1.5, y0 + dy), (x0 + 1.5, y0 + dy)),
+            speed_mps=0.5,
+            loop=True,
+        )
+        for dy in (1.2, -1.5)
+    ]
+    return boxes + walkers
+
+
+def bench_obstacles(
+    scene: Scene, body: RobotBody, lidar_args: tuple[object, ...], track: list[tuple[float, float, float]]
+) -> dict[str, object]:
+    """What dynamic obstacles cost: a scan and a contact step with none present, and with five (two walking).
+
+    Each scan follows an update (walkers move, so the obstacles' slice is rebuilt for every scan), as
+    in a run; the contact step is `ObstacleMonitor.check` along the same 1 kHz track as the world's
+    monitor, with an update every 10 steps (the simulation's 10 ms obstacle period).
+    """
+    robot, caster = lidar_args
+    assert isinstance(caster, object)
+    x0, y0, yaw0 = track[0]
+    out: dict[str, object] = {}
+    for label, specs in (("none_present", [_late_box(x0, y0)]), ("five_two_walking", _five_obstacles(x0, y0))):
+        field = ObstacleField(specs, body, update_period_ns=OBSTACLE_PERIOD_NS)
+        lidar = Lidar.from_robot(robot, scene, np.random.default_rng(0), obstacles=field)  # type: ignore[arg-type]
+        field.update(0, track[0])
+
+        def scan(k: int, field: ObstacleField = field, lidar: Lidar = lidar) -> object:
+            field.update((k + 1) * 200_000_000, (x0, y0, yaw0))
+            return lidar.scan(x0, y0, yaw0)
+
+        out[f"lidar_scan_{label}_us"] = round(per_call_us(scan, 2000), 1)
+        field = ObstacleField(specs, body, update_period_ns=OBSTACLE_PERIOD_NS)
+        monitor = ObstacleMonitor(CollisionMonitor(scene, body), field)
+        start = time.perf_counter()
+        for k, pose in enumerate(track):
+            if k % 10 == 0:
+                field.update(k * 1_000_000, pose)
+            monitor.free_m(*pose)
+            monitor.check(*pose)
+        out[f"contact_step_{label}_us"] = round((time.perf_counter() - start) / len(track) * 1e6, 2)
+        out[f"obstacle_fcl_queries_{label}_per_5000_steps"] = field.queries
+    return out
+
+
+def _late_box(x0: float, y0: float) -> ObstacleSpec:
+    """A box that appears only after the benchmark (the field exists, nothing is present)."""
+    return ObstacleSpec(shape="box", size_m=(0.3, 0.3, 0.4), pose=ObstaclePose(x_m=x0 + 1, y_m=y0), appear_s=1e6)
 
 
 def per_call_us(fn: Callable[[int], object], calls: int) -> float:
@@ -66,6 +130,12 @@ def bench_world(name: str, world_path: Path, model_path: list[Path], poses: np.n
         lambda k: numpy_caster.cast_fan(tuple(poses[k % n, :2]), poses[k % n, 2], step, 360, 3.5, min_range_m=0.12), 300
     )
     rays_native = per_call_us(lambda k: caster.cast_rays(tuple(poses[k % n, :2]), angles + poses[k % n, 2], 3.5), 300)
+    start = time.perf_counter()
+    for x, y, yaw in track:
+        monitor.free_m(x, y, yaw)
+        monitor.check(x, y, yaw)
+    walls_step_us = (time.perf_counter() - start) / len(track) * 1e6
+    obstacles = bench_obstacles(scene, body, (robot, caster), track)
     return {
         "world": name,
         "obstacles": len(scene.obstacles),
@@ -84,6 +154,8 @@ def bench_world(name: str, world_path: Path, model_path: list[Path], poses: np.n
         "monitor_check_per_step_us": round(check_us, 2),
         "monitor_fcl_queries_per_5000_steps": monitor.queries,
         "lidar_5hz_ms_per_sim_s": round(5 * scan_native / 1e3, 3),
+        "contact_step_walls_only_us": round(walls_step_us, 2),
+        "dynamic_obstacles": obstacles,
     }
 
 

@@ -18,6 +18,12 @@ velocity mode for the default scenario. `kinematic` swaps in ideal wheels, `fmu`
 a temporary git worktree and runs the whole default mission alternately in both trees (fresh
 processes, same scenario file and seed), then prints each tree's best and median real-time factor
 and their ratio. Alternating cancels most of a shared machine's drift.
+
+    python benchmarks/bench_sim.py --versus scenarios/house_obstacles.yaml [--pairs 5]
+
+`--versus FILE` runs the default mission and FILE alternately in this tree (whole runs, fresh
+processes) and prints the same figures and their ratio: e.g. what the obstacles of
+house_obstacles.yaml (three blocks, a walker, a box for 60 s) cost the mission.
 """
 
 from __future__ import annotations
@@ -41,7 +47,8 @@ def foundation(scenario):  # type: ignore[no-untyped-def]
     """The scenario without IMU, EKF, tree and planner: Gazebo-like /odom, the house tour's waypoints."""
     sensors = dataclasses.replace(scenario.sensors, imu=dataclasses.replace(scenario.sensors.imu, enabled=False))
     tour = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / "house_tour.yaml").mission
-    return dataclasses.replace(scenario, sensors=sensors, odometry="ground_truth", mission=tour)
+    no_blocks = dataclasses.replace(scenario.blocks, count=0)  # blocks stand at a tree mission's locations
+    return dataclasses.replace(scenario, sensors=sensors, odometry="ground_truth", mission=tour, blocks=no_blocks)
 
 
 def run_once(scenario, sim_s: float, *, profile: bool) -> dict[str, object]:  # type: ignore[no-untyped-def]
@@ -93,6 +100,42 @@ print(json.dumps({"sim_s": s.sim_s, "wall_s": s.wall_s, "cpu_s": cpu, "messages"
 """
 
 
+def _summarise(runs: dict[str, list[dict[str, float]]], result: dict[str, object], new: str, old: str) -> None:
+    import statistics
+
+    for name, rs in runs.items():
+        rtf = [r["sim_s"] / r["wall_s"] for r in rs]
+        cpu = [1000 * r["cpu_s"] / r["sim_s"] for r in rs]
+        result[name] = {
+            "sim_s": rs[0]["sim_s"],
+            "messages": rs[0]["messages"],
+            "real_time_factor_best": round(max(rtf), 1),
+            "real_time_factor_median": round(statistics.median(rtf), 1),
+            "cpu_ms_per_sim_s_best": round(min(cpu), 3),
+        }
+    a, b = result[new], result[old]
+    for stat in ("best", "median"):
+        key = f"real_time_factor_{stat}"
+        result[f"{new}_over_{old}_rtf_{stat}"] = round(a[key] / b[key], 3)  # type: ignore[index]
+
+
+def compare_scenarios(other: Path, pairs: int) -> dict[str, object]:
+    """Run the default mission and `other` alternately in this tree, `pairs` times each."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    runs: dict[str, list[dict[str, float]]] = {"other": [], "default": []}
+    for _ in range(pairs):
+        for name, scenario in (("other", other), ("default", default_scenario_path())):
+            out = subprocess.run(
+                [sys.executable, "-c", _ONE_RUN, str(root), str(scenario)], check=True, capture_output=True, text=True
+            )
+            runs[name].append(json.loads(out.stdout.strip().splitlines()[-1]))
+    result: dict[str, object] = {"benchmark": "scenario_vs_default", "other": str(other), "pairs": pairs}
+    _summarise(runs, result, "other", "default")
+    return result
+
+
 def compare_with(rev: str, scenario: Path, pairs: int) -> dict[str, object]:
     """Run the default mission alternately in this tree and in `rev`, `pairs` times each."""
     import statistics
@@ -142,7 +185,8 @@ def compare_with(rev: str, scenario: Path, pairs: int) -> dict[str, object]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--baseline", metavar="REV", help="compare the default mission with this git revision")
-    parser.add_argument("--pairs", type=int, default=5, help="alternating runs per tree with --baseline")
+    parser.add_argument("--versus", type=Path, metavar="FILE", help="compare the default mission with this scenario")
+    parser.add_argument("--pairs", type=int, default=5, help="alternating runs each with --baseline or --versus")
     parser.add_argument("--sim-s", type=float, default=60.0)
     parser.add_argument("--scenario", type=Path, default=default_scenario_path())
     parser.add_argument("--drive", choices=("scenario", "kinematic", "fmu"), default="scenario")
@@ -150,6 +194,9 @@ def main() -> int:
     args = parser.parse_args()
     if args.baseline:
         print(json.dumps(compare_with(args.baseline, args.scenario, args.pairs), indent=2))
+        return 0
+    if args.versus:
+        print(json.dumps(compare_scenarios(args.versus, args.pairs), indent=2))
         return 0
     scenario = load_scenario(args.scenario)
     if args.drive == "fmu":

@@ -36,35 +36,41 @@ def thesis_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return bag
 
 
+MISSION_LOG = "/mission/behavior_tree_log"  # the thesis's tree; /behavior_tree_log is bt_navigator's (Nav2)
+
+
 def test_the_thesis_tree_visits_the_four_locations_in_order(thesis_bag: Path) -> None:
-    msgs = read(thesis_bag, "/behavior_tree_log", "/ground_truth/odom", "/rosout")
-    events = [
-        (e.node_name, e.previous_status, e.current_status) for _, m in msgs["/behavior_tree_log"] for e in m.event_log
-    ]
+    msgs = read(thesis_bag, MISSION_LOG, "/ground_truth/odom", "/rosout")
+    events = [(e.node_name, e.previous_status, e.current_status) for _, m in msgs[MISSION_LOG] for e in m.event_log]
     successes = [name for name, _, new in events if new == "SUCCESS"]
     assert successes == ["go_to_location1", "go_to_location2", "go_to_location3", "go_to_location4", "sequence"]
     assert events[0] == ("sequence", "IDLE", "RUNNING")
-    # Each GoToPose succeeded with the robot at its location (the follower's 0.1 m / 0.1 rad).
+    # Each GoToPose succeeded with the robot at its location: Nav2's goal checker takes 0.25 m and
+    # 0.25 rad of the pose AMCL believes, a few centimetres off the truth.
     truth = msgs["/ground_truth/odom"]
-    for t_ns, msg in msgs["/behavior_tree_log"]:
+    for t_ns, msg in msgs[MISSION_LOG]:
         for e in msg.event_log:
             if e.node_name.startswith("go_to_") and e.current_status == "SUCCESS":
-                x, y, _ = LOCATIONS[e.node_name.removeprefix("go_to_")]
+                x, y, yaw = LOCATIONS[e.node_name.removeprefix("go_to_")]
                 pose = min(truth, key=lambda m: abs(m[0] - t_ns))[1].pose.pose
-                assert math.hypot(pose.position.x - x, pose.position.y - y) < 0.15
+                assert math.hypot(pose.position.x - x, pose.position.y - y) < 0.25 + 0.1
+                heading = 2.0 * math.atan2(pose.orientation.z, pose.orientation.w)
+                assert abs((heading - yaw + math.pi) % (2 * math.pi) - math.pi) < 0.25 + 0.05
     logs = [m.msg for _, m in msgs["/rosout"]]
     assert any("Finished Navigation" in line for line in logs)
     assert sum("goal reached" in line for line in logs) == 4
 
 
 def test_the_tree_is_ticked_every_500_ms_of_sim_time(thesis_bag: Path) -> None:
-    stamps = [t for t, _ in read(thesis_bag, "/behavior_tree_log")["/behavior_tree_log"]]
-    assert all(t % 500_000_000 == 0 for t in stamps)
+    stamps = [t for t, _ in read(thesis_bag, MISSION_LOG)[MISSION_LOG]]
+    assert stamps and all(t % 500_000_000 == 0 for t in stamps)
 
 
 def test_plans_are_recorded_and_stay_in_the_house(thesis_bag: Path) -> None:
-    plans = read(thesis_bag, "/plan")["/plan"]
-    assert len(plans) == 4
+    msgs = read(thesis_bag, "/plan", "/clock")
+    plans = msgs["/plan"]
+    duration_s = msgs["/clock"][-1][0] / 1e9
+    assert 0.6 * duration_s < len(plans) <= duration_s + 8  # replanned at 1 Hz while navigating (Nav2's tree)
     for _, plan in plans:
         assert plan.header.frame_id == "map"
         for pose in plan.poses:

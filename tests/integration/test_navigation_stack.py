@@ -166,7 +166,7 @@ def test_a_navigator_tree_with_a_leaf_the_twin_lacks_is_refused_with_exit_6(tmp_
 @pytest.fixture(scope="module")
 def nav2_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, object], Path]:
     bag = tmp_path_factory.mktemp("nav2") / "house_nav2"
-    result = run_twin("simulate", str(REPO / "scenarios" / "house_nav2.yaml"), "--out", str(bag), "--json")
+    result = run_twin("simulate", str(REPO / "scenarios" / "default.yaml"), "--out", str(bag), "--json")
     assert result.returncode == 0, result.stderr
     return json.loads(result.stdout), bag
 

@@ -43,10 +43,15 @@ class Layout:
     the struct and the constant runs in the order the struct expects them.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, *, offset: int | None = None) -> None:
+        """Start a message, or with `offset` a fragment of one: its bytes from that offset from the CDR origin on.
+
+        A fragment has no encapsulation header; its alignment counts from the CDR origin, so a
+        fragment built for one offset fits only where the message reaches that offset (modulo 8).
+        """
         self._fmt: list[str] = ["<"]
-        self._pos = 0  # offset from the CDR origin (just after the encapsulation header)
-        self._run = bytearray(ENCAPSULATION)
+        self._pos = 0 if offset is None else offset  # offset from the CDR origin (just after the header)
+        self._run = bytearray(ENCAPSULATION) if offset is None else bytearray()
         self._runs: list[bytes] = []
         self.slots: list[str] = []  #: argument kinds in pack order: "const" or the variable's name
 
@@ -54,6 +59,11 @@ class Layout:
     def size(self) -> int:
         """Bytes of the message so far, header included."""
         return 4 + self._pos
+
+    @property
+    def offset(self) -> int:
+        """Where the next field would start, from the CDR origin."""
+        return self._pos
 
     def _align(self, size: int) -> None:
         pad = (-self._pos) % size

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -29,7 +29,9 @@ __all__ = [
     "ImuEncoder",
     "JointStateEncoder",
     "LogEncoder",
+    "MarkerArrayEncoder",
     "MotorStateEncoder",
+    "NavigationFeedbackEncoder",
     "OccupancyGridEncoder",
     "OdometryEncoder",
     "ParticleCloudEncoder",
@@ -631,39 +633,94 @@ class PathEncoder:
     def __init__(self, frame_id: str = "map") -> None:
         """Paths in `frame_id`."""
         self.frame_id = frame_id
-        # Every PoseStamped after the first starts 8-aligned: stamp, frame id, padding, 7 doubles.
+        # Every PoseStamped after the first starts 8-aligned: stamp, frame id, padding, 7 doubles. A
+        # block is a whole number of doubles: the header's bytes are written as doubles (a view).
         frame = string_bytes(frame_id)
         frame += bytes((-(8 + len(frame))) % 8)
-        self._frame = np.frombuffer(frame, dtype=np.uint8)
-        self._block = np.dtype(
-            {
-                "names": ["sec", "nanosec", "frame", "pose"],
-                "formats": ["<i4", "<u4", ("u1", (len(frame),)), ("<f8", (7,))],
-                "offsets": [0, 4, 8, 8 + len(frame)],
-                "itemsize": 8 + len(frame) + 56,
-            }
-        )
+        self._frame = frame
+        self._head = (8 + len(frame)) // 8  # doubles of header in a block
 
     def encode(self, stamp_ns: int, poses: ArrayLike) -> bytes:
         """Encode poses given as `(N, 3)` x, y, yaw or `(N, 7)` x, y, z, qx, qy, qz, qw."""
-        arr = _planar_poses(poses)
+        arr = np.asarray(poses, dtype=np.float64)
+        n = arr.shape[0] if arr.ndim == 2 else 0
+        planar = arr.ndim == 2 and arr.shape[1] == 3
+        if not planar:
+            arr = _planar_poses(arr)
         w = CdrWriter()
         w.header(stamp_ns, self.frame_id)
-        w.count(arr.shape[0])
-        if arr.shape[0] == 0:
+        w.count(n)
+        if n == 0:
             return w.getvalue()
         # The first pose starts 4-aligned and may need padding that the others do not.
         w.header(stamp_ns, self.frame_id)
-        w.pack("d", *arr[0])
-        if arr.shape[0] > 1:
+        first = arr[0]
+        if planar:
+            w.pack("d", first[0], first[1], 0.0, 0.0, 0.0, math.sin(0.5 * first[2]), math.cos(0.5 * first[2]))
+        else:
+            w.pack("d", *first)
+        if n > 1:
             sec, nanosec = divmod(stamp_ns, _NS)
-            blocks = np.empty(arr.shape[0] - 1, dtype=self._block)
-            blocks["sec"] = sec
-            blocks["nanosec"] = nanosec
-            blocks["frame"] = self._frame
-            blocks["pose"] = arr[1:]
+            head = np.frombuffer(struct.pack("<iI", sec, nanosec) + self._frame, dtype=_F64)
+            h = self._head
+            blocks = np.zeros((n - 1, h + 7))
+            blocks[:, :h] = head
+            if planar:
+                blocks[:, h : h + 2] = arr[1:, :2]
+                half = 0.5 * arr[1:, 2]
+                blocks[:, h + 5] = np.sin(half)
+                blocks[:, h + 6] = np.cos(half)
+            else:
+                blocks[:, h:] = arr[1:]
             w.raw(blocks.tobytes(), align=8)
         return w.getvalue()
+
+
+class NavigationFeedbackEncoder:
+    """`twin_msgs/msg/NavigationFeedback` (`/navigate_to_pose/feedback`): NavigateToPose's feedback fields."""
+
+    msgtype: ClassVar[str] = "twin_msgs/msg/NavigationFeedback"
+
+    def __init__(self, frame_id: str = "map") -> None:
+        """The current pose in `frame_id`."""
+        layout = Layout()
+        layout.var_time()
+        layout.const_string(frame_id)
+        layout.var("pose", "d", 7)
+        layout.var_time("navigation_time")
+        layout.var_time("estimated_time_remaining")
+        layout.var("number_of_recoveries", "h")
+        layout.var("distance_remaining", "f")
+        packer, self._consts = layout.build()
+        self._pack = packer.pack
+
+    def encode(
+        self,
+        stamp_ns: int,
+        pose: tuple[float, float, float],
+        times_ns: tuple[int, int],
+        recoveries: int,
+        distance_remaining_m: float,
+    ) -> bytes:
+        """Encode the feedback.
+
+        Args:
+            stamp_ns: The header stamp.
+            pose: The robot's planar map pose (x m, y m, yaw rad).
+            times_ns: Navigation time and estimated time remaining, ns.
+            recoveries: Behaviours run for this goal.
+            distance_remaining_m: Along the current path.
+        """
+        navigation_time_ns, eta_ns = times_ns
+        sec, nanosec = divmod(stamp_ns, _NS)
+        nav_sec, nav_ns = divmod(navigation_time_ns, _NS)
+        eta_sec, eta_ns_part = divmod(eta_ns, _NS)
+        qz, qw = _planar_quat(pose[2])
+        c = self._consts
+        return self._pack(
+            c[0], sec, nanosec, c[1], pose[0], pose[1], 0.0, 0.0, 0.0, qz, qw,
+            nav_sec, nav_ns, eta_sec, eta_ns_part, recoveries, distance_remaining_m,
+        )  # fmt: skip
 
 
 class ParticleCloudEncoder:
@@ -745,3 +802,84 @@ class OccupancyGridEncoder:
         w.count(data.size)
         w.raw(data.tobytes(), align=1)
         return w.getvalue()
+
+
+class MarkerArrayEncoder:
+    """`visualization_msgs/msg/MarkerArray` of solid shapes (e.g. `/obstacles`), the whole set each message.
+
+    Each message starts with a DELETEALL marker, then one ADD marker per shape, so a viewer that
+    reads only the latest message (a latched topic) draws exactly the shapes present then. A
+    marker's bytes are one `struct` pack (stamp and pose vary, the rest is constant), built once
+    per marker and alignment and reused.
+    """
+
+    msgtype: ClassVar[str] = "visualization_msgs/msg/MarkerArray"
+    CUBE: ClassVar[int] = 1
+    CYLINDER: ClassVar[int] = 3
+    _ADD: ClassVar[int] = 0
+    _DELETEALL: ClassVar[int] = 3
+    _COUNT = struct.Struct("<I")
+
+    def __init__(self, frame_id: str = "map", namespace: str = "obstacles") -> None:
+        """Markers in `frame_id`, in marker namespace `namespace`."""
+        self.frame_id = frame_id
+        self.namespace = namespace
+        self._layouts: dict[tuple[object, ...], tuple[Callable[..., bytes], bytes, bytes, int]] = {}
+
+    def encode(
+        self,
+        stamp_ns: int,
+        markers: Sequence[
+            tuple[int, int, Sequence[float], Sequence[float], Sequence[float], str]
+        ],  # (id, type, pose x y z qx qy qz qw, scale x y z, rgba, text)
+    ) -> bytes:
+        """Encode a DELETEALL, then each marker as (id, type, pose (7), scale (3), rgba (4), text)."""
+        sec, nanosec = divmod(stamp_ns, _NS)
+        parts = [ENCAPSULATION, self._COUNT.pack(len(markers) + 1)]
+        offset = 4
+        delete_all = (0, 0, (0.0,) * 6 + (1.0,), (0.0,) * 3, (0.0,) * 4, "")
+        for action, marker in [(self._DELETEALL, delete_all)] + [(self._ADD, m) for m in markers]:
+            marker_id, kind, pose, scale, rgba, text = marker
+            key = (marker_id, kind, action, tuple(scale), tuple(rgba), text, offset % 8)
+            layout = self._layouts.get(key)
+            if layout is None:
+                layout = self._layouts[key] = self._layout(key, offset % 8)
+            pack, head, tail, size = layout
+            parts.append(pack(sec, nanosec, head, *pose, tail))
+            offset += size
+        return b"".join(parts)
+
+    def _layout(self, key: tuple[object, ...], start: int) -> tuple[Callable[..., bytes], bytes, bytes, int]:
+        """One marker's struct at `start` (mod 8) from the CDR origin: (pack, constant runs, its size)."""
+        marker_id, kind, action, scale, rgba, text, _ = key
+        assert isinstance(scale, tuple) and isinstance(rgba, tuple) and isinstance(text, str)
+        # Start at 8 + start so the leading padding to 4 is counted from the right place.
+        origin = 8 + start
+        layout = Layout(offset=origin)
+        layout.var_time()
+        layout.const_string(self.frame_id)
+        layout.const_string(self.namespace)
+        layout.const("i", int(marker_id), int(kind), int(action))  # type: ignore[call-overload]
+        layout.var("pose", "d", 7)
+        layout.const("d", *scale)
+        layout.const("f", *rgba)
+        layout.const("i", 0)  # lifetime: 0, forever
+        layout.const("I", 0)
+        layout.const("B", 0)  # frame_locked
+        layout.const_count(0)  # points
+        layout.const_count(0)  # colors
+        layout.const_string("")  # texture_resource
+        layout.const("i", 0)  # texture: an empty sensor_msgs/CompressedImage (header, format, data)
+        layout.const("I", 0)
+        layout.const_string("")
+        layout.const_string("")
+        layout.const_count(0)
+        layout.const_count(0)  # uv_coordinates
+        layout.const_string(text)
+        layout.const_string("")  # mesh_resource
+        layout.const_string("")  # mesh_file: filename, data
+        layout.const_count(0)
+        layout.const("B", 0)  # mesh_use_embedded_materials
+        packer, consts = layout.build()
+        assert layout.slots == ["stamp.sec", "stamp.nanosec", "const"] + ["pose"] * 7 + ["const"], layout.slots
+        return packer.pack, consts[0], consts[1], layout.offset - origin

@@ -49,13 +49,24 @@ class Blackboard:
         parent: the blackboard of the enclosing tree, for a SubTree's blackboard.
     """
 
-    __slots__ = ("_autoremap", "_parent", "_remap", "_storage")
+    __slots__ = ("_autoremap", "_parent", "_remap", "_storage", "_writes")
 
     def __init__(self, parent: Blackboard | None = None) -> None:
         self._storage: dict[str, Entry] = {}
         self._parent = parent
         self._remap: dict[str, str] = {}
         self._autoremap = False
+        # one write counter for a blackboard and every blackboard below it
+        self._writes: list[int] = parent._writes if parent is not None else [0]
+
+    @property
+    def version(self) -> int:
+        """How many writes this blackboard's tree of blackboards has taken (`set`, `unset`, new entries)."""
+        return self._writes[0]
+
+    def note_write(self) -> None:
+        """Count a write made to an entry in place (a script assigning to it)."""
+        self._writes[0] += 1
 
     # -- structure -----------------------------------------------------------------------------
 
@@ -129,6 +140,7 @@ class Blackboard:
             return parent._create_entry_impl(key, info)
         entry = Entry(info)
         self._storage[key] = entry
+        self._writes[0] += 1
         return entry
 
     def set(self, key: str, value: Any, *, as_any: bool = False) -> None:
@@ -150,6 +162,7 @@ class Blackboard:
         if key[:1] == "@":
             self.root().set(key[1:], value, as_any=as_any)
             return
+        self._writes[0] += 1
         entry = self._storage.get(key)
         if entry is None:
             info = PortType.ANY if (isinstance(value, str) and not as_any) or value is None else type_of_value(value)
@@ -208,7 +221,8 @@ class Blackboard:
 
     def unset(self, key: str) -> None:
         """Remove a local entry (nothing happens when there is none)."""
-        self._storage.pop(key, None)
+        if self._storage.pop(key, None) is not None:
+            self._writes[0] += 1
 
     def keys(self) -> list[str]:
         """The keys stored in this blackboard (not those reached through remapping)."""

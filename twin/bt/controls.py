@@ -49,6 +49,7 @@ class _SequentialNode(ControlNode):
     _STOP: ClassVar[NodeStatus]  # a child status that ends the node with that status
     _NEXT: ClassVar[NodeStatus]  # a child status that moves on to the next child
     _MEMORY: ClassVar[bool] = False  # keep the position after a stop or a halt (SequenceWithMemory)
+    settles = True
 
     def __init__(self, name: str, config: NodeConfig, asynch: bool = False) -> None:
         super().__init__(name, config)
@@ -134,6 +135,7 @@ class _ReactiveBase(ControlNode):
 
     _STOP: ClassVar[NodeStatus]
     _OTHERWISE: ClassVar[NodeStatus]
+    settles = True
 
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)

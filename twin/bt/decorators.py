@@ -57,6 +57,8 @@ def _add_timer(node: TreeNode, msec: int, callback: Callable[[bool], None]) -> T
 class InverterNode(DecoratorNode):
     """SUCCESS ↔ FAILURE; RUNNING and SKIPPED pass through."""
 
+    settles = True
+
     def tick(self) -> NodeStatus:
         """Tick the child and swap its result."""
         self.set_status(RUNNING)
@@ -75,6 +77,8 @@ class InverterNode(DecoratorNode):
 class ForceSuccessNode(DecoratorNode):
     """A completed child gives SUCCESS."""
 
+    settles = True
+
     def tick(self) -> NodeStatus:
         """Tick the child."""
         self.set_status(RUNNING)
@@ -87,6 +91,8 @@ class ForceSuccessNode(DecoratorNode):
 
 class ForceFailureNode(DecoratorNode):
     """A completed child gives FAILURE."""
+
+    settles = True
 
     def tick(self) -> NodeStatus:
         """Tick the child."""

@@ -151,9 +151,15 @@ class TreeNode:
         "_post",
         "_pre",
         "_registration_id",
+        "_settles",
         "_status",
         "_tree",
     )
+
+    #: A tick of a node of this type that changes no status and writes nothing repeats itself exactly
+    #: while the blackboard, the tree's external inputs and the clock (before `wake_ns()`) stay as they
+    #: were: `Tree.tick_unless_settled` may then skip the tick. False unless a node type says so.
+    settles: ClassVar[bool] = False
 
     def __init__(self, name: str, config: NodeConfig) -> None:
         self._name = name
@@ -164,6 +170,7 @@ class TreeNode:
         self._registration_id = config.manifest.registration_id if config.manifest else type(self).__name__
         self._pre = config.pre_conditions if any(s is not None for s in config.pre_conditions) else None
         self._post = config.post_conditions if any(s is not None for s in config.post_conditions) else None
+        self._settles = type(self).settles and self._pre is None and self._post is None
         self._env = Environment(config.blackboard, config.enums)
         self._literals: dict[tuple[str, str], Any] = {}
 
@@ -244,6 +251,10 @@ class TreeNode:
             TickError: If the node (or a script on it) fails.
         """
         try:
+            if not self._settles:
+                tree = self._tree
+                if tree is not None:
+                    tree._unsettled = True
             new = None
             if self._pre is not None:
                 new = self._check_pre_conditions(self._pre)
@@ -261,6 +272,7 @@ class TreeNode:
                 prev = self._status
                 if prev is not new:
                     self._status = new
+                    self._changed()
                     notify = self._notify
                     if notify is not None:
                         notify(self, prev, new)
@@ -317,6 +329,7 @@ class TreeNode:
         prev = self._status
         if prev is not new:
             self._status = new
+            self._changed()
             notify = self._notify
             if notify is not None:
                 notify(self, prev, new)
@@ -326,9 +339,19 @@ class TreeNode:
         prev = self._status
         if prev is not IDLE:
             self._status = IDLE
+            self._changed()
             notify = self._notify
             if notify is not None:
                 notify(self, prev, IDLE)
+
+    def _changed(self) -> None:
+        tree = self._tree
+        if tree is not None:
+            tree._status_changes += 1
+
+    def wake_ns(self) -> int | None:
+        """For a settling node whose ticks depend on time: when a tick of it may stop repeating (None: never)."""
+        return None
 
     # -- wake-ups and time ---------------------------------------------------------------------
 

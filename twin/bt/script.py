@@ -433,6 +433,7 @@ class _Assign(_Expr):
         if value is None:
             msg = f"The right operand of the operator [{op}] is not initialized"
             raise ScriptError(msg)
+        board.note_write()
         current = entry.value
         try:
             if op in (":=", "="):

@@ -25,6 +25,8 @@ from twin.bt.node import TreeNode
 from twin.bt.status import FAILURE, RUNNING, SUCCESS, NodeStatus
 from twin.core.errors import TreeError
 
+_NEVER: Final = 2**63 - 1  # a settled tick with no wake time repeats until something changes
+
 __all__ = ["ManualClock", "StatusListener", "SubtreeInstance", "TimerHandle", "TimerQueue", "Tree"]
 
 StatusListener = Callable[[int, str, int, NodeStatus, NodeStatus], None]
@@ -107,12 +109,15 @@ class TimerQueue:
         heapq.heappush(self._heap, (due_ns, self._seq, handle))
         return handle
 
-    def fire_due(self, now_ns: int) -> None:
-        """Fire every pending timer due at or before `now_ns`."""
+    def fire_due(self, now_ns: int) -> int:
+        """Fire every pending timer due at or before `now_ns`; return how many came due."""
         heap = self._heap
+        count = 0
         while heap and heap[0][0] <= now_ns:
             _, _, handle = heapq.heappop(heap)
             handle._fire()
+            count += 1
+        return count
 
     def next_due_ns(self) -> int | None:
         """When the next pending timer is due, or None."""
@@ -160,6 +165,12 @@ class Tree:
         self._by_uid = {node.uid: node for node in self.nodes}
         for node in self.nodes:
             node._attach(self, None)
+        # settled ticks (see tick_unless_settled)
+        self._status_changes = 0
+        self._unsettled = False
+        self._timers_fired = 0
+        self._settled: tuple[int, object, int] | None = None
+        self._timed = tuple(node for node in self.nodes if type(node).wake_ns is not TreeNode.wake_ns)
 
     # -- introspection -------------------------------------------------------------------------
 
@@ -247,7 +258,7 @@ class Tree:
             msg = f"the tree's clock went back from {self._now_ns} ns to {now} ns"
             raise TreeError(msg)
         self._now_ns = now
-        self.timers.fire_due(now)
+        self._timers_fired = self.timers.fire_due(now)
 
     def tick_once(self) -> NodeStatus:
         """Tick the root; tick it again at once while it is RUNNING and a wake-up was emitted.
@@ -255,13 +266,60 @@ class Tree:
         Raises:
             TickError: If a node fails; the tree keeps the state it had at that point.
         """
+        return self._tick(None)
+
+    def tick_unless_settled(self, external: Callable[[], object] | None = None) -> NodeStatus | None:
+        """Tick as `tick_once`, or return None when that tick would repeat the previous one exactly.
+
+        A tick settles when it ticked only nodes whose type `settles`, changed no node's status,
+        wrote nothing to the blackboard, fired no timer, emitted no wake-up, left `external()` (what
+        the tree's leaves read from outside it, e.g. the state of the servers they call) as it found
+        it, and returned RUNNING. Ticking again repeats it exactly until the blackboard or `external()`
+        changes or the clock reaches a timer or a node's `wake_ns()`: until then this returns None and
+        ticks nothing. Skipped ticks change nothing a listener or the blackboard could see.
+
+        Raises:
+            TickError: If a node fails.
+        """
+        settled = self._settled
+        if settled is not None:
+            version, seen, wake_ns = settled
+            if (
+                self.clock() < wake_ns
+                and self.subtrees[0].blackboard.version == version
+                and (external is None or external() == seen)
+            ):
+                return None
+        return self._tick(external)
+
+    def _tick(self, external: Callable[[], object] | None) -> NodeStatus:
+        board = self.subtrees[0].blackboard
+        version, changes = board.version, self._status_changes
+        seen = external() if external is not None else None
+        self._settled = None
+        self._unsettled = False
         self._begin_tick()
         root = self.root
         status = root.execute_tick()
+        woken = False
         while status is RUNNING and self._take_wake_up():
+            woken = True
             status = root.execute_tick()
         if status is SUCCESS or status is FAILURE:
             root.reset_status()
+        elif (
+            not self._unsettled
+            and not woken
+            and self._timers_fired == 0
+            and self._status_changes == changes
+            and board.version == version
+            and (external is None or external() == seen)
+        ):
+            wakes = [w for node in self._timed if (w := node.wake_ns()) is not None]
+            due = self.timers.next_due_ns()
+            if due is not None:
+                wakes.append(due)
+            self._settled = (version, seen, min(wakes, default=_NEVER))
         return status
 
     def tick_exactly_once(self) -> NodeStatus:
@@ -270,6 +328,7 @@ class Tree:
         Raises:
             TickError: If a node fails.
         """
+        self._settled = None
         self._begin_tick()
         root = self.root
         status = root.execute_tick()
@@ -279,6 +338,7 @@ class Tree:
 
     def halt_tree(self) -> None:
         """Halt every node (the root first, then each node as a safety net) and reset the root."""
+        self._settled = None
         self._now_ns = max(self._now_ns, self.clock())
         self.root.halt_node()
         for _, node in self.walk():

@@ -62,7 +62,14 @@ class NavigationServices(Protocol):
       spin {target_yaw, time_allowance}; backup {target_x, speed, time_allowance};
       drive_on_heading {target_x, speed, time_allowance}; wait {time_s};
       assisted_teleop {time_allowance}.
+
+    `generation` counts every change a leaf could see through `poll` (a goal sent, updated, canceled
+    or finished): the navigator skips ticks that would repeat themselves while it stays the same.
     """
+
+    @property
+    def generation(self) -> int:
+        """A counter that changes whenever any goal's state or result does."""
 
     def send_goal(self, server: str, request: Mapping[str, Any]) -> int:
         """Send a goal; return its id."""
@@ -129,6 +136,7 @@ def _path_length(path: Any) -> float:
 
 class _ServerAction(StatefulActionNode):
     server = ""
+    settles = True  # a RUNNING goal's poll changes only when the servers' `generation` does
 
     def __init__(self, name: str, config: NodeConfig, services: NavigationServices) -> None:
         super().__init__(name, config)
@@ -216,8 +224,10 @@ class FollowPath(_ServerAction):
         }
 
     def on_running(self) -> NodeStatus:
+        # a path written to the blackboard since the goal was sent (each replan writes a new one, and
+        # Nav2's stamped paths always differ) is sent to the running goal, which Nav2 preempts
         path = _input(self, "path")
-        if self._goal_id is not None and not _same(path, self._sent_path):
+        if self._goal_id is not None and path is not self._sent_path:
             self.services.update_goal(self._goal_id, self.request())
         return self._poll()
 
@@ -427,6 +437,8 @@ class RemovePassedGoals(SyncActionNode):
 class GoalUpdated(ConditionNode):
     """SUCCESS when the blackboard's `goal` or `goals` changed since the previous tick (FAILURE the first time)."""
 
+    settles = True
+
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)
         self._seen: tuple[Any, Any] | None = None
@@ -444,6 +456,8 @@ class GoalUpdated(ConditionNode):
 
 class GlobalUpdatedGoal(ConditionNode):
     """As GoalUpdated, but SUCCESS on its first tick (Nav2's GloballyUpdatedGoalCondition)."""
+
+    settles = True
 
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)
@@ -493,6 +507,8 @@ class IsPathValid(_ServicesCondition):
 
 class InitialPoseReceived(ConditionNode):
     """SUCCESS when the blackboard's `initial_pose_received` is true."""
+
+    settles = True
 
     def tick(self) -> NodeStatus:
         return SUCCESS if _bb(self, "initial_pose_received") else FAILURE

@@ -42,6 +42,8 @@ __all__ = [
 class PipelineSequence(ControlNode):
     """Tick children in order every tick; earlier children keep being re-ticked while a later one runs."""
 
+    settles = True
+
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)
         self._last_child_ticked = 0
@@ -77,6 +79,8 @@ class PipelineSequence(ControlNode):
 
 class RecoveryNode(ControlNode):
     """Two children: the action, and a recovery ticked when the action fails, up to `number_of_retries`."""
+
+    settles = True
 
     @classmethod
     def provided_ports(cls) -> tuple[PortSpec, ...]:
@@ -147,6 +151,8 @@ class RecoveryNode(ControlNode):
 class RoundRobinNode(ControlNode):
     """Tick one child per activation, moving on to the next after it completes; SUCCESS on any success."""
 
+    settles = True
+
     def __init__(self, name: str, config: NodeConfig) -> None:
         super().__init__(name, config)
         self._current = 0
@@ -190,6 +196,8 @@ class RoundRobinNode(ControlNode):
 class RateController(DecoratorNode):
     """Tick the child at most `hz` times per second of simulation time (and always while it runs)."""
 
+    settles = True
+
     @classmethod
     def provided_ports(cls) -> tuple[PortSpec, ...]:
         """Hz (default 10)."""
@@ -219,6 +227,10 @@ class RateController(DecoratorNode):
                 self._start_ns = self.now_ns()
             return status
         return self._status
+
+    def wake_ns(self) -> int | None:
+        """When the period since the child last succeeded is over (the child is ticked again)."""
+        return self._start_ns + self._period_ns if self._status is RUNNING else None
 
 
 _BASIC_ACTION_PORTS: Final = (

@@ -122,6 +122,8 @@ class FollowPathTask:
         goal_checker: The goal checker (reset on `start`).
         progress_checker: The progress checker (reset on `start`).
         failure_tolerance_s: How long controller failures are tolerated with zero commands (TB3: 0.3).
+        velocity_thresholds: controller_server's `min_x_velocity_threshold` and
+            `min_theta_velocity_threshold`: odometry speeds below them count as 0.
     """
 
     def __init__(
@@ -131,8 +133,10 @@ class FollowPathTask:
         progress_checker: SimpleProgressChecker | None = None,
         *,
         failure_tolerance_s: float = 0.3,
+        velocity_thresholds: tuple[float, float] = (0.0001, 0.0001),
     ) -> None:
         self.controller = controller
+        self.min_x_velocity_threshold, self.min_theta_velocity_threshold = velocity_thresholds
         self.goal_checker = goal_checker or SimpleGoalChecker()
         self.progress_checker = progress_checker or SimpleProgressChecker()
         self.failure_tolerance_s = failure_tolerance_s
@@ -147,9 +151,14 @@ class FollowPathTask:
         self.update_plan(plan)
 
     def update_plan(self, plan: NDArray[np.float64]) -> None:
-        """Replace the plan (a new path on the blackboard while the action runs)."""
+        """Replace the plan (a new path while the action runs).
+
+        The goal checker starts over, as Humble's `setPlannerPath` resets it, and the controller takes
+        the plan (DWB resets its critics).
+        """
         plan = np.asarray(plan, dtype=np.float64).reshape(-1, 3)
         self._goal = (float(plan[-1, 0]), float(plan[-1, 1]), float(plan[-1, 2]))
+        self.goal_checker.reset()
         self.controller.set_plan(plan)
 
     def step(
@@ -161,10 +170,14 @@ class FollowPathTask:
         *,
         plan_to_costmap: tuple[float, float, float] | None = None,
     ) -> FollowStep:
-        """Run one controller cycle with the robot's pose (costmap frame) and velocity.
+        """Run one controller cycle with the robot's pose (costmap frame) and odometry velocity.
 
-        `plan_to_costmap` is the plan frame's pose in the costmap frame (map in odom) when they
-        differ: the controller moves the plan with it and the goal is checked in the costmap frame.
+        In Humble's order: the progress check, the controller's command (its failures tolerated for
+        `failure_tolerance_s` with a zero command), then the goal check on the same pose; a reached goal
+        ends the action with a zero command. The odometry's velocity is thresholded as controller_server's
+        `getThresholdedTwist` does. `plan_to_costmap` is the plan frame's pose in the costmap frame (map
+        in odom) when they differ: the controller moves the plan with it and the goal is checked in the
+        costmap frame.
         """
         goal = self._goal
         if plan_to_costmap is not None:
@@ -173,20 +186,25 @@ class FollowPathTask:
             tx, ty, tyaw = plan_to_costmap
             c, s = math.cos(tyaw), math.sin(tyaw)
             goal = (tx + c * goal[0] - s * goal[1], ty + s * goal[0] + c * goal[1], goal[2] + tyaw)
-        if self.goal_checker.is_goal_reached(pose, goal):
-            return FollowStep(status=FollowStatus.SUCCEEDED, cmd=(0.0, 0.0))
         if not self.progress_checker.check(pose, t_ns):
             return FollowStep(status=FollowStatus.FAILED, cmd=(0.0, 0.0), reason="Failed to make progress")
+        vx = 0.0 if abs(velocity[0]) < self.min_x_velocity_threshold else velocity[0]
+        wz = 0.0 if abs(velocity[1]) < self.min_theta_velocity_threshold else velocity[1]
         try:
-            cmd = self.controller.compute_velocity(pose, velocity, costmap)
+            cmd = self.controller.compute_velocity(pose, (vx, wz), costmap)
         except RuntimeError as err:
             if t_ns - self._last_valid_ns > round(self.failure_tolerance_s * 1e9):
                 return FollowStep(
                     status=FollowStatus.FAILED, cmd=(0.0, 0.0), reason=f"Controller patience exceeded: {err}"
                 )
-            return FollowStep(status=FollowStatus.RUNNING, cmd=(0.0, 0.0), reason=str(err))
-        self._last_valid_ns = t_ns
-        return FollowStep(status=FollowStatus.RUNNING, cmd=cmd)
+            cmd = (0.0, 0.0)
+            reason = str(err)
+        else:
+            self._last_valid_ns = t_ns
+            reason = ""
+        if self.goal_checker.is_goal_reached(pose, goal):
+            return FollowStep(status=FollowStatus.SUCCEEDED, cmd=(0.0, 0.0))
+        return FollowStep(status=FollowStatus.RUNNING, cmd=cmd, reason=reason)
 
 
 CONTROLLER_PLUGINS = (
@@ -196,7 +214,11 @@ CONTROLLER_PLUGINS = (
 
 
 def controller_for_plugin(
-    plugin: str, section: Mapping[str, object], *, where: str = "controller_server"
+    plugin: str,
+    section: Mapping[str, object],
+    *,
+    where: str = "controller_server",
+    controller_frequency_hz: float = 20.0,
 ) -> Controller:
     """Build the controller a params file names by plugin (DWB or Regulated Pure Pursuit).
 
@@ -204,17 +226,19 @@ def controller_for_plugin(
         plugin: The `plugin:` value.
         section: The plugin's parameters (Nav2 names; unknown ones ignored as Nav2 does).
         where: File/key for the error message.
+        controller_frequency_hz: controller_server's `controller_frequency`.
 
     Raises:
-        ConfigError: If the plugin is not one the twin implements.
+        ConfigError: If the plugin is not one the twin implements, or a parameter cannot be used.
     """
     if plugin == CONTROLLER_PLUGINS[0]:
         from twin.nav.dwb import DwbController, DwbParams
 
-        return DwbController(DwbParams.from_nav2(dict(section)))
+        params = DwbParams.from_nav2(section, controller_frequency_hz=controller_frequency_hz, where=where)
+        return DwbController(params)
     if plugin == CONTROLLER_PLUGINS[1]:
         from twin.nav.rpp import RppController, RppParams
 
         return RppController(RppParams.from_nav2(dict(section)))
-    msg = f"{where}: unknown controller plugin {plugin!r}; the twin has {', '.join(CONTROLLER_PLUGINS)}"
+    msg = f"{where}.plugin: unknown controller plugin {plugin!r}; the twin has {', '.join(CONTROLLER_PLUGINS)}"
     raise ConfigError(msg)

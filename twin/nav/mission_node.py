@@ -69,6 +69,8 @@ class MissionNode(Node):
         initial_pose: The pose believed until the first `/odom` message.
         command_rate_hz: Rate of `/cmd_vel`.
         tree_rate_hz: Tick rate of a tree mission (None for other missions).
+        ready: For a tree mission, whether it may start: the thesis starts its autonomy node once
+            Nav2 runs and AMCL has its initial pose, so the tree's first tick waits for this.
     """
 
     def __init__(
@@ -80,8 +82,10 @@ class MissionNode(Node):
         tree_rate_hz: float | None = None,
         bt_log_topic: str = "/behavior_tree_log",
         pose_source: Callable[[], tuple[float, float, float]] | None = None,
+        ready: Callable[[], bool] | None = None,
     ) -> None:
         super().__init__("mission")
+        self._ready = ready
         self.mission = mission
         pose = list(initial_pose)
 
@@ -115,8 +119,15 @@ class MissionNode(Node):
         plan_encode = PathEncoder("map").encode
         navigator = mission.navigator
         plans = [0]
+        ready = self._ready
+        waiting = [False]
 
         def tick(t_ns: int) -> None:
+            if ready is not None and not ready():
+                if not waiting[0]:
+                    waiting[0] = True
+                    self.get_logger().info("waiting for the robot's map pose (AMCL's initial pose) to start")
+                return
             changes = mission.tick(t_ns)
             if changes:
                 events = [(c.t_ns, mission.node_name(c.uid), c.prev.name, c.new.name) for c in changes]

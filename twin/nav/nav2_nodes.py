@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.bag import BehaviorTreeLogEncoder, PathEncoder, TwistEncoder
+from twin.bag import BehaviorTreeLogEncoder, NavigationFeedbackEncoder, PathEncoder, TwistEncoder
 from twin.bt.log import StatusChangeBuffer
 from twin.bt.mission_nodes import NavigationStatus, Pose2D
 from twin.bt.status import NodeStatus
@@ -86,6 +86,7 @@ class Nav2Config:
 
     controller_frequency_hz: float = 10.0
     failure_tolerance_s: float = 0.3
+    velocity_thresholds: tuple[float, float] = (0.001, 0.001)
     controllers: Mapping[str, tuple[str, Mapping[str, object]]] = field(default_factory=dict)
     goal_checkers: Mapping[str, SimpleGoalChecker] = field(default_factory=dict)
     progress_radius_m: float = 0.5
@@ -103,6 +104,14 @@ def _num(section: Mapping[str, Any], key: str, default: float, where: str) -> fl
         msg = f"{where}.{key}: expected a number, got {value!r}; fix the params file"
         raise ConfigError(msg)
     return float(value)
+
+
+def _flag(section: Mapping[str, Any], key: str, default: bool, where: str) -> bool:
+    value = section.get(key, default)
+    if not isinstance(value, bool):
+        msg = f"{where}.{key}: expected true or false, got {value!r}; fix the params file"
+        raise ConfigError(msg)
+    return value
 
 
 def _names(section: Mapping[str, Any], key: str, default: Sequence[str], where: str) -> tuple[str, ...]:
@@ -141,11 +150,13 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     used: dict[str, list[str]] = {"controller_server": [], "planner_server": [], "bt_navigator": []}
     cu = used["controller_server"]
     plugins = _names(cs, "controller_plugins", ("FollowPath",), where)
+    frequency = _num(cs, "controller_frequency", 20.0, where)
     controllers: dict[str, tuple[str, Mapping[str, object]]] = {}
     for name in plugins:
         section = _sub(cs, name)
         plugin = str(section.get("plugin", "dwb_core::DWBLocalPlanner"))
-        controller_for_plugin(plugin, section, where=f"{where}.{name}.plugin")  # refuses unknown plugins now
+        # refuses unknown plugins, critics and bad values now, before the run
+        controller_for_plugin(plugin, section, where=f"{where}.{name}", controller_frequency_hz=frequency)
         controllers[name] = (plugin, section)
         cu.extend(f"{name}.{k}" for k in section)
     checker_names = _names(cs, "goal_checker_plugins", (), where) or (
@@ -164,6 +175,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     progress = _sub(cs, progress_name)
     cu.extend(f"{progress_name}.{k}" for k in progress)
     cu += ["controller_frequency", "failure_tolerance", "controller_plugins", "goal_checker_plugins"]
+    cu += ["min_x_velocity_threshold", "min_theta_velocity_threshold"]
     cu += ["goal_checker_plugin", "progress_checker_plugin"]
     ps = params.node("planner_server")
     pwhere = f"{src}: planner_server"
@@ -187,6 +199,9 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     used["bt_navigator"] = ["bt_loop_duration", "global_frame", "robot_base_frame", "odom_topic"]
     vs = params.node("velocity_smoother")
     vwhere = f"{src}: velocity_smoother"
+    if str(vs.get("feedback", "OPEN_LOOP")) != "OPEN_LOOP":
+        msg = f"{vwhere}.feedback: only OPEN_LOOP (Nav2's default) is implemented, got {vs['feedback']!r}"
+        raise ConfigError(msg)
     defaults = SmootherParams()
     smoother = SmootherParams(
         smoothing_frequency_hz=_num(vs, "smoothing_frequency", defaults.smoothing_frequency_hz, vwhere),
@@ -196,10 +211,11 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         max_decel=_triple(vs, "max_decel", defaults.max_decel, vwhere),
         deadband_velocity=_triple(vs, "deadband_velocity", defaults.deadband_velocity, vwhere),
         velocity_timeout_s=_num(vs, "velocity_timeout", defaults.velocity_timeout_s, vwhere),
+        scale_velocities=_flag(vs, "scale_velocities", defaults.scale_velocities, vwhere),
     )
     used["velocity_smoother"] = [
         "smoothing_frequency", "max_velocity", "min_velocity", "max_accel", "max_decel",
-        "deadband_velocity", "velocity_timeout", "feedback",
+        "deadband_velocity", "velocity_timeout", "feedback", "scale_velocities",
     ]  # fmt: skip
     bs = params.node("behavior_server")
     bwhere = f"{src}: behavior_server"
@@ -215,8 +231,12 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         "cycle_frequency", "simulate_ahead_time", "max_rotational_vel", "min_rotational_vel", "rotational_acc_lim",
     ]  # fmt: skip
     return Nav2Config(
-        controller_frequency_hz=_num(cs, "controller_frequency", 20.0, where),
+        controller_frequency_hz=frequency,
         failure_tolerance_s=_num(cs, "failure_tolerance", 0.0, where),
+        velocity_thresholds=(
+            _num(cs, "min_x_velocity_threshold", 0.0001, where),
+            _num(cs, "min_theta_velocity_threshold", 0.0001, where),
+        ),
         controllers=controllers,
         goal_checkers=checkers,
         progress_radius_m=_num(progress, "required_movement_radius", 0.5, f"{where}.{progress_name}"),
@@ -301,7 +321,12 @@ class Nav2Servers:
         self.controllers: dict[str, Controller] = {}
         self._tasks: dict[str, FollowPathTask] = {}
         for name, (plugin, section) in config.controllers.items():
-            controller = controller_for_plugin(plugin, section)
+            controller = controller_for_plugin(
+                plugin,
+                section,
+                where=f"controller_server.{name}",
+                controller_frequency_hz=config.controller_frequency_hz,
+            )
             self.controllers[name] = controller
             checker = next(iter(config.goal_checkers.values()), SimpleGoalChecker())
             progress = SimpleProgressChecker(
@@ -309,7 +334,11 @@ class Nav2Servers:
                 movement_time_allowance_s=config.progress_allowance_s,
             )
             self._tasks[name] = FollowPathTask(
-                controller, checker, progress, failure_tolerance_s=config.failure_tolerance_s
+                controller,
+                checker,
+                progress,
+                failure_tolerance_s=config.failure_tolerance_s,
+                velocity_thresholds=config.velocity_thresholds,
             )
         self._goals: dict[int, _Goal] = {}
         self._next_id = 0
@@ -318,6 +347,7 @@ class Nav2Servers:
         self._behavior: int | None = None
         self._behavior_impl: Any = None
         self.recoveries = 0
+        self._generation = 0
         #: Called with (t_ns, path) for every computed path (planner_server publishes `/plan`).
         self.on_plan: Callable[[int, F64], None] | None = None
         #: The last failure any server reported (the navigator's failure reason).
@@ -325,8 +355,14 @@ class Nav2Servers:
 
     # -- NavigationServices ---------------------------------------------------------------------
 
+    @property
+    def generation(self) -> int:
+        """Changes whenever a goal is sent, updated, canceled or finished (what a leaf's poll can see)."""
+        return self._generation
+
     def send_goal(self, server: str, request: Mapping[str, Any]) -> int:
         """Accept a goal on an action server (see `twin.nav.bt_leaves.NavigationServices`)."""
+        self._generation += 1
         self._next_id += 1
         goal = _Goal(server=server, request=dict(request))
         self._goals[self._next_id] = goal
@@ -357,6 +393,7 @@ class Nav2Servers:
         goal = self._goals.get(goal_id)
         if goal is None or goal.state is not ActionState.RUNNING:
             return
+        self._generation += 1
         goal.request = dict(request)
         if goal_id == self._follow and self._follow_task is not None:
             self._follow_task.update_plan(np.asarray(request["path"], dtype=np.float64))
@@ -373,6 +410,7 @@ class Nav2Servers:
         goal = self._goals.get(goal_id)
         if goal is None or goal.state is not ActionState.RUNNING:
             return
+        self._generation += 1
         goal.state = ActionState.FAILED
         goal.reason = "canceled"
         if goal_id == self._follow:
@@ -554,6 +592,7 @@ class Nav2Servers:
         return None if goal.server == "wait" else (0.0, 0.0)
 
     def _finish(self, goal: _Goal, state: ActionState, *, reason: str = "", **result: Any) -> None:
+        self._generation += 1
         goal.state = state
         goal.result = result
         goal.reason = reason
@@ -586,9 +625,22 @@ class BtNavigator:
         self.goal: Pose = (0.0, 0.0, 0.0)
         self.started_ns = 0
         self.recoveries_at_start = 0
+        self._path_seen: Any = None
+        self._path_xy: F64 = np.zeros((0, 2))
+        self._path_left: F64 = np.zeros(0)
 
     def navigate(self, pose: Pose) -> int:
-        """Accept a NavigateToPose goal; a running goal is preempted (the tree sees the new goal)."""
+        """Accept a NavigateToPose goal; a running goal is preempted (the tree sees the new goal).
+
+        As Nav2's bt_navigator, a goal sent before the robot's pose in the map is known (AMCL without
+        an initial pose yet) is rejected: it fails at once.
+        """
+        if not self.servers.frames.localized:
+            self._goal_id += 1
+            self._status[self._goal_id] = NavigationStatus.FAILED
+            self._reasons[self._goal_id] = "Initial robot pose is not available (AMCL has no initial pose yet)"
+            _log.warning("NavigateToPose goal rejected: the robot's pose in map is not available yet")
+            return self._goal_id
         if self.active:
             self._status[self._goal_id] = NavigationStatus.FAILED
             self._reasons[self._goal_id] = "preempted by a new goal"
@@ -619,8 +671,9 @@ class BtNavigator:
         """One bt_navigator loop iteration (only while a goal runs); True while the goal still runs."""
         if not self.active:
             return False
-        status = self.tree.tick_once()
-        if status is NodeStatus.RUNNING:
+        servers = self.servers
+        status = self.tree.tick_unless_settled(lambda: servers.generation)
+        if status is None or status is NodeStatus.RUNNING:  # None: the tick would have repeated the last one
             return True
         self.tree.halt_tree()
         self.active = False
@@ -636,21 +689,20 @@ class BtNavigator:
 
     def distance_remaining(self, pose: Pose) -> float:
         """Along the current path from the pose nearest the robot to its end (Nav2's feedback)."""
-        path = self.tree.root_blackboard.get("path") if self._has("path") else None
+        entry = self.tree.root_blackboard.get_entry("path")
+        path = entry.value if entry is not None else None
         if path is None:
             return math.hypot(self.goal[0] - pose[0], self.goal[1] - pose[1])
-        p = np.asarray(path, dtype=np.float64).reshape(-1, 3)
-        if len(p) == 0:
+        if path is not self._path_seen:  # each plan is a new array: its lengths once
+            p = np.asarray(path, dtype=np.float64).reshape(-1, 3)
+            seg = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
+            self._path_seen, self._path_xy = path, p[:, :2]
+            self._path_left = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]]) if len(p) else np.zeros(0)
+        if len(self._path_xy) == 0:
             return 0.0
-        i = int(np.argmin(np.hypot(p[:, 0] - pose[0], p[:, 1] - pose[1])))
-        return float(np.sum(np.hypot(*np.diff(p[i:, :2], axis=0).T))) if i < len(p) - 1 else 0.0
-
-    def _has(self, key: str) -> bool:
-        try:
-            self.tree.root_blackboard.get(key)
-        except (KeyError, LookupError, ValueError):
-            return False
-        return True
+        d = self._path_xy - (pose[0], pose[1])
+        i = int(np.argmin(np.einsum("ij,ij->i", d, d)))
+        return float(self._path_left[i])
 
 
 class Nav2Navigator:
@@ -780,12 +832,10 @@ class BtNavigatorNode(Node):
 
     def __init__(self, navigator: BtNavigator, frames: Frames) -> None:
         super().__init__("bt_navigator")
-        from twin.msgs import get_message
-
         log_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "/behavior_tree_log", 10)
         log_encode = BehaviorTreeLogEncoder().encode
-        feedback_type = get_message("twin_msgs/msg/NavigationFeedback")
-        feedback_pub = self.create_publisher(feedback_type, self.FEEDBACK_TOPIC, 10)
+        feedback_pub = self.create_publisher(NavigationFeedbackEncoder.msgtype, self.FEEDBACK_TOPIC, 10)
+        feedback_encode = NavigationFeedbackEncoder().encode
         tree = navigator.tree
         changes = navigator.changes
         loops = [0]
@@ -801,28 +851,18 @@ class BtNavigatorNode(Node):
                 log_pub.publish(Encoded((log_encode, (t_ns, events), events)))
             loops[0] += 1
             if running and loops[0] % period == 0:
-                feedback_pub.publish(self._feedback(feedback_type, navigator, frames, t_ns))
+                args = self._feedback(navigator, frames, t_ns)
+                feedback_pub.publish(Encoded((feedback_encode, args, args)))
 
         rate = 1.0 / navigator.servers.config.bt_loop_duration_s
         self.create_rate_timer(rate, on_timer, priority=PRIORITY_TREE + 1)
 
     @staticmethod
-    def _feedback(msg_class: Any, navigator: BtNavigator, frames: Frames, t_ns: int) -> Any:
-        msg = msg_class()
-        x, y, yaw = frames.map_pose()
-        fb = msg
-        fb.current_pose.header.frame_id = "map"
-        fb.current_pose.header.stamp.sec, fb.current_pose.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
-        fb.current_pose.pose.position.x = x
-        fb.current_pose.pose.position.y = y
-        fb.current_pose.pose.orientation.z = math.sin(yaw / 2.0)
-        fb.current_pose.pose.orientation.w = math.cos(yaw / 2.0)
-        elapsed = max(0, t_ns - navigator.started_ns)
-        fb.navigation_time.sec, fb.navigation_time.nanosec = divmod(elapsed, 1_000_000_000)
-        remaining = navigator.distance_remaining((x, y, yaw))
-        fb.distance_remaining = remaining
+    def _feedback(navigator: BtNavigator, frames: Frames, t_ns: int) -> tuple[Any, ...]:
+        """NavigateToPose's feedback now, as NavigationFeedbackEncoder.encode takes it."""
+        pose = frames.map_pose()
+        remaining = navigator.distance_remaining(pose)
         speed = abs(frames.velocity[0])
         eta_ns = round(remaining / speed * 1e9) if speed > 0.01 else 0
-        fb.estimated_time_remaining.sec, fb.estimated_time_remaining.nanosec = divmod(eta_ns, 1_000_000_000)
-        fb.number_of_recoveries = navigator.servers.recoveries - navigator.recoveries_at_start
-        return msg
+        recoveries = navigator.servers.recoveries - navigator.recoveries_at_start
+        return (t_ns, pose, (max(0, t_ns - navigator.started_ns), eta_ns), recoveries, remaining)

@@ -20,7 +20,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.nav.costmap_grid import CostGrid
-from twin.nav.dwb import prune_and_transform_plan
 
 __all__ = ["NoValidCommand", "RppController", "RppParams"]
 
@@ -103,7 +102,7 @@ class RppController:
         lookahead = p.lookahead_dist_m
         if p.use_velocity_scaled_lookahead_dist:
             lookahead = min(max(abs(velocity[0]) * p.lookahead_time_s, p.min_lookahead_dist_m), p.max_lookahead_dist_m)
-        local, begin = prune_and_transform_plan(
+        local, begin = _prune_and_transform_plan(
             self._plan, pose, plan_to_costmap=self.plan_to_costmap, prune_distance_m=max(lookahead, 2.0), shorten=False
         )
         if len(local) == 0:
@@ -180,3 +179,57 @@ class RppController:
         costs = costmap.cost[row[inside], col[inside]]
         if ((costs == 253) | (costs == 254)).any():
             raise NoValidCommand("RegulatedPurePursuitController detected collision ahead!")
+
+
+def _prune_and_transform_plan(
+    plan: NDArray[np.float64],
+    pose: tuple[float, float, float],
+    *,
+    plan_to_costmap: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    prune_distance_m: float = 2.0,
+    forward_prune_distance_m: float = 2.0,
+    shorten: bool = True,
+    costmap_extent_m: float | None = None,
+) -> tuple[NDArray[np.float64], int]:
+    """Return the plan in the costmap frame cut around the robot, and the index of its first pose in `plan`.
+
+    As RPP's `transformGlobalPlan`: poses beyond half the costmap's larger side (`costmap_extent_m`)
+    are not passed on; the plan starts at the pose nearest the robot within that distance (and
+    `prune_distance_m`) and, with `shorten`, ends at the first pose farther than both from the robot.
+
+    Args:
+        plan: Global plan poses (N, 3) in the plan's frame.
+        pose: Robot pose (x, y, yaw) in the costmap's frame.
+        plan_to_costmap: The plan frame's pose in the costmap frame (e.g. map in odom).
+        prune_distance_m: Poses farther than this from the robot are not transformed.
+        forward_prune_distance_m: Path length kept ahead of the pose nearest the robot.
+        shorten: Apply `forward_prune_distance_m`.
+        costmap_extent_m: Half the costmap's larger side (None: no costmap limit).
+    """
+    tx, ty, tyaw = plan_to_costmap
+    c, s = math.cos(tyaw), math.sin(tyaw)
+    local = np.empty_like(plan)
+    local[:, 0] = tx + c * plan[:, 0] - s * plan[:, 1]
+    local[:, 1] = ty + s * plan[:, 0] + c * plan[:, 1]
+    local[:, 2] = plan[:, 2] + tyaw
+    d = np.hypot(local[:, 0] - pose[0], local[:, 1] - pose[1])
+    threshold = prune_distance_m if costmap_extent_m is None else min(prune_distance_m, costmap_extent_m)
+    near = d <= threshold
+    if not near.any():
+        return local[:0], len(plan)
+    first_near = int(np.argmax(near))
+    # the closest pose among the first run of near poses
+    run_end = first_near + (
+        int(np.argmin(near[first_near:])) if not near[first_near:].all() else len(plan) - first_near
+    )
+    begin = first_near + int(np.argmin(d[first_near:run_end]))
+    end = run_end
+    if shorten:
+        seg = np.hypot(*np.diff(local[begin:end, :2], axis=0).T)
+        along = np.concatenate([[0.0], np.cumsum(seg)])
+        end = begin + int(np.searchsorted(along, forward_prune_distance_m, side="right"))
+        if costmap_extent_m is not None:
+            beyond = np.nonzero(d[begin:end] > threshold)[0]
+            if len(beyond):
+                end = begin + max(1, int(beyond[0]))
+    return local[begin:end], begin

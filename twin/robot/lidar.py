@@ -28,6 +28,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from twin.world.obstacles import ObstacleField
 from twin.world.robot_model import LidarSpec, RobotModelSpec
 from twin.world.scene import RayCaster, Scene, mask_ranges
 
@@ -54,9 +55,18 @@ class Lidar:
         spec: The lidar (rates, angles, ranges, noise, mount pose in the robot's base frame).
         caster: The scene's ray caster at the lidar's height above the floor.
         rng: Source of the Gaussian noise; required when the spec has noise.
+        obstacles: Obstacles that come and go (`ObstacleField`), seen at the caster's height along
+            with the world; None (the default) costs nothing.
     """
 
-    def __init__(self, spec: LidarSpec, caster: RayCaster, rng: np.random.Generator | None = None) -> None:
+    def __init__(
+        self,
+        spec: LidarSpec,
+        caster: RayCaster,
+        rng: np.random.Generator | None = None,
+        *,
+        obstacles: ObstacleField | None = None,
+    ) -> None:
         if spec.samples < 1 or spec.count < 1:
             msg = f"lidar {spec.name!r}: samples and samples x resolution must be at least 1"
             raise ValueError(msg)
@@ -67,6 +77,7 @@ class Lidar:
             raise ValueError(msg)
         self.spec = spec
         self._caster = caster
+        self._obstacles = obstacles
         self._noisy = spec.noise_std_m > 0.0 or spec.noise_mean_m != 0.0
         if self._noisy and rng is None:
             msg = f"lidar {spec.name!r} has noise; pass a numpy.random.Generator"
@@ -103,8 +114,9 @@ class Lidar:
         rng: np.random.Generator | None = None,
         *,
         spec: LidarSpec | None = None,
+        obstacles: ObstacleField | None = None,
     ) -> Lidar:
-        """Return the robot's lidar in a scene (`spec` overrides the robot's, e.g. scenario values).
+        """Return the robot's lidar in a scene, seeing `obstacles` too (`spec` overrides the robot's).
 
         Raises:
             ValueError: If the robot has no lidar and none is given.
@@ -113,7 +125,7 @@ class Lidar:
         if spec is None:
             msg = f"robot {robot.name!r} has no lidar (<sensor type='ray|gpu_ray|lidar|gpu_lidar'>)"
             raise ValueError(msg)
-        return cls(spec, scene.ray_caster(robot.base_height_m + spec.mount.z_m), rng)
+        return cls(spec, scene.ray_caster(robot.base_height_m + spec.mount.z_m), rng, obstacles=obstacles)
 
     def scan(self, x_m: float, y_m: float, yaw_rad: float) -> NDArray[np.float32]:
         """Return one scan's ranges (float32, as LaserScan carries them) for the base at (x, y, yaw).
@@ -133,7 +145,8 @@ class Lidar:
             first = heading + self._start
         else:  # mirrored: beam i points at heading - (start + i * step); cast in increasing order
             first = heading - self._start - self._ray_step * (spec.samples - 1)
-        if spec.count == spec.samples and self._sweep > 0.0:
+        dynamic = self._obstacles.caster(self._caster.height_m) if self._obstacles is not None else None
+        if spec.count == spec.samples and self._sweep > 0.0 and (dynamic is None or self._caster.native):
             return self._caster.cast_scan(
                 (ox, oy),
                 first,
@@ -142,10 +155,19 @@ class Lidar:
                 range_min_m=spec.range_min_m,
                 range_max_m=spec.range_max_m,
                 noise_m=noise,
+                also=None if dynamic is None else dynamic.shapes,
             )
         ranges = self._caster.cast_fan(
             (ox, oy), first, self._ray_step, spec.samples, spec.range_max_m, min_range_m=spec.range_min_m
         )
+        if dynamic is not None:  # the nearer of the world and the obstacles, beam by beam
+            np.minimum(
+                ranges,
+                dynamic.cast_fan(
+                    (ox, oy), first, self._ray_step, spec.samples, spec.range_max_m, min_range_m=spec.range_min_m
+                ),
+                out=ranges,
+            )
         if self._sweep < 0.0:
             ranges = ranges[::-1].copy()
         if spec.count != spec.samples:

@@ -6,6 +6,7 @@ as a Gazebo plugin reads the physics engine, and talks to everything else only o
 | node | publishes | subscribes |
 |---|---|---|
 | `diff_drive` | `/contacts`, `/motor_state` (FMU drives) | `/cmd_vel` |
+| `obstacles` (scenario obstacles) | `/obstacles` | |
 | `lidar` | `/scan` | |
 | `imu` | `/imu` | |
 | `joint_states` | `/joint_states` | |
@@ -34,6 +35,7 @@ from twin.bag import (
     ContactEncoder,
     ImuEncoder,
     JointStateEncoder,
+    MarkerArrayEncoder,
     MotorStateEncoder,
     OdometryEncoder,
     ScanEncoder,
@@ -49,6 +51,7 @@ from twin.robot.drivetrain import Drivetrain, WheelState
 from twin.robot.encoders import EncoderModel
 from twin.robot.imu import ImuModel
 from twin.robot.lidar import Lidar
+from twin.world.obstacles import ObstacleField, ObstacleMonitor
 from twin.world.scene import CollisionMonitor, Contact
 
 __all__ = [
@@ -60,6 +63,7 @@ __all__ = [
     "ImuNode",
     "JointStateNode",
     "LidarNode",
+    "ObstacleNode",
     "RobotStatePublisher",
     "tf_pose",
 ]
@@ -80,15 +84,25 @@ Pose7 = tuple[float, float, float, float, float, float, float]
 class ContactTracker:
     """The robot's contact sensor: asks the world whether a pose touches it, and remembers the episode.
 
-    The drivetrain calls `touches` for every pose it would move to; `DiffDriveNode` reports an
+    The drivetrain calls `touches` for every pose it would move to; `ObstacleNode` calls
+    `touched_by` when an obstacle moves or appears into the robot. `DiffDriveNode` reports an
     episode's beginning and end on `/contacts`.
     """
 
-    def __init__(self, monitor: CollisionMonitor) -> None:
+    def __init__(self, monitor: CollisionMonitor | ObstacleMonitor) -> None:
         self.monitor = monitor
         self.contact: tuple[Contact, ...] = ()
         self.in_contact = False  # a contact episode is open
         self.pending = False  # the node must track the open episode (after each physics advance)
+        self.by_obstacle = False  # the open episode began with an obstacle moving into the robot
+        self.released = False  # ... and that obstacle no longer touches it
+
+    def touched_by(self, contacts: tuple[Contact, ...]) -> None:
+        """An obstacle moved (or appeared) into the robot: open an episode unless one is open."""
+        if contacts and not self.in_contact:
+            self.in_contact = self.pending = self.by_obstacle = True
+            self.released = False
+            self.contact = contacts
 
     def touches(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
         """Whether the robot at this pose touches the world (opens an episode when it starts)."""
@@ -165,13 +179,21 @@ class DiffDriveNode(Node):
             self._reported = True
             self._release_from = (s.x_m, s.y_m)
             return
+        if tracker.released:  # the obstacle that walked into the robot has left it
+            self._end(t_ns)
+            return
         if s.blocked:
             self._release_from = (s.x_m, s.y_m)
             return
         x0, y0 = self._release_from
         if math.hypot(s.x_m - x0, s.y_m - y0) >= _CONTACT_RELEASE_M:
-            self._report(t_ns, begin=False)
-            tracker.in_contact = tracker.pending = self._reported = False
+            self._end(t_ns)
+
+    def _end(self, t_ns: int) -> None:
+        tracker = self.tracker
+        self._report(t_ns, begin=False)
+        tracker.in_contact = tracker.pending = self._reported = False
+        tracker.by_obstacle = tracker.released = False
 
     def _report(self, t_ns: int, *, begin: bool) -> None:
         c = self.tracker.contact[0]
@@ -192,6 +214,59 @@ class DiffDriveNode(Node):
             _log.warning("t=%.3f s: contact with %s::%s; the robot stops", ns_to_s(t_ns), c.model, c.link)
         else:
             _log.info("t=%.3f s: contact with %s::%s ended", ns_to_s(t_ns), c.model, c.link)
+
+
+class ObstacleNode(Node):
+    """The world's moving parts, as a Gazebo world plugin moves models: the scenario's obstacles.
+
+    On a `rate_hz` grid (from t = 0, before the sensors of the same instant), when the field says
+    something may change (`ObstacleField.next_update_ns`), it moves the obstacles to their places,
+    reports an obstacle that moved or appeared into the robot as a contact (the robot is not pushed)
+    and ends that contact once it has left, and publishes the obstacles present as a
+    `visualization_msgs/MarkerArray` on `/obstacles` (latched) when the set changes, and at most
+    every `marker_period_s` while one moves. Data: the `ObstacleMarker`s.
+    """
+
+    def __init__(
+        self,
+        field: ObstacleField,
+        tracker: ContactTracker,
+        chassis: Callable[[], ChassisState],
+        *,
+        rate_hz: float,
+        marker_period_s: float = 0.1,
+    ) -> None:
+        super().__init__("obstacles")
+        pub = self.create_publisher(MarkerArrayEncoder.msgtype, "/obstacles", LATCHED)
+        encode = MarkerArrayEncoder("map").encode
+        kinds = {"box": MarkerArrayEncoder.CUBE, "cylinder": MarkerArrayEncoder.CYLINDER}
+        marker_period_ns = round(marker_period_s * 1e9)
+        next_ns: int | None = 0
+        next_marker_ns = 0
+        shown = -1  # the field's membership count last published
+
+        def robot_pose() -> tuple[float, float, float]:
+            s = chassis()
+            return s.x_m, s.y_m, s.yaw_rad
+
+        def on_timer(t_ns: int) -> None:
+            nonlocal next_ns, next_marker_ns, shown
+            if next_ns is None or t_ns < next_ns:  # nothing appears, vanishes or moves before then
+                return
+            changed, contacts = field.update(t_ns, robot_pose)
+            next_ns = field.next_update_ns(t_ns)
+            if contacts:
+                tracker.touched_by(contacts)
+            elif changed and tracker.by_obstacle and tracker.in_contact:
+                tracker.released = True
+            if field.membership != shown or (changed and t_ns >= next_marker_ns):
+                shown = field.membership
+                next_marker_ns = t_ns + marker_period_ns
+                markers = field.markers()
+                rows = [(m.id, kinds[m.shape], m.pose, m.scale, m.color_rgba, m.name) for m in markers]
+                pub.publish(Encoded((encode, (t_ns, rows), markers)))
+
+        self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_SENSOR - 5)
 
 
 class LidarNode(Node):

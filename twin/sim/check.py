@@ -2,11 +2,11 @@
 
 `check_scenario(scenario, path)` raises a `ConfigError` naming the file, the key and the fix for
 the first value that cannot be honoured (NaN or infinite numbers, negative seeds, zero or negative
-rates, `range_min_m >= range_max_m`, sample counts below one, rates above the physics rate) and for
-the first referenced file that is missing or does not parse (locations, FMU mapping, FMU file,
-and any other path the scenario names). It is cheap (no world is loaded) so `simulate` runs it
-before it creates the bag folder. `check_inputs(scenario)` also loads what the run would load
-(world, robot, behaviour tree) for `twin scenario check`.
+rates, `range_min_m >= range_max_m`, sample counts below one, rates above the physics rate, more
+blocks than the mission has locations) and for the first referenced file that is missing or does
+not parse (locations, FMU mapping, FMU file, and any other path the scenario names). It is cheap
+(no world is loaded) so `simulate` runs it before it creates the bag folder. `check_inputs(scenario)`
+also loads what the run would load (world, robot, behaviour tree) for `twin scenario check`.
 """
 
 from __future__ import annotations
@@ -108,7 +108,22 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
             f"{lidar.angle_min_rad} is not below angle_max_rad {lidar.angle_max_rad}",
         )
     _check_files(scenario, path)
+    _check_blocks(scenario, path)
     _check_lidar_of_robot(scenario, path)
+
+
+def _check_blocks(scenario: Scenario, path: Path) -> None:
+    """Refuse blocks without a mission's locations to stand at, or more blocks than locations."""
+    if scenario.blocks.count == 0:
+        return
+    import numpy as np
+
+    from twin.sim.obstacles import scenario_obstacles
+
+    try:
+        scenario_obstacles(scenario, np.random.default_rng(0))  # the draw does not matter here
+    except ConfigError as err:
+        raise err.with_context(before=f"{path}: ") from None
 
 
 def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:

@@ -8,6 +8,7 @@ map_server, initial_pose, amcl, costmap and navigation-server nodes around them.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import math
@@ -176,6 +177,8 @@ class NavigationStack:
                     )
                     raise ConfigError(msg)
                 initial = ((x, y, yaw), est.xy_variance_m2, est.yaw_variance_rad2)
+        if isinstance(sc.mission, BehaviorTreeMission) and sc.mission.locations is not None:
+            _check_locations_on_map(sc.mission.locations, occupancy)
         global_costmap = local_costmap = None
         config = None
         bt_xml = None
@@ -209,7 +212,13 @@ class NavigationStack:
             assert robot.lidar is not None
             pose = sc.robot.initial_pose
             height = max(0.01, robot.base_height_m + robot.lidar.mount.z_m)  # the beam plane, as the lidar casts it
-            occupancy = map_from_scene(scene, height_m=height, resolution_m=0.05, free_xy_m=(pose.x_m, pose.y_m))
+            occupancy = map_from_scene(
+                scene,
+                height_m=height,
+                resolution_m=0.05,
+                free_xy_m=(pose.x_m, pose.y_m),
+                bounds_xy_m=_map_bounds(sc, scene),
+            )
         dx, dy = sc.localization.map_offset_m
         if dx or dy:
             occupancy = dataclasses.replace(
@@ -256,6 +265,47 @@ class NavigationStack:
                 BtNavigatorNode(navigator, frames),
             ]
         return nodes
+
+
+def _map_bounds(sc: Scenario, scene: Scene, *, margin_m: float = 1.0) -> tuple[float, float, float, float]:
+    """What a SLAM map of the mission covers: the world's obstacles, and the places the robot goes.
+
+    The obstacles' bounds 0.5 m around, and `margin_m` around the spawn point and every place the
+    mission names, so that the robot's way across an open floor is on the map (a world of one box
+    is not mapped around the box alone).
+    """
+    points = [(sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m)]
+    if isinstance(sc.mission, BehaviorTreeMission) and sc.mission.locations is not None:
+        from twin.bt.mission_nodes import load_locations
+
+        with contextlib.suppress(OSError, ValueError, TypeError):  # the mission reports a bad file itself
+            points += [(p.x_m, p.y_m) for p in load_locations(sc.mission.locations).values()]
+    xs = [x for x, _ in points]
+    ys = [y for _, y in points]
+    x0, y0, x1, y1 = min(xs) - margin_m, min(ys) - margin_m, max(xs) + margin_m, max(ys) + margin_m
+    box = scene.bounds
+    if box is not None:
+        pad = 0.5
+        x0, y0 = min(x0, box[0][0] - pad), min(y0, box[0][1] - pad)
+        x1, y1 = max(x1, box[1][0] + pad), max(y1, box[1][1] + pad)
+    return (x0, y0, x1, y1)
+
+
+def _check_locations_on_map(path: Path, occupancy: OccupancyMap) -> None:
+    """Refuse a mission location the robot could never be sent to: one off the map."""
+    from twin.bt.mission_nodes import load_locations
+
+    try:
+        locations = load_locations(path)
+    except (OSError, ValueError, TypeError):
+        return  # the mission reports a file it cannot read itself
+    for name, pose in locations.items():
+        if occupancy.world_to_cell(pose.x_m, pose.y_m) is None:
+            msg = (
+                f"{path}: {name}: goal ({pose.x_m:.2f}, {pose.y_m:.2f}) lies outside the map "
+                f"({_extent(occupancy)}); move it onto the map or give a map that covers it"
+            )
+            raise ConfigError(msg)
 
 
 def _extent(occupancy: OccupancyMap) -> str:

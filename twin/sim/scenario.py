@@ -22,6 +22,7 @@ from twin.nav.follower import FollowerParams
 from twin.nav.navigator import ProgressParams
 from twin.robot.disturbances import Disturbances
 from twin.robot.drivetrain import FmuDrive
+from twin.world.obstacles import ObstacleSpec
 
 __all__ = [
     "NodeSpec",
@@ -337,10 +338,31 @@ class LocalizationSection:
 class NavigationSection:
     """How `GoToPose` goals are carried out: Nav2's stack, or the twin's older grid follower by name."""
 
-    type: Literal["nav2", "grid"] = "grid"
+    type: Literal["nav2", "grid"] = "nav2"
     params: Path | None = None  # a Nav2 params YAML; null: TurtleBot3's Humble file for the robot model
     bt_xml: Path | None = None  # null: Nav2 Humble's navigate_to_pose_w_replanning_and_recovery.xml
     set: Mapping[str, Any] = field(default_factory=dict)  # single values over the params file, `node.param: value`
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class BlocksSection:
+    """The TurtleBot3 behaviour demos' blocks: red, green, blue cubes before `count` of the mission's locations.
+
+    Each stands `offset_m` along its location's heading theta, turned to theta, resting on the floor;
+    which locations get one is drawn from the scenario seed (its own stream, `blocks`).
+    """
+
+    count: int = 0  # 0: no blocks; 3: the demos'
+    offset_m: float = 0.6  # block_spawner.py's block_spawn_offset
+    size_m: float = 0.1  # the demos' cubes
+
+    def __post_init__(self) -> None:
+        if self.count < 0:
+            msg = f"count must be 0 (no blocks) or more, got {self.count}"
+            raise ValueError(msg)
+        if not self.size_m > 0.0:
+            msg = f"size_m must be above 0 m, got {self.size_m}"
+            raise ValueError(msg)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -363,6 +385,8 @@ class Scenario:
     map: Literal["from_world"] | Path = "from_world"  # a map_server YAML, or rasterised from the world
     localization: LocalizationSection = field(default_factory=LocalizationSection)
     navigation: NavigationSection = field(default_factory=NavigationSection)
+    obstacles: tuple[ObstacleSpec, ...] = ()  # boxes and cylinders that appear, vanish and walk (docs/obstacles.md)
+    blocks: BlocksSection = field(default_factory=BlocksSection)
     seed: int = 0
     max_duration_s: float = 600.0
     source_path: Path | None = None  # the scenario file (set by the loader; user modules are found beside it)

@@ -6,7 +6,7 @@ adds the scenario's own nodes; the executor (`twin.sim.executor`) runs them on t
 clock and the recorder records every topic. Nothing here knows what a topic means.
 
 Node order (it fixes which timer fires first among equals, and which subscriber hears first):
-rosout, robot_state_publisher, mission, lidar, joint_states, [gazebo_odometry], ground_truth, imu,
+rosout, robot_state_publisher, mission, [obstacles], lidar, joint_states, [gazebo_odometry], ground_truth, imu,
 diff_drive, ekf_odometry, clock, then the scenario's nodes in their order.
 """
 
@@ -49,6 +49,7 @@ from twin.robot.nodes import (
     ImuNode,
     JointStateNode,
     LidarNode,
+    ObstacleNode,
     RobotStatePublisher,
     tf_pose,
 )
@@ -56,6 +57,7 @@ from twin.sim.executor import Executor, RecordFilter, Sink
 from twin.sim.launch import load_nodes
 from twin.sim.mission import BagReplay, CmdVelScript, TreeMission, WaypointFollower
 from twin.sim.navigation import NavigationStack
+from twin.sim.obstacles import scenario_obstacles
 from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.replay import start_moving
 from twin.sim.rng import RngStreams
@@ -70,12 +72,16 @@ from twin.sim.scenario import (
     fmu_fallback,
 )
 from twin.world import RobotModelSpec, build_scene, load_robot, load_world, urdf_from_robot
+from twin.world.obstacles import ObstacleField, ObstacleMonitor
 from twin.world.scene import CollisionMonitor, RobotBody, Scene
 from twin.world.tf_static import static_frames
 
 __all__ = ["RunSummary", "Simulation"]
 
 _log = logging.getLogger(__name__)
+
+# Obstacles appear and vanish on this grid (the /clock period); walkers near the robot step at it (5 mm at 0.5 m/s).
+_OBSTACLE_PERIOD_NS = 10_000_000
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -198,9 +204,17 @@ class Simulation:
                 f"{c.model}::{c.link}; choose a free spawn pose"
             )
             raise ConfigError(msg)
-        self._tracker = ContactTracker(monitor)
-        self.lidar = Lidar.from_robot(robot, scene, self._rng.stream("lidar")) if robot.lidar is not None else None
-        self.drive = self._make_drive(body.radius_m, monitor)
+        self.obstacles = self._make_obstacles(body)
+        contact: CollisionMonitor | ObstacleMonitor = monitor
+        if self.obstacles is not None:
+            contact = ObstacleMonitor(monitor, self.obstacles)
+        self._tracker = ContactTracker(contact)
+        self.lidar = (
+            Lidar.from_robot(robot, scene, self._rng.stream("lidar"), obstacles=self.obstacles)
+            if robot.lidar is not None
+            else None
+        )
+        self.drive = self._make_drive(body.radius_m, contact)
         self.recorder: Recorder | None = None
         self.executor = Executor(self.step_ns, profile=profile)
         try:  # from here on, a failure must release the drive (FMU instances) it leaves behind
@@ -251,6 +265,26 @@ class Simulation:
             raise
 
     # -- what the nodes simulate -----------------------------------------------------------------
+
+    def _make_obstacles(self, body: RobotBody) -> ObstacleField | None:
+        """The scenario's obstacles and blocks (None without any), refused where they cover the spawn pose."""
+        specs = scenario_obstacles(self.scenario, self._rng.stream("blocks"))
+        if not specs:
+            return None
+        period_ns = self.step_ns * max(1, round(_OBSTACLE_PERIOD_NS / self.step_ns))
+        field = ObstacleField(specs, body, update_period_ns=period_ns)
+        pose = self.scenario.robot.initial_pose
+        _, contacts = field.update(0, (pose.x_m, pose.y_m, pose.yaw_rad))
+        if contacts:
+            c = contacts[0]
+            index = next(ob.index for ob in field.obstacles if ob.name == c.model)
+            key = f"obstacles[{index}]" if index < len(self.scenario.obstacles) else "blocks"
+            msg = (
+                f"{key}: {c.model} stands on the robot's spawn pose ({pose.x_m}, {pose.y_m}) at t = 0; "
+                "move it, or the robot's initial_pose"
+            )
+            raise ConfigError(msg)
+        return field
 
     def _make_mission(
         self, scene: Scene, body: RobotBody
@@ -337,7 +371,7 @@ class Simulation:
         info = self.drive.fmu_info
         return [fmu_record(self.drive.fmu_path, model_name=info.model_name, guid=info.guid)]
 
-    def _make_drive(self, bounding_radius_m: float, monitor: CollisionMonitor) -> Drivetrain:
+    def _make_drive(self, bounding_radius_m: float, monitor: CollisionMonitor | ObstacleMonitor) -> Drivetrain:
         sc, robot = self.scenario, self.robot
         assert robot.drive is not None
         pose = (sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m, sc.robot.initial_pose.yaw_rad)
@@ -420,9 +454,13 @@ class Simulation:
                 tree_rate_hz=spec.tick_rate_hz if isinstance(spec, BehaviorTreeMission) else None,
                 bt_log_topic="/mission/behavior_tree_log" if by_nav2 else "/behavior_tree_log",
                 pose_source=frames.map_pose if frames is not None and tree else None,
+                ready=(lambda: frames.localized) if frames is not None and tree else None,
             )
             nodes.append(self.mission_node)
 
+        if self.obstacles is not None:
+            period_s = self.obstacles.update_period_ns / NS_PER_S
+            nodes.append(ObstacleNode(self.obstacles, self._tracker, chassis, rate_hz=1.0 / period_s))
         if self.lidar is not None and robot.lidar is not None:
             nodes.append(LidarNode(self.lidar, robot.lidar.frame_id, robot.lidar.rate_hz, chassis))
 

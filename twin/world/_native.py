@@ -64,6 +64,33 @@ static void visit_interval(double lo, double span, double start, double inc, int
     }
 }
 
+/* Lower out[i] to each shape's hit along beam i (cosb, sinb); a null index visits every shape. */
+static void fan_accumulate(const double *seg, const long *seg_idx, long n_seg,
+                           const double *circ, const long *circ_idx, long n_circ,
+                           double ox, double oy, double start, double inc, int n,
+                           const double *cosb, const double *sinb, double tmin, double *out) {
+    for (long k = 0; k < n_seg; ++k) {
+        const double *s = seg + 4 * (seg_idx ? seg_idx[k] : k);
+        double a0 = atan2(s[1] - oy, s[0] - ox);
+        double a1 = atan2(s[3] - oy, s[2] - ox);
+        double span = fmod(a1 - a0, TWO_PI);
+        if (span < 0.0) span += TWO_PI;
+        double lo = a0;
+        if (span > M_PI) { lo = a1; span = TWO_PI - span; }
+        visit_interval(lo - EPS_ANGLE, span + 2 * EPS_ANGLE, start, inc, n, 1, s, ox, oy,
+                       cosb, sinb, tmin, out);
+    }
+    for (long k = 0; k < n_circ; ++k) {
+        const double *c = circ + 3 * (circ_idx ? circ_idx[k] : k);
+        double qx = c[0] - ox, qy = c[1] - oy, r = c[2];
+        double dist = sqrt(qx * qx + qy * qy);
+        double half = dist <= r ? M_PI : asin(r / dist);
+        double centre = atan2(qy, qx);
+        visit_interval(centre - half - EPS_ANGLE, 2 * half + 2 * EPS_ANGLE, start, inc, n, 0, c,
+                       ox, oy, cosb, sinb, tmin, out);
+    }
+}
+
 /* Evenly spaced beams: start + i * inc, i < n (inc > 0). out[n] receives the ranges. */
 int twin_cast_fan(const double *seg, const long *seg_idx, long n_seg,
                   const double *circ, const long *circ_idx, long n_circ,
@@ -78,26 +105,8 @@ int twin_cast_fan(const double *seg, const long *seg_idx, long n_seg,
         sinb[i] = sin(a);
         out[i] = INFINITY;
     }
-    for (long k = 0; k < n_seg; ++k) {
-        const double *s = seg + 4 * seg_idx[k];
-        double a0 = atan2(s[1] - oy, s[0] - ox);
-        double a1 = atan2(s[3] - oy, s[2] - ox);
-        double span = fmod(a1 - a0, TWO_PI);
-        if (span < 0.0) span += TWO_PI;
-        double lo = a0;
-        if (span > M_PI) { lo = a1; span = TWO_PI - span; }
-        visit_interval(lo - EPS_ANGLE, span + 2 * EPS_ANGLE, start, inc, n, 1, s, ox, oy,
-                       cosb, sinb, tmin, out);
-    }
-    for (long k = 0; k < n_circ; ++k) {
-        const double *c = circ + 3 * circ_idx[k];
-        double qx = c[0] - ox, qy = c[1] - oy, r = c[2];
-        double dist = sqrt(qx * qx + qy * qy);
-        double half = dist <= r ? M_PI : asin(r / dist);
-        double centre = atan2(qy, qx);
-        visit_interval(centre - half - EPS_ANGLE, 2 * half + 2 * EPS_ANGLE, start, inc, n, 0, c,
-                       ox, oy, cosb, sinb, tmin, out);
-    }
+    fan_accumulate(seg, seg_idx, n_seg, circ, circ_idx, n_circ, ox, oy, start, inc, n, cosb, sinb,
+                   tmin, out);
     for (int i = 0; i < n; ++i) if (out[i] > tmax) out[i] = INFINITY;
     free(cosb);
     return 0;
@@ -128,6 +137,39 @@ int twin_scan(const double *seg, const long *seg_idx, long n_seg,
         out[i] = (float)r;
     }
     free(raw);
+    return 0;
+}
+
+/* A lidar scan as twin_scan, seeing a second set of shapes too (seg2, circ2: every one of them). */
+int twin_scan_with(const double *seg, const long *seg_idx, long n_seg,
+                   const double *circ, const long *circ_idx, long n_circ,
+                   const double *seg2, long n_seg2, const double *circ2, long n_circ2,
+                   double ox, double oy, double start, double inc, int n,
+                   double tmin, double tmax, const double *noise, float *out) {
+    double *cosb = malloc(3 * (size_t)n * sizeof(double));
+    if (!cosb) return -1;
+    double *sinb = cosb + n, *raw = cosb + 2 * (size_t)n;
+    for (int i = 0; i < n; ++i) {
+        double a = start + i * inc;
+        cosb[i] = cos(a);
+        sinb[i] = sin(a);
+        raw[i] = INFINITY;
+    }
+    fan_accumulate(seg, seg_idx, n_seg, circ, circ_idx, n_circ, ox, oy, start, inc, n, cosb, sinb,
+                   tmin, raw);
+    fan_accumulate(seg2, 0, n_seg2, circ2, 0, n_circ2, ox, oy, start, inc, n, cosb, sinb, tmin, raw);
+    for (int i = 0; i < n; ++i) {
+        double r = raw[i];
+        if (r >= tmax) { out[i] = INFINITY; continue; }
+        if (r <= tmin) { out[i] = -INFINITY; continue; }
+        if (noise) {
+            r += noise[i];
+            if (r < tmin) r = tmin;
+            if (r > tmax) r = tmax;
+        }
+        out[i] = (float)r;
+    }
+    free(cosb);
     return 0;
 }
 
@@ -172,6 +214,12 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_scan.restype = ctypes.c_int
     lib.twin_scan.argtypes = [
         ptr, ptr, ctypes.c_long, ptr, ptr, ctypes.c_long,
+        ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_int,
+        ctypes.c_double, ctypes.c_double, ptr, ptr,
+    ]  # fmt: skip
+    lib.twin_scan_with.restype = ctypes.c_int
+    lib.twin_scan_with.argtypes = [
+        ptr, ptr, ctypes.c_long, ptr, ptr, ctypes.c_long, ptr, ctypes.c_long, ptr, ctypes.c_long,
         ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_int,
         ctypes.c_double, ctypes.c_double, ptr, ptr,
     ]  # fmt: skip

@@ -12,7 +12,8 @@ Built once from a `World` at start-up:
   loop a contact check whose per-step cost is a few arithmetic operations while the robot is
   far from obstacles.
 
-Models that are not static are obstacles too: nothing but the robot moves in the twin.
+Models that are not static are obstacles too: nothing in the world file moves in the twin. A
+scenario's obstacles that appear, vanish and walk live beside the Scene (`twin.world.obstacles`).
 """
 
 from __future__ import annotations
@@ -255,6 +256,11 @@ class RayCaster:
             )
 
     @property
+    def native(self) -> bool:
+        """Whether the compiled kernel casts (else the numpy implementation, same ranges)."""
+        return self._lib is not None
+
+    @property
     def segments(self) -> F64:
         """The slice's segments, shape (M, 4): x0, y0, x1, y1 in the world frame (read-only view)."""
         view = self._seg.view()
@@ -360,14 +366,20 @@ class RayCaster:
         range_min_m: float,
         range_max_m: float,
         noise_m: F64 | None = None,
+        also: tuple[F64, F64] | None = None,
     ) -> NDArray[np.float32]:
         """Return a lidar scan: `cast_fan` ranges masked as REP 117 says, optionally noisy.
+
+        `also` (the compiled kernel only: see `native`) adds shapes outside the slice, as contiguous
+        float64 arrays of segments (M, 4) and circles (K, 3), each cast against every beam.
 
         A range at or beyond `range_max_m` (nothing hit) is `+inf`, one at or below `range_min_m`
         is `-inf`; `noise_m` (shape (count,)) is added to the others, which are then clamped to
         [`range_min_m`, `range_max_m`]. float32, as LaserScan carries ranges. One compiled call
         when the kernel is available.
         """
+        if also is not None and self._lib is None:
+            raise ValueError("cast_scan(also=...) needs the compiled kernel; check RayCaster.native first")
         if self._lib is not None and increment_rad > 0.0 and count >= 1:
             ox, oy = float(origin_xy[0]), float(origin_xy[1])
             block = self._candidates(ox, oy, range_max_m)
@@ -376,6 +388,17 @@ class RayCaster:
             if noise_m is not None:
                 noise_m = np.ascontiguousarray(noise_m, dtype=np.float64)
                 noise_ptr = noise_m.ctypes.data
+            if also is not None:
+                seg2, circ2 = also
+                status = self._lib.twin_scan_with(
+                    self._seg_ptr, block.seg_ptr, len(block.seg_idx), self._circ_ptr, block.circ_ptr,
+                    len(block.circ_idx), seg2.ctypes.data, len(seg2), circ2.ctypes.data, len(circ2),
+                    ox, oy, float(start_rad), float(increment_rad), int(count), range_min_m, range_max_m,
+                    noise_ptr, out.ctypes.data,
+                )  # fmt: skip
+                if status != 0:
+                    raise MemoryError("ray caster kernel could not allocate its beam buffer")
+                return out
             status = self._lib.twin_scan(
                 self._seg_ptr, block.seg_ptr, len(block.seg_idx), self._circ_ptr, block.circ_ptr, len(block.circ_idx),
                 ox, oy, float(start_rad), float(increment_rad), int(count), range_min_m, range_max_m,

@@ -376,3 +376,77 @@ def test_wrong_sizes_raise_bag_errors_naming_the_encoder() -> None:
         E.OdometryEncoder().encode(0, 0, 0, 0, 0, 0, np.zeros(6))
     with pytest.raises(BagError, match="4x3 cells got 11"):
         E.OccupancyGridEncoder("map", 0.05, 4, 3).encode(0, np.zeros(11, np.int8))
+
+
+@given(
+    stamps,
+    frames,
+    st.lists(floats, min_size=3, max_size=3),
+    st.integers(0, 10**12),
+    st.integers(0, 10**12),
+    st.integers(0, 32767),
+    st.floats(width=32, allow_nan=False),
+)
+def test_navigation_feedback(
+    t: int, frame: str, v: list[float], nav_ns: int, eta_ns: int, recoveries: int, remaining: float
+) -> None:
+    x, y, yaw = v
+    if not math.isfinite(yaw):
+        yaw = 0.0
+    duration = T["builtin_interfaces/msg/Duration"]
+    expected = T["twin_msgs/msg/NavigationFeedback"](
+        current_pose=T["geometry_msgs/msg/PoseStamped"](header=header(t, frame), pose=planar(x, y, yaw)),
+        navigation_time=duration(sec=nav_ns // 10**9, nanosec=nav_ns % 10**9),
+        estimated_time_remaining=duration(sec=eta_ns // 10**9, nanosec=eta_ns % 10**9),
+        number_of_recoveries=recoveries,
+        distance_remaining=remaining,
+    )
+    data = E.NavigationFeedbackEncoder(frame).encode(t, (x, y, yaw), (nav_ns, eta_ns), recoveries, remaining)
+    assert data == ser(expected)
+
+
+def _marker(t: int, frame: str, marker_id: int, kind: int, action: int, p: Any, s: Any, c: Any, text: str) -> Any:
+    return T["visualization_msgs/msg/Marker"](
+        header=header(t, frame),
+        ns="obstacles",
+        id=marker_id,
+        type=kind,
+        action=action,
+        pose=pose7(p),
+        scale=vec(*s),
+        color=T["std_msgs/msg/ColorRGBA"](r=c[0], g=c[1], b=c[2], a=c[3]),
+        lifetime=T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
+        frame_locked=False,
+        points=[],
+        colors=[],
+        texture_resource="",
+        texture=T["sensor_msgs/msg/CompressedImage"](header=header(0, ""), format="", data=np.zeros(0, dtype=np.uint8)),
+        uv_coordinates=[],
+        text=text,
+        mesh_resource="",
+        mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, dtype=np.uint8)),
+        mesh_use_embedded_materials=False,
+    )
+
+
+@given(
+    stamps,
+    frames,
+    st.lists(
+        st.tuples(
+            st.integers(min_value=0, max_value=2**31 - 1),
+            st.sampled_from([E.MarkerArrayEncoder.CUBE, E.MarkerArrayEncoder.CYLINDER]),
+            st.lists(floats, min_size=7, max_size=7),
+            st.lists(floats, min_size=3, max_size=3),
+            st.lists(st.floats(min_value=0.0, max_value=1.0, width=32), min_size=4, max_size=4),
+            st.text(max_size=12),
+        ),
+        max_size=4,
+    ),
+)
+def test_marker_array(t: int, frame: str, markers: list[Any]) -> None:
+    expected = T["visualization_msgs/msg/MarkerArray"](
+        markers=[_marker(t, frame, 0, 0, 3, (0.0,) * 6 + (1.0,), (0.0,) * 3, (0.0,) * 4, "")]
+        + [_marker(t, frame, i, k, 0, p, s, c, text) for i, k, p, s, c, text in markers]
+    )
+    assert E.MarkerArrayEncoder(frame).encode(t, markers) == ser(expected)
