@@ -5,11 +5,12 @@
 
 Every figure is the median wall time of fresh processes, measured in the same run as `python -c
 pass` (the interpreter's own start-up), so a loaded machine shows in both; the first-step figures
-also give the median CPU time (user + system) of those processes, which other processes on the
-machine disturb less. Targets (issue 16): `--help` <= 0.3 s, first step of the default scenario
-<= 0.6 s, on a warm cache: twin's bytecode compiled (as pip compiles an installed package; this
-environment may set PYTHONDONTWRITEBYTECODE, which would make every process compile twin's
-modules again), then one untimed run builds the native kernels and fills the OS file cache.
+also give the median CPU time (user + system) of those processes from start to exit (they exit at
+the first step, closing the bag), which other processes on the machine disturb less. Targets
+(issue 16): `--help` <= 0.3 s, first step of the default scenario <= 0.6 s, on a warm cache:
+twin's bytecode compiled (as pip compiles an installed package; this environment may set
+PYTHONDONTWRITEBYTECODE, which would make every process compile twin's modules again), then one
+untimed run builds the native kernels and fills the OS file cache.
 
 "First step" runs what `twin simulate` runs (load the scenario, build the Simulation, run) in a
 fresh process and stamps the wall clock at the loop's first progress call (k = 0, the first events
@@ -75,7 +76,7 @@ def _wall(command: list[str], repeats: int) -> float:
 
 
 def _first_step(repeats: int, scenario: Path | None = None) -> tuple[float, float]:
-    """Median wall time to the first step and median CPU time of the process up to it."""
+    """Median wall time to the first step, and median CPU time of the whole process (it stops there and exits)."""
     times, cpus = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(repeats):
