@@ -39,7 +39,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.core.errors import ConfigError
 from twin.nav._native import load_kernel
@@ -541,6 +540,8 @@ class Amcl:
             if count < 0:
                 raise MemoryError("amcl clustering: out of memory")
             return labels, count
+        from scipy import ndimage  # the numpy path only: scipy is slow to import
+
         lo = bins.min(axis=0)
         shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
         grid = np.zeros(shape, dtype=bool)

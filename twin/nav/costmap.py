@@ -37,7 +37,6 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.nav._native import load_kernel
 from twin.nav.costmap_grid import (
@@ -550,6 +549,8 @@ class Costmap:
         self._grow(rr, cc)
 
     def _compose(self, bounds: tuple[int, int, int, int]) -> None:
+        from scipy import ndimage
+
         r0, r1, c0, c1 = bounds
         rows, cols = self.grid.cost.shape
         pad = self._radius_cells + 1 if self._inflate else 0

@@ -29,7 +29,6 @@ from pathlib import Path
 import numpy as np
 import yaml
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.core.errors import ConfigError
 from twin.world.scene import Scene
@@ -330,6 +329,8 @@ def map_from_scene(
     Raises:
         ConfigError: If `free_xy_m` lies outside the map or on an obstacle.
     """
+    from scipy import ndimage
+
     if bounds_xy_m is None:
         box = scene.bounds
         if box is None:
