@@ -677,6 +677,34 @@ int twin_costmap_scan_update(unsigned char *layer, const unsigned char *base, un
     return twin_costmap_compose(base, (unsigned char)k[4], layers, 1, rows, cols, w0, w1, v0, v1, e0, e1, f0, f1,
                                 (int)k[6], k[7], table, (int)k[8], (int)k[9], master);
 }
+
+/* The 4-connected region of cells not `blocked` holding cell `start` (row-major index): region[i] = 1.
+   Returns the region's size, or -1 when memory runs out. */
+long twin_flood_fill(const unsigned char *blocked, long rows, long cols, long start, unsigned char *region) {
+    long n = rows * cols, size = 0, top = 0;
+    for (long i = 0; i < n; ++i) region[i] = 0;
+    if (start < 0 || start >= n || blocked[start]) return 0;
+    long *stack = malloc(sizeof(long) * (size_t)n);
+    if (!stack) return -1;
+    region[start] = 1;
+    stack[top++] = start;
+    while (top > 0) {
+        long c = stack[--top];
+        size++;
+        long r = c / cols, k = c % cols;
+        long next[4] = {r > 0 ? c - cols : -1, r < rows - 1 ? c + cols : -1,
+                        k > 0 ? c - 1 : -1, k < cols - 1 ? c + 1 : -1};
+        for (int j = 0; j < 4; ++j) {
+            long m = next[j];
+            if (m >= 0 && !blocked[m] && !region[m]) {
+                region[m] = 1;
+                stack[top++] = m;
+            }
+        }
+    }
+    free(stack);
+    return size;
+}
 """
 
 
@@ -726,6 +754,8 @@ def load_kernel() -> ctypes.CDLL | None:
     ]  # fmt: skip
     lib.twin_costmap_scan_update.restype = ctypes.c_int
     lib.twin_costmap_scan_update.argtypes = [ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr]
+    lib.twin_flood_fill.restype = long_
+    lib.twin_flood_fill.argtypes = [ptr, long_, long_, long_, ptr]
     lib.twin_fill_polygon.restype = ctypes.c_int
     lib.twin_fill_polygon.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ctypes.c_ubyte, ptr]
     return lib

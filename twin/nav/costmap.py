@@ -549,8 +549,6 @@ class Costmap:
         self._grow(rr, cc)
 
     def _compose(self, bounds: tuple[int, int, int, int]) -> None:
-        from scipy import ndimage
-
         r0, r1, c0, c1 = bounds
         rows, cols = self.grid.cost.shape
         pad = self._radius_cells + 1 if self._inflate else 0
@@ -576,6 +574,8 @@ class Costmap:
             if infl.inflate_around_unknown:
                 seeds |= master == NO_INFORMATION
             if seeds.any():
+                from scipy import ndimage  # the numpy path only: scipy is slow to import
+
                 distance = np.asarray(ndimage.distance_transform_edt(~seeds), dtype=np.float64)
                 cost = self._costs(distance)
                 unknown = master == NO_INFORMATION
