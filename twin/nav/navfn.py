@@ -211,6 +211,9 @@ class NavfnPlanner:
         self, costmap: CostGrid, pot: NDArray[np.float64], nx: int, ny: int, goal: tuple[float, float, float]
     ) -> tuple[float, float] | None:
         """The goal if it has a potential, else the nearest point within tolerance that has one."""
+        g_node = self._node(costmap, goal[0], goal[1])
+        if g_node is not None and pot[g_node[1] * nx + g_node[0]] < POT_HIGH:
+            return goal[0], goal[1]
         res = costmap.resolution_m
         tol = self.params.tolerance_m
         steps = np.arange(-tol, tol + 1e-9, res)
@@ -223,9 +226,6 @@ class NavfnPlanner:
         d2 = (gx - goal[0]) ** 2 + (gy - goal[1]) ** 2
         idx = np.where(inside, my * nx + mx, 0)
         ok = inside & (pot[idx] < POT_HIGH) & (d2 <= tol * tol + 1e-12)
-        g_node = self._node(costmap, goal[0], goal[1])
-        if g_node is not None and pot[g_node[1] * nx + g_node[0]] < POT_HIGH:
-            return goal[0], goal[1]
         if not ok.any():
             return None
         flat = np.where(ok, d2, np.inf).ravel()
