@@ -31,7 +31,7 @@ mission:
 max_duration_s: 30
 """
 
-GOAL_XY = (0.6, 0.0)
+GOAL_XY = (1.5, -0.2)  # along the corridor east of the spawn point
 
 SIX_RUNS = """scenario: base.yaml
 runs: 2
