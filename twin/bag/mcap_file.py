@@ -21,7 +21,6 @@ import struct
 import zlib
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from operator import itemgetter
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +50,7 @@ _RECORD = struct.Struct("<BQ")
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
+_INDEX_HEAD = struct.Struct("<BQHI")  # MessageIndex: opcode, record length, channel, entries' byte length
 _CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
 _FOOTER = struct.Struct("<BQQQI")
 
@@ -60,7 +60,6 @@ _MESSAGE_HEAD = np.dtype(
 )
 _MESSAGE_HEAD_SIZE = _MESSAGE_HEAD.itemsize  # 31
 _INDEX_ENTRY = np.dtype([("time", "<u8"), ("offset", "<u8")])
-_FIRST, _SECOND, _THIRD = itemgetter(0), itemgetter(1), itemgetter(2)
 
 
 def _string(text: str) -> bytes:
@@ -175,19 +174,19 @@ def _message_indexes(
     entries = np.empty(channels.size, dtype=_INDEX_ENTRY)
     entries["time"] = times[order]
     entries["offset"] = offsets[order]
-    raw = entries.tobytes()
+    raw = memoryview(entries.tobytes())
     sorted_channels = channels[order]
-    starts = np.flatnonzero(np.r_[True, sorted_channels[1:] != sorted_channels[:-1]])
-    ends = np.r_[starts[1:], channels.size]
-    parts: list[bytes] = []
+    cuts = (np.flatnonzero(sorted_channels[1:] != sorted_channels[:-1]) + 1).tolist()
+    starts = [0, *cuts]
+    parts: list[bytes | memoryview] = []
     where: dict[int, int] = {}
     pos = base
-    for ch, a, b in zip(sorted_channels[starts].tolist(), starts.tolist(), ends.tolist(), strict=True):
-        body = raw[16 * a : 16 * b]
-        record = _RECORD.pack(OP_MESSAGE_INDEX, 6 + len(body)) + _U16.pack(ch) + _U32.pack(len(body)) + body
+    for ch, a, b in zip(sorted_channels[starts].tolist(), starts, [*cuts, channels.size], strict=True):
+        size = 16 * (b - a)
+        parts.append(_INDEX_HEAD.pack(OP_MESSAGE_INDEX, 6 + size, ch, size))
+        parts.append(raw[16 * a : 16 * b])
         where[ch] = pos
-        pos += len(record)
-        parts.append(record)
+        pos += _INDEX_HEAD.size + size
     return b"".join(parts), where
 
 
@@ -302,9 +301,9 @@ class McapWriter:
         if n == 0:
             return
         try:
-            channels = np.fromiter(map(_FIRST, batch), dtype=np.int64, count=n)
-            times = np.fromiter(map(_SECOND, batch), dtype=np.int64, count=n)
-            datas = list(map(_THIRD, batch))
+            handles, stamps, datas = zip(*batch, strict=True)
+            channels = np.fromiter(handles, dtype=np.int64, count=n)
+            times = np.fromiter(stamps, dtype=np.int64, count=n)
             lengths = np.fromiter(map(len, datas), dtype=np.int64, count=n)
         except (OverflowError, TypeError, ValueError) as err:
             msg = f"message handles and times must be integers and data bytes: {err}"
@@ -319,7 +318,7 @@ class McapWriter:
         if np.any(times[1:] < times[:-1]):  # keep chunks in time order, ties in write order
             order = np.argsort(times, kind="stable")
             channels, times, lengths = channels[order], times[order], lengths[order]
-            datas = [datas[i] for i in order.tolist()]
+            datas = tuple(map(datas.__getitem__, order.tolist()))
         heads = np.zeros(n, dtype=_MESSAGE_HEAD)
         heads["op"] = OP_MESSAGE
         heads["length"] = lengths + (_MESSAGE_HEAD_SIZE - 9)
