@@ -313,16 +313,16 @@ class ImuNode(Node):
             linear_acceleration_covariance=imu.linear_acceleration_covariance,
         ).encode
         pub = self.create_publisher(ImuEncoder.msgtype, "/imu", SENSOR_DATA)
-        sample = imu.sample
+        sample, remainder, tau = imu.sample, math.remainder, math.tau
         last_t_ns, last_yaw = 0, initial_yaw_rad
 
-        def on_timer(t_ns: int) -> None:
+        def on_timer(t_ns: int) -> None:  # 200 times a simulated second: everything bound to locals
             nonlocal last_t_ns, last_yaw
-            s = chassis()
-            yaw, dt_ns = s.yaw_rad, t_ns - last_t_ns
-            rate = math.remainder(yaw - last_yaw, math.tau) * 1e9 / dt_ns if dt_ns > 0 else s.yaw_rate_radps
+            _, _, yaw, _, yaw_rate, ax, ay, yaw_accel, _ = chassis()
+            dt_ns = t_ns - last_t_ns
+            rate = remainder(yaw - last_yaw, tau) * 1e9 / dt_ns if dt_ns > 0 else yaw_rate
             last_t_ns, last_yaw = t_ns, yaw
-            r = sample(yaw, rate, s.yaw_accel_radps2, s.ax_mps2, s.ay_mps2)
+            r = sample(yaw, rate, yaw_accel, ax, ay)
             pub.publish(Encoded((encode, (t_ns, *r), (t_ns, r))))
 
         self.create_rate_timer(imu.spec.rate_hz, on_timer, priority=PRIORITY_SENSOR)
@@ -397,8 +397,7 @@ class GroundTruthNode(Node):
         pub = self.create_publisher(OdometryEncoder.msgtype, "/ground_truth/odom", 10)
 
         def on_timer(t_ns: int) -> None:
-            s = chassis()
-            state = (s.x_m, s.y_m, s.yaw_rad, s.v_mps, s.yaw_rate_radps)
+            state = chassis()[:5]  # x, y, yaw, v, yaw rate (a plain tuple)
             pub.publish(Encoded((encode, (t_ns, *state), state)))
 
         self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_STATE)
