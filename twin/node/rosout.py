@@ -7,10 +7,9 @@ as `twin`. The bridge is a node, so its lines reach the recorder like any other 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 
 from twin.core.errors import TwinError
-from twin.node.node import Encoded, Node
+from twin.node.node import Node
 
 __all__ = ["RosoutBridge"]
 
@@ -18,25 +17,15 @@ _LEVELS = ((logging.CRITICAL, 50), (logging.ERROR, 40), (logging.WARNING, 30), (
 _NODE_PREFIX = "twin.node."
 
 
-#: Makes a `rcl_interfaces/msg/Log`'s CDR bytes from (stamp_ns, level, name, msg, file, function, line).
-LogEncode = Callable[[int, int, str, str, str, str, int], bytes]
-
-
 class RosoutBridge(Node):
-    """Publishes the log records of its `handler` (INFO and above) on `/rosout`; attach it while the run goes on.
-
-    Args:
-        encode: A fast encoder for the recorder (the message goes as an `Encoded` whose data is the
-            `Log` message); without one the recorder serialises the message object.
-    """
+    """Publishes the log records of its `handler` (INFO and above) on `/rosout`; attach it while the run goes on."""
 
     builtin = True
 
-    def __init__(self, encode: LogEncode | None = None) -> None:
+    def __init__(self) -> None:
         super().__init__("rosout")
         from twin.msgs import get_message
 
-        self._encode = encode
         self._log_msg = get_message("rcl_interfaces/msg/Log")
         self._time_msg = get_message("builtin_interfaces/msg/Time")
         self._pub = self.create_publisher(self._log_msg, "/rosout", 1000)
@@ -46,23 +35,17 @@ class RosoutBridge(Node):
         """Publish one log record."""
         level = next((ros for py, ros in _LEVELS if record.levelno >= py), 10)
         name = record.name[len(_NODE_PREFIX) :] if record.name.startswith(_NODE_PREFIX) else "twin"
-        t_ns = self._graph_now()
-        sec, nanosec = divmod(t_ns, 1_000_000_000)
-        text = record.getMessage()
+        sec, nanosec = divmod(self._graph_now(), 1_000_000_000)
         msg = self._log_msg(
             stamp=self._time_msg(sec=sec, nanosec=nanosec),
             level=level,
             name=name,
-            msg=text,
+            msg=record.getMessage(),
             file=record.pathname,
             function=record.funcName,
             line=record.lineno,
         )
-        if self._encode is None:
-            self._pub.publish(msg)
-            return
-        fields = (t_ns, level, name, text, record.pathname, record.funcName, record.lineno)
-        self._pub.publish(Encoded((self._encode, fields, msg)))
+        self._pub.publish(msg)
 
 
 class _Handler(logging.Handler):

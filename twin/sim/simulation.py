@@ -24,7 +24,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from twin.bag import LogEncoder, Recorder
+from twin.bag import Recorder
 from twin.core.clock import NS_PER_S, s_to_ns
 from twin.core.errors import ConfigError
 from twin.estimation import OdometryFilter
@@ -139,13 +139,6 @@ def _fmu_slip(sc: Scenario) -> FmuDrive:
     return dataclasses.replace(sc.drive, slip=SlipModel(slip=slip.left_fraction))
 
 
-def _encode_log(  # noqa: PLR0917 - RosoutBridge's encoder signature
-    stamp_ns: int, level: int, name: str, message: str, file: str, function: str, line: int
-) -> bytes:
-    """`/rosout`'s bytes by the fast encoder (rosbags' serialiser would build its code for `Log` mid-run)."""
-    return LogEncoder(name).encode(stamp_ns, level, message, file=file, function=function, line=line)
-
-
 def _yaw_inertia(robot: RobotModelSpec) -> float:
     """Moment of inertia of the whole robot about the base frame's z axis, kg·m²."""
     total = 0.0
@@ -245,7 +238,7 @@ class Simulation:
             # Wire the graph once without sinks: a node that cannot join (a duplicate name, a topic of
             # another type) is refused before a bag folder exists.
             scratch = Executor(self.step_ns)
-            for node in [RosoutBridge(_encode_log), *self._builtin_nodes(), *user_nodes]:
+            for node in [RosoutBridge(), *self._builtin_nodes(), *user_nodes]:
                 scratch.add_node(node)
             if bag_path is not None:
                 self.recorder = Recorder(
@@ -254,7 +247,7 @@ class Simulation:
                 self.recorder.add_provenance(run_provenance(scenario, duration_s=duration_s, fmus=self._fmu_records()))
             for sink in ([self.recorder] if self.recorder is not None else []) + list(sinks):
                 self.executor.add_sink(sink, keep)
-            self._rosout = RosoutBridge(_encode_log)
+            self._rosout = RosoutBridge()
             self.executor.add_node(self._rosout)
             for node in [*self._builtin_nodes(), *user_nodes]:
                 self.executor.add_node(node)
