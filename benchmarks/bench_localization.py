@@ -13,7 +13,10 @@ second, it times what the localization nodes do with TB3's Humble parameters:
 - the map: `load_map` of the SLAM map, the global costmap's first full build and AMCL's
   likelihood field, done once at start-up (reported apart, and amortised over a 10-minute run).
 
-The issue's budget is 2 ms per simulated second for all of it together.
+The issue's budget is 2 ms per simulated second for all of it together. Each component is timed
+on this thread's CPU clock (time the machine spends on other work, which a shared machine has much
+of, is left out), the minimum over `--repeat` runs; the same on the wall clock is printed beside it.
+AMCL's particle count follows Nav2's KLD-sampling (Nav2's own filter code sits at 1800 on this drive).
 """
 
 from __future__ import annotations
@@ -68,6 +71,23 @@ def laser_of(spec: LidarSpec) -> LaserGeometry:
     )
 
 
+class _Stopwatch:
+    """Seconds per component on two clocks: this thread's CPU time and wall time."""
+
+    def __init__(self) -> None:
+        self.cpu: dict[str, float] = {}
+        self.wall: dict[str, float] = {}
+        self._start = (0.0, 0.0)
+
+    def start(self) -> None:
+        self._start = (time.thread_time(), time.perf_counter())
+
+    def stop(self, key: str) -> None:
+        cpu, wall = time.thread_time(), time.perf_counter()
+        self.cpu[key] = self.cpu.get(key, 0.0) + cpu - self._start[0]
+        self.wall[key] = self.wall.get(key, 0.0) + wall - self._start[1]
+
+
 def _timed(
     params: Nav2Params,
     spec: LidarSpec,
@@ -77,51 +97,52 @@ def _timed(
     odoms: list[tuple[float, ...]],
     *,
     native: bool,
-) -> dict[str, float]:
-    """Run the nodes' work over the prepared scans; return seconds per component (and counts)."""
-    t0 = time.perf_counter()
+) -> tuple[_Stopwatch, dict[str, float]]:
+    """Run the nodes' work over the prepared scans; return the seconds per component and counts."""
+    watch = _Stopwatch()
+    for key in ("amcl", "local", "global"):
+        watch.cpu[key] = watch.wall[key] = 0.0
+    watch.start()
     occupancy = load_map(FIXTURES / "nav2/turtlebot3_navigation2_humble/map/map.yaml")
-    t_map_load = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    watch.stop("map_load")
+    watch.start()
     amcl = Amcl(params.amcl, occupancy, laser, np.random.default_rng(3), native=native)
-    t_field = time.perf_counter() - t0
+    watch.stop("field")
     amcl.set_initial_pose(float(truth[0][0]), float(truth[0][1]), float(truth[0][2]), np.diag([0.25, 0.25, 0.0685]))
-    t0 = time.perf_counter()
+    watch.start()
     global_costmap = Costmap(params.global_costmap, static_map=occupancy, native=native)
     global_costmap.update(*truth[0])
-    t_global_first = time.perf_counter() - t0
+    watch.stop("global_first")
     local_costmap = Costmap(params.local_costmap, robot_xy_m=(odoms[0][0], odoms[0][1]), native=native)
-    t_amcl = t_local = t_global = 0.0
     updates = 0
+    particles = []
     global_every = RATE_HZ // max(1, round(params.global_costmap.update_frequency_hz))
     local_every = RATE_HZ // max(1, round(params.local_costmap.update_frequency_hz))
     for k, (ranges, odom_pose) in enumerate(zip(scans, odoms, strict=True)):
         ox, oy, oyaw = odom_pose
-        t0 = time.perf_counter()
-        if amcl.process_scan((ox, oy, oyaw), ranges) is not None:
+        watch.start()
+        estimate = amcl.process_scan((ox, oy, oyaw), ranges)
+        watch.stop("amcl")
+        if estimate is not None:
             updates += 1
-        t_amcl += time.perf_counter() - t0
+            particles.append(estimate.particles)
         if k % local_every == 0:
-            t0 = time.perf_counter()
+            watch.start()
             obs = _observation(spec, ranges, ox, oy, oyaw)
             local_costmap.update(ox, oy, oyaw, [obs])
-            t_local += time.perf_counter() - t0
+            watch.stop("local")
         if k % global_every == 0:
-            t0 = time.perf_counter()
+            watch.start()
             est = amcl.estimate
             mx, my, myaw = (est.x_m, est.y_m, est.yaw_rad) if est is not None else truth[k]
             global_costmap.update(mx, my, myaw, [_observation(spec, ranges, mx, my, myaw)])
-            t_global += time.perf_counter() - t0
-    return {
-        "amcl": t_amcl,
-        "local": t_local,
-        "global": t_global,
-        "map_load": t_map_load,
-        "field": t_field,
-        "global_first": t_global_first,
+            watch.stop("global")
+    counts = {
         "updates": float(updates),
-        "particles": float(len(amcl.poses)),
+        "particles_end": float(len(amcl.poses)),
+        "particles_mean": float(np.mean(particles)) if particles else 0.0,
     }
+    return watch, counts
 
 
 def _observation(spec: LidarSpec, ranges: np.ndarray, x: float, y: float, yaw: float) -> Observation:
@@ -141,7 +162,7 @@ def _observation(spec: LidarSpec, ranges: np.ndarray, x: float, y: float, yaw: f
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="20 simulated seconds instead of 60")
-    parser.add_argument("--repeat", type=int, default=3, help="native runs; each component's minimum is kept")
+    parser.add_argument("--repeat", type=int, default=5, help="native runs; each component's minimum is kept")
     args = parser.parse_args()
     duration_s = 20.0 if args.quick else 60.0
 
@@ -170,9 +191,11 @@ def main() -> int:
         scans.append(lidar.scan(*pose))
         odoms.append(tuple(float(v) for v in odom))
 
-    native_runs = [_timed(params, spec, laser_of(spec), truth, scans, odoms, native=True) for _ in range(args.repeat)]
-    best = {key: min(run[key] for run in native_runs) for key in native_runs[0]}
-    numpy_run = _timed(params, spec, laser_of(spec), truth, scans, odoms, native=False)
+    runs = [_timed(params, spec, laser_of(spec), truth, scans, odoms, native=True) for _ in range(args.repeat)]
+    cpu = {key: min(w.cpu[key] for w, _ in runs) for key in runs[0][0].cpu}
+    wall = {key: min(w.wall[key] for w, _ in runs) for key in runs[0][0].wall}
+    numpy_watch, _ = _timed(params, spec, laser_of(spec), truth, scans, odoms, native=False)
+    counts = runs[0][1]
     seconds = len(scans) / RATE_HZ
 
     def per_second(run: dict[str, float]) -> dict[str, float]:
@@ -184,26 +207,30 @@ def main() -> int:
             "map_amortised_10min_ms": 1e3 * startup / 600.0,
         }
 
-    native_s, numpy_s = per_second(best), per_second(numpy_run)
+    native_s, wall_s, numpy_s = per_second(cpu), per_second(wall), per_second(numpy_watch.cpu)
     total, numpy_total = sum(native_s.values()), sum(numpy_s.values())
     result = {
         "simulated_s": seconds,
         "scans": len(scans),
         "repeats_min_of": args.repeat,
-        "amcl_filter_updates": int(best["updates"]),
-        "amcl_ms_per_filter_update": round(1e3 * best["amcl"] / max(1.0, best["updates"]), 3),
-        "particles_at_end": int(native_runs[0]["particles"]),
+        "clock": "CPU time of the benchmark's thread (min over repeats); wall time beside it",
+        "amcl_filter_updates": int(counts["updates"]),
+        "amcl_ms_per_filter_update": round(1e3 * cpu["amcl"] / max(1.0, counts["updates"]), 3),
+        "particles_mean": round(counts["particles_mean"]),
+        "particles_at_end": int(counts["particles_end"]),
         "per_simulated_second": {k: round(v, 3) for k, v in native_s.items()},
         "total_ms_per_simulated_second": round(total, 3),
         "budget_ms_per_simulated_second": 2.0,
         "within_budget": total <= 2.0,
+        "wall_per_simulated_second": {k: round(v, 3) for k, v in wall_s.items()},
+        "wall_total_ms_per_simulated_second": round(sum(wall_s.values()), 3),
         "numpy_fallback_per_simulated_second": {k: round(v, 3) for k, v in numpy_s.items()},
         "numpy_fallback_total_ms": round(numpy_total, 3),
         "native_speedup": round(numpy_total / total, 2),
         "startup_ms": {
-            "load_map": round(1e3 * best["map_load"], 2),
-            "amcl_likelihood_field": round(1e3 * best["field"], 2),
-            "global_costmap_first_build": round(1e3 * best["global_first"], 2),
+            "load_map": round(1e3 * cpu["map_load"], 2),
+            "amcl_likelihood_field": round(1e3 * cpu["field"], 2),
+            "global_costmap_first_build": round(1e3 * cpu["global_first"], 2),
         },
     }
     print(json.dumps(result, indent=2))

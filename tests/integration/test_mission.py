@@ -46,16 +46,17 @@ def test_the_thesis_tree_visits_the_four_locations_in_order(thesis_bag: Path) ->
     assert successes == ["go_to_location1", "go_to_location2", "go_to_location3", "go_to_location4", "sequence"]
     assert events[0] == ("sequence", "IDLE", "RUNNING")
     # Each GoToPose succeeded with the robot at its location: Nav2's goal checker takes 0.25 m and
-    # 0.25 rad of the pose AMCL believes, a few centimetres off the truth.
+    # 0.25 rad of the pose AMCL believes, which Nav2's filter keeps within ~0.2 m and a few degrees of
+    # the truth (docs/navigation.md).
     truth = msgs["/ground_truth/odom"]
     for t_ns, msg in msgs[MISSION_LOG]:
         for e in msg.event_log:
             if e.node_name.startswith("go_to_") and e.current_status == "SUCCESS":
                 x, y, yaw = LOCATIONS[e.node_name.removeprefix("go_to_")]
                 pose = min(truth, key=lambda m: abs(m[0] - t_ns))[1].pose.pose
-                assert math.hypot(pose.position.x - x, pose.position.y - y) < 0.25 + 0.1
+                assert math.hypot(pose.position.x - x, pose.position.y - y) < 0.25 + 0.2
                 heading = 2.0 * math.atan2(pose.orientation.z, pose.orientation.w)
-                assert abs((heading - yaw + math.pi) % (2 * math.pi) - math.pi) < 0.25 + 0.05
+                assert abs((heading - yaw + math.pi) % (2 * math.pi) - math.pi) < 0.25 + 0.1
     logs = [m.msg for _, m in msgs["/rosout"]]
     assert any("Finished Navigation" in line for line in logs)
     assert sum("goal reached" in line for line in logs) == 4

@@ -203,12 +203,15 @@ def test_twin_graph_lists_nodes_topics_types_and_rates() -> None:
     data = json.loads(run.stdout)
     nodes = {n["node"]: n for n in data["nodes"]}
     assert {"/mission", "/diff_drive", "/lidar", "/imu", "/ekf_odometry", "/robot_state_publisher"} <= set(nodes)
+    assert {"/amcl", "/bt_navigator", "/controller_server", "/velocity_smoother", "/planner_server"} <= set(nodes)
     topics = {t["topic"]: t for t in data["topics"]}
-    assert topics["/cmd_vel"]["publishers"] == ["/mission"]
+    # Nav2's chain, as its bringup remaps it: DWB and the behaviours into the smoother, the smoother to the drive
+    assert topics["/cmd_vel"]["publishers"] == ["/velocity_smoother"]
     assert topics["/cmd_vel"]["subscribers"] == ["/diff_drive"]
+    assert sorted(topics["/cmd_vel_nav"]["publishers"]) == ["/behavior_server", "/controller_server"]
     assert topics["/imu"]["rate_hz"] == pytest.approx(200.0, rel=0.01)
     assert topics["/scan"]["type"] == "sensor_msgs/msg/LaserScan"
     assert topics["/tf_static"]["latched"] is True
     dot = run_twin("graph", "--dot", "--measure-s", "0")
     assert dot.returncode == 0 and dot.stdout.startswith('digraph "house_waffle"')
-    assert '"/mission" -> "/cmd_vel";' in dot.stdout
+    assert '"/velocity_smoother" -> "/cmd_vel";' in dot.stdout

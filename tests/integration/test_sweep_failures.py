@@ -52,15 +52,26 @@ def _children(pid: int) -> dict[int, list[str]]:
     return out
 
 
+def _descendants(pid: int) -> dict[int, tuple[int, list[str]]]:
+    """Every process below `pid` (workers are forked by Dask's forkserver, a child of the sweep): parent, command line."""
+    out: dict[int, tuple[int, list[str]]] = {}
+    parents = [pid]
+    while parents:
+        parent = parents.pop()
+        for child, cmdline in _children(parent).items():
+            out[child] = (parent, cmdline)
+            parents.append(child)
+    return out
+
+
 def _kill_worker_running(sweep: subprocess.Popen[str], run_id: str, timeout_s: float) -> int:
-    """Find the worker process (a child of the sweep) whose `twin simulate` runs `run_id`; SIGKILL it."""
+    """Find the worker process (under the sweep) whose `twin simulate` runs `run_id`; SIGKILL it."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and sweep.poll() is None:
-        for worker in _children(sweep.pid):
-            for cmdline in _children(worker).values():
-                if "simulate" in cmdline and any(f"/runs/{run_id}/scenario.yaml" in arg for arg in cmdline):
-                    os.kill(worker, signal.SIGKILL)
-                    return worker
+        for worker, cmdline in _descendants(sweep.pid).values():
+            if "simulate" in cmdline and any(f"/runs/{run_id}/scenario.yaml" in arg for arg in cmdline):
+                os.kill(worker, signal.SIGKILL)
+                return worker
         time.sleep(0.2)
     msg = f"no worker ran {run_id} within {timeout_s} s"
     raise AssertionError(msg)

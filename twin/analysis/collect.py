@@ -46,7 +46,15 @@ F64 = NDArray[np.float64]
 POSE_TOPICS: tuple[str, ...] = ("/ground_truth/odom", "/amcl_pose", "/odom")
 CMD_TOPIC = "/cmd_vel"
 SCAN_TOPIC = "/scan"
-_DECODED_TOPICS = ("/behavior_tree_log", "/plan", "/goal_pose", "/contacts", "/map", "/robot_description")
+_DECODED_TOPICS = (
+    "/behavior_tree_log",
+    "/mission/behavior_tree_log",
+    "/plan",
+    "/goal_pose",
+    "/contacts",
+    "/map",
+    "/robot_description",
+)
 
 #: Rates a TurtleBot3 system publishes at (the twin's and Gazebo's TB3 defaults), Hz.
 EXPECTED_RATE_HZ: dict[str, float] = {
@@ -264,7 +272,9 @@ class BagData:
     scan_from: tuple[float, float, float] | None = None  # pose of the last scan placed
     health: dict[str, TopicHealth] = field(default_factory=dict)
     clock: tuple[array[int], array[int]] | None = None  # record ns, clock ns
-    bt_events: list[tuple[float, str, str, str]] = field(default_factory=list)
+    bt_events: list[tuple[float, str, str, str]] = field(default_factory=list)  # /behavior_tree_log
+    # the mission's own tree when Nav2's bt_navigator has /behavior_tree_log (a twin bag)
+    mission_events: list[tuple[float, str, str, str]] = field(default_factory=list)
     plans: list[tuple[float, F64]] = field(default_factory=list)
     goals: list[tuple[float, float, float, float]] = field(default_factory=list)  # t s, x, y, yaw
     contacts: list[ContactEvent] | None = None
@@ -523,9 +533,10 @@ def _rare_handler(data: BagData, topic: str, msgtype: str) -> Callable[[int, byt
 
 
 def _take_rare(data: BagData, topic: str, t_s: float, msg: Any) -> None:
-    if topic == "/behavior_tree_log" and hasattr(msg, "event_log"):
+    if topic in ("/behavior_tree_log", "/mission/behavior_tree_log") and hasattr(msg, "event_log"):
+        events = data.bt_events if topic == "/behavior_tree_log" else data.mission_events
         for e in msg.event_log:
-            data.bt_events.append((t_s, str(e.node_name), str(e.previous_status), str(e.current_status)))
+            events.append((t_s, str(e.node_name), str(e.previous_status), str(e.current_status)))
     elif topic == "/plan" and hasattr(msg, "poses"):
         xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=np.float64)
         if len(xy) > _PLAN_POINTS:

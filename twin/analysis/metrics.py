@@ -28,7 +28,15 @@ from numpy.typing import NDArray
 
 from twin.analysis.collect import CMD_TOPIC, POSE_TOPICS, SCAN_TOPIC, BagData, PoseTrack, best_pose, collect
 
-__all__ = ["GoalResult", "MissionTimeline", "RunMetrics", "compute_metrics", "mission_timeline", "run_metrics"]
+__all__ = [
+    "GoalResult",
+    "MissionTimeline",
+    "RunMetrics",
+    "bag_timeline",
+    "compute_metrics",
+    "mission_timeline",
+    "run_metrics",
+]
 
 F64 = NDArray[np.float64]
 
@@ -42,7 +50,15 @@ _RECOVERY_NODE = re.compile(
 )
 _TERMINAL = ("SUCCESS", "FAILURE")
 
-_METRIC_TOPICS = (*POSE_TOPICS, CMD_TOPIC, SCAN_TOPIC, "/contacts", "/behavior_tree_log", "/clock")
+_METRIC_TOPICS = (
+    *POSE_TOPICS,
+    CMD_TOPIC,
+    SCAN_TOPIC,
+    "/contacts",
+    "/behavior_tree_log",
+    "/mission/behavior_tree_log",
+    "/clock",
+)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -197,10 +213,28 @@ def localization_error(estimate: PoseTrack, reference: PoseTrack) -> tuple[F64, 
     return estimate.t_ns[inside].astype(np.float64), pos, yaw
 
 
+def bag_timeline(data: BagData) -> MissionTimeline | None:
+    """The mission's timeline in a bag: its own tree, with Nav2's recoveries.
+
+    A twin bag run through Nav2 holds the mission's tree on `/mission/behavior_tree_log` and
+    bt_navigator's on `/behavior_tree_log`: the goals and the outcome come from the first, the
+    recoveries (Spin, BackUp, Wait, clearing costmaps) from both. A bag with `/behavior_tree_log`
+    only (a real Nav2 run, or a twin run without Nav2) is read from that alone.
+    """
+    if not data.mission_events:
+        return mission_timeline(data.bt_events)
+    timeline = mission_timeline(data.mission_events)
+    navigator = mission_timeline(data.bt_events)
+    if timeline is None or navigator is None:
+        return timeline
+    recoveries = tuple(sorted(timeline.recoveries + navigator.recoveries))
+    return dataclasses.replace(timeline, recoveries=recoveries)
+
+
 def compute_metrics(data: BagData) -> RunMetrics:
     """The metrics of what `collect` kept of a bag."""
     notes: list[str] = []
-    timeline = mission_timeline(data.bt_events)
+    timeline = bag_timeline(data)
     duration_s = data.info.duration_ns * 1e-9
     if timeline is None:
         notes.append("outcome and goals need /behavior_tree_log")

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from twin import __version__
 from twin.analysis import plots
 from twin.analysis.collect import POSE_TOPICS, BagData, collect, scan_points
-from twin.analysis.metrics import RunMetrics, compute_metrics, localization_error, mission_timeline
+from twin.analysis.metrics import RunMetrics, bag_timeline, compute_metrics, localization_error
 
 __all__ = ["Report", "analyze", "world_walls", "write_report"]
 
@@ -122,7 +122,7 @@ def analyze(
     data = collect(bag, scan_points=walls is None, progress=progress)
     metrics = compute_metrics(data)
     info = data.info
-    timeline = mission_timeline(data.bt_events)
+    timeline = bag_timeline(data)
     summary = {
         "storage": info.storage,
         "metadata_version": info.version,

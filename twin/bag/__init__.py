@@ -2,7 +2,12 @@
 
 The only package that imports rosbags and mcap. The simulation builds one encoder per topic and
 hands its bytes to a `Recorder`; analysis reads bags back with `open_bag` and `read_messages`.
+
+The reading side (readers, raw reader, provenance, recovery) loads on first use of its names, so a
+run that only records does not import rosbags' bag readers.
 """
+
+from typing import TYPE_CHECKING, Any
 
 from twin.bag.encoders import (
     BehaviorTreeLogEncoder,
@@ -26,7 +31,6 @@ from twin.bag.encoders import (
     TwistEncoder,
 )
 from twin.bag.profiles import DISTROS
-from twin.bag.provenance import read_provenance
 from twin.bag.qos import (
     QOS_BEST_EFFORT,
     QOS_LATCHED,
@@ -37,10 +41,26 @@ from twin.bag.qos import (
     Reliability,
     default_qos,
 )
-from twin.bag.raw import read_raw
-from twin.bag.reader import BagInfo, BagMessage, TopicInfo, message_definitions, open_bag, read_messages
 from twin.bag.recorder import STORAGES, Recorder, TopicHandle
-from twin.bag.recover import RecoveryReport, recover_bag
+
+if TYPE_CHECKING:
+    from twin.bag.provenance import read_provenance
+    from twin.bag.raw import read_raw
+    from twin.bag.reader import BagInfo, BagMessage, TopicInfo, message_definitions, open_bag, read_messages
+    from twin.bag.recover import RecoveryReport, recover_bag
+
+_LAZY = {
+    "read_provenance": "twin.bag.provenance",
+    "read_raw": "twin.bag.raw",
+    "BagInfo": "twin.bag.reader",
+    "BagMessage": "twin.bag.reader",
+    "TopicInfo": "twin.bag.reader",
+    "message_definitions": "twin.bag.reader",
+    "open_bag": "twin.bag.reader",
+    "read_messages": "twin.bag.reader",
+    "RecoveryReport": "twin.bag.recover",
+    "recover_bag": "twin.bag.recover",
+}
 
 __all__ = [
     "DISTROS",
@@ -85,3 +105,15 @@ __all__ = [
     "read_raw",
     "recover_bag",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        msg = f"module 'twin.bag' has no attribute {name!r}"
+        raise AttributeError(msg)
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value

@@ -506,6 +506,11 @@ class LogEncoder:
         w.pack("I", line)
         return w.getvalue()
 
+    def encode_line(self, stamp_ns: int, level: int, message: str, where: tuple[str, str, int]) -> bytes:
+        """`encode` with the source location as one (file, function, line) argument."""
+        file, function, line = where
+        return self.encode(stamp_ns, level, message, file=file, function=function, line=line)
+
 
 class BehaviorTreeLogEncoder:
     """`nav2_msgs/msg/BehaviorTreeLog` (Humble layout): status changes since the last message."""

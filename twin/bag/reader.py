@@ -17,6 +17,7 @@ for m in read_messages("bags/run1", ["/odom", "/imu"]):
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 from collections.abc import Iterator, Sequence
@@ -128,6 +129,24 @@ def _bag_dir(path: str | os.PathLike[str]) -> Path:
     return bag
 
 
+@functools.lru_cache(maxsize=1024)
+def _parsed_definition(msgtype: str, msg_format: MessageDefinitionFormat, data: str) -> dict[str, Any]:
+    """The types an embedded definition declares (parsed once per process: every bag of a sweep has the same).
+
+    Raises:
+        TypesysError, ValueError, IndexError: If the definition does not parse.
+    """
+    if msg_format == MessageDefinitionFormat.MSG:
+        return dict(get_types_from_msg(data, msgtype))
+    sep = "=" * 80 + "\n"
+    types: dict[str, Any] = {}
+    chunks = data.split(sep)[1:] if data.startswith(sep) else [data]
+    for chunk in chunks:
+        idl = chunk.split("\n", 1)[1] if chunk.startswith("IDL: ") else chunk
+        types.update(get_types_from_idl(idl))
+    return types
+
+
 def _typestore_for(connections: Sequence[Connection]) -> tuple[TypeRegistry, set[str]]:
     """A registry holding the bag's embedded definitions over the standard ones; and the embedded type names."""
     registry = TypeRegistry()
@@ -136,16 +155,12 @@ def _typestore_for(connections: Sequence[Connection]) -> tuple[TypeRegistry, set
         if conn.msgtype in embedded or conn.msgdef.format == MessageDefinitionFormat.NONE:
             continue
         try:
-            if conn.msgdef.format == MessageDefinitionFormat.MSG:
-                types = get_types_from_msg(conn.msgdef.data, conn.msgtype)
-            else:
-                sep = "=" * 80 + "\n"
-                types = {}
-                chunks = conn.msgdef.data.split(sep)[1:] if conn.msgdef.data.startswith(sep) else [conn.msgdef.data]
-                for chunk in chunks:
-                    idl = chunk.split("\n", 1)[1] if chunk.startswith("IDL: ") else chunk
-                    types.update(get_types_from_idl(idl))
-            registry.store.register(types)
+            types = dict(_parsed_definition(conn.msgtype, conn.msgdef.format, conn.msgdef.data))
+            known = registry.store.fielddefs
+            # Definitions equal to the store's (every type of a bag the twin wrote) add nothing to
+            # it; registering them would generate and compile their classes again (~50 ms a bag).
+            if any(known.get(name) != tuple(definition[:2]) for name, definition in types.items()):
+                registry.store.register(types)
         except (TypesysError, ValueError, IndexError) as err:
             _log.warning("%s: embedded definition does not parse (%s); using the type store", conn.msgtype, err)
             continue

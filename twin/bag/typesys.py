@@ -5,16 +5,23 @@ sqlite3 `message_definitions`), so a reader that has never heard of `twin_msgs` 
 This module owns the definitions and turns them into what the storages need: the `ros2msg`
 text (the type followed by each dependency after a `MSG:` separator) and the RIHS01 type hash
 that Iron and later record.
+
+Building rosbags' Humble type store costs about a tenth of a second at start-up, so a registry
+builds it only when it is asked for a type it has not described before: the definitions it hands
+out are kept in the cache folder (`twin.core.native.cache_dir()`), keyed by the rosbags version and
+the extra definitions, and read from there by later runs.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-from rosbags.typesys.base import TypesysError
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from twin.core.config import suggest
 from twin.core.errors import BagError
@@ -44,10 +51,33 @@ class TypeRegistry:
     """
 
     def __init__(self, extra: Mapping[str, str] = EXTRA_DEFINITIONS) -> None:
-        self.store: Typestore = get_typestore(Stores.ROS2_HUMBLE)
+        self._store: Typestore | None = None
+        self._extra = dict(extra)
+        self._registered: dict[str, str] = {}  # types registered since, by their text
         self._cache: dict[str, MessageDefinition] = {}
-        for msgtype, text in extra.items():
-            self.register(msgtype, text)
+        self._disk: dict[str, Any] | None = None  # the cached definitions of this rosbags and these extras
+
+    @property
+    def store(self) -> Typestore:
+        """The rosbags type store: Humble's types, the extra definitions and those registered since."""
+        if self._store is None:
+            from rosbags.typesys import Stores, get_typestore
+
+            self._store = get_typestore(Stores.ROS2_HUMBLE)
+            for msgtype, text in (*self._extra.items(), *self._registered.items()):
+                self._add(msgtype, text)
+        return self._store
+
+    def _add(self, msgtype: str, text: str) -> None:
+        from rosbags.typesys import get_types_from_msg
+        from rosbags.typesys.base import TypesysError
+
+        assert self._store is not None
+        try:
+            self._store.register(get_types_from_msg(text, msgtype))
+        except (TypesysError, ValueError) as err:
+            msg = f"message definition of {msgtype} does not parse: {err}"
+            raise BagError(msg) from None
 
     def register(self, msgtype: str, text: str) -> None:
         """Add a type from its `.msg` text (or from a full `ros2msg` text with its dependencies).
@@ -55,11 +85,12 @@ class TypeRegistry:
         Raises:
             BagError: If the text does not parse.
         """
-        try:
-            self.store.register(get_types_from_msg(text, msgtype))
-        except (TypesysError, ValueError) as err:
-            msg = f"message definition of {msgtype} does not parse: {err}"
-            raise BagError(msg) from None
+        if self._store is None:
+            self._registered[msgtype] = text
+            _ = self.store  # built now, with this type among those it registers (its text is checked here)
+        else:
+            self._add(msgtype, text)
+            self._registered[msgtype] = text
         self._cache.pop(msgtype, None)
 
     def knows(self, msgtype: str) -> bool:
@@ -75,6 +106,11 @@ class TypeRegistry:
         cached = self._cache.get(msgtype)
         if cached is not None:
             return cached
+        stored = None if msgtype in self._registered else self._from_disk().get(msgtype)
+        if stored is not None:
+            definition = MessageDefinition(msgtype=msgtype, encoding="ros2msg", text=stored[0], type_hash=stored[1])
+            self._cache[msgtype] = definition
+            return definition
         if not self.knows(msgtype):
             hint = suggest(msgtype, sorted(self.store.fielddefs))
             hint = hint if hint.startswith("; did you mean") else ""
@@ -85,4 +121,37 @@ class TypeRegistry:
             msgtype=msgtype, encoding="ros2msg", text=text, type_hash=self.store.hash_rihs01(msgtype)
         )
         self._cache[msgtype] = definition
+        if msgtype not in self._registered:
+            self._to_disk(msgtype, definition)
         return definition
+
+    def _disk_path(self) -> Path:
+        from importlib.metadata import version
+
+        from twin.core.native import cache_dir
+
+        key = hashlib.sha256(version("rosbags").encode() + json.dumps(self._extra, sort_keys=True).encode())
+        return cache_dir() / "msgdefs" / f"humble-{key.hexdigest()[:16]}.json"
+
+    def _from_disk(self) -> dict[str, Any]:
+        if self._disk is None:
+            try:
+                data = json.loads(self._disk_path().read_text(encoding="utf-8"))
+                self._disk = data if isinstance(data, dict) else {}
+            except (OSError, ValueError):
+                self._disk = {}
+        return self._disk
+
+    def _to_disk(self, msgtype: str, definition: MessageDefinition) -> None:
+        """Add a definition to the cache file (written whole and moved into place; a failure only costs time)."""
+        disk = self._from_disk()
+        disk[msgtype] = [definition.text, definition.type_hash]
+        path = self._disk_path()
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".msgdefs-")
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                json.dump(disk, f)
+            os.replace(tmp, path)
+        except OSError:
+            pass

@@ -12,7 +12,6 @@ factory (like BT.CPP's `BT_REGISTER_NODES`); `load_plugins()` calls each of them
 from __future__ import annotations
 
 import enum
-import importlib.metadata
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
@@ -225,6 +224,8 @@ class BehaviorTreeFactory:
         Raises:
             TreeError: If a plugin cannot be imported or fails while registering.
         """
+        import importlib.metadata
+
         loaded: list[str] = []
         for entry_point in sorted(importlib.metadata.entry_points(group=group), key=lambda ep: ep.name):
             try:

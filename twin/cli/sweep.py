@@ -95,7 +95,8 @@ class _Bar:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from twin.sweep import load_sweep, run_sweep, wilson_interval, write_reports
+    from twin.core.config import load_yaml
+    from twin.sweep import Cluster, load_sweep, run_sweep, wilson_interval, write_reports
 
     if args.workers is not None and args.workers < 1:
         msg = f"--workers must be at least 1, got {args.workers}"
@@ -103,8 +104,7 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.workers is not None and args.scheduler is not None:
         msg = "--workers sizes the local cluster; with --scheduler the cluster's own workers run the sweep"
         raise ConfigError(msg)
-    spec = load_sweep(args.sweep)
-    out = args.out if args.out is not None else Path("bags") / f"{spec.name}_sweep"
+    load_yaml(args.sweep)  # a missing or malformed file is told at once, before any cluster starts
     if not (args.verbose or args.debug):  # Dask's own shutdown notices are not the user's business
         logging.getLogger("distributed").setLevel(logging.CRITICAL)
     bar = _Bar(sys.stderr)
@@ -112,9 +112,11 @@ def _sweep(args: argparse.Namespace) -> int:
     # and the finished runs stay finished for the next start.
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
-        result = run_sweep(
-            spec, out_dir=out, workers=args.workers, scheduler=args.scheduler, keep_bags=args.keep_bags, progress=bar
-        )
+        # The cluster comes up while the sweep file is read and checked.
+        with Cluster(workers=args.workers, scheduler=args.scheduler) as cluster:
+            spec = load_sweep(args.sweep)
+            out = args.out if args.out is not None else Path("bags") / f"{spec.name}_sweep"
+            result = run_sweep(spec, out_dir=out, keep_bags=args.keep_bags, progress=bar, cluster=cluster)
     finally:
         signal.signal(signal.SIGTERM, previous)
         bar.close()

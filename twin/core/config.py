@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import enum
+import functools
 import os
 import sys
 import types
@@ -26,7 +27,7 @@ from typing import Any, TypeVar
 import yaml
 
 from twin.core.errors import ConfigError, TwinError
-from twin.core.yaml_numbers import Loader as _Loader
+from twin.core.yaml_numbers import compose
 
 __all__ = ["ConfigNode", "build", "load_config", "load_yaml", "location", "read_text_file", "suggest"]
 
@@ -96,10 +97,8 @@ def load_yaml(path: Path) -> yaml.Node:
         ConfigError: If the file cannot be read or is not valid YAML.
     """
     text = read_text_file(path, ConfigError, what="a UTF-8 YAML file")
-    loader = _Loader(text)
-    loader.name = str(path)
     try:
-        node = loader.get_single_node()
+        node = compose(text, str(path))
     except yaml.MarkedYAMLError as err:
         mark = err.problem_mark or err.context_mark
         where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark else str(path)
@@ -111,8 +110,6 @@ def load_yaml(path: Path) -> yaml.Node:
     except RecursionError:
         msg = f"{path}: the YAML is nested too deeply to read (more than ~{sys.getrecursionlimit() // 4} levels)"
         raise ConfigError(msg) from None
-    finally:
-        loader.dispose()
     if node is None:
         node = yaml.MappingNode("tag:yaml.org,2002:map", [])
         node.start_mark = yaml.Mark(str(path), 0, 0, 0, "", 0)
@@ -184,8 +181,19 @@ def _is_dataclass_type(tp: Any) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
 
 
+@functools.cache
+def _type_hints(cls: type) -> dict[str, Any]:
+    """`typing.get_type_hints(cls)`, evaluated once per class (it compiles every string annotation)."""
+    return typing.get_type_hints(cls)
+
+
+@functools.cache
+def _init_fields(cls: type) -> dict[str, dataclasses.Field[Any]]:
+    return {f.name: f for f in dataclasses.fields(cls) if f.init}
+
+
 def _variant_tag(cls: type) -> tuple[str, ...]:
-    hints = typing.get_type_hints(cls)
+    hints = _type_hints(cls)
     tp = hints.get("type")
     if tp is None or typing.get_origin(tp) is not typing.Literal:
         return ()
@@ -316,8 +324,8 @@ def _build_mapping(args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
 def _build_dataclass(cls: type, node: yaml.Node, key: str) -> Any:
     if not isinstance(node, yaml.MappingNode):
         _fail(node, key, f"expected a mapping of {cls.__name__} settings")
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints = _type_hints(cls)
+    fields = _init_fields(cls)
     kwargs: dict[str, Any] = {}
     for k, v in node.value:
         name = str(_scalar(k, key))

@@ -19,17 +19,18 @@ import contextlib
 import ctypes
 import logging
 import mmap
-import multiprocessing
-import multiprocessing.connection
 import os
 import signal
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twin.core.errors import FmuError
 from twin.cosim.fmu import FmuFile
+
+if TYPE_CHECKING:
+    import multiprocessing.connection
 
 __all__ = ["IsolatedGroup", "IsolatedStepper"]
 
@@ -133,6 +134,8 @@ class IsolatedGroup:
             )
             for k, name in enumerate(names)
         )
+        import multiprocessing  # only for an isolated FMU (tens of ms to import)
+
         context = multiprocessing.get_context("spawn")
         self._conn, child_conn = context.Pipe()
         spec = {

@@ -61,7 +61,6 @@ from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import gammaincinv
 
 from twin.core.errors import EstimationError
 from twin.estimation._native import LAYOUT_NAMES, load_ekf_kernel
@@ -160,6 +159,28 @@ class _KernelState:
         self.slip_variance_per_rad = 0.0
 
 
+# chi2(3).ppf(p) = 2 * gammaincinv(1.5, p), as scipy computes it, for the packaged default and the
+# usual gate probabilities: scipy.special takes a few hundred ms to import, paid only for others.
+_CHI2_3_QUANTILES = {
+    0.9: 6.251388631170325,
+    0.95: 7.814727903251179,
+    0.99: 11.344866730144373,
+    0.995: 12.838156466598647,
+    0.999: 16.26623619623813,
+    0.9999: 21.107513466160444,
+}
+
+
+def chi2_3_quantile(p: float) -> float:
+    """Return the chi-square quantile with 3 degrees of freedom (`scipy.stats.chi2(3).ppf(p)`)."""
+    known = _CHI2_3_QUANTILES.get(p)
+    if known is not None:
+        return known
+    from scipy.special import gammaincinv
+
+    return float(2.0 * gammaincinv(1.5, p))
+
+
 class OdometryFilter:
     """Wheel-encoder and gyro odometry for a differential drive (see the module docstring).
 
@@ -239,8 +260,7 @@ class OdometryFilter:
         self._gyro_var = noise.gyro_std_radps**2
         self._fuse_gyro = config.fuse_gyro
         p_gate = config.slip_gate_probability
-        # chi2(3).ppf(p_gate) as scipy.stats computes it, without importing scipy.stats.
-        self._gate = float(2.0 * gammaincinv(1.5, p_gate)) if p_gate is not None else None
+        self._gate = chi2_3_quantile(p_gate) if p_gate is not None else None
         inv_r, half_b = 1.0 / wheel_radius_m, 0.5 * wheel_separation_m / wheel_radius_m
         # Measurement rows by kind (_ANGLES, _SPEEDS, _STILL); the third row is the gyro.
         self._h = (

@@ -13,10 +13,11 @@ arrays. The kernel is built on first use with the system C compiler (`twin.core.
         never) is settled; a settled cell is not updated again. The heap arrays hold 4*nx*ny
         entries; `done` (nx*ny, zeroed) marks settled cells. Returns the cells settled.
 
-    int twin_navfn_trace(const double *pot, const unsigned char *cost, int nx, int ny, int start,
+    int twin_navfn_trace(const double *pot, const unsigned char *cost, int nx, int ny, int start, int goal,
                          int max_cycles, double *out_xy, int max_points)
-        Descend the potential from cell `start` in half-cell steps; write (x, y) in cell units to
-        `out_xy`. Returns the number of points (the last is the source cell), or -1 on failure.
+        NavFn's calcPath: descend the potential from cell `start` in half-cell steps; write (x, y) in
+        cell units to `out_xy`, ending with the node `goal` (the potential's source). Returns the
+        number of points, or -1 on failure.
 """
 
 from __future__ import annotations
@@ -111,8 +112,12 @@ int twin_navfn_potential(const unsigned char *cost, int nx, int ny, int source, 
     return settled;
 }
 
-static void gradient(const double *pot, const unsigned char *cost, int nx, int n, double *gx, double *gy) {
-    double cv = pot[n], dx = 0.0, dy = 0.0;
+static void gradient(const double *pot, int ns, int nx, int n, double *gx, double *gy) {
+    /* NavFn::gradCell: the normalised descent direction at a cell (0 at the grid's first and last rows) */
+    double cv, dx = 0.0, dy = 0.0;
+    *gx = 0.0; *gy = 0.0;
+    if (n < nx || n > ns - nx) return;
+    cv = pot[n];
     if (cv >= POT_HIGH) {
         if (pot[n - 1] < POT_HIGH) dx = -COST_OBS;
         else if (pot[n + 1] < POT_HIGH) dx = COST_OBS;
@@ -125,50 +130,60 @@ static void gradient(const double *pot, const unsigned char *cost, int nx, int n
         if (pot[n + nx] < POT_HIGH) dy += cv - pot[n + nx];
     }
     double norm = sqrt(dx * dx + dy * dy);
-    if (norm > 0.0) { dx /= norm; dy /= norm; }
-    (void)cost;
+    if (norm > 0.0) { norm = 1.0 / norm; dx *= norm; dy *= norm; }
     *gx = dx; *gy = dy;
 }
 
-int twin_navfn_trace(const double *pot, const unsigned char *cost, int nx, int ny, int start, int max_cycles,
-                     double *out_xy, int max_points) {
-    int stc = start, count = 0;
+int twin_navfn_trace(const double *pot, const unsigned char *cost, int nx, int ny, int start, int goal,
+                     int max_cycles, double *out_xy, int max_points) {
+    /* NavFn::calcPath: from `start` (the plan's end) down the potential to `goal` (the robot's node, where
+       the potential is 0); the last point written is `goal` itself. */
+    int ns = nx * ny, stc = start, count = 0;
     double dx = 0.0, dy = 0.0;
+    const int ring[8] = {-nx - 1, -nx, -nx + 1, -1, 1, nx - 1, nx, nx + 1};
     for (int cycle = 0; cycle < max_cycles; ++cycle) {
-        int cx = stc % nx, cy = stc / nx;
-        if (cx < 1 || cy < 1 || cx > nx - 2 || cy > ny - 2) return -1;
         if (count >= max_points) return -1;
-        out_xy[2 * count] = cx + dx; out_xy[2 * count + 1] = cy + dy; ++count;
-        if (pot[stc] < COST_NEUTRAL) return count;
+        long near = (long)stc + (long)round(dx) + (long)(nx * round(dy));
+        if (near < 0) near = 0;
+        if (near > ns - 1) near = ns - 1;
+        if (pot[near] < COST_NEUTRAL) {
+            out_xy[2 * count] = goal % nx; out_xy[2 * count + 1] = goal / nx; ++count;
+            return count;
+        }
+        if (stc < nx || stc > ns - nx) return -1;
+        out_xy[2 * count] = stc % nx + dx; out_xy[2 * count + 1] = stc / nx + dy; ++count;
         int oscillating = count > 2 && out_xy[2 * (count - 1)] == out_xy[2 * (count - 3)]
                           && out_xy[2 * (count - 1) + 1] == out_xy[2 * (count - 3) + 1];
-        int high = 0;
-        const int ring[8] = {-nx - 1, -nx, -nx + 1, -1, 1, nx - 1, nx, nx + 1};
-        if (pot[stc] >= POT_HIGH) high = 1;
+        int high = pot[stc] >= POT_HIGH;
         for (int j = 0; j < 8 && !high; ++j) if (pot[stc + ring[j]] >= POT_HIGH) high = 1;
         if (high || oscillating) {
-            int best = stc; double bp = pot[stc];
-            for (int j = 0; j < 8; ++j) { int m = stc + ring[j]; if (pot[m] < bp) { bp = pot[m]; best = m; } }
-            if (bp >= POT_HIGH || best == stc) return -1;
+            /* the lowest of the eight neighbours; NavFn keeps the running minimum in an int */
+            int best = stc;
+            double bp = (double)(int)pot[stc];
+            for (int j = 0; j < 8; ++j) {
+                int m = stc + ring[j];
+                if (pot[m] < bp) { bp = (double)(int)pot[m]; best = m; }
+            }
             stc = best; dx = 0.0; dy = 0.0;
+            if (pot[stc] >= POT_HIGH) return -1;
             continue;
         }
         double g[4][2];
-        gradient(pot, cost, nx, stc, &g[0][0], &g[0][1]);
-        gradient(pot, cost, nx, stc + 1, &g[1][0], &g[1][1]);
-        gradient(pot, cost, nx, stc + nx, &g[2][0], &g[2][1]);
-        gradient(pot, cost, nx, stc + nx + 1, &g[3][0], &g[3][1]);
+        gradient(pot, ns, nx, stc, &g[0][0], &g[0][1]);
+        gradient(pot, ns, nx, stc + 1, &g[1][0], &g[1][1]);
+        gradient(pot, ns, nx, stc + nx, &g[2][0], &g[2][1]);
+        gradient(pot, ns, nx, stc + nx + 1, &g[3][0], &g[3][1]);
         double x1 = (1.0 - dx) * g[0][0] + dx * g[1][0], x2 = (1.0 - dx) * g[2][0] + dx * g[3][0];
+        double x = (1.0 - dy) * x1 + dy * x2;
         double y1 = (1.0 - dx) * g[0][1] + dx * g[1][1], y2 = (1.0 - dx) * g[2][1] + dx * g[3][1];
-        double x = (1.0 - dy) * x1 + dy * x2, y = (1.0 - dy) * y1 + dy * y2;
-        double norm = sqrt(x * x + y * y);
-        if (norm == 0.0) return -1;
-        double scale = 0.5 / norm;
-        dx += x * scale; dy += y * scale;
-        if (dx >= 1.0) { stc += 1; dx -= 1.0; }
-        if (dx < 0.0) { stc -= 1; dx += 1.0; }
-        if (dy >= 1.0) { stc += nx; dy -= 1.0; }
-        if (dy < 0.0) { stc -= nx; dy += 1.0; }
+        double y = (1.0 - dy) * y1 + dy * y2;
+        if (x == 0.0 && y == 0.0) return -1;
+        double ss = 0.5 / sqrt(x * x + y * y);
+        dx += x * ss; dy += y * ss;
+        if (dx > 1.0) { stc += 1; dx -= 1.0; }
+        if (dx < -1.0) { stc -= 1; dx += 1.0; }
+        if (dy > 1.0) { stc += nx; dy -= 1.0; }
+        if (dy < -1.0) { stc -= nx; dy += 1.0; }
     }
     return -1;
 }
@@ -189,6 +204,6 @@ def load_navfn_kernel() -> ctypes.CDLL | None:
     c_int = ctypes.c_int
     lib.twin_navfn_potential.argtypes = [u8, c_int, c_int, c_int, c_int, c_int, dbl, i32, dbl, u8]
     lib.twin_navfn_potential.restype = c_int
-    lib.twin_navfn_trace.argtypes = [dbl, u8, c_int, c_int, c_int, c_int, dbl, c_int]
+    lib.twin_navfn_trace.argtypes = [dbl, u8, c_int, c_int, c_int, c_int, c_int, dbl, c_int]
     lib.twin_navfn_trace.restype = c_int
     return lib

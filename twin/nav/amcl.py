@@ -10,6 +10,8 @@ LikelihoodFieldModel), vectorised over particles and beams:
   translate, rotate; each particle gets that change with Gaussian noise of standard deviation
   `sqrt(alpha1 rot^2 + alpha2 trans^2)` on the rotations and `sqrt(alpha3 trans^2 + alpha4 (rot1^2
   + rot2^2))` on the translation (rotations folded to the nearer of forward and backward motion).
+  Particle yaws are never folded into [-pi, pi), as in Nav2's filter: a cloud heading west stays
+  one histogram cluster instead of splitting at the seam.
 - **Laser** (likelihood field): `max_beams` beams, every `(n - 1) // (max_beams - 1)`-th; ranges
   at or below range_min count as range_max, and range_max readings are skipped. Each endpoint's
   distance `z` to the nearest occupied map cell (capped at `laser_likelihood_max_dist`; off the
@@ -37,7 +39,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.core.errors import ConfigError
 from twin.nav._native import load_kernel
@@ -45,17 +46,11 @@ from twin.nav.map_server import OccupancyMap
 from twin.nav.params import AmclParams
 from twin.world.robot_model import LidarSpec
 
-__all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField"]
+__all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField", "nav2_distances"]
 
 F64 = NDArray[np.float64]
 
-_BIN_XY_M = 0.5
-_BIN_YAW_RAD = math.radians(10.0)
-
-
-def _wrap(angle: F64) -> F64:
-    """Fold angles into [-pi, pi)."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+_BIN_SIZE = np.array([0.5, 0.5, math.radians(10.0)])  # pf_kdtree's histogram: x m, y m, yaw rad
 
 
 def _angle_diff(a: float, b: float) -> float:
@@ -130,37 +125,127 @@ def _bin_keys(bins: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.asarray((local[:, 0] * span[1] + local[:, 1]) * span[2] + local[:, 2], dtype=np.int64)
 
 
+def nav2_distances(occupied: NDArray[np.bool_], resolution_m: float, max_dist_m: float, *, native: bool = True) -> F64:
+    """Distances (m) from each cell to an occupied one, spread as Nav2's `map_update_cspace` spreads them.
+
+    Every occupied cell enters a priority queue at 0 (column by column, each column bottom to top);
+    while the queue holds cells, the top cell's neighbours at x - 1, y - 1, x + 1, y + 1 that no cell
+    has reached take the distance to the top cell's source, if it is at most `int(max_dist /
+    resolution)` cells, and join the queue; then the top is popped, whichever cell is on top by then.
+    The queue is a binary heap kept as libstdc++'s `std::priority_queue` keeps it, so cells of equal
+    distance leave it in Nav2's order. Cells never reached are `max_dist_m` away.
+
+    Args:
+        occupied: (rows, cols) obstacle cells, row = y.
+        resolution_m: Cell size.
+        max_dist_m: `laser_likelihood_max_dist`.
+        native: Use the C kernel when it can be built.
+    """
+    rows, cols = occupied.shape
+    out = np.empty((rows, cols))
+    lib = load_kernel() if native else None
+    if lib is not None:
+        cells = np.ascontiguousarray(occupied, dtype=np.uint8)
+        if lib.twin_amcl_distances(cells.ctypes.data, cols, rows, resolution_m, max_dist_m, out.ctypes.data):
+            raise MemoryError("amcl likelihood field: out of memory")
+        return out
+    radius = int(max_dist_m / resolution_m)
+    table = np.sqrt(np.add.outer(np.arange(radius + 2) ** 2, np.arange(radius + 2) ** 2).astype(np.float64))
+    dist = np.full(rows * cols, max_dist_m)
+    marked = occupied.reshape(-1).copy()
+    dist[marked] = 0.0
+    heap: list[tuple[float, int, int, int, int]] = []  # (distance, x, y, source x, source y)
+    for i, j in zip(*np.nonzero(occupied.T), strict=True):  # x outer, y inner, as Nav2 pushes them
+        _heap_push(heap, (0.0, int(i), int(j), int(i), int(j)))
+    while heap:
+        _, i, j, si, sj = heap[0]
+        for x, y in ((i - 1, j), (i, j - 1), (i + 1, j), (i, j + 1)):
+            if x < 0 or y < 0 or x >= cols or y >= rows or marked[y * cols + x]:
+                continue
+            d = float(table[abs(x - si), abs(y - sj)])
+            if d > radius:
+                continue
+            dist[y * cols + x] = d * resolution_m
+            _heap_push(heap, (d * resolution_m, x, y, si, sj))
+            marked[y * cols + x] = True
+        _heap_pop(heap)
+    return dist.reshape(rows, cols)
+
+
+_Cell = tuple[float, int, int, int, int]
+
+
+def _heap_push(heap: list[_Cell], value: _Cell) -> None:
+    """std::push_heap with the smallest distance on top."""
+    heap.append(value)
+    _sift_up(heap, len(heap) - 1, value)
+
+
+def _sift_up(heap: list[_Cell], hole: int, value: _Cell) -> None:
+    parent = (hole - 1) // 2
+    while hole > 0 and heap[parent][0] > value[0]:
+        heap[hole] = heap[parent]
+        hole = parent
+        parent = (hole - 1) // 2
+    heap[hole] = value
+
+
+def _heap_pop(heap: list[_Cell]) -> None:
+    """std::pop_heap (libstdc++'s __adjust_heap: the hole goes down to a leaf, then the last value up)."""
+    n = len(heap) - 1
+    if n < 1:
+        heap.pop()
+        return
+    value = heap[n]
+    heap[n] = heap[0]
+    hole = child = 0
+    while child < (n - 1) // 2:
+        child = 2 * (child + 1)
+        if heap[child][0] > heap[child - 1][0]:
+            child -= 1
+        heap[hole] = heap[child]
+        hole = child
+    if n % 2 == 0 and child == (n - 2) // 2:
+        child = 2 * (child + 1)
+        heap[hole] = heap[child - 1]
+        hole = child - 1
+    _sift_up(heap, hole, value)
+    heap.pop()
+
+
 class LikelihoodField:
-    """The map's distance to the nearest occupied cell, and per-cell beam likelihood cubes.
+    """The map's distance to the nearest occupied cell as Nav2's AMCL computes it, and per-cell likelihood cubes.
+
+    Nav2 (`map_update_cspace`) does not take the exact distance transform: it spreads distances from
+    the occupied cells through a priority queue, each cell taking the distance to the source of the
+    first neighbour that reaches it (up to `int(max_dist / resolution)` cells). About one cell in ten
+    then lies up to a few centimetres further from the wall than it is; the filter's statistics
+    follow, so the twin spreads them the same way, in the same order (`nav2_distances`).
 
     Args:
         occupancy: The map (cells equal to 100 are obstacles, as AMCL reads them).
         max_dist_m: `laser_likelihood_max_dist`: distances are capped here (and off the map).
+        native: Use the C kernel when it can be built (else the same steps in Python, much slower).
     """
 
-    def __init__(self, occupancy: OccupancyMap, max_dist_m: float) -> None:
-        occupied = occupancy.data == 100
+    def __init__(self, occupancy: OccupancyMap, max_dist_m: float, *, native: bool = True) -> None:
         res = occupancy.resolution_m
-        if occupied.any():
-            dist = np.asarray(ndimage.distance_transform_edt(~occupied), dtype=np.float64) * res
-        else:
-            dist = np.full(occupied.shape, np.inf)
         self.max_dist_m = float(max_dist_m)
-        self.distance_m: F64 = np.minimum(dist, self.max_dist_m)
+        self.distance_m: F64 = nav2_distances(occupancy.data == 100, res, self.max_dist_m, native=native)
         self.resolution_m = res
         self.origin_x_m = occupancy.origin_x_m
         self.origin_y_m = occupancy.origin_y_m
         self.free_cells = np.argwhere(occupancy.data == 0)  # (row, col) for uniform pose draws
-        self._cubes: dict[tuple[float, float, float, float], tuple[F64, int]] = {}
+        self._cubes: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
 
-    def cubes(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, int]:
-        """Return (pz^3 per cell, padded by `pad` cells of the off-map value on every side, pad)."""
+    def cubes(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
+        """Return (pz^3 per map cell, pz^3 of an endpoint off the map), pz as the likelihood-field model's."""
         key = (z_hit, z_rand, sigma_hit_m, range_max_m)
         if key not in self._cubes:
-            pad = math.ceil(range_max_m / self.resolution_m) + 2
-            field = np.pad(self.distance_m, pad, constant_values=self.max_dist_m)
-            pz = z_hit * np.exp(-(field**2) / (2.0 * sigma_hit_m**2)) + z_rand / range_max_m
-            self._cubes[key] = (np.ascontiguousarray(pz**3), pad)
+            denominator = 2.0 * sigma_hit_m**2
+            pz = z_hit * np.exp(-(self.distance_m**2) / denominator) + z_rand / range_max_m
+            off = z_hit * math.exp(-(self.max_dist_m**2) / denominator) + z_rand / range_max_m
+            self._cubes[key] = (np.ascontiguousarray(pz**3), off**3)
         return self._cubes[key]
 
 
@@ -189,13 +274,15 @@ class Amcl:
         self.map = occupancy
         self.laser = laser
         self._rng = rng
-        self.field = LikelihoodField(occupancy, params.laser_likelihood_max_dist_m)
+        self.field = LikelihoodField(occupancy, params.laser_likelihood_max_dist_m, native=native)
         range_max = laser.range_max_m
         if params.laser_max_range_m > 0.0:
             range_max = min(range_max, params.laser_max_range_m)
         self._range_max = range_max
         self._range_min = max(laser.range_min_m, params.laser_min_range_m)
-        self._cubes, self._pad = self.field.cubes(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
+        self._cubes, self._off_map = self.field.cubes(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
+        # KLD-sampling's particle bound for k occupied bins, k = 0 .. max_particles (one table, both paths)
+        self._kld_limits = np.ascontiguousarray(self._kld_limit(np.arange(params.max_particles + 1)))
         self.poses: F64 = np.zeros((0, 3))
         self.weights: F64 = np.zeros(0)
         self._w_slow = 0.0
@@ -239,7 +326,6 @@ class Amcl:
         n = self.params.max_particles
         draws = self._rng.standard_normal((n, 3)) * np.sqrt(np.maximum(values, 0.0))
         poses = np.array([x_m, y_m, yaw_rad]) + draws @ vectors.T
-        poses[:, 2] = _wrap(poses[:, 2])
         self.poses = poses
         self.weights = np.full(n, 1.0 / n)
         self._w_slow = self._w_fast = 0.0
@@ -278,6 +364,11 @@ class Amcl:
         self.estimate = self._estimate(odom_pose)
         return self.estimate
 
+    @property
+    def has_initial_pose(self) -> bool:
+        """True once an initial pose was set (before it, scans are ignored)."""
+        return self._initialised
+
     def map_odom(self) -> tuple[float, float, float] | None:
         """Return the latest map->odom (x, y, yaw), or None before the first estimate."""
         return None if self.estimate is None else self.estimate.map_odom
@@ -296,13 +387,20 @@ class Amcl:
         sd_rot1 = math.sqrt(p.alpha1 * rot1_noise**2 + p.alpha2 * trans**2)
         sd_trans = math.sqrt(p.alpha3 * trans**2 + p.alpha4 * rot1_noise**2 + p.alpha4 * rot2_noise**2)
         sd_rot2 = math.sqrt(p.alpha1 * rot2_noise**2 + p.alpha2 * trans**2)
-        rot1_hat = _wrap(rot1 - noise[:, 0] * sd_rot1)
+        if self._lib is not None:
+            poses = np.ascontiguousarray(self.poses)
+            self._lib.twin_amcl_motion(
+                poses.ctypes.data, n, noise.ctypes.data, rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2
+            )
+            self.poses = poses
+            return
+        rot1_hat = rot1 - noise[:, 0] * sd_rot1
         trans_hat = trans - noise[:, 1] * sd_trans
-        rot2_hat = _wrap(rot2 - noise[:, 2] * sd_rot2)
+        rot2_hat = rot2 - noise[:, 2] * sd_rot2
         heading = self.poses[:, 2] + rot1_hat
         self.poses[:, 0] += trans_hat * np.cos(heading)
         self.poses[:, 1] += trans_hat * np.sin(heading)
-        self.poses[:, 2] = _wrap(self.poses[:, 2] + rot1_hat + rot2_hat)
+        self.poses[:, 2] += rot1_hat + rot2_hat
 
     def _beams(self, ranges: F64) -> tuple[F64, F64]:
         """Return the used beams' endpoints in the base frame (bx, by)."""
@@ -320,32 +418,36 @@ class Amcl:
     def _sensor(self, ranges: F64) -> None:
         bx, by = self._beams(ranges)
         poses = self.poses
-        if len(bx) and self._lib is not None:
-            poses = np.ascontiguousarray(poses)
-            self.poses = poses
-            bx, by = np.ascontiguousarray(bx), np.ascontiguousarray(by)
+        n = len(poses)
+        if len(bx):
+            field = self.field
+            inv_res = 1.0 / field.resolution_m
+            ex, ey = bx * inv_res, by * inv_res  # each beam's endpoint in the base frame, in cells
             cubes = self._cubes
-            likelihood = np.empty(len(poses))
-            status = self._lib.twin_amcl_likelihood(
-                poses.ctypes.data, len(poses), bx.ctypes.data, by.ctypes.data, len(bx),
-                cubes.ctypes.data, cubes.shape[0], cubes.shape[1], self._pad,
-                self.field.origin_x_m, self.field.origin_y_m, self.field.resolution_m, likelihood.ctypes.data,
-            )  # fmt: skip
-            if status != 0:
-                raise MemoryError("amcl likelihood: out of memory")
-        elif len(bx):
-            c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-            res = self.field.resolution_m
-            hx = poses[:, 0:1] + c * bx - s * by
-            hy = poses[:, 1:2] + s * bx + c * by
-            cubes, pad = self._cubes, self._pad
-            col = np.floor((hx - self.field.origin_x_m) / res + 0.5).astype(np.intp) + pad
-            row = np.floor((hy - self.field.origin_y_m) / res + 0.5).astype(np.intp) + pad
-            np.clip(col, 0, cubes.shape[1] - 1, out=col)
-            np.clip(row, 0, cubes.shape[0] - 1, out=row)
-            likelihood = 1.0 + cubes[row, col].sum(axis=1)
+            rows, cols = cubes.shape
+            if self._lib is not None:
+                poses = np.ascontiguousarray(poses)
+                self.poses = poses
+                likelihood = np.empty(n)
+                status = self._lib.twin_amcl_likelihood(
+                    poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
+                    ex.ctypes.data, ey.ctypes.data, len(ex),
+                    cubes.ctypes.data, rows, cols, self._off_map, likelihood.ctypes.data,
+                )  # fmt: skip
+                if status != 0:
+                    raise MemoryError("amcl likelihood: out of memory")
+            else:
+                # grid coordinates of each particle (AMCL rounds: +0.5 then floor), its heading
+                gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
+                gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
+                c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+                col = np.floor(gx[:, None] + c[:, None] * ex - s[:, None] * ey).astype(np.intp)
+                row = np.floor(gy[:, None] + s[:, None] * ex + c[:, None] * ey).astype(np.intp)
+                inside = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
+                values = cubes[np.clip(row, 0, rows - 1), np.clip(col, 0, cols - 1)]
+                likelihood = 1.0 + np.where(inside, values, self._off_map).sum(axis=1)
         else:
-            likelihood = np.ones(len(poses))
+            likelihood = np.ones(n)
         weights = self.weights * likelihood
         total = float(weights.sum())
         p = self.params
@@ -362,14 +464,9 @@ class Amcl:
             self.weights = np.full(len(weights), 1.0 / len(weights))
 
     def _bins(self, poses: F64) -> NDArray[np.int64]:
-        return np.stack(
-            [
-                np.floor(poses[:, 0] / _BIN_XY_M),
-                np.floor(poses[:, 1] / _BIN_XY_M),
-                np.floor(poses[:, 2] / _BIN_YAW_RAD),
-            ],
-            axis=1,
-        ).astype(np.int64)
+        """Each particle's (x, y, yaw) histogram bin, as pf_kdtree keys them (floor of pose / bin size)."""
+        keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
+        return keys
 
     def _kld_limit(self, k: NDArray[np.int64]) -> NDArray[np.float64]:
         p = self.params
@@ -389,9 +486,24 @@ class Amcl:
             w_diff = max(0.0, 1.0 - self._w_fast / self._w_slow)
         cumulative = np.cumsum(self.weights)
         cumulative /= cumulative[-1]
-        pick = np.minimum(np.searchsorted(cumulative, rng.random(m), side="right"), len(cumulative) - 1)
+        draws = rng.random(m)
+        recovering = w_diff > 0.0 and len(self.field.free_cells) > 0
+        if self._lib is not None and not recovering:  # draw, histogram and stop in one pass
+            out = np.empty((m, 3))
+            n = int(
+                self._lib.twin_pf_resample(
+                    self.poses.ctypes.data, len(self.poses), cumulative.ctypes.data, draws.ctypes.data, m,
+                    _BIN_SIZE.ctypes.data, self._kld_limits.ctypes.data, out.ctypes.data,
+                )
+            )  # fmt: skip
+            if n < 0:
+                raise MemoryError("amcl resampling: out of memory")
+            self.poses = out[:n]
+            self.weights = np.full(n, 1.0 / n)
+            return
+        pick = np.minimum(np.searchsorted(cumulative, draws, side="right"), len(cumulative) - 1)
         new = self.poses[pick]
-        if w_diff > 0.0 and len(self.field.free_cells):
+        if recovering:
             random = rng.random(m) < w_diff
             count = int(random.sum())
             if count:
@@ -401,44 +513,72 @@ class Amcl:
                 new[random, 1] = self.field.origin_y_m + cells[:, 0] * res
                 new[random, 2] = rng.uniform(-math.pi, math.pi, count)
             self._w_slow = self._w_fast = 0.0
-        bins = self._bins(new)
+        n = self._kld_count(self._bins(new))
+        self.poses = new[:n]
+        self.weights = np.full(n, 1.0 / n)
+
+    def _kld_count(self, bins: NDArray[np.int64]) -> int:
+        """How many of the drawn particles KLD-sampling keeps: the first n with n > limit(bins among them)."""
+        m = len(bins)
+        if self._lib is not None:
+            n = int(self._lib.twin_kld_count(bins.ctypes.data, m, self._kld_limits.ctypes.data))
+            if n < 0:
+                raise MemoryError("amcl resampling: out of memory")
+            return n
         _, first = np.unique(_bin_keys(bins), return_index=True)
         is_first = np.zeros(m, dtype=bool)
         is_first[first] = True
         leaves = np.cumsum(is_first)
-        n_drawn = np.arange(1, m + 1)
-        stop = np.nonzero(n_drawn > self._kld_limit(leaves))[0]
-        n = int(stop[0]) + 1 if len(stop) else m
-        self.poses = np.ascontiguousarray(new[:n])
-        self.weights = np.full(n, 1.0 / n)
+        stop = np.nonzero(np.arange(1, m + 1) > self._kld_limits[leaves])[0]
+        return int(stop[0]) + 1 if len(stop) else m
 
-    def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
-        poses, w = self.poses, self.weights
-        bins = self._bins(poses)
+    def _clusters(self, bins: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]:
+        """Each particle's cluster (bins that touch, 26-neighbourhood), numbered from 1 in raster order of the bins."""
+        if self._lib is not None:
+            labels = np.empty(len(bins), dtype=np.int64)
+            count = int(self._lib.twin_pf_clusters(bins.ctypes.data, len(bins), labels.ctypes.data))
+            if count < 0:
+                raise MemoryError("amcl clustering: out of memory")
+            return labels, count
+        from scipy import ndimage  # the numpy path only: scipy is slow to import
+
         lo = bins.min(axis=0)
         shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
         grid = np.zeros(shape, dtype=bool)
         local = bins - lo
         grid[local[:, 0], local[:, 1], local[:, 2]] = True
         labels, count = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
-        cluster = labels[local[:, 0], local[:, 1], local[:, 2]]
-        cw = np.bincount(cluster, weights=w, minlength=count + 1)
-        best = int(np.argmax(cw))
-        mask = cluster == best
-        wc = w[mask]
-        total = float(wc.sum())
-        mx = float((wc * poses[mask, 0]).sum() / total)
-        my = float((wc * poses[mask, 1]).sum() / total)
-        myaw = math.atan2(float((wc * np.sin(poses[mask, 2])).sum()), float((wc * np.cos(poses[mask, 2])).sum()))
-        # The whole set's covariance, as amcl_pose carries it.
-        wt = float(w.sum())
-        sx, sy = float((w * poses[:, 0]).sum() / wt), float((w * poses[:, 1]).sum() / wt)
+        return np.asarray(labels[local[:, 0], local[:, 1], local[:, 2]], dtype=np.int64), int(count)
+
+    def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
+        poses, w = self.poses, self.weights
+        cluster, count = self._clusters(self._bins(poses))
         cov = np.zeros((3, 3))
-        cov[0, 0] = float((w * poses[:, 0] ** 2).sum() / wt) - sx * sx
-        cov[1, 1] = float((w * poses[:, 1] ** 2).sum() / wt) - sy * sy
-        cov[0, 1] = cov[1, 0] = float((w * poses[:, 0] * poses[:, 1]).sum() / wt) - sx * sy
-        mc, ms = float((w * np.cos(poses[:, 2])).sum() / wt), float((w * np.sin(poses[:, 2])).sum() / wt)
-        cov[2, 2] = -2.0 * math.log(max(math.hypot(mc, ms), 1e-300))
+        if self._lib is not None:
+            out = np.empty(7)
+            if self._lib.twin_pf_estimate(
+                poses.ctypes.data, w.ctypes.data, len(w), cluster.ctypes.data, count, out.ctypes.data
+            ):
+                raise MemoryError("amcl estimate: out of memory")
+            mx, my, myaw = float(out[0]), float(out[1]), float(out[2])
+            cov[0, 0], cov[1, 1], cov[0, 1], cov[2, 2] = out[3], out[4], out[5], out[6]
+            cov[1, 0] = cov[0, 1]
+        else:
+            cw = np.bincount(cluster, weights=w, minlength=count + 1)
+            mask = cluster == int(np.argmax(cw))
+            wc = w[mask]
+            total = float(wc.sum())
+            mx = float((wc * poses[mask, 0]).sum() / total)
+            my = float((wc * poses[mask, 1]).sum() / total)
+            myaw = math.atan2(float((wc * np.sin(poses[mask, 2])).sum()), float((wc * np.cos(poses[mask, 2])).sum()))
+            # The whole set's covariance, as amcl_pose carries it.
+            wt = float(w.sum())
+            sx, sy = float((w * poses[:, 0]).sum() / wt), float((w * poses[:, 1]).sum() / wt)
+            cov[0, 0] = float((w * poses[:, 0] ** 2).sum() / wt) - sx * sx
+            cov[1, 1] = float((w * poses[:, 1] ** 2).sum() / wt) - sy * sy
+            cov[0, 1] = cov[1, 0] = float((w * poses[:, 0] * poses[:, 1]).sum() / wt) - sx * sy
+            mc, ms = float((w * np.cos(poses[:, 2])).sum() / wt), float((w * np.sin(poses[:, 2])).sum() / wt)
+            cov[2, 2] = -2.0 * math.log(max(math.hypot(mc, ms), 1e-300))
         ox, oy, oyaw = odom_pose
         # map->odom = map->base * (odom->base)^-1
         tyaw = myaw - oyaw

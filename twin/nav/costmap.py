@@ -29,13 +29,14 @@ The grid's Nav2 0..100 publication values come from `CostGrid.occupancy_values()
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.nav._native import load_kernel
 from twin.nav.costmap_grid import (
@@ -53,14 +54,60 @@ __all__ = ["Costmap", "Observation", "footprint_radii", "inflation_costs", "scan
 U8 = NDArray[np.uint8]
 F64 = NDArray[np.float64]
 
+_NO_TABLE: U8 = np.zeros(2, dtype=np.uint8)  # the C kernel's table argument when nothing inflates
+# the C kernel's addresses: static layer (or None), obstacle layers, cost table, master
+_Addresses = tuple[int | None, "ctypes.Array[ctypes.c_void_p]", int, int]
+_NO_CELLS: tuple[NDArray[np.intp], NDArray[np.intp]] = (np.zeros(0, np.intp), np.zeros(0, np.intp))
 
-@dataclass(frozen=True, kw_only=True, slots=True, eq=False)
+
+class _Scan(NamedTuple):
+    """A LaserScan's ranges with what projects them: beam directions in the sensor frame, range limits, heading."""
+
+    ranges: F64
+    cos_a: F64
+    sin_a: F64
+    range_min_m: float
+    range_max_m: float
+    cos_yaw: float
+    sin_yaw: float
+
+
 class Observation:
-    """One scan as the obstacle layer sees it: the sensor's origin and the hit points, in the costmap's frame."""
+    """One scan as the obstacle layer sees it: the sensor's origin and the hit points, in the costmap's frame.
 
-    origin_x_m: float
-    origin_y_m: float
-    points_xy_m: F64  # (n, 2)
+    Args:
+        origin_x_m: The sensor's x in the costmap's frame.
+        origin_y_m: The sensor's y.
+        points_xy_m: The hit points (n, 2); None for a scan made by `scan_observation`, whose points are
+            projected when first asked for (the C kernel projects the ranges itself, with the same roundings).
+        scan: The scan the points come from.
+    """
+
+    __slots__ = ("_points", "origin_x_m", "origin_y_m", "scan")
+
+    def __init__(
+        self, *, origin_x_m: float, origin_y_m: float, points_xy_m: F64 | None = None, scan: _Scan | None = None
+    ) -> None:
+        if points_xy_m is None and scan is None:
+            raise ValueError("an observation needs its points or its scan")
+        self.origin_x_m = origin_x_m
+        self.origin_y_m = origin_y_m
+        self._points = points_xy_m
+        self.scan = scan
+
+    @property
+    def points_xy_m(self) -> F64:
+        """The hit points (n, 2) in the costmap's frame."""
+        if self._points is None:
+            assert self.scan is not None
+            r, cos_a, sin_a, lo, hi, c, s = self.scan
+            index = np.flatnonzero((r >= lo) & (r < hi))  # false for nan and +-inf
+            ca, sa, rk = cos_a[index], sin_a[index], r[index]
+            points = np.empty((len(index), 2))
+            points[:, 0] = self.origin_x_m + rk * (c * ca - s * sa)
+            points[:, 1] = self.origin_y_m + rk * (s * ca + c * sa)
+            self._points = points
+        return self._points
 
 
 def scan_observation(
@@ -79,12 +126,17 @@ def scan_observation(
     Ranges that are not finite or lie outside [range_min, range_max) give no point, as
     laser_geometry's projection does for Nav2's obstacle layer (`inf_is_valid` false).
     """
-    r = np.asarray(ranges, dtype=np.float64)
-    keep = np.isfinite(r) & (r >= range_min_m) & (r < range_max_m)
-    index = np.nonzero(keep)[0]
-    angle = sensor_yaw_rad + angle_min_rad + index * angle_increment_rad
-    points = np.column_stack([sensor_x_m + r[index] * np.cos(angle), sensor_y_m + r[index] * np.sin(angle)])
-    return Observation(origin_x_m=sensor_x_m, origin_y_m=sensor_y_m, points_xy_m=points)
+    r = np.ascontiguousarray(ranges, dtype=np.float64)
+    cos_a, sin_a = _beam_directions(angle_min_rad, angle_increment_rad, len(r))
+    scan = _Scan(r, cos_a, sin_a, range_min_m, range_max_m, math.cos(sensor_yaw_rad), math.sin(sensor_yaw_rad))
+    return Observation(origin_x_m=sensor_x_m, origin_y_m=sensor_y_m, scan=scan)
+
+
+@functools.lru_cache(maxsize=8)
+def _beam_directions(angle_min_rad: float, angle_increment_rad: float, count: int) -> tuple[F64, F64]:
+    """Return cos and sin of each beam's angle in the sensor frame."""
+    angle = angle_min_rad + np.arange(count) * angle_increment_rad
+    return np.cos(angle), np.sin(angle)
 
 
 def _radius_footprint(radius_m: float) -> list[tuple[float, float]]:
@@ -167,6 +219,14 @@ class Costmap:
         self.params = params
         self._lib = load_kernel() if native else None
         self.inscribed_radius_m, self.circumscribed_radius_m, self.footprint = footprint_radii(params)
+        self._footprint_xy = np.array(self.footprint, dtype=np.float64).reshape(-1, 2)
+        self._footprint_address = self._footprint_xy.ctypes.data
+        self._bounds = np.zeros(4, dtype=np.int64)
+        self._bounds_address = self._bounds.ctypes.data
+        self._address_cache: tuple[tuple[U8 | None, ...], _Addresses] | None = None
+        self._doubles = np.zeros(17)
+        self._longs = np.zeros(11, dtype=np.int64)
+        self._doubles_address, self._longs_address = self._doubles.ctypes.data, self._longs.ctypes.data
         self._default = NO_INFORMATION if params.track_unknown_space else FREE_SPACE
         self._static: U8 | None = None
         self._obstacles: list[_ObstacleLayer] = []
@@ -193,6 +253,11 @@ class Costmap:
                 self._obstacles.append(
                     _ObstacleLayer(layer.sources, layer.footprint_clearing_enabled, (rows, cols), self._default)
                 )
+        # the one-call update: one obstacle layer fed one source that clears and marks (TB3's costmaps)
+        self._single_source: ObservationSource | None = None
+        if self._lib is not None and len(self._obstacles) == 1 and len(self._obstacles[0].sources) == 1:
+            only = self._obstacles[0].sources[0]
+            self._single_source = only if only.clearing and only.marking else None
         inflation = params.inflation
         self._inflate = inflation is not None and inflation.enabled
         self._radius_cells = math.ceil(inflation.inflation_radius_m / res) if inflation is not None else 0
@@ -234,6 +299,10 @@ class Costmap:
         """Run one update cycle with the robot's pose and the observations since the last one (costmap frame)."""
         if self.params.rolling_window:
             self._roll(robot_x_m, robot_y_m)
+        source = self._single_source
+        if source is not None and len(observations) == 1 and observations[0].scan is not None:
+            self._scan_update(robot_x_m, robot_y_m, robot_yaw_rad, observations[0], source)
+            return
         bounds = self._apply_observations(robot_x_m, robot_y_m, robot_yaw_rad, observations)
         rows, cols = self.grid.cost.shape
         if self._full_update or self.params.rolling_window:
@@ -293,62 +362,116 @@ class Costmap:
         g.origin_x_m += cx * res
         g.origin_y_m += cy * res
         for layer in self._obstacles:
-            layer.cost = _shift(layer.cost, cy, cx, layer.default)
-        g.cost = _shift(g.cost, cy, cx, self._default)
+            _shift(layer.cost, cy, cx, layer.default)
+        # the master needs no shift: a rolling window's update recomposes all of it
+
+    def _scan_update(self, x: float, y: float, yaw: float, obs: Observation, source: ObservationSource) -> None:
+        """The whole update in one C call: one layer, one scan source that clears and marks (TB3's costmaps)."""
+        assert self._lib is not None and obs.scan is not None
+        g = self.grid
+        res = g.resolution_m
+        rows, cols = g.cost.shape
+        scan = obs.scan
+        layer = self._obstacles[0]
+        base, pointers, table, master = self._addresses()
+        full = self._full_update or self.params.rolling_window
+        self._full_update = False
+        infl = self.params.inflation if self._inflate else None
+        self._doubles[:] = (
+            g.origin_x_m, g.origin_y_m, res, scan.range_min_m, scan.range_max_m,
+            obs.origin_x_m, obs.origin_y_m, scan.cos_yaw, scan.sin_yaw,
+            float(max(0.0, math.ceil(source.raytrace_max_range_m / res))),
+            float(max(0.0, math.ceil(source.raytrace_min_range_m / res))),
+            source.obstacle_max_range_m, source.obstacle_min_range_m, x, y, math.cos(yaw), math.sin(yaw),
+        )  # fmt: skip
+        self._longs[:] = (
+            rows, cols, len(scan.ranges), len(self._footprint_xy) if layer.footprint_clearing else 0,
+            self._default, int(full), int(infl is not None), self._radius_cells,
+            int(infl is not None and infl.inflate_unknown), int(infl is not None and infl.inflate_around_unknown),
+            self._radius_cells + 1 if infl is not None else 0,
+        )  # fmt: skip
+        status = self._lib.twin_costmap_scan_update(
+            pointers[0], base, master, table, scan.ranges.ctypes.data, scan.cos_a.ctypes.data,
+            scan.sin_a.ctypes.data, self._footprint_address, self._doubles_address, self._longs_address,
+            self._bounds_address,
+        )  # fmt: skip
+        if status != 0:
+            raise MemoryError("costmap update: out of memory")
 
     def _apply_observations(
         self, x: float, y: float, yaw: float, observations: Sequence[Observation]
     ) -> tuple[int, int, int, int] | None:
+        bounds = self._bounds  # rows min, max, cols min, max (inclusive) of the cells written
         rows, cols = self.grid.cost.shape
-        touched: list[NDArray[np.intp]] = []
+        bounds[:] = (rows, -1, cols, -1)
         for layer in self._obstacles:
             # as ObstacleLayer::updateBounds: every clearing observation first, then every marking one
-            for source in layer.sources:
-                for obs in observations:
-                    if source.clearing:
-                        touched.extend(self._observe(layer.cost, obs, source, clearing=True))
-            for source in layer.sources:
-                for obs in observations:
-                    if source.marking:
-                        touched.extend(self._observe(layer.cost, obs, source, clearing=False))
+            clearing = [(source, obs) for source in layer.sources if source.clearing for obs in observations]
+            marking = [(source, obs) for source in layer.sources if source.marking for obs in observations]
+            if self._lib is not None and len(clearing) == 1 and clearing == marking:
+                source, obs = clearing[0]
+                self._observe(layer.cost, obs, source, clearing=True, marking=True)  # one call: clear, then mark
+            else:
+                for source, obs in clearing:
+                    self._observe(layer.cost, obs, source, clearing=True, marking=False)
+                for source, obs in marking:
+                    self._observe(layer.cost, obs, source, clearing=False, marking=True)
             if layer.footprint_clearing:
-                touched.extend(self._clear_footprint(layer.cost, x, y, yaw))
-        rr = np.concatenate(touched[0::2]) if touched else np.zeros(0, np.intp)
-        cc = np.concatenate(touched[1::2]) if touched else np.zeros(0, np.intp)
-        if not len(rr):
-            return None
-        return int(rr.min()), min(rows, int(rr.max()) + 1), int(cc.min()), min(cols, int(cc.max()) + 1)
+                self._clear_footprint(layer.cost, x, y, yaw)
+        r0, r1, c0, c1 = (int(v) for v in bounds)
+        return None if r1 < 0 else (r0, min(rows, r1 + 1), c0, min(cols, c1 + 1))
 
-    def _observe(
-        self, cost: U8, obs: Observation, source: ObservationSource, *, clearing: bool
-    ) -> list[NDArray[np.intp]]:
-        """Clear along (or mark the ends of) one observation's rays; return the touched bounds or cells."""
+    def _grow(self, rr: NDArray[np.intp], cc: NDArray[np.intp]) -> None:
+        """Grow the update's bounds by cells written on the numpy path."""
+        if len(rr):
+            b = self._bounds
+            b[0], b[1] = min(b[0], int(rr.min())), max(b[1], int(rr.max()))
+            b[2], b[3] = min(b[2], int(cc.min())), max(b[3], int(cc.max()))
+
+    def _observe(self, cost: U8, obs: Observation, source: ObservationSource, *, clearing: bool, marking: bool) -> None:
+        """Clear along one observation's rays, then mark their ends, as the source does; grow the bounds."""
         if self._lib is None:
-            return self._clear(cost, obs, source) if clearing else self._mark(cost, obs, source)
+            if clearing:
+                self._grow(*self._clear(cost, obs, source))
+            if marking:
+                self._grow(*self._mark(cost, obs, source))
+            return
         g = self.grid
         res = g.resolution_m
         rows, cols = cost.shape
-        pts = np.ascontiguousarray(obs.points_xy_m, dtype=np.float64)
-        bounds = np.array([rows, -1, cols, -1], dtype=np.int64)
+        ray_max = float(max(0.0, math.ceil(source.raytrace_max_range_m / res)))
+        ray_min = float(max(0.0, math.ceil(source.raytrace_min_range_m / res)))
+        scan = obs.scan
+        if scan is not None:  # the kernel projects the ranges
+            status = self._lib.twin_scan_update(
+                cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res,
+                scan.ranges.ctypes.data, len(scan.ranges), scan.cos_a.ctypes.data, scan.sin_a.ctypes.data,
+                scan.range_min_m, scan.range_max_m, obs.origin_x_m, obs.origin_y_m, scan.cos_yaw, scan.sin_yaw,
+                int(clearing), int(marking), ray_max, ray_min,
+                source.obstacle_max_range_m, source.obstacle_min_range_m, self._bounds_address,
+            )  # fmt: skip
+            if status != 0:
+                raise MemoryError("costmap obstacle layer: out of memory")
+            return
+        pts = obs.points_xy_m
+        if not pts.flags.c_contiguous or pts.dtype != np.float64:
+            pts = np.ascontiguousarray(pts, dtype=np.float64)
         self._lib.twin_obstacle_update(
             cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res, obs.origin_x_m, obs.origin_y_m,
-            pts.ctypes.data, len(pts), int(clearing), int(not clearing),
-            float(max(0.0, math.ceil(source.raytrace_max_range_m / res))),
-            float(max(0.0, math.ceil(source.raytrace_min_range_m / res))),
-            source.obstacle_max_range_m, source.obstacle_min_range_m, bounds.ctypes.data,
+            pts.ctypes.data, len(pts), int(clearing), int(marking), ray_max, ray_min,
+            source.obstacle_max_range_m, source.obstacle_min_range_m, self._bounds_address,
         )  # fmt: skip
-        if bounds[1] < 0:
-            return []
-        return [np.array([bounds[0], bounds[1]], dtype=np.intp), np.array([bounds[2], bounds[3]], dtype=np.intp)]
 
-    def _clear(self, cost: U8, obs: Observation, source: ObservationSource) -> list[NDArray[np.intp]]:
+    def _clear(
+        self, cost: U8, obs: Observation, source: ObservationSource
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         g = self.grid
         res = g.resolution_m
         rows, cols = cost.shape
         ox, oy = obs.origin_x_m, obs.origin_y_m
         x0f, y0f = (ox - g.origin_x_m) / res, (oy - g.origin_y_m) / res
         if not (0.0 <= x0f < cols and 0.0 <= y0f < rows) or not len(obs.points_xy_m):
-            return []
+            return _NO_CELLS
         x0, y0 = int(x0f), int(y0f)
         map_end_x = g.origin_x_m + cols * res
         map_end_y = g.origin_y_m + rows * res
@@ -376,13 +499,13 @@ class Costmap:
         keep = (rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols)
         rr, cc = rr[keep], cc[keep]
         cost[rr, cc] = FREE_SPACE
-        return [rr, cc]
+        return rr, cc
 
-    def _mark(self, cost: U8, obs: Observation, source: ObservationSource) -> list[NDArray[np.intp]]:
+    def _mark(self, cost: U8, obs: Observation, source: ObservationSource) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         g = self.grid
         pts = obs.points_xy_m
         if not len(pts):
-            return []
+            return _NO_CELLS
         d2 = (pts[:, 0] - obs.origin_x_m) ** 2 + (pts[:, 1] - obs.origin_y_m) ** 2
         keep = (d2 < source.obstacle_max_range_m**2) & (d2 >= source.obstacle_min_range_m**2)
         pts = pts[keep]
@@ -392,36 +515,38 @@ class Costmap:
         inside = (fx >= 0) & (fy >= 0) & (fx < cols) & (fy < rows)
         cc, rr = fx[inside].astype(np.intp), fy[inside].astype(np.intp)
         cost[rr, cc] = LETHAL_OBSTACLE
-        return [rr, cc]
+        return rr, cc
 
-    def _clear_footprint(self, cost: U8, x: float, y: float, yaw: float) -> list[NDArray[np.intp]]:
+    def _clear_footprint(self, cost: U8, x: float, y: float, yaw: float) -> None:
         g = self.grid
         c, s = math.cos(yaw), math.sin(yaw)
-        poly = np.array([(x + c * px - s * py, y + s * px + c * py) for px, py in self.footprint])
         res = g.resolution_m
         rows, cols = cost.shape
         if self._lib is not None:
-            bounds = np.array([rows, -1, cols, -1], dtype=np.int64)
-            self._lib.twin_fill_polygon(
+            status = self._lib.twin_fill_footprint(
                 cost.ctypes.data, rows, cols, g.origin_x_m, g.origin_y_m, res,
-                poly.ctypes.data, len(poly), FREE_SPACE, bounds.ctypes.data,
+                self._footprint_address, len(self._footprint_xy), x, y, c, s, FREE_SPACE, self._bounds_address,
             )  # fmt: skip
-            if bounds[1] < 0:
-                return []
-            return [np.array([bounds[0], bounds[1]], dtype=np.intp), np.array([bounds[2], bounds[3]], dtype=np.intp)]
+            if status != 0:
+                raise MemoryError("costmap footprint clearing: out of memory")
+            return
+        fx, fy = self._footprint_xy[:, 0], self._footprint_xy[:, 1]
+        poly = np.empty((len(fx), 2))
+        poly[:, 0] = x + c * fx - s * fy
+        poly[:, 1] = y + s * fx + c * fy
         c0 = max(0, int((poly[:, 0].min() - g.origin_x_m) / res))
         c1 = min(cols, int((poly[:, 0].max() - g.origin_x_m) / res) + 1)
         r0 = max(0, int((poly[:, 1].min() - g.origin_y_m) / res))
         r1 = min(rows, int((poly[:, 1].max() - g.origin_y_m) / res) + 1)
         if c0 >= c1 or r0 >= r1:
-            return []
+            return
         xs = g.origin_x_m + (np.arange(c0, c1) + 0.5) * res
         ys = g.origin_y_m + (np.arange(r0, r1) + 0.5) * res
         inside = _in_polygon(xs[None, :], ys[:, None], poly)
         rr, cc = np.nonzero(inside)
         rr, cc = rr + r0, cc + c0
         cost[rr, cc] = FREE_SPACE
-        return [rr, cc]
+        self._grow(rr, cc)
 
     def _compose(self, bounds: tuple[int, int, int, int]) -> None:
         r0, r1, c0, c1 = bounds
@@ -431,30 +556,54 @@ class Costmap:
         w0, w1, v0, v1 = max(0, r0 - pad), min(rows, r1 + pad), max(0, c0 - pad), min(cols, c1 + pad)
         # the obstacles that reach into that window lie within another inflation radius of it
         e0, e1, f0, f1 = max(0, w0 - pad), min(rows, w1 + pad), max(0, v0 - pad), min(cols, v1 + pad)
+        infl = self.params.inflation if self._inflate else None
+        if self._lib is not None:
+            base, pointers, table_address, master_address = self._addresses()
+            status = self._lib.twin_costmap_compose(
+                base, self._default, pointers, len(self._obstacles),
+                rows, cols, w0, w1, v0, v1, e0, e1, f0, f1, int(infl is not None), self._radius_cells,
+                table_address, int(infl is not None and infl.inflate_unknown),
+                int(infl is not None and infl.inflate_around_unknown), master_address,
+            )  # fmt: skip
+            if status != 0:
+                raise MemoryError("costmap update: out of memory")
+            return
         master = self._layers(e0, e1, f0, f1)
-        if self._inflate and self.params.inflation is not None:
-            infl = self.params.inflation
+        if infl is not None:
             seeds = master == LETHAL_OBSTACLE
             if infl.inflate_around_unknown:
                 seeds |= master == NO_INFORMATION
             if seeds.any():
-                if self._lib is not None:
-                    cost = np.empty(master.shape, dtype=np.uint8)
-                    table = self._cost_table()
-                    seed_cells = np.ascontiguousarray(seeds, dtype=np.uint8)  # kept alive across the call
-                    status = self._lib.twin_inflate(
-                        seed_cells.ctypes.data, master.shape[0], master.shape[1],
-                        table.ctypes.data, len(table) - 1, cost.ctypes.data,
-                    )  # fmt: skip
-                    if status != 0:
-                        raise MemoryError("costmap inflation: out of memory")
-                else:
-                    distance = np.asarray(ndimage.distance_transform_edt(~seeds), dtype=np.float64)
-                    cost = self._costs(distance)
+                from scipy import ndimage  # the numpy path only: scipy is slow to import
+
+                distance = np.asarray(ndimage.distance_transform_edt(~seeds), dtype=np.float64)
+                cost = self._costs(distance)
                 unknown = master == NO_INFORMATION
                 take = (cost > FREE_SPACE) if infl.inflate_unknown else (cost >= INSCRIBED_INFLATED_OBSTACLE)
                 master = np.where(unknown, np.where(take, cost, master), np.maximum(master, cost)).astype(np.uint8)
         self.grid.cost[w0:w1, v0:v1] = master[w0 - e0 : w1 - e0, v0 - f0 : v1 - f0]
+
+    def _addresses(self) -> _Addresses:
+        """Addresses for the C kernel: static layer (or None), obstacle layers, cost table, master (cached)."""
+        static = self._static if self._uses_static() else None
+        table = self._cost_table() if self._inflate and self.params.inflation is not None else _NO_TABLE
+        key = (static, table, self.grid.cost, *(layer.cost for layer in self._obstacles))
+        cache = self._address_cache
+        if cache is None or len(cache[0]) != len(key) or any(a is not b for a, b in zip(cache[0], key, strict=True)):
+            layers = [layer.cost for layer in self._obstacles]
+            pointers = (ctypes.c_void_p * max(1, len(layers)))(*[layer.ctypes.data for layer in layers])
+            values = (
+                None if static is None else int(static.ctypes.data),
+                pointers,
+                int(table.ctypes.data),
+                int(self.grid.cost.ctypes.data),
+            )
+            cache = self._address_cache = (key, values)
+        return cache[1]
+
+    def _uses_static(self) -> bool:
+        p = self.params
+        return self._static is not None and p.static_layer is not None and not p.rolling_window
 
     def _costs(self, distance_cells: F64) -> U8:
         infl = self.params.inflation
@@ -468,16 +617,16 @@ class Costmap:
         )
 
     def _cost_table(self) -> U8:
-        """The inflation cost for every squared cell distance 0..R^2."""
+        """The inflation cost for every squared cell distance 0..R^2, then 0 (beyond the radius)."""
         key = (self._radius_cells, self.grid.resolution_m)
         if self._table_cache is None or self._table_cache[0] != key:
-            d2 = np.arange(self._radius_cells**2 + 1, dtype=np.float64)
+            d2 = np.arange(self._radius_cells**2 + 2, dtype=np.float64)
             self._table_cache = (key, np.ascontiguousarray(self._costs(np.sqrt(d2))))
         return self._table_cache[1]
 
     def _layers(self, r0: int, r1: int, c0: int, c1: int) -> U8:
         """Static (overwrite) then obstacle layers (maximum) over a window; the master before inflation."""
-        if self._static is not None and self.params.static_layer is not None and not self.params.rolling_window:
+        if self._static is not None and self._uses_static():
             master = self._static[r0:r1, c0:c1].copy()
         else:
             master = np.full((r1 - r0, c1 - c0), self._default, dtype=np.uint8)
@@ -489,17 +638,25 @@ class Costmap:
         return master
 
 
-def _shift(cost: U8, dr: int, dc: int, fill: int) -> U8:
-    """Move a grid's window by (dr, dc) cells: the overlap is kept, new cells are `fill`."""
+def _shift(cost: U8, dr: int, dc: int, fill: int) -> None:
+    """Move a grid's window by (dr, dc) cells in place: the overlap is kept, new cells are `fill`."""
     rows, cols = cost.shape
-    out = np.full_like(cost, fill)
-    if abs(dr) < rows and abs(dc) < cols:
-        src_r = slice(max(0, dr), rows + min(0, dr))
-        dst_r = slice(max(0, -dr), rows + min(0, -dr))
-        src_c = slice(max(0, dc), cols + min(0, dc))
-        dst_c = slice(max(0, -dc), cols + min(0, -dc))
-        out[dst_r, dst_c] = cost[src_r, src_c]
-    return out
+    if abs(dr) >= rows or abs(dc) >= cols:
+        cost.fill(fill)
+        return
+    src_r = slice(max(0, dr), rows + min(0, dr))
+    dst_r = slice(max(0, -dr), rows + min(0, -dr))
+    src_c = slice(max(0, dc), cols + min(0, dc))
+    dst_c = slice(max(0, -dc), cols + min(0, -dc))
+    cost[dst_r, dst_c] = cost[src_r, src_c].copy()
+    if dr > 0:
+        cost[rows - dr :, :] = fill
+    elif dr < 0:
+        cost[:-dr, :] = fill
+    if dc > 0:
+        cost[:, cols - dc :] = fill
+    elif dc < 0:
+        cost[:, :-dc] = fill
 
 
 def _in_polygon(x: F64, y: F64, poly: F64) -> NDArray[np.bool_]:

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.world.scene import Scene
 
@@ -105,6 +104,8 @@ def build_grid(
         bounds_xy_m: (x_min, y_min, x_max, y_max) to cover; default the obstacles' bounds plus `padding_m`.
         padding_m: Margin around the obstacles' bounds.
     """
+    from scipy import ndimage
+
     if bounds_xy_m is None:
         box = scene.bounds
         if box is None:

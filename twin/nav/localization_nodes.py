@@ -22,7 +22,6 @@ from numpy.typing import NDArray
 
 from twin.bag import OccupancyGridEncoder, ParticleCloudEncoder, PoseWithCovarianceStampedEncoder, TFEncoder
 from twin.core.errors import TwinError
-from twin.msgs import PoseWithCovarianceStamped
 from twin.nav.amcl import Amcl, LaserGeometry
 from twin.nav.costmap import Costmap, scan_observation
 from twin.nav.frames import Frames, compose
@@ -69,26 +68,20 @@ class InitialPoseNode(Node):
 
     def __init__(self, pose: tuple[float, float, float], *, xy_variance_m2: float, yaw_variance_rad2: float) -> None:
         super().__init__("initial_pose")
-        pub = self.create_publisher(PoseWithCovarianceStamped, "/initialpose", 10)
+        pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "/initialpose", 10)
+        encode = PoseWithCovarianceStampedEncoder("map").encode
         log = self.get_logger()
-        clock = self.get_clock()
+        now = self._graph_now
         x, y, yaw = pose
 
         def on_timer() -> None:
             if pub.get_subscription_count() == 0:
                 return
-            msg = PoseWithCovarianceStamped()
-            msg.header.frame_id = "map"
-            msg.header.stamp = clock.now().to_msg()
-            msg.pose.pose.position.x = x
-            msg.pose.pose.position.y = y
-            msg.pose.pose.orientation.z = math.sin(yaw / 2.0)
-            msg.pose.pose.orientation.w = math.cos(yaw / 2.0)
             cov = [0.0] * 36
             cov[0] = cov[7] = xy_variance_m2
             cov[35] = yaw_variance_rad2
-            msg.pose.covariance = cov
-            pub.publish(msg)
+            # in process: (x, y, yaw, covariance, frame), as AMCL's subscription reads it
+            pub.publish(Encoded((encode, (now(), x, y, yaw, cov), (x, y, yaw, cov, "map"))))
             log.info(f"initial pose sent: x={x:.3f}, y={y:.3f}, yaw={yaw:.3f}")
             timer.cancel()
 
@@ -97,6 +90,9 @@ class InitialPoseNode(Node):
 
 
 def _pose_of(msg: Any) -> tuple[float, float, float, list[float], str]:
+    if type(msg) is Encoded:
+        x, y, yaw, cov, frame = msg[2]
+        return x, y, yaw, list(cov), frame
     p, q = msg.pose.pose.position, msg.pose.pose.orientation
     yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
     return float(p.x), float(p.y), yaw, [float(c) for c in msg.pose.covariance], str(msg.header.frame_id)
@@ -200,7 +196,9 @@ class AmclNode(Node):
 
         self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
         self.create_subscription("sensor_msgs/msg/LaserScan", "/scan", on_scan, 10, raw=True)
-        self.create_subscription(PoseWithCovarianceStamped, "/initialpose", on_initial_pose, 10)
+        self.create_subscription(
+            "geometry_msgs/msg/PoseWithCovarianceStamped", "/initialpose", on_initial_pose, 10, raw=True
+        )
 
 
 class CostmapNode(Node):

@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from twin.core.errors import ConfigError
+from twin.nav._native import load_kernel
 from twin.world.scene import Scene
 
 __all__ = ["MapMode", "OccupancyMap", "load_map", "map_from_scene", "save_map"]
@@ -303,6 +303,35 @@ def _rasterise(
     return occupied
 
 
+def _region_of(walls: NDArray[np.bool_], row: int, col: int) -> NDArray[np.bool_]:
+    """The 4-connected free region holding (row, col) (a C flood fill; scipy's labelling without a compiler)."""
+    lib = load_kernel()
+    if lib is None:
+        from scipy import ndimage
+
+        labels, _ = ndimage.label(~walls)
+        return np.asarray(labels == labels[row, col])
+    blocked = np.ascontiguousarray(walls, dtype=np.uint8)
+    region = np.empty(walls.shape, dtype=np.uint8)
+    if lib.twin_flood_fill(blocked.ctypes.data, walls.shape[0], walls.shape[1], row * walls.shape[1] + col,
+                           region.ctypes.data) < 0:  # fmt: skip
+        raise MemoryError("map from world: out of memory")
+    return region.astype(bool)
+
+
+def _dilated(region: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """The region grown by one cell in its 8-neighbourhood (a 3 x 3 binary dilation)."""
+    out = region.copy()
+    rows, cols = region.shape
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr == 0 and dc == 0:
+                continue
+            src = region[max(0, -dr) : rows - max(0, dr), max(0, -dc) : cols - max(0, dc)]
+            out[max(0, dr) : rows - max(0, -dr), max(0, dc) : cols - max(0, -dc)] |= src
+    return out
+
+
 def map_from_scene(
     scene: Scene,
     *,
@@ -343,7 +372,6 @@ def map_from_scene(
     cols = max(1, math.ceil((x_max - x_min) / resolution_m - 1e-9))
     rows = max(1, math.ceil((y_max - y_min) / resolution_m - 1e-9))
     walls = _rasterise(scene, height_m, (x_min, y_min), (rows, cols), resolution_m)
-    labels, count = ndimage.label(~walls)
     if free_xy_m is not None:
         col = math.floor((free_xy_m[0] - x_min) / resolution_m)
         row = math.floor((free_xy_m[1] - y_min) / resolution_m)
@@ -353,17 +381,21 @@ def map_from_scene(
                 "give a point the robot can stand on"
             )
             raise ConfigError(msg)
-        region = labels == labels[row, col]
-    elif count == 0:
-        region = np.zeros_like(walls)
+        region = _region_of(walls, row, col)
     else:
-        sizes = np.bincount(labels.ravel(), minlength=count + 1)
-        sizes[0] = 0
-        border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-        inner = sizes.copy()
-        inner[border] = 0
-        region = labels == int(np.argmax(inner if inner.any() else sizes))
-    seen_walls = walls & ndimage.binary_dilation(region, structure=np.ones((3, 3), dtype=bool))
+        from scipy import ndimage
+
+        labels, count = ndimage.label(~walls)
+        if count == 0:
+            region = np.zeros_like(walls)
+        else:
+            sizes = np.bincount(labels.ravel(), minlength=count + 1)
+            sizes[0] = 0
+            border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+            inner = sizes.copy()
+            inner[border] = 0
+            region = labels == int(np.argmax(inner if inner.any() else sizes))
+    seen_walls = walls & _dilated(region)
     data = np.full((rows, cols), -1, dtype=np.int8)
     data[region] = 0
     data[seen_walls] = 100

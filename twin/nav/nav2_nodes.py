@@ -21,6 +21,7 @@ The mission's `GoToPose` reaches the navigator through `Nav2Navigator` (send_goa
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -104,6 +105,14 @@ def _num(section: Mapping[str, Any], key: str, default: float, where: str) -> fl
         msg = f"{where}.{key}: expected a number, got {value!r}; fix the params file"
         raise ConfigError(msg)
     return float(value)
+
+
+def _flag(section: Mapping[str, Any], key: str, default: bool, where: str) -> bool:
+    value = section.get(key, default)
+    if not isinstance(value, bool):
+        msg = f"{where}.{key}: expected true or false, got {value!r}; fix the params file"
+        raise ConfigError(msg)
+    return value
 
 
 def _names(section: Mapping[str, Any], key: str, default: Sequence[str], where: str) -> tuple[str, ...]:
@@ -191,6 +200,9 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     used["bt_navigator"] = ["bt_loop_duration", "global_frame", "robot_base_frame", "odom_topic"]
     vs = params.node("velocity_smoother")
     vwhere = f"{src}: velocity_smoother"
+    if str(vs.get("feedback", "OPEN_LOOP")) != "OPEN_LOOP":
+        msg = f"{vwhere}.feedback: only OPEN_LOOP (Nav2's default) is implemented, got {vs['feedback']!r}"
+        raise ConfigError(msg)
     defaults = SmootherParams()
     smoother = SmootherParams(
         smoothing_frequency_hz=_num(vs, "smoothing_frequency", defaults.smoothing_frequency_hz, vwhere),
@@ -200,10 +212,11 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         max_decel=_triple(vs, "max_decel", defaults.max_decel, vwhere),
         deadband_velocity=_triple(vs, "deadband_velocity", defaults.deadband_velocity, vwhere),
         velocity_timeout_s=_num(vs, "velocity_timeout", defaults.velocity_timeout_s, vwhere),
+        scale_velocities=_flag(vs, "scale_velocities", defaults.scale_velocities, vwhere),
     )
     used["velocity_smoother"] = [
         "smoothing_frequency", "max_velocity", "min_velocity", "max_accel", "max_decel",
-        "deadband_velocity", "velocity_timeout", "feedback",
+        "deadband_velocity", "velocity_timeout", "feedback", "scale_velocities",
     ]  # fmt: skip
     bs = params.node("behavior_server")
     bwhere = f"{src}: behavior_server"
@@ -557,7 +570,9 @@ class Nav2Servers:
         request = dict(goal.request)
         if goal.server == "wait" and "time_s" not in request:
             request["time_s"] = request.get("wait_duration", 1.0)
-        behavior = make_behavior(goal.server, self.config.behaviors)
+        # the behaviours check the local costmap's footprint, as behavior_server reads it from that costmap
+        params = dataclasses.replace(self.config.behaviors, footprint=tuple(self.local_costmap.footprint))
+        behavior = make_behavior(goal.server, params)
         behavior.start(request, self.frames.odom_pose, t_ns)
         self._behavior, self._behavior_impl = gid, behavior
         self.recoveries += 1

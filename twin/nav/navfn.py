@@ -11,9 +11,11 @@ What carries over from Nav2 (facts in TB3_FACTS §4.3 and §4.8):
   (Nav2's `clearRobotCell`). Propagation stops when the goal cell is settled.
 - Tolerance: when the goal cell has no potential, the reachable node nearest the goal within
   `tolerance_m` (scanned on a grid of one cell) becomes the path's end.
-- Path: gradient descent on the potential from the end back to the robot in half-cell steps (a
-  lowest-neighbour step where the potential is not defined around the point or oscillates),
-  reversed; the goal replaces the last point if it is closer to the one before, else is appended.
+- Path: NavFn's calcPath: gradient descent on the potential from the end back to the robot in
+  half-cell steps (a lowest-neighbour step where the potential is not defined around the point or
+  the path oscillates), done when the nearest node has a potential below 50 (the robot's node is
+  then the last point), at most 4 x the costmap's larger side steps; reversed; the goal replaces
+  the last point if it is closer to the one before, else is appended.
   Middle poses carry identity orientation (yaw 0), the last pose the goal's yaw.
 - Grid nodes: as Humble's NavfnPlanner, world -> node by rounding (x - origin) / resolution and
   node -> world as origin + node * resolution (a node sits on a cell's corner, not its centre).
@@ -173,18 +175,18 @@ class NavfnPlanner:
                 message=f"no path to ({goal[0]:.2f}, {goal[1]:.2f}) within {self.params.tolerance_m} m",
             )
         ex, ey = end
-        trace = self._trace(pot, cost, nx=nx, ny=ny, start=self._node_index(costmap, ex, ey, nx), max_cycles=4 * nx)
+        max_cycles = 4 * max(nx, ny)
+        trace = self._trace(
+            pot, cost, nx=nx, ny=ny, start=self._node_index(costmap, ex, ey, nx), goal=source, max_cycles=max_cycles
+        )
         if trace is None:
             return PlanFailure(
                 reason=PlanFailureReason.NO_VALID_PATH,
                 message=f"the path to ({goal[0]:.2f}, {goal[1]:.2f}) could not be traced on the potential",
             )
-        cells = np.vstack([trace, [[s_node[0], s_node[1]]]])[::-1]
+        cells = trace[::-1]  # from the robot's node to the plan's end
         xy = np.column_stack([costmap.origin_x_m + cells[:, 0] * res, costmap.origin_y_m + cells[:, 1] * res])
         xy = _approach(xy, np.array([ex, ey]))
-        keep = np.ones(len(xy), dtype=bool)
-        keep[1:] = np.any(np.diff(xy, axis=0) != 0.0, axis=1)  # drop exact repeats (the end on a node)
-        xy = xy[keep]
         poses = np.zeros((len(xy), 3))
         poses[:, :2] = xy
         poses[-1, 2] = goal[2]
@@ -209,6 +211,9 @@ class NavfnPlanner:
         self, costmap: CostGrid, pot: NDArray[np.float64], nx: int, ny: int, goal: tuple[float, float, float]
     ) -> tuple[float, float] | None:
         """The goal if it has a potential, else the nearest point within tolerance that has one."""
+        g_node = self._node(costmap, goal[0], goal[1])
+        if g_node is not None and pot[g_node[1] * nx + g_node[0]] < POT_HIGH:
+            return goal[0], goal[1]
         res = costmap.resolution_m
         tol = self.params.tolerance_m
         steps = np.arange(-tol, tol + 1e-9, res)
@@ -221,9 +226,6 @@ class NavfnPlanner:
         d2 = (gx - goal[0]) ** 2 + (gy - goal[1]) ** 2
         idx = np.where(inside, my * nx + mx, 0)
         ok = inside & (pot[idx] < POT_HIGH) & (d2 <= tol * tol + 1e-12)
-        g_node = self._node(costmap, goal[0], goal[1])
-        if g_node is not None and pot[g_node[1] * nx + g_node[0]] < POT_HIGH:
-            return goal[0], goal[1]
         if not ok.any():
             return None
         flat = np.where(ok, d2, np.inf).ravel()
@@ -256,10 +258,18 @@ class NavfnPlanner:
         return pot
 
     def _trace(
-        self, pot: NDArray[np.float64], cost: NDArray[np.uint8], *, nx: int, ny: int, start: int, max_cycles: int
+        self,
+        pot: NDArray[np.float64],
+        cost: NDArray[np.uint8],
+        *,
+        nx: int,
+        ny: int,
+        start: int,
+        goal: int,
+        max_cycles: int,
     ) -> NDArray[np.float64] | None:
         if self._kernel is None:
-            return _trace_py(pot, nx, ny, start, max_cycles)
+            return _trace_py(pot, nx=nx, ny=ny, start=start, goal=goal, max_cycles=max_cycles)
         import ctypes
 
         out = np.empty((max_cycles, 2))
@@ -270,6 +280,7 @@ class NavfnPlanner:
             nx,
             ny,
             start,
+            goal,
             max_cycles,
             out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
             max_cycles,
@@ -342,6 +353,9 @@ def _potential_py(
 
 
 def _gradient(pot: NDArray[np.float64], nx: int, n: int) -> tuple[float, float]:
+    """NavFn's gradCell: the normalised descent direction at a cell (0 on the grid's first and last rows)."""
+    if n < nx or n > len(pot) - nx:
+        return 0.0, 0.0
     cv = float(pot[n])
     dx = dy = 0.0
     if cv >= POT_HIGH:
@@ -364,57 +378,62 @@ def _gradient(pot: NDArray[np.float64], nx: int, n: int) -> tuple[float, float]:
             dy += cv - float(pot[n + nx])
     norm = math.sqrt(dx * dx + dy * dy)
     if norm > 0.0:
-        dx /= norm
-        dy /= norm
+        norm = 1.0 / norm
+        dx *= norm
+        dy *= norm
     return dx, dy
 
 
-def _trace_py(pot: NDArray[np.float64], nx: int, ny: int, start: int, max_cycles: int) -> NDArray[np.float64] | None:
+def _trace_py(
+    pot: NDArray[np.float64], *, nx: int, ny: int, start: int, goal: int, max_cycles: int
+) -> NDArray[np.float64] | None:
+    """NavFn's calcPath (see the C kernel): the points from `start` down to the source node `goal`."""
+    ns = nx * ny
     stc = start
     dx = dy = 0.0
     points: list[tuple[float, float]] = []
     ring = (-nx - 1, -nx, -nx + 1, -1, 1, nx - 1, nx, nx + 1)
     for _ in range(max_cycles):
-        cx, cy = stc % nx, stc // nx
-        if cx < 1 or cy < 1 or cx > nx - 2 or cy > ny - 2:
-            return None
-        points.append((cx + dx, cy + dy))
-        if pot[stc] < COST_NEUTRAL:
+        near = min(max(stc + round(dx) + int(nx * round(dy)), 0), ns - 1)
+        if pot[near] < COST_NEUTRAL:
+            points.append((float(goal % nx), float(goal // nx)))
             return np.array(points)
+        if stc < nx or stc > ns - nx:
+            return None
+        points.append((stc % nx + dx, stc // nx + dy))
         oscillating = len(points) > 2 and points[-1] == points[-3]
         high = pot[stc] >= POT_HIGH or any(pot[stc + r] >= POT_HIGH for r in ring)
         if high or oscillating:
-            best, bp = stc, float(pot[stc])
+            best, bp = stc, float(int(pot[stc]))  # NavFn keeps the running minimum in an int
             for r in ring:
                 if pot[stc + r] < bp:
-                    bp, best = float(pot[stc + r]), stc + r
-            if bp >= POT_HIGH or best == stc:
-                return None
+                    bp, best = float(int(pot[stc + r])), stc + r
             stc, dx, dy = best, 0.0, 0.0
+            if pot[stc] >= POT_HIGH:
+                return None
             continue
         g0, g1, g2, g3 = (_gradient(pot, nx, c) for c in (stc, stc + 1, stc + nx, stc + nx + 1))
         x1 = (1.0 - dx) * g0[0] + dx * g1[0]
         x2 = (1.0 - dx) * g2[0] + dx * g3[0]
+        x = (1.0 - dy) * x1 + dy * x2
         y1 = (1.0 - dx) * g0[1] + dx * g1[1]
         y2 = (1.0 - dx) * g2[1] + dx * g3[1]
-        x = (1.0 - dy) * x1 + dy * x2
         y = (1.0 - dy) * y1 + dy * y2
-        norm = math.sqrt(x * x + y * y)
-        if norm == 0.0:
+        if x == 0.0 and y == 0.0:
             return None
-        scale = 0.5 / norm
-        dx += x * scale
-        dy += y * scale
-        if dx >= 1.0:
+        ss = 0.5 / math.sqrt(x * x + y * y)
+        dx += x * ss
+        dy += y * ss
+        if dx > 1.0:
             stc += 1
             dx -= 1.0
-        if dx < 0.0:
+        if dx < -1.0:
             stc -= 1
             dx += 1.0
-        if dy >= 1.0:
+        if dy > 1.0:
             stc += nx
             dy -= 1.0
-        if dy < 0.0:
+        if dy < -1.0:
             stc -= nx
             dy += 1.0
     return None

@@ -14,8 +14,6 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from twin.nav.grid import NavGrid
 
@@ -44,6 +42,8 @@ class GridPlanner:
         cost_scaling_factor: float = 3.0,
         tolerance_m: float = 0.5,
     ) -> None:
+        from scipy.sparse import coo_matrix
+
         self.grid = grid
         self.robot_radius_m = robot_radius_m
         self.tolerance_m = tolerance_m
@@ -105,6 +105,8 @@ class GridPlanner:
 
     def plan(self, start_xy_m: tuple[float, float], goal_xy_m: tuple[float, float]) -> list[tuple[float, float]] | None:
         """Return waypoints from start to goal (the goal last, as given), or None if there is no path."""
+        from scipy.sparse.csgraph import dijkstra
+
         start, goal = self._snap(*start_xy_m), self._snap(*goal_xy_m)
         if start is None or goal is None:
             return None

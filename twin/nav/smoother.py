@@ -3,11 +3,13 @@
 TB3's yaml has no velocity_smoother section, so Nav2's code defaults hold (TB3_FACTS §4.2):
 max_velocity [0.5, 0, 2.5], min [-0.5, 0, -2.5], max_accel [2.5, 0, 3.2], max_decel [-2.5, 0,
 -3.2], deadband 0, velocity_timeout 1.0 s, scale_velocities false. Each cycle clamps the latest
-command to the velocity limits, zeroes values inside the deadband, and moves the last output (open
-loop: the smoother's own previous command is the current velocity) towards it by at most one cycle
-of acceleration (accelerating while the speed grows without changing sign, else decelerating).
-Without a command for `velocity_timeout_s` it ramps the target to zero and, once the output is zero,
-stops publishing (`step` returns None).
+command to the velocity limits and moves the last output (open loop: the smoother's own previous
+command is the current velocity) towards it by at most one cycle of acceleration (accelerating
+while the speed grows without changing sign, else decelerating); with `scale_velocities` every
+component moves by the same fraction of its change, the one the most constrained component allows.
+What is published has values inside the deadband zeroed (the next cycle starts from the value
+before). Without a command for `velocity_timeout_s` it ramps the target to zero and, once the
+output is zero, stops publishing (`step` returns None).
 """
 
 from __future__ import annotations
@@ -28,14 +30,29 @@ class SmootherParams:
     max_decel: tuple[float, float] = (-2.5, -3.2)
     deadband_velocity: tuple[float, float] = (0.0, 0.0)
     velocity_timeout_s: float = 1.0
+    scale_velocities: bool = False
 
 
-def _limit(current: float, command: float, accel: float, decel: float, rate_hz: float) -> float:
+def _bounds(current: float, command: float, accel: float, decel: float, rate_hz: float) -> tuple[float, float]:
     if abs(command) >= abs(current) and current * command >= 0.0:
-        hi, lo = accel / rate_hz, -accel / rate_hz
-    else:
-        hi, lo = -decel / rate_hz, decel / rate_hz
-    return current + min(max(command - current, lo), hi)
+        return -accel / rate_hz, accel / rate_hz
+    return decel / rate_hz, -decel / rate_hz
+
+
+def _eta(current: float, command: float, accel: float, decel: float, rate_hz: float) -> float:
+    """findEtaConstraint: the fraction of the change one cycle allows (-1 when all of it)."""
+    lo, hi = _bounds(current, command, accel, decel, rate_hz)
+    dv = command - current
+    if dv > hi:
+        return hi / dv
+    if dv < lo:
+        return lo / dv
+    return -1.0
+
+
+def _limit(current: float, command: float, accel: float, decel: float, rate_hz: float, *, eta: float = 1.0) -> float:
+    lo, hi = _bounds(current, command, accel, decel, rate_hz)
+    return current + min(max(eta * (command - current), lo), hi)
 
 
 class VelocitySmoother:
@@ -51,11 +68,10 @@ class VelocitySmoother:
     def command(self, vx: float, wz: float, t_ns: int) -> None:
         """Take a new command (cmd_vel_nav) received at `t_ns`."""
         p = self.params
-        target = []
-        for i, raw in enumerate((vx, wz)):
-            v = min(max(raw, p.min_velocity[i]), p.max_velocity[i])
-            target.append(0.0 if abs(v) < p.deadband_velocity[i] else v)
-        self._target = (target[0], target[1])
+        self._target = (
+            min(max(vx, p.min_velocity[0]), p.max_velocity[0]),
+            min(max(wz, p.min_velocity[1]), p.max_velocity[1]),
+        )
         self._last_cmd_ns = t_ns
         self._stopped = False
 
@@ -71,8 +87,19 @@ class VelocitySmoother:
                 return None
             target = (0.0, 0.0)
         rate = p.smoothing_frequency_hz
+        out = self._out
+        eta = 1.0
+        if p.scale_velocities:
+            for i in (0, 1):
+                e = _eta(out[i], target[i], p.max_accel[i], p.max_decel[i], rate)
+                if e > 0.0 and abs(1.0 - e) > abs(1.0 - eta):
+                    eta = e
         self._out = (
-            _limit(self._out[0], target[0], p.max_accel[0], p.max_decel[0], rate),
-            _limit(self._out[1], target[1], p.max_accel[1], p.max_decel[1], rate),
+            _limit(out[0], target[0], p.max_accel[0], p.max_decel[0], rate, eta=eta),
+            _limit(out[1], target[1], p.max_accel[1], p.max_decel[1], rate, eta=eta),
         )
-        return self._out
+        vx, wz = self._out
+        return (
+            0.0 if abs(vx) < p.deadband_velocity[0] else vx,
+            0.0 if abs(wz) < p.deadband_velocity[1] else wz,
+        )

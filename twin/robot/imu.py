@@ -34,7 +34,6 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter
 
 from twin.core.clock import period_ns
 from twin.core.geometry import quat_from_rpy
@@ -155,6 +154,28 @@ class ImuReading(NamedTuple):
     linear_acceleration_z: float
 
 
+def _gauss_markov(
+    steps: NDArray[np.float64], phi: float, sigma_d: float, start: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Run `b[n] = phi * b[n-1] + sigma_d * w[n]` down each column of `steps` from `b[-1] = start`.
+
+    The same float operations, in the same order, as a first-order IIR filter in transposed direct
+    form (e.g. `scipy.signal.lfilter([sigma_d], [1, -phi], steps, axis=0, zi=phi * start)`), so the
+    drift is bit for bit what that call gives; written out because the recursion is one multiply-add
+    per sample and `scipy.signal` costs most of a second to import.
+    """
+    driven = (sigma_d * steps).T.tolist()  # per column: sigma_d * w[n]
+    out = np.empty_like(steps)
+    for col, (b0, column) in enumerate(zip(start.tolist(), driven, strict=True)):
+        z = phi * b0
+        for n, sw in enumerate(column):
+            b = z + sw
+            column[n] = b
+            z = phi * b
+        out[:, col] = column
+    return out
+
+
 class _ChannelNoise:
     """The additive error of the three axes of one channel, from one random stream, drawn in blocks."""
 
@@ -190,8 +211,7 @@ class _ChannelNoise:
         if self._drift_axes:
             steps = self._rng.standard_normal((_BLOCK, len(self._drift_axes)))
             for phi, sigma_d, axes, columns in self._drift_groups:
-                zi = (phi * self.bias[axes])[None, :]
-                biases[:, axes] = lfilter([sigma_d], [1.0, -phi], steps[:, columns], axis=0, zi=zi)[0]
+                biases[:, axes] = _gauss_markov(steps[:, columns], phi, sigma_d, self.bias[axes])
             self.bias = biases[-1].copy()
         return biases + self._mean, white + biases
 

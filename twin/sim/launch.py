@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import importlib
-import importlib.metadata
 import inspect
 import sys
 from collections.abc import Iterator
@@ -30,6 +29,8 @@ ENTRY_POINT_GROUP = "twin.nodes"
 
 def known_node_plugins() -> dict[str, str]:
     """Entry-point names of the `twin.nodes` group and what each points at (`module:Class`)."""
+    import importlib.metadata  # tens of ms to import: only when a scenario names its own nodes
+
     return {ep.name: ep.value for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}
 
 

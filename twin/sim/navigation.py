@@ -177,6 +177,8 @@ class NavigationStack:
                     )
                     raise ConfigError(msg)
                 initial = ((x, y, yaw), est.xy_variance_m2, est.yaw_variance_rad2)
+        if isinstance(sc.mission, BehaviorTreeMission) and sc.mission.locations is not None:
+            _check_locations_on_map(sc.mission.locations, occupancy)
         global_costmap = local_costmap = None
         config = None
         bt_xml = None
@@ -287,6 +289,23 @@ def _map_bounds(sc: Scenario, scene: Scene, *, margin_m: float = 1.0) -> tuple[f
         x0, y0 = min(x0, box[0][0] - pad), min(y0, box[0][1] - pad)
         x1, y1 = max(x1, box[1][0] + pad), max(y1, box[1][1] + pad)
     return (x0, y0, x1, y1)
+
+
+def _check_locations_on_map(path: Path, occupancy: OccupancyMap) -> None:
+    """Refuse a mission location the robot could never be sent to: one off the map."""
+    from twin.bt.mission_nodes import load_locations
+
+    try:
+        locations = load_locations(path)
+    except (OSError, ValueError, TypeError):
+        return  # the mission reports a file it cannot read itself
+    for name, pose in locations.items():
+        if occupancy.world_to_cell(pose.x_m, pose.y_m) is None:
+            msg = (
+                f"{path}: {name}: goal ({pose.x_m:.2f}, {pose.y_m:.2f}) lies outside the map "
+                f"({_extent(occupancy)}); move it onto the map or give a map that covers it"
+            )
+            raise ConfigError(msg)
 
 
 def _extent(occupancy: OccupancyMap) -> str:

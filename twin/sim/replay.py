@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.bag import open_bag, read_messages
 from twin.core.errors import BagError
 from twin.sim.scenario import ReplayMission
 
@@ -70,6 +69,8 @@ def _pose(msg: Any) -> tuple[float, float, float]:
 
 
 def _first(spec: ReplayMission) -> tuple[str, int, tuple[float, float, float], tuple[float, float], int]:
+    from twin.bag import open_bag, read_messages  # the bag readers load only for a replay
+
     info = open_bag(spec.bag)
     topics = {t.name: t.msgtype for t in info.topics}
     topic = _pose_topic(spec, topics)
@@ -102,6 +103,8 @@ def check_bag(spec: ReplayMission) -> dict[str, str]:
     Raises:
         BagError: If the bag is unreadable or lacks the command topic (or it is not a Twist).
     """
+    from twin.bag import open_bag
+
     bag = spec.bag
     info = open_bag(bag)
     topics = {t.name: t.msgtype for t in info.topics}
@@ -125,6 +128,8 @@ def load_commands(spec: ReplayMission) -> RecordedCommands:
         BagError: If the bag is unreadable, lacks the command topic (or it is not a Twist), or
             has no poses to start from.
     """
+    from twin.bag import read_messages
+
     bag: Path = spec.bag
     topics = check_bag(spec)
     pose_topic, t0_ns, pose, velocity, last_ns = _first(spec)

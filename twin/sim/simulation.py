@@ -33,7 +33,6 @@ from twin.nav import GridNavigator, GridPlanner, build_grid
 from twin.nav.mission_node import MissionNode
 from twin.nav.nav2_nodes import Nav2Navigator
 from twin.node import Node
-from twin.node.rosout import RosoutBridge
 from twin.robot.chassis import ChassisParams, SlipModel
 from twin.robot.drivetrain import Drivetrain, FmuDrive, FmuDrivetrain
 from twin.robot.encoders import EncoderModel, EncoderSpec
@@ -61,6 +60,7 @@ from twin.sim.obstacles import scenario_obstacles
 from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.replay import start_moving
 from twin.sim.rng import RngStreams
+from twin.sim.rosout import RosoutBridge
 from twin.sim.scenario import (
     BehaviorTreeMission,
     CmdVelScriptMission,

@@ -32,6 +32,9 @@ running it died (set by the client)."""
 KeepBags = Literal["failed", "none", "all"]
 
 _TERM_GRACE_S = 5.0  # after SIGTERM a run closes its bag; then it is killed
+# A run is one process on one core: numerical libraries must not start a thread per core, or runs
+# on neighbouring workers fight over the cores (Dask's nanny sets the same for its workers).
+_ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1"}
 _PR_SET_PDEATHSIG = 1
 
 
@@ -168,7 +171,7 @@ def _run(command: list[str], timeout_s: float, cwd: Path) -> tuple[str, str, int
         stderr=subprocess.PIPE,
         text=True,
         preexec_fn=preexec,  # noqa: PLW1509 - only prctl, async-signal-safe
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        env={**os.environ, **_ONE_THREAD, "PYTHONUNBUFFERED": "1"},
     ) as process:
         try:
             stdout, stderr = process.communicate(timeout=timeout_s)

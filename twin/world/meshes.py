@@ -3,20 +3,30 @@
 Mesh files are read as Gazebo reads them: COLLADA's `<unit meter=...>` scales the vertices (its
 `<up_axis>` is ignored, as Gazebo ignores it), `<submesh>` selects the geometry under the named
 COLLADA node (or the named OBJ/STL object) and may centre it, and `<scale>` applies last.
+
+Boxes and polylines (most of an indoor world) are tessellated with numpy; trimesh, which takes
+about half a second to import, loads only for mesh files, curved primitives and callers that ask
+for `trimesh.Trimesh` objects.
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import importlib.util
 import logging
+import os
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
-import trimesh
 from lxml import etree
+from numpy.typing import NDArray
 
 from twin.core.errors import WorldError
+from twin.core.native import cache_dir
 from twin.world.types import (
     Box,
     Capsule,
@@ -28,13 +38,71 @@ from twin.world.types import (
     Sphere,
 )
 
-__all__ = ["MeshCache", "geometry_mesh"]
+if TYPE_CHECKING:
+    import trimesh
+
+__all__ = ["MeshArrays", "MeshCache", "geometry_arrays", "geometry_mesh"]
 
 _log = logging.getLogger(__name__)
 
 # Tessellation of curved primitives where an exact shape is not needed (bounds, viewers, slices of
 # tilted shapes). Ray casting and collision use the exact shapes where they can.
 _SECTIONS = 48
+
+
+class MeshArrays(NamedTuple):
+    """A triangle mesh as plain arrays (no trimesh needed to hold one)."""
+
+    vertices: NDArray[np.float64]
+    """(N, 3) vertex positions, m."""
+    faces: NDArray[np.int64]
+    """(M, 3) vertex indices of each triangle, counter-clockwise seen from outside."""
+
+    def bounds(self) -> NDArray[np.float64]:
+        """Return the (2, 3) min and max corners of the vertices the faces use (as `trimesh.Trimesh.bounds`)."""
+        used = self.vertices
+        if len(self.faces):
+            referenced = np.zeros(len(used), dtype=bool)
+            referenced[self.faces.ravel()] = True
+            if not referenced.all():
+                used = used[referenced]
+        return np.array([used.min(axis=0), used.max(axis=0)])
+
+    def to_trimesh(self) -> trimesh.Trimesh:
+        """Return the mesh as a new `trimesh.Trimesh` (arrays copied, nothing merged or reordered)."""
+        import trimesh
+
+        return trimesh.Trimesh(vertices=self.vertices.copy(), faces=self.faces.copy(), process=False)
+
+
+def _unit_box() -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Return the corners of a unit cube centred on the origin and its 12 outward-facing triangles.
+
+    Corner `i` is at (-0.5 or +0.5) per axis from the bits of `i` (x the highest), the order trimesh
+    uses too; each face's quad is split along one diagonal.
+    """
+    corners = np.array([[(i >> 2) & 1, (i >> 1) & 1, i & 1] for i in range(8)], dtype=np.float64) - 0.5
+    faces: list[tuple[int, int, int]] = []
+    for axis in range(3):
+        u, v = [a for a in range(3) if a != axis]
+        for side in (0, 1):
+            # The quad's corners in order round the face: (u, v) = (0, 0), (1, 0), (1, 1), (0, 1).
+            quad = [
+                (side << (2 - axis)) | (bu << (2 - u)) | (bv << (2 - v)) for bu, bv in ((0, 0), (1, 0), (1, 1), (0, 1))
+            ]
+            for tri in ((quad[0], quad[1], quad[2]), (quad[0], quad[2], quad[3])):
+                a, b, c = corners[list(tri)]
+                outward = np.cross(b - a, c - a)[axis] * (1 if side else -1)
+                faces.append(tri if outward > 0 else (tri[0], tri[2], tri[1]))
+    return corners, np.array(faces, dtype=np.int64)
+
+
+_UNIT_BOX_VERTICES, _UNIT_BOX_FACES = _unit_box()
+
+
+def box_arrays(size_m: tuple[float, float, float]) -> MeshArrays:
+    """Return a box of the given edge lengths centred on the origin: 8 corners, 12 triangles."""
+    return MeshArrays(_UNIT_BOX_VERTICES * np.asarray(size_m, dtype=np.float64), _UNIT_BOX_FACES.copy())
 
 
 class MeshCache:
@@ -45,7 +113,7 @@ class MeshCache:
         self._units: dict[Path, float] = {}
         # Primitive shapes by value: a world of 10,000 equal boxes builds one box mesh (callers copy
         # before they transform, never change a mesh they are given).
-        self.primitives: dict[object, trimesh.Trimesh] = {}
+        self.primitives: dict[object, MeshArrays] = {}
 
     def scene(self, path: Path, where: str) -> tuple[trimesh.Scene, float]:
         """Return the file's meshes as a trimesh Scene and its unit scale (metres per unit).
@@ -53,6 +121,8 @@ class MeshCache:
         Raises:
             WorldError: If the file cannot be read as a mesh.
         """
+        import trimesh
+
         if path not in self._files:
             if path.suffix.lower() == ".stl":
                 _check_stl(path, where)
@@ -77,6 +147,8 @@ class MeshCache:
         if geometry.path is None:
             msg = f"{where}: mesh {geometry.uri!r} was not found"
             raise WorldError(msg)
+        import trimesh
+
         scene, unit = self.scene(geometry.path, where)
         if geometry.submesh:
             wanted = _submesh_geometry_names(geometry.path, geometry.submesh)
@@ -171,11 +243,65 @@ def _submesh_geometry_names(path: Path, name: str) -> set[str]:
     return out or {name}
 
 
-def _primitive_mesh(geometry: Box | Cylinder | Sphere | Capsule | Ellipsoid) -> trimesh.Trimesh:
+def _primitive_arrays(geometry: Box | Cylinder | Sphere | Capsule | Ellipsoid) -> MeshArrays:
+    if isinstance(geometry, Box):
+        return box_arrays(geometry.size_m)
+    path = _tessellation_path(geometry)
+    if path is not None:
+        try:
+            with path.open("rb") as stream:
+                vertices, faces = np.load(stream, allow_pickle=False), np.load(stream, allow_pickle=False)
+            return MeshArrays(vertices, faces)
+        except (OSError, ValueError, EOFError):
+            pass  # not there yet (or cut short): tessellate and store it
+    out = _arrays_of(_tessellate(geometry))
+    if path is not None:
+        _store(path, out)
+    return out
+
+
+def _tessellation_path(geometry: Cylinder | Sphere | Capsule | Ellipsoid) -> Path | None:
+    """Return where the tessellation of a curved primitive is cached, keyed by shape and trimesh's files.
+
+    trimesh tessellates curved shapes (and takes half a second to import); the same shape from the
+    same trimesh gives the same triangles, so they are kept in the cache folder as `.npy` arrays.
+    None when trimesh is not installed (tessellating then raises the ImportError).
+    """
+    spec = importlib.util.find_spec("trimesh")  # finds the package without importing it
+    if spec is None or spec.origin is None:
+        return None
+    creation = Path(spec.origin).with_name("creation.py")
+    try:
+        stat = creation.stat()
+    except OSError:
+        return None
+    key = f"{_SECTIONS}\0{geometry!r}\0{creation}\0{stat.st_mtime_ns}\0{stat.st_size}"
+    digest = hashlib.sha256(key.encode()).hexdigest()[:20]
+    return cache_dir() / "tessellations" / f"{type(geometry).__name__.lower()}-{digest}.npy"
+
+
+def _store(path: Path, mesh: MeshArrays) -> None:
+    """Write a tessellation into the cache in one step (a concurrent reader sees all of it or nothing)."""
+    staged: str | None = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".tmp-", delete=False) as stream:
+            staged = stream.name
+            np.save(stream, mesh.vertices, allow_pickle=False)
+            np.save(stream, mesh.faces, allow_pickle=False)
+        os.replace(staged, path)
+    except OSError as err:
+        _log.debug("cannot cache a tessellation in %s (%s)", path, err)
+        if staged is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(staged)
+
+
+def _tessellate(geometry: Cylinder | Sphere | Capsule | Ellipsoid) -> trimesh.Trimesh:
+    import trimesh
+
     out: Any
     match geometry:
-        case Box(size_m=size):
-            out = trimesh.creation.box(extents=size)
         case Cylinder(radius_m=r, length_m=length):
             out = trimesh.creation.cylinder(radius=r, height=length, sections=_SECTIONS)
         case Sphere(radius_m=r):
@@ -185,11 +311,18 @@ def _primitive_mesh(geometry: Box | Cylinder | Sphere | Capsule | Ellipsoid) -> 
         case Ellipsoid(radii_m=radii):
             out = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
             out.apply_scale(np.asarray(radii))
-    return out  # type: ignore[no-any-return]
+    mesh: trimesh.Trimesh = out
+    return mesh
 
 
-def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trimesh.Trimesh | None:
-    """Return a triangle mesh of a geometry in its own frame (None for infinite planes).
+def _arrays_of(mesh: trimesh.Trimesh) -> MeshArrays:
+    return MeshArrays(np.array(mesh.vertices, dtype=np.float64), np.array(mesh.faces, dtype=np.int64))
+
+
+def geometry_arrays(geometry: Geometry, cache: MeshCache, where: str = "") -> MeshArrays | None:
+    """Return a triangle mesh of a geometry in its own frame as arrays (None for infinite planes).
+
+    The arrays of a primitive are shared by every equal primitive of the cache: copy before changing.
 
     Raises:
         WorldError: If a mesh file cannot be used.
@@ -197,19 +330,28 @@ def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trim
     if isinstance(geometry, Box | Cylinder | Sphere | Capsule | Ellipsoid):
         cached = cache.primitives.get(geometry)
         if cached is None:
-            cached = _primitive_mesh(geometry)
+            cached = _primitive_arrays(geometry)
             cache.primitives[geometry] = cached
         return cached
-    out: Any = None
     match geometry:
         case Polyline():
-            out = polyline_mesh(geometry)
+            return polyline_arrays(geometry)
         case Mesh():
-            out = cache.mesh(geometry, where)
-    return out if isinstance(out, trimesh.Trimesh) else None
+            return _arrays_of(cache.mesh(geometry, where))
+    return None
 
 
-def polyline_mesh(geometry: Polyline) -> trimesh.Trimesh:
+def geometry_mesh(geometry: Geometry, cache: MeshCache, where: str = "") -> trimesh.Trimesh | None:
+    """Return a triangle mesh of a geometry in its own frame as a new `trimesh.Trimesh` (None for planes).
+
+    Raises:
+        WorldError: If a mesh file cannot be used.
+    """
+    arrays = geometry_arrays(geometry, cache, where)
+    return arrays.to_trimesh() if arrays is not None else None
+
+
+def polyline_arrays(geometry: Polyline) -> MeshArrays:
     """Return the extruded polygons of a polyline as a closed triangle mesh (ear-clipped caps)."""
     vertices: list[tuple[float, float, float]] = []
     faces: list[tuple[int, int, int]] = []
@@ -227,7 +369,9 @@ def polyline_mesh(geometry: Polyline) -> trimesh.Trimesh:
         for a, b, c in _ear_clip(pts):
             faces.append((base + a, base + c, base + b))
             faces.append((base + n + a, base + n + b, base + n + c))
-    return trimesh.Trimesh(vertices=np.array(vertices), faces=np.array(faces), process=False)
+    return MeshArrays(
+        np.array(vertices, dtype=np.float64).reshape(-1, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
+    )
 
 
 def _ccw(points: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:

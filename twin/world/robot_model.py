@@ -23,7 +23,7 @@ import numpy as np
 from twin.core.errors import WorldError
 from twin.core.geometry import Mat4, Pose, pose_from_matrix
 from twin.world._xml import XmlNode
-from twin.world.meshes import MeshCache, geometry_mesh
+from twin.world.meshes import MeshCache, geometry_arrays
 from twin.world.sdf import load_model
 from twin.world.types import (
     Box,
@@ -382,7 +382,7 @@ def _lowest_z(collision: Collision, T: Mat4, cache: MeshCache) -> float:
             return cz - abs(float(rz[2])) * length / 2 - r
         case Ellipsoid(radii_m=radii):
             return cz - math.sqrt(sum((float(rz[i]) * radii[i]) ** 2 for i in range(3)))
-    mesh = geometry_mesh(collision.geometry, cache, collision.where)
+    mesh = geometry_arrays(collision.geometry, cache, collision.where)
     if mesh is None:
         return math.inf
     return float((mesh.vertices @ T[:3, :3].T + T[:3, 3])[:, 2].min())

@@ -1,9 +1,10 @@
-"""The Scene: the world's obstacles as trimesh meshes, FCL objects and 2D slices for ray casting.
+"""The Scene: the world's obstacles as triangle meshes, FCL objects and 2D slices for ray casting.
 
 Built once from a `World` at start-up:
 
 - every collision except infinite planes and floor-level slabs becomes an obstacle, with a
-  trimesh mesh in the world frame and a python-fcl collision object (primitives stay primitives);
+  triangle mesh in the world frame (`Scene.meshes()` gives them as trimesh meshes) and a
+  python-fcl collision object (primitives stay primitives);
 - `ray_caster(height_m)` cuts the obstacles with a horizontal plane into 2D segments and circles,
   analytic where the shape allows (upright boxes, cylinders, spheres, capsules, polylines; any mesh
   by exact plane intersection), and answers vectorised ray casts over all beams at once;
@@ -21,17 +22,16 @@ import logging
 import math
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import fcl
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
 from twin.core.errors import WorldError
 from twin.core.geometry import Mat4
 from twin.world._native import load_kernel
-from twin.world.meshes import MeshCache, geometry_mesh
+from twin.world.meshes import MeshArrays, MeshCache, geometry_arrays
 from twin.world.types import (
     Box,
     Capsule,
@@ -45,6 +45,9 @@ from twin.world.types import (
     World,
     geometry_kind,
 )
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["CollisionMonitor", "Contact", "RayCaster", "RobotBody", "Scene", "build_scene", "obstacle_extent"]
 
@@ -74,7 +77,8 @@ class Contact(NamedTuple):
 @dataclass(frozen=True, kw_only=True, slots=True, eq=False)
 class _Obstacle:
     collision: Collision
-    mesh: trimesh.Trimesh
+    mesh: MeshArrays  # in the world frame
+    bounds: F64  # (2, 3): the mesh's min and max corners
     fcl_object: fcl.CollisionObject
     fcl_geometry: fcl.CollisionGeometry
 
@@ -86,7 +90,7 @@ def _fcl_transform(mat: Mat4) -> fcl.Transform:
     return fcl.Transform(np.ascontiguousarray(mat[:3, :3]), np.ascontiguousarray(mat[:3, 3]))
 
 
-def _fcl_geometry(geometry: Geometry, mesh: trimesh.Trimesh | None) -> fcl.CollisionGeometry | None:
+def _fcl_geometry(geometry: Geometry, mesh: MeshArrays | None) -> fcl.CollisionGeometry | None:
     match geometry:
         case Box(size_m=size):
             return fcl.Box(*size)
@@ -167,7 +171,7 @@ def _section(
 ) -> tuple[list[tuple[float, float, float, float]], list[tuple[float, float, float]]]:
     """Return the segments and circles where the plane at height z cuts one obstacle."""
     geometry, T = obstacle.collision.geometry, obstacle.collision.T_world
-    bounds = obstacle.mesh.bounds
+    bounds = obstacle.bounds
     if not (bounds[0, 2] - 1e-9 <= z <= bounds[1, 2] + 1e-9) and not isinstance(geometry, (Sphere, Capsule, Cylinder)):
         return [], []
     dz = z - float(T[2, 3])
@@ -197,7 +201,9 @@ def _section(
                 pts = [T[:2, :2] @ np.array(p) + T[:2, 3] for p in polygon]
                 segs.extend((*pts[i], *pts[(i + 1) % len(pts)]) for i in range(len(pts)))
             return segs, []
-    lines = trimesh.intersections.mesh_plane(obstacle.mesh, [0.0, 0.0, 1.0], [0.0, 0.0, z])  # type: ignore[no-untyped-call]
+    import trimesh
+
+    lines = trimesh.intersections.mesh_plane(obstacle.mesh.to_trimesh(), [0.0, 0.0, 1.0], [0.0, 0.0, z])  # type: ignore[no-untyped-call]
     return [(float(a[0]), float(a[1]), float(b[0]), float(b[1])) for a, b in lines], []
 
 
@@ -556,7 +562,7 @@ class RobotBody:
         z_lo, z_hi = math.inf, -math.inf
         self.base_height_m = base_height_m
         for collision in collisions:
-            mesh = geometry_mesh(collision.geometry, cache, collision.where)
+            mesh = geometry_arrays(collision.geometry, cache, collision.where)
             geometry = _fcl_geometry(collision.geometry, mesh)
             if geometry is None or mesh is None:
                 continue
@@ -621,15 +627,15 @@ class Scene:
 
     def meshes(self) -> tuple[trimesh.Trimesh, ...]:
         """The obstacles as triangle meshes in the world frame (copies)."""
-        return tuple(o.mesh.copy() for o in self._obstacles)
+        return tuple(o.mesh.to_trimesh() for o in self._obstacles)
 
     @property
     def bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
         """Axis-aligned bounds of all obstacles ((xmin, ymin, zmin), (xmax, ymax, zmax)), or None."""
         if not self._obstacles:
             return None
-        lo = np.min([o.mesh.bounds[0] for o in self._obstacles], axis=0)
-        hi = np.max([o.mesh.bounds[1] for o in self._obstacles], axis=0)
+        lo = np.min([o.bounds[0] for o in self._obstacles], axis=0)
+        hi = np.max([o.bounds[1] for o in self._obstacles], axis=0)
         return (float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]), float(hi[2]))
 
     def ray_caster(self, height_m: float, *, cell_m: float = 1.0, native: bool = True) -> RayCaster:
@@ -819,7 +825,7 @@ class CollisionMonitor:
 
 def _placed_obstacles(
     world: World, exclude_models: Iterable[str], floor_height_m: float, cache: MeshCache
-) -> Iterator[tuple[Collision, trimesh.Trimesh, F64]]:
+) -> Iterator[tuple[Collision, MeshArrays, F64]]:
     """Yield (collision, mesh in its own frame, its world-frame vertices) of every obstacle of `world`.
 
     Planes, shapes with no mesh and floor-level shapes (top at or below `floor_height_m`) are left out.
@@ -837,11 +843,11 @@ def _placed_obstacles(
             for collision in link.collisions:
                 if isinstance(collision.geometry, Plane):
                     continue
-                local = geometry_mesh(collision.geometry, cache, collision.where)
+                local = geometry_arrays(collision.geometry, cache, collision.where)
                 if local is None:
                     continue
                 T = np.asarray(collision.T_world)
-                vertices = local.vertices.view(np.ndarray) @ T[:3, :3].T + T[:3, 3]
+                vertices = local.vertices @ T[:3, :3].T + T[:3, 3]
                 if vertices[:, 2].max() <= floor_height_m:
                     skipped_floor += 1
                     continue
@@ -886,11 +892,12 @@ def build_scene(world: World, *, exclude_models: Iterable[str] = (), floor_heigh
         geometry = _fcl_geometry(collision.geometry, local)
         if geometry is None:
             continue
-        mesh = trimesh.Trimesh(vertices=vertices, faces=local.faces, process=False)
+        mesh = MeshArrays(vertices, local.faces)
         obstacles.append(
             _Obstacle(
                 collision=collision,
                 mesh=mesh,
+                bounds=mesh.bounds(),
                 fcl_object=fcl.CollisionObject(geometry, _fcl_transform(collision.T_world)),
                 fcl_geometry=geometry,
             )

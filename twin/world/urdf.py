@@ -10,7 +10,6 @@ frames' fixed transforms; wheel joints are `continuous`, SDF ball joints become 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -19,6 +18,23 @@ from twin.world.robot_model import FrameSpec, RobotModelSpec
 from twin.world.types import Box, Capsule, Cylinder, Ellipsoid, Geometry, JointType, Mesh, Sphere, inverse
 
 __all__ = ["urdf_from_robot"]
+
+_ESCAPES = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;", "\n": "&#10;", "\r": "&#13;", "\t": "&#9;"})
+
+
+def _quoteattr(text: str) -> str:
+    """Return `text` as a quoted XML attribute value, as `xml.sax.saxutils.quoteattr` writes it.
+
+    `&`, `<`, `>` and line breaks and tabs become entities; the value is put in double quotes, in
+    single quotes if it holds a double quote but no single one, else its double quotes become
+    `&quot;`. Written here because `xml.sax.saxutils` imports `urllib.request` (tens of ms).
+    """
+    text = text.translate(_ESCAPES)
+    if '"' not in text:
+        return f'"{text}"'
+    if "'" not in text:
+        return f"'{text}'"
+    return '"{}"'.format(text.replace('"', "&quot;"))
 
 
 def _num(value: float) -> str:
@@ -48,7 +64,7 @@ def _geometry(geometry: Geometry) -> str | None:
         case Ellipsoid(radii_m=radii):
             return f'<sphere radius="{_num(max(radii))}"/>'
         case Mesh(path=path, scale=scale) if path is not None:
-            return f'<mesh filename={quoteattr(path.resolve().as_uri())} scale="{" ".join(_num(v) for v in scale)}"/>'
+            return f'<mesh filename={_quoteattr(path.resolve().as_uri())} scale="{" ".join(_num(v) for v in scale)}"/>'
     return None
 
 
@@ -79,9 +95,9 @@ def urdf_from_robot(robot: RobotModelSpec) -> str:
             color = ""
             if visual.color_rgba is not None:
                 rgba = " ".join(_num(v) for v in visual.color_rgba)
-                color = f'<material name={quoteattr(f"{link.name}_{visual.name}")}><color rgba="{rgba}"/></material>'
+                color = f'<material name={_quoteattr(f"{link.name}_{visual.name}")}><color rgba="{rgba}"/></material>'
             body[host].append(
-                f"    <visual name={quoteattr(visual.name)}>{_origin(T_frame_link @ np.asarray(visual.T_link))}"
+                f"    <visual name={_quoteattr(visual.name)}>{_origin(T_frame_link @ np.asarray(visual.T_link))}"
                 f"<geometry>{shape}</geometry>{color}</visual>"
             )
         for collision in link.collisions:
@@ -89,11 +105,11 @@ def urdf_from_robot(robot: RobotModelSpec) -> str:
             if shape is None:
                 continue
             body[host].append(
-                f"    <collision name={quoteattr(collision.name)}>"
+                f"    <collision name={_quoteattr(collision.name)}>"
                 f"{_origin(T_frame_link @ np.asarray(collision.T_link))}"
                 f"<geometry>{shape}</geometry></collision>"
             )
-    lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>"]
+    lines = ['<?xml version="1.0"?>', f"<robot name={_quoteattr(robot.name)}>"]
     for name in frames:
         lines.extend(_link(name, body[name]))
     lines.extend(_joint(spec) for spec in robot.frames)
@@ -104,8 +120,8 @@ def urdf_from_robot(robot: RobotModelSpec) -> str:
 def _link(name: str, contents: Iterable[str]) -> list[str]:
     items = list(contents)
     if not items:
-        return [f"  <link name={quoteattr(name)}/>"]
-    return [f"  <link name={quoteattr(name)}>", *items, "  </link>"]
+        return [f"  <link name={_quoteattr(name)}/>"]
+    return [f"  <link name={_quoteattr(name)}>", *items, "  </link>"]
 
 
 def _joint(frame: FrameSpec) -> str:
@@ -121,6 +137,6 @@ def _joint(frame: FrameSpec) -> str:
     if urdf_type == "prismatic":
         axis_xml += '<limit lower="-1e9" upper="1e9" effort="0" velocity="0"/>'
     return (
-        f'  <joint name={quoteattr(name)} type="{urdf_type}"><parent link={quoteattr(frame.parent)}/>'
-        f"<child link={quoteattr(frame.name)}/>{_origin(np.asarray(frame.T_parent))}{axis_xml}</joint>"
+        f'  <joint name={_quoteattr(name)} type="{urdf_type}"><parent link={_quoteattr(frame.parent)}/>'
+        f"<child link={_quoteattr(frame.name)}/>{_origin(np.asarray(frame.T_parent))}{axis_xml}</joint>"
     )

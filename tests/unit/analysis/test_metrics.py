@@ -91,10 +91,11 @@ def test_twin_bag_localization_error_matches_interpolated_truth(twin_bag: Path) 
 
 
 def test_twin_bag_goals_come_from_the_tree_log(twin_bag: Path) -> None:
+    # the mission's tree (bt_navigator's is on /behavior_tree_log)
     m = run_metrics(twin_bag)
     changes = [
         (m_.t_ns, e.node_name, e.current_status)
-        for m_ in read_messages(twin_bag, ["/behavior_tree_log"])
+        for m_ in read_messages(twin_bag, ["/mission/behavior_tree_log"])
         for e in m_.msg.event_log
     ]
     succeeded = [name for _, name, status in changes if name.startswith("go_to") and status == "SUCCESS"]

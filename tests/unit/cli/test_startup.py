@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -90,3 +91,52 @@ def test_fmu_profiles_spelled_in_the_cli_match_the_contract() -> None:
     from twin.cosim.contract import Profile
 
     assert tuple(p.value for p in Profile) == PROFILES
+
+
+# What a default run does not use, so its first step must not wait for their import (each costs
+# 0.02 s to 1 s): trimesh (the house is boxes), scipy.signal and scipy.stats (the IMU's drift is
+# computed without them), the bag readers (a run only writes), urllib (URDF quoting), filterpy (the
+# reference EKF), plots, Dask.
+NOT_FOR_A_DEFAULT_RUN = (
+    "trimesh",
+    "scipy.signal",
+    "scipy.stats",
+    "rosbags.rosbag2",
+    "twin.bag.reader",
+    "urllib.request",
+    "filterpy",
+    "control",
+    "matplotlib",
+    "dask",
+    "distributed",
+)
+
+_FIRST_STEP = """
+from pathlib import Path
+from twin.sim.scenario import default_scenario_path, load_scenario
+from twin.sim.simulation import Simulation
+
+class _First(Exception):
+    pass
+
+def _stop(sim_s, messages):
+    raise _First
+
+with Simulation(load_scenario({scenario}), bag_path=Path({bag!r}), duration_s=1.0) as sim:
+    try:
+        sim.run(progress=_stop)
+    except _First:
+        pass
+"""
+
+
+@pytest.mark.parametrize("scenario", ["default", "house_grid"])
+def test_a_run_reaches_its_first_step_without_the_libraries_it_does_not_use(scenario: str, tmp_path: Path) -> None:
+    path = (
+        "default_scenario_path()"
+        if scenario == "default"
+        else f"Path({str(REPO / 'scenarios' / scenario)!r} + '.yaml')"
+    )
+    modules = _imported_by(_FIRST_STEP.format(scenario=path, bag=str(tmp_path / "bag")))
+    assert "twin.sim.simulation" in modules
+    assert sorted(m for m in modules if m in NOT_FOR_A_DEFAULT_RUN or m.split(".")[0] in NOT_FOR_A_DEFAULT_RUN) == []

@@ -14,7 +14,7 @@ from twin.core.config import load_config
 from twin.core.errors import ConfigError, EstimationError
 from twin.estimation import EstimationSection, OdometryFilter
 from twin.estimation.config import MeasurementNoise, ProcessNoise
-from twin.estimation.ekf import UNOBSERVED_VARIANCE, SolvedEkf
+from twin.estimation.ekf import UNOBSERVED_VARIANCE, SolvedEkf, chi2_3_quantile
 
 R, B = WHEEL_RADIUS_M, WHEEL_SEPARATION_M
 DT_NS = 33_333_333
@@ -95,6 +95,15 @@ def test_the_gyro_owns_the_yaw_while_the_wheels_turn() -> None:
     assert fused.estimate.yaw_rad == pytest.approx(0.0, abs=1e-3)
     assert wheels_only.estimate.yaw_rad == pytest.approx(1.0, abs=1e-3)
     assert abs(fused.estimate.gyro_bias_radps) < 1e-4  # the slip did not leak into the bias
+
+
+@pytest.mark.parametrize("p", [0.9, 0.95, 0.99, 0.995, 0.999, 0.9999, 0.97, 0.5])
+def test_the_slip_gate_is_scipys_chi_square_quantile_to_the_bit(p: float) -> None:
+    # Usual gate probabilities are answered without importing scipy; every answer must be what
+    # scipy.stats.chi2(3).ppf gives, or runs would change with the gate setting's spelling.
+    from scipy.stats import chi2
+
+    assert chi2_3_quantile(p) == float(chi2(3).ppf(p))
 
 
 def test_a_robot_turned_at_standstill_trips_the_slip_gate() -> None:

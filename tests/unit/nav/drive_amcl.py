@@ -67,6 +67,7 @@ def drive(
     cov: float = 0.25,
     yaw_var: float = 0.0685,
     odom_noise: float = 0.02,
+    native: bool = True,
 ) -> Run:
     scene, occupancy = world()
     robot = load_robot("turtlebot3_waffle", model_path=[REPO / "sdf" / "models"])
@@ -74,7 +75,7 @@ def drive(
     lidar = Lidar.from_robot(robot, scene, np.random.default_rng(seed + 1000))
     spec = lidar.spec
     laser = LaserGeometry.from_spec(spec)
-    amcl = Amcl(amcl_params(), occupancy, laser, np.random.default_rng(seed + 2000))
+    amcl = Amcl(amcl_params(), occupancy, laser, np.random.default_rng(seed + 2000), native=native)
     amcl.set_initial_pose(*initial, np.diag([cov, cov, yaw_var]))
     truth = path_poses(duration_s)
     odom = np.zeros(3)

@@ -262,3 +262,38 @@ def test_the_c_kernel_and_numpy_clear_the_same_cells(tmp_path: Path) -> None:
             native.update(*pose, [observation])
             numpy_only.update(*pose, [observation])
             assert np.array_equal(native.grid.cost, numpy_only.grid.cost)
+
+
+@pytest.mark.parametrize(
+    ("inflate_unknown", "around_unknown", "resolution_m"),
+    [(False, False, 0.05), (True, False, 0.05), (False, True, 0.05), (True, True, 0.005)],
+    ids=["tb3", "inflate_unknown", "inflate_around_unknown", "radius_over_127_cells"],
+)
+def test_the_c_kernel_and_numpy_compose_and_inflate_alike(
+    tmp_path: Path, inflate_unknown: bool, around_unknown: bool, resolution_m: float
+) -> None:
+    # a static map with unknown space, a wall and posts, seen by a scan and updated partially
+    glob, _ = _tb3()
+    assert glob.inflation is not None
+    inflation = dataclasses.replace(
+        glob.inflation, inflate_unknown=inflate_unknown, inflate_around_unknown=around_unknown
+    )
+    params = dataclasses.replace(glob, inflation=inflation)
+    cells = round(5.0 / resolution_m) if resolution_m >= 0.05 else 400
+    rng = np.random.default_rng(7)
+    data = np.zeros((cells, cells), dtype=np.int8)
+    data[rng.integers(0, cells, 6), rng.integers(0, cells, 6)] = 100  # posts
+    data[: cells // 5, :] = -1
+    data[cells // 2, cells // 4 : cells // 2] = 100
+    span_m = cells * resolution_m
+    occupancy = OccupancyMap(resolution_m=resolution_m, origin_x_m=-span_m / 2, origin_y_m=-span_m / 2, data=data)
+    native = Costmap(params, static_map=occupancy, native=True)
+    numpy_only = Costmap(params, static_map=occupancy, native=False)
+    lidar = _room(tmp_path, True)
+    for pose in [(0.0, 0.0, 0.0), (0.2, -0.3, 1.0), (-0.4, 0.5, 2.5)]:
+        observation = _observe(lidar, *pose)
+        native.update(*pose, [observation])
+        numpy_only.update(*pose, [observation])
+        assert np.array_equal(native.grid.cost, numpy_only.grid.cost)
+    costs = set(np.unique(native.grid.cost).tolist())
+    assert {0, 253, 254} <= costs and len(costs) > 10  # free, a gradient of inflated costs, lethal

@@ -7,7 +7,7 @@ import pytest
 from PIL import Image
 from scipy import ndimage
 
-from tests.conftest import run_twin
+from tests.conftest import REPO, run_twin
 from twin.core.errors import ConfigError
 from twin.nav.map_server import OccupancyMap, load_map, map_from_scene, save_map
 from twin.world import build_scene, load_world
@@ -114,3 +114,24 @@ def test_twin_map_save_writes_a_map_server_map(fixtures: Path, tmp_path: Path) -
         "map", "save", str(fixtures / "gazebo_classic/worlds/turtlebot3_world.world"), "--out", str(tmp_path / "x.txt")
     )
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "Traceback" not in bad.stderr
+
+
+@pytest.mark.parametrize("free", [(0.0, 0.0), (4.0, 0.5)])
+def test_the_free_region_and_its_walls_match_scipys_labelling(free: tuple[float, float]) -> None:
+    # map_from_scene finds the robot's region with a C flood fill and grows it with numpy: the same
+    # cells as scipy's connected-component labelling and 3 x 3 binary dilation
+    from twin.nav import map_server
+
+    scene = build_scene(load_world(REPO / "sdf" / "worlds" / "house.sdf", model_path=[REPO / "sdf" / "models"]))
+    occupancy = map_from_scene(scene, height_m=0.17, free_xy_m=free)
+    walls = map_server._rasterise(
+        scene, 0.17, (occupancy.origin_x_m, occupancy.origin_y_m), occupancy.data.shape, occupancy.resolution_m
+    )
+    row = int((free[1] - occupancy.origin_y_m) / 0.05)
+    col = int((free[0] - occupancy.origin_x_m) / 0.05)
+    labels, _ = ndimage.label(~walls)
+    region = labels == labels[row, col]
+    assert np.array_equal(occupancy.data == 0, region)
+    seen = walls & ndimage.binary_dilation(region, structure=np.ones((3, 3), dtype=bool))
+    assert np.array_equal(occupancy.data == 100, seen)
+    assert region.sum() > 1000 and seen.sum() > 100

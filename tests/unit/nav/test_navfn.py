@@ -110,3 +110,19 @@ def test_house_plan_between_rooms_stays_out_of_inscribed_cells(astar: bool) -> N
     assert isinstance(plan, Plan)
     assert (_cells_cost(costmap, plan.poses[1:-1]) < 253).all()
     assert plan.poses[-1] == pytest.approx((0.5, 4.0, 1.57))
+
+
+def test_the_path_leaves_the_robot_at_once_and_ends_on_its_node() -> None:
+    # NavFn's calcPath stops once the point's *nearest* node has a potential below 50 (the robot's
+    # node): a path that only checked the node below the point circled the robot for many steps
+    from tests.unit.nav.costmaps import house_costmap
+
+    house = house_costmap()
+    plan = NavfnPlanner().make_plan(house, (0.0, 0.0, 0.0), (4.0, 0.5, 1.571))
+    assert isinstance(plan, Plan)
+    steps = np.hypot(*np.diff(plan.poses[:, :2], axis=0).T)
+    assert (steps > 0.0).all() and steps.max() <= 0.05 * math.sqrt(2) + 1e-9  # none repeated; at most a diagonal
+    assert plan.length_m < 1.15 * math.hypot(4.0, 0.5)
+    robot_node = (round((0.0 - house.origin_x_m) / 0.05), round((0.0 - house.origin_y_m) / 0.05))
+    first = ((plan.poses[0, 0] - house.origin_x_m) / 0.05, (plan.poses[0, 1] - house.origin_y_m) / 0.05)
+    assert first == pytest.approx(robot_node)

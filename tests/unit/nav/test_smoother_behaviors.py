@@ -28,7 +28,22 @@ def test_smoother_clamps_to_code_default_limits_and_deadband() -> None:
         out = smoother.step(k * 50 * MS)
     assert out == pytest.approx((0.5, 0.0))
     smoother.command(0.04, 0.0, 1000 * MS)
-    assert smoother.step(1050 * MS) == pytest.approx((0.375, 0.0))  # decelerating towards 0 (deadband)
+    assert smoother.step(1050 * MS) == pytest.approx((0.375, 0.0))  # decelerating towards 0.04
+    for k in range(22, 26):
+        out = smoother.step(k * 50 * MS)
+    # Nav2 zeroes what it publishes inside the deadband, and smooths on from the value before
+    assert out == (0.0, 0.0)
+    smoother.command(0.2, 0.0, 1300 * MS)
+    assert smoother.step(1350 * MS) == pytest.approx((0.04 + 0.125, 0.0))
+
+
+def test_smoother_scale_velocities_keeps_the_command_direction() -> None:
+    plain, scaled = VelocitySmoother(), VelocitySmoother(SmootherParams(scale_velocities=True))
+    for smoother in (plain, scaled):
+        smoother.command(0.22, 0.1, 0)
+    assert plain.step(50 * MS) == pytest.approx((0.125, 0.1))  # each component on its own
+    vx, wz = scaled.step(50 * MS)  # both scaled by the linear axis' limit: 0.125 / 0.22 of the way
+    assert vx == pytest.approx(0.125) and wz == pytest.approx(0.1 * 0.125 / 0.22)
 
 
 def test_smoother_ramps_down_after_the_timeout_then_stops_publishing() -> None:
@@ -84,7 +99,21 @@ def test_drive_on_heading_stops_before_an_obstacle_ahead() -> None:
     cost[:, 60:] = 254  # a wall at x = 3 m
     step, pose, _, _ = _run("drive_on_heading", {"target_x": 2.0, "speed": 0.2, "time_allowance": 20.0}, grid(cost))
     assert step.status is BehaviorStatus.FAILED and "Collision Ahead" in step.reason
-    assert pose[0] < 3.0
+    # 2 s ahead at 0.2 m/s: stopped with the 0.22 m footprint 0.4 m short of the wall, not at it
+    assert 3.0 - 0.22 - 0.4 - 0.05 < pose[0] < 3.0 - 0.22
+
+
+def test_a_spin_whose_footprint_touches_a_lethal_cell_is_refused_at_once() -> None:
+    # Nav2 checks the footprint's edges on the local costmap: TB3's 0.22 m circle 0.21 m from a wall
+    # reaches into it, so the spin fails (a rectangular body would scrape the wall). Humble's check
+    # simulates only as far ahead as the spin has turned so far: nothing on the first cycle.
+    cost = np.zeros((100, 100), dtype=np.uint8)
+    cost[:, 55:] = 254  # the wall's face at x = 2.75 m
+    step, _, cmds, _ = _run("spin", {"target_yaw": 1.57, "time_allowance": 10.0}, grid(cost), pose=(2.54, 2.5, 0.0))
+    assert step.status is BehaviorStatus.FAILED and step.reason == "Collision Ahead - Exiting Spin"
+    assert cmds == [(0.0, 1.0)]
+    clear, _, _, _ = _run("spin", {"target_yaw": 1.57, "time_allowance": 10.0}, grid(cost), pose=(2.5, 2.5, 0.0))
+    assert clear.status is BehaviorStatus.SUCCEEDED  # 0.25 m away the circle stays clear
 
 
 def test_wait_lasts_its_duration_and_times_out_are_failures() -> None:

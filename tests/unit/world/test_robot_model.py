@@ -120,3 +120,12 @@ def test_fixture_robot_urdf_keeps_mesh_visuals_as_file_uris() -> None:
     root = etree.fromstring(urdf_from_robot(robot).encode())
     meshes = [m.get("filename") for m in root.iter("mesh")]
     assert any(uri.startswith("file:///") and uri.endswith("burger_base.dae") for uri in meshes)
+
+
+@pytest.mark.parametrize("name", ["wheel", 'say "hi"', "it's", "both \"'", "a<b>&c", "tab\tline\nend\r", ""])
+def test_urdf_attributes_are_quoted_as_the_standard_library_quotes_them(name: str) -> None:
+    from xml.sax.saxutils import quoteattr
+
+    from twin.world.urdf import _quoteattr
+
+    assert _quoteattr(name) == quoteattr(name)

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -8,9 +9,10 @@ import pytest
 import trimesh
 
 from twin.world import load_world
-from twin.world.meshes import MeshCache, geometry_mesh
+from twin.world.meshes import MeshCache, geometry_arrays, geometry_mesh
 from twin.world.robot_model import load_robot
 from twin.world.scene import CollisionMonitor, RayCaster, Scene, build_scene, obstacle_extent
+from twin.world.types import Box, Cylinder, Sphere
 
 REPO = Path(__file__).resolve().parents[3]
 FIXTURES = REPO.parent / "shared" / "fixtures"
@@ -281,3 +283,37 @@ def test_obstacle_extent_leaves_out_planes_floor_slabs_and_excluded_models(tmp_p
     assert count == len(build_scene(world).obstacles) == 2
     assert bounds == build_scene(world).bounds
     assert obstacle_extent(world, exclude_models=["wall"])[0] == 1
+
+
+@pytest.mark.parametrize(
+    ("geometry", "fresh"),
+    [
+        (
+            Cylinder(radius_m=0.033, length_m=0.018),
+            lambda: trimesh.creation.cylinder(radius=0.033, height=0.018, sections=48),
+        ),
+        (Sphere(radius_m=0.2), lambda: trimesh.creation.icosphere(subdivisions=3, radius=0.2)),
+    ],
+    ids=["cylinder", "sphere"],
+)
+def test_a_curved_shape_read_back_from_the_cache_is_trimeshs_tessellation(
+    geometry: Cylinder | Sphere, fresh: Callable[[], trimesh.Trimesh], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("TWIN_CACHE_DIR", str(tmp_path))
+    first = geometry_arrays(geometry, MeshCache())
+    assert list((tmp_path / "tessellations").iterdir())  # stored for the next process
+    again = geometry_arrays(geometry, MeshCache())  # a new cache reads the file
+    expected = fresh()
+    for mesh in (first, again):
+        assert mesh is not None
+        assert np.array_equal(mesh.vertices, expected.vertices)
+        assert np.array_equal(mesh.faces, expected.faces)
+
+
+def test_a_box_is_a_closed_outward_facing_mesh_with_trimeshs_corners() -> None:
+    mesh = geometry_arrays(Box(size_m=(2.5, 0.15, 1.0)), MeshCache())
+    assert mesh is not None
+    as_trimesh = mesh.to_trimesh()
+    assert as_trimesh.is_watertight and as_trimesh.is_winding_consistent
+    assert as_trimesh.volume == pytest.approx(2.5 * 0.15 * 1.0)  # positive: the normals point out
+    assert np.array_equal(mesh.vertices, trimesh.creation.box(extents=(2.5, 0.15, 1.0)).vertices)

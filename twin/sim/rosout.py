@@ -1,15 +1,18 @@
 """`/rosout`: the twin's log lines and every node's, stamped with sim time, as rcl publishes them.
 
 A node's logger (`twin.node.<name>`) logs under the node's name; the twin's own library lines log
-as `twin`. The bridge is a node, so its lines reach the recorder like any other topic's.
+as `twin`. The bridge is a node, so its lines reach the recorder like any other topic's; it encodes
+them itself (`twin.bag.LogEncoder`), so a run that nobody reads `rcl_interfaces/Log` objects from
+never builds them.
 """
 
 from __future__ import annotations
 
 import logging
 
+from twin.bag import LogEncoder
 from twin.core.errors import TwinError
-from twin.node.node import Node
+from twin.node import Encoded, Node
 
 __all__ = ["RosoutBridge"]
 
@@ -24,28 +27,20 @@ class RosoutBridge(Node):
 
     def __init__(self) -> None:
         super().__init__("rosout")
-        from twin.msgs import get_message
-
-        self._log_msg = get_message("rcl_interfaces/msg/Log")
-        self._time_msg = get_message("builtin_interfaces/msg/Time")
-        self._pub = self.create_publisher(self._log_msg, "/rosout", 1000)
+        self._pub = self.create_publisher(LogEncoder.msgtype, "/rosout", 1000)
+        self._encoders: dict[str, LogEncoder] = {}
         self.handler = _Handler(self)
 
     def publish_record(self, record: logging.LogRecord) -> None:
         """Publish one log record."""
         level = next((ros for py, ros in _LEVELS if record.levelno >= py), 10)
         name = record.name[len(_NODE_PREFIX) :] if record.name.startswith(_NODE_PREFIX) else "twin"
-        sec, nanosec = divmod(self._graph_now(), 1_000_000_000)
-        msg = self._log_msg(
-            stamp=self._time_msg(sec=sec, nanosec=nanosec),
-            level=level,
-            name=name,
-            msg=record.getMessage(),
-            file=record.pathname,
-            function=record.funcName,
-            line=record.lineno,
-        )
-        self._pub.publish(msg)
+        encoder = self._encoders.get(name)
+        if encoder is None:
+            encoder = self._encoders[name] = LogEncoder(name)
+        text = record.getMessage()
+        args = (self._graph_now(), level, text, (record.pathname, record.funcName, record.lineno))
+        self._pub.publish(Encoded((encoder.encode_line, args, (level, name, text))))
 
 
 class _Handler(logging.Handler):
