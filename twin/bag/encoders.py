@@ -126,13 +126,20 @@ class ImuEncoder:
         layout.var_time()
         layout.const_string(frame_id)
         layout.var("orientation", "d", 4)
+        orientation_at = layout.size - 32
         layout.const("d", *_fixed_f64(orientation_covariance, 9, "orientation_covariance"))
         layout.var("angular_velocity", "d", 3)
+        angular_velocity_at = layout.size - 24
         layout.const("d", *_fixed_f64(angular_velocity_covariance, 9, "angular_velocity_covariance"))
         layout.var("linear_acceleration", "d", 3)
+        linear_acceleration_at = layout.size - 24
         layout.const("d", *_fixed_f64(linear_acceleration_covariance, 9, "linear_acceleration_covariance"))
         packer, self._c = layout.build()
         self._pack = packer.pack
+        #: Byte offsets in a message of the stamp (int32 sec, uint32 nanosec), the orientation (4
+        #: doubles), the angular velocity and the linear acceleration (3 each), for code that writes
+        #: them into `encode`'s bytes in place.
+        self.offsets = (4, orientation_at, angular_velocity_at, linear_acceleration_at)
 
     def encode(  # noqa: PLR0917 - the hot path takes plain numbers positionally
         self,

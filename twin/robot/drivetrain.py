@@ -21,6 +21,7 @@ each step.
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import logging
 import math
@@ -667,6 +668,17 @@ class FmuDrivetrain:
     def native(self) -> bool:
         """Whether the compiled loop runs the steps (`api: native` and the shim built)."""
         return self._loop is not None
+
+    @property
+    def chassis_address(self) -> int | None:
+        """Address of the chassis in the compiled loop's structure (None without it), for compiled readers.
+
+        Eight doubles, as `chassis_state` returns them: x, y, yaw, v, yaw rate, ax, ay, yaw
+        acceleration. They hold the chassis between `advance` calls, as long as the drive is open.
+        """
+        if self._loop is None:
+            return None
+        return ctypes.addressof(self._loop.state) + self._loop.offset("x_m")
 
     # --- the Drivetrain protocol ---
 
