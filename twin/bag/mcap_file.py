@@ -7,8 +7,10 @@ Footer, magic. The writer appends schema and channel records as topics appear an
 single write, so a killed process leaves a file whose every complete record is valid. The
 summary is only written by `finish()`; `recover_mcap()` rebuilds it from what a kill left.
 
-Message records inside a chunk are built for a whole batch at once with numpy: the per-message
-Python work is one tuple appended to a list by the recorder.
+A chunk and its message indexes are built for a whole batch at once, by a compiled kernel
+(`twin.bag._native`) or, for a batch out of time order, a bad one, or without a C compiler, with
+numpy; both give the same bytes. The per-message Python work is one tuple appended to a list by
+the recorder.
 """
 
 from __future__ import annotations
