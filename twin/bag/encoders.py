@@ -47,6 +47,7 @@ __all__ = [
 _NS = 1_000_000_000
 _F64 = np.dtype("<f8")
 _F32 = np.dtype("<f4")
+_TIME = struct.Struct("<iI")
 
 
 def _fixed_f64(values: ArrayLike | None, size: int, what: str) -> tuple[float, ...]:
@@ -125,13 +126,20 @@ class ImuEncoder:
         layout.var_time()
         layout.const_string(frame_id)
         layout.var("orientation", "d", 4)
+        orientation_at = layout.size - 32
         layout.const("d", *_fixed_f64(orientation_covariance, 9, "orientation_covariance"))
         layout.var("angular_velocity", "d", 3)
+        angular_velocity_at = layout.size - 24
         layout.const("d", *_fixed_f64(angular_velocity_covariance, 9, "angular_velocity_covariance"))
         layout.var("linear_acceleration", "d", 3)
+        linear_acceleration_at = layout.size - 24
         layout.const("d", *_fixed_f64(linear_acceleration_covariance, 9, "linear_acceleration_covariance"))
         packer, self._c = layout.build()
         self._pack = packer.pack
+        #: Byte offsets in a message of the stamp (int32 sec, uint32 nanosec), the orientation (4
+        #: doubles), the angular velocity and the linear acceleration (3 each), for code that writes
+        #: them into `encode`'s bytes in place.
+        self.offsets = (4, orientation_at, angular_velocity_at, linear_acceleration_at)
 
     def encode(  # noqa: PLR0917 - the hot path takes plain numbers positionally
         self,
@@ -638,10 +646,19 @@ class PathEncoder:
     def __init__(self, frame_id: str = "map") -> None:
         """Paths in `frame_id`."""
         self.frame_id = frame_id
+        # The path's header, the pose count and the first PoseStamped (4-aligned after the count, so
+        # its doubles may need padding that the others do not) are one struct.
+        frame = string_bytes(frame_id)
+        size = len(frame)
+        pad_count = (-(8 + size)) % 4
+        first_at = 8 + size + pad_count + 4
+        pad_first = (-(first_at + 8 + size)) % 8
+        self._empty = struct.Struct(f"<4siI{size}s{pad_count}xI").pack
+        self._prefix = struct.Struct(f"<4siI{size}s{pad_count}xIiI{size}s{pad_first}x7d").pack
+        self._frame_string = frame
         # Every PoseStamped after the first starts 8-aligned: stamp, frame id, padding, 7 doubles. A
         # block is a whole number of doubles: the header's bytes are written as doubles (a view).
-        frame = string_bytes(frame_id)
-        frame += bytes((-(8 + len(frame))) % 8)
+        frame += bytes((-(8 + size)) % 8)
         self._frame = frame
         self._head = (8 + len(frame)) // 8  # doubles of header in a block
 
@@ -652,33 +669,30 @@ class PathEncoder:
         planar = arr.ndim == 2 and arr.shape[1] == 3
         if not planar:
             arr = _planar_poses(arr)
-        w = CdrWriter()
-        w.header(stamp_ns, self.frame_id)
-        w.count(n)
+        sec, nanosec = divmod(stamp_ns, _NS)
+        frame = self._frame_string
         if n == 0:
-            return w.getvalue()
-        # The first pose starts 4-aligned and may need padding that the others do not.
-        w.header(stamp_ns, self.frame_id)
-        first = arr[0]
+            return self._empty(ENCAPSULATION, sec, nanosec, frame, 0)
         if planar:
-            w.pack("d", first[0], first[1], 0.0, 0.0, 0.0, math.sin(0.5 * first[2]), math.cos(0.5 * first[2]))
+            x, y, yaw = arr[0].tolist()
+            first = (x, y, 0.0, 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
         else:
-            w.pack("d", *first)
-        if n > 1:
-            sec, nanosec = divmod(stamp_ns, _NS)
-            head = np.frombuffer(struct.pack("<iI", sec, nanosec) + self._frame, dtype=_F64)
-            h = self._head
-            blocks = np.zeros((n - 1, h + 7))
-            blocks[:, :h] = head
-            if planar:
-                blocks[:, h : h + 2] = arr[1:, :2]
-                half = 0.5 * arr[1:, 2]
-                blocks[:, h + 5] = np.sin(half)
-                blocks[:, h + 6] = np.cos(half)
-            else:
-                blocks[:, h:] = arr[1:]
-            w.raw(blocks.tobytes(), align=8)
-        return w.getvalue()
+            first = tuple(arr[0].tolist())
+        prefix = self._prefix(ENCAPSULATION, sec, nanosec, frame, n, sec, nanosec, frame, *first)
+        if n == 1:
+            return prefix
+        head = np.frombuffer(_TIME.pack(sec, nanosec) + self._frame, dtype=_F64)
+        h = self._head
+        blocks = np.zeros((n - 1, h + 7))
+        blocks[:, :h] = head
+        if planar:
+            blocks[:, h : h + 2] = arr[1:, :2]
+            half = 0.5 * arr[1:, 2]
+            blocks[:, h + 5] = np.sin(half)
+            blocks[:, h + 6] = np.cos(half)
+        else:
+            blocks[:, h:] = arr[1:]
+        return prefix + blocks.tobytes()
 
 
 class NavigationFeedbackEncoder:

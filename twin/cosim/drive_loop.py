@@ -108,7 +108,7 @@ _WRITABLE = frozenset(field[0] for field in _DriveState._fields_) - {
     "stopped_on_budget",
     "budget_m",
 }
-_MAX_RUN = 1 << 30  # steps per C call (its count is an int)
+MAX_RUN = 1 << 30  # steps per C call (its count is an int)
 
 
 class DriveLoop:
@@ -152,6 +152,11 @@ class DriveLoop:
         function = library.twin_drive_run
         function.restype = ctypes.c_int  # no argtypes: a pointer and a small int pass as they are
         self._run = functools.partial(function, ctypes.byref(state))
+        #: `run` without its checks, for a caller that inlines them: `step(count)` with `count` at most
+        #: `MAX_RUN` and `state.budget_m` set before; the caller checks `state.failed` itself.
+        self.step = self._run
+        # The structure's bytes, for readers that take several fields in one `struct` call.
+        self.buffer = memoryview((ctypes.c_ubyte * ctypes.sizeof(state)).from_buffer(state))
 
     def write(self, **values: float) -> None:
         """Set fields by name (numbers; `servo` and `blocked` as flags).
@@ -166,6 +171,16 @@ class DriveLoop:
         state = self.state
         for name, value in values.items():
             setattr(state, name, value)
+
+    def raise_failure(self) -> None:
+        """Raise the FmuError of the instance whose failure `step` left in `state.failed`."""
+        self._group.raise_failure(self.state.failed)
+
+    @staticmethod
+    def offset(name: str) -> int:
+        """Byte offset of field `name` in `buffer` (fields are doubles but for the flags and pointers)."""
+        offset: int = getattr(_DriveState, name).offset
+        return offset
 
     def read(self, names: Iterable[str]) -> tuple[float, ...]:
         """The fields `names`, in that order."""
@@ -185,7 +200,7 @@ class DriveLoop:
         """
         state = self.state
         state.budget_m = budget_m
-        done: int = self._run(count if count < _MAX_RUN else _MAX_RUN)
+        done: int = self._run(count if count < MAX_RUN else MAX_RUN)
         if done < count and state.failed >= 0:
             self._group.raise_failure(state.failed)
         return done

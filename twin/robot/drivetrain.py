@@ -21,10 +21,12 @@ each step.
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import logging
 import math
-from collections.abc import Mapping
+import struct
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -35,7 +37,7 @@ import numpy as np
 from twin.core.errors import ConfigError, FmuError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
-from twin.cosim.drive_loop import DriveLoop
+from twin.cosim.drive_loop import MAX_RUN, DriveLoop
 from twin.cosim.fmu import Api, FmuFile, FmuInfo, StepGroup, Stepper
 from twin.cosim.isolated import IsolatedGroup
 from twin.robot.chassis import (
@@ -480,6 +482,7 @@ class FmuDrivetrain:
                 _log.warning("running the drivetrain's step loop in Python: %s", err)
             else:
                 self._run = self._run_native
+                self._bind_native()
 
     def _native_loop(self) -> DriveLoop:
         """Set up the compiled loop with this drive's numbers and state."""
@@ -508,6 +511,100 @@ class FmuDrivetrain:
         self._loop = loop
         self._to_native()
         return loop
+
+    def _bind_native(self) -> None:
+        """Give `advance`, `chassis_state` and `wheel_state` their compiled-loop forms, one closure each.
+
+        Each does its method's arithmetic, reading several fields of the loop's structure (and the
+        FMUs' outputs) per `struct` call. The executor calls them for every event (hundreds a
+        simulated second); the methods stay the reference and the path without the compiled loop.
+        """
+        loop = self._loop
+        assert loop is not None
+        state, step, raise_failure = loop.state, loop.step, loop.raise_failure
+        contact, free, near_world, ratio, inf = self._contact, self._free, self._near_world, self._ratio, math.inf
+
+        def advance(n_steps: int) -> None:
+            count = n_steps
+            if ratio != 1:
+                pending = self._pending + n_steps
+                count = pending // ratio
+                self._pending = pending - count * ratio
+            while count:
+                if contact is None:
+                    budget = inf
+                else:
+                    budget = free(state.x_m, state.y_m, state.yaw_rad) if free is not None else 0.0
+                state.budget_m = budget
+                done: int = step(count if count < MAX_RUN else MAX_RUN)
+                if done < count and state.failed >= 0:
+                    raise_failure()
+                count -= done
+                if state.stopped_on_budget:
+                    count = near_world(count)
+
+        buffer, new = loop.buffer, tuple.__new__
+        # ChassisState's eight numbers are consecutive doubles of the structure, `blocked` its last field.
+        at = loop.offset("x_m")
+        blocked_at = loop.offset("blocked")
+        unpack_chassis = struct.Struct(f"<8d{blocked_at - at - 64}x?").unpack_from
+
+        def chassis_state() -> ChassisState:
+            state: ChassisState = new(ChassisState, unpack_chassis(buffer, at))
+            return state
+
+        self.advance = advance  # type: ignore[method-assign]
+        self.chassis_state = chassis_state  # type: ignore[method-assign]
+        self.wheel_state = self._native_wheel_state()  # type: ignore[method-assign]
+
+    def _native_wheel_state(self) -> Callable[[], WheelState]:
+        """`wheel_state` with the compiled loop: the FMUs' outputs and the loop's wheel fields read at once."""
+        loop = self._loop
+        assert loop is not None
+        buffer, new, nan = loop.buffer, tuple.__new__, math.nan
+        wheels_at = loop.offset("w_left")  # w, int, volt: (left, right) each
+        unpack_wheels = struct.Struct("<6d").unpack_from
+        angles_at = loop.offset("wheel_angle_left_rad")
+        unpack_pair = struct.Struct("<2d").unpack_from
+        n = len(self._left.outputs)
+        unpack_outputs = struct.Struct(f"<{n}d").unpack_from
+        left, right = memoryview(self._left.outputs).cast("B"), memoryview(self._right.outputs).cast("B")
+        voltage_profile = self.profile is Profile.VOLTAGE
+        nans = (nan, nan)
+        angle, current, torque, volts = (
+            self._reading[role] for role in ("wheel_angle", "current", "motor_torque", "applied_voltage")
+        )
+        per_amp = self._torque_per_amp if torque is None else None
+
+        def wheel_state() -> WheelState:
+            lo, ro = unpack_outputs(left), unpack_outputs(right)
+            w_left, w_right, _, _, v_left, v_right = unpack_wheels(buffer, wheels_at)
+            if angle is None:
+                angles = unpack_pair(buffer, angles_at)
+            else:
+                k, factor, offset = angle
+                angles = (factor * lo[k] + offset, factor * ro[k] + offset)
+            if current is None:
+                amps = nans
+            else:
+                k, factor, offset = current
+                amps = (factor * lo[k] + offset, factor * ro[k] + offset)
+            if torque is not None:
+                k, factor, offset = torque
+                effort = (factor * lo[k] + offset, factor * ro[k] + offset)
+            elif per_amp is not None:
+                effort = (per_amp * amps[0], per_amp * amps[1])
+            else:
+                effort = nans
+            if volts is not None:
+                k, factor, offset = volts
+                voltage = (factor * lo[k] + offset, factor * ro[k] + offset)
+            else:
+                voltage = (v_left, v_right) if voltage_profile else nans
+            ws: WheelState = new(WheelState, (angles, (w_left, w_right), effort, voltage, amps))
+            return ws
+
+        return wheel_state
 
     def _to_native(self) -> None:
         """Hand the wheels' and the chassis' state to the compiled loop."""
@@ -571,6 +668,17 @@ class FmuDrivetrain:
     def native(self) -> bool:
         """Whether the compiled loop runs the steps (`api: native` and the shim built)."""
         return self._loop is not None
+
+    @property
+    def chassis_address(self) -> int | None:
+        """Address of the chassis in the compiled loop's structure (None without it), for compiled readers.
+
+        Eight doubles, as `chassis_state` returns them: x, y, yaw, v, yaw rate, ax, ay, yaw
+        acceleration. They hold the chassis between `advance` calls, as long as the drive is open.
+        """
+        if self._loop is None:
+            return None
+        return ctypes.addressof(self._loop.state) + self._loop.offset("x_m")
 
     # --- the Drivetrain protocol ---
 

@@ -28,9 +28,14 @@ readings.
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import math
+import struct
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,6 +44,9 @@ from twin.core.clock import period_ns
 from twin.core.geometry import quat_from_rpy
 from twin.world.robot_model import ImuSpec as SdfImuSpec
 from twin.world.robot_model import NoiseSpec
+
+if TYPE_CHECKING:
+    from twin.bag import ImuEncoder
 
 __all__ = [
     "GRAVITY_MPS2",
@@ -245,6 +253,8 @@ class ImuModel:
         self.orientation_covariance: tuple[float, ...] = (0.0,) * 9
         self.angular_velocity_covariance = _diagonal(spec.angular_velocity_noise)
         self.linear_acceleration_covariance = _diagonal(spec.linear_acceleration_noise)
+        self._compiled: Any = None  # the C sampler's state (`compiled_sampler`), which then owns the noise index
+        self._block = np.zeros((_BLOCK, 6))  # the noise block the C sampler reads
 
     @property
     def gyro_bias_radps(self) -> Vec3:
@@ -259,17 +269,73 @@ class ImuModel:
     def _bias_at_last(self, channel: int) -> Vec3:
         if self._biases is None:
             self._refill()
-            self._next = 0
         assert self._biases is not None
-        x, y, z = self._biases[channel][max(self._next - 1, 0)].tolist()
+        used = self._next if self._compiled is None else int(self._compiled.next)
+        x, y, z = self._biases[channel][max(used - 1, 0)].tolist()
         return (x, y, z)
 
     def _refill(self) -> None:
         gyro_bias, gyro_error = self._gyro.block()
         accel_bias, accel_error = self._accel.block()
-        self._rows = np.hstack((gyro_error, accel_error)).tolist()
+        rows = np.hstack((gyro_error, accel_error))
         self._biases = (gyro_bias, accel_bias)
-        self._next = 0
+        if self._compiled is None:
+            self._rows = rows.tolist()
+            self._next = 0
+        else:
+            self._block[:] = rows
+            self._compiled.next = 0
+
+    def compiled_sampler(
+        self, chassis_address: int, initial_yaw_rad: float, encoder: ImuEncoder
+    ) -> Callable[[int], tuple[ImuReading, bytes]] | None:
+        """Return `ImuNode`'s per-sample path in C, or None where it cannot run (then sample in Python).
+
+        The returned `sample(t_ns)` reads the chassis at `chassis_address` (x, y, yaw, v, yaw rate,
+        ax, ay, yaw acceleration: eight doubles, the compiled drive loop's), derives the yaw rate
+        from the heading change since the last sample (the chassis' own rate at the first, from
+        `initial_yaw_rad` at t = 0), and returns the reading `sample` would give with the message
+        `encoder.encode` would make, to the bit. From then on the model is sampled only through the
+        latest sampler (a later call takes over the noise stream where it is). None without the
+        compiled kernel, on a big-endian machine, or with `gaussian_quantized` axes.
+        """
+        from twin.robot._native import ImuState, load_imu_kernel
+
+        kernel = load_imu_kernel()
+        if kernel is None or self._quantize or sys.byteorder != "little":
+            return None
+        template = encoder.encode(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        message = (ctypes.c_ubyte * len(template)).from_buffer_copy(template)
+        state = ImuState()
+        state.chassis = chassis_address
+        state.noise = self._block.ctypes.data
+        state.message = ctypes.addressof(message)
+        state.rows = _BLOCK
+        state.stamp_at, state.orientation_at, state.angular_velocity_at, state.linear_acceleration_at = encoder.offsets
+        state.last_t_ns = 0
+        state.last_yaw = initial_yaw_rad
+        state.k[:] = self._const
+        if self._compiled is not None:  # an earlier sampler's block: go on where it is
+            state.next = self._compiled.next
+        elif self._biases is not None:  # sampled in Python before: go on in the same block
+            self._block[:] = self._rows
+            state.next = self._next
+        else:
+            state.next = _BLOCK
+        self._compiled = state  # a later call takes over from this sampler
+        step = functools.partial(kernel.twin_imu_sample, ctypes.byref(state))
+        out = memoryview((ctypes.c_ubyte * ctypes.sizeof(state)).from_buffer(state))[ImuState.out.offset :]
+        unpack_reading, new, refill = struct.Struct("<10d").unpack_from, tuple.__new__, self._refill
+        keep = (message, state)  # the closure owns the buffers the C code points to
+
+        def sample(t_ns: int) -> tuple[ImuReading, bytes]:
+            if step(t_ns):  # the noise block is used up
+                refill()
+                step(t_ns)
+            reading: ImuReading = new(ImuReading, unpack_reading(out))
+            return reading, bytes(keep[0])
+
+        return sample
 
     def sample(
         self,

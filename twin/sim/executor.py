@@ -386,13 +386,14 @@ class Executor:
             TwinError: From any node; the sinks hold everything published before it.
         """
         scheduler, advance, after, pending = self.scheduler, self._advance, self._after_advance, self._pending
+        fire_due, heap = scheduler.fire_due, scheduler._heap  # the heap's head is the next due step
         step_ns = self.step_ns
         steps_per_s = max(1, NS_PER_S // step_ns)
         next_report = self._k
         k = self._k
         ended = "duration"
         while True:
-            due = min(scheduler.next_due(), end_k)
+            due = heap[0][0] if heap and heap[0][0] < end_k else end_k
             if due > k:
                 if advance is not None:
                     advance(due - k)
@@ -403,7 +404,7 @@ class Executor:
             if k >= end_k:
                 break
             self.now_ns = k * step_ns
-            scheduler.fire_due(k)
+            fire_due(k)
             if done is not None and done.done:
                 end_k = k  # this step's publications are the last
                 ended = "done"

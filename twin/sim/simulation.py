@@ -476,7 +476,8 @@ class Simulation:
 
         nodes.append(GroundTruthNode(robot.base_frame, sc.sensors.ground_truth.rate_hz, chassis))
         if self._imu is not None:
-            nodes.append(ImuNode(self._imu, chassis, pose.yaw_rad))
+            address = self.drive.chassis_address if isinstance(self.drive, FmuDrivetrain) else None
+            nodes.append(ImuNode(self._imu, chassis, pose.yaw_rad, chassis_address=address))
 
         motor_rate = robot.joint_states.rate_hz if robot.joint_states is not None else 30.0
         self._drive_node = DiffDriveNode(

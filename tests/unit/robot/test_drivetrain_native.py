@@ -226,3 +226,18 @@ def test_native_api_falls_back_to_python_when_the_shim_cannot_be_built(
     assert "no C compiler" in caplog.text
     monkeypatch.undo()
     assert_same(trace, _run(FmuDrive(), SCRIPT[:2]))
+
+
+@pytest.mark.parametrize("profile,fmu", [("voltage", "xm430_w210"), ("velocity-servo", "xm430_w210_servo")])
+def test_native_readers_return_what_the_loop_structure_holds(profile: str, fmu: str) -> None:
+    # With the compiled loop, chassis_state and wheel_state read the loop's structure and the FMUs'
+    # outputs several fields at a time; the methods of the class read them one by one.
+    drive = FmuDrive(fmu=f"builtin:{fmu}", profile=profile)  # type: ignore[arg-type]
+    with FmuDrivetrain(drive, WAFFLE, step_ns=MS, contact=None, free_distance=None, bounding_radius_m=0.0) as dt:
+        assert dt.native
+        for v, w, steps in SCRIPT:
+            dt.set_cmd_vel(v, w)
+            dt.advance(steps)
+            assert dt.chassis_state() == FmuDrivetrain.chassis_state(dt)
+            assert repr(dt.wheel_state()) == repr(FmuDrivetrain.wheel_state(dt))  # repr: NaN where there is none
+        assert dt.chassis_state().x_m != 0.0
