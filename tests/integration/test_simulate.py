@@ -16,7 +16,10 @@ from rosbags.highlevel import AnyReader
 
 from tests.conftest import REPO, run_twin
 
-RATES_HZ = {"/clock": 100.0, "/odom": 30.0, "/joint_states": 30.0, "/scan": 5.0, "/cmd_vel": 10.0}
+RATES_HZ = {"/clock": 100.0, "/odom": 30.0, "/joint_states": 30.0, "/scan": 5.0}
+# Nav2's velocity_smoother publishes /cmd_vel at its smoothing_frequency (TB3's Humble file: 20 Hz) from the
+# first command the controller sends on, which waits for AMCL's initial pose and the first plan.
+CMD_VEL_HZ = 20.0
 
 
 def read_all(bag: Path) -> tuple[Counter[str], dict[str, list[tuple[int, object]]]]:
@@ -42,6 +45,10 @@ def test_default_scenario_bag_opens_in_rosbags_with_counts_equal_to_rate_times_d
     counts, messages = read_all(default_bag)
     for topic, rate in RATES_HZ.items():
         assert abs(counts[topic] - rate * 20.0) <= 1, (topic, counts[topic])
+    cmd_stamps = [t for t, _ in messages["/cmd_vel"]]
+    assert cmd_stamps[0] < 2_000_000_000, "the robot was still idle 2 s into the mission"
+    periods = {b - a for a, b in zip(cmd_stamps, cmd_stamps[1:])}
+    assert periods == {round(1e9 / CMD_VEL_HZ)}, sorted(periods)[:5]
     assert counts["/tf_static"] == 1
     assert counts["/robot_description"] == 1
     stamps = [t for t, _ in messages["/clock"]]
