@@ -39,6 +39,40 @@ __all__ = ["PLUGIN_GROUP", "BehaviorTreeFactory", "NodeBuilder"]
 
 PLUGIN_GROUP: Final = "twin.bt_nodes"
 
+
+def _may_declare_group(group: str) -> bool:
+    """Whether any installed distribution's `entry_points.txt` names `group` (a cheap look before the real one).
+
+    Reads the metadata directories on `sys.path` directly; anything it cannot read this way (a zip or egg
+    file on the path, an unreadable directory) answers True, so `importlib.metadata` then decides.
+    """
+    import os
+    import sys
+
+    header = f"[{group}]"
+    for entry in sys.path:
+        directory = entry or "."
+        if not os.path.isdir(directory):
+            if os.path.exists(directory):
+                return True  # a zip or egg: let importlib.metadata read it
+            continue
+        try:
+            names = os.listdir(directory)
+        except OSError:
+            return True
+        for name in names:
+            if not name.endswith((".dist-info", ".egg-info")):
+                continue
+            try:
+                with open(os.path.join(directory, name, "entry_points.txt"), encoding="utf-8") as f:
+                    if header in f.read():
+                        return True
+            except FileNotFoundError:
+                continue
+            except OSError:
+                return True
+    return False
+
 NodeBuilder = Callable[[str, NodeConfig], TreeNode]
 
 
@@ -224,9 +258,11 @@ class BehaviorTreeFactory:
         Raises:
             TreeError: If a plugin cannot be imported or fails while registering.
         """
-        import importlib.metadata
-
         loaded: list[str] = []
+        if not _may_declare_group(group):
+            return loaded
+        import importlib.metadata  # 30-60 ms to import: only when some distribution declares the group
+
         for entry_point in sorted(importlib.metadata.entry_points(group=group), key=lambda ep: ep.name):
             try:
                 register = entry_point.load()

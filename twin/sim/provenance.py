@@ -41,7 +41,8 @@ def _plain(value: Any) -> Any:
 
 def scenario_yaml(scenario: Scenario) -> str:
     """The scenario as YAML with every key: `load_scenario` of it gives an equal scenario."""
-    text: str = yaml.safe_dump(_plain(scenario), sort_keys=False, allow_unicode=True)
+    dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)  # libyaml's emitter when built: 10x faster
+    text: str = yaml.dump(_plain(scenario), Dumper=dumper, sort_keys=False, allow_unicode=True)
     return text
 
 

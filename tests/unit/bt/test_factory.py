@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import enum
-import importlib.metadata
-from collections.abc import Callable
+import importlib
+from pathlib import Path
 
 import pytest
 
@@ -229,39 +229,44 @@ def test_set_output_on_an_unconnected_port_returns_false() -> None:
     assert Writer.result is False
 
 
-def test_plugins_register_through_the_entry_point_group(monkeypatch: pytest.MonkeyPatch) -> None:
-    calls: list[BehaviorTreeFactory] = []
+def _install_plugin(root: Path, name: str, module_source: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Install a distribution the way pip leaves one: a module and a dist-info with its entry point."""
+    (root / f"{name}_pkg.py").write_text(module_source)
+    dist = root / f"{name}_pkg-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}-pkg\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text(f"[twin.bt_nodes]\n{name} = {name}_pkg:register\n")
+    monkeypatch.syspath_prepend(str(root))
 
-    def register(factory: BehaviorTreeFactory) -> None:
-        calls.append(factory)
-        factory.register_node_type(Double, "PluginDouble")
 
-    class EntryPoint:
-        name = "demo"
-        value = "demo_pkg:register"
+def test_plugins_register_through_the_entry_point_group(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    source = """
+from twin.bt import NodeStatus, SyncActionNode
 
-        def load(self) -> Callable[[BehaviorTreeFactory], None]:
-            return register
+class PluginDouble(SyncActionNode):
+    def tick(self):
+        return NodeStatus.SUCCESS
 
-    def entry_points(*, group: str):
-        assert group == "twin.bt_nodes"
-        return [EntryPoint()]
+calls = []
 
-    monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
+def register(factory):
+    calls.append(factory)
+    factory.register_node_type(PluginDouble, "PluginDouble")
+"""
+    _install_plugin(tmp_path, "demo", source, monkeypatch)
     factory = BehaviorTreeFactory()
     assert factory.load_plugins() == ["demo"]
-    assert calls == [factory]
+    module = importlib.import_module("demo_pkg")
+    assert module.calls == [factory]
     assert "PluginDouble" in factory.manifests
+    assert factory.create_tree_from_text(v4("<PluginDouble/>")).tick_once() is NodeStatus.SUCCESS
 
 
-def test_a_broken_plugin_is_reported_with_its_name(monkeypatch: pytest.MonkeyPatch) -> None:
-    class EntryPoint:
-        name = "broken"
-        value = "broken_pkg:register"
+def test_no_plugin_installed_loads_nothing() -> None:
+    assert BehaviorTreeFactory().load_plugins() == []
 
-        def load(self):  # type: ignore[no-untyped-def]
-            raise ImportError("No module named 'broken_pkg'")
 
-    monkeypatch.setattr(importlib.metadata, "entry_points", lambda *, group: [EntryPoint()])
-    with pytest.raises(TreeError, match="BT plugin 'broken'.*broken_pkg"):
+def test_a_broken_plugin_is_reported_with_its_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _install_plugin(tmp_path, "broken", "import no_such_module_anywhere\n", monkeypatch)
+    with pytest.raises(TreeError, match="BT plugin 'broken'.*no_such_module_anywhere"):
         BehaviorTreeFactory().load_plugins()
