@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import signal
 import subprocess
@@ -47,7 +48,7 @@ def test_default_scenario_bag_opens_in_rosbags_with_counts_equal_to_rate_times_d
         assert abs(counts[topic] - rate * 20.0) <= 1, (topic, counts[topic])
     cmd_stamps = [t for t, _ in messages["/cmd_vel"]]
     assert cmd_stamps[0] < 2_000_000_000, "the robot was still idle 2 s into the mission"
-    periods = {b - a for a, b in zip(cmd_stamps, cmd_stamps[1:])}
+    periods = {b - a for a, b in itertools.pairwise(cmd_stamps)}
     assert periods == {round(1e9 / CMD_VEL_HZ)}, sorted(periods)[:5]
     assert counts["/tf_static"] == 1
     assert counts["/robot_description"] == 1
@@ -147,6 +148,23 @@ def test_spawning_inside_a_wall_is_refused_before_the_run(tmp_path: Path) -> Non
     result = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"))
     assert result.returncode == 2
     assert "robot.initial_pose" in result.stderr and "choose a free spawn pose" in result.stderr
+    assert not (tmp_path / "bag").exists()
+    # `twin scenario check` says the same before anything runs.
+    checked = run_twin("scenario", "check", str(scenario))
+    assert checked.returncode == 2
+    assert checked.stderr.strip().splitlines() == [result.stderr.strip()]
+
+
+def test_a_spawn_far_outside_the_world_is_refused_not_mapped(tmp_path: Path) -> None:
+    # A map made from the world covers the spawn point: 37,600 km away it would take 107 GiB.
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("name: t\nrobot: {initial_pose: {x_m: 37603494.0}}\n")
+    for command in (("scenario", "check", str(scenario)), ("simulate", str(scenario), "--out", str(tmp_path / "bag"))):
+        result = run_twin(*command)
+        assert result.returncode == 2, result.stderr
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and "robot.initial_pose" in lines[0] and "map file" in lines[0], lines
+    assert not (tmp_path / "bag").exists()
 
 
 def test_driving_into_a_wall_stops_the_robot_and_records_the_contact(tmp_path: Path) -> None:

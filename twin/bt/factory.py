@@ -73,6 +73,7 @@ def _may_declare_group(group: str) -> bool:
                 return True
     return False
 
+
 NodeBuilder = Callable[[str, NodeConfig], TreeNode]
 
 

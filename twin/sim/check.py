@@ -204,11 +204,16 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
     Raises:
         TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
     """
-    from twin.world import load_robot, load_world
+    from twin.sim.navigation import check_map_extent
+    from twin.sim.simulation import spawn_monitor
+    from twin.world import build_scene, load_robot, load_world
 
     try:
-        load_world(scenario.world.sdf, model_path=scenario.world.model_path)
-        load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+        world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
+        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+        scene = build_scene(world, exclude_models=(robot.name,))
+        spawn_monitor(scene, robot, scenario.robot.initial_pose)
+        check_map_extent(scenario, robot, scene)
         if isinstance(scenario.mission, BehaviorTreeMission):
             _load_tree(scenario.mission)
         _load_navigation(scenario)

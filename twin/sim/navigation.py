@@ -267,28 +267,66 @@ class NavigationStack:
         return nodes
 
 
+MAX_MAP_SPAN_M = 300.0
+"""The largest side of a map made from the world (6000 cells at 5 cm); beyond it, a map file is the way."""
+
+
 def _map_bounds(sc: Scenario, scene: Scene, *, margin_m: float = 1.0) -> tuple[float, float, float, float]:
     """What a SLAM map of the mission covers: the world's obstacles, and the places the robot goes.
 
     The obstacles' bounds 0.5 m around, and `margin_m` around the spawn point and every place the
     mission names, so that the robot's way across an open floor is on the map (a world of one box
     is not mapped around the box alone).
+
+    Raises:
+        ConfigError: If that covers more than `MAX_MAP_SPAN_M` a side, naming the place that lies farthest out.
     """
-    points = [(sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m)]
+    points = [("robot.initial_pose", sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m)]
     if isinstance(sc.mission, BehaviorTreeMission) and sc.mission.locations is not None:
         from twin.bt.mission_nodes import load_locations
 
         with contextlib.suppress(OSError, ValueError, TypeError):  # the mission reports a bad file itself
-            points += [(p.x_m, p.y_m) for p in load_locations(sc.mission.locations).values()]
-    xs = [x for x, _ in points]
-    ys = [y for _, y in points]
+            locations = load_locations(sc.mission.locations)
+            points += [(f"{sc.mission.locations}: {name}", p.x_m, p.y_m) for name, p in locations.items()]
+    xs = [x for _, x, _ in points]
+    ys = [y for _, _, y in points]
     x0, y0, x1, y1 = min(xs) - margin_m, min(ys) - margin_m, max(xs) + margin_m, max(ys) + margin_m
     box = scene.bounds
     if box is not None:
         pad = 0.5
         x0, y0 = min(x0, box[0][0] - pad), min(y0, box[0][1] - pad)
         x1, y1 = max(x1, box[1][0] + pad), max(y1, box[1][1] + pad)
+    if max(x1 - x0, y1 - y0) > MAX_MAP_SPAN_M:
+        if box is not None:
+            (bx0, by0, _), (bx1, by1, _) = box
+        else:
+            bx0 = bx1 = points[0][1]
+            by0 = by1 = points[0][2]
+
+        def outside(point: tuple[str, float, float]) -> float:
+            _, x, y = point
+            return math.hypot(max(bx0 - x, 0.0, x - bx1), max(by0 - y, 0.0, y - by1))
+
+        label, x, y = max(points, key=outside)
+        msg = (
+            f"{label}: ({x:.6g}, {y:.6g}) lies {outside((label, x, y)):.6g} m from the world's obstacles, so a map "
+            f"made from the world would span {x1 - x0:.6g} x {y1 - y0:.6g} m (at most {MAX_MAP_SPAN_M:.0f} m a side); "
+            "put it inside the world, or give `map:` a map file that covers it"
+        )
+        raise ConfigError(msg)
     return (x0, y0, x1, y1)
+
+
+def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
+    """Refuse a scenario whose map made from the world would be too large, as `NavigationStack.build` would.
+
+    Raises:
+        ConfigError: As `_map_bounds`.
+    """
+    wants_amcl = sc.localization.type == "amcl"
+    wants_nav2 = isinstance(sc.mission, BehaviorTreeMission) and sc.navigation.type == "nav2"
+    if sc.map == "from_world" and robot.lidar is not None and (wants_amcl or wants_nav2):
+        _map_bounds(sc, scene)
 
 
 def _check_locations_on_map(path: Path, occupancy: OccupancyMap) -> None:

@@ -64,6 +64,7 @@ from twin.sim.rosout import RosoutBridge
 from twin.sim.scenario import (
     BehaviorTreeMission,
     CmdVelScriptMission,
+    InitialPose,
     LidarSection,
     NoMission,
     ReplayMission,
@@ -151,6 +152,25 @@ def _yaw_inertia(robot: RobotModelSpec) -> float:
     return total
 
 
+def spawn_monitor(scene: Scene, robot: RobotModelSpec, pose: InitialPose) -> tuple[RobotBody, CollisionMonitor]:
+    """The robot's collision body and contact monitor, after checking the spawn pose is free.
+
+    Raises:
+        ConfigError: If the robot at `pose` overlaps the world (naming the model and link it is inside).
+    """
+    body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
+    monitor = CollisionMonitor(scene, body)
+    contacts = monitor.check(pose.x_m, pose.y_m, pose.yaw_rad)
+    if contacts:
+        c = contacts[0]
+        msg = (
+            f"robot.initial_pose: ({pose.x_m}, {pose.y_m}, {pose.yaw_rad}) puts {robot.name} inside "
+            f"{c.model}::{c.link}; choose a free spawn pose"
+        )
+        raise ConfigError(msg)
+    return body, monitor
+
+
 class Simulation:
     """One run of a scenario, recording into a new bag. Use as a context manager.
 
@@ -193,17 +213,7 @@ class Simulation:
             raise ConfigError(msg)
         self.robot = robot
         scene = build_scene(world, exclude_models=(robot.name,))
-        body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
-        monitor = CollisionMonitor(scene, body)
-        pose = scenario.robot.initial_pose
-        spawn_contacts = monitor.check(pose.x_m, pose.y_m, pose.yaw_rad)
-        if spawn_contacts:
-            c = spawn_contacts[0]
-            msg = (
-                f"robot.initial_pose: ({pose.x_m}, {pose.y_m}, {pose.yaw_rad}) puts {robot.name} inside "
-                f"{c.model}::{c.link}; choose a free spawn pose"
-            )
-            raise ConfigError(msg)
+        body, monitor = spawn_monitor(scene, robot, scenario.robot.initial_pose)
         self.obstacles = self._make_obstacles(body)
         contact: CollisionMonitor | ObstacleMonitor = monitor
         if self.obstacles is not None:
