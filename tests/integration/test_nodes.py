@@ -205,10 +205,12 @@ def test_twin_graph_lists_nodes_topics_types_and_rates() -> None:
     assert {"/mission", "/diff_drive", "/lidar", "/imu", "/ekf_odometry", "/robot_state_publisher"} <= set(nodes)
     assert {"/amcl", "/bt_navigator", "/controller_server", "/velocity_smoother", "/planner_server"} <= set(nodes)
     topics = {t["topic"]: t for t in data["topics"]}
-    # Nav2's chain, as its bringup remaps it: DWB and the behaviours into the smoother, the smoother to the drive
-    assert topics["/cmd_vel"]["publishers"] == ["/velocity_smoother"]
+    # Nav2's chain, as Humble's bringup remaps it: DWB into the smoother, the smoother and the behaviours
+    # (not remapped in Humble) to the drive
+    assert sorted(topics["/cmd_vel"]["publishers"]) == ["/behavior_server", "/velocity_smoother"]
     assert topics["/cmd_vel"]["subscribers"] == ["/diff_drive"]
-    assert sorted(topics["/cmd_vel_nav"]["publishers"]) == ["/behavior_server", "/controller_server"]
+    assert topics["/cmd_vel_nav"]["publishers"] == ["/controller_server"]
+    assert topics["/cmd_vel_nav"]["subscribers"] == ["/velocity_smoother"]
     assert topics["/imu"]["rate_hz"] == pytest.approx(200.0, rel=0.01)
     assert topics["/scan"]["type"] == "sensor_msgs/msg/LaserScan"
     assert topics["/tf_static"]["latched"] is True

@@ -9,8 +9,11 @@ cycle per `cycle_frequency` tick. The nodes wrap those cycles and publish what N
 - planner_server: `/plan` (nav_msgs/Path, map) for each computed path;
 - controller_server: `cmd_vel_nav` and `/local_plan` (odom) each cycle while following;
 - velocity_smoother: `/cmd_vel` at its smoothing frequency from `cmd_vel_nav` (open loop);
-- behavior_server: `cmd_vel_nav` during Spin, BackUp, DriveOnHeading (into the smoother, as
-  Nav2's bringup remaps the behaviours' `cmd_vel`);
+- behavior_server: `/cmd_vel` during Spin, BackUp, DriveOnHeading, straight to the robot: Humble's
+  `navigation_launch.py` remaps only the controller's `cmd_vel` to `cmd_vel_nav`, so the behaviours
+  bypass the smoother, which (open loop) keeps publishing its ramp to zero on `/cmd_vel` until its
+  `velocity_timeout` after the controller's last command: both reach the drive in a recovery's
+  first second, as they do on a Humble robot;
 - bt_navigator: the NavigateToPose action, running a Nav2 behaviour-tree XML unchanged every
   `bt_loop_duration`; status changes on `/behavior_tree_log`; feedback (current pose, navigation
   time, distance remaining, recoveries) on `/navigate_to_pose/feedback` (twin_msgs/NavigationFeedback,
@@ -579,7 +582,7 @@ class Nav2Servers:
         _log.info("Running %s", goal.server)
 
     def behavior_cycle(self, t_ns: int) -> tuple[float, float] | None:
-        """One behavior_server cycle: the command for `cmd_vel_nav` (None when idle or waiting)."""
+        """One behavior_server cycle: the command for `/cmd_vel` (None when idle or waiting)."""
         if self._behavior is None:
             return None
         goal = self._goals[self._behavior]
@@ -812,11 +815,15 @@ class VelocitySmootherNode(Node):
 
 
 class BehaviorServerNode(Node):
-    """behavior_server: Spin, BackUp, DriveOnHeading and Wait, one cycle per `cycle_frequency`, on `cmd_vel_nav`."""
+    """behavior_server: Spin, BackUp, DriveOnHeading and Wait, one cycle per `cycle_frequency`, on `/cmd_vel`.
+
+    Humble's bringup does not remap the behaviours' `cmd_vel`: their commands reach the drive
+    unsmoothed, beside the velocity smoother's.
+    """
 
     def __init__(self, servers: Nav2Servers) -> None:
         super().__init__("behavior_server")
-        pub = self.create_publisher(TwistEncoder.msgtype, "cmd_vel_nav", 10)
+        pub = self.create_publisher(TwistEncoder.msgtype, "/cmd_vel", 10)
         encode = TwistEncoder().encode
         cycle = servers.behavior_cycle
 
