@@ -9,8 +9,11 @@ the default mission's longest leg (location1 -> location2):
   moves along the plan, TB3 waffle parameters (20 x 40 samples, sim_time 2.0 s).
 * `smoother`: twenty velocity_smoother cycles (20 Hz).
 * `behaviors`: ten Spin cycles (10 Hz; only while a recovery runs, counted anyway).
-* `navigator`: a hundred ticks (bt_navigator's 10 ms loop) of Nav2's default tree with leaves
-  whose servers answer at once (planning measured above), FollowPath running.
+* `navigator`: a hundred loops (bt_navigator's 10 ms) of Nav2's default tree with leaves whose
+  servers answer at once (planning measured above), FollowPath running, as bt_navigator runs them:
+  a loop whose tick would repeat the previous one exactly is skipped (`tick_unless_settled`; the
+  tree then ticks when the RateController's second is up or a server's state changes). The cost of
+  ticking all hundred is printed beside it (`navigator_every_tick_ms_per_simulated_second`).
 
 The issue's budget is <= 3 ms per simulated second for all of them together.
 
@@ -80,14 +83,16 @@ class _Servers:
     def __init__(self, plan: np.ndarray) -> None:
         self.plan = plan
         self._n = 0
+        self.generation = 0  # as Nav2Servers: bumped by every goal sent, updated or canceled
 
     def send_goal(self, server: str, request: Mapping[str, Any]) -> int:
         self._n += 1
+        self.generation += 1
         self._server = server
         return self._n
 
     def update_goal(self, goal_id: int, request: Mapping[str, Any]) -> None:
-        pass
+        self.generation += 1
 
     def poll(self, goal_id: int) -> ActionUpdate:
         if self._server == "compute_path_to_pose":
@@ -95,10 +100,10 @@ class _Servers:
         return ActionUpdate(state=ActionState.RUNNING)
 
     def cancel(self, goal_id: int) -> None:
-        pass
+        self.generation += 1
 
     def cancel_all(self, server: str) -> None:
-        pass
+        self.generation += 1
 
     def call_service(self, service: str, request: Mapping[str, Any]) -> bool:
         return True
@@ -181,12 +186,18 @@ def main() -> None:
     tree = nav2_factory(servers).create_tree_from_file(TREE, clock=clock)
     tree.root_blackboard.set("goal", GOAL)
 
-    def navigator_second() -> None:
+    def navigator_second() -> None:  # as BtNavigator.tick: a loop that would repeat the last tick is skipped
+        for _ in range(100):
+            tree.tick_unless_settled(lambda: servers.generation)
+            clock.advance(10_000_000)
+
+    def navigator_every_tick_second() -> None:
         for _ in range(100):
             tree.tick_once()
             clock.advance(10_000_000)
 
     per_s["navigator"] = _best_ms(navigator_second, repeats)
+    out["navigator_every_tick_ms_per_simulated_second"] = round(_best_ms(navigator_every_tick_second, repeats), 3)
     out["ms_per_simulated_second"] = {k: round(v, 3) for k, v in per_s.items()}
     total = sum(per_s.values())
     out["total_ms_per_simulated_second"] = round(total, 3)

@@ -705,6 +705,53 @@ long twin_flood_fill(const unsigned char *blocked, long rows, long cols, long st
     free(stack);
     return size;
 }
+
+/* Nav2's FootprintCollisionChecker::footprintCost: the highest cost (uint8 grid, row-major rows x cols)
+   on the edges of the footprint (fx, fy: n points in the robot's frame) at pose (x, y, yaw), each
+   edge walked as nav2_util's LineIterator (Bresenham) walks it: a line's cost is 254 (lethal) at its
+   first lethal cell, and the walk stops when the running maximum is lethal (an unknown 255 seen on an
+   earlier edge outranks it, as in Nav2); 254 for a footprint point off the grid. Same arithmetic as
+   behaviors.footprint_cost_py. */
+int twin_footprint_cost(const unsigned char *cost, long rows, long cols, double ox, double oy, double res,
+                        const double *fx, const double *fy, long n, double x, double y, double yaw) {
+    enum { LETHAL = 254 };
+    double c = cos(yaw), s = sin(yaw);
+    long mxs[64], mys[64];
+    if (n <= 0 || n > 64) return -1;
+    for (long i = 0; i < n; ++i) {
+        double wx = x + c * fx[i] - s * fy[i];
+        double wy = y + s * fx[i] + c * fy[i];
+        if (wx < ox || wy < oy) return LETHAL;
+        long mx = (long)((wx - ox) / res), my = (long)((wy - oy) / res);
+        if (mx >= cols || my >= rows) return LETHAL;
+        mxs[i] = mx;
+        mys[i] = my;
+    }
+    int worst = 0;
+    for (long i = 0; i < n; ++i) {
+        long x0 = mxs[i], y0 = mys[i], x1 = mxs[(i + 1) % n], y1 = mys[(i + 1) % n];
+        long dx = labs(x1 - x0), dy = labs(y1 - y0);
+        long sx = x1 >= x0 ? 1 : -1, sy = y1 >= y0 ? 1 : -1;
+        int straight = dx >= dy;
+        long den = straight ? dx : dy, num = den / 2, add = straight ? dy : dx, pixels = den;
+        long cx = x0, cy = y0;
+        int line = 0;
+        for (long k = 0; k <= pixels; ++k) {
+            int v = cost[cy * cols + cx];
+            if (v == LETHAL) { line = LETHAL; break; }  /* the line's cost; unknown (255) seen before stays */
+            if (v > line) line = v;
+            num += add;
+            if (num >= den) {
+                num -= den;
+                if (straight) cy += sy; else cx += sx;
+            }
+            if (straight) cx += sx; else cy += sy;
+        }
+        if (line > worst) worst = line;
+        if (worst == LETHAL) return LETHAL;
+    }
+    return worst;
+}
 """
 
 
@@ -756,6 +803,8 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_costmap_scan_update.argtypes = [ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr]
     lib.twin_flood_fill.restype = long_
     lib.twin_flood_fill.argtypes = [ptr, long_, long_, long_, ptr]
+    lib.twin_footprint_cost.restype = ctypes.c_int
+    lib.twin_footprint_cost.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, ptr, long_, dbl, dbl, dbl]
     lib.twin_fill_polygon.restype = ctypes.c_int
     lib.twin_fill_polygon.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ctypes.c_ubyte, ptr]
     return lib

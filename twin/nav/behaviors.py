@@ -17,6 +17,7 @@ footprint's edges, a Bresenham line each; a footprint point off the costmap coun
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -51,7 +52,7 @@ class BehaviorStatus(enum.Enum):
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class BehaviorStep:
-    """One cycle: the status, the command for cmd_vel (behavior_server publishes to the smoother's input), a reason."""
+    """One cycle: the status, the command for `/cmd_vel` (Humble's behavior_server sends it straight), a reason."""
 
     status: BehaviorStatus
     cmd: tuple[float, float] = (0.0, 0.0)
@@ -101,11 +102,39 @@ def _line_cost(cost: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> int:
     return worst
 
 
+@functools.cache
+def _footprint_arrays(footprint: tuple[tuple[float, float], ...]) -> tuple[Any, Any] | None:
+    """The footprint's x and y as float64 arrays for the kernel (and the kernel), or None without it."""
+    from twin.nav._native import load_kernel
+
+    lib = load_kernel()
+    if lib is None or not 0 < len(footprint) <= 64:
+        return None
+    xs = np.ascontiguousarray([p[0] for p in footprint], dtype=np.float64)
+    ys = np.ascontiguousarray([p[1] for p in footprint], dtype=np.float64)
+    return (lib.twin_footprint_cost, (xs, ys, xs.ctypes.data, ys.ctypes.data))
+
+
 def footprint_cost(costmap: CostGrid, footprint: tuple[tuple[float, float], ...], pose: Pose) -> int:
     """Nav2's FootprintCollisionChecker::footprintCost: the highest cost on the footprint's edges at `pose`.
 
-    A footprint point off the costmap gives LETHAL (254).
+    A footprint point off the costmap gives LETHAL (254). In C when the kernels are built (the same
+    arithmetic, the same cells: tested), else in Python.
     """
+    kernel = _footprint_arrays(footprint)
+    cost = costmap.cost
+    if kernel is not None and cost.flags.c_contiguous:
+        fn, (_, _, xs, ys) = kernel
+        rows, cols = cost.shape
+        return int(
+            fn(cost.ctypes.data, rows, cols, costmap.origin_x_m, costmap.origin_y_m, costmap.resolution_m,
+               xs, ys, len(footprint), pose[0], pose[1], pose[2])
+        )  # fmt: skip
+    return footprint_cost_py(costmap, footprint, pose)
+
+
+def footprint_cost_py(costmap: CostGrid, footprint: tuple[tuple[float, float], ...], pose: Pose) -> int:
+    """`footprint_cost` in Python (the reference the kernel is tested against)."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     cells = []
     for px, py in footprint:

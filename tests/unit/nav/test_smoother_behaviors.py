@@ -116,6 +116,35 @@ def test_a_spin_whose_footprint_touches_a_lethal_cell_is_refused_at_once() -> No
     assert clear.status is BehaviorStatus.SUCCEEDED  # 0.25 m away the circle stays clear
 
 
+def test_the_footprint_kernel_reads_the_cells_the_python_checker_reads() -> None:
+    # The C footprint check (what every behaviour cycle runs) against the Python reference: the house's
+    # inflated costmap and a random one (lethal and unknown cells), poses on, across and off the edges,
+    # the TB3 circle and a rectangle.
+    from tests.unit.nav.costmaps import house_costmap
+    from twin.nav._native import load_kernel
+    from twin.nav.behaviors import BehaviorParams, footprint_cost, footprint_cost_py
+
+    assert load_kernel() is not None  # the tests run where the kernels build; the Python path is the fallback
+    rng = np.random.default_rng(7)
+    random_cost = rng.choice(np.array([0, 1, 50, 128, 252, 253, 254, 255], dtype=np.uint8), size=(80, 120))
+    maps = [house_costmap(), grid(random_cost, resolution_m=0.05, origin_m=(-1.3, 0.7))]
+    footprints = [BehaviorParams().footprint, ((0.2, 0.15), (0.2, -0.15), (-0.2, -0.15), (-0.2, 0.15))]
+    costs = set()
+    for costmap in maps:
+        w, h = costmap.cols * costmap.resolution_m, costmap.rows * costmap.resolution_m
+        for footprint in footprints:
+            for _ in range(3000):
+                pose = (
+                    costmap.origin_x_m - 0.4 + rng.random() * (w + 0.8),
+                    costmap.origin_y_m - 0.4 + rng.random() * (h + 0.8),
+                    float(rng.uniform(-7.0, 7.0)),
+                )
+                expected = footprint_cost_py(costmap, footprint, pose)
+                assert footprint_cost(costmap, footprint, pose) == expected, (pose, footprint)
+                costs.add(expected)
+    assert {0, 254} <= costs and len(costs) > 4  # free, lethal (and off the map) and costs between were met
+
+
 def test_wait_lasts_its_duration_and_times_out_are_failures() -> None:
     step, _, cmds, k = _run("wait", {"time_s": 5.0}, _empty())
     assert step.status is BehaviorStatus.SUCCEEDED and k == 50 and cmds == [(0.0, 0.0)] * 50
