@@ -126,11 +126,9 @@ class TypeRegistry:
         return definition
 
     def _disk_path(self) -> Path:
-        from importlib.metadata import version
-
         from twin.core.native import cache_dir
 
-        key = hashlib.sha256(version("rosbags").encode() + json.dumps(self._extra, sort_keys=True).encode())
+        key = hashlib.sha256(_rosbags_version().encode() + json.dumps(self._extra, sort_keys=True).encode())
         return cache_dir() / "msgdefs" / f"humble-{key.hexdigest()[:16]}.json"
 
     def _from_disk(self) -> dict[str, Any]:
@@ -155,3 +153,28 @@ class TypeRegistry:
             os.replace(tmp, path)
         except OSError:
             pass
+
+
+def _rosbags_version() -> str:
+    """The installed rosbags' version, which keys the on-disk definitions.
+
+    Read from the name of its dist-info folder beside the package (one directory listing), not through
+    `importlib.metadata`, whose import alone costs 30-60 ms of every run's start-up; that is the
+    fallback when the folder is not where pip puts it.
+    """
+    import os
+
+    import rosbags
+
+    for location in rosbags.__path__:
+        parent = os.path.dirname(os.path.abspath(location))
+        try:
+            names = os.listdir(parent)
+        except OSError:
+            continue
+        for name in names:
+            if name.startswith("rosbags-") and name.endswith(".dist-info"):
+                return name[len("rosbags-") : -len(".dist-info")]
+    from importlib.metadata import version
+
+    return version("rosbags")
