@@ -77,6 +77,12 @@ def _node_of(frame: FrameType) -> str:
     if isinstance(full_path, str):
         kind = f" ({registration})" if isinstance(registration, str) else ""
         return f"tree node '{full_path}'{kind}"
+    root = getattr(owner, "root", None)  # the tree itself, between ticks of its root (a wake-up loop)
+    root_path = getattr(root, "full_path", None)
+    if isinstance(root_path, str):
+        registration = getattr(root, "registration_name", None)
+        kind = f" ({registration})" if isinstance(registration, str) else ""
+        return f"tree node '{root_path}'{kind} ticked again and again by its tree"
     name = frame.f_code.co_name
     if name.lower().endswith(("dostep", "do_step")) or "fmi" in frame.f_code.co_filename.lower():
         return f"FMU call {name}"

@@ -1,0 +1,38 @@
+"""The watchdog's one-line answer to "where is the run stuck?" names the tree node, wherever it looks."""
+
+from __future__ import annotations
+
+import _thread
+import threading
+import time
+from pathlib import Path
+
+from twin.bt import BehaviorTreeFactory, ManualClock
+from twin.sim.watchdog import describe_thread
+
+FOREVER = Path(__file__).resolve().parents[2] / "robustness" / "data" / "forever.xml"
+
+
+def test_a_tree_spinning_on_wake_ups_is_named_at_every_sample() -> None:
+    # Repeat forever over AlwaysSuccess never returns from one tick: the main thread alternates between the
+    # nodes' ticks and the tree's own wake-up loop. Every sample must name a tree node, not only those that
+    # land inside a node (the flaky case: a sample in Tree._take_wake_up named none).
+    tree = BehaviorTreeFactory().create_tree_from_file(FOREVER, clock=ManualClock())
+    main = threading.get_ident()
+    wheres: list[str] = []
+
+    def watch() -> None:
+        for _ in range(80):
+            time.sleep(0.002)
+            wheres.append(describe_thread(main)[0])
+        _thread.interrupt_main()
+
+    threading.Thread(target=watch, daemon=True).start()
+    try:
+        tree.tick_once()
+        raise AssertionError("the tree returned")
+    except KeyboardInterrupt:
+        pass
+    assert len(wheres) == 80
+    unnamed = [w for w in wheres if "tree node '" not in w]
+    assert not unnamed, unnamed[:3]
