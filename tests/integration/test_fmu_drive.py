@@ -108,7 +108,7 @@ def test_fmu_error_mid_run_ends_with_one_line_exit_4_and_a_readable_bag(tmp_path
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
     assert "t=3.0" in lines[0] and str(bag) in lines[0]
     clock = topics(bag)["/clock"]
-    assert 290 <= len(clock) <= 301  # everything up to the fault is in the bag
+    assert 29 <= len(clock) <= 31  # /clock at 10 Hz: everything up to the fault is in the bag
 
 
 def test_burger_above_its_motors_warns_once_and_motor_state_shows_the_saturation(tmp_path: Path) -> None:
@@ -168,7 +168,7 @@ def test_isolated_fmu_that_crashes_or_hangs_ends_the_run_with_one_line_exit_4_an
     assert str(bag) in lines[0]
     msgs = topics(bag)
     clock = msgs["/clock"]
-    assert 95 <= len(clock) <= 101  # /clock at 100 Hz: everything up to the fault is in the bag
+    assert 9 <= len(clock) <= 11  # /clock at 10 Hz: everything up to the fault is in the bag
     assert len(msgs["/motor_state"]) >= 29
 
 

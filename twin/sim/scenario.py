@@ -104,7 +104,9 @@ class SensorsSection:
     lidar: LidarSection = field(default_factory=LidarSection)
     imu: ImuSection = field(default_factory=ImuSection)
     ground_truth: RateSection = field(default_factory=lambda: RateSection(rate_hz=30.0))
-    clock: RateSection = field(default_factory=lambda: RateSection(rate_hz=100.0))
+    # gazebo_ros_init publishes /clock at its `publish_rate`, 10 Hz by default (throttled on real time:
+    # 10 per simulated second when Gazebo runs at real time, as the Humble TB3 bag records, 282 in 29.8 s)
+    clock: RateSection = field(default_factory=lambda: RateSection(rate_hz=10.0))
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
