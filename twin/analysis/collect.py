@@ -294,11 +294,21 @@ class BagData:
         """The sim time (from /clock) at record times `t_ns`, or None without /clock."""
         if self.clock is None or len(self.clock[0]) < 2:
             return None
-        rec = np.frombuffer(self.clock[0], dtype=np.int64)
-        sim = np.frombuffer(self.clock[1], dtype=np.int64)
-        return np.round(np.interp(t_ns.astype(np.float64), rec.astype(np.float64), sim.astype(np.float64))).astype(
-            np.int64
-        )
+        rec = np.frombuffer(self.clock[0], dtype=np.int64).astype(np.float64)
+        sim = np.frombuffer(self.clock[1], dtype=np.int64).astype(np.float64)
+        t = t_ns.astype(np.float64)
+        out = np.interp(t, rec, sim)
+        # Before the first and after the last /clock message (10 Hz from Gazebo and the twin, so up to 0.1 s
+        # of commands), go on at the pace of the nearest ten intervals rather than holding the end value.
+        k = min(10, len(rec) - 1)
+        before, after = t < rec[0], t > rec[-1]
+        if before.any() and rec[k] > rec[0]:
+            pace = (sim[k] - sim[0]) / (rec[k] - rec[0])
+            out[before] = sim[0] + (t[before] - rec[0]) * pace
+        if after.any() and rec[-1] > rec[-1 - k]:
+            pace = (sim[-1] - sim[-1 - k]) / (rec[-1] - rec[-1 - k])
+            out[after] = sim[-1] + (t[after] - rec[-1]) * pace
+        return np.round(out).astype(np.int64)
 
 
 def _best_pose(data: BagData) -> PoseTrack | None:
