@@ -42,6 +42,8 @@ from twin.cli import _COMMAND_MODULES  # noqa: E402
 
 _FIRST_STEP = """
 import sys, time
+from twin.core.gcpolicy import defer_collection
+defer_collection()  # as `twin simulate`'s entry point does (twin.cli.run); the loop turns collection back on
 from pathlib import Path
 from twin.sim.scenario import default_scenario_path, load_scenario
 from twin.sim.simulation import Simulation

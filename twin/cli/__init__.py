@@ -182,4 +182,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def run() -> None:
     """Console-script entry point."""
+    argv = sys.argv[1:]
+    if _named_command(argv) == "simulate":  # start-up without the cyclic collector (see twin.core.gcpolicy)
+        from twin.core.gcpolicy import defer_collection, resume_collection
+
+        defer_collection()
+        try:
+            code = main(argv)
+        finally:
+            resume_collection()  # the loop resumed it already; an early exit or error path, here
+        sys.exit(code)
     sys.exit(main())

@@ -27,6 +27,7 @@ import numpy as np
 from twin.bag import Recorder
 from twin.core.clock import NS_PER_S, s_to_ns
 from twin.core.errors import ConfigError
+from twin.core.gcpolicy import resume_collection
 from twin.estimation import OdometryFilter
 from twin.estimation.node import EkfNode
 from twin.nav import GridNavigator, GridPlanner, build_grid
@@ -556,6 +557,7 @@ class Simulation:
         )
         mission = self.mission_node
         done = None if mission is None or self._run_to_limit else self.mission  # its `done` ends the run
+        resume_collection()  # `twin simulate` built all this without the cyclic collector: freeze it, resume
         wall0 = time.perf_counter()
         why = self.executor.spin(self.end_k, done=done, should_stop=should_stop, progress=progress)
         wall_s = time.perf_counter() - wall0
