@@ -123,7 +123,7 @@ def footprint_cost(costmap: CostGrid, footprint: tuple[tuple[float, float], ...]
     """
     kernel = _footprint_arrays(footprint)
     cost = costmap.cost
-    if kernel is not None and cost.flags.c_contiguous:
+    if kernel is not None and cost.dtype == np.uint8 and cost.flags.c_contiguous:
         fn, (_, _, xs, ys) = kernel
         rows, cols = cost.shape
         return int(
