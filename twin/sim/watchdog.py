@@ -69,20 +69,25 @@ class StuckReport:
     stack: str
 
 
+def _tree_node(node: object) -> str:
+    """Name a behaviour-tree node ("tree node 'path' (type)"), or "" for anything else."""
+    full_path = getattr(node, "full_path", None)
+    if not isinstance(full_path, str):
+        return ""
+    registration = getattr(node, "registration_name", None)
+    kind = f" ({registration})" if isinstance(registration, str) else ""
+    return f"tree node '{full_path}'{kind}"
+
+
 def _node_of(frame: FrameType) -> str:
     """Name a behaviour-tree node or FMU call that a frame belongs to, if it does."""
     owner = frame.f_locals.get("self")
-    full_path = getattr(owner, "full_path", None)
-    registration = getattr(owner, "registration_name", None)
-    if isinstance(full_path, str):
-        kind = f" ({registration})" if isinstance(registration, str) else ""
-        return f"tree node '{full_path}'{kind}"
-    root = getattr(owner, "root", None)  # the tree itself, between ticks of its root (a wake-up loop)
-    root_path = getattr(root, "full_path", None)
-    if isinstance(root_path, str):
-        registration = getattr(root, "registration_name", None)
-        kind = f" ({registration})" if isinstance(registration, str) else ""
-        return f"tree node '{root_path}'{kind} ticked again and again by its tree"
+    node = _tree_node(owner)
+    if node:
+        return node
+    root = _tree_node(getattr(owner, "root", None))  # the tree itself, between ticks of its root (a wake-up loop)
+    if root:
+        return f"{root} ticked again and again by its tree"
     name = frame.f_code.co_name
     if name.lower().endswith(("dostep", "do_step")) or "fmi" in frame.f_code.co_filename.lower():
         return f"FMU call {name}"
