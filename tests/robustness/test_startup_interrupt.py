@@ -24,13 +24,16 @@ import pytest
 from tests.conftest import REPO
 
 MOMENTS_S = (0.05, 0.15, 0.4, 0.8, 1.3, 2.0, 3.0, 4.5)
+# Long enough that the run is still going at the last moment on any machine: the default mission
+# simulates 600 s in about 2 s on a quick one, so a 600 s run could end before its SIGINT arrives.
+DURATION_S = 86_400
 
 
 @pytest.mark.parametrize("delay_s", MOMENTS_S)
 def test_ctrl_c_at_any_moment_is_one_line_and_exit_130(delay_s: float, tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "twin", "simulate", "--duration", "600", "--out", str(tmp_path / "bag")],
+        [sys.executable, "-m", "twin", "simulate", "--duration", str(DURATION_S), "--out", str(tmp_path / "bag")],
         cwd=REPO,
         env=env,
         stdout=subprocess.PIPE,
