@@ -112,19 +112,10 @@ int twin_cast_fan(const double *seg, const long *seg_idx, long n_seg,
     return 0;
 }
 
-/* A lidar scan: the fan above, then REP 117 masking (+inf at or beyond tmax, -inf at or below
-   tmin) and, when noise is given, noise added to the in-range values, clamped to [tmin, tmax]. */
-int twin_scan(const double *seg, const long *seg_idx, long n_seg,
-              const double *circ, const long *circ_idx, long n_circ,
-              double ox, double oy, double start, double inc, int n,
-              double tmin, double tmax, const double *noise, float *out) {
-    double *raw = malloc((size_t)n * sizeof(double));
-    if (!raw) return -1;
-    if (twin_cast_fan(seg, seg_idx, n_seg, circ, circ_idx, n_circ, ox, oy, start, inc, n,
-                      tmin, tmax, raw) != 0) {
-        free(raw);
-        return -1;
-    }
+/* REP 117 masking of a fan's ranges (+inf at or beyond tmax, -inf at or below tmin) and, when
+   noise is given, noise added to the in-range values, clamped to [tmin, tmax]. */
+static void mask_ranges(const double *raw, int n, double tmin, double tmax, const double *noise,
+                        float *out) {
     for (int i = 0; i < n; ++i) {
         double r = raw[i];
         if (r >= tmax) { out[i] = INFINITY; continue; }
@@ -136,6 +127,21 @@ int twin_scan(const double *seg, const long *seg_idx, long n_seg,
         }
         out[i] = (float)r;
     }
+}
+
+/* A lidar scan: the fan above, then mask_ranges. */
+int twin_scan(const double *seg, const long *seg_idx, long n_seg,
+              const double *circ, const long *circ_idx, long n_circ,
+              double ox, double oy, double start, double inc, int n,
+              double tmin, double tmax, const double *noise, float *out) {
+    double *raw = malloc((size_t)n * sizeof(double));
+    if (!raw) return -1;
+    if (twin_cast_fan(seg, seg_idx, n_seg, circ, circ_idx, n_circ, ox, oy, start, inc, n,
+                      tmin, tmax, raw) != 0) {
+        free(raw);
+        return -1;
+    }
+    mask_ranges(raw, n, tmin, tmax, noise, out);
     free(raw);
     return 0;
 }
@@ -158,17 +164,7 @@ int twin_scan_with(const double *seg, const long *seg_idx, long n_seg,
     fan_accumulate(seg, seg_idx, n_seg, circ, circ_idx, n_circ, ox, oy, start, inc, n, cosb, sinb,
                    tmin, raw);
     fan_accumulate(seg2, 0, n_seg2, circ2, 0, n_circ2, ox, oy, start, inc, n, cosb, sinb, tmin, raw);
-    for (int i = 0; i < n; ++i) {
-        double r = raw[i];
-        if (r >= tmax) { out[i] = INFINITY; continue; }
-        if (r <= tmin) { out[i] = -INFINITY; continue; }
-        if (noise) {
-            r += noise[i];
-            if (r < tmin) r = tmin;
-            if (r > tmax) r = tmax;
-        }
-        out[i] = (float)r;
-    }
+    mask_ranges(raw, n, tmin, tmax, noise, out);
     free(cosb);
     return 0;
 }
