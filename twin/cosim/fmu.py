@@ -27,14 +27,15 @@ import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import MappingProxyType, TracebackType
-from typing import Any, Literal, Protocol, Self
+from types import MappingProxyType
+from typing import Any, Literal, Protocol
 
 import fmpy
 import fmpy.fmi2
 import fmpy.fmi3
 from fmpy.model_description import read_model_description
 
+from twin.core.closing import Closing
 from twin.core.errors import FmuError
 from twin.cosim.units import Unit
 
@@ -477,7 +478,7 @@ def _decode(value: bytes | None) -> str:
     return value.decode("utf-8", "replace") if value else ""
 
 
-class FmuFile:
+class FmuFile(Closing):
     """An extracted FMU whose Co-Simulation instances can be created (a context manager)."""
 
     def __init__(self, path: Path) -> None:
@@ -506,14 +507,6 @@ class FmuFile:
             msg = f"{path}: {problem}"
             raise FmuError(msg)
         self._instances: list[Stepper] = []
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
     def close(self) -> None:
         """Close every instance and remove the extraction."""
@@ -597,7 +590,7 @@ class FmuFile:
         return stepper
 
 
-class _Base:
+class _Base(Closing):
     """What both adapters share: buffers, labels, status checks, start values, closing."""
 
     def __init__(  # noqa: PLR0917 - private, built in one place
@@ -758,14 +751,6 @@ class _Base:
             fmu.freeInstance()
         except Exception as err:
             _log.debug("%s: freeInstance: %s", self.name, err)
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
 
 class _Fmi2(_Base):

@@ -22,13 +22,12 @@ import logging
 import threading
 from collections import deque
 from dataclasses import dataclass
-from types import TracebackType
-from typing import Self
 
 import foxglove
 from foxglove.websocket import Capability, ChannelView, Client, ServerListener
 
 from twin.bag.typesys import MessageDefinition
+from twin.core.closing import Closing
 from twin.core.errors import ConfigError
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LiveServer"]
@@ -57,7 +56,7 @@ class _Listener(ServerListener):
         self._server._resend_latched(channel.id)
 
 
-class LiveServer:
+class LiveServer(Closing):
     """A Foxglove WebSocket server for one run or one bag. Use as a context manager.
 
     Args:
@@ -175,11 +174,3 @@ class LiveServer:
         for entry in self._channels:
             entry.channel.close()
         self._server.stop()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()

@@ -29,11 +29,11 @@ import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
-from typing import Literal, NamedTuple, Protocol, Self
+from typing import Literal, NamedTuple, Protocol
 
 import numpy as np
 
+from twin.core.closing import Closing
 from twin.core.errors import ConfigError, FmuError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
@@ -296,7 +296,7 @@ def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]
         raise ConfigError(msg) from None
 
 
-class FmuDrivetrain:
+class FmuDrivetrain(Closing):
     """Two FMU wheel drives and the chassis, stepped at a fixed step (a context manager)."""
 
     def __init__(
@@ -938,14 +938,6 @@ class FmuDrivetrain:
         if self._isolated is not None:
             self._isolated.close()
         self._file.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
 
 # --- step response of a drive FMU ---------------------------------------------------------------

@@ -19,13 +19,13 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Self
+from typing import Any
 
 import numpy as np
 
 from twin.bag import Recorder
 from twin.core.clock import NS_PER_S, s_to_ns
+from twin.core.closing import Closing
 from twin.core.errors import ConfigError
 from twin.core.gcpolicy import resume_collection
 from twin.estimation import OdometryFilter
@@ -172,7 +172,7 @@ def spawn_monitor(scene: Scene, robot: RobotModelSpec, pose: InitialPose) -> tup
     return body, monitor
 
 
-class Simulation:
+class Simulation(Closing):
     """One run of a scenario, recording into a new bag. Use as a context manager.
 
     Args:
@@ -512,14 +512,6 @@ class Simulation:
         return self._drive_node.contacts
 
     # -- context manager -------------------------------------------------------------------------
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
     def close(self) -> None:
         """Close the drive and the bag (idempotent); what was recorded stays a complete, readable bag."""

@@ -19,9 +19,9 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Self
+from typing import Any
 
+from twin.core.closing import Closing
 from twin.core.errors import ConfigError
 from twin.sweep.runner import KeepBags, RunTask, execute_run, read_result
 from twin.sweep.spec import RunSpec, SweepSpec, expand_runs
@@ -47,7 +47,7 @@ class SweepResult:
     resumed: int
 
 
-class Cluster:
+class Cluster(Closing):
     """A Dask client started in the background: an embedded LocalCluster, or a scheduler by address.
 
     Starting a cluster takes a second or more (worker processes, Dask's imports); started when the
@@ -91,14 +91,6 @@ class Cluster:
         """Stop the embedded cluster (after it finished starting), or disconnect from the scheduler."""
         self._thread.join()
         self._stack.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
 
 def run_sweep(
