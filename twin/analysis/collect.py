@@ -312,11 +312,27 @@ class BagData:
 
 
 def _best_pose(data: BagData) -> PoseTrack | None:
-    for topic in POSE_TOPICS:
-        track = data.poses.get(topic)
-        if track is not None and len(track):
+    for track in data.poses.values():  # most trusted first (see _pose_topics)
+        if len(track):
             return track
     return None
+
+
+def _pose_topics(types: dict[str, str], extra: Iterable[str]) -> list[str]:
+    """The topics to read poses from, most trusted first.
+
+    POSE_TOPICS where present, then `extra` (topics a caller names). A bag with none of POSE_TOPICS
+    (a real robot's `/odometry/filtered`, `/wheel/odom`, `/pose`) gives every topic of a pose type,
+    Odometry first, by name.
+    """
+    out: list[str] = []
+    for t in (*POSE_TOPICS, *extra):
+        if t in types and t not in out and _cdr.pose_reader(types[t]) is not None:
+            out.append(t)
+    if not any(t in POSE_TOPICS for t in out):
+        others = [t for t, ty in types.items() if t not in out and _cdr.pose_reader(ty) is not None]
+        out += sorted(others, key=lambda t: (types[t] != "nav_msgs/msg/Odometry", t))
+    return out
 
 
 def collect(
@@ -327,6 +343,7 @@ def collect(
     scan_points: bool = False,
     decoded: bool = True,
     progress: Callable[[float], None] | None = None,
+    pose_topics: Iterable[str] = (),
 ) -> BagData:
     """Read the bag once (twice with `decoded`) and keep the series analysis uses.
 
@@ -337,6 +354,8 @@ def collect(
         scan_points: Accumulate scan endpoints (placed with the best pose known at the scan).
         decoded: Also decode the rare structured topics (BT log, plans, goals, contacts, map).
         progress: Called with the fraction of the bag's time read, now and then.
+        pose_topics: Topics to read poses from besides POSE_TOPICS (a bag without any of those reads
+            every topic of a pose type); `data.poses` holds them most trusted first.
 
     Raises:
         BagError: If the folder is not a readable bag; a truncated storage file says to run
@@ -352,8 +371,15 @@ def collect(
     info = open_bag(bag)
     data = BagData(info=info, start_ns=info.start_ns)
     names = {t.name for t in info.topics}
-    wanted = None if topics is None else [t for t in topics if t in names]
     by_name = {t.name: t for t in info.topics}
+    pose_list = _pose_topics({t.name: t.msgtype for t in info.topics}, pose_topics)
+    wanted = None
+    if topics is not None:
+        asked = list(topics)
+        wanted = [t for t in asked if t in names]
+        if pose_topics or any(t in asked for t in POSE_TOPICS):
+            # a caller asking for the usual pose topics gets whatever the bag carries poses on
+            wanted += [t for t in pose_list if t not in wanted]
     for ti in info.topics:
         if wanted is None or ti.name in wanted:
             data.health[ti.name] = TopicHealth(
@@ -362,7 +388,7 @@ def collect(
                 decodable=ti.decodable,
                 expected_rate_hz=EXPECTED_RATE_HZ.get(ti.name),
             )
-    pose_fns = {t: fn for t in POSE_TOPICS if t in by_name and (fn := _cdr.pose_reader(by_name[t].msgtype)) is not None}
+    pose_fns = {t: fn for t in pose_list if (fn := _cdr.pose_reader(by_name[t].msgtype)) is not None}
     for t in pose_fns:
         data.poses[t] = PoseTrack(t, by_name[t].msgtype)
     twist_fn = _cdr.twist_reader(by_name[CMD_TOPIC].msgtype) if CMD_TOPIC in by_name else None
@@ -383,7 +409,7 @@ def collect(
         return data
     span = max(info.duration_ns, 1)
     next_report = 0
-    pose_rank = {t: i for i, t in enumerate(POSE_TOPICS)}
+    pose_rank = {t: i for i, t in enumerate(pose_list)}
     best_rank = min((pose_rank[t] for t in pose_fns), default=99)
     handlers: dict[str, Callable[[int, bytes], None]] = {}
     state = {"pose": None}

@@ -1,7 +1,11 @@
 """Two bags of one run compared: time-aligned pose error, ATE and RPE, per-topic rate differences.
 
-Times are matched from each bag's first pose on the chosen topic, by header stamps (sim time):
-B's pose is interpolated at A's stamps where both bags cover. ATE is the RMS position error
+Times are matched from each bag's first pose on the chosen topic, by header stamps (sim time), as
+a twin run and the real run it stands in for start their clocks at different moments. Two topics
+of one bag, or two bags recorded on one clock (`same_clock`), are matched on their stamps as they
+are instead: a latched or old first message (an `/amcl_pose` from before `/odom` began) would
+otherwise shift one track against the other by its age. B's pose is interpolated at A's stamps
+where both bags cover. ATE is the RMS position error
 (optionally after the rigid Umeyama alignment of B onto A); RPE is the RMS error of the relative
 motion over a fixed interval (1 s by default).
 """
@@ -156,11 +160,20 @@ def _pick_topics(a: BagData, b: BagData, topics: tuple[str, ...] | None) -> tupl
     raise BagError(msg)
 
 
-def _relative(track: PoseTrack) -> tuple[F64, F64]:
+def _relative(track: PoseTrack, origin_ns: int | None = None) -> tuple[F64, F64]:
+    """The track's stamps in s from `origin_ns` (default: its own first stamp), in time order."""
     stamps = track.stamp_ns
     order = np.argsort(stamps, kind="stable")
-    t = (stamps[order] - stamps[order][0]).astype(np.float64) * 1e-9
+    first = int(stamps[order][0]) if origin_ns is None else origin_ns
+    t = (stamps[order] - first).astype(np.float64) * 1e-9
     return t, track.values[order]
+
+
+def _same_bag(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return False
 
 
 def compare_bags(
@@ -170,18 +183,27 @@ def compare_bags(
     topics: tuple[str, ...] | None = None,
     align: bool = False,
     rpe_interval_s: float = 1.0,
+    same_clock: bool | None = None,
 ) -> Comparison:
     """Compare bag B against bag A (see the module docstring).
+
+    `same_clock`: match the poses on their stamps as they are (True), or each from its track's first
+    pose (False); None (the default) chooses True when A and B are the same bag.
 
     Raises:
         BagError: If a bag is unreadable, or they have no common pose topic (or a given one).
     """
-    data_a = collect(a, decoded=False)
-    data_b = collect(b, decoded=False)
+    data_a = collect(a, decoded=False, pose_topics=topics[:1] if topics else ())
+    data_b = collect(b, decoded=False, pose_topics=topics[-1:] if topics else ())
     ta, tb = _pick_topics(data_a, data_b, topics)
-    t_a, va = _relative(data_a.poses[ta])
-    t_b, vb = _relative(data_b.poses[tb])
-    inside = t_a <= t_b[-1]
+    if same_clock is None:
+        same_clock = _same_bag(a, b)
+    origin = None
+    if same_clock:
+        origin = min(int(data_a.poses[ta].stamp_ns.min()), int(data_b.poses[tb].stamp_ns.min()))
+    t_a, va = _relative(data_a.poses[ta], origin)
+    t_b, vb = _relative(data_b.poses[tb], origin)
+    inside = (t_a >= t_b[0]) & (t_a <= t_b[-1])
     t = t_a[inside]
     xy_a = va[inside, :2]
     yaw_a = va[inside, 2]

@@ -160,10 +160,13 @@ def _timeline_dict(tl: Any) -> dict[str, Any]:
     }
 
 
+_POSE_TYPES = "Odometry, PoseStamped or PoseWithCovarianceStamped"
+
+
 def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str, render: bool) -> None:
     title = report.bag.name
     add = report.sections.append
-    tracks = {t: data.poses[t].values[:, :2] for t in POSE_TOPICS if t in data.poses and len(data.poses[t])}
+    tracks = {t: track.values[:, :2] for t, track in data.poses.items() if len(track)}
 
     # Map.
     if walls is not None:
@@ -184,11 +187,17 @@ def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str,
     if tracks:
         _plot(report, "map", render, lambda: plots.map_plot(layers, title))
     else:
-        add(Section(name="map", available=False, needs="a pose topic: " + ", ".join(POSE_TOPICS)))
+        add(
+            Section(
+                name="map",
+                available=False,
+                needs=f"a pose topic ({_POSE_TYPES}): " + ", ".join(POSE_TOPICS),
+            )
+        )
 
     # Velocity: commanded vs actual.
-    motion_topics = ("/ground_truth/odom", "/odom")
-    motion = next((data.poses[t] for t in motion_topics if t in data.poses and len(data.poses[t])), None)
+    # the first Odometry track (most trusted first): the one pose type that carries velocities
+    motion = next((tr for tr in data.poses.values() if len(tr) and tr.msgtype == "nav_msgs/msg/Odometry"), None)
     cmd = None
     if data.cmd is not None and len(data.cmd[0]):
         cmd = tuple(np.frombuffer(a, dtype=np.float64) for a in data.cmd)

@@ -57,7 +57,8 @@ examples:
 
 Poses of the chosen topic in each bag (default: /ground_truth/odom, else /odom, the first both
 have; or --topic for both, --topic A_TOPIC B_TOPIC for each) are matched in time from each bag's
-start (sim time from the header stamps), then compared: position and yaw error over time, ATE
+first pose (sim time from the header stamps; two topics of one bag, or --same-clock, on the stamps
+as they are), then compared: position and yaw error over time, ATE
 (RMS position error, optionally after a Umeyama rigid alignment with --align) and RPE over 1 s.
 Exit codes: 0 done (and within --max-position-error), 1 over the threshold, 5 unreadable bags or
 no common pose topic.
@@ -89,6 +90,11 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     cmp = parser.add_argument_group("compare A B")
     cmp.add_argument("--topic", nargs="+", metavar="TOPIC", help="pose topic in both bags (or one per bag)")
     cmp.add_argument("--align", action="store_true", help="Umeyama-align B's trajectory to A's before the ATE")
+    cmp.add_argument(
+        "--same-clock",
+        action="store_true",
+        help="match the poses on their stamps as they are (two recordings of one run), not from each first pose",
+    )
     cmp.add_argument(
         "--max-position-error", type=float, metavar="M", help="exit 1 when the final or max position error exceeds M"
     )
@@ -157,7 +163,7 @@ def _compare(args: argparse.Namespace) -> int:
     if topics is not None and len(topics) > 2:
         msg = f"--topic takes one topic (both bags) or two (A's, B's), got {len(topics)}"
         raise BagError(msg)
-    result = compare_bags(a, b, topics=topics, align=args.align)
+    result = compare_bags(a, b, topics=topics, align=args.align, same_clock=True if args.same_clock else None)
     out = args.out
     if out is not None:
         walls = _walls(args)
