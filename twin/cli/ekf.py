@@ -126,6 +126,26 @@ def _load_config(path: Path | None) -> EstimationSection:
     return config
 
 
+def _topic_hint(topics: Any, args: argparse.Namespace, missing: list[str]) -> str:
+    """What to pass for the missing topics: the bag's topics of the right type as flags, else its topics."""
+    flags = {
+        args.imu_topic: ("--imu-topic", "sensor_msgs/msg/Imu"),
+        args.joint_topic: ("--joint-topic", "sensor_msgs/msg/JointState"),
+    }
+    hints = []
+    for name in missing:
+        flag, msgtype = flags[name]
+        found = sorted(t.name for t in topics if t.msgtype == msgtype)
+        if found:
+            hints.append(f"{flag} {found[0]}" + (f" (or {', '.join(found[1:])})" if len(found) > 1 else ""))
+        elif flag == "--imu-topic":
+            hints.append("--no-gyro (the bag has no sensor_msgs/Imu topic)")
+    if hints:
+        return "pass " + " and ".join(hints)
+    listing = ", ".join(sorted(t.name for t in topics)) or "no topics"
+    return f"the bag has {listing} and no {' or '.join(flags[n][1] for n in missing)} topic"
+
+
 def _read(args: argparse.Namespace, bag: ModuleType) -> ReplayInputs:
     from twin.estimation.replay import collect_inputs
 
@@ -133,8 +153,7 @@ def _read(args: argparse.Namespace, bag: ModuleType) -> ReplayInputs:
     names = {t.name for t in info.topics}
     missing = [t for t in (args.imu_topic, args.joint_topic) if t not in names]
     if missing and not (args.no_gyro and missing == [args.imu_topic]):
-        listing = ", ".join(sorted(names)) or "no topics"
-        msg = f"{args.bag}: no {' or '.join(missing)} to replay; the bag has {listing}"
+        msg = f"{args.bag}: no {' or '.join(missing)} to replay; " + _topic_hint(info.topics, args, missing)
         raise EstimationError(msg)
     wanted = [t for t in (args.imu_topic, args.joint_topic, args.odom_topic) if t in names]
     messages = bag.read_messages(args.bag, wanted)

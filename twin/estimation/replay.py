@@ -212,7 +212,7 @@ def collect_inputs(
     if not joints and names_seen:
         msg_text = (
             f"{joint_topic} names joints {', '.join(sorted(names_seen))}, not both {left_joint} and {right_joint}; "
-            "pass the wheel joint names"
+            "pass the wheel joint names with --left-joint NAME --right-joint NAME"
         )
         raise EstimationError(msg_text)
     jt, j = _sorted_unique(joints, 4)

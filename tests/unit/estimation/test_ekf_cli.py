@@ -75,11 +75,12 @@ def test_the_unit_flag_is_reported_as_given(
     assert json.loads(out)["joint_velocity_units_note"] == "m/s (given)"
 
 
-def _copy_without(source: Path, target: Path, dropped: set[str]) -> None:
+def _copy_without(source: Path, target: Path, dropped: set[str], renamed: dict[str, str] | None = None) -> None:
     store = get_typestore(Stores.ROS2_HUMBLE)
+    names = renamed or {}
     with Reader(source) as reader, Writer(target, version=8) as writer:
         conns = {
-            c.id: writer.add_connection(c.topic, c.msgtype, typestore=store)
+            c.id: writer.add_connection(names.get(c.topic, c.topic), c.msgtype, typestore=store)
             for c in reader.connections
             if c.topic not in dropped and c.msgtype in store.types
         }
@@ -88,7 +89,7 @@ def _copy_without(source: Path, target: Path, dropped: set[str]) -> None:
                 writer.write(conns[conn.id], t_ns, raw)
 
 
-def test_a_bag_without_imu_gets_one_line_listing_its_topics(
+def test_a_bag_without_imu_gets_one_line_naming_the_flag_that_helps(
     gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
     bag = tmp_path / "no_imu"
@@ -98,8 +99,15 @@ def test_a_bag_without_imu_gets_one_line_listing_its_topics(
     assert out == ""
     lines = err.strip().splitlines()
     assert len(lines) == 1
-    assert f"{bag}: no /imu to replay; the bag has " in lines[0]
-    assert "/joint_states" in lines[0] and "/odom" in lines[0]
+    assert lines[0].endswith(f"{bag}: no /imu to replay; pass --no-gyro (the bag has no sensor_msgs/Imu topic)")
+    # an IMU under another name (a real robot's /imu/data) is named with the flag that reads it
+    renamed = tmp_path / "imu_data"
+    _copy_without(gazebo_bag, renamed, {"/scan", "/tf", "/tf_static", "/rosout"}, {"/imu": "/imu/data"})
+    code, _, err = replay(capsys, renamed, "--out", tmp_path / "out2")
+    assert code == EstimationError.exit_code
+    assert err.strip().endswith(f"{renamed}: no /imu to replay; pass --imu-topic /imu/data")
+    code, _, _ = replay(capsys, renamed, "--out", tmp_path / "out3", "--imu-topic", "/imu/data")
+    assert code == 0
     # Wheel odometry alone does not need it.
     code, out, _ = replay(capsys, bag, "--out", tmp_path / "wheels", "--no-gyro")
     assert code == 0
