@@ -16,7 +16,7 @@ from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -140,6 +140,10 @@ class TopicHealth:
     _last_stamp: int = 0
     t_buf: array[int] = field(default_factory=lambda: array("q"))
     stamp_buf: bytearray = field(default_factory=bytearray)
+    # TFMessage: each message's first transform (frame, child) as a small id; its stamps run on their own
+    tf_ids: array[int] = field(default_factory=lambda: array("i"))
+    _tf_pairs: dict[bytes, int] = field(default_factory=dict)
+    _tf_last: dict[int, int] = field(default_factory=dict)
 
     def add(self, t_ns: int, buf: bytes) -> None:
         """Count one message recorded at `t_ns` (its serialized bytes `buf` give the stamp)."""
@@ -155,8 +159,28 @@ class TopicHealth:
             self.flush()
 
     def add_tf_stamp(self, buf: bytes) -> None:
-        """Buffer the stamp of a TFMessage's first transform (zeros when it has none)."""
-        self.stamp_buf += buf[8:16] if len(buf) >= 16 and buf[4:8] != b"\0\0\0\0" else bytes(8)
+        """Buffer the stamp of a TFMessage's first transform (zeros when it has none) and its frame pair.
+
+        One /tf topic carries several transform streams (odometry, joints, AMCL's map -> odom stamped
+        ahead by its transform tolerance), each on its own stamps: whether stamps go backwards is
+        judged per (frame, child) pair of the message's first transform.
+        """
+        pair = b""
+        if len(buf) >= 16 and buf[4:8] != b"\0\0\0\0":
+            self.stamp_buf += buf[8:16]
+            order: Literal["little", "big"] = "little" if self.little_endian else "big"
+            n1 = int.from_bytes(buf[16:20], order)
+            end1 = 20 + n1
+            at = end1 + (-(end1 - 4) % 4)  # CDR aligns the child's length to 4 from the body's start
+            n2 = int.from_bytes(buf[at : at + 4], order)
+            pair = bytes(buf[16 : at + 4 + n2])
+        else:
+            self.stamp_buf += bytes(8)
+        pairs = self._tf_pairs
+        ident = pairs.get(pair)
+        if ident is None:
+            ident = pairs[pair] = len(pairs)
+        self.tf_ids.append(ident)
 
     def flush(self) -> None:
         """Reduce the buffered block into the statistics."""
@@ -186,10 +210,13 @@ class TopicHealth:
             has = stamps > 0
             st = stamps[has]
             if len(st):
-                prev = np.concatenate(([self._last_stamp], st[:-1])) if self._last_stamp else st[:-1]
-                cur = st if self._last_stamp else st[1:]
-                self.non_monotonic += int(np.count_nonzero(cur < prev))
-                self._last_stamp = int(st[-1])
+                if self.stamp_kind == 2:
+                    self._count_backwards_per_pair(st, np.frombuffer(self.tf_ids, dtype=np.int32)[has])
+                else:
+                    prev = np.concatenate(([self._last_stamp], st[:-1])) if self._last_stamp else st[:-1]
+                    cur = st if self._last_stamp else st[1:]
+                    self.non_monotonic += int(np.count_nonzero(cur < prev))
+                    self._last_stamp = int(st[-1])
                 skew = (t[has] - st) * 1e-9
                 self.skew_count += len(skew)
                 self.skew_sum_s += float(skew.sum())
@@ -197,6 +224,16 @@ class TopicHealth:
                 self.skew_max_s = max(self.skew_max_s, float(skew.max()))
         del self.t_buf[:]
         del self.stamp_buf[:]
+        del self.tf_ids[:]
+
+    def _count_backwards_per_pair(self, stamps: NDArray[np.int64], ids: NDArray[np.int32]) -> None:
+        last = self._tf_last
+        for ident in np.unique(ids).tolist():
+            st = stamps[ids == ident]
+            prev = last.get(ident)
+            seq = np.concatenate(([prev], st)) if prev is not None else st
+            self.non_monotonic += int(np.count_nonzero(np.diff(seq) < 0))
+            last[ident] = int(st[-1])
 
     def _settle(self, warm: NDArray[np.float64]) -> None:
         if self.expected_rate_hz:
