@@ -74,6 +74,7 @@ VALUE_CASES: dict[str, tuple[dict[str, Any], str]] = {
     "zero_max_duration": ({"max_duration_s": 0.0}, "max_duration_s"),
     "angle_min_above_max": ({"sensors.lidar.angle_min_rad": 1.0, "sensors.lidar.angle_max_rad": -1.0}, "angle_min"),
     "seed_text": ({"seed": "seven"}, "seed"),
+    "negative_floor_height": ({"world.floor_height_m": -0.1}, "floor_height_m"),
 }
 
 
@@ -390,4 +391,34 @@ def test_signed_values_are_not_refused(tmp_path: Path, capsys: pytest.CaptureFix
         "drive.slip.regions": [{"x_min_m": -2.0, "x_max_m": -1.5, "y_min_m": -1.0, "y_max_m": 1.0, "slip": 0.3}],
     }
     code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
+    assert code == 0, err
+
+
+def test_a_floor_slab_above_z_0_names_floor_height_and_then_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # a 10 x 10 m floor slab whose top is 1.5 cm above z = 0 (as some AWS worlds have), walls around it
+    walls = "".join(
+        f"<model name='wall{i}'><static>1</static><pose>{x} {y} 0.5 0 0 {yaw}</pose><link name='l'><collision name='c'>"
+        "<geometry><box><size>10 0.1 1</size></box></geometry></collision></link></model>"
+        for i, (x, y, yaw) in enumerate(((0, 4, 0), (0, -4, 0), (4, 0, 1.5708), (-4, 0, 1.5708)))
+    )
+    world = tmp_path / "slab.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><model name='slab'><static>1</static><pose>0 0 -0.035 0 0 0</pose>"
+        "<link name='floor'><collision name='c'><geometry><box><size>10 10 0.1</size></box></geometry></collision>"
+        f"</link></model>{walls}</world></sdf>"
+    )
+    values: dict[str, Any] = {
+        "world.sdf": str(world),
+        "mission": {"type": "cmd_vel_script", "segments": [{"duration_s": 2.0, "linear_mps": 0.1}]},
+        "localization.type": "none",
+    }
+    code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
+    assert code == 2, err
+    line = assert_one_line_error(err, contains="inside slab")
+    assert "its top is 1.5 cm above z = 0), set world.floor_height_m to 0.02" in line
+    values["world.floor_height_m"] = 0.02
+    scenario = write_scenario(tmp_path, values)
+    code, _, err = run(["simulate", str(scenario), "--out", str(tmp_path / "bag"), "--duration", "2"], capsys)
     assert code == 0, err

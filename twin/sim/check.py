@@ -211,8 +211,8 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
     try:
         world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
         robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
-        scene = build_scene(world, exclude_models=(robot.name,))
-        spawn_monitor(scene, robot, scenario.robot.initial_pose)
+        scene = build_scene(world, exclude_models=(robot.name,), floor_height_m=scenario.world.floor_height_m)
+        spawn_monitor(scene, robot, scenario.robot.initial_pose, floor_height_m=scenario.world.floor_height_m)
         check_map_extent(scenario, robot, scene)
         if isinstance(scenario.mission, BehaviorTreeMission):
             _load_tree(scenario.mission)

@@ -46,6 +46,12 @@ class WorldSection:
 
     sdf: Path
     model_path: tuple[Path, ...] = ()
+    floor_height_m: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.floor_height_m <= 0.5:
+            msg = f"floor_height_m must be between 0 and 0.5 m, got {self.floor_height_m}"
+            raise ValueError(msg)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

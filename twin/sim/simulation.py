@@ -153,11 +153,19 @@ def _yaw_inertia(robot: RobotModelSpec) -> float:
     return total
 
 
-def spawn_monitor(scene: Scene, robot: RobotModelSpec, pose: InitialPose) -> tuple[RobotBody, CollisionMonitor]:
+_LOW_OBSTACLE_M = 0.2
+"""An obstacle the robot is spawned inside whose top is no higher than this may be a raised floor."""
+
+
+def spawn_monitor(
+    scene: Scene, robot: RobotModelSpec, pose: InitialPose, *, floor_height_m: float = 0.01
+) -> tuple[RobotBody, CollisionMonitor]:
     """The robot's collision body and contact monitor, after checking the spawn pose is free.
 
     Raises:
-        ConfigError: If the robot at `pose` overlaps the world (naming the model and link it is inside).
+        ConfigError: If the robot at `pose` overlaps the world (naming the model and link it is inside;
+            a low one may be a floor slab standing a little above z = 0: the error names
+            `world.floor_height_m` then).
     """
     body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
     monitor = CollisionMonitor(scene, body)
@@ -168,6 +176,13 @@ def spawn_monitor(scene: Scene, robot: RobotModelSpec, pose: InitialPose) -> tup
             f"robot.initial_pose: ({pose.x_m}, {pose.y_m}, {pose.yaw_rad}) puts {robot.name} inside "
             f"{c.model}::{c.link}; choose a free spawn pose"
         )
+        top = scene.top_m(c)
+        if top is not None and floor_height_m < top <= _LOW_OBSTACLE_M:
+            msg += (
+                f", or, if that is the floor (its top is {100 * top:.1f} cm above z = 0), set world.floor_height_m "
+                f"to {math.ceil(top * 100 + 0.5) / 100:g} (now {floor_height_m:g}: shapes whose top is at or below "
+                "it are floor)"
+            )
         raise ConfigError(msg)
     return body, monitor
 
@@ -213,8 +228,9 @@ class Simulation(Closing):
             msg = f"robot {robot.name!r} has no differential drive (wheel joints or a diff-drive plugin) in its SDF"
             raise ConfigError(msg)
         self.robot = robot
-        scene = build_scene(world, exclude_models=(robot.name,))
-        body, monitor = spawn_monitor(scene, robot, scenario.robot.initial_pose)
+        floor_m = scenario.world.floor_height_m
+        scene = build_scene(world, exclude_models=(robot.name,), floor_height_m=floor_m)
+        body, monitor = spawn_monitor(scene, robot, scenario.robot.initial_pose, floor_height_m=floor_m)
         self.obstacles = self._make_obstacles(body)
         contact: CollisionMonitor | ObstacleMonitor = monitor
         if self.obstacles is not None:

@@ -113,6 +113,10 @@ def _fcl_geometry(geometry: Geometry, mesh: MeshArrays | None) -> fcl.CollisionG
     return model
 
 
+_PRIMITIVES = (Box, Cylinder, Sphere, Capsule, Ellipsoid, Plane)
+"""Geometries FCL holds as shapes; any other is a triangle mesh."""
+
+
 def _is_upright(T: Mat4) -> bool:
     """True when the shape's local z axis is the world's (so horizontal slices are analytic)."""
     return abs(abs(float(T[2, 2])) - 1.0) < _UPRIGHT_TOL
@@ -737,6 +741,14 @@ class Scene:
         contacts.sort(key=lambda c: -c.depth_m)
         return tuple(contacts)
 
+    def top_m(self, contact: Contact) -> float | None:
+        """Height of the top of the obstacle `contact` is with (m), or None if it is not in the scene."""
+        for o in self._obstacles:
+            c = o.collision
+            if (c.model, c.link, c.name) == (contact.model, contact.link, contact.collision):
+                return float(o.bounds[1, 2])
+        return None
+
     def robot_body(self, collisions: Iterable[Collision], *, base_height_m: float = 0.0) -> RobotBody:
         """Return the robot's collision body (see `RobotBody`)."""
         return RobotBody(collisions, base_height_m=base_height_m)
@@ -828,10 +840,13 @@ def _placed_obstacles(
 ) -> Iterator[tuple[Collision, MeshArrays, F64]]:
     """Yield (collision, mesh in its own frame, its world-frame vertices) of every obstacle of `world`.
 
-    Planes, shapes with no mesh and floor-level shapes (top at or below `floor_height_m`) are left out.
+    Planes, shapes with no mesh and floor-level shapes (top at or below `floor_height_m`) are left out,
+    and so are a mesh's floor-level triangles: a floor modelled as one mesh with a step or a kerb in it
+    keeps the step, not the ground the robot stands on.
     """
     excluded = set(exclude_models)
     skipped_floor = 0
+    trimmed = 0
     for model in world.all_models():
         if excluded and (
             model.name in excluded
@@ -851,9 +866,18 @@ def _placed_obstacles(
                 if vertices[:, 2].max() <= floor_height_m:
                     skipped_floor += 1
                     continue
+                if not isinstance(collision.geometry, _PRIMITIVES) and len(local.faces):
+                    above = vertices[:, 2][local.faces].max(axis=1) > floor_height_m
+                    if not above.all():
+                        local = MeshArrays(local.vertices, local.faces[above])
+                        trimmed += 1
                 yield collision, local, vertices
-    if skipped_floor:
-        _log.debug("%d floor-level collisions left out of the scene", skipped_floor)
+    if skipped_floor or trimmed:
+        _log.debug(
+            "%d floor-level collisions left out of the scene, %d meshes without their floor-level triangles",
+            skipped_floor,
+            trimmed,
+        )
 
 
 def obstacle_extent(

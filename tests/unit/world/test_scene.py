@@ -12,7 +12,7 @@ from twin.world import load_world
 from twin.world.meshes import MeshCache, geometry_arrays, geometry_mesh
 from twin.world.robot_model import load_robot
 from twin.world.scene import CollisionMonitor, RayCaster, Scene, build_scene, obstacle_extent
-from twin.world.types import Box, Cylinder, Sphere
+from twin.world.types import Box, Capsule, Cylinder, Ellipsoid, Sphere
 
 REPO = Path(__file__).resolve().parents[3]
 FIXTURES = REPO.parent / "shared" / "fixtures"
@@ -259,14 +259,18 @@ def test_obstacle_extent_is_what_the_scene_holds(name: str) -> None:
     assert bounds is not None
     for mine, theirs in zip(bounds, scene.bounds, strict=True):
         assert mine == pytest.approx(theirs, abs=1e-12)
-    # Each obstacle's mesh is its collision's own mesh, placed in the world (as trimesh places it).
+    # Each obstacle's mesh is its collision's own mesh, placed in the world (as trimesh places it),
+    # a mesh file's without its floor-level triangles (all three corners at or below 0.01 m).
     cache = MeshCache()
     for obstacle, mesh in zip(scene.obstacles, scene.meshes(), strict=True):
         expected = geometry_mesh(obstacle.geometry, cache, obstacle.where)
         assert expected is not None
         expected = expected.copy()
         expected.apply_transform(np.asarray(obstacle.T_world))
-        assert np.array_equal(mesh.faces, expected.faces)
+        faces = expected.faces
+        if not isinstance(obstacle.geometry, (Box, Cylinder, Sphere, Capsule, Ellipsoid)):
+            faces = faces[expected.vertices[:, 2][faces].max(axis=1) > 0.01]
+        assert np.array_equal(mesh.faces, faces)
         assert np.allclose(mesh.vertices, expected.vertices, rtol=0.0, atol=1e-12)
 
 
@@ -317,3 +321,24 @@ def test_a_box_is_a_closed_outward_facing_mesh_with_trimeshs_corners() -> None:
     assert as_trimesh.is_watertight and as_trimesh.is_winding_consistent
     assert as_trimesh.volume == pytest.approx(2.5 * 0.15 * 1.0)  # positive: the normals point out
     assert np.array_equal(mesh.vertices, trimesh.creation.box(extents=(2.5, 0.15, 1.0)).vertices)
+
+
+def test_a_floor_mesh_with_a_step_keeps_the_step_and_not_the_ground(tmp_path: Path) -> None:
+    # one mesh: a 4 x 4 m ground slab topping out at z = 0 and a 0.175 m step on it from x = 1.25 m
+    # (as the AWS hospital's floor); the robot stands on the slab and is stopped by the step
+    ground = trimesh.creation.box(extents=(4.0, 4.0, 0.1))
+    ground.apply_translation((0.0, 0.0, -0.05))
+    step = trimesh.creation.box(extents=(0.5, 4.0, 0.175))
+    step.apply_translation((1.5, 0.0, 0.0875))
+    (tmp_path / "floor.stl").write_bytes(trimesh.util.concatenate([ground, step]).export(file_type="stl"))
+    scene = _world(tmp_path, _static("floor", "0 0 0 0 0 0", "<mesh><uri>floor.stl</uri></mesh>"))
+    assert len(scene.obstacles) == 1
+    robot = load_robot("turtlebot3_waffle", model_path=[REPO / "sdf" / "models"])
+    body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
+    # on the ground: free, with the step as the nearest thing (not the ground under the wheels)
+    assert scene.collides(body, 0.0, 0.0, 0.0) == ()
+    assert scene.distance(body, 0.0, 0.0, 0.0) > 1.0
+    assert scene.collides(body, 1.25 - 0.05, 0.0, 0.0)  # the waffle's front (x + 0.073) is in the step
+    # the lidar sees the step's face, not the ground
+    ranges = scene.ray_caster(0.132).cast_fan((0.0, 0.0), 0.0, 1.0, 1, 10.0)
+    assert ranges[0] == pytest.approx(1.25, abs=1e-6)
