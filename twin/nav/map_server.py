@@ -332,6 +332,10 @@ def _dilated(region: NDArray[np.bool_]) -> NDArray[np.bool_]:
     return out
 
 
+_OPEN_WORLD_RATIO = 4
+"""An enclosed free region this many times smaller than the largest one is not where the robot drives."""
+
+
 def map_from_scene(
     scene: Scene,
     *,
@@ -352,7 +356,10 @@ def map_from_scene(
         height_m: Height of the lidar's beam plane above the floor.
         resolution_m: Cell size.
         free_xy_m: A point in the space the robot drives in; default the largest free region not
-            touching the map's border (the inside of the outer walls), else the largest.
+            touching the map's border (the inside of the outer walls), unless the largest region
+            that does is more than four times its size: then the world is open (a floor with
+            things on it, a building whose doors open to the outside) and the enclosed region is
+            only the inside of a box or a wall, so the largest region is taken.
         bounds_xy_m: (x_min, y_min, x_max, y_max) to cover; default the obstacles' bounds plus `padding_m`.
         padding_m: Margin around the obstacles' bounds.
 
@@ -394,7 +401,8 @@ def map_from_scene(
             border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
             inner = sizes.copy()
             inner[border] = 0
-            region = labels == int(np.argmax(inner if inner.any() else sizes))
+            enclosed = inner.any() and inner.max() * _OPEN_WORLD_RATIO >= sizes.max()
+            region = labels == int(np.argmax(inner if enclosed else sizes))
     seen_walls = walls & _dilated(region)
     data = np.full((rows, cols), -1, dtype=np.int8)
     data[region] = 0

@@ -135,3 +135,45 @@ def test_the_free_region_and_its_walls_match_scipys_labelling(free: tuple[float,
     seen = walls & ndimage.binary_dilation(region, structure=np.ones((3, 3), dtype=bool))
     assert np.array_equal(occupancy.data == 100, seen)
     assert region.sum() > 1000 and seen.sum() > 100
+
+
+def _cell(grid: OccupancyMap, x: float, y: float) -> int:
+    return int(
+        grid.data[int((y - grid.origin_y_m) / grid.resolution_m), int((x - grid.origin_x_m) / grid.resolution_m)]
+    )
+
+
+def test_an_open_world_maps_the_floor_around_a_closed_box_not_its_inside(tmp_path: Path) -> None:
+    # a floor with a closed 1 m box on it and a pillar 5 m away (as gz-sim's shapes.sdf): no outer walls,
+    # so the free space touches the map's border and the only enclosed region is the box's inside
+    def wall(name: str, x: float, y: float, sx: float, sy: float) -> str:
+        return (
+            f"<model name='{name}'><static>1</static><pose>{x} {y} 0.5 0 0 0</pose><link name='l'><collision "
+            f"name='c'><geometry><box><size>{sx} {sy} 1</size></box></geometry></collision></link></model>"
+        )
+
+    walls = wall("s", 0, -0.5, 1.1, 0.1) + wall("n", 0, 0.5, 1.1, 0.1) + wall("w", -0.5, 0, 0.1, 1.1)
+    walls += wall("e", 0.5, 0, 0.1, 1.1) + wall("pillar", 5, 5, 0.2, 0.2)
+    world = tmp_path / "open.sdf"
+    world.write_text(f"<sdf version='1.7'><world name='open'>{walls}</world></sdf>")
+    grid = map_from_scene(build_scene(load_world(world)), height_m=0.132)
+    assert _cell(grid, 3.0, 2.0) == 0 and _cell(grid, -0.8, -0.8) == 0  # the floor around the box
+    assert _cell(grid, 0.0, 0.0) == -1  # the box's inside is not where the robot drives
+    assert max(_cell(grid, x, 0.0) for x in np.arange(0.4, 0.7, 0.01)) == 100  # its east wall, seen from outside
+
+
+def test_a_walled_world_maps_its_inside_and_leaves_the_outside_unknown(tmp_path: Path) -> None:
+    def wall(name: str, x: float, y: float, sx: float, sy: float) -> str:
+        return (
+            f"<model name='{name}'><static>1</static><pose>{x} {y} 0.5 0 0 0</pose><link name='l'><collision "
+            f"name='c'><geometry><box><size>{sx} {sy} 1</size></box></geometry></collision></link></model>"
+        )
+
+    walls = (
+        wall("s", 0, -3, 6.1, 0.1) + wall("n", 0, 3, 6.1, 0.1) + wall("w", -3, 0, 0.1, 6.1) + wall("e", 3, 0, 0.1, 6.1)
+    )
+    world = tmp_path / "room.sdf"
+    world.write_text(f"<sdf version='1.7'><world name='room'>{walls}</world></sdf>")
+    grid = map_from_scene(build_scene(load_world(world)), height_m=0.132, padding_m=3.0)
+    # the ring outside the walls is larger than a quarter of the inside, yet the inside is the map
+    assert _cell(grid, 0.0, 0.0) == 0 and _cell(grid, 4.5, 4.5) == -1
