@@ -422,3 +422,18 @@ def test_a_floor_slab_above_z_0_names_floor_height_and_then_runs(
     scenario = write_scenario(tmp_path, values)
     code, _, err = run(["simulate", str(scenario), "--out", str(tmp_path / "bag"), "--duration", "2"], capsys)
     assert code == 0, err
+
+
+def test_a_world_too_large_to_map_names_the_world_and_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # two pillars 400 m apart (as gz-sim's 3k_shapes spans 1.5 km): the world, not the spawn pose, is too large
+    pillars = "".join(
+        f"<model name='p{i}'><static>1</static><pose>{x} 3 0.5 0 0 0</pose><link name='l'><collision name='c'>"
+        "<geometry><box><size>0.2 0.2 1</size></box></geometry></collision></link></model>"
+        for i, x in enumerate((-200, 200))
+    )
+    world = tmp_path / "wide.world"
+    world.write_text(f"<sdf version='1.6'><world name='w'>{pillars}</world></sdf>")
+    code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, {"world.sdf": str(world)}))], capsys)
+    assert code == 2, err
+    line = assert_one_line_error(err, contains=f"{world}: the world's obstacles span 400.2 x 0.2 m")
+    assert "give `map:` a map_server YAML" in line

@@ -297,6 +297,14 @@ def _map_bounds(sc: Scenario, scene: Scene, *, margin_m: float = 1.0) -> tuple[f
         x0, y0 = min(x0, box[0][0] - pad), min(y0, box[0][1] - pad)
         x1, y1 = max(x1, box[1][0] + pad), max(y1, box[1][1] + pad)
     if max(x1 - x0, y1 - y0) > MAX_MAP_SPAN_M:
+        if box is not None and max(box[1][0] - box[0][0], box[1][1] - box[0][1]) + 2 * pad > MAX_MAP_SPAN_M:
+            w, h = box[1][0] - box[0][0], box[1][1] - box[0][1]
+            msg = (
+                f"{sc.world.sdf}: the world's obstacles span {w:.6g} x {h:.6g} m, "
+                f"too large for a map made from the world (at most {MAX_MAP_SPAN_M:.0f} m a side at its resolution); "
+                "give `map:` a map_server YAML of the area the robot drives in"
+            )
+            raise ConfigError(msg)
         if box is not None:
             (bx0, by0, _), (bx1, by1, _) = box
         else:
