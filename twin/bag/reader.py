@@ -32,6 +32,7 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import get_types_from_idl, get_types_from_msg
 from rosbags.typesys.base import TypesysError
 
+from twin.bag.mcap_file import _decompress
 from twin.bag.metadata import BagMetadata, read_metadata
 from twin.bag.qos import QosProfile
 from twin.bag.typesys import MessageDefinition, TypeRegistry
@@ -242,6 +243,32 @@ def _definitions(bag: Path, meta: BagMetadata) -> tuple[set[str], set[str]]:
     return embedded, {t.msgtype for t in meta.topics if registry.knows(t.msgtype)}
 
 
+def _storage_messages(
+    reader: Reader, wanted: Sequence[Connection], start_ns: int | None, stop_ns: int | None
+) -> Iterator[tuple[Connection, int, bytes | memoryview]]:
+    """The messages of the `wanted` connections, each storage file's connections matched by topic and type.
+
+    rosbags matches metadata.yaml's connections to a storage file's by equality, offered QoS
+    included, so a bag whose metadata.yaml writes the QoS differently from its storage file (a
+    Foxy recording: `deadline 0 s` in one, `2147483647 s` in the other) would read no message.
+    The QoS describes the publishers, not which messages belong to a topic: here only the topic
+    and the type decide.
+    """
+    storages = getattr(reader.storage, "storages", None)
+    if storages is None:  # a single storage file: the reader's connections are the file's own
+        yield from reader.messages(wanted, start=start_ns, stop=stop_ns)
+        return
+    by_key = {(c.topic, c.msgtype): c for c in wanted}
+    per_message_zstd = reader.compression_mode == "message"
+    for storage in storages:
+        own = {c.id: by_key[(c.topic, c.msgtype)] for c in storage.connections if (c.topic, c.msgtype) in by_key}
+        if not own:
+            continue
+        chosen = [c for c in storage.connections if c.id in own]
+        for conn, t_ns, data in storage.messages(chosen, start_ns, stop_ns):
+            yield own[conn.id], t_ns, _decompress("zstd", data, 0) if per_message_zstd else data
+
+
 def read_messages(
     path: str | os.PathLike[str],
     topics: Sequence[str] | None = None,
@@ -293,7 +320,7 @@ def read_messages(
         if not wanted:
             return
         store = registry.store
-        for conn, t_ns, data in reader.messages(wanted, start=start_ns, stop=stop_ns):
+        for conn, t_ns, data in _storage_messages(reader, wanted, start_ns, stop_ns):
             if not decode:
                 yield BagMessage(conn.topic, conn.msgtype, t_ns, bytes(data))
                 continue

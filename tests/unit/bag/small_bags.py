@@ -1,0 +1,49 @@
+"""Small bags built in the tests, then altered the way other recorders and tools leave bags.
+
+Each builder records a few messages with the twin's own recorder; the edits reproduce what was
+found in public bags (Foxy's QoS spelling, message compression, a storage file without its
+folder, ...) without committing anyone's bag files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+
+from twin.bag import OdometryEncoder, Recorder, StringEncoder
+from twin.bag.metadata import BagMetadata, TopicMetadata, read_metadata, write_metadata
+
+#: Messages per topic in `small_bag`.
+COUNT = 10
+STEP_NS = 100_000_000
+START_NS = 1_700_000_000 * 1_000_000_000
+
+
+def small_bag(path: Path, *, storage: str = "mcap", distro: str = "humble") -> Path:
+    """A bag with `/chatter` (String) and `/odom` (Odometry), `COUNT` messages each, 10 Hz."""
+    with Recorder(path, storage=storage, distro=distro) as rec:
+        chatter = rec.add_topic("/chatter", StringEncoder.msgtype)
+        odom = rec.add_topic("/odom", OdometryEncoder.msgtype)
+        text, pose = StringEncoder(), OdometryEncoder("odom", "base_footprint")
+        for k in range(COUNT):
+            t_ns = START_NS + k * STEP_NS
+            rec.write(chatter, t_ns, text.encode(f"hello {k}"))
+            rec.write(odom, t_ns, pose.encode(t_ns, 0.1 * k, 0.0, 0.0, 1.0, 0.0))
+    return path
+
+
+def storage_file(bag: Path) -> Path:
+    """The bag's one storage file."""
+    (file,) = (p for p in bag.iterdir() if p.suffix in (".mcap", ".db3"))
+    return file
+
+
+def edit_metadata(bag: Path, change: Callable[[BagMetadata], BagMetadata]) -> None:
+    """Rewrite the bag's metadata.yaml with `change` applied."""
+    write_metadata(bag, change(read_metadata(bag)), fsync=False)
+
+
+def edit_topics(bag: Path, change: Callable[[TopicMetadata], TopicMetadata]) -> None:
+    """Rewrite every topic of the bag's metadata.yaml with `change` applied."""
+    edit_metadata(bag, lambda meta: dataclasses.replace(meta, topics=tuple(change(t) for t in meta.topics)))
