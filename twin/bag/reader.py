@@ -33,8 +33,9 @@ from rosbags.typesys import get_types_from_idl, get_types_from_msg
 from rosbags.typesys.base import TypesysError
 
 from twin.bag.mcap_file import _decompress
-from twin.bag.metadata import BagMetadata, read_metadata
+from twin.bag.metadata import METADATA_FILE, BagMetadata, read_metadata
 from twin.bag.qos import QosProfile
+from twin.bag.single_file import STORAGE_SUFFIXES, storage_file_metadata
 from twin.bag.typesys import MessageDefinition, TypeRegistry
 from twin.core.errors import BagError
 
@@ -118,16 +119,60 @@ class BagMessage(NamedTuple):
 
 
 def _bag_dir(path: str | os.PathLike[str]) -> Path:
+    """The bag at `path`: a rosbag2 folder, or a single `.mcap` or `.db3` file outside one.
+
+    A storage file inside a bag folder stands for the folder.
+
+    Raises:
+        BagError: If `path` is neither.
+    """
     bag = Path(path)
-    if bag.is_file() and (bag.parent / "metadata.yaml").exists():
-        return bag.parent  # a storage file inside a bag folder
+    if bag.is_file():
+        if (bag.parent / METADATA_FILE).exists():
+            return bag.parent  # a storage file inside a bag folder
+        if bag.suffix in STORAGE_SUFFIXES:
+            return bag
+        if bag.suffix == ".zstd" and Path(bag.stem).suffix in STORAGE_SUFFIXES:
+            msg = f"{bag}: a zstd-compressed storage file without its metadata.yaml; unpack it with `zstd -d {bag}`"
+            raise BagError(msg)
+        msg = f"{bag}: not a bag; expected a rosbag2 folder (metadata.yaml and storage files) or a .mcap or .db3 file"
+        raise BagError(msg)
     if not bag.exists():
-        msg = f"{bag}: no such bag folder"
+        msg = f"{bag}: no such bag folder or file"
         raise BagError(msg)
     if not bag.is_dir():
-        msg = f"{bag}: not a rosbag2 folder (expected a folder with metadata.yaml and the storage files)"
+        msg = f"{bag}: not a bag; expected a rosbag2 folder (metadata.yaml and storage files) or a .mcap or .db3 file"
         raise BagError(msg)
     return bag
+
+
+def bag_metadata(bag: Path) -> BagMetadata:
+    """The metadata of the bag `bag` (from `_bag_dir`): its metadata.yaml, or a single storage file's own.
+
+    Raises:
+        BagError: If the metadata is missing or unreadable, or a storage file it lists is not there.
+    """
+    if bag.is_file():
+        return storage_file_metadata(bag)
+    meta = read_metadata(bag)
+    missing = [Path(rel).name for rel in meta.relative_file_paths if not (bag / Path(rel).name).is_file()]
+    if missing:
+        files = ", ".join(missing)
+        its = "its storage file" if len(missing) == 1 else "its storage files"
+        verb = "is" if len(missing) == 1 else "are"
+        msg = (
+            f"{bag}: {its} {files} (listed in {METADATA_FILE}) {verb} not there; "
+            f"copy {files} into {bag}: {METADATA_FILE} alone holds no messages"
+        )
+        raise BagError(msg)
+    return meta
+
+
+def storage_paths(bag: Path, meta: BagMetadata) -> list[Path]:
+    """The storage files of the bag `bag` (from `_bag_dir`)."""
+    if bag.is_file():
+        return [bag]
+    return [bag / Path(rel).name for rel in meta.relative_file_paths]
 
 
 @functools.lru_cache(maxsize=1024)
@@ -173,32 +218,29 @@ def _open_reader(bag: Path) -> Reader:
     try:
         reader = Reader(bag)
         reader.open()
-    except FileNotFoundError:
-        read_metadata(bag)  # raises the BagError naming the missing metadata.yaml
-        raise
-    except (ReaderError, OSError) as err:
+    except (FileNotFoundError, ReaderError, OSError) as err:
+        bag_metadata(bag)  # names a missing metadata.yaml or storage file, the usual causes, in a line of its own
+        if isinstance(err, FileNotFoundError):
+            raise
         msg = f"{bag}: cannot read the bag: {err}"
         raise BagError(msg) from None
     return reader
 
 
 def open_bag(path: str | os.PathLike[str]) -> BagInfo:
-    """Describe the bag at `path` (a rosbag2 folder, or a storage file inside one).
+    """Describe the bag at `path`: a rosbag2 folder (or a storage file inside one), or a single .mcap or .db3 file.
 
     Raises:
-        BagError: If the folder is not a readable bag (e.g. no metadata.yaml: run
-            `twin bag recover`).
+        BagError: If it is not a readable bag (e.g. no metadata.yaml: run `twin bag recover`).
     """
     bag = _bag_dir(path)
-    meta = read_metadata(bag)
+    meta = bag_metadata(bag)
     embedded, known = _definitions(bag, meta)
     files = []
-    for rel in meta.relative_file_paths:
-        file = bag / Path(rel).name
-        size = file.stat().st_size if file.exists() else 0
-        count = next((f.message_count for f in meta.files if Path(f.path).name == Path(rel).name), 0)
-        files.append(BagFile(path=Path(rel).name, size_bytes=size, message_count=count))
-    size_bytes = sum(p.stat().st_size for p in bag.iterdir() if p.is_file())
+    for file in storage_paths(bag, meta):
+        count = next((f.message_count for f in meta.files if Path(f.path).name == file.name), 0)
+        files.append(BagFile(path=file.name, size_bytes=file.stat().st_size, message_count=count))
+    size_bytes = bag.stat().st_size if bag.is_file() else sum(p.stat().st_size for p in bag.iterdir() if p.is_file())
     topics = tuple(
         TopicInfo(
             name=t.name,
@@ -244,7 +286,7 @@ def _definitions(bag: Path, meta: BagMetadata) -> tuple[set[str], set[str]]:
 
 
 def _storage_messages(
-    reader: Reader, wanted: Sequence[Connection], start_ns: int | None, stop_ns: int | None
+    reader: Reader, wanted: Sequence[Connection], start_ns: int | None, stop_ns: int | None, *, zstd_messages: bool
 ) -> Iterator[tuple[Connection, int, bytes | memoryview]]:
     """The messages of the `wanted` connections, each storage file's connections matched by topic and type.
 
@@ -256,7 +298,8 @@ def _storage_messages(
     """
     storages = getattr(reader.storage, "storages", None)
     if storages is None:  # a single storage file: the reader's connections are the file's own
-        yield from reader.messages(wanted, start=start_ns, stop=stop_ns)
+        for conn, t_ns, data in reader.messages(wanted, start=start_ns, stop=stop_ns):
+            yield conn, t_ns, _decompress("zstd", data, 0) if zstd_messages else data
         return
     by_key = {(c.topic, c.msgtype): c for c in wanted}
     per_message_zstd = reader.compression_mode == "message"
@@ -280,7 +323,7 @@ def read_messages(
     """Yield the bag's messages in time order, decoded.
 
     Args:
-        path: A rosbag2 folder (or a storage file inside one).
+        path: A rosbag2 folder (or a storage file inside one), or a single .mcap or .db3 file.
         topics: Topics to read; None reads every topic that can be decoded (the others are
             skipped with a warning).
         start_ns: Only messages at or after this bag time.
@@ -292,6 +335,8 @@ def read_messages(
             definition, or a message does not decode.
     """
     bag = _bag_dir(path)
+    # rosbags unpacks per-message compression in a folder (its metadata.yaml says so), not in a single file
+    zstd_messages = bag.is_file() and storage_file_metadata(bag).compression_mode == "message"
     reader = _open_reader(bag)
     try:
         registry, _ = _typestore_for(reader.connections)
@@ -320,7 +365,7 @@ def read_messages(
         if not wanted:
             return
         store = registry.store
-        for conn, t_ns, data in _storage_messages(reader, wanted, start_ns, stop_ns):
+        for conn, t_ns, data in _storage_messages(reader, wanted, start_ns, stop_ns, zstd_messages=zstd_messages):
             if not decode:
                 yield BagMessage(conn.topic, conn.msgtype, t_ns, bytes(data))
                 continue

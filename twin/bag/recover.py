@@ -29,6 +29,7 @@ from twin.bag.metadata import (
 )
 from twin.bag.profiles import DISTROS, distro_profile
 from twin.bag.qos import parse_qos_profiles
+from twin.bag.single_file import STORAGE_SUFFIXES, storage_file_metadata
 from twin.bag.sqlite_file import recover_sqlite
 from twin.core.errors import BagError
 
@@ -69,12 +70,19 @@ def _distro(name: str) -> str:
 def recover_bag(path: str | os.PathLike[str]) -> RecoveryReport:
     """Complete the bag in folder `path` and rewrite its `metadata.yaml`.
 
+    A single storage file (`.mcap` or `.db3` outside a bag folder) is completed in place; it
+    needs no `metadata.yaml`, so none is written.
+
     Raises:
         BagError: If the folder holds no storage file, mixes storages, or a file is not a bag.
     """
     bag = Path(path)
+    if bag.is_file() and (bag.parent / METADATA_FILE).exists():
+        bag = bag.parent  # a storage file inside a bag folder
+    elif bag.is_file() and bag.suffix in STORAGE_SUFFIXES:
+        return _recover_file(bag)
     if not bag.is_dir():
-        msg = f"{bag}: no such bag folder"
+        msg = f"{bag}: no such bag folder (or .mcap or .db3 file)"
         raise BagError(msg)
     mcaps = sorted(bag.glob("*.mcap"))
     dbs = sorted(bag.glob("*.db3"))
@@ -93,6 +101,35 @@ def recover_bag(path: str | os.PathLike[str]) -> RecoveryReport:
     if mcaps:
         return _recover_mcap_bag(bag, mcaps, previous)
     return _recover_sqlite_bag(bag, dbs, previous)
+
+
+def _recover_file(file: Path) -> RecoveryReport:
+    """Complete a single storage file in place; it describes itself, so no metadata.yaml is written."""
+    dropped = 0
+    try:
+        if file.suffix == ".mcap":
+            outcome = recover_mcap(file)
+            was_complete, dropped = outcome.was_complete, outcome.dropped_bytes
+        else:
+            was_complete = not any(file.with_name(file.name + end).exists() for end in ("-journal", "-wal"))
+            recover_sqlite(file)
+    except (ValueError, sqlite3.Error) as err:
+        msg = f"{file}: cannot recover: {err}"
+        raise BagError(msg) from None
+    except OSError as err:
+        msg = f"{file}: cannot rewrite: {err.strerror}; free space or fix permissions and run again"
+        raise BagError(msg) from None
+    meta = storage_file_metadata(file)
+    return RecoveryReport(
+        path=file,
+        storage=meta.storage_identifier,
+        files=(file.name,),
+        message_count=meta.message_count,
+        topic_counts=tuple((t.name, t.message_count) for t in meta.topics),
+        was_complete=was_complete,
+        dropped_bytes=dropped,
+        metadata=meta,
+    )
 
 
 def _backup_metadata(bag: Path) -> Path | None:

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import dataclasses
+import json
+import shutil
 from collections import Counter
 from pathlib import Path
 
 import pytest
 
-from tests.unit.bag.small_bags import COUNT, edit_topics, small_bag
-from twin.bag import read_messages, read_raw
+from tests.conftest import run_twin
+from tests.unit.bag.small_bags import COUNT, edit_topics, small_bag, storage_file
+from twin.bag import open_bag, read_messages, read_raw
+from twin.bag.mcap_file import scan_mcap
 from twin.bag.qos import QosDuration, QosProfile
 
 STORAGES = ["mcap", "sqlite3"]
@@ -29,3 +33,66 @@ def test_messages_are_read_whatever_qos_metadata_yaml_states(tmp_path: Path, sto
     chosen = Counter(m.topic for m in read_messages(bag, ["/odom"]))
     assert decoded == raw == {"/chatter": COUNT, "/odom": COUNT}
     assert chosen == {"/odom": COUNT}
+
+
+def loose_copy(bag: Path, where: Path) -> Path:
+    """The bag's storage file copied alone into `where`, as projects publish them."""
+    where.mkdir()
+    file = storage_file(bag)
+    return Path(shutil.copy(file, where / file.name))
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_a_single_storage_file_reads_like_its_bag_folder(tmp_path: Path, storage: str) -> None:
+    bag = small_bag(tmp_path / "bag", storage=storage)
+    file = loose_copy(bag, tmp_path / "loose")
+    folder, alone = open_bag(bag), open_bag(file)
+    assert alone.path == file and [f.path for f in alone.files] == [file.name]
+    assert alone.storage == storage and alone.ros_distro == "humble"
+    assert (alone.start_ns, alone.end_ns, alone.message_count) == (folder.start_ns, folder.end_ns, 2 * COUNT)
+    assert {(t.name, t.msgtype, t.message_count, t.qos) for t in alone.topics} == {
+        (t.name, t.msgtype, t.message_count, t.qos) for t in folder.topics
+    }
+    assert Counter(m.topic for m in read_messages(file)) == {"/chatter": COUNT, "/odom": COUNT}
+    assert Counter(topic for topic, _, _ in read_raw(file)) == {"/chatter": COUNT, "/odom": COUNT}
+
+
+def test_the_cli_takes_a_single_mcap_file_wherever_it_takes_a_bag(tmp_path: Path) -> None:
+    file = loose_copy(small_bag(tmp_path / "bag"), tmp_path / "loose")
+    info = run_twin("bag", "info", str(file), "--json")
+    assert info.returncode == 0, info.stderr
+    assert json.loads(info.stdout)["message_count"] == 2 * COUNT
+    export = run_twin("bag", "export", str(file), "--topics", "/odom", "--out", str(tmp_path / "csv"))
+    assert export.returncode == 0, export.stderr
+    assert len((tmp_path / "csv" / "odom.csv").read_text().splitlines()) == 1 + COUNT
+    report = run_twin("analyze", str(file), "--no-plots", "--json", "--out", str(tmp_path / "report"))
+    assert report.returncode == 0, report.stderr
+    assert {h["topic"]: h["count"] for h in json.loads(report.stdout)["topic_health"]} == {
+        "/chatter": COUNT,
+        "/odom": COUNT,
+    }
+
+
+def test_a_killed_single_mcap_file_says_to_recover_it_and_recover_completes_it(tmp_path: Path) -> None:
+    file = loose_copy(small_bag(tmp_path / "bag"), tmp_path / "loose")
+    with file.open("r+b") as f:
+        f.truncate(scan_mcap(file).data_end)  # the summary and footer are never written
+    refused = run_twin("bag", "info", str(file))
+    assert refused.returncode == 5 and refused.stderr.count("\n") == 1, refused.stderr
+    assert f"`twin bag recover {file}`" in refused.stderr
+    recovered = run_twin("bag", "recover", str(file))
+    assert recovered.returncode == 0, recovered.stderr
+    assert not (file.parent / "metadata.yaml").exists()
+    assert open_bag(file).message_count == 2 * COUNT
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_a_missing_storage_file_is_one_line_naming_it(tmp_path: Path, storage: str) -> None:
+    bag = small_bag(tmp_path / "bag", storage=storage)
+    name = storage_file(bag).name
+    storage_file(bag).unlink()
+    run = run_twin("bag", "info", str(bag))
+    assert run.returncode == 5
+    assert run.stderr.count("\n") == 1 and run.stderr.startswith("twin: error: "), run.stderr
+    assert f"its storage file {name}" in run.stderr and "not there" in run.stderr
+    assert "recover" not in run.stderr
