@@ -24,7 +24,6 @@ from numpy.typing import NDArray
 from twin.analysis import _cdr
 from twin.bag import BagInfo, open_bag, read_messages, read_raw
 from twin.bag.raw import raw_readable
-from twin.core.errors import BagError
 
 __all__ = [
     "CMD_TOPIC",
@@ -343,12 +342,10 @@ def collect(
             `twin bag recover`.
     """
     bag = Path(path)
-    try:  # opening the storage first turns a truncated file into one error line, not a warning and an error
-        if not raw_readable(bag):
-            for _ in read_messages(bag, []):
-                pass
-    except BagError as err:
-        raise BagError(_truncation_hint(bag, err)) from None
+    # Opening the storage first turns a truncated file into one error line, not a warning and an error.
+    if not raw_readable(bag):
+        for _ in read_messages(bag, []):
+            pass
     info = open_bag(bag)
     data = BagData(info=info, start_ns=info.start_ns)
     names = {t.name for t in info.topics}
@@ -408,35 +405,32 @@ def collect(
         name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
     }
     block = _BLOCK
-    try:
-        for topic, t_ns, raw in read_raw(bag, read_topics):
-            r = route.get(topic)
-            if r is None:
-                continue
-            buf: Any = raw  # bytes or a memoryview into the chunk
-            th, handler = r
-            if th is not None:  # TopicHealth.add, inlined: this runs for every message of the bag
-                tb = th.t_buf
-                if not tb and th.count == 0:
-                    th.little_endian = len(buf) > 1 and bool(buf[1] & 1)
-                tb.append(t_ns)
-                kind = th.stamp_kind
-                if kind == 1:
-                    th.stamp_buf += buf[4:12]
-                elif kind == 2:
-                    th.add_tf_stamp(buf)
-                if len(tb) >= block:
-                    th.flush()
-            if handler is not None:
-                try:
-                    handler(t_ns, buf)
-                except (IndexError, ValueError, TypeError) as err:  # struct.error is a ValueError
-                    _log.warning("%s: a message on %s at %d ns does not parse (%s); skipped", bag, topic, t_ns, err)
-            if progress is not None and t_ns >= next_report:
-                progress((t_ns - info.start_ns) / span)
-                next_report = t_ns + span // 50
-    except BagError as err:
-        raise BagError(_truncation_hint(bag, err)) from None
+    for topic, t_ns, raw in read_raw(bag, read_topics):
+        r = route.get(topic)
+        if r is None:
+            continue
+        buf: Any = raw  # bytes or a memoryview into the chunk
+        th, handler = r
+        if th is not None:  # TopicHealth.add, inlined: this runs for every message of the bag
+            tb = th.t_buf
+            if not tb and th.count == 0:
+                th.little_endian = len(buf) > 1 and bool(buf[1] & 1)
+            tb.append(t_ns)
+            kind = th.stamp_kind
+            if kind == 1:
+                th.stamp_buf += buf[4:12]
+            elif kind == 2:
+                th.add_tf_stamp(buf)
+            if len(tb) >= block:
+                th.flush()
+        if handler is not None:
+            try:
+                handler(t_ns, buf)
+            except (IndexError, ValueError, TypeError) as err:  # struct.error is a ValueError
+                _log.warning("%s: a message on %s at %d ns does not parse (%s); skipped", bag, topic, t_ns, err)
+        if progress is not None and t_ns >= next_report:
+            progress((t_ns - info.start_ns) / span)
+            next_report = t_ns + span // 50
     for h in data.health.values():
         h.finish()
     return data
@@ -478,13 +472,6 @@ def _cmd_handler(data: BagData, fn: Callable[[bytes], tuple[int | None, float, f
         w_arr.append(w)
 
     return handle
-
-
-def _truncation_hint(bag: Path, err: BagError) -> str:
-    text = str(err).rstrip(". ")
-    if "recover" in text or "no such bag folder" in text:
-        return text
-    return f"{text}; if its recording was killed, run `twin bag recover {bag}`"
 
 
 def _add_scan(data: BagData, t_ns: int, buf: bytes, pose: tuple[float, float, float] | None) -> None:

@@ -37,6 +37,7 @@ __all__ = [
     "McapScan",
     "McapSummary",
     "McapWriter",
+    "mcap_has_footer",
     "read_mcap_summary",
     "recover_mcap",
     "scan_mcap",
@@ -850,6 +851,19 @@ def _summary_by_scan(path: Path) -> McapSummary:
         end_ns=stats.end_ns,
         metadata=[(name, values) for _, _, name, values in scan.metadata],
     )
+
+
+def mcap_has_footer(path: Path) -> bool:
+    """Whether the MCAP file at `path` ends with its footer and magic (a killed writer's file does not)."""
+    tail = _FOOTER.size + len(MAGIC)
+    with path.open("rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        if size < len(MAGIC) + tail:
+            return False
+        f.seek(size - tail)
+        end = f.read(tail)
+    op, length, *_ = _FOOTER.unpack_from(end, 0)
+    return bool(end[-8:] == MAGIC and op == OP_FOOTER and length == 20)
 
 
 def _has_footer(view: memoryview) -> bool:

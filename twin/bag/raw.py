@@ -35,7 +35,8 @@ _CHANNEL_HEAD = struct.Struct("<HH")
 def _fast(bag: Path, topics: Sequence[str] | None) -> _McapChunks | None:
     meta = bag_metadata(bag)
     files = storage_paths(bag, meta)
-    if meta.storage_identifier == "mcap" and len(files) == 1 and not meta.compression_format:
+    cdr = all(t.serialization_format == "cdr" for t in meta.topics)  # other formats: rosbags says what it reads
+    if meta.storage_identifier == "mcap" and len(files) == 1 and not meta.compression_format and cdr:
         fast = _McapChunks(files[0], topics)
         if fast.in_order():
             return fast

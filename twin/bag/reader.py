@@ -32,7 +32,7 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import get_types_from_idl, get_types_from_msg
 from rosbags.typesys.base import TypesysError
 
-from twin.bag.mcap_file import _decompress
+from twin.bag.mcap_file import _decompress, mcap_has_footer
 from twin.bag.metadata import METADATA_FILE, BagMetadata, read_metadata
 from twin.bag.qos import QosProfile
 from twin.bag.single_file import STORAGE_SUFFIXES, storage_file_metadata
@@ -219,12 +219,30 @@ def _open_reader(bag: Path) -> Reader:
         reader = Reader(bag)
         reader.open()
     except (FileNotFoundError, ReaderError, OSError) as err:
-        bag_metadata(bag)  # names a missing metadata.yaml or storage file, the usual causes, in a line of its own
+        meta = bag_metadata(bag)  # names a missing metadata.yaml or storage file, the usual causes
         if isinstance(err, FileNotFoundError):
             raise
-        msg = f"{bag}: cannot read the bag: {err}"
+        msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, meta)}"
         raise BagError(msg) from None
     return reader
+
+
+def _killed_hint(bag: Path, meta: BagMetadata | None) -> str:
+    """The recover hint, if a storage file shows what a killed recording leaves; else "".
+
+    A killed recording leaves an MCAP file without its footer, a sqlite3 file with its journal.
+    Anything else (an unsupported format, a damaged message) is not helped by `twin bag recover`.
+    """
+    files = [bag] if bag.is_file() else ([] if meta is None else storage_paths(bag, meta))
+    for file in files:
+        try:
+            if file.suffix == ".mcap" and not mcap_has_footer(file):
+                return f"; if its recording was killed, run `twin bag recover {bag}`"
+        except OSError:
+            continue
+        if file.suffix == ".db3" and any(file.with_name(file.name + end).exists() for end in ("-journal", "-wal")):
+            return f"; if its recording was killed, run `twin bag recover {bag}`"
+    return ""
 
 
 def open_bag(path: str | os.PathLike[str]) -> BagInfo:
@@ -376,10 +394,17 @@ def read_messages(
                 raise BagError(msg) from None
             yield BagMessage(conn.topic, conn.msgtype, t_ns, msg_obj)
     except ReaderError as err:
-        msg = f"{bag}: cannot read the bag: {err}"
+        msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, _metadata_or_none(bag))}"
         raise BagError(msg) from None
     finally:
         reader.close()
+
+
+def _metadata_or_none(bag: Path) -> BagMetadata | None:
+    try:
+        return bag_metadata(bag)
+    except BagError:
+        return None
 
 
 def message_definitions(path: str | os.PathLike[str]) -> dict[str, MessageDefinition]:
