@@ -84,6 +84,16 @@ def recover_bag(path: str | os.PathLike[str]) -> RecoveryReport:
     if not bag.is_dir():
         msg = f"{bag}: no such bag folder (or .mcap or .db3 file)"
         raise BagError(msg)
+    packed = sorted(p.name for p in bag.glob("*.zstd") if Path(p.stem).suffix in STORAGE_SUFFIXES)
+    if packed:
+        # rosbag2's `--compression-mode file`: recovery reads and rewrites records in place, which a
+        # compressed file does not allow. Unpacked, the files are ordinary storage files.
+        names = ", ".join(packed)
+        msg = (
+            f"{bag}: {names}: storage compressed as whole files, which recover cannot check or mend; "
+            f"unpack them (`zstd -d --rm` on each) and run `twin bag recover {bag}` again"
+        )
+        raise BagError(msg)
     mcaps = sorted(bag.glob("*.mcap"))
     dbs = sorted(bag.glob("*.db3"))
     if mcaps and dbs:
@@ -195,7 +205,6 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
     counts: dict[str, int] = {}
     infos: list[FileInformation] = []
     distro = previous.ros_distro if previous else ""
-    was_complete = True
     dropped = 0
     starts: list[int] = []
     ends: list[int] = []
@@ -209,7 +218,6 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
             msg = f"{file}: cannot rewrite: {err.strerror}; free space or fix permissions and run again"
             raise BagError(msg) from None
         scan = outcome.scan
-        was_complete = was_complete and outcome.was_complete
         dropped += outcome.dropped_bytes
         for _, _, name, values in scan.metadata:
             if name == "twin" and values.get("ros_distro") and not distro:
@@ -250,7 +258,6 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
         ends=ends,
         distro=distro,
         previous=previous,
-        was_complete=was_complete,
         dropped=dropped,
     )
 
@@ -262,12 +269,7 @@ def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | No
     distro = previous.ros_distro if previous else ""
     starts: list[int] = []
     ends: list[int] = []
-    was_complete = True
     for file in files:
-        journal = file.with_name(file.name + "-journal")
-        wal = file.with_name(file.name + "-wal")
-        if journal.exists() or wal.exists():
-            was_complete = False
         try:
             rows, file_distro = recover_sqlite(file)
         except sqlite3.Error as err:
@@ -307,7 +309,6 @@ def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | No
         ends=ends,
         distro=distro,
         previous=previous,
-        was_complete=was_complete,
         dropped=0,
     )
     for file in files:  # keep the metadata table in step with metadata.yaml, as rosbag2 does on close
@@ -337,12 +338,8 @@ def _finish(
     ends: list[int],
     distro: str,
     previous: BagMetadata | None,
-    was_complete: bool,
     dropped: int,
 ) -> RecoveryReport:
-    total = sum(counts.values())
-    # Complete means nothing had to change; a bag reaching here had its metadata rewritten.
-    was_complete = was_complete and previous is not None and previous.message_count == total
     profile = distro_profile(_distro(distro))
     version = previous.version if previous and previous.version >= 8 else profile.metadata_version
     start = min(starts) if starts else 0
@@ -382,7 +379,7 @@ def _finish(
         files=tuple(f.name for f in files),
         message_count=total,
         topic_counts=tuple((t.name, t.message_count) for t in full_topics),
-        was_complete=was_complete,
+        was_complete=False,  # complete means nothing had to change; metadata.yaml was just rewritten
         dropped_bytes=dropped,
         metadata=meta,
     )

@@ -8,8 +8,10 @@ folder, ...) without committing anyone's bag files.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from twin.bag import OdometryEncoder, Recorder, StringEncoder
 from twin.bag.metadata import BagMetadata, TopicMetadata, read_metadata, write_metadata
@@ -47,3 +49,30 @@ def edit_metadata(bag: Path, change: Callable[[BagMetadata], BagMetadata]) -> No
 def edit_topics(bag: Path, change: Callable[[TopicMetadata], TopicMetadata]) -> None:
     """Rewrite every topic of the bag's metadata.yaml with `change` applied."""
     edit_metadata(bag, lambda meta: dataclasses.replace(meta, topics=tuple(change(t) for t in meta.topics)))
+
+
+def zstd() -> Any:
+    """The zstd module rosbags uses (the standard library's from Python 3.14, else backports.zstd)."""
+    try:
+        return importlib.import_module("compression.zstd")
+    except ImportError:
+        return importlib.import_module("backports.zstd")
+
+
+def compress_files(bag: Path) -> Path:
+    """Turn the bag into what `ros2 bag record --compression-mode file` leaves: its storage file zstd-compressed whole."""
+    file = storage_file(bag)
+    packed = file.with_name(file.name + ".zstd")
+    packed.write_bytes(zstd().compress(file.read_bytes()))
+    file.unlink()
+    edit_metadata(
+        bag,
+        lambda meta: dataclasses.replace(
+            meta,
+            compression_format="zstd",
+            compression_mode="FILE",
+            relative_file_paths=(packed.name,),
+            files=tuple(dataclasses.replace(f, path=packed.name) for f in meta.files),
+        ),
+    )
+    return packed

@@ -11,9 +11,10 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import run_twin
-from tests.unit.bag.small_bags import COUNT, edit_topics, small_bag, storage_file
-from twin.bag import open_bag, read_messages, read_raw
+from tests.unit.bag.small_bags import COUNT, compress_files, edit_topics, small_bag, storage_file, zstd
+from twin.bag import open_bag, read_messages, read_raw, recover_bag
 from twin.bag.mcap_file import scan_mcap
+from twin.bag.metadata import read_metadata
 from twin.bag.qos import QosDuration, QosProfile
 
 STORAGES = ["mcap", "sqlite3"]
@@ -96,3 +97,37 @@ def test_a_missing_storage_file_is_one_line_naming_it(tmp_path: Path, storage: s
     assert run.stderr.count("\n") == 1 and run.stderr.startswith("twin: error: "), run.stderr
     assert f"its storage file {name}" in run.stderr and "not there" in run.stderr
     assert "recover" not in run.stderr
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_info_describes_a_file_compressed_bag(tmp_path: Path, storage: str) -> None:
+    bag = small_bag(tmp_path / "bag", storage=storage)
+    packed = compress_files(bag)
+    run = run_twin("bag", "info", str(bag), "--json")
+    assert run.returncode == 0, run.stderr
+    info = json.loads(run.stdout)
+    assert [f["path"] for f in info["files"]] == [packed.name]
+    assert (info["compression_format"], info["compression_mode"], info["message_count"]) == ("zstd", "FILE", 2 * COUNT)
+    assert Counter(m.topic for m in read_messages(bag)) == {"/chatter": COUNT, "/odom": COUNT}
+
+
+def test_recover_refuses_a_file_compressed_bag_in_one_line_that_says_how(tmp_path: Path) -> None:
+    bag = small_bag(tmp_path / "bag")
+    packed = compress_files(bag)
+    before = {f.name: f.read_bytes() for f in bag.iterdir()}
+    run = run_twin("bag", "recover", str(bag))
+    assert run.returncode == 5 and run.stderr.count("\n") == 1, run.stderr
+    assert packed.name in run.stderr and "compressed as whole files" in run.stderr and "zstd -d" in run.stderr
+    assert {f.name: f.read_bytes() for f in bag.iterdir()} == before
+
+
+def test_recover_after_unpacking_says_it_rewrote_the_metadata(tmp_path: Path) -> None:
+    bag = small_bag(tmp_path / "bag")
+    packed = compress_files(bag)
+    packed.with_suffix("").write_bytes(zstd().decompress(packed.read_bytes()))
+    packed.unlink()
+    report = recover_bag(bag)
+    assert not report.was_complete  # metadata.yaml was rewritten: not "complete (nothing changed)"
+    meta = read_metadata(bag)
+    assert meta.relative_file_paths == (packed.with_suffix("").name,) and meta.compression_mode == ""
+    assert Counter(m.topic for m in read_messages(bag)) == {"/chatter": COUNT, "/odom": COUNT}
