@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import struct
 from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from numpy.typing import NDArray
 from twin.analysis import _cdr
 from twin.bag import BagInfo, open_bag, read_messages, read_raw
 from twin.bag.raw import raw_readable
+from twin.bag.reader import undecodable
 
 __all__ = [
     "CMD_TOPIC",
@@ -413,8 +415,11 @@ def collect(
         th, handler = r
         if th is not None:  # TopicHealth.add, inlined: this runs for every message of the bag
             tb = th.t_buf
-            if not tb and th.count == 0:
-                th.little_endian = len(buf) > 1 and bool(buf[1] & 1)
+            if not tb and th.count == 0:  # a topic's first message: is it CDR at all?
+                if len(buf) < 4 or buf[0] != 0:
+                    err = ValueError(f"no CDR header: starts with {bytes(buf[:4]).hex(' ')}")
+                    raise undecodable(bag, buf, err, topic=topic, t_ns=t_ns, msgtype=th.msgtype)
+                th.little_endian = bool(buf[1] & 1)
             tb.append(t_ns)
             kind = th.stamp_kind
             if kind == 1:
@@ -426,8 +431,8 @@ def collect(
         if handler is not None:
             try:
                 handler(t_ns, buf)
-            except (IndexError, ValueError, TypeError) as err:  # struct.error is a ValueError
-                _log.warning("%s: a message on %s at %d ns does not parse (%s); skipped", bag, topic, t_ns, err)
+            except (IndexError, ValueError, TypeError, struct.error) as err:
+                raise undecodable(bag, buf, err, topic=topic, t_ns=t_ns, msgtype=by_name[topic].msgtype) from None
         if progress is not None and t_ns >= next_report:
             progress((t_ns - info.start_ns) / span)
             next_report = t_ns + span // 50

@@ -33,6 +33,7 @@ from twin.bag._native import load_chunk_kernel
 
 __all__ = [
     "MAGIC",
+    "ZSTD_MAGIC",
     "McapRecovery",
     "McapScan",
     "McapSummary",
@@ -46,6 +47,8 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 MAGIC = b"\x89MCAP0\r\n"
+#: The first bytes of a zstd frame; a CDR message starts with a 0 byte (its encapsulation kind).
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
 OP_HEADER = 0x01
 OP_FOOTER = 0x02
@@ -598,6 +601,7 @@ class _ChunkInfo:
     #: Schema and Channel records written inside the chunk (other writers put them there).
     schemas: list[SchemaRecord] = field(default_factory=list)
     channel_records: list[ChannelRecord] = field(default_factory=list)
+    first_data: bytes = b""  #: the data of the chunk's first message (tells a per-message compression)
 
 
 @dataclass(kw_only=True, slots=True)
@@ -650,6 +654,7 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
     offsets: list[int] = []
     schemas: list[SchemaRecord] = []
     channel_records: list[ChannelRecord] = []
+    first_data = b""
     inner = _Cursor(records)
     while inner.pos < len(records):
         rec_start = inner.pos
@@ -661,6 +666,8 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
             body.u32()
             times.append(body.u64())
             offsets.append(rec_start)
+            if not first_data:
+                first_data = bytes(body.data[22:])  # after channel, sequence, log and publish time
         elif op == OP_SCHEMA:
             schemas.append(_schema_record(body))
         elif op == OP_CHANNEL:
@@ -678,6 +685,7 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
         offsets=np.array(offsets, dtype=np.uint64),
         schemas=schemas,
         channel_records=channel_records,
+        first_data=bytes(first_data),
     )
 
 

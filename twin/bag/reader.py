@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import logging
 import os
+import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,14 +33,23 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import get_types_from_idl, get_types_from_msg
 from rosbags.typesys.base import TypesysError
 
-from twin.bag.mcap_file import _decompress, mcap_has_footer
+from twin.bag.mcap_file import ZSTD_MAGIC, _decompress, mcap_has_footer
 from twin.bag.metadata import METADATA_FILE, BagMetadata, read_metadata
 from twin.bag.qos import QosProfile
 from twin.bag.single_file import STORAGE_SUFFIXES, storage_file_metadata
 from twin.bag.typesys import MessageDefinition, TypeRegistry
 from twin.core.errors import BagError
 
-__all__ = ["BagFile", "BagInfo", "BagMessage", "TopicInfo", "message_definitions", "open_bag", "read_messages"]
+__all__ = [
+    "BagFile",
+    "BagInfo",
+    "BagMessage",
+    "TopicInfo",
+    "message_definitions",
+    "open_bag",
+    "read_messages",
+    "undecodable",
+]
 
 _log = logging.getLogger(__name__)
 
@@ -303,6 +313,20 @@ def _definitions(bag: Path, meta: BagMetadata) -> tuple[set[str], set[str]]:
     return embedded, {t.msgtype for t in meta.topics if registry.knows(t.msgtype)}
 
 
+def undecodable(
+    bag: Path, data: bytes | memoryview, err: Exception, *, topic: str, t_ns: int, msgtype: str
+) -> BagError:
+    """The error for a message whose bytes do not parse as its type, with the likely cause."""
+    if bytes(data[:4]) == ZSTD_MAGIC:
+        cause = (
+            "its bytes are a zstd frame: the bag is compressed per message but its metadata does not say so; "
+            f"`twin bag recover {bag}` records the compression"
+        )
+    else:
+        cause = "the bag's messages are damaged, or are not CDR of the type its metadata names"
+    return BagError(f"{bag}: a message on {topic} at {t_ns} ns does not parse as {msgtype} ({err}); {cause}")
+
+
 def _storage_messages(
     reader: Reader, wanted: Sequence[Connection], start_ns: int | None, stop_ns: int | None, *, zstd_messages: bool
 ) -> Iterator[tuple[Connection, int, bytes | memoryview]]:
@@ -389,9 +413,8 @@ def read_messages(
                 continue
             try:
                 msg_obj = store.deserialize_cdr(data, conn.msgtype)
-            except (SerdeError, ValueError, IndexError, KeyError) as err:
-                msg = f"{bag}: message on {conn.topic} at {t_ns} ns does not decode as {conn.msgtype}: {err}"
-                raise BagError(msg) from None
+            except (SerdeError, ValueError, IndexError, KeyError, struct.error) as err:
+                raise undecodable(bag, data, err, topic=conn.topic, t_ns=t_ns, msgtype=conn.msgtype) from None
             yield BagMessage(conn.topic, conn.msgtype, t_ns, msg_obj)
     except ReaderError as err:
         msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, _metadata_or_none(bag))}"

@@ -17,7 +17,7 @@ import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.bag.mcap_file import recover_mcap, scan_mcap
+from twin.bag.mcap_file import ZSTD_MAGIC, recover_mcap, scan_mcap
 from twin.bag.metadata import (
     METADATA_FILE,
     BagMetadata,
@@ -166,24 +166,29 @@ def _complete_report(bag: Path, mcaps: list[Path], dbs: list[Path], previous: Ba
     if set(previous.relative_file_paths) != names:
         return None
     total = 0
+    firsts: list[bytes] = []
     try:
         for file in mcaps:
             scan = scan_mcap(file)
             if not scan.complete:
                 return None
             total += scan.stats().message_count
+            firsts += [c.first_data for c in scan.chunks[:1]]
         for file in dbs:
             if file.with_name(file.name + "-journal").exists() or file.with_name(file.name + "-wal").exists():
                 return None
             db = sqlite3.connect(f"{file.resolve().as_uri()}?mode=ro", uri=True)
             try:
                 total += int(db.execute("SELECT count(*) FROM messages").fetchone()[0])
+                firsts += _first_sqlite_data(db)
             finally:
                 db.close()
     except (ValueError, OSError, sqlite3.Error):
         return None  # the recovery proper names the problem
     if total != previous.message_count:
         return None
+    if _compressed_messages(firsts) and previous.compression_mode.lower() != "message":
+        return None  # zstd frames the metadata does not announce: readers would take them for CDR
     return RecoveryReport(
         path=bag,
         storage="mcap" if mcaps else "sqlite3",
@@ -194,6 +199,20 @@ def _complete_report(bag: Path, mcaps: list[Path], dbs: list[Path], previous: Ba
         dropped_bytes=0,
         metadata=previous,
     )
+
+
+def _first_sqlite_data(db: sqlite3.Connection) -> list[bytes]:
+    row = db.execute("SELECT data FROM messages ORDER BY rowid LIMIT 1").fetchone()
+    return [] if row is None else [bytes(row[0])]
+
+
+def _compressed_messages(firsts: list[bytes]) -> bool:
+    """Whether the storage's messages are zstd frames (`--compression-mode message`), judged by the first of each file.
+
+    A CDR message starts with a 0 byte (its encapsulation kind), a zstd frame with its magic number,
+    so the two cannot be confused.
+    """
+    return any(data[:4] == ZSTD_MAGIC for data in firsts)
 
 
 def _file_info(name: str, start: int, end: int, count: int) -> FileInformation:
@@ -208,6 +227,7 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
     dropped = 0
     starts: list[int] = []
     ends: list[int] = []
+    firsts: list[bytes] = []
     for file in files:
         try:
             outcome = recover_mcap(file)
@@ -218,6 +238,7 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
             msg = f"{file}: cannot rewrite: {err.strerror}; free space or fix permissions and run again"
             raise BagError(msg) from None
         scan = outcome.scan
+        firsts += [c.first_data for c in scan.chunks[:1]]
         dropped += outcome.dropped_bytes
         for _, _, name, values in scan.metadata:
             if name == "twin" and values.get("ros_distro") and not distro:
@@ -259,6 +280,7 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
         distro=distro,
         previous=previous,
         dropped=dropped,
+        compressed=_compressed_messages(firsts),
     )
 
 
@@ -269,6 +291,7 @@ def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | No
     distro = previous.ros_distro if previous else ""
     starts: list[int] = []
     ends: list[int] = []
+    firsts: list[bytes] = []
     for file in files:
         try:
             rows, file_distro = recover_sqlite(file)
@@ -276,6 +299,11 @@ def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | No
             msg = f"{file}: cannot recover: {err}"
             raise BagError(msg) from None
         distro = distro or file_distro
+        db = sqlite3.connect(f"{file.resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            firsts += _first_sqlite_data(db)
+        finally:
+            db.close()
         live = [r for r in rows if r.count]
         for r in rows:
             counts[r.name] = counts.get(r.name, 0) + r.count
@@ -310,6 +338,7 @@ def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | No
         distro=distro,
         previous=previous,
         dropped=0,
+        compressed=_compressed_messages(firsts),
     )
     for file in files:  # keep the metadata table in step with metadata.yaml, as rosbag2 does on close
         try:
@@ -339,6 +368,7 @@ def _finish(
     distro: str,
     previous: BagMetadata | None,
     dropped: int,
+    compressed: bool,
 ) -> RecoveryReport:
     profile = distro_profile(_distro(distro))
     version = previous.version if previous and previous.version >= 8 else profile.metadata_version
@@ -365,6 +395,9 @@ def _finish(
         message_count=total,
         topics=full_topics,
         files=tuple(infos),
+        # rosbag2 writes the mode in capitals; every reader takes either case
+        compression_format="zstd" if compressed else "",
+        compression_mode="MESSAGE" if compressed else "",
         custom_data=previous.custom_data if previous else (),
         ros_distro=profile.name,
     )

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from twin.bag import OdometryEncoder, Recorder, StringEncoder
+from twin.bag import OdometryEncoder, Recorder, StringEncoder, read_messages
 from twin.bag.metadata import BagMetadata, TopicMetadata, read_metadata, write_metadata
 
 #: Messages per topic in `small_bag`.
@@ -76,3 +76,26 @@ def compress_files(bag: Path) -> Path:
         ),
     )
     return packed
+
+
+def message_compressed_bag(path: Path, *, storage: str = "mcap") -> Path:
+    """`small_bag`'s messages as `ros2 bag record --compression-mode message` writes them (each a zstd frame).
+
+    Written with rosbags' writer, which compresses per message the way rosbag2 does.
+    """
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+
+    from twin.bag.typesys import TypeRegistry
+
+    source = small_bag(path.with_name(path.name + "_plain"), storage=storage)
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    writer = Writer(path, version=8, storage_plugin=plugin)
+    writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    store = TypeRegistry().store
+    with writer:
+        connections: dict[str, Any] = {}
+        for m in read_messages(source, decode=False):
+            if m.topic not in connections:
+                connections[m.topic] = writer.add_connection(m.topic, m.msgtype, typestore=store)
+            writer.write(connections[m.topic], m.t_ns, m.msg)
+    return path

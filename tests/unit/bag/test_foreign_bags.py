@@ -11,8 +11,18 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import run_twin
-from tests.unit.bag.small_bags import COUNT, compress_files, edit_topics, small_bag, storage_file, zstd
-from twin.bag import open_bag, read_messages, read_raw, recover_bag
+from tests.unit.bag.small_bags import (
+    COUNT,
+    START_NS,
+    compress_files,
+    edit_metadata,
+    edit_topics,
+    message_compressed_bag,
+    small_bag,
+    storage_file,
+    zstd,
+)
+from twin.bag import OdometryEncoder, Recorder, StringEncoder, open_bag, read_messages, read_raw, recover_bag
 from twin.bag.mcap_file import scan_mcap
 from twin.bag.metadata import read_metadata
 from twin.bag.qos import QosDuration, QosProfile
@@ -130,4 +140,49 @@ def test_recover_after_unpacking_says_it_rewrote_the_metadata(tmp_path: Path) ->
     assert not report.was_complete  # metadata.yaml was rewritten: not "complete (nothing changed)"
     meta = read_metadata(bag)
     assert meta.relative_file_paths == (packed.with_suffix("").name,) and meta.compression_mode == ""
+    assert Counter(m.topic for m in read_messages(bag)) == {"/chatter": COUNT, "/odom": COUNT}
+
+
+def _without_compression(bag: Path) -> None:
+    """metadata.yaml rebuilt by a tool that did not know the messages are compressed."""
+    edit_metadata(bag, lambda meta: dataclasses.replace(meta, compression_format="", compression_mode=""))
+
+
+@pytest.mark.parametrize("command", ["analyze", "export"])
+def test_compressed_messages_read_as_cdr_are_one_bag_error_naming_topic_and_bag(tmp_path: Path, command: str) -> None:
+    bag = message_compressed_bag(tmp_path / "bag")
+    _without_compression(bag)
+    out = str(tmp_path / "out")
+    args = (
+        ["analyze", str(bag), "--out", out]
+        if command == "analyze"
+        else ["bag", "export", str(bag), "--topics", "/odom", "--out", out]
+    )
+    run = run_twin(*args)
+    assert run.returncode == 5, run.stderr
+    assert run.stderr.count("\n") == 1 and run.stderr.startswith(f"twin: error: {bag}: a message on /"), run.stderr
+    assert "zstd frame" in run.stderr and f"`twin bag recover {bag}`" in run.stderr
+
+
+def test_a_message_too_short_for_its_type_is_one_bag_error(tmp_path: Path) -> None:
+    with Recorder(tmp_path / "bag") as rec:
+        odom = rec.add_topic("/odom", OdometryEncoder.msgtype)
+        rec.write(odom, START_NS, StringEncoder().encode("not an odometry"))  # CDR, but far too short
+    run = run_twin("analyze", str(tmp_path / "bag"), "--out", str(tmp_path / "out"))
+    assert run.returncode == 5, run.stderr
+    assert run.stderr.count("\n") == 1 and "a message on /odom" in run.stderr and "nav_msgs/msg/Odometry" in run.stderr
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+@pytest.mark.parametrize("metadata", ["stale", "missing"])
+def test_recover_records_per_message_compression(tmp_path: Path, storage: str, metadata: str) -> None:
+    bag = message_compressed_bag(tmp_path / "bag", storage=storage)
+    if metadata == "stale":
+        _without_compression(bag)
+    else:
+        (bag / "metadata.yaml").unlink()
+    report = recover_bag(bag)
+    assert not report.was_complete
+    meta = read_metadata(bag)
+    assert (meta.compression_format, meta.compression_mode) == ("zstd", "MESSAGE")
     assert Counter(m.topic for m in read_messages(bag)) == {"/chatter": COUNT, "/odom": COUNT}
