@@ -97,6 +97,30 @@ class TypeRegistry:
         """Whether the registry can describe (and so decode) `msgtype`."""
         return msgtype in self.store.fielddefs
 
+    def field_paths(self, msgtype: str) -> list[str]:
+        """The dotted paths of a type's fields: nested messages spread out, each value, array or sequence one path.
+
+        Raises:
+            BagError: If the type is unknown.
+        """
+        from rosbags.interfaces import Nodetype
+
+        fielddefs = self.store.fielddefs
+        if msgtype not in fielddefs:
+            msg = f"unknown message type {msgtype!r}"
+            raise BagError(msg)
+
+        def paths(name: str, prefix: str) -> list[str]:
+            out: list[str] = []
+            for field_name, (kind, detail) in fielddefs[name][1]:
+                if kind == Nodetype.NAME and isinstance(detail, str):
+                    out += paths(detail, f"{prefix}{field_name}.")
+                else:
+                    out.append(prefix + field_name)
+            return out
+
+        return paths(msgtype, "")
+
     def definition(self, msgtype: str) -> MessageDefinition:
         """Return the embedded definition of `msgtype`.
 
