@@ -26,6 +26,7 @@ from twin.analysis import _cdr
 from twin.bag import BagInfo, open_bag, read_messages, read_raw
 from twin.bag.raw import raw_readable
 from twin.bag.reader import undecodable
+from twin.bag.typesys import message_type_name
 
 __all__ = [
     "CMD_TOPIC",
@@ -353,6 +354,7 @@ def collect(
     names = {t.name for t in info.topics}
     wanted = None if topics is None else [t for t in topics if t in names]
     by_name = {t.name: t for t in info.topics}
+    types = {t.name: message_type_name(t.msgtype) for t in info.topics}  # full names, as the fast readers know them
     for ti in info.topics:
         if wanted is None or ti.name in wanted:
             data.health[ti.name] = TopicHealth(
@@ -361,21 +363,21 @@ def collect(
                 decodable=ti.decodable,
                 expected_rate_hz=EXPECTED_RATE_HZ.get(ti.name),
             )
-    pose_fns = {t: fn for t in POSE_TOPICS if t in by_name and (fn := _cdr.pose_reader(by_name[t].msgtype)) is not None}
+    pose_fns = {t: fn for t in POSE_TOPICS if t in by_name and (fn := _cdr.pose_reader(types[t])) is not None}
     for t in pose_fns:
         data.poses[t] = PoseTrack(t, by_name[t].msgtype)
-    twist_fn = _cdr.twist_reader(by_name[CMD_TOPIC].msgtype) if CMD_TOPIC in by_name else None
+    twist_fn = _cdr.twist_reader(types[CMD_TOPIC]) if CMD_TOPIC in by_name else None
     if twist_fn is not None:
         data.cmd = (array("d"), array("d"), array("d"))
-        data.cmd_stamped = by_name[CMD_TOPIC].msgtype.endswith("Stamped")
-    scan_ok = SCAN_TOPIC in by_name and by_name[SCAN_TOPIC].msgtype == "sensor_msgs/msg/LaserScan"
+        data.cmd_stamped = types[CMD_TOPIC].endswith("Stamped")
+    scan_ok = SCAN_TOPIC in by_name and types[SCAN_TOPIC] == "sensor_msgs/msg/LaserScan"
     if scan_ok:
         data.scan_min = (array("d"), array("d"))
-    clock_ok = "/clock" in by_name and by_name["/clock"].msgtype == "rosgraph_msgs/msg/Clock"
+    clock_ok = "/clock" in by_name and types["/clock"] == "rosgraph_msgs/msg/Clock"
     if clock_ok:
         data.clock = (array("q"), array("q"))
     for h in data.health.values():
-        h.stamp_kind = _cdr.stamp_kind(h.msgtype)
+        h.stamp_kind = _cdr.stamp_kind(types[h.topic])
 
     read_topics = None if wanted is None else wanted
     if read_topics is not None and not read_topics:
@@ -399,7 +401,7 @@ def collect(
             data.contacts = []
         for name in _DECODED_TOPICS:
             if name in by_name and (wanted is None or name in wanted) and by_name[name].decodable:
-                rare = _rare_handler(data, name, by_name[name].msgtype)
+                rare = _rare_handler(data, name, types[name])
                 if rare is not None:
                     handlers[name] = rare
     health_of = data.health if health else {}

@@ -141,9 +141,10 @@ class _ParquetSink:
 def _header(msgtype: str) -> list[str]:
     """The columns of a topic without messages: `t_ns`, then the field paths `flatten` would give."""
     from twin.analysis._cdr import type_store_registry
+    from twin.bag.typesys import message_type_name
 
-    registry = type_store_registry()
-    return ["t_ns", *registry.field_paths(msgtype)] if registry.knows(msgtype) else ["t_ns"]
+    registry, full = type_store_registry(), message_type_name(msgtype)
+    return ["t_ns", *registry.field_paths(full)] if registry.knows(full) else ["t_ns"]
 
 
 def export_topics(
@@ -170,6 +171,14 @@ def export_topics(
         if topic not in names:
             msg = f"{info.path}: no topic {topic!r}; it has {', '.join(names)}"
             raise BagError(msg)
+    blind = [f"{t.name} ({t.msgtype})" for t in info.topics if t.name in topics and not t.decodable]
+    if blind:
+        msg = (
+            f"{info.path}: cannot decode {', '.join(blind)}: no definition in the bag nor in the type store "
+            "(Humble's standard types, nav2_msgs, twin_msgs); export the other topics, or record the bag "
+            "with its message definitions (rosbag2's MCAP storage embeds them)"
+        )
+        raise BagError(msg)
     out_dir.mkdir(parents=True, exist_ok=True)
     types = {t.name: t.msgtype for t in info.topics}
     sinks: dict[str, _CsvSink | _ParquetSink] = {}

@@ -37,7 +37,7 @@ from twin.bag.mcap_file import ZSTD_MAGIC, _decompress, mcap_has_footer
 from twin.bag.metadata import METADATA_FILE, BagMetadata, read_metadata
 from twin.bag.qos import QosProfile
 from twin.bag.single_file import STORAGE_SUFFIXES, storage_file_metadata
-from twin.bag.typesys import MessageDefinition, TypeRegistry
+from twin.bag.typesys import MessageDefinition, TypeRegistry, message_type_name
 from twin.core.errors import BagError
 
 __all__ = [
@@ -204,11 +204,11 @@ def _parsed_definition(msgtype: str, msg_format: MessageDefinitionFormat, data: 
 
 
 def _typestore_for(connections: Sequence[Connection]) -> tuple[TypeRegistry, set[str]]:
-    """A registry holding the bag's embedded definitions over the standard ones; and the embedded type names."""
+    """A registry holding the bag's embedded definitions over the standard ones; and the embedded types' full names."""
     registry = TypeRegistry()
     embedded: set[str] = set()
     for conn in connections:
-        if conn.msgtype in embedded or conn.msgdef.format == MessageDefinitionFormat.NONE:
+        if message_type_name(conn.msgtype) in embedded or conn.msgdef.format == MessageDefinitionFormat.NONE:
             continue
         try:
             types = dict(_parsed_definition(conn.msgtype, conn.msgdef.format, conn.msgdef.data))
@@ -220,7 +220,7 @@ def _typestore_for(connections: Sequence[Connection]) -> tuple[TypeRegistry, set
         except (TypesysError, ValueError, IndexError) as err:
             _log.warning("%s: embedded definition does not parse (%s); using the type store", conn.msgtype, err)
             continue
-        embedded.add(conn.msgtype)
+        embedded.add(message_type_name(conn.msgtype))
     return registry, embedded
 
 
@@ -277,7 +277,11 @@ def open_bag(path: str | os.PathLike[str]) -> BagInfo:
             serialization_format=t.serialization_format,
             qos=t.offered_qos_profiles,
             type_hash=t.type_description_hash,
-            definition="embedded" if t.msgtype in embedded else ("type store" if t.msgtype in known else "none"),
+            definition=(
+                "embedded"
+                if message_type_name(t.msgtype) in embedded
+                else ("type store" if message_type_name(t.msgtype) in known else "none")
+            ),
         )
         for t in meta.topics
     )
@@ -305,12 +309,12 @@ def _definitions(bag: Path, meta: BagMetadata) -> tuple[set[str], set[str]]:
     except BagError as err:
         _log.warning("%s", err)
         registry = TypeRegistry()
-        return set(), {t.msgtype for t in meta.topics if registry.knows(t.msgtype)}
+        return set(), {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
     try:
         registry, embedded = _typestore_for(reader.connections)
     finally:
         reader.close()
-    return embedded, {t.msgtype for t in meta.topics if registry.knows(t.msgtype)}
+    return embedded, {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
 
 
 def undecodable(
@@ -386,7 +390,7 @@ def read_messages(
         for conn in reader.connections:
             by_topic.setdefault(conn.topic, []).append(conn)
         if topics is None:
-            wanted = [c for c in reader.connections if not decode or registry.knows(c.msgtype)]
+            wanted = [c for c in reader.connections if not decode or registry.knows(message_type_name(c.msgtype))]
             skipped = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections if c not in wanted})
             if skipped:
                 _log.warning("%s: no definition for %s; skipping", bag, ", ".join(skipped))
@@ -397,7 +401,7 @@ def read_messages(
                     msg = f"{bag}: no topic {name!r}; it has {', '.join(sorted(by_topic)) or 'no topics'}"
                     raise BagError(msg)
                 for conn in by_topic[name]:
-                    if decode and not registry.knows(conn.msgtype):
+                    if decode and not registry.knows(message_type_name(conn.msgtype)):
                         msg = (
                             f"{bag}: topic {name} has type {conn.msgtype}, whose definition is neither in the bag "
                             "nor in the type store; read it with decode=False"
@@ -412,7 +416,7 @@ def read_messages(
                 yield BagMessage(conn.topic, conn.msgtype, t_ns, bytes(data))
                 continue
             try:
-                msg_obj = store.deserialize_cdr(data, conn.msgtype)
+                msg_obj = store.deserialize_cdr(data, message_type_name(conn.msgtype))
             except (SerdeError, ValueError, IndexError, KeyError, struct.error) as err:
                 raise undecodable(bag, data, err, topic=conn.topic, t_ns=t_ns, msgtype=conn.msgtype) from None
             yield BagMessage(conn.topic, conn.msgtype, t_ns, msg_obj)
@@ -446,10 +450,10 @@ def message_definitions(path: str | os.PathLike[str]) -> dict[str, MessageDefini
         registry, _ = _typestore_for(reader.connections)
         definitions: dict[str, MessageDefinition] = {}
         for conn in reader.connections:
-            if conn.msgtype in definitions or not registry.knows(conn.msgtype):
+            if conn.msgtype in definitions or not registry.knows(message_type_name(conn.msgtype)):
                 continue
             try:
-                definitions[conn.msgtype] = registry.definition(conn.msgtype)
+                definitions[conn.msgtype] = registry.definition(message_type_name(conn.msgtype))
             except (BagError, TypesysError, KeyError, ValueError) as err:
                 _log.warning("%s: no usable definition of %s (%s)", bag, conn.msgtype, err)
     finally:

@@ -99,3 +99,24 @@ def message_compressed_bag(path: Path, *, storage: str = "mcap") -> Path:
                 connections[m.topic] = writer.add_connection(m.topic, m.msgtype, typestore=store)
             writer.write(connections[m.topic], m.t_ns, m.msg)
     return path
+
+
+#: A type named the way early rosbag2 bags name types (no `/msg/`), with its definition.
+LEGACY_TYPE = "legacy_msgs/Reading"
+LEGACY_DEFINITION = "float64 value\nstring label"
+
+
+def legacy_type_bag(path: Path, *, storage: str = "mcap") -> Path:
+    """A bag whose one topic, `/reading`, has a legacy type name and its definition embedded (rosbags' writer)."""
+    import struct
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=8, storage_plugin=plugin) as writer:
+        conn = writer.add_connection("/reading", LEGACY_TYPE, msgdef=LEGACY_DEFINITION, rihs01="RIHS01_" + "0" * 64)
+        for k in range(COUNT):
+            label = f"r{k}".encode() + b"\0"
+            data = b"\0\x01\0\0" + struct.pack("<d", 1.5 * k) + struct.pack("<I", len(label)) + label
+            writer.write(conn, START_NS + k * STEP_NS, data)
+    return path
