@@ -203,7 +203,20 @@ def _parsed_definition(msgtype: str, msg_format: MessageDefinitionFormat, data: 
     return types
 
 
-def _typestore_for(connections: Sequence[Connection]) -> tuple[TypeRegistry, set[str]]:
+@functools.cache
+def _warn_once(bag: Path, msgtype: str, reason: str, fallback: bool) -> None:
+    """Say that the bag's definition of `msgtype` is not used, once per process (each pass over the bag meets it)."""
+    then = "decoding with the type store's" if fallback else "its topics cannot be decoded"
+    _log.warning("%s: the definition of %s in the bag is not used (%s); %s", bag, msgtype, reason, then)
+
+
+def _one_line(err: Exception, limit: int = 100) -> str:
+    """The first line of an error's text, cut to `limit` characters (a parser may quote a whole definition)."""
+    text = (str(err).strip().splitlines() or [type(err).__name__])[0]
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _typestore_for(bag: Path, connections: Sequence[Connection]) -> tuple[TypeRegistry, set[str]]:
     """A registry holding the bag's embedded definitions over the standard ones; and the embedded types' full names."""
     registry = TypeRegistry()
     embedded: set[str] = set()
@@ -218,7 +231,14 @@ def _typestore_for(connections: Sequence[Connection]) -> tuple[TypeRegistry, set
             if any(known.get(name) != tuple(definition[:2]) for name, definition in types.items()):
                 registry.store.register(types)
         except (TypesysError, ValueError, IndexError) as err:
-            _log.warning("%s: embedded definition does not parse (%s); using the type store", conn.msgtype, err)
+            # rosbags quotes the whole text it could not parse: say what is wrong instead
+            if str(err).startswith("Could not parse"):
+                reason = "not .msg text rosbags parses"
+            elif "already present with different definition" in str(err):
+                reason = "it differs from the type store's"
+            else:
+                reason = _one_line(err)
+            _warn_once(bag, conn.msgtype, reason, registry.knows(message_type_name(conn.msgtype)))
             continue
         embedded.add(message_type_name(conn.msgtype))
     return registry, embedded
@@ -311,7 +331,7 @@ def _definitions(bag: Path, meta: BagMetadata) -> tuple[set[str], set[str]]:
         registry = TypeRegistry()
         return set(), {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
     try:
-        registry, embedded = _typestore_for(reader.connections)
+        registry, embedded = _typestore_for(bag, reader.connections)
     finally:
         reader.close()
     return embedded, {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
@@ -385,7 +405,7 @@ def read_messages(
     zstd_messages = bag.is_file() and storage_file_metadata(bag).compression_mode == "message"
     reader = _open_reader(bag)
     try:
-        registry, _ = _typestore_for(reader.connections)
+        registry, _ = _typestore_for(bag, reader.connections)
         by_topic: dict[str, list[Connection]] = {}
         for conn in reader.connections:
             by_topic.setdefault(conn.topic, []).append(conn)
@@ -447,7 +467,7 @@ def message_definitions(path: str | os.PathLike[str]) -> dict[str, MessageDefini
     bag = _bag_dir(path)
     reader = _open_reader(bag)
     try:
-        registry, _ = _typestore_for(reader.connections)
+        registry, _ = _typestore_for(bag, reader.connections)
         definitions: dict[str, MessageDefinition] = {}
         for conn in reader.connections:
             if conn.msgtype in definitions or not registry.knows(message_type_name(conn.msgtype)):

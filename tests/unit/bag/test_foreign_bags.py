@@ -186,3 +186,33 @@ def test_recover_records_per_message_compression(tmp_path: Path, storage: str, m
     meta = read_metadata(bag)
     assert (meta.compression_format, meta.compression_mode) == ("zstd", "MESSAGE")
     assert Counter(m.topic for m in read_messages(bag)) == {"/chatter": COUNT, "/odom": COUNT}
+
+
+def _bag_with_unusable_definitions(path: Path) -> Path:
+    """A service-event type whose definition is not .msg text, and a String defined unlike the type store's."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    rihs = "RIHS01_" + "0" * 64
+    with Writer(path, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        event = writer.add_connection(
+            "/events", "demo_msgs/srv/Ping_Event", msgdef="bool a\n---\nbool b\n", rihs01=rihs
+        )
+        text = writer.add_connection(
+            "/chatter", "std_msgs/msg/String", msgdef="string data\nint32 extra\n", rihs01=rihs
+        )
+        for k in range(COUNT):
+            writer.write(event, START_NS + k, b"\0\x01\0\0\x01")
+            writer.write(text, START_NS + k, b"\0\x01\0\0\x02\0\0\0x\0\0\0\x05\0\0\0")
+    return path
+
+
+def test_an_unusable_embedded_definition_is_one_warning_line_once_per_type(tmp_path: Path) -> None:
+    bag = _bag_with_unusable_definitions(tmp_path / "bag")
+    run = run_twin("analyze", str(bag), "--no-plots", "--out", str(tmp_path / "report"))
+    assert run.returncode == 0, run.stderr
+    warnings = [line for line in run.stderr.splitlines() if line.startswith("twin: WARNING:")]
+    assert len(warnings) == len(run.stderr.splitlines()) == 2, run.stderr
+    (event,) = [w for w in warnings if "demo_msgs/srv/Ping_Event" in w]
+    (text,) = [w for w in warnings if "std_msgs/msg/String" in w]
+    assert "not .msg text" in event and "cannot be decoded" in event
+    assert "differs from the type store's" in text and "decoding with the type store's" in text
