@@ -29,7 +29,7 @@ from twin.bag.metadata import (
 )
 from twin.bag.profiles import DISTROS, distro_profile
 from twin.bag.qos import parse_qos_profiles
-from twin.bag.single_file import STORAGE_SUFFIXES, storage_file_metadata
+from twin.bag.single_file import STORAGE_SUFFIXES, rosbag2_record, storage_file_metadata
 from twin.bag.sqlite_file import recover_sqlite
 from twin.core.errors import BagError
 
@@ -243,8 +243,10 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
         for _, _, name, values in scan.metadata:
             if name == "twin" and values.get("ros_distro") and not distro:
                 distro = values["ros_distro"]
-            if name == "rosbag2" and values.get("ROS_DISTRO") and not distro:
-                distro = values["ROS_DISTRO"]
+        # rosbag2's own record: `ROS_DISTRO` on Humble, the whole metadata (with `ros_distro`) from Iron on
+        distro = distro or str(
+            rosbag2_record([(name, values) for _, _, name, values in scan.metadata]).get("ros_distro", "")
+        )
         stats = scan.stats()
         for cid, channel in scan.channels.items():
             schema = scan.schemas.get(channel.schema_id)

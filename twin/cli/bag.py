@@ -165,8 +165,9 @@ def _info(args: argparse.Namespace) -> int:
     print(label("Version:") + (str(info.version) if info.version else "-"))
     print(label("ROS distro:") + (info.ros_distro or "-"))
     print(label("Duration:") + f"{info.duration_ns / 1e9:.9f}s")
-    print(label("Start:") + _stamp(info.start_ns))
-    print(label("End:") + _stamp(info.end_ns))
+    # An empty bag has no first or last message (rosbag2 records the start as INT64_MAX: Apr 11 2262)
+    print(label("Start:") + (_stamp(info.start_ns) if info.message_count else "-"))
+    print(label("End:") + (_stamp(info.end_ns) if info.message_count else "-"))
     print(label("Messages:") + str(info.message_count))
     if info.compression_format:
         print(label("Compression:") + f"{info.compression_format} ({info.compression_mode})")

@@ -23,9 +23,9 @@ from tests.unit.bag.small_bags import (
     zstd,
 )
 from twin.bag import OdometryEncoder, Recorder, StringEncoder, open_bag, read_messages, read_raw, recover_bag
-from twin.bag.mcap_file import scan_mcap
+from twin.bag.mcap_file import McapWriter, scan_mcap
 from twin.bag.metadata import read_metadata
-from twin.bag.qos import QosDuration, QosProfile
+from twin.bag.qos import QosDuration, QosProfile, qos_summary
 
 STORAGES = ["mcap", "sqlite3"]
 
@@ -216,3 +216,36 @@ def test_an_unusable_embedded_definition_is_one_warning_line_once_per_type(tmp_p
     (text,) = [w for w in warnings if "std_msgs/msg/String" in w]
     assert "not .msg text" in event and "cannot be decoded" in event
     assert "differs from the type store's" in text and "decoding with the type store's" in text
+
+
+def test_info_on_an_empty_bag_shows_no_start_or_end(tmp_path: Path) -> None:
+    with Recorder(tmp_path / "bag") as rec:
+        rec.add_topic("/odom", OdometryEncoder.msgtype)
+    # as rosbag2 writes an empty bag: the start is INT64_MAX (Apr 11 2262)
+    edit_metadata(tmp_path / "bag", lambda meta: dataclasses.replace(meta, starting_time_ns=2**63 - 1, duration_ns=0))
+    run = run_twin("bag", "info", str(tmp_path / "bag"))
+    assert run.returncode == 0, run.stderr
+    assert "Start:             -\n" in run.stdout and "End:               -\n" in run.stdout
+    assert "2262" not in run.stdout
+
+
+def test_foxy_and_unspecified_qos_durations_read_as_infinite() -> None:
+    foxy = QosDuration(2147483647, 4294967295)
+    storage_form = QosProfile(deadline=foxy, lifespan=foxy, liveliness_lease_duration=foxy)
+    assert qos_summary((storage_form,)) == qos_summary((FOXY_YAML_QOS,)) == qos_summary((QosProfile(),))
+    assert qos_summary((QosProfile(lifespan=QosDuration(10, 0)),)) == "reliable, volatile, lifespan 10s"
+
+
+def test_recover_takes_the_distro_from_rosbag2s_serialized_metadata(tmp_path: Path) -> None:
+    bag = tmp_path / "jazzy"
+    bag.mkdir()
+    writer = McapWriter(bag / "jazzy_0.mcap", library="rosbag2")  # a file from rosbag2 itself: no twin record
+    schema = writer.add_schema("std_msgs/msg/String", "ros2msg", b"string data")
+    channel = writer.add_channel("/chatter", schema, "cdr", {"offered_qos_profiles": ""})
+    writer.write_batch([(channel, START_NS + k, StringEncoder().encode(f"hi {k}")) for k in range(COUNT)])
+    record = "version: 9\nstorage_identifier: mcap\nmessage_count: 0\nros_distro: jazzy"
+    writer.add_metadata("rosbag2", {"serialized_metadata": record})
+    writer.finish()
+    report = recover_bag(bag)
+    assert (report.metadata.ros_distro, report.metadata.version) == ("jazzy", 9)
+    assert read_metadata(bag).ros_distro == "jazzy"
