@@ -99,10 +99,14 @@ def recover_bag(path: str | os.PathLike[str]) -> RecoveryReport:
     if mcaps and dbs:
         msg = f"{bag}: holds both .mcap and .db3 files; recover one storage per folder"
         raise BagError(msg)
-    if not mcaps and not dbs:
-        msg = f"{bag}: no .mcap or .db3 storage file to recover"
-        raise BagError(msg)
     previous = _previous_metadata(bag)
+    if not mcaps and not dbs:
+        listed = ", ".join(Path(rel).name for rel in previous.relative_file_paths) if previous else ""
+        if listed:  # a metadata.yaml copied without its bag
+            msg = f"{bag}: {listed} (listed in {METADATA_FILE}) is not there, so nothing to recover; copy it into {bag}"
+        else:
+            msg = f"{bag}: no .mcap or .db3 storage file to recover"
+        raise BagError(msg)
     if previous is not None:
         untouched = _complete_report(bag, mcaps, dbs, previous)
         if untouched is not None:

@@ -107,6 +107,9 @@ def test_a_missing_storage_file_is_one_line_naming_it(tmp_path: Path, storage: s
     assert run.stderr.count("\n") == 1 and run.stderr.startswith("twin: error: "), run.stderr
     assert f"its storage file {name}" in run.stderr and "not there" in run.stderr
     assert "recover" not in run.stderr
+    recover = run_twin("bag", "recover", str(bag))
+    assert recover.returncode == 5 and recover.stderr.count("\n") == 1, recover.stderr
+    assert f"{name} (listed in metadata.yaml) is not there, so nothing to recover" in recover.stderr
 
 
 @pytest.mark.parametrize("storage", STORAGES)
