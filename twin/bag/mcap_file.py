@@ -629,13 +629,15 @@ class McapScan:
 def _decompress(compression: str, data: bytes, size: int) -> bytes:
     if compression == "":
         return data
-    # Other writers' chunks; zstd comes with rosbags (Python < 3.14) or the standard library.
+    # Other writers' chunks; zstd comes with the standard library (3.14) or with rosbags:
+    # backports.zstd from its later 0.11 releases, zstandard before.
     if compression == "zstd":
-        try:
-            zstd = importlib.import_module("compression.zstd")
-        except ImportError:
-            zstd = importlib.import_module("backports.zstd")
-        return bytes(zstd.decompress(data))
+        for name in ("compression.zstd", "backports.zstd"):
+            try:
+                return bytes(importlib.import_module(name).decompress(data))
+            except ImportError:
+                continue
+        return bytes(importlib.import_module("zstandard").ZstdDecompressor().decompressobj().decompress(data))
     if compression == "lz4":
         return bytes(importlib.import_module("lz4.frame").decompress(data))
     msg = f"unsupported chunk compression {compression!r}"
