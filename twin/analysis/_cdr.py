@@ -28,6 +28,7 @@ __all__ = [
     "stamp_reader",
     "twist_reader",
     "type_store",
+    "type_store_registry",
     "yaw_of",
 ]
 
@@ -132,9 +133,14 @@ def clock_ns(buf: bytes) -> int:
 
 
 @functools.cache
+def type_store_registry() -> TypeRegistry:
+    """The registry of Humble's standard types plus nav2_msgs and twin_msgs (built on first use, read-only after)."""
+    return TypeRegistry()
+
+
 def type_store() -> Any:
     """Humble's standard types plus nav2_msgs and twin_msgs (one store, built on first use, read-only after)."""
-    return TypeRegistry().store
+    return type_store_registry().store
 
 
 def _fielddefs() -> dict[str, object]:

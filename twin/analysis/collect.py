@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import struct
 from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -24,7 +25,8 @@ from numpy.typing import NDArray
 from twin.analysis import _cdr
 from twin.bag import BagInfo, open_bag, read_messages, read_raw
 from twin.bag.raw import raw_readable
-from twin.core.errors import BagError
+from twin.bag.reader import undecodable
+from twin.bag.typesys import message_type_name
 
 __all__ = [
     "CMD_TOPIC",
@@ -399,17 +401,16 @@ def collect(
             `twin bag recover`.
     """
     bag = Path(path)
-    try:  # opening the storage first turns a truncated file into one error line, not a warning and an error
-        if not raw_readable(bag):
-            for _ in read_messages(bag, []):
-                pass
-    except BagError as err:
-        raise BagError(_truncation_hint(bag, err)) from None
+    # Opening the storage first turns a truncated file into one error line, not a warning and an error.
+    if not raw_readable(bag):
+        for _ in read_messages(bag, []):
+            pass
     info = open_bag(bag)
     data = BagData(info=info, start_ns=info.start_ns)
     names = {t.name for t in info.topics}
     by_name = {t.name: t for t in info.topics}
-    pose_list = _pose_topics({t.name: t.msgtype for t in info.topics}, pose_topics)
+    types = {t.name: message_type_name(t.msgtype) for t in info.topics}  # full names, as the fast readers know them
+    pose_list = _pose_topics(types, pose_topics)
     wanted = None
     if topics is not None:
         asked = list(topics)
@@ -425,21 +426,21 @@ def collect(
                 decodable=ti.decodable,
                 expected_rate_hz=EXPECTED_RATE_HZ.get(ti.name),
             )
-    pose_fns = {t: fn for t in pose_list if (fn := _cdr.pose_reader(by_name[t].msgtype)) is not None}
+    pose_fns = {t: fn for t in pose_list if (fn := _cdr.pose_reader(types[t])) is not None}
     for t in pose_fns:
-        data.poses[t] = PoseTrack(t, by_name[t].msgtype)
-    twist_fn = _cdr.twist_reader(by_name[CMD_TOPIC].msgtype) if CMD_TOPIC in by_name else None
+        data.poses[t] = PoseTrack(t, types[t])
+    twist_fn = _cdr.twist_reader(types[CMD_TOPIC]) if CMD_TOPIC in by_name else None
     if twist_fn is not None:
         data.cmd = (array("d"), array("d"), array("d"))
-        data.cmd_stamped = by_name[CMD_TOPIC].msgtype.endswith("Stamped")
-    scan_ok = SCAN_TOPIC in by_name and by_name[SCAN_TOPIC].msgtype == "sensor_msgs/msg/LaserScan"
+        data.cmd_stamped = types[CMD_TOPIC].endswith("Stamped")
+    scan_ok = SCAN_TOPIC in by_name and types[SCAN_TOPIC] == "sensor_msgs/msg/LaserScan"
     if scan_ok:
         data.scan_min = (array("d"), array("d"))
-    clock_ok = "/clock" in by_name and by_name["/clock"].msgtype == "rosgraph_msgs/msg/Clock"
+    clock_ok = "/clock" in by_name and types["/clock"] == "rosgraph_msgs/msg/Clock"
     if clock_ok:
         data.clock = (array("q"), array("q"))
     for h in data.health.values():
-        h.stamp_kind = _cdr.stamp_kind(h.msgtype)
+        h.stamp_kind = _cdr.stamp_kind(types[h.topic])
 
     read_topics = None if wanted is None else wanted
     if read_topics is not None and not read_topics:
@@ -463,7 +464,7 @@ def collect(
             data.contacts = []
         for name in _DECODED_TOPICS:
             if name in by_name and (wanted is None or name in wanted) and by_name[name].decodable:
-                rare = _rare_handler(data, name, by_name[name].msgtype)
+                rare = _rare_handler(data, name, types[name])
                 if rare is not None:
                     handlers[name] = rare
     health_of = data.health if health else {}
@@ -471,35 +472,35 @@ def collect(
         name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
     }
     block = _BLOCK
-    try:
-        for topic, t_ns, raw in read_raw(bag, read_topics):
-            r = route.get(topic)
-            if r is None:
-                continue
-            buf: Any = raw  # bytes or a memoryview into the chunk
-            th, handler = r
-            if th is not None:  # TopicHealth.add, inlined: this runs for every message of the bag
-                tb = th.t_buf
-                if not tb and th.count == 0:
-                    th.little_endian = len(buf) > 1 and bool(buf[1] & 1)
-                tb.append(t_ns)
-                kind = th.stamp_kind
-                if kind == 1:
-                    th.stamp_buf += buf[4:12]
-                elif kind == 2:
-                    th.add_tf_stamp(buf)
-                if len(tb) >= block:
-                    th.flush()
-            if handler is not None:
-                try:
-                    handler(t_ns, buf)
-                except (IndexError, ValueError, TypeError) as err:  # struct.error is a ValueError
-                    _log.warning("%s: a message on %s at %d ns does not parse (%s); skipped", bag, topic, t_ns, err)
-            if progress is not None and t_ns >= next_report:
-                progress((t_ns - info.start_ns) / span)
-                next_report = t_ns + span // 50
-    except BagError as err:
-        raise BagError(_truncation_hint(bag, err)) from None
+    for topic, t_ns, raw in read_raw(bag, read_topics):
+        r = route.get(topic)
+        if r is None:
+            continue
+        buf: Any = raw  # bytes or a memoryview into the chunk
+        th, handler = r
+        if th is not None:  # TopicHealth.add, inlined: this runs for every message of the bag
+            tb = th.t_buf
+            if not tb and th.count == 0:  # a topic's first message: is it CDR at all?
+                if len(buf) < 4 or buf[0] != 0:
+                    err = ValueError(f"no CDR header: starts with {bytes(buf[:4]).hex(' ')}")
+                    raise undecodable(bag, buf, err, topic=topic, t_ns=t_ns, msgtype=th.msgtype)
+                th.little_endian = bool(buf[1] & 1)
+            tb.append(t_ns)
+            kind = th.stamp_kind
+            if kind == 1:
+                th.stamp_buf += buf[4:12]
+            elif kind == 2:
+                th.add_tf_stamp(buf)
+            if len(tb) >= block:
+                th.flush()
+        if handler is not None:
+            try:
+                handler(t_ns, buf)
+            except (IndexError, ValueError, TypeError, struct.error) as err:
+                raise undecodable(bag, buf, err, topic=topic, t_ns=t_ns, msgtype=by_name[topic].msgtype) from None
+        if progress is not None and t_ns >= next_report:
+            progress((t_ns - info.start_ns) / span)
+            next_report = t_ns + span // 50
     for h in data.health.values():
         h.finish()
     return data
@@ -541,13 +542,6 @@ def _cmd_handler(data: BagData, fn: Callable[[bytes], tuple[int | None, float, f
         w_arr.append(w)
 
     return handle
-
-
-def _truncation_hint(bag: Path, err: BagError) -> str:
-    text = str(err).rstrip(". ")
-    if "recover" in text or "no such bag folder" in text:
-        return text
-    return f"{text}; if its recording was killed, run `twin bag recover {bag}`"
 
 
 def _add_scan(data: BagData, t_ns: int, buf: bytes, pose: tuple[float, float, float] | None) -> None:

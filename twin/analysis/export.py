@@ -9,6 +9,7 @@ so memory does not grow with the bag.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import os
@@ -20,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from twin.bag import open_bag, read_messages
-from twin.core.errors import BagError, ConfigError
+from twin.core.errors import BagError, ConfigError, TwinError
 
 __all__ = ["FORMATS", "export_topics", "flatten"]
 
@@ -76,10 +77,16 @@ def _csv_cell(value: Any) -> Any:
     return value
 
 
+def _part(path: Path) -> Path:
+    """Where a table is written until the export succeeds (a failed export leaves no file behind)."""
+    return path.with_name(f".{path.name}.part")
+
+
 class _CsvSink:
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, header: Sequence[str]) -> None:
         self.path = path
-        self._file = path.open("w", newline="")
+        self._header = header
+        self._file = _part(path).open("w", newline="")
         self._writer: csv.DictWriter[str] | None = None
 
     def write(self, rows: list[dict[str, Any]]) -> None:
@@ -91,14 +98,17 @@ class _CsvSink:
         self._writer.writerows({k: _csv_cell(v) for k, v in r.items()} for r in rows)
 
     def close(self) -> None:
+        if self._writer is None and not self._file.closed:  # no message: the columns its type would have
+            csv.writer(self._file).writerow(self._header)
         self._file.close()
 
 
 class _ParquetSink:
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, header: Sequence[str]) -> None:
         self.path = path
         self._writer: Any = None
         self._schema: Any = None
+        self._closed = False
 
     def write(self, rows: list[dict[str, Any]]) -> None:
         import pyarrow as pa
@@ -110,19 +120,31 @@ class _ParquetSink:
         if self._schema is None:
             table = pa.table(columns)
             self._schema = table.schema
-            self._writer = pq.ParquetWriter(self.path, self._schema)
+            self._writer = pq.ParquetWriter(_part(self.path), self._schema)
         else:
             table = pa.table(columns, schema=self._schema)
         self._writer.write_table(table)
 
     def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
         if self._writer is not None:
             self._writer.close()
-        elif not self.path.exists():
+        else:
             import pyarrow as pa
             import pyarrow.parquet as pq
 
-            pq.write_table(pa.table({"t_ns": pa.array([], pa.int64())}), self.path)
+            pq.write_table(pa.table({"t_ns": pa.array([], pa.int64())}), _part(self.path))
+
+
+def _header(msgtype: str) -> list[str]:
+    """The columns of a topic without messages: `t_ns`, then the field paths `flatten` would give."""
+    from twin.analysis._cdr import type_store_registry
+    from twin.bag.typesys import message_type_name
+
+    registry, full = type_store_registry(), message_type_name(msgtype)
+    return ["t_ns", *registry.field_paths(full)] if registry.knows(full) else ["t_ns"]
 
 
 def export_topics(
@@ -149,14 +171,24 @@ def export_topics(
         if topic not in names:
             msg = f"{info.path}: no topic {topic!r}; it has {', '.join(names)}"
             raise BagError(msg)
+    blind = [f"{t.name} ({t.msgtype})" for t in info.topics if t.name in topics and not t.decodable]
+    if blind:
+        msg = (
+            f"{info.path}: cannot decode {', '.join(blind)}: no definition in the bag nor in the type store "
+            "(Humble's standard types, nav2_msgs, twin_msgs); export the other topics, or record the bag "
+            "with its message definitions (rosbag2's MCAP storage embeds them)"
+        )
+        raise BagError(msg)
     out_dir.mkdir(parents=True, exist_ok=True)
+    types = {t.name: t.msgtype for t in info.topics}
     sinks: dict[str, _CsvSink | _ParquetSink] = {}
-    for topic in topics:
-        path = out_dir / f"{_file_name(topic)}.{fmt}"
-        sinks[topic] = _CsvSink(path) if fmt == "csv" else _ParquetSink(path)
     pending: dict[str, list[dict[str, Any]]] = {t: [] for t in topics}
     counts = dict.fromkeys(topics, 0)
     try:
+        for topic in topics:
+            path = out_dir / f"{_file_name(topic)}.{fmt}"
+            make = _CsvSink if fmt == "csv" else _ParquetSink
+            sinks[topic] = make(path, _header(types[topic]))
         for m in read_messages(bag, list(topics)):
             rows = pending[m.topic]
             rows.append({"t_ns": m.t_ns, **flatten(m.msg)})
@@ -166,10 +198,17 @@ def export_topics(
                 rows.clear()
         for topic, rows in pending.items():
             sinks[topic].write(rows)
-    except ValueError as err:
-        msg = f"{info.path}: messages of one topic change shape ({err}); export that topic on its own"
-        raise BagError(msg) from None
-    finally:
         for sink in sinks.values():
             sink.close()
+    except BaseException as err:
+        for sink in sinks.values():  # nothing half-written stays behind, whatever stopped the export
+            with contextlib.suppress(Exception):
+                sink.close()
+            _part(sink.path).unlink(missing_ok=True)
+        if isinstance(err, ValueError) and not isinstance(err, TwinError):
+            msg = f"{info.path}: messages of one topic change shape ({err}); export that topic on its own"
+            raise BagError(msg) from None
+        raise
+    for sink in sinks.values():
+        _part(sink.path).replace(sink.path)
     return {t: (sinks[t].path, counts[t]) for t in topics}

@@ -31,11 +31,24 @@ from numpy.typing import NDArray
 
 from twin.bag._native import load_chunk_kernel
 
-__all__ = ["MAGIC", "McapRecovery", "McapScan", "McapWriter", "recover_mcap", "scan_mcap"]
+__all__ = [
+    "MAGIC",
+    "ZSTD_MAGIC",
+    "McapRecovery",
+    "McapScan",
+    "McapSummary",
+    "McapWriter",
+    "mcap_has_footer",
+    "read_mcap_summary",
+    "recover_mcap",
+    "scan_mcap",
+]
 
 _log = logging.getLogger(__name__)
 
 MAGIC = b"\x89MCAP0\r\n"
+#: The first bytes of a zstd frame; a CDR message starts with a 0 byte (its encapsulation kind).
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
 OP_HEADER = 0x01
 OP_FOOTER = 0x02
@@ -58,6 +71,7 @@ _U64 = struct.Struct("<Q")
 _INDEX_HEAD = struct.Struct("<BQHI")  # MessageIndex: opcode, record length, channel, entries' byte length
 _CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
 _FOOTER = struct.Struct("<BQQQI")
+_STATS_HEAD = struct.Struct("<QHIIII")  # messages, schemas, channels, attachments, metadata, chunks
 
 # A Message record's fixed part: opcode, record length, channel, sequence, log and publish time.
 _MESSAGE_HEAD = np.dtype(
@@ -520,7 +534,7 @@ def _statistics(stats: _Stats, schemas: int, channels: int, chunks: int, metadat
     counts = b"".join(_U16.pack(ch) + _U64.pack(n) for ch, n in sorted(stats.channel_counts.items()))
     start = stats.start_ns if stats.message_count else 0
     content = (
-        struct.pack("<QHIIII", stats.message_count, schemas, channels, 0, metadata, chunks)
+        _STATS_HEAD.pack(stats.message_count, schemas, channels, 0, metadata, chunks)
         + struct.pack("<QQ", start, stats.end_ns)
         + _U32.pack(len(counts))
         + counts
@@ -587,6 +601,7 @@ class _ChunkInfo:
     #: Schema and Channel records written inside the chunk (other writers put them there).
     schemas: list[SchemaRecord] = field(default_factory=list)
     channel_records: list[ChannelRecord] = field(default_factory=list)
+    first_data: bytes = b""  #: the data of the chunk's first message (tells a per-message compression)
 
 
 @dataclass(kw_only=True, slots=True)
@@ -614,13 +629,15 @@ class McapScan:
 def _decompress(compression: str, data: bytes, size: int) -> bytes:
     if compression == "":
         return data
-    # Other writers' chunks; zstd comes with rosbags (Python < 3.14) or the standard library.
+    # Other writers' chunks; zstd comes with the standard library (3.14) or with rosbags:
+    # backports.zstd from its later 0.11 releases, zstandard before.
     if compression == "zstd":
-        try:
-            zstd = importlib.import_module("compression.zstd")
-        except ImportError:
-            zstd = importlib.import_module("backports.zstd")
-        return bytes(zstd.decompress(data))
+        for name in ("compression.zstd", "backports.zstd"):
+            try:
+                return bytes(importlib.import_module(name).decompress(data))
+            except ImportError:
+                continue
+        return bytes(importlib.import_module("zstandard").ZstdDecompressor().decompressobj().decompress(data))
     if compression == "lz4":
         return bytes(importlib.import_module("lz4.frame").decompress(data))
     msg = f"unsupported chunk compression {compression!r}"
@@ -639,6 +656,7 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
     offsets: list[int] = []
     schemas: list[SchemaRecord] = []
     channel_records: list[ChannelRecord] = []
+    first_data = b""
     inner = _Cursor(records)
     while inner.pos < len(records):
         rec_start = inner.pos
@@ -650,6 +668,8 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
             body.u32()
             times.append(body.u64())
             offsets.append(rec_start)
+            if not first_data:
+                first_data = bytes(body.data[22:])  # after channel, sequence, log and publish time
         elif op == OP_SCHEMA:
             schemas.append(_schema_record(body))
         elif op == OP_CHANNEL:
@@ -667,6 +687,7 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
         offsets=np.array(offsets, dtype=np.uint64),
         schemas=schemas,
         channel_records=channel_records,
+        first_data=bytes(first_data),
     )
 
 
@@ -747,6 +768,112 @@ def scan_mcap(path: Path) -> McapScan:
     # No DataEnd: a killed writer. Keep whole chunks with their (complete) message indexes.
     scan.data_end = data_end
     return scan
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class McapSummary:
+    """What a complete MCAP file holds, as its summary section says."""
+
+    schemas: dict[int, SchemaRecord]
+    channels: dict[int, ChannelRecord]
+    channel_counts: dict[int, int]  #: messages per channel id
+    message_count: int
+    start_ns: int  #: log time of the first message (0 without messages)
+    end_ns: int  #: log time of the last message
+    metadata: list[tuple[str, dict[str, str]]]  #: Metadata records: name, values
+
+
+def read_mcap_summary(path: Path) -> McapSummary:
+    """Describe a complete MCAP file from its summary section, found through the footer, without reading its data.
+
+    A file whose summary lacks the statistics (optional in MCAP) is scanned whole instead.
+
+    Raises:
+        ValueError: If the file is not MCAP, or has no footer (a killed writer's file: run
+            `recover_mcap` first).
+        OSError: If the file cannot be read.
+    """
+    with path.open("rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        if f.read(8) != MAGIC:
+            msg = "not an MCAP file (bad magic)"
+            raise ValueError(msg)
+        tail = _FOOTER.size + len(MAGIC)
+        f.seek(max(size - tail, 0))
+        end = f.read(tail)
+        if size < 8 + tail or end[-8:] != MAGIC or end[0] != OP_FOOTER:
+            msg = "the MCAP file ends without its footer (a recording that was killed)"
+            raise ValueError(msg)
+        _op, _length, summary_start, _offsets_start, _crc = _FOOTER.unpack_from(end, 0)
+        if not 8 <= summary_start <= size - tail:
+            return _summary_by_scan(path)
+        f.seek(summary_start)
+        view = memoryview(f.read(size - tail - summary_start))
+        schemas: dict[int, SchemaRecord] = {}
+        channels: dict[int, ChannelRecord] = {}
+        stats: tuple[int, int, int, dict[int, int]] | None = None
+        metadata_at: list[tuple[int, int]] = []
+        for op, offset, _len in _records(view, 0):
+            cur = _Cursor(view, offset + 9)
+            if op == OP_SCHEMA:
+                schema = _schema_record(cur)
+                schemas[schema.id] = schema
+            elif op == OP_CHANNEL:
+                channel = _channel_record(cur)
+                channels[channel.id] = channel
+            elif op == OP_STATISTICS:
+                count, *_record_counts = _STATS_HEAD.unpack(cur.take(_STATS_HEAD.size))
+                start_ns, end_ns = cur.u64(), cur.u64()
+                entries = cur.take(cur.u32())
+                counts = {ch: n for ch, n in struct.iter_unpack("<HQ", entries)}
+                stats = (count, start_ns, end_ns, counts)
+            elif op == OP_METADATA_INDEX:
+                metadata_at.append((cur.u64(), cur.u64()))
+        if stats is None:
+            return _summary_by_scan(path)
+        metadata = []
+        for offset, length in metadata_at:
+            f.seek(offset)
+            cur = _Cursor(f.read(length), 9)
+            name = cur.string()
+            metadata.append((name, cur.mapping()))
+    count, start_ns, end_ns, counts = stats
+    return McapSummary(
+        schemas=schemas,
+        channels=channels,
+        channel_counts=counts,
+        message_count=count,
+        start_ns=start_ns if count else 0,
+        end_ns=end_ns if count else 0,
+        metadata=metadata,
+    )
+
+
+def _summary_by_scan(path: Path) -> McapSummary:
+    scan = scan_mcap(path)
+    stats = scan.stats()
+    return McapSummary(
+        schemas=scan.schemas,
+        channels=scan.channels,
+        channel_counts=stats.channel_counts,
+        message_count=stats.message_count,
+        start_ns=stats.start_ns if stats.message_count else 0,
+        end_ns=stats.end_ns,
+        metadata=[(name, values) for _, _, name, values in scan.metadata],
+    )
+
+
+def mcap_has_footer(path: Path) -> bool:
+    """Whether the MCAP file at `path` ends with its footer and magic (a killed writer's file does not)."""
+    tail = _FOOTER.size + len(MAGIC)
+    with path.open("rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        if size < len(MAGIC) + tail:
+            return False
+        f.seek(size - tail)
+        end = f.read(tail)
+    op, length, *_ = _FOOTER.unpack_from(end, 0)
+    return bool(end[-8:] == MAGIC and op == OP_FOOTER and length == 20)
 
 
 def _has_footer(view: memoryview) -> bool:

@@ -285,6 +285,9 @@ def read_metadata(bag_dir: Path) -> BagMetadata:
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
+        if not any(p.suffix in (".mcap", ".db3") for p in bag_dir.glob("*")):
+            msg = f"{bag_dir}: not a bag folder (no {METADATA_FILE}, no .mcap or .db3 file); give a bag folder or file"
+            raise BagError(msg) from None
         msg = (
             f"{bag_dir}: no {METADATA_FILE}; if a recording was killed, "
             f"`twin bag recover {bag_dir}` rebuilds it from the storage files"

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from twin.bag.mcap_file import scan_mcap
+from twin.bag.metadata import METADATA_FILE, read_metadata
 from twin.core.errors import BagError
 
 __all__ = ["PROVENANCE_NAME", "PROVENANCE_TOPIC", "decode_provenance_message", "read_provenance"]
@@ -33,6 +34,19 @@ def decode_provenance_message(data: bytes) -> dict[str, str]:
     return {str(k): str(v) for k, v in values.items()}
 
 
+def _storage_files(bag: Path) -> list[Path]:
+    """The storage files of the bag at `bag` (a folder or a single file), as its metadata.yaml lists them."""
+    if bag.is_file():
+        return [bag]
+    if (bag / METADATA_FILE).exists():
+        return [bag / Path(rel).name for rel in read_metadata(bag).relative_file_paths]
+    files = sorted(p for p in bag.glob("*") if p.suffix in (".mcap", ".db3"))
+    if not files:
+        msg = f"{bag}: no metadata.yaml, no .mcap or .db3 file (is it a bag folder?)"
+        raise BagError(msg)
+    return files
+
+
 def read_provenance(path: str | os.PathLike[str]) -> Mapping[str, str] | None:
     """The provenance a twin run recorded in the bag at `path` (a folder or a storage file), or None.
 
@@ -40,11 +54,9 @@ def read_provenance(path: str | os.PathLike[str]) -> Mapping[str, str] | None:
         BagError: If the bag cannot be read.
     """
     bag = Path(path)
-    files = [bag] if bag.is_file() else sorted(p for p in bag.glob("*") if p.suffix in (".mcap", ".db3"))
-    if not files:
-        msg = f"{bag}: no .mcap or .db3 file (is it a bag folder?)"
-        raise BagError(msg)
-    for file in files:
+    for file in _storage_files(bag):
+        if file.suffix not in (".mcap", ".db3"):
+            continue  # a file-compressed bag (`.mcap.zstd`): the twin never writes one
         try:
             if file.suffix == ".mcap":
                 for _, _, name, values in scan_mcap(file).metadata:

@@ -32,6 +32,7 @@ __all__ = [
     "QosProfile",
     "Reliability",
     "default_qos",
+    "is_infinite",
     "parse_qos_profiles",
     "qos_profiles_to_yaml",
     "qos_summary",
@@ -87,6 +88,15 @@ class QosDuration(NamedTuple):
 
 #: `RMW_DURATION_INFINITE` as ROS 2 writes it into bags.
 INFINITE = QosDuration(9223372036, 854775807)
+#: Durations that mean the same in older bags: Foxy's rmw wrote infinity as the largest 32-bit
+#: seconds and nanoseconds, and 0 is `RMW_DURATION_UNSPECIFIED`, the default, which for deadline,
+#: lifespan and liveliness lease is infinite.
+_ALSO_INFINITE = frozenset({QosDuration(2147483647, 4294967295), QosDuration(0, 0)})
+
+
+def is_infinite(duration: QosDuration) -> bool:
+    """Whether a recorded QoS duration means "no limit", in any distro's spelling."""
+    return duration == INFINITE or duration in _ALSO_INFINITE
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -267,9 +277,9 @@ def qos_summary(profiles: Sequence[QosProfile]) -> str:
     parts = []
     for profile in profiles:
         words = [_policy_name(profile.reliability), _policy_name(profile.durability)]
-        if profile.lifespan != INFINITE:
+        if not is_infinite(profile.lifespan):
             words.append(f"lifespan {profile.lifespan.sec + profile.lifespan.nsec / 1e9:g}s")
-        if profile.deadline != INFINITE:
+        if not is_infinite(profile.deadline):
             words.append(f"deadline {profile.deadline.sec + profile.deadline.nsec / 1e9:g}s")
         parts.append(", ".join(words))
     unique = list(dict.fromkeys(parts))

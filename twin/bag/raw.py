@@ -19,8 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.bag.mcap_file import MAGIC, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_MESSAGE, _decompress
-from twin.bag.metadata import read_metadata
-from twin.bag.reader import _bag_dir, read_messages
+from twin.bag.reader import _bag_dir, bag_metadata, read_messages, storage_paths
 from twin.core.errors import BagError
 
 __all__ = ["raw_readable", "read_raw"]
@@ -34,9 +33,10 @@ _CHANNEL_HEAD = struct.Struct("<HH")
 
 
 def _fast(bag: Path, topics: Sequence[str] | None) -> _McapChunks | None:
-    meta = read_metadata(bag)
-    files = [bag / Path(rel).name for rel in meta.relative_file_paths]
-    if meta.storage_identifier == "mcap" and len(files) == 1 and not meta.compression_format:
+    meta = bag_metadata(bag)
+    files = storage_paths(bag, meta)
+    cdr = all(t.serialization_format == "cdr" for t in meta.topics)  # other formats: rosbags says what it reads
+    if meta.storage_identifier == "mcap" and len(files) == 1 and not meta.compression_format and cdr:
         fast = _McapChunks(files[0], topics)
         if fast.in_order():
             return fast
@@ -47,7 +47,7 @@ def raw_readable(path: str | os.PathLike[str]) -> bool:
     """Whether `read_raw` reads this bag's file directly (a complete, in-order MCAP file).
 
     Raises:
-        BagError: If the folder is not a bag (no such folder, no metadata.yaml).
+        BagError: If `path` is not a bag (no such folder or file, no metadata.yaml).
     """
     return _fast(_bag_dir(path), None) is not None
 
@@ -65,7 +65,7 @@ def read_raw(
     bag = _bag_dir(path)
     fast = _fast(bag, topics)
     if fast is not None:
-        names = {t.name for t in read_metadata(bag).topics}
+        names = {t.name for t in bag_metadata(bag).topics}
         for name in topics or ():
             if name not in names:
                 msg = f"{bag}: no topic {name!r}; it has {', '.join(sorted(names)) or 'no topics'}"

@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import logging
 import os
+import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,12 +33,23 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import get_types_from_idl, get_types_from_msg
 from rosbags.typesys.base import TypesysError
 
-from twin.bag.metadata import BagMetadata, read_metadata
+from twin.bag.mcap_file import ZSTD_MAGIC, _decompress, mcap_has_footer
+from twin.bag.metadata import METADATA_FILE, BagMetadata, read_metadata
 from twin.bag.qos import QosProfile
-from twin.bag.typesys import MessageDefinition, TypeRegistry
+from twin.bag.single_file import STORAGE_SUFFIXES, storage_file_metadata
+from twin.bag.typesys import MessageDefinition, TypeRegistry, message_type_name
 from twin.core.errors import BagError
 
-__all__ = ["BagFile", "BagInfo", "BagMessage", "TopicInfo", "message_definitions", "open_bag", "read_messages"]
+__all__ = [
+    "BagFile",
+    "BagInfo",
+    "BagMessage",
+    "TopicInfo",
+    "message_definitions",
+    "open_bag",
+    "read_messages",
+    "undecodable",
+]
 
 _log = logging.getLogger(__name__)
 
@@ -117,16 +129,60 @@ class BagMessage(NamedTuple):
 
 
 def _bag_dir(path: str | os.PathLike[str]) -> Path:
+    """The bag at `path`: a rosbag2 folder, or a single `.mcap` or `.db3` file outside one.
+
+    A storage file inside a bag folder stands for the folder.
+
+    Raises:
+        BagError: If `path` is neither.
+    """
     bag = Path(path)
-    if bag.is_file() and (bag.parent / "metadata.yaml").exists():
-        return bag.parent  # a storage file inside a bag folder
+    if bag.is_file():
+        if (bag.parent / METADATA_FILE).exists():
+            return bag.parent  # a storage file inside a bag folder
+        if bag.suffix in STORAGE_SUFFIXES:
+            return bag
+        if bag.suffix == ".zstd" and Path(bag.stem).suffix in STORAGE_SUFFIXES:
+            msg = f"{bag}: a zstd-compressed storage file without its metadata.yaml; unpack it with `zstd -d {bag}`"
+            raise BagError(msg)
+        msg = f"{bag}: not a bag; expected a rosbag2 folder (metadata.yaml and storage files) or a .mcap or .db3 file"
+        raise BagError(msg)
     if not bag.exists():
-        msg = f"{bag}: no such bag folder"
+        msg = f"{bag}: no such bag folder or file"
         raise BagError(msg)
     if not bag.is_dir():
-        msg = f"{bag}: not a rosbag2 folder (expected a folder with metadata.yaml and the storage files)"
+        msg = f"{bag}: not a bag; expected a rosbag2 folder (metadata.yaml and storage files) or a .mcap or .db3 file"
         raise BagError(msg)
     return bag
+
+
+def bag_metadata(bag: Path) -> BagMetadata:
+    """The metadata of the bag `bag` (from `_bag_dir`): its metadata.yaml, or a single storage file's own.
+
+    Raises:
+        BagError: If the metadata is missing or unreadable, or a storage file it lists is not there.
+    """
+    if bag.is_file():
+        return storage_file_metadata(bag)
+    meta = read_metadata(bag)
+    missing = [Path(rel).name for rel in meta.relative_file_paths if not (bag / Path(rel).name).is_file()]
+    if missing:
+        files = ", ".join(missing)
+        its = "its storage file" if len(missing) == 1 else "its storage files"
+        verb = "is" if len(missing) == 1 else "are"
+        msg = (
+            f"{bag}: {its} {files} (listed in {METADATA_FILE}) {verb} not there; "
+            f"copy {files} into {bag}: {METADATA_FILE} alone holds no messages"
+        )
+        raise BagError(msg)
+    return meta
+
+
+def storage_paths(bag: Path, meta: BagMetadata) -> list[Path]:
+    """The storage files of the bag `bag` (from `_bag_dir`)."""
+    if bag.is_file():
+        return [bag]
+    return [bag / Path(rel).name for rel in meta.relative_file_paths]
 
 
 @functools.lru_cache(maxsize=1024)
@@ -147,12 +203,25 @@ def _parsed_definition(msgtype: str, msg_format: MessageDefinitionFormat, data: 
     return types
 
 
-def _typestore_for(connections: Sequence[Connection]) -> tuple[TypeRegistry, set[str]]:
-    """A registry holding the bag's embedded definitions over the standard ones; and the embedded type names."""
+@functools.cache
+def _warn_once(bag: Path, msgtype: str, reason: str, fallback: bool) -> None:
+    """Say that the bag's definition of `msgtype` is not used, once per process (each pass over the bag meets it)."""
+    then = "decoding with the type store's" if fallback else "its topics cannot be decoded"
+    _log.warning("%s: the definition of %s in the bag is not used (%s); %s", bag, msgtype, reason, then)
+
+
+def _one_line(err: Exception, limit: int = 100) -> str:
+    """The first line of an error's text, cut to `limit` characters (a parser may quote a whole definition)."""
+    text = (str(err).strip().splitlines() or [type(err).__name__])[0]
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _typestore_for(bag: Path, connections: Sequence[Connection]) -> tuple[TypeRegistry, set[str]]:
+    """A registry holding the bag's embedded definitions over the standard ones; and the embedded types' full names."""
     registry = TypeRegistry()
     embedded: set[str] = set()
     for conn in connections:
-        if conn.msgtype in embedded or conn.msgdef.format == MessageDefinitionFormat.NONE:
+        if message_type_name(conn.msgtype) in embedded or conn.msgdef.format == MessageDefinitionFormat.NONE:
             continue
         try:
             types = dict(_parsed_definition(conn.msgtype, conn.msgdef.format, conn.msgdef.data))
@@ -162,9 +231,16 @@ def _typestore_for(connections: Sequence[Connection]) -> tuple[TypeRegistry, set
             if any(known.get(name) != tuple(definition[:2]) for name, definition in types.items()):
                 registry.store.register(types)
         except (TypesysError, ValueError, IndexError) as err:
-            _log.warning("%s: embedded definition does not parse (%s); using the type store", conn.msgtype, err)
+            # rosbags quotes the whole text it could not parse: say what is wrong instead
+            if str(err).startswith("Could not parse"):
+                reason = "not .msg text rosbags parses"
+            elif "already present with different definition" in str(err):
+                reason = "it differs from the type store's"
+            else:
+                reason = _one_line(err)
+            _warn_once(bag, conn.msgtype, reason, registry.knows(message_type_name(conn.msgtype)))
             continue
-        embedded.add(conn.msgtype)
+        embedded.add(message_type_name(conn.msgtype))
     return registry, embedded
 
 
@@ -172,32 +248,47 @@ def _open_reader(bag: Path) -> Reader:
     try:
         reader = Reader(bag)
         reader.open()
-    except FileNotFoundError:
-        read_metadata(bag)  # raises the BagError naming the missing metadata.yaml
-        raise
-    except (ReaderError, OSError) as err:
-        msg = f"{bag}: cannot read the bag: {err}"
+    except (FileNotFoundError, ReaderError, OSError) as err:
+        meta = bag_metadata(bag)  # names a missing metadata.yaml or storage file, the usual causes
+        if isinstance(err, FileNotFoundError):
+            raise
+        msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, meta)}"
         raise BagError(msg) from None
     return reader
 
 
+def _killed_hint(bag: Path, meta: BagMetadata | None) -> str:
+    """The recover hint, if a storage file shows what a killed recording leaves; else "".
+
+    A killed recording leaves an MCAP file without its footer, a sqlite3 file with its journal.
+    Anything else (an unsupported format, a damaged message) is not helped by `twin bag recover`.
+    """
+    files = [bag] if bag.is_file() else ([] if meta is None else storage_paths(bag, meta))
+    for file in files:
+        try:
+            if file.suffix == ".mcap" and not mcap_has_footer(file):
+                return f"; if its recording was killed, run `twin bag recover {bag}`"
+        except OSError:
+            continue
+        if file.suffix == ".db3" and any(file.with_name(file.name + end).exists() for end in ("-journal", "-wal")):
+            return f"; if its recording was killed, run `twin bag recover {bag}`"
+    return ""
+
+
 def open_bag(path: str | os.PathLike[str]) -> BagInfo:
-    """Describe the bag at `path` (a rosbag2 folder, or a storage file inside one).
+    """Describe the bag at `path`: a rosbag2 folder (or a storage file inside one), or a single .mcap or .db3 file.
 
     Raises:
-        BagError: If the folder is not a readable bag (e.g. no metadata.yaml: run
-            `twin bag recover`).
+        BagError: If it is not a readable bag (e.g. no metadata.yaml: run `twin bag recover`).
     """
     bag = _bag_dir(path)
-    meta = read_metadata(bag)
+    meta = bag_metadata(bag)
     embedded, known = _definitions(bag, meta)
     files = []
-    for rel in meta.relative_file_paths:
-        file = bag / Path(rel).name
-        size = file.stat().st_size if file.exists() else 0
-        count = next((f.message_count for f in meta.files if Path(f.path).name == Path(rel).name), 0)
-        files.append(BagFile(path=Path(rel).name, size_bytes=size, message_count=count))
-    size_bytes = sum(p.stat().st_size for p in bag.iterdir() if p.is_file())
+    for file in storage_paths(bag, meta):
+        count = next((f.message_count for f in meta.files if Path(f.path).name == file.name), 0)
+        files.append(BagFile(path=file.name, size_bytes=file.stat().st_size, message_count=count))
+    size_bytes = bag.stat().st_size if bag.is_file() else sum(p.stat().st_size for p in bag.iterdir() if p.is_file())
     topics = tuple(
         TopicInfo(
             name=t.name,
@@ -206,7 +297,11 @@ def open_bag(path: str | os.PathLike[str]) -> BagInfo:
             serialization_format=t.serialization_format,
             qos=t.offered_qos_profiles,
             type_hash=t.type_description_hash,
-            definition="embedded" if t.msgtype in embedded else ("type store" if t.msgtype in known else "none"),
+            definition=(
+                "embedded"
+                if message_type_name(t.msgtype) in embedded
+                else ("type store" if message_type_name(t.msgtype) in known else "none")
+            ),
         )
         for t in meta.topics
     )
@@ -234,12 +329,53 @@ def _definitions(bag: Path, meta: BagMetadata) -> tuple[set[str], set[str]]:
     except BagError as err:
         _log.warning("%s", err)
         registry = TypeRegistry()
-        return set(), {t.msgtype for t in meta.topics if registry.knows(t.msgtype)}
+        return set(), {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
     try:
-        registry, embedded = _typestore_for(reader.connections)
+        registry, embedded = _typestore_for(bag, reader.connections)
     finally:
         reader.close()
-    return embedded, {t.msgtype for t in meta.topics if registry.knows(t.msgtype)}
+    return embedded, {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
+
+
+def undecodable(
+    bag: Path, data: bytes | memoryview, err: Exception, *, topic: str, t_ns: int, msgtype: str
+) -> BagError:
+    """The error for a message whose bytes do not parse as its type, with the likely cause."""
+    if bytes(data[:4]) == ZSTD_MAGIC:
+        cause = (
+            "its bytes are a zstd frame: the bag is compressed per message but its metadata does not say so; "
+            f"`twin bag recover {bag}` records the compression"
+        )
+    else:
+        cause = "the bag's messages are damaged, or are not CDR of the type its metadata names"
+    return BagError(f"{bag}: a message on {topic} at {t_ns} ns does not parse as {msgtype} ({err}); {cause}")
+
+
+def _storage_messages(
+    reader: Reader, wanted: Sequence[Connection], start_ns: int | None, stop_ns: int | None, *, zstd_messages: bool
+) -> Iterator[tuple[Connection, int, bytes | memoryview]]:
+    """The messages of the `wanted` connections, each storage file's connections matched by topic and type.
+
+    rosbags matches metadata.yaml's connections to a storage file's by equality, offered QoS
+    included, so a bag whose metadata.yaml writes the QoS differently from its storage file (a
+    Foxy recording: `deadline 0 s` in one, `2147483647 s` in the other) would read no message.
+    The QoS describes the publishers, not which messages belong to a topic: here only the topic
+    and the type decide.
+    """
+    storages = getattr(reader.storage, "storages", None)
+    if storages is None:  # a single storage file: the reader's connections are the file's own
+        for conn, t_ns, data in reader.messages(wanted, start=start_ns, stop=stop_ns):
+            yield conn, t_ns, _decompress("zstd", data, 0) if zstd_messages else data
+        return
+    by_key = {(c.topic, c.msgtype): c for c in wanted}
+    per_message_zstd = reader.compression_mode == "message"
+    for storage in storages:
+        own = {c.id: by_key[(c.topic, c.msgtype)] for c in storage.connections if (c.topic, c.msgtype) in by_key}
+        if not own:
+            continue
+        chosen = [c for c in storage.connections if c.id in own]
+        for conn, t_ns, data in storage.messages(chosen, start_ns, stop_ns):
+            yield own[conn.id], t_ns, _decompress("zstd", data, 0) if per_message_zstd else data
 
 
 def read_messages(
@@ -253,7 +389,7 @@ def read_messages(
     """Yield the bag's messages in time order, decoded.
 
     Args:
-        path: A rosbag2 folder (or a storage file inside one).
+        path: A rosbag2 folder (or a storage file inside one), or a single .mcap or .db3 file.
         topics: Topics to read; None reads every topic that can be decoded (the others are
             skipped with a warning).
         start_ns: Only messages at or after this bag time.
@@ -265,14 +401,16 @@ def read_messages(
             definition, or a message does not decode.
     """
     bag = _bag_dir(path)
+    # rosbags unpacks per-message compression in a folder (its metadata.yaml says so), not in a single file
+    zstd_messages = bag.is_file() and storage_file_metadata(bag).compression_mode == "message"
     reader = _open_reader(bag)
     try:
-        registry, _ = _typestore_for(reader.connections)
+        registry, _ = _typestore_for(bag, reader.connections)
         by_topic: dict[str, list[Connection]] = {}
         for conn in reader.connections:
             by_topic.setdefault(conn.topic, []).append(conn)
         if topics is None:
-            wanted = [c for c in reader.connections if not decode or registry.knows(c.msgtype)]
+            wanted = [c for c in reader.connections if not decode or registry.knows(message_type_name(c.msgtype))]
             skipped = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections if c not in wanted})
             if skipped:
                 _log.warning("%s: no definition for %s; skipping", bag, ", ".join(skipped))
@@ -283,7 +421,7 @@ def read_messages(
                     msg = f"{bag}: no topic {name!r}; it has {', '.join(sorted(by_topic)) or 'no topics'}"
                     raise BagError(msg)
                 for conn in by_topic[name]:
-                    if decode and not registry.knows(conn.msgtype):
+                    if decode and not registry.knows(message_type_name(conn.msgtype)):
                         msg = (
                             f"{bag}: topic {name} has type {conn.msgtype}, whose definition is neither in the bag "
                             "nor in the type store; read it with decode=False"
@@ -293,21 +431,27 @@ def read_messages(
         if not wanted:
             return
         store = registry.store
-        for conn, t_ns, data in reader.messages(wanted, start=start_ns, stop=stop_ns):
+        for conn, t_ns, data in _storage_messages(reader, wanted, start_ns, stop_ns, zstd_messages=zstd_messages):
             if not decode:
                 yield BagMessage(conn.topic, conn.msgtype, t_ns, bytes(data))
                 continue
             try:
-                msg_obj = store.deserialize_cdr(data, conn.msgtype)
-            except (SerdeError, ValueError, IndexError, KeyError) as err:
-                msg = f"{bag}: message on {conn.topic} at {t_ns} ns does not decode as {conn.msgtype}: {err}"
-                raise BagError(msg) from None
+                msg_obj = store.deserialize_cdr(data, message_type_name(conn.msgtype))
+            except (SerdeError, ValueError, IndexError, KeyError, struct.error) as err:
+                raise undecodable(bag, data, err, topic=conn.topic, t_ns=t_ns, msgtype=conn.msgtype) from None
             yield BagMessage(conn.topic, conn.msgtype, t_ns, msg_obj)
     except ReaderError as err:
-        msg = f"{bag}: cannot read the bag: {err}"
+        msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, _metadata_or_none(bag))}"
         raise BagError(msg) from None
     finally:
         reader.close()
+
+
+def _metadata_or_none(bag: Path) -> BagMetadata | None:
+    try:
+        return bag_metadata(bag)
+    except BagError:
+        return None
 
 
 def message_definitions(path: str | os.PathLike[str]) -> dict[str, MessageDefinition]:
@@ -323,13 +467,13 @@ def message_definitions(path: str | os.PathLike[str]) -> dict[str, MessageDefini
     bag = _bag_dir(path)
     reader = _open_reader(bag)
     try:
-        registry, _ = _typestore_for(reader.connections)
+        registry, _ = _typestore_for(bag, reader.connections)
         definitions: dict[str, MessageDefinition] = {}
         for conn in reader.connections:
-            if conn.msgtype in definitions or not registry.knows(conn.msgtype):
+            if conn.msgtype in definitions or not registry.knows(message_type_name(conn.msgtype)):
                 continue
             try:
-                definitions[conn.msgtype] = registry.definition(conn.msgtype)
+                definitions[conn.msgtype] = registry.definition(message_type_name(conn.msgtype))
             except (BagError, TypesysError, KeyError, ValueError) as err:
                 _log.warning("%s: no usable definition of %s (%s)", bag, conn.msgtype, err)
     finally:

@@ -17,7 +17,7 @@ import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.bag.mcap_file import recover_mcap, scan_mcap
+from twin.bag.mcap_file import ZSTD_MAGIC, recover_mcap, scan_mcap
 from twin.bag.metadata import (
     METADATA_FILE,
     BagMetadata,
@@ -29,6 +29,7 @@ from twin.bag.metadata import (
 )
 from twin.bag.profiles import DISTROS, distro_profile
 from twin.bag.qos import parse_qos_profiles
+from twin.bag.single_file import STORAGE_SUFFIXES, rosbag2_record, storage_file_metadata
 from twin.bag.sqlite_file import recover_sqlite
 from twin.core.errors import BagError
 
@@ -69,22 +70,43 @@ def _distro(name: str) -> str:
 def recover_bag(path: str | os.PathLike[str]) -> RecoveryReport:
     """Complete the bag in folder `path` and rewrite its `metadata.yaml`.
 
+    A single storage file (`.mcap` or `.db3` outside a bag folder) is completed in place; it
+    needs no `metadata.yaml`, so none is written.
+
     Raises:
         BagError: If the folder holds no storage file, mixes storages, or a file is not a bag.
     """
     bag = Path(path)
+    if bag.is_file() and (bag.parent / METADATA_FILE).exists():
+        bag = bag.parent  # a storage file inside a bag folder
+    elif bag.is_file() and bag.suffix in STORAGE_SUFFIXES:
+        return _recover_file(bag)
     if not bag.is_dir():
-        msg = f"{bag}: no such bag folder"
+        msg = f"{bag}: no such bag folder (or .mcap or .db3 file)"
+        raise BagError(msg)
+    packed = sorted(p.name for p in bag.glob("*.zstd") if Path(p.stem).suffix in STORAGE_SUFFIXES)
+    if packed:
+        # rosbag2's `--compression-mode file`: recovery reads and rewrites records in place, which a
+        # compressed file does not allow. Unpacked, the files are ordinary storage files.
+        names = ", ".join(packed)
+        msg = (
+            f"{bag}: {names}: storage compressed as whole files, which recover cannot check or mend; "
+            f"unpack them (`zstd -d --rm` on each) and run `twin bag recover {bag}` again"
+        )
         raise BagError(msg)
     mcaps = sorted(bag.glob("*.mcap"))
     dbs = sorted(bag.glob("*.db3"))
     if mcaps and dbs:
         msg = f"{bag}: holds both .mcap and .db3 files; recover one storage per folder"
         raise BagError(msg)
-    if not mcaps and not dbs:
-        msg = f"{bag}: no .mcap or .db3 storage file to recover"
-        raise BagError(msg)
     previous = _previous_metadata(bag)
+    if not mcaps and not dbs:
+        listed = ", ".join(Path(rel).name for rel in previous.relative_file_paths) if previous else ""
+        if listed:  # a metadata.yaml copied without its bag
+            msg = f"{bag}: {listed} (listed in {METADATA_FILE}) is not there, so nothing to recover; copy it into {bag}"
+        else:
+            msg = f"{bag}: no .mcap or .db3 storage file to recover"
+        raise BagError(msg)
     if previous is not None:
         untouched = _complete_report(bag, mcaps, dbs, previous)
         if untouched is not None:
@@ -93,6 +115,35 @@ def recover_bag(path: str | os.PathLike[str]) -> RecoveryReport:
     if mcaps:
         return _recover_mcap_bag(bag, mcaps, previous)
     return _recover_sqlite_bag(bag, dbs, previous)
+
+
+def _recover_file(file: Path) -> RecoveryReport:
+    """Complete a single storage file in place; it describes itself, so no metadata.yaml is written."""
+    dropped = 0
+    try:
+        if file.suffix == ".mcap":
+            outcome = recover_mcap(file)
+            was_complete, dropped = outcome.was_complete, outcome.dropped_bytes
+        else:
+            was_complete = not any(file.with_name(file.name + end).exists() for end in ("-journal", "-wal"))
+            recover_sqlite(file)
+    except (ValueError, sqlite3.Error) as err:
+        msg = f"{file}: cannot recover: {err}"
+        raise BagError(msg) from None
+    except OSError as err:
+        msg = f"{file}: cannot rewrite: {err.strerror}; free space or fix permissions and run again"
+        raise BagError(msg) from None
+    meta = storage_file_metadata(file)
+    return RecoveryReport(
+        path=file,
+        storage=meta.storage_identifier,
+        files=(file.name,),
+        message_count=meta.message_count,
+        topic_counts=tuple((t.name, t.message_count) for t in meta.topics),
+        was_complete=was_complete,
+        dropped_bytes=dropped,
+        metadata=meta,
+    )
 
 
 def _backup_metadata(bag: Path) -> Path | None:
@@ -119,24 +170,29 @@ def _complete_report(bag: Path, mcaps: list[Path], dbs: list[Path], previous: Ba
     if set(previous.relative_file_paths) != names:
         return None
     total = 0
+    firsts: list[bytes] = []
     try:
         for file in mcaps:
             scan = scan_mcap(file)
             if not scan.complete:
                 return None
             total += scan.stats().message_count
+            firsts += [c.first_data for c in scan.chunks[:1]]
         for file in dbs:
             if file.with_name(file.name + "-journal").exists() or file.with_name(file.name + "-wal").exists():
                 return None
             db = sqlite3.connect(f"{file.resolve().as_uri()}?mode=ro", uri=True)
             try:
                 total += int(db.execute("SELECT count(*) FROM messages").fetchone()[0])
+                firsts += _first_sqlite_data(db)
             finally:
                 db.close()
     except (ValueError, OSError, sqlite3.Error):
         return None  # the recovery proper names the problem
     if total != previous.message_count:
         return None
+    if _compressed_messages(firsts) and previous.compression_mode.lower() != "message":
+        return None  # zstd frames the metadata does not announce: readers would take them for CDR
     return RecoveryReport(
         path=bag,
         storage="mcap" if mcaps else "sqlite3",
@@ -149,6 +205,20 @@ def _complete_report(bag: Path, mcaps: list[Path], dbs: list[Path], previous: Ba
     )
 
 
+def _first_sqlite_data(db: sqlite3.Connection) -> list[bytes]:
+    row = db.execute("SELECT data FROM messages ORDER BY rowid LIMIT 1").fetchone()
+    return [] if row is None else [bytes(row[0])]
+
+
+def _compressed_messages(firsts: list[bytes]) -> bool:
+    """Whether the storage's messages are zstd frames (`--compression-mode message`), judged by the first of each file.
+
+    A CDR message starts with a 0 byte (its encapsulation kind), a zstd frame with its magic number,
+    so the two cannot be confused.
+    """
+    return any(data[:4] == ZSTD_MAGIC for data in firsts)
+
+
 def _file_info(name: str, start: int, end: int, count: int) -> FileInformation:
     return FileInformation(path=name, starting_time_ns=start, duration_ns=end - start, message_count=count)
 
@@ -158,10 +228,10 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
     counts: dict[str, int] = {}
     infos: list[FileInformation] = []
     distro = previous.ros_distro if previous else ""
-    was_complete = True
     dropped = 0
     starts: list[int] = []
     ends: list[int] = []
+    firsts: list[bytes] = []
     for file in files:
         try:
             outcome = recover_mcap(file)
@@ -172,13 +242,15 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
             msg = f"{file}: cannot rewrite: {err.strerror}; free space or fix permissions and run again"
             raise BagError(msg) from None
         scan = outcome.scan
-        was_complete = was_complete and outcome.was_complete
+        firsts += [c.first_data for c in scan.chunks[:1]]
         dropped += outcome.dropped_bytes
         for _, _, name, values in scan.metadata:
             if name == "twin" and values.get("ros_distro") and not distro:
                 distro = values["ros_distro"]
-            if name == "rosbag2" and values.get("ROS_DISTRO") and not distro:
-                distro = values["ROS_DISTRO"]
+        # rosbag2's own record: `ROS_DISTRO` on Humble, the whole metadata (with `ros_distro`) from Iron on
+        distro = distro or str(
+            rosbag2_record([(name, values) for _, _, name, values in scan.metadata]).get("ros_distro", "")
+        )
         stats = scan.stats()
         for cid, channel in scan.channels.items():
             schema = scan.schemas.get(channel.schema_id)
@@ -213,8 +285,8 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
         ends=ends,
         distro=distro,
         previous=previous,
-        was_complete=was_complete,
         dropped=dropped,
+        compressed=_compressed_messages(firsts),
     )
 
 
@@ -225,18 +297,19 @@ def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | No
     distro = previous.ros_distro if previous else ""
     starts: list[int] = []
     ends: list[int] = []
-    was_complete = True
+    firsts: list[bytes] = []
     for file in files:
-        journal = file.with_name(file.name + "-journal")
-        wal = file.with_name(file.name + "-wal")
-        if journal.exists() or wal.exists():
-            was_complete = False
         try:
             rows, file_distro = recover_sqlite(file)
         except sqlite3.Error as err:
             msg = f"{file}: cannot recover: {err}"
             raise BagError(msg) from None
         distro = distro or file_distro
+        db = sqlite3.connect(f"{file.resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            firsts += _first_sqlite_data(db)
+        finally:
+            db.close()
         live = [r for r in rows if r.count]
         for r in rows:
             counts[r.name] = counts.get(r.name, 0) + r.count
@@ -270,8 +343,8 @@ def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | No
         ends=ends,
         distro=distro,
         previous=previous,
-        was_complete=was_complete,
         dropped=0,
+        compressed=_compressed_messages(firsts),
     )
     for file in files:  # keep the metadata table in step with metadata.yaml, as rosbag2 does on close
         try:
@@ -300,12 +373,9 @@ def _finish(
     ends: list[int],
     distro: str,
     previous: BagMetadata | None,
-    was_complete: bool,
     dropped: int,
+    compressed: bool,
 ) -> RecoveryReport:
-    total = sum(counts.values())
-    # Complete means nothing had to change; a bag reaching here had its metadata rewritten.
-    was_complete = was_complete and previous is not None and previous.message_count == total
     profile = distro_profile(_distro(distro))
     version = previous.version if previous and previous.version >= 8 else profile.metadata_version
     start = min(starts) if starts else 0
@@ -331,6 +401,9 @@ def _finish(
         message_count=total,
         topics=full_topics,
         files=tuple(infos),
+        # rosbag2 writes the mode in capitals; every reader takes either case
+        compression_format="zstd" if compressed else "",
+        compression_mode="MESSAGE" if compressed else "",
         custom_data=previous.custom_data if previous else (),
         ros_distro=profile.name,
     )
@@ -345,7 +418,7 @@ def _finish(
         files=tuple(f.name for f in files),
         message_count=total,
         topic_counts=tuple((t.name, t.message_count) for t in full_topics),
-        was_complete=was_complete,
+        was_complete=False,  # complete means nothing had to change; metadata.yaml was just rewritten
         dropped_bytes=dropped,
         metadata=meta,
     )

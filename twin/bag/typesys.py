@@ -30,7 +30,16 @@ from twin.core.msgdefs import EXTRA_DEFINITIONS
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-__all__ = ["EXTRA_DEFINITIONS", "MessageDefinition", "TypeRegistry"]
+__all__ = ["EXTRA_DEFINITIONS", "MessageDefinition", "TypeRegistry", "message_type_name"]
+
+
+def message_type_name(msgtype: str) -> str:
+    """The full name of a message type: `pkg/msg/Type` for the `pkg/Type` of early rosbag2 bags.
+
+    Type stores (rosbags', the registry's) know message types by their full name only.
+    """
+    parts = msgtype.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 and all(parts) else msgtype
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -94,8 +103,32 @@ class TypeRegistry:
         self._cache.pop(msgtype, None)
 
     def knows(self, msgtype: str) -> bool:
-        """Whether the registry can describe (and so decode) `msgtype`."""
+        """Whether the registry can describe (and so decode) `msgtype` (by its full name, see `message_type_name`)."""
         return msgtype in self.store.fielddefs
+
+    def field_paths(self, msgtype: str) -> list[str]:
+        """The dotted paths of a type's fields: nested messages spread out, each value, array or sequence one path.
+
+        Raises:
+            BagError: If the type is unknown.
+        """
+        from rosbags.interfaces import Nodetype
+
+        fielddefs = self.store.fielddefs
+        if msgtype not in fielddefs:
+            msg = f"unknown message type {msgtype!r}"
+            raise BagError(msg)
+
+        def paths(name: str, prefix: str) -> list[str]:
+            out: list[str] = []
+            for field_name, (kind, detail) in fielddefs[name][1]:
+                if kind == Nodetype.NAME and isinstance(detail, str):
+                    out += paths(detail, f"{prefix}{field_name}.")
+                else:
+                    out.append(prefix + field_name)
+            return out
+
+        return paths(msgtype, "")
 
     def definition(self, msgtype: str) -> MessageDefinition:
         """Return the embedded definition of `msgtype`.

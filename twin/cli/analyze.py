@@ -78,7 +78,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
-    parser.add_argument("bag", metavar="BAG", help="bag folder to analyse (or `compare`, see below)")
+    parser.add_argument("bag", metavar="BAG", help="bag folder or .mcap/.db3 file to analyse (or `compare`)")
     parser.add_argument("rest", nargs="*", metavar="B", help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path, metavar="DIR", help="report folder (default: bags/<BAG name>_report)")
     parser.add_argument("--json", action="store_true", help="print the report (or comparison) as JSON on stdout")

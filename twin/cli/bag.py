@@ -52,7 +52,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
-    info.add_argument("bag", type=Path, metavar="BAG", help="bag folder (or a storage file inside one)")
+    info.add_argument("bag", type=Path, metavar="BAG", help="bag folder, or a single .mcap or .db3 file")
     info.add_argument("--json", action="store_true", help="print the summary as JSON")
     info.set_defaults(func=_info)
     recover = sub.add_parser(
@@ -63,7 +63,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
-    recover.add_argument("dir", type=Path, metavar="DIR", help="bag folder")
+    recover.add_argument("dir", type=Path, metavar="DIR", help="bag folder, or a single .mcap or .db3 file")
     recover.add_argument("--json", action="store_true", help="print the outcome as JSON")
     recover.set_defaults(func=_recover)
     add_export_parser(sub, common)
@@ -162,11 +162,12 @@ def _info(args: argparse.Namespace) -> int:
     print(label("Files:") + ("\n" + " " * 19).join(f.path for f in info.files))
     print(label("Bag size:") + _size(info.size_bytes))
     print(label("Storage id:") + info.storage)
-    print(label("Version:") + str(info.version))
+    print(label("Version:") + (str(info.version) if info.version else "-"))
     print(label("ROS distro:") + (info.ros_distro or "-"))
     print(label("Duration:") + f"{info.duration_ns / 1e9:.9f}s")
-    print(label("Start:") + _stamp(info.start_ns))
-    print(label("End:") + _stamp(info.end_ns))
+    # An empty bag has no first or last message (rosbag2 records the start as INT64_MAX: Apr 11 2262)
+    print(label("Start:") + (_stamp(info.start_ns) if info.message_count else "-"))
+    print(label("End:") + (_stamp(info.end_ns) if info.message_count else "-"))
     print(label("Messages:") + str(info.message_count))
     if info.compression_format:
         print(label("Compression:") + f"{info.compression_format} ({info.compression_mode})")
@@ -212,9 +213,12 @@ def _recover(args: argparse.Namespace) -> int:
         state = f"recovered ({_size(report.dropped_bytes)} of partial records cut)"
     else:
         state = "recovered"
+    if report.path.is_file():
+        form = "a single file: no metadata.yaml needed"
+    else:
+        form = f"metadata version {report.metadata.version}, {report.metadata.ros_distro}"
     print(
         f"{report.path}: {report.storage} bag {state}: {report.message_count} messages on "
-        f"{len(report.topic_counts)} topics (metadata version {report.metadata.version}, "
-        f"{report.metadata.ros_distro})"
+        f"{len(report.topic_counts)} topics ({form})"
     )
     return 0

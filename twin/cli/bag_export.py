@@ -29,7 +29,7 @@ def add_export_parser(sub: Any, common: argparse.ArgumentParser) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
-    parser.add_argument("bag", type=Path, metavar="BAG", help="bag folder")
+    parser.add_argument("bag", type=Path, metavar="BAG", help="bag folder, or a single .mcap or .db3 file")
     parser.add_argument("--topics", nargs="+", required=True, metavar="TOPIC", help="topics to export")
     parser.add_argument("--format", choices=("csv", "parquet"), default="csv", help="table format (default: csv)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: bags/<BAG name>_export)")

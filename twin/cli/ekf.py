@@ -62,7 +62,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
-    rep.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 folder (or a storage file inside one)")
+    rep.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 folder, or a single .mcap or .db3 file")
     rep.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: bags/<BAG name>_ekf)")
     rep.add_argument(
         "--joint-velocity-units",

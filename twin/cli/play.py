@@ -57,7 +57,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
-    parser.add_argument("bag", type=Path, metavar="BAG", help="bag folder (or a storage file inside one)")
+    parser.add_argument("bag", type=Path, metavar="BAG", help="bag folder, or a single .mcap or .db3 file")
     parser.add_argument(
         "--speed",
         type=speed_arg,

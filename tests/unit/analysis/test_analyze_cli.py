@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -12,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import run_twin
+from tests.unit.bag.small_bags import edit_topics, small_bag
 from twin.bag import Recorder, open_bag, read_messages
 
 
@@ -136,16 +138,37 @@ def _one_line_error(proc: object, code: int = 5) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
-def test_truncated_bag_is_one_line_suggesting_recover(
-    storage: str, twin_bag: Path, twin_bag_sqlite: Path, tmp_path: Path
-) -> None:
+def test_truncated_bag_is_one_line_suggesting_recover(twin_bag: Path, tmp_path: Path) -> None:
     bag = tmp_path / "cut"
-    shutil.copytree(twin_bag if storage == "mcap" else twin_bag_sqlite, bag)
+    shutil.copytree(twin_bag, bag)
     (storage_file,) = [p for p in bag.iterdir() if p.suffix in (".mcap", ".db3")]
     os.truncate(storage_file, storage_file.stat().st_size // 2)
     line = _one_line_error(run_twin("analyze", str(bag), "--out", str(tmp_path / "r")))
     assert "twin bag recover" in line
+
+
+def test_a_damaged_sqlite3_file_is_one_line_without_a_recover_hint(twin_bag_sqlite: Path, tmp_path: Path) -> None:
+    # A killed recording leaves a sqlite3 file whole, with its journal; a file cut in half is damage
+    # `twin bag recover` cannot mend (its integrity check refuses it), so the error does not send users there.
+    bag = tmp_path / "cut"
+    shutil.copytree(twin_bag_sqlite, bag)
+    (storage_file,) = [p for p in bag.iterdir() if p.suffix == ".db3"]
+    os.truncate(storage_file, storage_file.stat().st_size // 2)
+    line = _one_line_error(run_twin("analyze", str(bag), "--out", str(tmp_path / "r")))
+    assert "malformed" in line and "recover" not in line
+
+
+def test_an_unsupported_serialization_format_is_one_line_without_a_recover_hint(tmp_path: Path) -> None:
+    bag = small_bag(tmp_path / "bag")
+    edit_topics(bag, lambda t: dataclasses.replace(t, serialization_format="json"))
+    line = _one_line_error(run_twin("analyze", str(bag), "--out", str(tmp_path / "r")))
+    assert "not supported" in line and "recover" not in line
+
+
+def test_a_folder_without_any_bag_file_is_one_line_without_a_recover_hint(tmp_path: Path) -> None:
+    (tmp_path / "empty").mkdir()
+    line = _one_line_error(run_twin("analyze", str(tmp_path / "empty"), "--out", str(tmp_path / "r")))
+    assert "not a bag folder" in line and "recover" not in line
 
 
 def test_folder_without_metadata_is_one_line(twin_bag: Path, tmp_path: Path) -> None:

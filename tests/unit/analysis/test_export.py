@@ -3,13 +3,27 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
+import sqlite3
 from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
 
 from tests.conftest import run_twin
-from twin.bag import read_messages
+from tests.unit.bag.small_bags import (
+    COUNT,
+    LEGACY_TYPE,
+    edit_metadata,
+    edit_topics,
+    legacy_type_bag,
+    message_compressed_bag,
+    small_bag,
+    storage_file,
+)
+from twin.analysis.export import export_topics
+from twin.bag import OdometryEncoder, Recorder, open_bag, read_messages
+from twin.core.errors import BagError
 
 
 def test_csv_has_a_row_per_message_with_field_path_columns(gazebo_bag: Path, tmp_path: Path) -> None:
@@ -45,6 +59,50 @@ def test_unknown_topic_is_one_line_exit_5(twin_bag: Path, tmp_path: Path) -> Non
     proc = run_twin("bag", "export", str(twin_bag), "--topics", "/nope", "--out", str(tmp_path))
     assert proc.returncode == 5
     assert len(proc.stderr.strip().splitlines()) == 1 and "/nope" in proc.stderr
+
+
+@pytest.mark.parametrize("fmt", ["csv", "parquet"])
+def test_a_failed_export_leaves_no_file_behind(tmp_path: Path, fmt: str) -> None:
+    bag = message_compressed_bag(tmp_path / "bag")  # then described as uncompressed: nothing decodes
+    edit_metadata(bag, lambda meta: dataclasses.replace(meta, compression_format="", compression_mode=""))
+    out = tmp_path / "tables"
+    with pytest.raises(BagError, match="does not parse"):
+        export_topics(bag, ["/chatter", "/odom"], out, fmt=fmt)
+    assert list(out.iterdir()) == []
+
+
+def test_an_empty_topic_gets_a_csv_with_its_header_row(tmp_path: Path) -> None:
+    with Recorder(tmp_path / "bag") as rec:
+        rec.add_topic("/odom", OdometryEncoder.msgtype)  # offered, never published
+    full = small_bag(tmp_path / "full")
+    written = export_topics(tmp_path / "bag", ["/odom"], tmp_path / "empty")
+    export_topics(full, ["/odom"], tmp_path / "full_tables")
+    assert written == {"/odom": (tmp_path / "empty" / "odom.csv", 0)}
+    lines = (tmp_path / "empty" / "odom.csv").read_text().splitlines()
+    assert lines == (tmp_path / "full_tables" / "odom.csv").read_text().splitlines()[:1]
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_legacy_type_name_exports_as_info_says_it_decodes(tmp_path: Path, storage: str) -> None:
+    bag = legacy_type_bag(tmp_path / "bag", storage=storage)
+    (topic,) = open_bag(bag).topics
+    assert (topic.msgtype, topic.decodable) == (LEGACY_TYPE, True)
+    written = export_topics(bag, ["/reading"], tmp_path / "tables")
+    assert written["/reading"][1] == COUNT
+    with (tmp_path / "tables" / "reading.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [(float(r["value"]), r["label"]) for r in rows] == [(1.5 * k, f"r{k}") for k in range(COUNT)]
+
+
+def test_exporting_an_undecodable_topic_says_what_the_user_can_do(tmp_path: Path) -> None:
+    bag = small_bag(tmp_path / "bag", storage="sqlite3")
+    with sqlite3.connect(storage_file(bag)) as db:  # a type whose definition is nowhere
+        db.execute("UPDATE topics SET type = 'mystery_msgs/msg/Thing' WHERE name = '/chatter'")
+    edit_topics(bag, lambda t: dataclasses.replace(t, msgtype="mystery_msgs/msg/Thing") if t.name == "/chatter" else t)
+    proc = run_twin("bag", "export", str(bag), "--topics", "/chatter", "/odom", "--out", str(tmp_path / "t"))
+    assert proc.returncode == 5 and proc.stderr.count("\n") == 1, proc.stderr
+    assert "/chatter (mystery_msgs/msg/Thing)" in proc.stderr and "export the other topics" in proc.stderr
+    assert "decode=False" not in proc.stderr
 
 
 def test_ekf_replay_takes_wheel_geometry_from_the_bags_urdf_and_says_so(gazebo_bag: Path, tmp_path: Path) -> None:

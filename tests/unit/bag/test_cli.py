@@ -78,7 +78,7 @@ def test_info_on_twin_bags(mix_bag: MixBagFactory, storage: str, distro: str) ->
 def test_bad_input_is_one_line_with_exit_code_5(tmp_path: Path) -> None:
     run = twin("bag", "info", str(tmp_path / "nope"))
     assert run.returncode == 5
-    assert run.stderr.strip() == f"twin: error: {tmp_path / 'nope'}: no such bag folder"
+    assert run.stderr.strip() == f"twin: error: {tmp_path / 'nope'}: no such bag folder or file"
     (tmp_path / "killed").mkdir()
     (tmp_path / "killed" / "killed_0.mcap").write_bytes(b"\x89MCAP0\r\n")
     run = twin("bag", "info", str(tmp_path / "killed"))
