@@ -463,6 +463,14 @@ class TreeParser:
             report(element.location, f"the decorator <{name}> must have exactly 1 child, it has {count}")
         elif kind is NodeKind.CONTROL and count == 0:
             report(element.location, f"the control node <{name}> must have 1 or more children")
+        elif name == "ReactiveSequence" and sum(child.type_name == "AsyncSequence" for child in element.children) > 1:
+            # BT.CPP 4.8.2's VerifyXML counts only <AsyncSequence> children as async (the other names
+            # it checks are C++ class names, never a registered control); ReactiveFallback is not checked.
+            report(
+                element.location,
+                "a <ReactiveSequence> cannot have more than one async child (<AsyncSequence>), as in BT.CPP; "
+                "make all but one of them a <Sequence>, or move them out of the <ReactiveSequence>",
+            )
         elif kind in (NodeKind.ACTION, NodeKind.CONDITION) and count:
             report(element.location, f"the {kind.value.lower()} <{name}> must not have children")
 

@@ -174,3 +174,36 @@ def test_subtree_models_demand_their_mandatory_ports() -> None:
 def test_ports_pre_create_typed_entries_and_reject_conflicting_types() -> None:
     message = error_of(v4('<Sequence><Repeat num_cycles="{n}"><AlwaysSuccess/></Repeat><Sleep msec="{n}"/></Sequence>'))
     assert "[int]" in message and "[unsigned int]" in message
+
+
+# BT.CPP's Reactive.TwoAsyncNodesInReactiveSequence (tests/gtest_reactive.cpp), with built-in leaves.
+TWO_ASYNC = """<root BTCPP_format="4">
+  <BehaviorTree ID="MainTree">
+    <ReactiveSequence>
+      <AsyncSequence name="first"><AlwaysSuccess/><AlwaysSuccess/></AsyncSequence>
+      <AsyncSequence name="second"><AlwaysSuccess/><AlwaysSuccess/></AsyncSequence>
+    </ReactiveSequence>
+  </BehaviorTree>
+</root>"""
+
+
+def test_a_reactive_sequence_with_two_async_sequences_is_refused_at_its_line() -> None:
+    message = error_of(TWO_ASYNC)
+    assert message.startswith("t.xml:3: a <ReactiveSequence> cannot have more than one async child")
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        # BT.CPP 4.8.2 counts only <AsyncSequence> children (oracle: all three load and run)
+        "<ReactiveSequence><AsyncSequence><AlwaysSuccess/></AsyncSequence><Sequence><AsyncSequence><AlwaysSuccess/>"
+        "</AsyncSequence></Sequence></ReactiveSequence>",
+        "<ReactiveSequence><AsyncFallback><AlwaysSuccess/></AsyncFallback><AsyncFallback><AlwaysSuccess/>"
+        "</AsyncFallback></ReactiveSequence>",
+        "<ReactiveFallback><AsyncSequence><AlwaysSuccess/></AsyncSequence><AsyncSequence><AlwaysSuccess/>"
+        "</AsyncSequence></ReactiveFallback>",
+    ],
+    ids=["one_direct", "async_fallbacks", "reactive_fallback"],
+)
+def test_other_async_children_are_accepted_as_btcpp_accepts_them(body: str) -> None:
+    assert load(v4(body)).tick_once() is NodeStatus.SUCCESS

@@ -66,6 +66,13 @@ def test_the_shipped_trees_are_valid(factory: BehaviorTreeFactory, tree_file: st
             'so write _autoremap="true"',
         ),
         ('<SubTree ID="Missing"/>', "", ' BTCPP_format="4"', "t.xml:3: SubTree 'Missing' does not match"),
+        (
+            "<ReactiveSequence><AsyncSequence><AlwaysSuccess/></AsyncSequence>"
+            "<AsyncSequence><AlwaysSuccess/></AsyncSequence></ReactiveSequence>",
+            "",
+            ' BTCPP_format="4"',
+            "t.xml:3: a <ReactiveSequence> cannot have more than one async child",
+        ),
     ],
 )
 def test_each_problem_is_one_line_with_file_and_line(factory, body: str, extra: str, fmt: str, expected: str) -> None:
