@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import re
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
@@ -112,6 +113,42 @@ class XmlElement:
 MAX_XML_DEPTH: Final = 100
 """Deepest element nesting a tree file may have (the loader and ticks recurse per level)."""
 
+# What tinyxml2 (BT.CPP's parser) reads as markup: comments, CDATA, processing instructions, and
+# tags, whose quoted attribute values may hold any character but their own quote.
+_MARKUP: Final = re.compile(
+    r"""<!--.*?-->|<!\[CDATA\[.*?\]\]>|<\?.*?\?>|<[^<>"']*(?:(?:"[^"]*"|'[^']*')[^<>"']*)*>""", re.DOTALL
+)
+_QUOTED: Final = re.compile(r""""[^"]*"|'[^']*'""")
+# An `&` that starts no entity tinyxml2 knows: the five predefined ones and character references.
+_BARE_AMP: Final = re.compile(r"&(?!(?:amp|lt|gt|quot|apos|#[0-9]+|#x[0-9a-fA-F]+);)")
+
+
+def _escape_as_tinyxml2_reads(text: str) -> str:
+    """Escape what tinyxml2 accepts and expat does not: a bare `&`, and `<` in an attribute value.
+
+    tinyxml2 keeps an `&` that starts no entity as it is, and reads an attribute value up to its
+    closing quote (`if="A>-B && color != BLUE"` is fine for BT.CPP). Escaping them adds no line, so
+    expat's line numbers stay the file's. A DOCTYPE (never in a tree file) is left to expat.
+    """
+    if "<!DOCTYPE" in text:
+        return text
+    out: list[str] = []
+    end = 0
+    for match in _MARKUP.finditer(text):
+        out.append(_BARE_AMP.sub("&amp;", text[end : match.start()]))
+        markup = match.group()
+        if markup.startswith(("<!--", "<![CDATA[", "<?")):
+            out.append(markup)
+        else:
+            out.append(_QUOTED.sub(_escape_quoted, markup))
+        end = match.end()
+    out.append(_BARE_AMP.sub("&amp;", text[end:]))
+    return "".join(out)
+
+
+def _escape_quoted(match: re.Match[str]) -> str:
+    return _BARE_AMP.sub("&amp;", match.group()).replace("<", "&lt;")
+
 
 def parse_xml(text: str, source: str) -> XmlElement:
     """Parse XML text into elements with line numbers.
@@ -140,7 +177,7 @@ def parse_xml(text: str, source: str) -> XmlElement:
     parser.StartElementHandler = start
     parser.EndElementHandler = end
     try:
-        parser.Parse(text, True)
+        parser.Parse(_escape_as_tinyxml2_reads(text), True)
     except expat.ExpatError as err:
         msg = f"{source}:{err.lineno}: malformed XML: {expat.ErrorString(err.code)} (column {err.offset + 1})"
         raise TreeError(msg) from None

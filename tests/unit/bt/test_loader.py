@@ -207,3 +207,27 @@ def test_a_reactive_sequence_with_two_async_sequences_is_refused_at_its_line() -
 )
 def test_other_async_children_are_accepted_as_btcpp_accepts_them(body: str) -> None:
     assert load(v4(body)).tick_once() is NodeStatus.SUCCESS
+
+
+def test_raw_ampersands_and_angle_brackets_in_attributes_load_as_tinyxml2_reads_them() -> None:
+    tree = load(
+        v4(
+            "<Sequence><Script code=\"a := 1; b := 2; ok := a &lt; b &amp;&amp; b > a; s := 'x &foo; &amp; y'\"/>"
+            '<Precondition if="a>-b && ok != 0 && s == \'x &foo; & y\'" else="FAILURE">'
+            '<Script code="c := a < b"/></Precondition></Sequence>'
+        )
+    )
+    assert tree.tick_once() is NodeStatus.SUCCESS
+    assert tree.root_blackboard.get("c") == 1.0
+
+
+def test_escaping_keeps_line_numbers_and_leaves_comments_alone() -> None:
+    message = error_of(
+        '<root BTCPP_format="4">\n<!-- a & b < c -->\n<BehaviorTree ID="M">\n'
+        '<Sequence><Script code="x := 1 && 2 < 3"/>\n<Teleport/>\n</Sequence></BehaviorTree></root>'
+    )
+    assert message.startswith("t.xml:5: unknown node type <Teleport>")
+
+
+def test_a_lt_outside_any_attribute_is_still_malformed() -> None:
+    assert "t.xml:1: malformed XML" in error_of(v4("<Sequence>a < b<AlwaysSuccess/></Sequence>"))
