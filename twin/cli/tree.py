@@ -360,6 +360,8 @@ def _script_unknown_types(file: Path, factory: BehaviorTreeFactory, scripts: dic
             if manifest is not None and manifest.bound:
                 continue
             model = manifest or parser.node_models.get(name)
+            if model is None and element.children:
+                continue  # not a leaf: the loader reports the unknown node type, as validate does
             kind = model.kind if model is not None else NodeKind.ACTION
             if kind not in (NodeKind.ACTION, NodeKind.CONDITION):
                 continue

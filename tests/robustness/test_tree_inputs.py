@@ -1,0 +1,47 @@
+"""`twin tree` refuses bad trees and options with one line and its exit code, never a traceback or exit 70.
+
+Trees and files are written into a temporary folder; cases run in-process through `twin.cli.main`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.robustness.helpers import assert_one_line_error
+from twin.cli import main
+
+# BT.CPP's TryCatch test tree (tests/gtest_try_catch.cpp): a control node 4.8.2 does not have.
+TRY_CATCH = """<root BTCPP_format="4">
+  <BehaviorTree ID="MainTree">
+    <TryCatch>
+      <TestA/>
+      <TestB/>
+    </TryCatch>
+  </BehaviorTree>
+</root>
+"""
+
+FILES = {"try_catch.xml": TRY_CATCH}
+
+CASES: dict[str, tuple[list[str], int, str]] = {
+    "log_unknown_control": (["tree", "log", "{d}/try_catch.xml"], 6, "try_catch.xml:3: unknown node type <TryCatch>"),
+    "show_unknown_control": (["tree", "show", "{d}/try_catch.xml"], 6, "try_catch.xml:3: unknown node type <TryCatch>"),
+}
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = main(argv)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.mark.parametrize("case", CASES, ids=str)
+def test_a_bad_tree_or_option_is_one_line(case: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for name, text in FILES.items():
+        (tmp_path / name).write_text(text)
+    argv, exit_code, contains = CASES[case]
+    code, _, err = run([a.replace("{d}", str(tmp_path)) for a in argv], capsys)
+    assert code == exit_code, err
+    assert_one_line_error(err, contains=contains)
