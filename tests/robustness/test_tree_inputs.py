@@ -23,11 +23,12 @@ TRY_CATCH = """<root BTCPP_format="4">
 </root>
 """
 
-FILES = {"try_catch.xml": TRY_CATCH}
+FILES = {"try_catch.xml": TRY_CATCH, "no_tree.xml": '<root BTCPP_format="4"></root>'}
 
 CASES: dict[str, tuple[list[str], int, str]] = {
     "log_unknown_control": (["tree", "log", "{d}/try_catch.xml"], 6, "try_catch.xml:3: unknown node type <TryCatch>"),
     "show_unknown_control": (["tree", "show", "{d}/try_catch.xml"], 6, "try_catch.xml:3: unknown node type <TryCatch>"),
+    "log_no_behavior_tree": (["tree", "log", "{d}/no_tree.xml"], 6, "no_tree.xml:1: the file has no <BehaviorTree>"),
 }
 
 

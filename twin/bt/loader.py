@@ -532,11 +532,14 @@ class TreeParser:
             msg = "no behaviour tree file was loaded"
             raise TreeError(msg)
         first = self.documents[0]
+        if not self.tree_roots:
+            msg = f'{first.root.location}: the file has no <BehaviorTree>; put the tree in <BehaviorTree ID="MainTree">'
+            raise TreeError(msg)
         if first.main_tree_to_execute:
             if first.main_tree_to_execute not in self.tree_roots:
                 msg = (
                     f"{first.root.location}: main_tree_to_execute={first.main_tree_to_execute!r} names no tree "
-                    f"in the file{suggest(first.main_tree_to_execute, list(self.tree_roots)) or ' (it has none)'}"
+                    f"in the file{suggest(first.main_tree_to_execute, list(self.tree_roots))}"
                 )
                 raise TreeError(msg)
             return first.main_tree_to_execute

@@ -231,3 +231,8 @@ def test_escaping_keeps_line_numbers_and_leaves_comments_alone() -> None:
 
 def test_a_lt_outside_any_attribute_is_still_malformed() -> None:
     assert "t.xml:1: malformed XML" in error_of(v4("<Sequence>a < b<AlwaysSuccess/></Sequence>"))
+
+
+@pytest.mark.parametrize("root", ['<root BTCPP_format="4">', '<root BTCPP_format="4" main_tree_to_execute="M">'])
+def test_a_file_without_behavior_tree_says_so(root: str) -> None:
+    assert error_of(f"{root}</root>").startswith("t.xml:1: the file has no <BehaviorTree>")
