@@ -23,11 +23,22 @@ TRY_CATCH = """<root BTCPP_format="4">
 </root>
 """
 
-FILES = {"try_catch.xml": TRY_CATCH, "no_tree.xml": '<root BTCPP_format="4"></root>'}
+# A chain of 300 SubTrees, each inside a Sequence: 601 levels of nodes.
+CHAIN = (
+    '<root BTCPP_format="4" main_tree_to_execute="T0">'
+    + "".join(
+        f'<BehaviorTree ID="T{i}"><Sequence><SubTree ID="T{i + 1}"/></Sequence></BehaviorTree>' for i in range(300)
+    )
+    + '<BehaviorTree ID="T300"><AlwaysSuccess/></BehaviorTree></root>'
+)
+
+FILES = {"try_catch.xml": TRY_CATCH, "no_tree.xml": '<root BTCPP_format="4"></root>', "chain.xml": CHAIN}
 
 CASES: dict[str, tuple[list[str], int, str]] = {
     "log_unknown_control": (["tree", "log", "{d}/try_catch.xml"], 6, "try_catch.xml:3: unknown node type <TryCatch>"),
     "show_unknown_control": (["tree", "show", "{d}/try_catch.xml"], 6, "try_catch.xml:3: unknown node type <TryCatch>"),
+    "log_deep_subtrees": (["tree", "log", "{d}/chain.xml"], 6, "chain.xml:1: <BehaviorTree ID='T0'> nests nodes 601"),
+    "show_deep_subtrees": (["tree", "show", "{d}/chain.xml"], 6, "twin ticks trees up to 200 levels"),
     "log_no_behavior_tree": (["tree", "log", "{d}/no_tree.xml"], 6, "no_tree.xml:1: the file has no <BehaviorTree>"),
 }
 

@@ -113,6 +113,10 @@ class XmlElement:
 MAX_XML_DEPTH: Final = 100
 """Deepest element nesting a tree file may have (the loader and ticks recurse per level)."""
 
+MAX_TREE_DEPTH: Final = 200
+"""Deepest node nesting a tree may have, counted from its root through its SubTrees (a tick
+recurses up to three Python frames per level; 200 levels stay well inside Python's stack)."""
+
 # What tinyxml2 (BT.CPP's parser) reads as markup: comments, CDATA, processing instructions, and
 # tags, whose quoted attribute values may hold any character but their own quote.
 _MARKUP: Final = re.compile(
@@ -518,6 +522,72 @@ class TreeParser:
                 if entry.tag == "SubTree" and entry.attrs.get("ID"):
                     self.subtree_models.setdefault(entry.attrs["ID"], {}).update(model_ports(entry, self.report))
 
+    # -- depth ---------------------------------------------------------------------------------
+
+    def tree_depths(self) -> dict[str, tuple[int, str | None]]:
+        """Each tree's node depth through its SubTrees, and the SubTree on its deepest path.
+
+        A tree's own root node is level 1, a SubTree node adds the depth of the tree it holds.
+        SubTrees that name no tree or that loop back are left out (they are reported elsewhere).
+        Iterative, so that a chain of thousands of SubTrees does not exhaust the stack.
+        """
+        roots = self.tree_roots
+        subtrees: dict[str, tuple[int, list[tuple[int, str]]]] = {}
+        for tree_id, (tree, _) in roots.items():
+            own = 0
+            refs: list[tuple[int, str]] = []
+            stack = [(child, 1) for child in tree.children]
+            while stack:
+                element, level = stack.pop()
+                own = max(own, level)
+                if element.tag == "SubTree" and element.attrs.get("ID") in roots:
+                    refs.append((level, element.attrs["ID"]))
+                stack.extend((child, level + 1) for child in element.children)
+            subtrees[tree_id] = (own, refs)
+        depths: dict[str, tuple[int, str | None]] = {}
+        for start in roots:
+            if start in depths:
+                continue
+            path = [start]
+            on_path = {start}
+            pending = [iter(subtrees[start][1])]
+            while path:
+                ref = next(pending[-1], None)
+                if ref is not None:
+                    child = ref[1]
+                    if child not in depths and child not in on_path:
+                        path.append(child)
+                        on_path.add(child)
+                        pending.append(iter(subtrees[child][1]))
+                    continue
+                tree_id = path.pop()
+                on_path.discard(tree_id)
+                pending.pop()
+                own, refs = subtrees[tree_id]
+                best: tuple[int, str | None] = (own, None)
+                for level, child in refs:
+                    if child in depths and level + depths[child][0] > best[0]:
+                        best = (level + depths[child][0], child)
+                depths[tree_id] = best
+        return depths
+
+    def check_depth(self, tree_id: str, depths: Mapping[str, tuple[int, str | None]] | None = None) -> str | None:
+        """The problem with tree `tree_id` nesting deeper than `MAX_TREE_DEPTH`, or None."""
+        depths = depths if depths is not None else self.tree_depths()
+        depth = depths[tree_id][0] if tree_id in depths else 0
+        if depth <= MAX_TREE_DEPTH:
+            return None
+        chain = [tree_id]
+        while (following := depths[chain[-1]][1]) is not None:
+            chain.append(following)
+        shown = " -> ".join(chain) if len(chain) <= 6 else " -> ".join([*chain[:3], "...", *chain[-2:]])
+        tree, _ = self.tree_roots[tree_id]
+        return (
+            f"{tree.location}: <BehaviorTree ID={tree_id!r}> nests nodes {depth} levels deep through "
+            f"{len(chain) - 1} nested SubTrees ({shown}); twin ticks trees up to {MAX_TREE_DEPTH} levels: "
+            "flatten some of the SubTrees"
+        )
+
     # -- instantiation -------------------------------------------------------------------------
 
     def main_tree_id(self, main_tree: str | None = None) -> str:
@@ -573,6 +643,9 @@ class TreeParser:
             TreeError: `file:line: ...` for the first problem.
         """
         tree_id = self.main_tree_id(main_tree)
+        problem = self.check_depth(tree_id)
+        if problem is not None:
+            raise TreeError(problem)
         builder = _Builder(self, stub)
         builder.create_subtree(tree_id, _Scope("", "", blackboard or Blackboard(), ()), None, None)
         nodes = builder.nodes

@@ -695,6 +695,9 @@ class Script:
         except TreeError as err:
             msg = f"error in script [{self.source}]: {err}"
             raise ScriptError(msg) from None
+        except RecursionError:
+            msg = f"error in script [{self.source}]: nested too deeply for twin to evaluate; split it up"
+            raise ScriptError(msg) from None
 
     def __repr__(self) -> str:
         return f"Script({self.source!r})"
@@ -706,7 +709,10 @@ def parse_script(text: str) -> Script:
     Raises:
         ScriptSyntaxError: With the column of the first problem.
     """
-    return Script(text, _Parser(text).script())
+    try:
+        return Script(text, _Parser(text).script())
+    except RecursionError:
+        raise ScriptSyntaxError(text, 1, "nested too deeply for twin to parse; split it up") from None
 
 
 def script_truth(value: Any) -> bool:

@@ -236,3 +236,25 @@ def test_a_lt_outside_any_attribute_is_still_malformed() -> None:
 @pytest.mark.parametrize("root", ['<root BTCPP_format="4">', '<root BTCPP_format="4" main_tree_to_execute="M">'])
 def test_a_file_without_behavior_tree_says_so(root: str) -> None:
     assert error_of(f"{root}</root>").startswith("t.xml:1: the file has no <BehaviorTree>")
+
+
+def subtree_chain(n: int, wrap: bool = True) -> str:
+    """T0 holds T1 holds ... holds Tn, each inside a Sequence when `wrap`."""
+    trees = "".join(
+        f'<BehaviorTree ID="T{i}">{"<Sequence>" if wrap else ""}<SubTree ID="T{i + 1}"/>{"</Sequence>" if wrap else ""}'
+        "</BehaviorTree>"
+        for i in range(n)
+    )
+    return f'<root BTCPP_format="4" main_tree_to_execute="T0">{trees}<BehaviorTree ID="T{n}"><AlwaysSuccess/></BehaviorTree></root>'
+
+
+def test_a_subtree_chain_within_the_depth_limit_ticks() -> None:
+    assert load(subtree_chain(99)).tick_once() is NodeStatus.SUCCESS  # 199 levels
+
+
+@pytest.mark.parametrize(("n", "wrap", "levels"), [(100, True, 201), (1200, False, 1201)])
+def test_a_subtree_chain_nesting_too_deep_is_one_short_line(n: int, wrap: bool, levels: int) -> None:
+    message = error_of(subtree_chain(n, wrap))
+    assert message.startswith(f"t.xml:1: <BehaviorTree ID='T0'> nests nodes {levels} levels deep through {n} nested")
+    assert f"(T0 -> T1 -> T2 -> ... -> T{n - 1} -> T{n})" in message
+    assert len(message) < 300

@@ -171,3 +171,13 @@ def test_script_results_as_conditions_follow_any_cast_to_bool() -> None:
     for bad in (2, -1.0, "true", None):
         with pytest.raises(ScriptError):
             script_truth(bad)
+
+
+def test_parentheses_nested_too_deeply_are_a_syntax_error_not_a_crash() -> None:
+    with pytest.raises(ScriptSyntaxError, match="nested too deeply"):
+        parse_script("(" * 2000 + "1" + ")" * 2000)
+
+
+def test_an_expression_too_long_to_evaluate_is_a_script_error() -> None:
+    with pytest.raises(ScriptError, match="nested too deeply"):
+        run(" - ".join(["1"] * 5000))
