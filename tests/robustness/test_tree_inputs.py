@@ -35,8 +35,16 @@ CHAIN = (
 
 _CASE = '{"id": "x", "xml": "<root BTCPP_format=\\"4\\"><BehaviorTree ID=\\"M\\"><Leaf name=\\"A\\"/></BehaviorTree></root>", '
 
+# Nav2's FollowPath with a port the twin's Nav2 declarations do not have (validate and show refuse it).
+FOLLOW_PATH = (
+    '<root BTCPP_format="4"><BehaviorTree ID="M">\n'
+    '<FollowPath path="{path}" controller_id="FollowPath" tracking_feedback="{fb}"/>\n'
+    "</BehaviorTree></root>"
+)
+
 FILES = {
     "try_catch.xml": TRY_CATCH,
+    "follow_path.xml": FOLLOW_PATH,
     "no_tree.xml": '<root BTCPP_format="4"></root>',
     "chain.xml": CHAIN,
     "bad_ticks.json": _CASE + '"ticks": "x", "expected_trace": []}',
@@ -49,6 +57,16 @@ NAV_TREE_QUEUE = str(REPO / "trees" / "nav_tree_queue.xml")
 CASES: dict[str, tuple[list[str], int, str]] = {
     "log_unknown_control": (["tree", "log", "{d}/try_catch.xml"], 6, "try_catch.xml:3: unknown node type <TryCatch>"),
     "show_unknown_control": (["tree", "show", "{d}/try_catch.xml"], 6, "try_catch.xml:3: unknown node type <TryCatch>"),
+    "log_unknown_port_of_a_nav2_leaf": (
+        ["tree", "log", "{d}/follow_path.xml"],
+        6,
+        "follow_path.xml:2: unknown port 'tracking_feedback' of <FollowPath>",
+    ),
+    "show_unknown_port_of_a_nav2_leaf": (
+        ["tree", "show", "{d}/follow_path.xml"],
+        6,
+        "follow_path.xml:2: unknown port 'tracking_feedback' of <FollowPath>",
+    ),
     "log_deep_subtrees": (["tree", "log", "{d}/chain.xml"], 6, "chain.xml:1: <BehaviorTree ID='T0'> nests nodes 601"),
     "show_deep_subtrees": (["tree", "show", "{d}/chain.xml"], 6, "twin ticks trees up to 200 levels"),
     "log_polls_to_arrive_0": (["tree", "log", NAV_TREE_QUEUE, "--polls-to-arrive", "0"], 6, "--polls-to-arrive"),

@@ -686,6 +686,8 @@ def check_ports(
                 known = sorted(manifest.ports)
                 listing = f"; its ports are {', '.join(known)}" if known else "; it has no ports"
                 hint = suggest(name, known) if known else ""
+                if hint.startswith("; valid:"):
+                    hint = ""  # the listing below names them
                 report(element.location, f"unknown port {name!r} of <{manifest.registration_id}>{hint}{listing}")
                 continue
             if not _is_pointer(value) and spec.type.has_converter and spec.type.strongly_typed:

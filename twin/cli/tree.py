@@ -374,10 +374,10 @@ def _script_unknown_types(file: Path, factory: BehaviorTreeFactory, scripts: dic
             kind = model.kind if model is not None else NodeKind.ACTION
             if kind not in (NodeKind.ACTION, NodeKind.CONDITION):
                 continue
-            ports = dict(model.ports) if model is not None else {}
-            for attr in element.attrs:
-                if is_allowed_port_name(attr) and attr not in ports:
-                    ports[attr] = bidirectional_port(attr)
+            if model is not None:  # declared ports only: the loader reports unknown ones, as validate does
+                ports = dict(model.ports)
+            else:
+                ports = {attr: bidirectional_port(attr) for attr in element.attrs if is_allowed_port_name(attr)}
             base = ScriptedAction if kind is NodeKind.ACTION else ScriptedCondition
             cls = scripted_node_class(base, tuple(ports.values()), name)
             if manifest is not None:

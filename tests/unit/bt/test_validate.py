@@ -118,3 +118,9 @@ def test_a_long_subtree_cycle_is_reported_without_recursion(factory: BehaviorTre
     trees = "".join(f'<BehaviorTree ID="T{i}"><SubTree ID="T{(i + 1) % 1500}"/></BehaviorTree>' for i in range(1500))
     report = validate_text(f'<root BTCPP_format="4" main_tree_to_execute="T0">{trees}</root>', factory, source="t.xml")
     assert any("includes itself (T0 -> T1 -> " in problem for problem in report.problems), report.problems
+
+
+def test_an_unknown_port_lists_the_ports_once(factory: BehaviorTreeFactory) -> None:
+    report = validate_text(doc('<Timeout msec="1" zzz="2"><AlwaysSuccess/></Timeout>'), factory, source="t.xml")
+    (problem,) = report.problems
+    assert "unknown port 'zzz' of <Timeout>; its ports are msec" in problem and "valid:" not in problem
