@@ -1,8 +1,9 @@
 """A step that never returns: the watchdog ends the run by itself (exit 8), and SIGTERM/SIGINT still work.
 
 Three kinds of stuck step, as a user meets them:
-- a behaviour tree whose `Repeat num_cycles="-1"` over `AlwaysSuccess` never leaves its first tick
-  (the main thread spins in Python);
+- a behaviour tree whose first tick does not return for half a minute or more: `Repeat
+  num_cycles="-1"` over 64,000 instant actions, re-ticked 1000 times in that tick (the main thread
+  spins in Python);
 - a vendor FMU that hangs in `doStep` (the project's faulty test motor, `fault_mode` hang: it waits
   in `pause()` forever, in the same process: `drive.isolation: none`);
 - a step stuck in native code that releases the GIL, as ctypes calls do: a C busy loop compiled

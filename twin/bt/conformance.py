@@ -147,8 +147,29 @@ def load_case(path: Path) -> ConformanceCase:
     for key in ("id", "xml", "ticks", "expected_trace"):
         if key not in raw:
             raise _fail(path, f"missing key {key!r}")
-    ticks = int(raw["ticks"])
-    sleeps = tuple(int(ms) for ms in raw.get("sleep_before_tick_ms", [0] * ticks))
+    try:
+        return _case_from_json(path, raw)
+    except TreeError:
+        raise
+    except (ValueError, TypeError, AttributeError) as err:  # a field of the wrong JSON type
+        raise _fail(
+            path, f"not a case in the format of bt_conformance/README.md ({type(err).__name__}: {err})"
+        ) from None
+
+
+def _whole(path: Path, field: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _fail(path, f"{field} must be a whole number, got {value!r}")
+    return value
+
+
+def _case_from_json(path: Path, raw: dict[str, Any]) -> ConformanceCase:
+    ticks = _whole(path, "ticks", raw["ticks"])
+    if ticks < 1:
+        raise _fail(path, f"ticks must be at least 1, got {ticks}")
+    sleeps = tuple(
+        _whole(path, "each entry of sleep_before_tick_ms", ms) for ms in raw.get("sleep_before_tick_ms", [0] * ticks)
+    )
     if len(sleeps) != ticks:
         raise _fail(path, f"sleep_before_tick_ms has {len(sleeps)} entries for {ticks} ticks")
     tick_mode = str(raw.get("tick_mode", "once"))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import re
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
@@ -112,6 +113,46 @@ class XmlElement:
 MAX_XML_DEPTH: Final = 100
 """Deepest element nesting a tree file may have (the loader and ticks recurse per level)."""
 
+MAX_TREE_DEPTH: Final = 200
+"""Deepest node nesting a tree may have, counted from its root through its SubTrees (a tick
+recurses up to three Python frames per level; 200 levels stay well inside Python's stack)."""
+
+# What tinyxml2 (BT.CPP's parser) reads as markup: comments, CDATA, processing instructions, and
+# tags, whose quoted attribute values may hold any character but their own quote.
+_MARKUP: Final = re.compile(
+    r"""<!--.*?-->|<!\[CDATA\[.*?\]\]>|<\?.*?\?>|<[^<>"']*(?:(?:"[^"]*"|'[^']*')[^<>"']*)*>""", re.DOTALL
+)
+_QUOTED: Final = re.compile(r""""[^"]*"|'[^']*'""")
+# An `&` that starts no entity tinyxml2 knows: the five predefined ones and character references.
+_BARE_AMP: Final = re.compile(r"&(?!(?:amp|lt|gt|quot|apos|#[0-9]+|#x[0-9a-fA-F]+);)")
+
+
+def _escape_as_tinyxml2_reads(text: str) -> str:
+    """Escape what tinyxml2 accepts and expat does not: a bare `&`, and `<` in an attribute value.
+
+    tinyxml2 keeps an `&` that starts no entity as it is, and reads an attribute value up to its
+    closing quote (`if="A>-B && color != BLUE"` is fine for BT.CPP). Escaping them adds no line, so
+    expat's line numbers stay the file's. A DOCTYPE (never in a tree file) is left to expat.
+    """
+    if "<!DOCTYPE" in text:
+        return text
+    out: list[str] = []
+    end = 0
+    for match in _MARKUP.finditer(text):
+        out.append(_BARE_AMP.sub("&amp;", text[end : match.start()]))
+        markup = match.group()
+        if markup.startswith(("<!--", "<![CDATA[", "<?")):
+            out.append(markup)
+        else:
+            out.append(_QUOTED.sub(_escape_quoted, markup))
+        end = match.end()
+    out.append(_BARE_AMP.sub("&amp;", text[end:]))
+    return "".join(out)
+
+
+def _escape_quoted(match: re.Match[str]) -> str:
+    return _BARE_AMP.sub("&amp;", match.group()).replace("<", "&lt;")
+
 
 def parse_xml(text: str, source: str) -> XmlElement:
     """Parse XML text into elements with line numbers.
@@ -140,7 +181,7 @@ def parse_xml(text: str, source: str) -> XmlElement:
     parser.StartElementHandler = start
     parser.EndElementHandler = end
     try:
-        parser.Parse(text, True)
+        parser.Parse(_escape_as_tinyxml2_reads(text), True)
     except expat.ExpatError as err:
         msg = f"{source}:{err.lineno}: malformed XML: {expat.ErrorString(err.code)} (column {err.offset + 1})"
         raise TreeError(msg) from None
@@ -463,6 +504,14 @@ class TreeParser:
             report(element.location, f"the decorator <{name}> must have exactly 1 child, it has {count}")
         elif kind is NodeKind.CONTROL and count == 0:
             report(element.location, f"the control node <{name}> must have 1 or more children")
+        elif name == "ReactiveSequence" and sum(child.type_name == "AsyncSequence" for child in element.children) > 1:
+            # BT.CPP 4.8.2's VerifyXML counts only <AsyncSequence> children as async (the other names
+            # it checks are C++ class names, never a registered control); ReactiveFallback is not checked.
+            report(
+                element.location,
+                "a <ReactiveSequence> cannot have more than one async child (<AsyncSequence>), as in BT.CPP; "
+                "make all but one of them a <Sequence>, or move them out of the <ReactiveSequence>",
+            )
         elif kind in (NodeKind.ACTION, NodeKind.CONDITION) and count:
             report(element.location, f"the {kind.value.lower()} <{name}> must not have children")
 
@@ -472,6 +521,72 @@ class TreeParser:
             for entry in model.children:
                 if entry.tag == "SubTree" and entry.attrs.get("ID"):
                     self.subtree_models.setdefault(entry.attrs["ID"], {}).update(model_ports(entry, self.report))
+
+    # -- depth ---------------------------------------------------------------------------------
+
+    def tree_depths(self) -> dict[str, tuple[int, str | None]]:
+        """Each tree's node depth through its SubTrees, and the SubTree on its deepest path.
+
+        A tree's own root node is level 1, a SubTree node adds the depth of the tree it holds.
+        SubTrees that name no tree or that loop back are left out (they are reported elsewhere).
+        Iterative, so that a chain of thousands of SubTrees does not exhaust the stack.
+        """
+        roots = self.tree_roots
+        subtrees: dict[str, tuple[int, list[tuple[int, str]]]] = {}
+        for tree_id, (tree, _) in roots.items():
+            own = 0
+            refs: list[tuple[int, str]] = []
+            stack = [(child, 1) for child in tree.children]
+            while stack:
+                element, level = stack.pop()
+                own = max(own, level)
+                if element.tag == "SubTree" and element.attrs.get("ID") in roots:
+                    refs.append((level, element.attrs["ID"]))
+                stack.extend((child, level + 1) for child in element.children)
+            subtrees[tree_id] = (own, refs)
+        depths: dict[str, tuple[int, str | None]] = {}
+        for start in roots:
+            if start in depths:
+                continue
+            path = [start]
+            on_path = {start}
+            pending = [iter(subtrees[start][1])]
+            while path:
+                ref = next(pending[-1], None)
+                if ref is not None:
+                    child = ref[1]
+                    if child not in depths and child not in on_path:
+                        path.append(child)
+                        on_path.add(child)
+                        pending.append(iter(subtrees[child][1]))
+                    continue
+                tree_id = path.pop()
+                on_path.discard(tree_id)
+                pending.pop()
+                own, refs = subtrees[tree_id]
+                best: tuple[int, str | None] = (own, None)
+                for level, child in refs:
+                    if child in depths and level + depths[child][0] > best[0]:
+                        best = (level + depths[child][0], child)
+                depths[tree_id] = best
+        return depths
+
+    def check_depth(self, tree_id: str, depths: Mapping[str, tuple[int, str | None]] | None = None) -> str | None:
+        """The problem with tree `tree_id` nesting deeper than `MAX_TREE_DEPTH`, or None."""
+        depths = depths if depths is not None else self.tree_depths()
+        depth = depths[tree_id][0] if tree_id in depths else 0
+        if depth <= MAX_TREE_DEPTH:
+            return None
+        chain = [tree_id]
+        while (following := depths[chain[-1]][1]) is not None:
+            chain.append(following)
+        shown = " -> ".join(chain) if len(chain) <= 6 else " -> ".join([*chain[:3], "...", *chain[-2:]])
+        tree, _ = self.tree_roots[tree_id]
+        return (
+            f"{tree.location}: <BehaviorTree ID={tree_id!r}> nests nodes {depth} levels deep through "
+            f"{len(chain) - 1} nested SubTrees ({shown}); twin ticks trees up to {MAX_TREE_DEPTH} levels: "
+            "flatten some of the SubTrees"
+        )
 
     # -- instantiation -------------------------------------------------------------------------
 
@@ -487,11 +602,14 @@ class TreeParser:
             msg = "no behaviour tree file was loaded"
             raise TreeError(msg)
         first = self.documents[0]
+        if not self.tree_roots:
+            msg = f'{first.root.location}: the file has no <BehaviorTree>; put the tree in <BehaviorTree ID="MainTree">'
+            raise TreeError(msg)
         if first.main_tree_to_execute:
             if first.main_tree_to_execute not in self.tree_roots:
                 msg = (
                     f"{first.root.location}: main_tree_to_execute={first.main_tree_to_execute!r} names no tree "
-                    f"in the file{suggest(first.main_tree_to_execute, list(self.tree_roots)) or ' (it has none)'}"
+                    f"in the file{suggest(first.main_tree_to_execute, list(self.tree_roots))}"
                 )
                 raise TreeError(msg)
             return first.main_tree_to_execute
@@ -525,6 +643,9 @@ class TreeParser:
             TreeError: `file:line: ...` for the first problem.
         """
         tree_id = self.main_tree_id(main_tree)
+        problem = self.check_depth(tree_id)
+        if problem is not None:
+            raise TreeError(problem)
         builder = _Builder(self, stub)
         builder.create_subtree(tree_id, _Scope("", "", blackboard or Blackboard(), ()), None, None)
         nodes = builder.nodes
@@ -565,6 +686,8 @@ def check_ports(
                 known = sorted(manifest.ports)
                 listing = f"; its ports are {', '.join(known)}" if known else "; it has no ports"
                 hint = suggest(name, known) if known else ""
+                if hint.startswith("; valid:"):
+                    hint = ""  # the listing below names them
                 report(element.location, f"unknown port {name!r} of <{manifest.registration_id}>{hint}{listing}")
                 continue
             if not _is_pointer(value) and spec.type.has_converter and spec.type.strongly_typed:

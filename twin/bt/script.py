@@ -483,6 +483,14 @@ class _Assign(_Expr):
 # -- parser ------------------------------------------------------------------------------------
 
 
+def _fold_right(operands: list[_Expr], ops: list[str]) -> _Expr:
+    """`a op1 b op2 c` as `a op1 (b op2 c)`."""
+    result = operands[-1]
+    for lhs, op in zip(reversed(operands[:-1]), reversed(ops), strict=True):
+        result = _Binary(lhs, op, result)
+    return result
+
+
 class _Parser:
     def __init__(self, text: str) -> None:
         self.text = text
@@ -588,19 +596,23 @@ class _Parser:
         self.no_mix(_BIT_OPS | {".."})
         return lhs
 
+    # BT.CPP 4.8.2 groups `+ -` and `* /` from the right within their level: `10 - 4 - 3` is
+    # 10 - (4 - 3), `100 / 10 / 2` is 100 / (10 / 2) (its issue #1029, fixed after 4.8.2).
     def math_sum(self, first: _Expr | None) -> _Expr:
-        lhs = self.math_product(first)
+        operands = [self.math_product(first)]
+        ops: list[str] = []
         while self.is_op("+", "-"):
-            op = self.advance().text
-            lhs = _Binary(lhs, op, self.math_product(None))
-        return lhs
+            ops.append(self.advance().text)
+            operands.append(self.math_product(None))
+        return _fold_right(operands, ops)
 
     def math_product(self, first: _Expr | None) -> _Expr:
-        lhs = first if first is not None else self.math_prefix()
+        operands = [first if first is not None else self.math_prefix()]
+        ops: list[str] = []
         while self.is_op("*", "/"):
-            op = self.advance().text
-            lhs = _Binary(lhs, op, self.math_prefix())
-        return lhs
+            ops.append(self.advance().text)
+            operands.append(self.math_prefix())
+        return _fold_right(operands, ops)
 
     def math_prefix(self) -> _Expr:
         if self.is_op("-"):
@@ -683,6 +695,9 @@ class Script:
         except TreeError as err:
             msg = f"error in script [{self.source}]: {err}"
             raise ScriptError(msg) from None
+        except RecursionError:
+            msg = f"error in script [{self.source}]: nested too deeply for twin to evaluate; split it up"
+            raise ScriptError(msg) from None
 
     def __repr__(self) -> str:
         return f"Script({self.source!r})"
@@ -694,7 +709,10 @@ def parse_script(text: str) -> Script:
     Raises:
         ScriptSyntaxError: With the column of the first problem.
     """
-    return Script(text, _Parser(text).script())
+    try:
+        return Script(text, _Parser(text).script())
+    except RecursionError:
+        raise ScriptSyntaxError(text, 1, "nested too deeply for twin to parse; split it up") from None
 
 
 def script_truth(value: Any) -> bool:

@@ -3,7 +3,8 @@
 `Tree.tick_once()` is BT.CPP's `Tree::tickOnce()`: it fires the timers that are due, ticks the root,
 and ticks it again at once while the root is RUNNING and some node emitted a wake-up signal (a
 `SequenceWithMemory`, `Repeat` or `RetryUntilSuccessful` after an instant child, a timer that
-fired). `tick_exactly_once()` ticks the root once. A completed root is reset to IDLE.
+fired), at most `MAX_WAKE_UP_RETICKS` times. `tick_exactly_once()` ticks the root once. A
+completed root is reset to IDLE.
 
 Time comes from the clock the tree is given (a callable returning integer nanoseconds). Timers
 (`Delay`, `Timeout`, `Sleep`) are due at `start + delay` on that clock and fire at the start of the
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import heapq
+import logging
 from collections.abc import Callable, Iterator, Sequence
 from typing import Final
 
@@ -27,7 +29,24 @@ from twin.core.errors import TreeError
 
 _NEVER: Final = 2**63 - 1  # a settled tick with no wake time repeats until something changes
 
-__all__ = ["ManualClock", "StatusListener", "SubtreeInstance", "TimerHandle", "TimerQueue", "Tree"]
+#: How many times one `tick_once()` ticks the root again on wake-ups. BT.CPP's loop has no count:
+#: a node that wakes the tree on every pass (a RetryUntilSuccessful over a failing child) spins
+#: until wall time lets a timer fire. A tick takes no simulated time, so such a loop would never
+#: end here; past this many re-ticks the tick returns the root's status (RUNNING) and the loop
+#: goes on at the next tick, a later simulated time. The recorded cases need at most 3.
+MAX_WAKE_UP_RETICKS: Final = 1000
+
+_log = logging.getLogger(__name__)
+
+__all__ = [
+    "MAX_WAKE_UP_RETICKS",
+    "ManualClock",
+    "StatusListener",
+    "SubtreeInstance",
+    "TimerHandle",
+    "TimerQueue",
+    "Tree",
+]
 
 StatusListener = Callable[[int, str, int, NodeStatus, NodeStatus], None]
 
@@ -161,6 +180,7 @@ class Tree:
         self.timers = TimerQueue()
         self._listeners: tuple[StatusListener, ...] = ()
         self._wake_up = False
+        self._reticks_capped = False
         self._now_ns = clock()
         self._by_uid = {node.uid: node for node in self.nodes}
         for node in self.nodes:
@@ -263,6 +283,9 @@ class Tree:
     def tick_once(self) -> NodeStatus:
         """Tick the root; tick it again at once while it is RUNNING and a wake-up was emitted.
 
+        At most `MAX_WAKE_UP_RETICKS` re-ticks: then the root's status (RUNNING) is returned and the
+        next call goes on.
+
         Raises:
             TickError: If a node fails; the tree keeps the state it had at that point.
         """
@@ -302,8 +325,13 @@ class Tree:
         root = self.root
         status = root.execute_tick()
         woken = False
+        reticks = 0
         while status is RUNNING and self._take_wake_up():
             woken = True
+            if reticks == MAX_WAKE_UP_RETICKS:
+                self._note_reticks_capped()
+                break
+            reticks += 1
             status = root.execute_tick()
         if status is SUCCESS or status is FAILURE:
             root.reset_status()
@@ -321,6 +349,16 @@ class Tree:
                 wakes.append(due)
             self._settled = (version, seen, min(wakes, default=_NEVER))
         return status
+
+    def _note_reticks_capped(self) -> None:
+        if not self._reticks_capped:
+            self._reticks_capped = True
+            _log.warning(
+                "the tree woke itself up %d times in one tick at t=%.3f s (a loop BT.CPP ends only when "
+                "wall time passes); it goes on at the next tick",
+                MAX_WAKE_UP_RETICKS,
+                self._now_ns * 1e-9,
+            )
 
     def tick_exactly_once(self) -> NodeStatus:
         """Tick the root once, whatever wake-ups were emitted.

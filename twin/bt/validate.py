@@ -146,27 +146,40 @@ def _check_element(
 
 
 def _check_recursion(parser: TreeParser, report: Callable[[str, str], None]) -> None:
+    """Report SubTrees that include themselves: one depth-first walk, without recursion."""
     edges: dict[str, list[tuple[str, XmlElement]]] = {}
     for tree_id, (tree, _) in parser.tree_roots.items():
         edges[tree_id] = [(e.attrs["ID"], e) for e in tree.iter() if e.tag == "SubTree" and e.attrs.get("ID")]
-    reported: set[frozenset[str]] = set()
-
-    def visit(tree_id: str, path: tuple[str, ...]) -> None:
-        for child, element in edges.get(tree_id, []):
+    done: set[str] = set()
+    for start, start_edges in edges.items():
+        if start in done:
+            continue
+        path = [start]
+        pending = [iter(start_edges)]
+        while path:
+            edge = next(pending[-1], None)
+            if edge is None:
+                done.add(path.pop())
+                pending.pop()
+                continue
+            child, element = edge
             if child in path:
-                cycle = (*path[path.index(child) :], child)
-                key = frozenset(cycle)
-                if key not in reported:
-                    reported.add(key)
-                    chain = " -> ".join(cycle)
-                    report(
-                        element.location, f"SubTree {child!r} includes itself ({chain}); a tree cannot contain itself"
-                    )
-            elif child in edges:
-                visit(child, (*path, child))
+                chain = " -> ".join((*path[path.index(child) :], child))
+                report(element.location, f"SubTree {child!r} includes itself ({chain}); a tree cannot contain itself")
+            elif child in edges and child not in done:
+                path.append(child)
+                pending.append(iter(edges[child]))
 
-    for tree_id in edges:
-        visit(tree_id, (tree_id,))
+
+def _check_depth(parser: TreeParser, report: Callable[[str, str], None]) -> bool:
+    """Report the trees no other tree holds that nest deeper than twin ticks; True if none does."""
+    depths = parser.tree_depths()
+    held = {e.attrs.get("ID") for tree, _ in parser.tree_roots.values() for e in tree.iter() if e.tag == "SubTree"}
+    too_deep = [(tree_id, problem) for tree_id in parser.tree_roots if (problem := parser.check_depth(tree_id, depths))]
+    for _, problem in [item for item in too_deep if item[0] not in held] or too_deep[:1]:
+        location, _, message = problem.partition(": ")
+        report(location, message)
+    return not too_deep
 
 
 def _validate(load: Callable[[TreeParser], None], source: str, factory: BehaviorTreeFactory) -> ValidationReport:
@@ -177,6 +190,20 @@ def _validate(load: Callable[[TreeParser], None], source: str, factory: Behavior
         if line not in problems:
             problems.append(line)
 
+    try:
+        return _check_all(load, source, factory, problems, report)
+    except RecursionError:  # a safety net: the loader and checks bound what they recurse on
+        line = f"{source}: the tree nests too deeply for twin to check it; flatten some SubTrees or nodes"
+        return ValidationReport(source=source, problems=(*problems, line))
+
+
+def _check_all(
+    load: Callable[[TreeParser], None],
+    source: str,
+    factory: BehaviorTreeFactory,
+    problems: list[str],
+    report: Callable[[str, str], None],
+) -> ValidationReport:
     parser = TreeParser(factory, strict=True)
     parser.report = report
     try:
@@ -189,12 +216,13 @@ def _validate(load: Callable[[TreeParser], None], source: str, factory: Behavior
             if element is not tree:
                 _check_element(parser, element, report, declared_only)
     _check_recursion(parser, report)
+    depth_ok = _check_depth(parser, report)
     main_tree: str | None = None
     try:
         main_tree = parser.main_tree_id()
     except TreeError as err:
         problems.append(str(err))
-    if not problems:
+    if not problems and depth_ok:
         for tree_id in parser.tree_roots:
             try:
                 parser.instantiate(main_tree=tree_id, clock=ManualClock(), stub=stub_node)

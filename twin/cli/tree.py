@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twin.core.errors import TreeError
+from twin.core.errors import ConfigError, TreeError
 
 if TYPE_CHECKING:
     from twin.bt.conformance import Step
@@ -317,10 +317,19 @@ def _read_scripts(text: str | None) -> dict[str, tuple[Step, ...]]:
 
     if not text:
         return {}
-    source = Path(text)
+    if not text.lstrip().startswith("{"):  # a file name
+        source = Path(text)
+        try:
+            text = source.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            msg = f"--scripts: {source}: file not found; give a .json file or the JSON text itself"
+            raise TreeError(msg) from None
+        except (OSError, UnicodeDecodeError) as err:
+            msg = f"--scripts: cannot read {source} ({err})"
+            raise TreeError(msg) from None
     try:
-        raw = json.loads(source.read_text(encoding="utf-8") if text.endswith(".json") and source.is_file() else text)
-    except (OSError, json.JSONDecodeError) as err:
+        raw = json.loads(text)
+    except json.JSONDecodeError as err:
         msg = f"--scripts: not a JSON object of node path -> statuses ({err})"
         raise TreeError(msg) from None
     if not isinstance(raw, dict):
@@ -360,13 +369,15 @@ def _script_unknown_types(file: Path, factory: BehaviorTreeFactory, scripts: dic
             if manifest is not None and manifest.bound:
                 continue
             model = manifest or parser.node_models.get(name)
+            if model is None and element.children:
+                continue  # not a leaf: the loader reports the unknown node type, as validate does
             kind = model.kind if model is not None else NodeKind.ACTION
             if kind not in (NodeKind.ACTION, NodeKind.CONDITION):
                 continue
-            ports = dict(model.ports) if model is not None else {}
-            for attr in element.attrs:
-                if is_allowed_port_name(attr) and attr not in ports:
-                    ports[attr] = bidirectional_port(attr)
+            if model is not None:  # declared ports only: the loader reports unknown ones, as validate does
+                ports = dict(model.ports)
+            else:
+                ports = {attr: bidirectional_port(attr) for attr in element.attrs if is_allowed_port_name(attr)}
             base = ScriptedAction if kind is NodeKind.ACTION else ScriptedCondition
             cls = scripted_node_class(base, tuple(ports.values()), name)
             if manifest is not None:
@@ -389,13 +400,20 @@ class _Defaulting(dict[str, tuple["Step", ...]]):
 
 def _run_xml(args: argparse.Namespace) -> StatusLog:
     from twin.bt.log import StatusLog
-    from twin.bt.mission_nodes import LOCATION_FILE_KEY
+    from twin.bt.mission_nodes import LOCATION_FILE_KEY, load_locations
     from twin.bt.tree import ManualClock
     from twin.core.clock import NS_PER_S
 
     if args.period_ms <= 0 or args.ticks <= 0:
         msg = "--period-ms and --ticks must be positive"
         raise TreeError(msg)
+    if args.polls_to_arrive < 1:
+        msg = f"--polls-to-arrive must be at least 1 (navigator polls per goal), got {args.polls_to_arrive}"
+        raise TreeError(msg)
+    try:
+        load_locations(args.location_file)  # one line now, not a warning per node and a FAILURE later
+    except ConfigError as err:
+        raise err.with_context(before="--location-file: ") from None
     factory = _factory(seed=args.seed, polls_to_arrive=args.polls_to_arrive)
     _script_unknown_types(args.file, factory, _read_scripts(args.scripts))
     clock = ManualClock()
@@ -435,7 +453,13 @@ def _log_command(args: argparse.Namespace) -> int:
     else:
         log = _run_xml(args)
     if args.save:
-        log.write_jsonl(args.save)
+        try:
+            log.write_jsonl(args.save)
+        except OSError as err:
+            msg = (
+                f"--save: cannot write {args.save} ({err.strerror or err}); give a path in an existing, writable folder"
+            )
+            raise TreeError(msg) from None
         print(f"saved {len(log.changes)} changes to {args.save}", file=sys.stderr)
     if args.json:
         changes = [

@@ -174,3 +174,87 @@ def test_subtree_models_demand_their_mandatory_ports() -> None:
 def test_ports_pre_create_typed_entries_and_reject_conflicting_types() -> None:
     message = error_of(v4('<Sequence><Repeat num_cycles="{n}"><AlwaysSuccess/></Repeat><Sleep msec="{n}"/></Sequence>'))
     assert "[int]" in message and "[unsigned int]" in message
+
+
+# BT.CPP's Reactive.TwoAsyncNodesInReactiveSequence (tests/gtest_reactive.cpp), with built-in leaves.
+TWO_ASYNC = """<root BTCPP_format="4">
+  <BehaviorTree ID="MainTree">
+    <ReactiveSequence>
+      <AsyncSequence name="first"><AlwaysSuccess/><AlwaysSuccess/></AsyncSequence>
+      <AsyncSequence name="second"><AlwaysSuccess/><AlwaysSuccess/></AsyncSequence>
+    </ReactiveSequence>
+  </BehaviorTree>
+</root>"""
+
+
+def test_a_reactive_sequence_with_two_async_sequences_is_refused_at_its_line() -> None:
+    message = error_of(TWO_ASYNC)
+    assert message.startswith("t.xml:3: a <ReactiveSequence> cannot have more than one async child")
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        # BT.CPP 4.8.2 counts only <AsyncSequence> children (oracle: all three load and run)
+        "<ReactiveSequence><AsyncSequence><AlwaysSuccess/></AsyncSequence><Sequence><AsyncSequence><AlwaysSuccess/>"
+        "</AsyncSequence></Sequence></ReactiveSequence>",
+        "<ReactiveSequence><AsyncFallback><AlwaysSuccess/></AsyncFallback><AsyncFallback><AlwaysSuccess/>"
+        "</AsyncFallback></ReactiveSequence>",
+        "<ReactiveFallback><AsyncSequence><AlwaysSuccess/></AsyncSequence><AsyncSequence><AlwaysSuccess/>"
+        "</AsyncSequence></ReactiveFallback>",
+    ],
+    ids=["one_direct", "async_fallbacks", "reactive_fallback"],
+)
+def test_other_async_children_are_accepted_as_btcpp_accepts_them(body: str) -> None:
+    assert load(v4(body)).tick_once() is NodeStatus.SUCCESS
+
+
+def test_raw_ampersands_and_angle_brackets_in_attributes_load_as_tinyxml2_reads_them() -> None:
+    tree = load(
+        v4(
+            "<Sequence><Script code=\"a := 1; b := 2; ok := a &lt; b &amp;&amp; b > a; s := 'x &foo; &amp; y'\"/>"
+            '<Precondition if="a>-b && ok != 0 && s == \'x &foo; & y\'" else="FAILURE">'
+            '<Script code="c := a < b"/></Precondition></Sequence>'
+        )
+    )
+    assert tree.tick_once() is NodeStatus.SUCCESS
+    assert tree.root_blackboard.get("c") == 1.0
+
+
+def test_escaping_keeps_line_numbers_and_leaves_comments_alone() -> None:
+    message = error_of(
+        '<root BTCPP_format="4">\n<!-- a & b < c -->\n<BehaviorTree ID="M">\n'
+        '<Sequence><Script code="x := 1 && 2 < 3"/>\n<Teleport/>\n</Sequence></BehaviorTree></root>'
+    )
+    assert message.startswith("t.xml:5: unknown node type <Teleport>")
+
+
+def test_a_lt_outside_any_attribute_is_still_malformed() -> None:
+    assert "t.xml:1: malformed XML" in error_of(v4("<Sequence>a < b<AlwaysSuccess/></Sequence>"))
+
+
+@pytest.mark.parametrize("root", ['<root BTCPP_format="4">', '<root BTCPP_format="4" main_tree_to_execute="M">'])
+def test_a_file_without_behavior_tree_says_so(root: str) -> None:
+    assert error_of(f"{root}</root>").startswith("t.xml:1: the file has no <BehaviorTree>")
+
+
+def subtree_chain(n: int, wrap: bool = True) -> str:
+    """T0 holds T1 holds ... holds Tn, each inside a Sequence when `wrap`."""
+    trees = "".join(
+        f'<BehaviorTree ID="T{i}">{"<Sequence>" if wrap else ""}<SubTree ID="T{i + 1}"/>{"</Sequence>" if wrap else ""}'
+        "</BehaviorTree>"
+        for i in range(n)
+    )
+    return f'<root BTCPP_format="4" main_tree_to_execute="T0">{trees}<BehaviorTree ID="T{n}"><AlwaysSuccess/></BehaviorTree></root>'
+
+
+def test_a_subtree_chain_within_the_depth_limit_ticks() -> None:
+    assert load(subtree_chain(99)).tick_once() is NodeStatus.SUCCESS  # 199 levels
+
+
+@pytest.mark.parametrize(("n", "wrap", "levels"), [(100, True, 201), (1200, False, 1201)])
+def test_a_subtree_chain_nesting_too_deep_is_one_short_line(n: int, wrap: bool, levels: int) -> None:
+    message = error_of(subtree_chain(n, wrap))
+    assert message.startswith(f"t.xml:1: <BehaviorTree ID='T0'> nests nodes {levels} levels deep through {n} nested")
+    assert f"(T0 -> T1 -> T2 -> ... -> T{n - 1} -> T{n})" in message
+    assert len(message) < 300

@@ -78,6 +78,34 @@ def test_logical_operators_need_0_or_1_integers() -> None:
         run("2 && 1")
 
 
+@pytest.mark.parametrize(
+    ("code", "value"),
+    [
+        ("10 - 4 - 3", 9.0),  # 10 - (4 - 3)
+        ("2 - 3 + 4", -5.0),  # 2 - (3 + 4)
+        ("100 / 10 / 2", 20.0),  # 100 / (10 / 2)
+        ("12 / 2 * 3", 2.0),  # 12 / (2 * 3)
+        ("2 - 3 * 4 + 1", -11.0),  # 2 - ((3 * 4) + 1)
+        ("2 * 3 - 4 * 5 - 6", -8.0),  # (2 * 3) - ((4 * 5) - 6)
+        ("-2 - 3 - 4", -1.0),  # (-2) - (3 - 4)
+        ("2 + 3 * 4", 14.0),
+        ("(10 - 4) - 3", 3.0),
+    ],
+)
+def test_arithmetic_groups_from_the_right_within_a_level_as_btcpp_4_8_2(code: str, value: float) -> None:
+    # BT.CPP issue #1029, fixed after 4.8.2; values recorded from BT.CPP 4.8.2 (case t068)
+    assert run(code)[0] == value
+
+
+def test_bit_and_logical_operators_group_from_the_left() -> None:
+    assert run("1 | 2 ^ 3")[0] == 0.0  # (1 | 2) ^ 3
+    assert run("0 && 1 || 1")[0] == 1.0  # (0 && 1) || 1
+
+
+def test_a_long_subtraction_chain_folds_from_the_right() -> None:
+    assert run(" - ".join(["1"] * 300))[0] == 0.0  # 1 - (1 - (1 - ...)): 300 terms alternate 1, 0
+
+
 def test_bit_operators_bind_and_before_or() -> None:
     assert run("1 | 2 & 3")[0] == 3.0
 
@@ -143,3 +171,13 @@ def test_script_results_as_conditions_follow_any_cast_to_bool() -> None:
     for bad in (2, -1.0, "true", None):
         with pytest.raises(ScriptError):
             script_truth(bad)
+
+
+def test_parentheses_nested_too_deeply_are_a_syntax_error_not_a_crash() -> None:
+    with pytest.raises(ScriptSyntaxError, match="nested too deeply"):
+        parse_script("(" * 2000 + "1" + ")" * 2000)
+
+
+def test_an_expression_too_long_to_evaluate_is_a_script_error() -> None:
+    with pytest.raises(ScriptError, match="nested too deeply"):
+        run(" - ".join(["1"] * 5000))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from twin.bt import BehaviorTreeFactory, ManualClock, NodeStatus
-from twin.bt.tree import TimerQueue
+from twin.bt.tree import MAX_WAKE_UP_RETICKS, TimerQueue
 from twin.core.errors import TreeError
 
 from .helpers import v4
@@ -83,3 +83,53 @@ def test_walk_visits_nodes_depth_first_with_their_depth() -> None:
         )
     )
     assert [(depth, node.name) for depth, node in tree.walk()] == [(0, "s"), (1, "i"), (2, "f"), (1, "a")]
+
+
+# BT.CPP's Parallel.PauseWithRetry (tests/gtest_parallel.cpp): the Retry wakes the tree on every pass,
+# a loop BT.CPP ends only when its Sleep timer fires on wall time.
+PAUSE_WITH_RETRY = """
+<root BTCPP_format="4">
+  <BehaviorTree ID="TestTree">
+    <Parallel>
+      <Sequence>
+        <Sleep msec="150"/>
+        <Script code="paused := false"/>
+        <Sleep msec="150"/>
+      </Sequence>
+      <Sequence>
+        <Script code="paused := true; done := false"/>
+        <RetryUntilSuccessful _while="paused" num_attempts="-1" _onHalted="done = true">
+          <AlwaysFailure/>
+        </RetryUntilSuccessful>
+      </Sequence>
+    </Parallel>
+  </BehaviorTree>
+</root>
+"""
+
+
+def test_a_tree_that_wakes_itself_forever_returns_running_after_the_re_tick_cap(caplog) -> None:
+    clock = ManualClock()
+    tree = BehaviorTreeFactory().create_tree_from_text(PAUSE_WITH_RETRY, clock=clock)
+    passes = 0
+
+    def count(t_ns, path, uid, prev, new) -> None:
+        nonlocal passes
+        passes += path == "AlwaysFailure::9" and new is NodeStatus.FAILURE
+
+    tree.add_listener(count)
+    assert tree.tick_once() is NodeStatus.RUNNING
+    assert passes == MAX_WAKE_UP_RETICKS + 1
+    assert "woke itself up 1000 times in one tick" in caplog.text
+    assert tree.root_blackboard.get("done") == 0  # BT.CPP stores the script's false as int 0
+
+
+def test_a_capped_tick_goes_on_at_a_later_time_as_btcpp_does() -> None:
+    clock = ManualClock()
+    tree = BehaviorTreeFactory().create_tree_from_text(PAUSE_WITH_RETRY, clock=clock)
+    assert tree.tick_once() is NodeStatus.RUNNING
+    clock.advance(150_000_000)
+    assert tree.tick_once() is NodeStatus.RUNNING  # the first Sleep fired: paused := false halts the Retry
+    assert tree.root_blackboard.get("done") == 1
+    clock.advance(150_000_000)
+    assert tree.tick_once() is NodeStatus.SUCCESS

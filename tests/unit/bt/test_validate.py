@@ -66,6 +66,13 @@ def test_the_shipped_trees_are_valid(factory: BehaviorTreeFactory, tree_file: st
             'so write _autoremap="true"',
         ),
         ('<SubTree ID="Missing"/>', "", ' BTCPP_format="4"', "t.xml:3: SubTree 'Missing' does not match"),
+        (
+            "<ReactiveSequence><AsyncSequence><AlwaysSuccess/></AsyncSequence>"
+            "<AsyncSequence><AlwaysSuccess/></AsyncSequence></ReactiveSequence>",
+            "",
+            ' BTCPP_format="4"',
+            "t.xml:3: a <ReactiveSequence> cannot have more than one async child",
+        ),
     ],
 )
 def test_each_problem_is_one_line_with_file_and_line(factory, body: str, extra: str, fmt: str, expected: str) -> None:
@@ -97,3 +104,23 @@ def test_every_tree_is_checked_not_only_the_main_one(factory: BehaviorTreeFactor
         source="t.xml",
     )
     assert any("num_cycles" in p for p in report.problems)
+
+
+def test_a_deep_subtree_chain_is_one_problem_not_a_recursion_error(factory: BehaviorTreeFactory) -> None:
+    trees = "".join(f'<BehaviorTree ID="T{i}"><SubTree ID="T{i + 1}"/></BehaviorTree>' for i in range(1200))
+    xml = f'<root BTCPP_format="4" main_tree_to_execute="T0">{trees}<BehaviorTree ID="T1200"><AlwaysSuccess/></BehaviorTree></root>'
+    report = validate_text(xml, factory, source="t.xml")
+    assert len(report.problems) == 1
+    assert report.problems[0].startswith("t.xml:1: <BehaviorTree ID='T0'> nests nodes 1201 levels deep")
+
+
+def test_a_long_subtree_cycle_is_reported_without_recursion(factory: BehaviorTreeFactory) -> None:
+    trees = "".join(f'<BehaviorTree ID="T{i}"><SubTree ID="T{(i + 1) % 1500}"/></BehaviorTree>' for i in range(1500))
+    report = validate_text(f'<root BTCPP_format="4" main_tree_to_execute="T0">{trees}</root>', factory, source="t.xml")
+    assert any("includes itself (T0 -> T1 -> " in problem for problem in report.problems), report.problems
+
+
+def test_an_unknown_port_lists_the_ports_once(factory: BehaviorTreeFactory) -> None:
+    report = validate_text(doc('<Timeout msec="1" zzz="2"><AlwaysSuccess/></Timeout>'), factory, source="t.xml")
+    (problem,) = report.problems
+    assert "unknown port 'zzz' of <Timeout>; its ports are msec" in problem and "valid:" not in problem
