@@ -42,6 +42,7 @@ from twin.core.native import (
     compiler_version,
     find_compiler,
 )
+from twin.cosim.fmu import fmu_file_problem
 from twin.cosim.units import BASE_NAMES, find_unit
 
 __all__ = [
@@ -178,8 +179,10 @@ def resolve_fmu(ref: str | Path, *, fmi_version: FmiVersion = 2, base_dir: Path 
     path = Path(text).expanduser()
     if base_dir is not None and not path.is_absolute():
         path = base_dir / path
-    if not path.is_file():
-        msg = f"{path}: FMU file not found (give a .fmu path or builtin:NAME)"
+    problem = fmu_file_problem(path)
+    if problem is not None:
+        hint = " (give a .fmu path or builtin:NAME)" if not path.exists() else ""
+        msg = f"{path}: {problem}{hint}"
         raise FmuError(msg)
     return path
 

@@ -48,6 +48,7 @@ __all__ = [
     "Stepper",
     "VariableInfo",
     "binary_problem",
+    "fmu_file_problem",
     "fmu_logger",
     "read_fmu_info",
     "stepping",
@@ -118,8 +119,9 @@ def read_fmu_info(path: Path) -> FmuInfo:
     Raises:
         FmuError: If the file is missing, not a zip, or its model description is invalid.
     """
-    if not path.is_file():
-        msg = f"{path}: FMU file not found"
+    problem = fmu_file_problem(path)
+    if problem is not None:
+        msg = f"{path}: {problem}"
         raise FmuError(msg)
     if not zipfile.is_zipfile(path):
         msg = f"{path}: not an FMU (not a zip archive)"
@@ -127,8 +129,14 @@ def read_fmu_info(path: Path) -> FmuInfo:
     try:
         md = read_model_description(str(path), validate=False)
     except Exception as err:  # FMPy raises bare Exceptions and XML errors of several kinds
-        first = str(err).strip().splitlines()
-        msg = f"{path}: invalid modelDescription.xml: {first[0] if first else type(err).__name__}"
+        try:
+            problem = _description_problem(path)
+        except Exception:  # a diagnosis that fails itself leaves FMPy's message, never a traceback
+            problem = None
+        if problem is None:
+            first = str(err).strip().splitlines()
+            problem = f"invalid modelDescription.xml: {first[0] if first else type(err).__name__}"
+        msg = f"{path}: {problem}"
         raise FmuError(msg) from None
     variables: dict[str, VariableInfo] = {}
     for v in md.modelVariables:
@@ -167,6 +175,89 @@ def read_fmu_info(path: Path) -> FmuInfo:
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),
     )
+
+
+def fmu_file_problem(path: Path) -> str | None:
+    """Why `path` is not a file to read as an FMU (missing, or a folder), as a phrase; None when it is a file."""
+    if path.is_dir():
+        if (path / "modelDescription.xml").is_file():
+            return (
+                "is a folder (an unzipped FMU), where an .fmu file is expected; zip its contents into one: "
+                f"(cd {path} && zip -r ../{path.name}.fmu .)"
+            )
+        return "is a folder, where an .fmu file is expected"
+    if not path.is_file():
+        return "FMU file not found"
+    return None
+
+
+_FMI3_VARIABLE_TAGS = frozenset(
+    {"Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
+    | {"Boolean", "String", "Binary", "Enumeration", "Clock"}
+)
+
+
+def _description_problem(path: Path) -> str | None:
+    """What is wrong with the FMU's model description, in FMI terms; None when nothing known is.
+
+    Called only after FMPy failed to read it, to say why in words a vendor can act on.
+    """
+    from lxml import etree
+
+    with zipfile.ZipFile(path) as archive:
+        names = archive.namelist()
+        if "modelDescription.xml" not in names:
+            nested = sorted(n for n in names if n.endswith("/modelDescription.xml"))
+            if nested:
+                folder = nested[0].rsplit("/", 1)[0]
+                return (
+                    f"no modelDescription.xml at the archive's root, only {nested[0]}; "
+                    f"zip the contents of {folder}/, not the folder itself"
+                )
+            return "no modelDescription.xml in the archive; an FMU has one at its root (is this an FMU?)"
+        data = archive.read("modelDescription.xml")
+    try:
+        root = etree.fromstring(data, etree.XMLParser(resolve_entities=False, no_network=True))
+    except etree.XMLSyntaxError:
+        return None  # the parser's own message says where
+    if etree.QName(root).localname != "fmiModelDescription":
+        return f"modelDescription.xml: the root element is <{etree.QName(root).localname}>, not <fmiModelDescription>"
+    version = root.get("fmiVersion")
+    if version is None:
+        return 'modelDescription.xml: <fmiModelDescription> has no fmiVersion attribute (FMI 2.0: "2.0", 3.0: "3.0")'
+    variables = root.find("ModelVariables")
+    tags = {child.tag for child in variables} if variables is not None else set()
+    if version == "1.0":
+        if root.find("CoSimulation") is not None or root.find("ModelExchange") is not None:
+            return (
+                'modelDescription.xml says fmiVersion="1.0" but is laid out as FMI 2.0 (<CoSimulation>/'
+                "<ModelExchange> elements); FMI 1.0 is not supported anyway (FMI 2.0 and 3.0 are)"
+            )
+        return "modelDescription.xml is not valid FMI 1.0, and FMI 1.0 is not supported (FMI 2.0 and 3.0 are)"
+    if version != "2.0" and not version.startswith("3."):
+        return f'modelDescription.xml: fmiVersion="{version}" is no FMI version twin reads (2.0 and 3.0 are)'
+    if version.startswith("3.") and "ScalarVariable" in tags:
+        return (
+            f'modelDescription.xml says fmiVersion="{version}" but declares FMI 2.0 <ScalarVariable> elements; '
+            "fix fmiVersion or the variables"
+        )
+    if version == "2.0" and tags & _FMI3_VARIABLE_TAGS:
+        found = sorted(tags & _FMI3_VARIABLE_TAGS)[0]
+        return (
+            f'modelDescription.xml says fmiVersion="2.0" but declares FMI 3.0 variable elements (<{found}>); '
+            "fix fmiVersion or the variables"
+        )
+    if version == "2.0":
+        count = sum(1 for child in variables if child.tag == "ScalarVariable") if variables is not None else 0
+        structure = root.find("ModelStructure")
+        indices = [] if structure is None else [u.get("index") for u in structure.iter("Unknown")]
+        for index in indices:
+            if index is None or not index.isdigit() or not 1 <= int(index) <= count:
+                return (
+                    f"modelDescription.xml: <ModelStructure> refers to variable index {index}, but <ModelVariables> "
+                    f"declares {count} variable(s); indices count the ScalarVariables from 1"
+                )
+    return None
 
 
 def _binary_member(info: FmuInfo) -> str:
