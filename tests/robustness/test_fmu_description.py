@@ -111,3 +111,31 @@ def test_an_unzipped_fmu_folder_is_told_to_be_zipped(tmp_path: Path, capsys: pyt
         assert "not found" not in line
     with pytest.raises(FmuError, match="is a folder"):
         read_fmu_info(folder)
+
+
+def _start_of_r(value: str) -> Callable[[str], str]:
+    def change(text: str) -> str:
+        return re.sub(r'(name="R".*?start=")[^"]*"', rf'\g<1>{value}"', text, count=1, flags=re.DOTALL)
+
+    return change
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_a_start_value_that_is_not_a_number_is_named_by_check_and_simulate(
+    fmi_version: int, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    fmu = _copy(tmp_path, _description(_start_of_r("abc")), fmi_version=fmi_version)
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(f"name: s\ndrive: {{type: fmu, fmu_file: {fmu.name}}}\n")
+    bag = tmp_path / "bag"
+    for argv in (
+        ["fmu", "check", str(fmu)],
+        ["scenario", "check", str(scenario)],
+        ["simulate", str(scenario), "--duration", "0.1", "--out", str(bag)],
+    ):
+        code = main(argv)
+        captured = capsys.readouterr()
+        assert code == 4, (argv, captured.err)
+        line = assert_one_line_error(captured.err, contains=fmu.name)
+        assert "variable 'R'" in line and 'start="abc"' in line and "not a number" in line
+    assert not bag.exists()

@@ -140,6 +140,10 @@ def read_fmu_info(path: Path) -> FmuInfo:
         raise FmuError(msg) from None
     variables: dict[str, VariableInfo] = {}
     for v in md.modelVariables:
+        problem = _start_problem(v)
+        if problem is not None:
+            msg = f"{path}: modelDescription.xml: {problem}; fix the start value in the FMU's model description"
+            raise FmuError(msg)
         unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
         variables[v.name] = VariableInfo(
             name=v.name,
@@ -175,6 +179,26 @@ def read_fmu_info(path: Path) -> FmuInfo:
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),
     )
+
+
+# Variable types whose start value is a number (FMI 2 and 3 spellings); arrays list one per element.
+_NUMERIC_TYPES = frozenset(
+    {"Real", "Integer", "Enumeration", "Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16"}
+    | {"Int32", "UInt32", "Int64", "UInt64"}
+)
+
+
+def _start_problem(variable: Any) -> str | None:
+    """Why an FMPy model variable's start value is not a number its type needs (None when it is, or has none)."""
+    if variable.start is None or str(variable.type) not in _NUMERIC_TYPES:
+        return None
+    text = str(variable.start)
+    try:
+        for item in text.split() or [text]:
+            float(item)
+    except ValueError:
+        return f'variable {variable.name!r} ({variable.type}) has start="{text}", which is not a number'
+    return None
 
 
 def fmu_file_problem(path: Path) -> str | None:

@@ -286,7 +286,14 @@ def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]
                     "give the number (SI) or the FMU parameter's name"
                 )
                 raise ConfigError(msg)
-            values[name] = float(var.start)
+            try:
+                values[name] = float(var.start)
+            except ValueError:  # an array's or a Boolean's start (read_fmu_info refuses non-numbers)
+                msg = (
+                    f"drive.motor.{name}: the FMU's {ref!r} is a {var.type} with start {var.start!r}, not one "
+                    "number; give the number (SI) or name a scalar parameter"
+                )
+                raise ConfigError(msg) from None
         else:
             values[name] = float(ref)
     try:
