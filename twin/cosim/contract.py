@@ -219,6 +219,7 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
     reports = []
     problems = []
     bound_to: dict[str, str] = {}  # variable -> the role it is bound to
+    by_vr: dict[int, tuple[str, str]] = {}  # value reference -> (variable, role) first bound to it
     given = mapping.roles.given()
     for role in roles:
         spec = ROLES[role]
@@ -244,6 +245,13 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
                 _, problem = _unit_for(info, unit_name, spec)
             if problem is None:
                 bound_to[var.name] = role
+                other = by_vr.setdefault(var.value_reference, (var.name, role))
+                if other[0] != var.name:
+                    problems.append(
+                        f"roles.{role}: {var.name!r} shares value reference {var.value_reference} with {other[0]!r} "
+                        f"(role {other[1]}), so setting or reading one is the other; the FMU's model description "
+                        "must give them distinct valueReferences"
+                    )
         if problem is not None and role in given and role not in required:
             # An optional role the mapping names explicitly must bind: a wrong name is not silently dropped.
             problems.append(f"roles.{role}: {problem}")
@@ -307,10 +315,10 @@ def bind(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Binding:
             details = "; ".join(f"{r.role}: {r.problem}" for r in report.roles if r.required and r.problem)
             parts.append(f"missing required role(s) {', '.join(report.missing)} ({details})")
         parts.extend(report.problems)
-        msg = (
-            f"{info.path}: does not satisfy the {profile.value} drive contract: {'; '.join(parts)}; "
-            f"{'map the roles to' if report.missing else 'fix the mapping against'} the FMU's variables "
-            f"(see `twin fmu check {info.path.name}`)"
+        msg = f"{info.path}: does not satisfy the {profile.value} drive contract: {'; '.join(parts)}; " + (
+            f"map the roles to the FMU's variables (see `twin fmu check {info.path.name}`)"
+            if report.missing
+            else f"`twin fmu check {info.path.name}` lists the FMU's variables"
         )
         raise FmuError(msg)
     bound: dict[str, BoundVariable] = {}

@@ -7,12 +7,16 @@ import dataclasses
 import math
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 from types import MappingProxyType
 
+import pytest
+
 from tests.unit.cosim.helpers import acme
+from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
-from twin.cosim.contract import FmuMapping, Profile, RoleBinding, RoleMap, check_contract, load_mapping
+from twin.cosim.contract import FmuMapping, Profile, RoleBinding, RoleMap, bind, check_contract, load_mapping
 from twin.cosim.fmu import read_fmu_info
 from twin.robot.chassis import ChassisParams
 from twin.robot.drivetrain import FmuDrive, FmuDrivetrain, MotorModel
@@ -136,3 +140,23 @@ def test_a_parameter_that_is_not_finite_is_refused() -> None:
     info = read_fmu_info(resolve_fmu("builtin:xm430_w210"))
     report = check_contract(info, FmuMapping(parameters={"R": math.nan}), Profile.VOLTAGE)
     assert report.problems == ("parameters.R: nan is not a finite number",)
+
+
+def test_two_roles_sharing_one_value_reference_are_refused(tmp_path: Path) -> None:
+    source = resolve_fmu("builtin:xm430_w210")
+    aliased = tmp_path / "aliased.fmu"
+    with zipfile.ZipFile(source) as src, zipfile.ZipFile(aliased, "w") as dst:
+        for name in src.namelist():
+            data = src.read(name)
+            if name == "modelDescription.xml":
+                data = data.replace(b'name="load_torque" valueReference="2"', b'name="load_torque" valueReference="0"')
+            dst.writestr(name, data)
+    info = read_fmu_info(aliased)
+    assert info.variables["load_torque"].value_reference == info.variables["voltage"].value_reference
+    report = check_contract(info, FmuMapping(), Profile.VOLTAGE)
+    assert not report.ok
+    assert report.problems[0].startswith(
+        "roles.load_torque: 'load_torque' shares value reference 0 with 'voltage' (role voltage)"
+    )
+    with pytest.raises(FmuError, match="shares value reference 0"):
+        bind(info, FmuMapping(), Profile.VOLTAGE)
