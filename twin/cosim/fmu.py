@@ -645,6 +645,7 @@ class FmuFile(Closing):
         start: Mapping[str, float] | None = None,
         start_time_s: float = 0.0,
         api: Api = "lowlevel",
+        purpose: str = "",
     ) -> Stepper:
         """Create, set up and initialise one instance.
 
@@ -657,12 +658,14 @@ class FmuFile(Closing):
                 the FMU's own units.
             start_time_s: Start time, s.
             api: `lowlevel` (direct C calls) or `convenience` (FMPy's wrappers).
+            purpose: What the instance is for, said after its name in messages when the name alone
+                means nothing to the user (an instance the twin makes for itself).
 
         Raises:
             FmuError: If the library cannot be loaded, instantiation returns NULL, a start value
                 names an unknown or non-settable variable, or initialisation fails.
         """
-        label = f"{self.label} instance {name!r}"
+        label = f"{self.label} instance {name!r}" + (f" ({purpose})" if purpose else "")
         messages = _Messages(label, name)
         kwargs = {
             "guid": self.info.guid,
@@ -769,6 +772,13 @@ class _Base(Closing):
     _out_refs: Any
     _n_in: int
     _n_out: int
+    # Set by the Model Exchange adapters (`_split_inputs`): where the discrete and continuous inputs are.
+    _discrete_at: tuple[int, ...]
+    _continuous_at: tuple[int, ...]
+    _discrete_refs: Any
+    _continuous_refs: Any
+    _continuous_values: Any
+    _held: tuple[float, ...] | None
 
     # The FMI 2 and FMI 3 adapters below implement these four; this base is never stepped itself.
     def step(self, t_s: float) -> None:
@@ -970,6 +980,12 @@ class _Fmi2Exchange(_Fmi2):
     """
 
     _FUNCTIONS = ("fmi2SetReal", f"{ME_SOLVER} integration", "fmi2GetReal")
+    _UPDATE = "fmi2NewDiscreteStates"
+
+    def _write(self, refs: Any, n: int, values: Any) -> int:
+        """Set `n` Real inputs; the status."""
+        status: int = self._set(self._c_ptr, refs, n, values)
+        return status
 
     def _bind_step(self, dll: Any) -> None:
         fmu = self._fmu
@@ -995,6 +1011,7 @@ class _Fmi2Exchange(_Fmi2):
         self._next_event_s = math.inf
         if self._api == "convenience":
             self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
+        _split_inputs(self, info)
         super().initialize(info, start, start_time_s)
 
     def slot_fields(self) -> dict[str, Any] | None:
@@ -1003,9 +1020,7 @@ class _Fmi2Exchange(_Fmi2):
 
     def step(self, t_s: float) -> None:
         c = self._c_ptr
-        set_status = self._set(c, self._in_refs, self._n_in, self.inputs)
-        if set_status > 1:
-            self.fail("fmi2SetReal", set_status, t_s)
+        _set_inputs(self, t_s)
         terminate = _integrate(self, t_s)
         if terminate:
             self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
@@ -1138,6 +1153,12 @@ class _Fmi3Exchange(_Fmi3):
 
     _FUNCTIONS = ("fmi3SetFloat64", f"{ME_SOLVER} integration", "fmi3GetFloat64")
     _INSTANTIATE = "fmi3InstantiateModelExchange"
+    _UPDATE = "fmi3UpdateDiscreteStates"
+
+    def _write(self, refs: Any, n: int, values: Any) -> int:
+        """Set `n` Float64 inputs; the status."""
+        status: int = self._set(self._c_ptr, refs, n, values, n)
+        return status
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         self._nx = info.n_states
@@ -1146,6 +1167,7 @@ class _Fmi3Exchange(_Fmi3):
         self._next_event_s = math.inf
         if self._api == "convenience":
             self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
+        _split_inputs(self, info)
         super().initialize(info, start, start_time_s)
 
     def _bind_step(self, dll: Any) -> None:
@@ -1174,9 +1196,7 @@ class _Fmi3Exchange(_Fmi3):
 
     def step(self, t_s: float) -> None:
         c = self._c_ptr
-        set_status = self._set(c, self._in_refs, self._n_in, self.inputs, self._n_in)
-        if set_status > 1:
-            self.fail("fmi3SetFloat64", set_status, t_s)
+        _set_inputs(self, t_s)
         terminate = _integrate(self, t_s)
         if terminate:
             self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
@@ -1205,6 +1225,59 @@ def _cvode(fmu: Any, get_dx: Any, get_nominals: Any, *, nx: int, nz: int, t0_s: 
         maxStep=max_step_s,
         relativeTolerance=ME_RELATIVE_TOLERANCE,
     )
+
+
+def _split_inputs(adapter: _Fmi2Exchange | _Fmi3Exchange, info: FmuInfo) -> None:
+    """Find the adapter's discrete inputs (variability `discrete`), which FMI lets change at events only."""
+    variability = {v.value_reference: v.variability for v in info.variables.values() if v.type in _REAL_TYPES}
+    vrs = adapter._in_vr
+    discrete = [k for k, vr in enumerate(vrs) if variability.get(vr) == "discrete"]
+    continuous = [k for k in range(len(vrs)) if k not in discrete]
+    adapter._discrete_at = tuple(discrete)
+    adapter._continuous_at = tuple(continuous)
+    adapter._discrete_refs = (ctypes.c_uint * max(1, len(discrete)))(*(vrs[k] for k in discrete))
+    adapter._continuous_refs = (ctypes.c_uint * max(1, len(continuous)))(*(vrs[k] for k in continuous))
+    adapter._continuous_values = (ctypes.c_double * max(1, len(continuous)))()
+    adapter._held = None  # the discrete inputs' values last set (None: not yet)
+
+
+def _set_inputs(adapter: _Fmi2Exchange | _Fmi3Exchange, t_s: float) -> None:
+    """Set the inputs for the step from `t_s`: continuous ones now, discrete ones in event mode.
+
+    FMI lets a discrete input change only at an event: when one of their values differs from the
+    last step's, the FMU enters event mode, takes them, updates its discrete states and goes back
+    to continuous-time mode (the solver restarts at the step's start in any case). Without
+    discrete inputs, one set call sets every input.
+    """
+    inputs = adapter.inputs
+    if not adapter._discrete_at:
+        status = adapter._write(adapter._in_refs, adapter._n_in, inputs)
+        if status > 1:
+            adapter.fail(adapter._FUNCTIONS[0], status, t_s)
+        return
+    if adapter._continuous_at:
+        values = adapter._continuous_values
+        for j, k in enumerate(adapter._continuous_at):
+            values[j] = inputs[k]
+        status = adapter._write(adapter._continuous_refs, len(adapter._continuous_at), values)
+        if status > 1:
+            adapter.fail(adapter._FUNCTIONS[0], status, t_s)
+    now = tuple(inputs[k] for k in adapter._discrete_at)
+    if now == adapter._held:
+        return
+    fmu = adapter._fmu
+    try:
+        fmu.enterEventMode()
+        status = adapter._write(adapter._discrete_refs, len(now), (ctypes.c_double * len(now))(*now))
+        if status > 1:
+            adapter.fail(f"{adapter._FUNCTIONS[0]} in event mode", status, t_s)
+        if _event_update(adapter):
+            adapter._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+            adapter.fail(adapter._UPDATE, 3, t_s)
+        fmu.enterContinuousTimeMode()
+    except fmpy.fmi1.FMICallException as err:
+        adapter.fail(err.function, int(err.status), t_s)
+    adapter._held = now
 
 
 def _event_update(adapter: _Fmi2Exchange | _Fmi3Exchange) -> bool:

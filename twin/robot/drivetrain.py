@@ -653,7 +653,15 @@ class FmuDrivetrain(Closing):
         speed = binding.outputs["wheel_speed"]
         probe_nm, h = 0.01, self._h
         stepper = self._file.instantiate(
-            "probe", step_s=h, inputs=in_vrs, outputs=[speed.value_reference], start=binding.start
+            "probe",
+            step_s=h,
+            inputs=in_vrs,
+            outputs=[speed.value_reference],
+            start=binding.start,
+            purpose=(
+                "a third instance the twin steps once before the run, under a small load torque, to estimate "
+                "the drive's inertia at the wheel; drive.wheel_inertia_kgm2 or drive.motor skips it"
+            ),
         )
         try:
             cmd, load = binding.inputs
@@ -985,6 +993,7 @@ def fmu_step_response(
         outputs = [speed.value_reference] + ([current.value_reference] if current else [])
         stepper = fmu.instantiate(
             "step",
+            purpose="the step-response run",
             step_s=step_s,
             inputs=[b.value_reference for b in binding.inputs],
             outputs=outputs,
