@@ -17,6 +17,7 @@ from twin.core.errors import BagError, ConfigError, FmuError
 
 if TYPE_CHECKING:
     from twin.cosim.contract import FmuMapping
+    from twin.robot.drivetrain import FmuDrive
 
 # twin.cosim.contract.Profile's values, spelled here so `--help` need not import fmpy (a test compares).
 PROFILES = ("voltage", "velocity-servo")
@@ -41,6 +42,7 @@ _STEP_EPILOG = """\
 examples:
   twin fmu step-response builtin:xl430_w250
   twin fmu step-response builtin:xm430_w210 --fmi 3 --step-ms 5 --out /tmp/step.png
+  twin fmu step-response vendor.fmu --scenario vendor.yaml   drive.motor and drive.mapping from a scenario
 """
 
 
@@ -94,7 +96,8 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         description=(
             "Step the FMU with a constant voltage and no load torque and print, next to it, python-control's "
             "response of the analytic transfer function w(s)/V(s) built from the FMU's parameters "
-            "(R, L, Kt, Ke, J_rotor, b_rotor, N, J_wheel)."
+            "(R, L, Kt, Ke, J_rotor, b_rotor, N, J_wheel), or from a scenario's drive.motor (--scenario) for an "
+            "FMU whose parameters are named otherwise."
         ),
         epilog=_STEP_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -105,6 +108,13 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     step.add_argument("--step-ms", type=float, default=1.0, help="communication step, ms (default 1)")
     step.add_argument("--duration-s", type=float, default=None, help="length (default 8 mechanical time constants)")
     step.add_argument("--map", type=Path, metavar="FILE", help="mapping file for a vendor FMU")
+    step.add_argument(
+        "--scenario",
+        type=Path,
+        metavar="FILE",
+        help="scenario whose drive.motor gives the motor model (numbers in SI or the FMU's parameter names) "
+        "for an FMU without the project's parameters R, L, Kt, ...; also its drive.mapping unless --map",
+    )
     step.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built-in (default 2)")
     step.add_argument("--out", type=Path, metavar="PNG", help="also plot both responses to this PNG")
     step.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -243,18 +253,40 @@ def _check_step_response_args(args: argparse.Namespace) -> None:
 
 def _step_response(args: argparse.Namespace) -> int:
     from twin.cosim.build import resolve_fmu
-    from twin.robot.drivetrain import fmu_step_response
+    from twin.robot.drivetrain import MotorModelError, fmu_step_response
 
     _check_step_response_args(args)
 
     path = resolve_fmu(args.fmu, fmi_version=args.fmi)
-    comparison, motor = fmu_step_response(
-        path,
-        voltage_v=args.voltage,
-        step_s=args.step_ms * 1e-3,
-        duration_s=args.duration_s,
-        mapping=_mapping(args.map),
-    )
+    mapping, motor_model = _mapping(args.map), None
+    if args.scenario is not None:
+        drive = _scenario_drive(args.scenario)
+        motor_model = drive.motor
+        if args.map is None:
+            try:
+                mapping = drive.resolved_mapping()
+            except ConfigError as err:
+                raise err.with_context(before=f"{args.scenario}: drive.mapping: ") from None
+    try:
+        comparison, motor = fmu_step_response(
+            path,
+            voltage_v=args.voltage,
+            step_s=args.step_ms * 1e-3,
+            duration_s=args.duration_s,
+            mapping=mapping,
+            motor_model=motor_model,
+        )
+    except MotorModelError as err:
+        if args.scenario is not None:
+            raise err.with_context(before=f"{args.scenario}: ") from None
+        # The default motor model names the project's parameters; another FMU needs its own.
+        field = err.key.removeprefix("drive.motor").lstrip(".")
+        msg = (
+            f"{path}: the step response compares the FMU with its linear motor model, but "
+            f"{err.problem}{f' (for {field})' if field else ''}; pass --scenario FILE whose drive.motor gives "
+            "the motor's constants (numbers in SI or this FMU's parameter names)"
+        )
+        raise FmuError(msg) from None
     c = comparison
     final_model = float(c.model_speed_radps[-1])
     summary = {
@@ -293,6 +325,25 @@ def _step_response(args: argparse.Namespace) -> int:
     if args.out is not None:
         print(f"  plot: {args.out}")
     return 0
+
+
+def _scenario_drive(path: Path) -> FmuDrive:
+    """The FMU drive section of the scenario at `path`, with a motor model.
+
+    Raises:
+        ConfigError: If the scenario does not load, its drive is not an FMU drive or has `motor: null`.
+    """
+    from twin.robot.drivetrain import FmuDrive
+    from twin.sim.scenario import load_scenario
+
+    drive = load_scenario(path).drive
+    if not isinstance(drive, FmuDrive):
+        msg = f"{path}: drive: is {drive.type}; --scenario takes drive.motor from an FMU drive (type: fmu)"
+        raise ConfigError(msg)
+    if drive.motor is None:
+        msg = f"{path}: drive.motor: is null; give the motor's constants (numbers in SI or the FMU's parameter names)"
+        raise ConfigError(msg)
+    return drive
 
 
 def _spread(n: int, count: int) -> list[float]:

@@ -73,6 +73,7 @@ __all__ = [
     "FmuDrive",
     "FmuDrivetrain",
     "MotorModel",
+    "MotorModelError",
     "Saturation",
     "SpeedLoopTargets",
     "WheelState",
@@ -278,13 +279,27 @@ _WHEEL_STATE = (
 )
 
 
+class MotorModelError(ConfigError):
+    """The motor model does not resolve against the FMU: `key` (`drive.motor.resistance_ohm`) and `problem`.
+
+    The message is `key: problem; fix` in a scenario's terms; `twin fmu step-response` rewords it in its own.
+    """
+
+    def __init__(self, key: str, problem: str, fix: str) -> None:
+        """Say that `key` fails with `problem`, and the `fix`."""
+        super().__init__(f"{key}: {problem}" + (f"; {fix}" if fix else ""))
+        self.key = key
+        self.problem = problem
+
+
 def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]) -> MotorConstants:
     """Resolve a motor model against an FMU: numbers as given, names from the start values or the FMU.
 
     Raises:
-        ConfigError: If a named parameter is missing or the constants are not physical.
+        MotorModelError: If a named parameter is missing or the constants are not physical.
     """
     values: dict[str, float] = {}
+    fix = "give the number (SI) or the FMU parameter's name"
     for name in MotorModel.__dataclass_fields__:
         ref = getattr(model, name)
         if isinstance(ref, str):
@@ -293,26 +308,21 @@ def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]
                 continue
             var = info.variables.get(ref)
             if var is None or var.start is None:
-                msg = (
-                    f"drive.motor.{name}: the FMU has no parameter {ref!r} with a start value; "
-                    "give the number (SI) or the FMU parameter's name"
-                )
-                raise ConfigError(msg)
+                problem = f"the FMU has no parameter {ref!r} with a start value"
+                raise MotorModelError(f"drive.motor.{name}", problem, fix)
             try:
                 values[name] = float(var.start)
             except ValueError:  # an array's or a Boolean's start (read_fmu_info refuses non-numbers)
-                msg = (
-                    f"drive.motor.{name}: the FMU's {ref!r} is a {var.type} with start {var.start!r}, not one "
-                    "number; give the number (SI) or name a scalar parameter"
-                )
-                raise ConfigError(msg) from None
+                problem = f"the FMU's {ref!r} is a {var.type} with start {var.start!r}, not one number"
+                raise MotorModelError(
+                    f"drive.motor.{name}", problem, "give the number (SI) or name a scalar parameter"
+                ) from None
         else:
             values[name] = float(ref)
     try:
         return MotorConstants(**values)
     except ValueError as err:
-        msg = f"drive.motor: {err}"
-        raise ConfigError(msg) from None
+        raise MotorModelError("drive.motor", str(err), "") from None
 
 
 def _communication_step(drive: FmuDrive, step_ns: int) -> tuple[float, int]:
@@ -1059,7 +1069,9 @@ def fmu_step_response(
 
     Raises:
         FmuError: If the FMU cannot be loaded, bound to the voltage profile or stepped.
-        ConfigError: If the FMU's parameters do not give a linear motor model.
+        MotorModelError: If `motor_model` (default: the project FMUs' parameter names) does not give a
+            linear motor model with this FMU.
+        ConfigError: If the run would take too many steps.
     """
     mapping = mapping or FmuMapping()
     with FmuFile(path) as fmu:
