@@ -104,6 +104,8 @@ class FmuInfo:
     n_states: int = 0  # continuous states (Model Exchange)
     n_event_indicators: int = 0
     variable_step: bool
+    # canBeInstantiatedOnlyOncePerProcess of the interface the twin steps (Co-Simulation, else Model Exchange).
+    instantiated_once: bool = False
     variables: Mapping[str, VariableInfo]
     units: Mapping[str, Unit]
 
@@ -163,6 +165,7 @@ def read_fmu_info(path: Path) -> FmuInfo:
             dims = (b.kg, b.m, b.s, b.A, b.K, b.mol, b.cd, b.rad)
             units[u.name] = Unit(name=u.name, dims=tuple(int(d) for d in dims), factor=b.factor, offset=b.offset)
     cs = md.coSimulation
+    stepped = cs if cs is not None else md.modelExchange
     return FmuInfo(
         path=path,
         fmi_version=str(md.fmiVersion),
@@ -176,6 +179,7 @@ def read_fmu_info(path: Path) -> FmuInfo:
         n_states=len(md.derivatives or ()),
         n_event_indicators=int(md.numberOfEventIndicators or 0),
         variable_step=bool(cs.canHandleVariableCommunicationStepSize) if cs is not None else False,
+        instantiated_once=bool(getattr(stepped, "canBeInstantiatedOnlyOncePerProcess", False)),
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),
     )
@@ -666,6 +670,13 @@ class FmuFile(Closing):
                 names an unknown or non-settable variable, or initialisation fails.
         """
         label = f"{self.label} instance {name!r}" + (f" ({purpose})" if purpose else "")
+        if self.info.instantiated_once and self._instances:
+            msg = (
+                f"{label}: the FMU declares canBeInstantiatedOnlyOncePerProcess and this process has an instance "
+                f"of it already ({self._instances[0].name.rsplit(' instance ', 1)[-1]}); run each instance in its "
+                "own process (drive.isolation: process)"
+            )
+            raise FmuError(msg)
         messages = _Messages(label, name)
         kwargs = {
             "guid": self.info.guid,

@@ -388,6 +388,13 @@ def plan_fmu_drive(drive: FmuDrive, info: FmuInfo, *, step_ns: int) -> DrivePlan
         speed_loop = design_speed_pi(
             motor, crossover_hz=targets.bandwidth_hz, phase_margin_deg=targets.phase_margin_deg, step_s=comm_s
         )
+    if info.instantiated_once and drive.isolation != "process":
+        msg = (
+            f"drive.isolation: {info.path.name} declares canBeInstantiatedOnlyOncePerProcess, and the drive needs "
+            "one instance per wheel; set drive.isolation: process, which runs each instance in its own process "
+            "(with drive.motor or drive.wheel_inertia_kgm2)"
+        )
+        raise ConfigError(msg)
     if drive.wheel_inertia_kgm2 is None and motor is None and drive.isolation == "process":
         msg = (
             "drive.wheel_inertia_kgm2: give it (or drive.motor) with isolation: process; "
@@ -541,6 +548,7 @@ class FmuDrivetrain(Closing):
                 outputs=out_vrs,
                 start=binding.start,
                 timeout_s=drive.step_timeout_s,
+                process_per_instance=self._file.info.instantiated_once,
             )
             self._left, self._right = self._isolated.steppers
         else:
