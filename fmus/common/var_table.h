@@ -16,6 +16,7 @@
 #define KIND_PARAMETER 1
 #define KIND_INPUT 2
 #define KIND_OUTPUT 3
+#define KIND_DISCRETE_INPUT 4 /* an input that changes only at events */
 
 static inline void vt_reset(double *v) { memcpy(v, MODEL_START, sizeof(double) * MODEL_NVR); }
 

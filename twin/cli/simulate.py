@@ -340,6 +340,7 @@ def _run(
     sinks: list[Sink],
     provenance: Mapping[str, str] | None,
 ) -> int:
+    from twin.sim.check import in_scenario
     from twin.sim.simulation import Simulation
     from twin.sim.watchdog import Watchdog, WatchdogAbort
 
@@ -360,11 +361,11 @@ def _run(
             shutil.rmtree(bag_path, ignore_errors=True)
         if not isinstance(err, ConfigError):
             raise
-        text = str(err)
-        if not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text or text.startswith("/"):
-            raise
         # A scenario value the loaded world or robot refuses: name the scenario file too.
-        raise err.with_context(before=f"{path}: ") from err
+        named = in_scenario(err, path)
+        if named is err:
+            raise
+        raise named from err
     guard = _Guard(simulation, debug=bool(getattr(args, "debug", False)))
     try:
         with _graceful_signals(flag), simulation as sim:

@@ -164,10 +164,28 @@ def _fail(node: yaml.Node, key: str, problem: str) -> typing.NoReturn:
     raise ConfigError(msg)
 
 
+# How a message names what a key takes, in the file's terms rather than the Python class's.
+_PLAIN_NAMES: dict[Any, str] = {str: "text", float: "a number", int: "a whole number", bool: "true or false"}
+_PLAIN_NAMES[Path] = "a path"
+
+
 def _describe(tp: Any) -> str:
+    if _is_dataclass_type(tp):
+        return f"a mapping (keys: {', '.join(_init_fields(tp))})"
+    if tp in _PLAIN_NAMES:
+        return _PLAIN_NAMES[tp]
     if isinstance(tp, type):
         return tp.__name__
     return str(tp).replace("typing.", "")
+
+
+def _kind(node: yaml.Node) -> str:
+    """What a YAML node is, for 'got ...'."""
+    if isinstance(node, yaml.MappingNode):
+        return "a mapping"
+    if isinstance(node, yaml.SequenceNode):
+        return "a list"
+    return repr(_CONSTRUCTOR.construct_object(node, deep=True))
 
 
 def _scalar(node: yaml.Node, key: str) -> Any:
@@ -294,7 +312,11 @@ def _build_union(args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
             return build(member, node, key=key)
         except ConfigError as err:
             errors.append(str(err))
-    _fail(node, key, f"expected {' or '.join(_describe(m) for m in members)}")
+    mappings = [k for k, m in enumerate(members) if _is_dataclass_type(m)]
+    if isinstance(node, yaml.MappingNode) and len(mappings) == 1:
+        raise ConfigError(errors[mappings[0]])  # the only member a mapping can be: its own reason
+    plain_first = sorted(members, key=_is_dataclass_type)
+    _fail(node, key, f"expected {' or '.join(_describe(m) for m in plain_first)}, got {_kind(node)}")
 
 
 def _build_sequence(tp: Any, origin: Any, args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
@@ -323,7 +345,7 @@ def _build_mapping(args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
 
 def _build_dataclass(cls: type, node: yaml.Node, key: str) -> Any:
     if not isinstance(node, yaml.MappingNode):
-        _fail(node, key, f"expected a mapping of {cls.__name__} settings")
+        _fail(node, key, f"expected {_describe(cls)}, got {_kind(node)}")
     hints = _type_hints(cls)
     fields = _init_fields(cls)
     kwargs: dict[str, Any] = {}

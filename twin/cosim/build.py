@@ -42,6 +42,7 @@ from twin.core.native import (
     compiler_version,
     find_compiler,
 )
+from twin.cosim.fmu import fmu_file_problem
 from twin.cosim.units import BASE_NAMES, find_unit
 
 __all__ = [
@@ -87,8 +88,13 @@ class VariableSpec:
     only: str | None = None  # present only when this define is set
     unless: str | None = None  # absent when this define is set
     derivative_of: str | None = None  # Model Exchange: the state variable this is the derivative of
+    # discrete: an input that changes only at events (a Model Exchange FMU takes it in event mode only).
+    variability: Literal["continuous", "discrete"] = "continuous"
 
     def __post_init__(self) -> None:
+        if self.variability == "discrete" and self.causality != "input":
+            msg = f"variable {self.name!r}: only inputs may be discrete, not a {self.causality}"
+            raise ValueError(msg)
         if self.vr < 0 or self.vr > 4095:
             msg = f"vr must be between 0 and 4095, got {self.vr}"
             raise ValueError(msg)
@@ -178,8 +184,10 @@ def resolve_fmu(ref: str | Path, *, fmi_version: FmiVersion = 2, base_dir: Path 
     path = Path(text).expanduser()
     if base_dir is not None and not path.is_absolute():
         path = base_dir / path
-    if not path.is_file():
-        msg = f"{path}: FMU file not found (give a .fmu path or builtin:NAME)"
+    problem = fmu_file_problem(path)
+    if problem is not None:
+        hint = " (give a .fmu path or builtin:NAME)" if not path.exists() else ""
+        msg = f"{path}: {problem}{hint}"
         raise FmuError(msg)
     return path
 
@@ -350,6 +358,7 @@ def _variables(spec: FmuSourceSpec, variant: VariantSpec) -> list[VariableSpec]:
 
 
 _KIND = {"parameter": 1, "input": 2, "output": 3, "local": 3}  # locals: not settable
+_KIND_DISCRETE_INPUT = 4  # KIND_DISCRETE_INPUT in fmus/common/var_table.h
 
 
 def _header(variables: list[VariableSpec], variant: VariantSpec) -> str:
@@ -361,7 +370,7 @@ def _header(variables: list[VariableSpec], variant: VariantSpec) -> str:
     for var in variables:
         lines.append(f"#define VR_{var.name} {var.vr}")
         start[var.vr] = repr(float(var.start if var.start is not None else 0.0))
-        kind[var.vr] = str(_KIND[var.causality])
+        kind[var.vr] = str(_KIND_DISCRETE_INPUT if var.variability == "discrete" else _KIND[var.causality])
         names[var.vr] = f'"{var.name}"'
     lines.append(f"static const double MODEL_START[MODEL_NVR] = {{{', '.join(start)}}};")
     lines.append(f"static const unsigned char MODEL_KIND[MODEL_NVR] = {{{', '.join(kind)}}};")
@@ -451,7 +460,7 @@ def _model_description(
     index_of = {var.name: index for index, var in enumerate(variables, start=1)}
     for index, var in enumerate(variables, start=1):
         attrs = {"name": var.name, "valueReference": str(var.vr), "causality": var.causality}
-        attrs["variability"] = "fixed" if var.causality == "parameter" else "continuous"
+        attrs["variability"] = "fixed" if var.causality == "parameter" else var.variability
         if var.description:
             attrs["description"] = var.description
         typed = {"unit": var.unit}

@@ -20,6 +20,7 @@ the role, if there is one. Parameters and start values are set by variable name,
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
@@ -218,6 +219,7 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
     reports = []
     problems = []
     bound_to: dict[str, str] = {}  # variable -> the role it is bound to
+    by_vr: dict[int, tuple[str, str]] = {}  # value reference -> (variable, role) first bound to it
     given = mapping.roles.given()
     for role in roles:
         spec = ROLES[role]
@@ -232,9 +234,9 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
             unit_name = bind_to.unit or var.unit
             wanted = ("input",) if spec.direction == "input" else ("output", "local")
             if var.causality not in wanted:
-                problem = f"{var.name!r} is a {var.causality}, the role needs an {spec.direction}"
+                problem = f"{var.name!r} is {_article(var.causality)}, the role needs an {spec.direction}"
             elif var.type not in ("Real", "Float64"):
-                problem = f"{var.name!r} is a {var.type}, the role needs a Real/Float64"
+                problem = f"{var.name!r} is {_article(var.type)}, the role needs a Real/Float64"
             elif var.dimensions:
                 problem = f"{var.name!r} is an array ({var.dimensions}-D), the role needs a scalar"
             elif var.name in bound_to:
@@ -243,6 +245,13 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
                 _, problem = _unit_for(info, unit_name, spec)
             if problem is None:
                 bound_to[var.name] = role
+                other = by_vr.setdefault(var.value_reference, (var.name, role))
+                if other[0] != var.name:
+                    problems.append(
+                        f"roles.{role}: {var.name!r} shares value reference {var.value_reference} with {other[0]!r} "
+                        f"(role {other[1]}), so setting or reading one is the other; the FMU's model description "
+                        "must give them distinct valueReferences"
+                    )
         if problem is not None and role in given and role not in required:
             # An optional role the mapping names explicitly must bind: a wrong name is not silently dropped.
             problems.append(f"roles.{role}: {problem}")
@@ -252,15 +261,45 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
     interface_problem = stepping_problem(info)
     if interface_problem is not None:
         problems.append(interface_problem)
-    for name in mapping.start():
-        var = info.variables.get(name)
-        if var is None:
-            problems.append(f"no variable {name!r} to set{suggest(name, list(info.variables))}")
-        elif var.variability == "constant" or var.causality in ("independent",):
-            problems.append(f"{name!r} ({var.causality}, {var.variability}) cannot be set")
-        elif var.dimensions:
-            problems.append(f"{name!r} is an array ({var.dimensions}-D); the mapping sets scalars only")
+    for section, values in (("parameters", mapping.parameters), ("start_values", mapping.start_values)):
+        for name, value in values.items():
+            problem = _setting_problem(info, section, name)
+            if problem is None and not math.isfinite(value):
+                problem = f"{value} is not a finite number"
+            if problem is not None:
+                problems.append(f"{section}.{name}: {problem}")
     return ContractReport(profile=profile, roles=tuple(reports), problems=tuple(problems))
+
+
+def _article(word: str) -> str:
+    """`word` with its indefinite article: `an output`, `a parameter`."""
+    return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"
+
+
+_PARAMETERS = ("parameter", "structuralParameter")
+
+
+def _setting_problem(info: FmuInfo, section: str, name: str) -> str | None:
+    """Why the mapping cannot set `name` under `section` (parameters or start_values) before initialisation."""
+    var = info.variables.get(name)
+    if var is None:
+        return f"no variable {name!r} to set{suggest(name, list(info.variables))}"
+    if var.variability == "constant" or var.causality in ("independent", "calculatedParameter"):
+        return f"{name!r} ({var.causality}, {var.variability}) cannot be set"
+    if var.dimensions:
+        return f"{name!r} is an array ({var.dimensions}-D); the mapping sets scalars only"
+    # Outputs and locals without a start value are computed by the FMU (initial="calculated").
+    calculated = var.causality in ("output", "local") and var.start is None
+    if section == "parameters" and var.causality not in _PARAMETERS:
+        fix = (
+            "the FMU computes it, it cannot be set"
+            if calculated
+            else "set it under start_values, or name one of the FMU's parameters"
+        )
+        return f"{name!r} is {_article(var.causality)}, not a parameter; {fix}"
+    if calculated:
+        return f"{name!r} is {_article(var.causality)} the FMU computes (it has no start value); it cannot be set"
+    return None
 
 
 def bind(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Binding:
@@ -276,9 +315,10 @@ def bind(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Binding:
             details = "; ".join(f"{r.role}: {r.problem}" for r in report.roles if r.required and r.problem)
             parts.append(f"missing required role(s) {', '.join(report.missing)} ({details})")
         parts.extend(report.problems)
-        msg = (
-            f"{info.path}: does not satisfy the {profile.value} drive contract: {'; '.join(parts)}; "
+        msg = f"{info.path}: does not satisfy the {profile.value} drive contract: {'; '.join(parts)}; " + (
             f"map the roles to the FMU's variables (see `twin fmu check {info.path.name}`)"
+            if report.missing
+            else f"`twin fmu check {info.path.name}` lists the FMU's variables"
         )
         raise FmuError(msg)
     bound: dict[str, BoundVariable] = {}

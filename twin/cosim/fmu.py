@@ -48,6 +48,7 @@ __all__ = [
     "Stepper",
     "VariableInfo",
     "binary_problem",
+    "fmu_file_problem",
     "fmu_logger",
     "read_fmu_info",
     "stepping",
@@ -103,6 +104,8 @@ class FmuInfo:
     n_states: int = 0  # continuous states (Model Exchange)
     n_event_indicators: int = 0
     variable_step: bool
+    # canBeInstantiatedOnlyOncePerProcess of the interface the twin steps (Co-Simulation, else Model Exchange).
+    instantiated_once: bool = False
     variables: Mapping[str, VariableInfo]
     units: Mapping[str, Unit]
 
@@ -118,8 +121,9 @@ def read_fmu_info(path: Path) -> FmuInfo:
     Raises:
         FmuError: If the file is missing, not a zip, or its model description is invalid.
     """
-    if not path.is_file():
-        msg = f"{path}: FMU file not found"
+    problem = fmu_file_problem(path)
+    if problem is not None:
+        msg = f"{path}: {problem}"
         raise FmuError(msg)
     if not zipfile.is_zipfile(path):
         msg = f"{path}: not an FMU (not a zip archive)"
@@ -127,11 +131,21 @@ def read_fmu_info(path: Path) -> FmuInfo:
     try:
         md = read_model_description(str(path), validate=False)
     except Exception as err:  # FMPy raises bare Exceptions and XML errors of several kinds
-        first = str(err).strip().splitlines()
-        msg = f"{path}: invalid modelDescription.xml: {first[0] if first else type(err).__name__}"
+        try:
+            problem = _description_problem(path)
+        except Exception:  # a diagnosis that fails itself leaves FMPy's message, never a traceback
+            problem = None
+        if problem is None:
+            first = str(err).strip().splitlines()
+            problem = f"invalid modelDescription.xml: {first[0] if first else type(err).__name__}"
+        msg = f"{path}: {problem}"
         raise FmuError(msg) from None
     variables: dict[str, VariableInfo] = {}
     for v in md.modelVariables:
+        problem = _start_problem(v)
+        if problem is not None:
+            msg = f"{path}: modelDescription.xml: {problem}; fix the start value in the FMU's model description"
+            raise FmuError(msg)
         unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
         variables[v.name] = VariableInfo(
             name=v.name,
@@ -151,6 +165,7 @@ def read_fmu_info(path: Path) -> FmuInfo:
             dims = (b.kg, b.m, b.s, b.A, b.K, b.mol, b.cd, b.rad)
             units[u.name] = Unit(name=u.name, dims=tuple(int(d) for d in dims), factor=b.factor, offset=b.offset)
     cs = md.coSimulation
+    stepped = cs if cs is not None else md.modelExchange
     return FmuInfo(
         path=path,
         fmi_version=str(md.fmiVersion),
@@ -164,9 +179,113 @@ def read_fmu_info(path: Path) -> FmuInfo:
         n_states=len(md.derivatives or ()),
         n_event_indicators=int(md.numberOfEventIndicators or 0),
         variable_step=bool(cs.canHandleVariableCommunicationStepSize) if cs is not None else False,
+        instantiated_once=bool(getattr(stepped, "canBeInstantiatedOnlyOncePerProcess", False)),
         variables=MappingProxyType(variables),
         units=MappingProxyType(units),
     )
+
+
+# Variable types whose start value is a number (FMI 2 and 3 spellings); arrays list one per element.
+_NUMERIC_TYPES = frozenset(
+    {"Real", "Integer", "Enumeration", "Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16"}
+    | {"Int32", "UInt32", "Int64", "UInt64"}
+)
+
+
+def _start_problem(variable: Any) -> str | None:
+    """Why an FMPy model variable's start value is not a number its type needs (None when it is, or has none)."""
+    if variable.start is None or str(variable.type) not in _NUMERIC_TYPES:
+        return None
+    text = str(variable.start)
+    try:
+        for item in text.split() or [text]:
+            float(item)
+    except ValueError:
+        return f'variable {variable.name!r} ({variable.type}) has start="{text}", which is not a number'
+    return None
+
+
+def fmu_file_problem(path: Path) -> str | None:
+    """Why `path` is not a file to read as an FMU (missing, or a folder), as a phrase; None when it is a file."""
+    if path.is_dir():
+        if (path / "modelDescription.xml").is_file():
+            return (
+                "is a folder (an unzipped FMU), where an .fmu file is expected; zip its contents into one: "
+                f"(cd {path} && zip -r ../{path.name}.fmu .)"
+            )
+        return "is a folder, where an .fmu file is expected"
+    if not path.is_file():
+        return "FMU file not found"
+    return None
+
+
+_FMI3_VARIABLE_TAGS = frozenset(
+    {"Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
+    | {"Boolean", "String", "Binary", "Enumeration", "Clock"}
+)
+
+
+def _description_problem(path: Path) -> str | None:
+    """What is wrong with the FMU's model description, in FMI terms; None when nothing known is.
+
+    Called only after FMPy failed to read it, to say why in words a vendor can act on.
+    """
+    from lxml import etree
+
+    with zipfile.ZipFile(path) as archive:
+        names = archive.namelist()
+        if "modelDescription.xml" not in names:
+            nested = sorted(n for n in names if n.endswith("/modelDescription.xml"))
+            if nested:
+                folder = nested[0].rsplit("/", 1)[0]
+                return (
+                    f"no modelDescription.xml at the archive's root, only {nested[0]}; "
+                    f"zip the contents of {folder}/, not the folder itself"
+                )
+            return "no modelDescription.xml in the archive; an FMU has one at its root (is this an FMU?)"
+        data = archive.read("modelDescription.xml")
+    try:
+        root = etree.fromstring(data, etree.XMLParser(resolve_entities=False, no_network=True))
+    except etree.XMLSyntaxError:
+        return None  # the parser's own message says where
+    if etree.QName(root).localname != "fmiModelDescription":
+        return f"modelDescription.xml: the root element is <{etree.QName(root).localname}>, not <fmiModelDescription>"
+    version = root.get("fmiVersion")
+    if version is None:
+        return 'modelDescription.xml: <fmiModelDescription> has no fmiVersion attribute (FMI 2.0: "2.0", 3.0: "3.0")'
+    variables = root.find("ModelVariables")
+    tags = {child.tag for child in variables} if variables is not None else set()
+    if version == "1.0":
+        if root.find("CoSimulation") is not None or root.find("ModelExchange") is not None:
+            return (
+                'modelDescription.xml says fmiVersion="1.0" but is laid out as FMI 2.0 (<CoSimulation>/'
+                "<ModelExchange> elements); FMI 1.0 is not supported anyway (FMI 2.0 and 3.0 are)"
+            )
+        return "modelDescription.xml is not valid FMI 1.0, and FMI 1.0 is not supported (FMI 2.0 and 3.0 are)"
+    if version != "2.0" and not version.startswith("3."):
+        return f'modelDescription.xml: fmiVersion="{version}" is no FMI version twin reads (2.0 and 3.0 are)'
+    if version.startswith("3.") and "ScalarVariable" in tags:
+        return (
+            f'modelDescription.xml says fmiVersion="{version}" but declares FMI 2.0 <ScalarVariable> elements; '
+            "fix fmiVersion or the variables"
+        )
+    if version == "2.0" and tags & _FMI3_VARIABLE_TAGS:
+        found = sorted(tags & _FMI3_VARIABLE_TAGS)[0]
+        return (
+            f'modelDescription.xml says fmiVersion="2.0" but declares FMI 3.0 variable elements (<{found}>); '
+            "fix fmiVersion or the variables"
+        )
+    if version == "2.0":
+        count = sum(1 for child in variables if child.tag == "ScalarVariable") if variables is not None else 0
+        structure = root.find("ModelStructure")
+        indices = [] if structure is None else [u.get("index") for u in structure.iter("Unknown")]
+        for index in indices:
+            if index is None or not index.isdigit() or not 1 <= int(index) <= count:
+                return (
+                    f"modelDescription.xml: <ModelStructure> refers to variable index {index}, but <ModelVariables> "
+                    f"declares {count} variable(s); indices count the ScalarVariables from 1"
+                )
+    return None
 
 
 def _binary_member(info: FmuInfo) -> str:
@@ -530,6 +649,7 @@ class FmuFile(Closing):
         start: Mapping[str, float] | None = None,
         start_time_s: float = 0.0,
         api: Api = "lowlevel",
+        purpose: str = "",
     ) -> Stepper:
         """Create, set up and initialise one instance.
 
@@ -542,12 +662,21 @@ class FmuFile(Closing):
                 the FMU's own units.
             start_time_s: Start time, s.
             api: `lowlevel` (direct C calls) or `convenience` (FMPy's wrappers).
+            purpose: What the instance is for, said after its name in messages when the name alone
+                means nothing to the user (an instance the twin makes for itself).
 
         Raises:
             FmuError: If the library cannot be loaded, instantiation returns NULL, a start value
                 names an unknown or non-settable variable, or initialisation fails.
         """
-        label = f"{self.label} instance {name!r}"
+        label = f"{self.label} instance {name!r}" + (f" ({purpose})" if purpose else "")
+        if self.info.instantiated_once and self._instances:
+            msg = (
+                f"{label}: the FMU declares canBeInstantiatedOnlyOncePerProcess and this process has an instance "
+                f"of it already ({self._instances[0].name.rsplit(' instance ', 1)[-1]}); run each instance in its "
+                "own process (drive.isolation: process)"
+            )
+            raise FmuError(msg)
         messages = _Messages(label, name)
         kwargs = {
             "guid": self.info.guid,
@@ -654,6 +783,13 @@ class _Base(Closing):
     _out_refs: Any
     _n_in: int
     _n_out: int
+    # Set by the Model Exchange adapters (`_split_inputs`): where the discrete and continuous inputs are.
+    _discrete_at: tuple[int, ...]
+    _continuous_at: tuple[int, ...]
+    _discrete_refs: Any
+    _continuous_refs: Any
+    _continuous_values: Any
+    _held: tuple[float, ...] | None
 
     # The FMI 2 and FMI 3 adapters below implement these four; this base is never stepped itself.
     def step(self, t_s: float) -> None:
@@ -855,6 +991,12 @@ class _Fmi2Exchange(_Fmi2):
     """
 
     _FUNCTIONS = ("fmi2SetReal", f"{ME_SOLVER} integration", "fmi2GetReal")
+    _UPDATE = "fmi2NewDiscreteStates"
+
+    def _write(self, refs: Any, n: int, values: Any) -> int:
+        """Set `n` Real inputs; the status."""
+        status: int = self._set(self._c_ptr, refs, n, values)
+        return status
 
     def _bind_step(self, dll: Any) -> None:
         fmu = self._fmu
@@ -880,6 +1022,7 @@ class _Fmi2Exchange(_Fmi2):
         self._next_event_s = math.inf
         if self._api == "convenience":
             self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
+        _split_inputs(self, info)
         super().initialize(info, start, start_time_s)
 
     def slot_fields(self) -> dict[str, Any] | None:
@@ -888,9 +1031,7 @@ class _Fmi2Exchange(_Fmi2):
 
     def step(self, t_s: float) -> None:
         c = self._c_ptr
-        set_status = self._set(c, self._in_refs, self._n_in, self.inputs)
-        if set_status > 1:
-            self.fail("fmi2SetReal", set_status, t_s)
+        _set_inputs(self, t_s)
         terminate = _integrate(self, t_s)
         if terminate:
             self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
@@ -1023,6 +1164,12 @@ class _Fmi3Exchange(_Fmi3):
 
     _FUNCTIONS = ("fmi3SetFloat64", f"{ME_SOLVER} integration", "fmi3GetFloat64")
     _INSTANTIATE = "fmi3InstantiateModelExchange"
+    _UPDATE = "fmi3UpdateDiscreteStates"
+
+    def _write(self, refs: Any, n: int, values: Any) -> int:
+        """Set `n` Float64 inputs; the status."""
+        status: int = self._set(self._c_ptr, refs, n, values, n)
+        return status
 
     def initialize(self, info: FmuInfo, start: Mapping[str, float], start_time_s: float) -> None:
         self._nx = info.n_states
@@ -1031,6 +1178,7 @@ class _Fmi3Exchange(_Fmi3):
         self._next_event_s = math.inf
         if self._api == "convenience":
             self._api = "lowlevel"  # one stepping path: the solver calls fmpy's wrappers either way
+        _split_inputs(self, info)
         super().initialize(info, start, start_time_s)
 
     def _bind_step(self, dll: Any) -> None:
@@ -1059,9 +1207,7 @@ class _Fmi3Exchange(_Fmi3):
 
     def step(self, t_s: float) -> None:
         c = self._c_ptr
-        set_status = self._set(c, self._in_refs, self._n_in, self.inputs, self._n_in)
-        if set_status > 1:
-            self.fail("fmi3SetFloat64", set_status, t_s)
+        _set_inputs(self, t_s)
         terminate = _integrate(self, t_s)
         if terminate:
             self._messages.add(3, "twin", "the FMU asked to terminate the simulation")
@@ -1090,6 +1236,59 @@ def _cvode(fmu: Any, get_dx: Any, get_nominals: Any, *, nx: int, nz: int, t0_s: 
         maxStep=max_step_s,
         relativeTolerance=ME_RELATIVE_TOLERANCE,
     )
+
+
+def _split_inputs(adapter: _Fmi2Exchange | _Fmi3Exchange, info: FmuInfo) -> None:
+    """Find the adapter's discrete inputs (variability `discrete`), which FMI lets change at events only."""
+    variability = {v.value_reference: v.variability for v in info.variables.values() if v.type in _REAL_TYPES}
+    vrs = adapter._in_vr
+    discrete = [k for k, vr in enumerate(vrs) if variability.get(vr) == "discrete"]
+    continuous = [k for k in range(len(vrs)) if k not in discrete]
+    adapter._discrete_at = tuple(discrete)
+    adapter._continuous_at = tuple(continuous)
+    adapter._discrete_refs = (ctypes.c_uint * max(1, len(discrete)))(*(vrs[k] for k in discrete))
+    adapter._continuous_refs = (ctypes.c_uint * max(1, len(continuous)))(*(vrs[k] for k in continuous))
+    adapter._continuous_values = (ctypes.c_double * max(1, len(continuous)))()
+    adapter._held = None  # the discrete inputs' values last set (None: not yet)
+
+
+def _set_inputs(adapter: _Fmi2Exchange | _Fmi3Exchange, t_s: float) -> None:
+    """Set the inputs for the step from `t_s`: continuous ones now, discrete ones in event mode.
+
+    FMI lets a discrete input change only at an event: when one of their values differs from the
+    last step's, the FMU enters event mode, takes them, updates its discrete states and goes back
+    to continuous-time mode (the solver restarts at the step's start in any case). Without
+    discrete inputs, one set call sets every input.
+    """
+    inputs = adapter.inputs
+    if not adapter._discrete_at:
+        status = adapter._write(adapter._in_refs, adapter._n_in, inputs)
+        if status > 1:
+            adapter.fail(adapter._FUNCTIONS[0], status, t_s)
+        return
+    if adapter._continuous_at:
+        values = adapter._continuous_values
+        for j, k in enumerate(adapter._continuous_at):
+            values[j] = inputs[k]
+        status = adapter._write(adapter._continuous_refs, len(adapter._continuous_at), values)
+        if status > 1:
+            adapter.fail(adapter._FUNCTIONS[0], status, t_s)
+    now = tuple(inputs[k] for k in adapter._discrete_at)
+    if now == adapter._held:
+        return
+    fmu = adapter._fmu
+    try:
+        fmu.enterEventMode()
+        status = adapter._write(adapter._discrete_refs, len(now), (ctypes.c_double * len(now))(*now))
+        if status > 1:
+            adapter.fail(f"{adapter._FUNCTIONS[0]} in event mode", status, t_s)
+        if _event_update(adapter):
+            adapter._messages.add(3, "twin", "the FMU asked to terminate the simulation")
+            adapter.fail(adapter._UPDATE, 3, t_s)
+        fmu.enterContinuousTimeMode()
+    except fmpy.fmi1.FMICallException as err:
+        adapter.fail(err.function, int(err.status), t_s)
+    adapter._held = now
 
 
 def _event_update(adapter: _Fmi2Exchange | _Fmi3Exchange) -> bool:

@@ -96,6 +96,7 @@ class IsolatedGroup:
         outputs: Sequence[int],
         start: Mapping[str, float],
         timeout_s: float,
+        process_per_instance: bool = False,
     ) -> None:
         """Start the child, load `path` there and create one instance per name.
 
@@ -108,6 +109,8 @@ class IsolatedGroup:
             outputs: Output value references, read into each stepper's `outputs`.
             start: Start values (FMU names and units).
             timeout_s: Longest wall time one step of all instances may take before the FMU counts as hung.
+            process_per_instance: One child process per instance, for an FMU that may be instantiated
+                only once per process (`canBeInstantiatedOnlyOncePerProcess`); the children step in parallel.
 
         Raises:
             FmuError: If the child cannot start, or the FMU cannot be loaded or instantiated there.
@@ -137,28 +140,36 @@ class IsolatedGroup:
         import multiprocessing  # only for an isolated FMU (tens of ms to import)
 
         context = multiprocessing.get_context("spawn")
-        self._conn, child_conn = context.Pipe()
-        spec = {
-            "path": str(path),
-            "map_path": self._map_path,
-            "size": size,
-            "names": list(names),
-            "step_s": self._h,
-            "inputs": list(inputs),
-            "outputs": list(outputs),
-            "start": dict(start),
-            "fmu_log_level": logging.getLogger("twin.node.fmu").getEffectiveLevel(),
-        }
-        self._process: Any = context.Process(target=_child_main, args=(spec, child_conn), daemon=True)
+        # The instances each child owns, by their position in `names` (and in the shared map).
+        slots = [[k] for k in range(n)] if process_per_instance else [list(range(n))]
+        self._children: list[_Child] = []
         try:
-            self._process.start()
-            child_conn.close()
-            if not self._conn.poll(_START_TIMEOUT_S):
-                self._fail_hard("did not start", 0.0)
-            reply = self._reply(0.0, "starting", _START_TIMEOUT_S)
-            if reply != _OK:
-                self.close()
-                raise FmuError(reply.decode("utf-8", "replace"))
+            for owned in slots:
+                conn, child_conn = context.Pipe()
+                spec = {
+                    "path": str(path),
+                    "map_path": self._map_path,
+                    "size": size,
+                    "names": list(names),
+                    "slots": owned,
+                    "step_s": self._h,
+                    "inputs": list(inputs),
+                    "outputs": list(outputs),
+                    "start": dict(start),
+                    "fmu_log_level": logging.getLogger("twin.node.fmu").getEffectiveLevel(),
+                }
+                process = context.Process(target=_child_main, args=(spec, child_conn), daemon=True)
+                child = _Child(process, conn, owned)
+                self._children.append(child)
+                process.start()
+                child_conn.close()
+            for child in self._children:
+                if not child.conn.poll(_START_TIMEOUT_S):
+                    self._fail_hard(child, "did not start", 0.0)
+                reply = self._reply(child, 0.0, "starting", _START_TIMEOUT_S)
+                if reply != _OK:
+                    self.close()
+                    raise FmuError(reply.decode("utf-8", "replace"))
         except BaseException:
             self.close()
             raise
@@ -173,6 +184,11 @@ class IsolatedGroup:
     def size(self) -> int:
         """How many instances the group steps."""
         return len(self.steppers)
+
+    @property
+    def processes(self) -> int:
+        """How many child processes step them (one, or one per instance)."""
+        return len(self._children)
 
     @property
     def index(self) -> int:
@@ -191,19 +207,23 @@ class IsolatedGroup:
         """
         t_s = self._index * self._h
         self._time.value = t_s
-        try:
-            self._conn.send_bytes(_STEP)
-        except OSError:
-            self._fail_hard(_signal_name(self._process.exitcode), t_s)
-        if not self._conn.poll(self._timeout_s):
-            self._fail_hard(f"did not finish a step within {self._timeout_s:g} s (hung)", t_s)
-        reply = self._reply(t_s, "stepping", self._timeout_s)
-        if reply == _OK:
+        for child in self._children:
+            try:
+                child.conn.send_bytes(_STEP)
+            except OSError:
+                self._fail_hard(child, _signal_name(child.process.exitcode), t_s)
+        failed = -1
+        for child in self._children:  # every child answers before the next step, even after a failure
+            if not child.conn.poll(self._timeout_s):
+                self._fail_hard(child, f"did not finish a step within {self._timeout_s:g} s (hung)", t_s)
+            reply = self._reply(child, t_s, "stepping", self._timeout_s)
+            if reply != _OK and failed < 0:
+                position, _, text = reply.partition(b"\0")
+                self._failure = text.decode("utf-8", "replace")
+                failed = child.slots[int(position)]
+        if failed < 0:
             self._index += 1
-            return -1
-        failed, _, text = reply.partition(b"\0")
-        self._failure = text.decode("utf-8", "replace")
-        return int(failed)
+        return failed
 
     def step(self) -> None:
         """Take one communication step.
@@ -219,44 +239,59 @@ class IsolatedGroup:
         """Raise the FmuError the child reported for instance `failed`."""
         raise FmuError(self._failure or f"{self.steppers[failed].name} failed at t = {self._index * self._h:.6f} s")
 
-    def _reply(self, t_s: float, doing: str, timeout_s: float) -> bytes:
+    def _reply(self, child: _Child, t_s: float, doing: str, timeout_s: float) -> bytes:
         """Receive the child's reply, logging the FMU's log records it sends first."""
-        reply = self._receive(t_s, doing)
+        reply = self._receive(child, t_s, doing)
         while reply[:1] == _LOG:
             level, name, text = reply[1:].decode("utf-8", "replace").split("\0", 2)
             logging.getLogger(name).log(int(level), "%s", text)
-            if not self._conn.poll(timeout_s):
-                self._fail_hard(f"did not finish a step within {timeout_s:g} s (hung)", t_s, doing)
-            reply = self._receive(t_s, doing)
+            if not child.conn.poll(timeout_s):
+                self._fail_hard(child, f"did not finish a step within {timeout_s:g} s (hung)", t_s, doing)
+            reply = self._receive(child, t_s, doing)
         return reply
 
-    def _receive(self, t_s: float, doing: str) -> bytes:
+    def _receive(self, child: _Child, t_s: float, doing: str) -> bytes:
         try:
-            reply: bytes = self._conn.recv_bytes()
+            reply: bytes = child.conn.recv_bytes()
         except (EOFError, OSError):
-            self._process.join(timeout=5.0)
-            self._fail_hard(_signal_name(self._process.exitcode), t_s, doing)
+            child.process.join(timeout=5.0)
+            self._fail_hard(child, _signal_name(child.process.exitcode), t_s, doing)
         return reply
 
-    def _fail_hard(self, what: str, t_s: float, doing: str = "stepping") -> None:
+    def _fail_hard(self, child: _Child, what: str, t_s: float, doing: str = "stepping") -> None:
+        where = "its own process"
+        if len(self._children) > 1:  # one process per instance: say whose
+            where = f"the process of instance {self.steppers[child.slots[0]].name.rsplit(' instance ', 1)[-1]}"
         self.close()
-        msg = f"{self._label} in its own process {what} at t = {t_s:.6f} s while {doing}; the run stops here"
+        msg = f"{self._label} in {where} {what} at t = {t_s:.6f} s while {doing}; the run stops here"
         raise FmuError(msg)
 
     def close(self) -> None:
-        """Stop the child (politely, else by force) and release the map (idempotent)."""
-        process = self._process
-        if process is None:
-            return
-        self._process = None
-        if process.is_alive():
+        """Stop the children (politely, else by force) and release the map (idempotent)."""
+        children, self._children = self._children, []
+        for child in children:
+            child.close()
+
+
+class _Child:
+    """One child process, the pipe to it and the instances it steps (positions in the group)."""
+
+    def __init__(self, process: Any, conn: multiprocessing.connection.Connection, slots: list[int]) -> None:
+        self.process = process
+        self.conn = conn
+        self.slots = slots
+
+    def close(self) -> None:
+        """Ask the child to stop, kill it if it does not, and close the pipe."""
+        process = self.process
+        if process.pid is not None and process.is_alive():
             with contextlib.suppress(OSError):
-                self._conn.send_bytes(_CLOSE)
+                self.conn.send_bytes(_CLOSE)
             process.join(timeout=2.0)
-        if process.is_alive():
+        if process.pid is not None and process.is_alive():
             process.kill()
             process.join(timeout=5.0)
-        self._conn.close()
+        self.conn.close()
 
 
 class _Forward(logging.Handler):
@@ -278,24 +313,24 @@ def _child_main(spec: dict[str, Any], conn: multiprocessing.connection.Connectio
     fmu_log.setLevel(spec["fmu_log_level"])
     fmu_log.propagate = False
     fmu_log.addHandler(_Forward(conn))
-    names, n = spec["names"], len(spec["names"])
+    names, n, slots = spec["names"], len(spec["names"]), spec["slots"]
     n_in, n_out = max(1, len(spec["inputs"])), max(1, len(spec["outputs"]))
     with open(spec["map_path"], "r+b") as f:
         shared = mmap.mmap(f.fileno(), spec["size"])
     time_s = ctypes.c_double.from_buffer(shared, 0)
-    ins = [(ctypes.c_double * n_in).from_buffer(shared, _D * (1 + k * n_in)) for k in range(n)]
-    outs = [(ctypes.c_double * n_out).from_buffer(shared, _D * (1 + n * n_in + k * n_out)) for k in range(n)]
+    ins = [(ctypes.c_double * n_in).from_buffer(shared, _D * (1 + k * n_in)) for k in slots]
+    outs = [(ctypes.c_double * n_out).from_buffer(shared, _D * (1 + n * n_in + k * n_out)) for k in slots]
     try:
         fmu = FmuFile(Path(spec["path"]))
         steppers = [
             fmu.instantiate(
-                name,
+                names[k],
                 step_s=spec["step_s"],
                 inputs=spec["inputs"],
                 outputs=spec["outputs"],
                 start=spec["start"],
             )
-            for name in names
+            for k in slots
         ]
     except FmuError as err:
         conn.send_bytes(str(err).encode())

@@ -38,7 +38,16 @@ from twin.core.errors import ConfigError, FmuError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
 from twin.cosim.drive_loop import MAX_RUN, DriveLoop
-from twin.cosim.fmu import Api, FmuFile, FmuInfo, StepGroup, Stepper
+from twin.cosim.fmu import (
+    Api,
+    FmuFile,
+    FmuInfo,
+    StepGroup,
+    Stepper,
+    binary_problem,
+    read_fmu_info,
+    stepping_problem,
+)
 from twin.cosim.isolated import IsolatedGroup
 from twin.robot.chassis import (
     Chassis,
@@ -59,16 +68,20 @@ from twin.robot.drive_control import (
 
 __all__ = [
     "CommandLimits",
+    "DrivePlan",
     "Drivetrain",
     "FmuDrive",
     "FmuDrivetrain",
     "MotorModel",
+    "MotorModelError",
     "Saturation",
     "SpeedLoopTargets",
     "WheelState",
     "builtin_motor",
+    "check_fmu_drive",
     "fmu_step_response",
     "motor_constants",
+    "plan_fmu_drive",
     "wheel_setpoints",
 ]
 
@@ -266,13 +279,27 @@ _WHEEL_STATE = (
 )
 
 
+class MotorModelError(ConfigError):
+    """The motor model does not resolve against the FMU: `key` (`drive.motor.resistance_ohm`) and `problem`.
+
+    The message is `key: problem; fix` in a scenario's terms; `twin fmu step-response` rewords it in its own.
+    """
+
+    def __init__(self, key: str, problem: str, fix: str) -> None:
+        """Say that `key` fails with `problem`, and the `fix`."""
+        super().__init__(f"{key}: {problem}" + (f"; {fix}" if fix else ""))
+        self.key = key
+        self.problem = problem
+
+
 def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]) -> MotorConstants:
     """Resolve a motor model against an FMU: numbers as given, names from the start values or the FMU.
 
     Raises:
-        ConfigError: If a named parameter is missing or the constants are not physical.
+        MotorModelError: If a named parameter is missing or the constants are not physical.
     """
     values: dict[str, float] = {}
+    fix = "give the number (SI) or the FMU parameter's name"
     for name in MotorModel.__dataclass_fields__:
         ref = getattr(model, name)
         if isinstance(ref, str):
@@ -281,19 +308,129 @@ def motor_constants(model: MotorModel, info: FmuInfo, start: Mapping[str, float]
                 continue
             var = info.variables.get(ref)
             if var is None or var.start is None:
-                msg = (
-                    f"drive.motor.{name}: the FMU has no parameter {ref!r} with a start value; "
-                    "give the number (SI) or the FMU parameter's name"
-                )
-                raise ConfigError(msg)
-            values[name] = float(var.start)
+                problem = f"the FMU has no parameter {ref!r} with a start value"
+                raise MotorModelError(f"drive.motor.{name}", problem, fix)
+            try:
+                values[name] = float(var.start)
+            except ValueError:  # an array's or a Boolean's start (read_fmu_info refuses non-numbers)
+                problem = f"the FMU's {ref!r} is a {var.type} with start {var.start!r}, not one number"
+                raise MotorModelError(
+                    f"drive.motor.{name}", problem, "give the number (SI) or name a scalar parameter"
+                ) from None
         else:
             values[name] = float(ref)
     try:
         return MotorConstants(**values)
     except ValueError as err:
-        msg = f"drive.motor: {err}"
-        raise ConfigError(msg) from None
+        raise MotorModelError("drive.motor", str(err), "") from None
+
+
+def _communication_step(drive: FmuDrive, step_ns: int) -> tuple[float, int]:
+    """The communication step (s) and how many physics steps it spans.
+
+    Raises:
+        ConfigError: If it is not a whole multiple of the physics step.
+    """
+    physics_s = step_ns * 1e-9
+    comm_s = drive.communication_step_s or physics_s
+    ratio = comm_s / physics_s
+    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
+        msg = f"drive.communication_step_s: {comm_s:g} s must be a whole multiple of the physics step {physics_s:g} s"
+        raise ConfigError(msg)
+    return comm_s, round(ratio)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class DrivePlan:
+    """What an FMU drive section comes to before any instance exists (`plan_fmu_drive`)."""
+
+    communication_step_s: float
+    ratio: int  # physics steps per communication step
+    profile: Profile
+    binding: Binding
+    motor: MotorConstants | None  # None: no motor model (a servo FMU without one)
+    speed_loop: SpeedLoop | None  # the twin's PI (voltage profile), else None
+
+
+def plan_fmu_drive(drive: FmuDrive, info: FmuInfo, *, step_ns: int) -> DrivePlan:
+    """Check a drive section against its FMU and decide what `FmuDrivetrain` needs, without instantiating it.
+
+    `FmuDrivetrain` runs this before it creates the wheels' instances, and `twin scenario check`
+    runs it too (`check_fmu_drive`), so both refuse the same drive with the same line: the
+    communication step, the drive contract (roles, parameters, start values), the motor model
+    and the speed-loop design, and what isolation needs.
+
+    Args:
+        drive: The drive section, `fmu: auto` already resolved.
+        info: The FMU's model description.
+        step_ns: The physics step, ns.
+
+    Raises:
+        ConfigError: If the communication step, the mapping file, the motor model or the speed-loop targets are wrong.
+        FmuError: If the FMU does not satisfy the profile's contract with this mapping.
+    """
+    comm_s, ratio = _communication_step(drive, step_ns)
+    profile = Profile(drive.profile)
+    binding = bind(info, drive.resolved_mapping(), profile)
+    motor: MotorConstants | None = None
+    if drive.motor is not None:
+        try:
+            motor = motor_constants(drive.motor, info, binding.start)
+        except ConfigError:
+            if profile is Profile.VOLTAGE:
+                raise
+    speed_loop: SpeedLoop | None = None
+    if profile is Profile.VOLTAGE:
+        if motor is None:
+            msg = "drive.motor: the voltage profile needs the motor model to design the speed loop"
+            raise ConfigError(msg)
+        targets = drive.speed_loop
+        speed_loop = design_speed_pi(
+            motor, crossover_hz=targets.bandwidth_hz, phase_margin_deg=targets.phase_margin_deg, step_s=comm_s
+        )
+    if info.instantiated_once and drive.isolation != "process":
+        msg = (
+            f"drive.isolation: {info.path.name} declares canBeInstantiatedOnlyOncePerProcess, and the drive needs "
+            "one instance per wheel; set drive.isolation: process, which runs each instance in its own process "
+            "(with drive.motor or drive.wheel_inertia_kgm2)"
+        )
+        raise ConfigError(msg)
+    if drive.wheel_inertia_kgm2 is None and motor is None and drive.isolation == "process":
+        msg = (
+            "drive.wheel_inertia_kgm2: give it (or drive.motor) with isolation: process; "
+            "the twin does not probe an isolated FMU in its own process"
+        )
+        raise ConfigError(msg)
+    return DrivePlan(
+        communication_step_s=comm_s,
+        ratio=ratio,
+        profile=profile,
+        binding=binding,
+        motor=motor,
+        speed_loop=speed_loop,
+    )
+
+
+def check_fmu_drive(drive: FmuDrive, *, step_ns: int, robot_name: str = "") -> DrivePlan:
+    """Refuse what `FmuDrivetrain` would refuse before its first step, without loading the FMU's binary.
+
+    Resolves `fmu: auto`, builds a built-in FMU on first use as a run would, reads the FMU's model
+    description, checks its binary and runs `plan_fmu_drive`.
+
+    Raises:
+        ConfigError: As `plan_fmu_drive`.
+        FmuError: If the FMU cannot be built, read or stepped here, or does not satisfy the contract.
+    """
+    if drive.fmu == "auto":
+        drive = dataclasses.replace(drive, fmu=builtin_motor(robot_name, drive.profile))
+    _communication_step(drive, step_ns)  # before any build, as a run checks it
+    path = resolve_fmu(drive.fmu_file or drive.fmu, fmi_version=drive.fmi_version)
+    info = read_fmu_info(path)
+    problem = stepping_problem(info) or binary_problem(info)
+    if problem is not None:
+        msg = f"{path}: {problem}"
+        raise FmuError(msg)
+    return plan_fmu_drive(drive, info, step_ns=step_ns)
 
 
 class FmuDrivetrain(Closing):
@@ -343,15 +480,7 @@ class FmuDrivetrain(Closing):
         self._contact = contact
         self._free = free_distance
         self._reach_m = bounding_radius_m
-        physics_s = step_ns * 1e-9
-        comm_s = drive.communication_step_s or physics_s
-        ratio = comm_s / physics_s
-        if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
-            msg = (
-                f"drive.communication_step_s: {comm_s:g} s must be a whole multiple of the physics step {physics_s:g} s"
-            )
-            raise ConfigError(msg)
-        self._ratio = round(ratio)
+        comm_s, self._ratio = _communication_step(drive, step_ns)
         self._pending = 0
         self._h = comm_s
         accel = drive.max_wheel_acceleration_mps2
@@ -369,37 +498,24 @@ class FmuDrivetrain(Closing):
         self.label = f"fmu {name} (FMI {self._file.info.major_version}, {drive.profile})"
         self._isolated: IsolatedGroup | None = None
         try:
-            self._setup(drive, chassis, pose, contact)
+            self._setup(drive, chassis, pose, contact, plan_fmu_drive(drive, self._file.info, step_ns=step_ns))
         except BaseException:
             self.close()
             raise
 
     def _setup(
-        self, drive: FmuDrive, chassis: ChassisParams, pose: tuple[float, float, float], contact: ContactFn | None
+        self,
+        drive: FmuDrive,
+        chassis: ChassisParams,
+        pose: tuple[float, float, float],
+        contact: ContactFn | None,
+        plan: DrivePlan,
     ) -> None:
-        info = self._file.info
-        mapping = drive.resolved_mapping()
-        binding = bind(info, mapping, self.profile)
+        binding = plan.binding
         self.binding = binding
-        self.motor: MotorConstants | None = None
-        self.speed_loop: SpeedLoop | None = None
-        if drive.motor is not None:
-            try:
-                self.motor = motor_constants(drive.motor, info, binding.start)
-            except ConfigError:
-                if self.profile is Profile.VOLTAGE:
-                    raise
-        if self.profile is Profile.VOLTAGE:
-            if self.motor is None:
-                msg = "drive.motor: the voltage profile needs the motor model to design the speed loop"
-                raise ConfigError(msg)
-            targets = drive.speed_loop
-            self.speed_loop = design_speed_pi(
-                self.motor,
-                crossover_hz=targets.bandwidth_hz,
-                phase_margin_deg=targets.phase_margin_deg,
-                step_s=self._h,
-            )
+        self.motor: MotorConstants | None = plan.motor
+        self.speed_loop: SpeedLoop | None = plan.speed_loop
+        if self.speed_loop is not None:
             _log.info("speed loop: %s", self.speed_loop)
         outputs = [binding.outputs[r] for r in _OUTPUT_ORDER if r in binding.outputs]
         # Per optional output role: (index in the outputs, factor, offset) to twin units, or None.
@@ -415,12 +531,6 @@ class FmuDrivetrain(Closing):
         in_vrs = [b.value_reference for b in binding.inputs]
         out_vrs = [b.value_reference for b in outputs]
         wheel_inertia = drive.wheel_inertia_kgm2
-        if wheel_inertia is None and self.motor is None and drive.isolation == "process":
-            msg = (
-                "drive.wheel_inertia_kgm2: give it (or drive.motor) with isolation: process; "
-                "the twin does not probe an isolated FMU in its own process"
-            )
-            raise ConfigError(msg)
         if wheel_inertia is None:
             wheel_inertia = self.motor.wheel_inertia_kgm2 if self.motor is not None else self._probe(binding)
         self.wheel_inertia_kgm2 = wheel_inertia
@@ -438,6 +548,7 @@ class FmuDrivetrain(Closing):
                 outputs=out_vrs,
                 start=binding.start,
                 timeout_s=drive.step_timeout_s,
+                process_per_instance=self._file.info.instantiated_once,
             )
             self._left, self._right = self._isolated.steppers
         else:
@@ -646,7 +757,15 @@ class FmuDrivetrain(Closing):
         speed = binding.outputs["wheel_speed"]
         probe_nm, h = 0.01, self._h
         stepper = self._file.instantiate(
-            "probe", step_s=h, inputs=in_vrs, outputs=[speed.value_reference], start=binding.start
+            "probe",
+            step_s=h,
+            inputs=in_vrs,
+            outputs=[speed.value_reference],
+            start=binding.start,
+            purpose=(
+                "a third instance the twin steps once before the run, under a small load torque, to estimate "
+                "the drive's inertia at the wheel; drive.wheel_inertia_kgm2 or drive.motor skips it"
+            ),
         )
         try:
             cmd, load = binding.inputs
@@ -958,7 +1077,9 @@ def fmu_step_response(
 
     Raises:
         FmuError: If the FMU cannot be loaded, bound to the voltage profile or stepped.
-        ConfigError: If the FMU's parameters do not give a linear motor model.
+        MotorModelError: If `motor_model` (default: the project FMUs' parameter names) does not give a
+            linear motor model with this FMU.
+        ConfigError: If the run would take too many steps.
     """
     mapping = mapping or FmuMapping()
     with FmuFile(path) as fmu:
@@ -978,6 +1099,7 @@ def fmu_step_response(
         outputs = [speed.value_reference] + ([current.value_reference] if current else [])
         stepper = fmu.instantiate(
             "step",
+            purpose="the step-response run",
             step_s=step_s,
             inputs=[b.value_reference for b in binding.inputs],
             outputs=outputs,

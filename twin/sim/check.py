@@ -20,7 +20,7 @@ from typing import Any
 from twin.core.errors import ConfigError, FmuError, TwinError
 from twin.sim.scenario import BehaviorTreeMission, Scenario
 
-__all__ = ["check_inputs", "check_scenario"]
+__all__ = ["check_inputs", "check_scenario", "in_scenario"]
 
 # Numbers that may be infinite (none today: every number of a scenario must be finite).
 _MAY_BE_INFINITE: frozenset[str] = frozenset()
@@ -221,6 +221,37 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         if str(err).startswith(str(path)):
             raise
         raise err.with_context(before=f"{path}: ") from None
+    _check_drive(scenario, path, robot.name)
+
+
+def in_scenario(err: TwinError, path: Path) -> TwinError:
+    """`err` as `twin simulate` reports it for the scenario at `path`.
+
+    A ConfigError about one of the scenario's keys (`drive.motor: ...`) gets the file in front; an
+    error that names its own file (a mapping file, an FMU) is left as it is.
+    """
+    text = str(err)
+    if not isinstance(err, ConfigError) or text.startswith(("/", str(path))):
+        return err
+    if not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text:
+        return err
+    return err.with_context(before=f"{path}: ")
+
+
+def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
+    """Bind the FMU drive as `simulate` does before its first step (contract, motor model, speed loop)."""
+    from twin.core.clock import s_to_ns
+    from twin.robot.drivetrain import FmuDrive, check_fmu_drive
+    from twin.sim.scenario import fmu_fallback
+    from twin.sim.simulation import fmu_drive_section
+
+    if not isinstance(scenario.drive, FmuDrive) or fmu_fallback(scenario.drive) is not None:
+        return
+    try:
+        drive = fmu_drive_section(scenario)
+        check_fmu_drive(drive, step_ns=s_to_ns(scenario.physics.step_s), robot_name=robot_name)
+    except TwinError as err:
+        raise in_scenario(err, path) from None
 
 
 def _load_tree(mission: BehaviorTreeMission) -> None:

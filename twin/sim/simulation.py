@@ -119,7 +119,7 @@ def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
     return dataclasses.replace(robot, lidar=dataclasses.replace(robot.lidar, **overrides))
 
 
-def _fmu_slip(sc: Scenario) -> FmuDrive:
+def fmu_drive_section(sc: Scenario) -> FmuDrive:
     """Return the FMU drive section with `disturbances.wheel_slip` moved into its chassis slip model.
 
     Raises:
@@ -428,7 +428,7 @@ class Simulation(Closing):
             yaw_inertia_kgm2=_yaw_inertia(robot),
         )
         return FmuDrivetrain(
-            _fmu_slip(sc),
+            fmu_drive_section(sc),
             chassis,
             step_ns=self.step_ns,
             pose=pose,

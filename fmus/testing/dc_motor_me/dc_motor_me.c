@@ -8,6 +8,8 @@
 #include "dc_motor.c"
 #include "model_me.h"
 
+int model_is_discrete_input(unsigned vr) { return vr < MODEL_NVR && MODEL_KIND[vr] == KIND_DISCRETE_INPUT; }
+
 int model_n_states(void) {
 #ifdef SERVO
     return 4;

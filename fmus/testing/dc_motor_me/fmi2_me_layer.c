@@ -27,6 +27,7 @@ typedef struct {
     fmi2CallbackFunctions cb;
     fmi2Boolean logging;
     Phase phase;
+    int event_mode; /* after initialization: in event mode (1) or continuous-time mode (0) */
     double time_s;
     char msg[MODEL_MSG_LEN];
 } Instance;
@@ -138,7 +139,10 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     if (inst == NULL) return fmi2Error;
     if (inst->phase != ST_INIT) return fail(inst, fmi2Error, "fmi2ExitInitializationMode: not allowed now");
     fmi2Status status = from_model(inst, model_initialize(inst->model, inst->msg), "initialization");
-    if (status == fmi2OK) inst->phase = ST_STEP;
+    if (status == fmi2OK) {
+        inst->phase = ST_STEP;
+        inst->event_mode = 1; /* Model Exchange leaves initialization in event mode */
+    }
     return status == fmi2Discard ? fail(inst, fmi2Error, "initialization: %s", inst->msg) : status;
 }
 
@@ -181,6 +185,10 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     }
     int initializing = inst->phase == ST_INSTANTIATED || inst->phase == ST_INIT;
     for (size_t k = 0; k < nvr; k++) {
+        if (!initializing && !inst->event_mode && model_is_discrete_input(vr[k])) {
+            return fail(inst, fmi2Error, "fmi2SetReal: value reference %u is a discrete input; set it in "
+                        "initialization or event mode, not in continuous-time mode", vr[k]);
+        }
         if (model_set(inst->model, vr[k], value[k], initializing, inst->msg) != MODEL_OK) {
             return fail(inst, fmi2Error, "fmi2SetReal: %s", inst->msg);
         }
@@ -261,7 +269,12 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 
 /* --- Model Exchange -------------------------------------------------------------------------- */
 
-fmi2Status fmi2EnterEventMode(fmi2Component c) { return c == NULL ? fmi2Error : fmi2OK; }
+fmi2Status fmi2EnterEventMode(fmi2Component c) {
+    Instance *inst = c;
+    if (inst == NULL) return fmi2Error;
+    inst->event_mode = 1;
+    return fmi2OK;
+}
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
     if (c == NULL || info == NULL) return fmi2Error;
@@ -274,7 +287,12 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
     return fmi2OK;
 }
 
-fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) { return c == NULL ? fmi2Error : fmi2OK; }
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) {
+    Instance *inst = c;
+    if (inst == NULL) return fmi2Error;
+    inst->event_mode = 0;
+    return fmi2OK;
+}
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {

@@ -28,6 +28,7 @@ typedef struct {
     fmi3LogMessageCallback log;
     fmi3Boolean logging;
     Phase phase;
+    int event_mode; /* after initialization: in event mode (1) or continuous-time mode (0) */
     double time_s;
     char msg[MODEL_MSG_LEN];
 } Instance;
@@ -166,12 +167,19 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
     if (inst == NULL) return fmi3Error;
     if (inst->phase != ST_INIT) return fail(inst, fmi3Error, "fmi3ExitInitializationMode: not allowed now");
     fmi3Status status = from_model(inst, model_initialize(inst->model, inst->msg), "initialization");
-    if (status == fmi3OK) inst->phase = ST_STEP;
+    if (status == fmi3OK) {
+        inst->phase = ST_STEP;
+        inst->event_mode = 1; /* Model Exchange leaves initialization in event mode */
+    }
     return status == fmi3Discard ? fail(inst, fmi3Error, "initialization: %s", inst->msg) : status;
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
-    return fail(instance, fmi3Error, "fmi3EnterEventMode: event mode is not supported");
+    Instance *inst = instance;
+    if (inst == NULL) return fmi3Error;
+    if (inst->phase != ST_STEP) return fail(inst, fmi3Error, "fmi3EnterEventMode: not allowed now");
+    inst->event_mode = 1;
+    return fmi3OK;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance) {
@@ -221,6 +229,10 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
     if (nValues != nValueReferences) return fail(inst, fmi3Error, "fmi3SetFloat64: nValues != nValueReferences");
     int initializing = inst->phase == ST_INSTANTIATED || inst->phase == ST_INIT;
     for (size_t k = 0; k < nValueReferences; k++) {
+        if (!initializing && !inst->event_mode && model_is_discrete_input(valueReferences[k])) {
+            return fail(inst, fmi3Error, "fmi3SetFloat64: value reference %u is a discrete input; set it in "
+                        "initialization or event mode, not in continuous-time mode", valueReferences[k]);
+        }
         if (model_set(inst->model, valueReferences[k], values[k], initializing, inst->msg) != MODEL_OK) {
             return fail(inst, fmi3Error, "fmi3SetFloat64: %s", inst->msg);
         }
@@ -449,7 +461,12 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     *nextEventTime = 0.0;
     return fmi3OK;
 }
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { return instance == NULL ? fmi3Error : fmi3OK; }
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
+    Instance *inst = instance;
+    if (inst == NULL) return fmi3Error;
+    inst->event_mode = 0;
+    return fmi3OK;
+}
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
     (void)noSetFMUStatePriorToCurrentPoint;

@@ -7,12 +7,16 @@ import dataclasses
 import math
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 from types import MappingProxyType
 
+import pytest
+
 from tests.unit.cosim.helpers import acme
+from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
-from twin.cosim.contract import FmuMapping, Profile, RoleBinding, RoleMap, check_contract, load_mapping
+from twin.cosim.contract import FmuMapping, Profile, RoleBinding, RoleMap, bind, check_contract, load_mapping
 from twin.cosim.fmu import read_fmu_info
 from twin.robot.chassis import ChassisParams
 from twin.robot.drivetrain import FmuDrive, FmuDrivetrain, MotorModel
@@ -95,3 +99,64 @@ def test_without_a_torque_output_the_effort_is_current_times_kt_or_none() -> Non
     no_current = dataclasses.replace(no_torque, current=None)
     with FmuDrivetrain(_acme_drive(no_current), ChassisParams.tb3_waffle(), step_ns=1_000_000) as dt:
         assert not dt.has_effort  # /joint_states then carries no effort, not NaN
+
+
+def test_a_parameter_entry_naming_an_output_is_refused_by_the_check() -> None:
+    info = read_fmu_info(resolve_fmu("builtin:xm430_w210"))
+    report = check_contract(info, FmuMapping(parameters={"wheel_speed": 5.0}), Profile.VOLTAGE)
+    assert not report.ok
+    assert report.problems == (
+        "parameters.wheel_speed: 'wheel_speed' is an output, not a parameter; the FMU computes it, it cannot be set",
+    )
+
+
+def test_a_parameter_entry_naming_an_input_points_to_start_values() -> None:
+    info = read_fmu_info(resolve_fmu("builtin:xm430_w210"))
+    report = check_contract(info, FmuMapping(parameters={"load_torque": 0.1}), Profile.VOLTAGE)
+    assert report.problems == (
+        "parameters.load_torque: 'load_torque' is an input, not a parameter; set it under start_values, "
+        "or name one of the FMU's parameters",
+    )
+    assert check_contract(info, FmuMapping(start_values={"load_torque": 0.1}), Profile.VOLTAGE).ok
+
+
+def test_a_start_value_for_a_computed_output_is_refused() -> None:
+    info = read_fmu_info(resolve_fmu("builtin:xm430_w210"))
+    report = check_contract(info, FmuMapping(start_values={"current": 1.0}), Profile.VOLTAGE)
+    assert report.problems == (
+        "start_values.current: 'current' is an output the FMU computes (it has no start value); it cannot be set",
+    )
+
+
+def test_role_problems_use_the_right_article() -> None:
+    info = read_fmu_info(resolve_fmu("builtin:xm430_w210"))
+    mapping = FmuMapping(roles=RoleMap(voltage="wheel_speed", wheel_speed="voltage"))
+    problems = {r.role: r.problem for r in check_contract(info, mapping, Profile.VOLTAGE).roles}
+    assert problems["voltage"] == "'wheel_speed' is an output, the role needs an input"
+    assert problems["wheel_speed"] == "'voltage' is an input, the role needs an output"
+
+
+def test_a_parameter_that_is_not_finite_is_refused() -> None:
+    info = read_fmu_info(resolve_fmu("builtin:xm430_w210"))
+    report = check_contract(info, FmuMapping(parameters={"R": math.nan}), Profile.VOLTAGE)
+    assert report.problems == ("parameters.R: nan is not a finite number",)
+
+
+def test_two_roles_sharing_one_value_reference_are_refused(tmp_path: Path) -> None:
+    source = resolve_fmu("builtin:xm430_w210")
+    aliased = tmp_path / "aliased.fmu"
+    with zipfile.ZipFile(source) as src, zipfile.ZipFile(aliased, "w") as dst:
+        for name in src.namelist():
+            data = src.read(name)
+            if name == "modelDescription.xml":
+                data = data.replace(b'name="load_torque" valueReference="2"', b'name="load_torque" valueReference="0"')
+            dst.writestr(name, data)
+    info = read_fmu_info(aliased)
+    assert info.variables["load_torque"].value_reference == info.variables["voltage"].value_reference
+    report = check_contract(info, FmuMapping(), Profile.VOLTAGE)
+    assert not report.ok
+    assert report.problems[0].startswith(
+        "roles.load_torque: 'load_torque' shares value reference 0 with 'voltage' (role voltage)"
+    )
+    with pytest.raises(FmuError, match="shares value reference 0"):
+        bind(info, FmuMapping(), Profile.VOLTAGE)

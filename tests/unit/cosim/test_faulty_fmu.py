@@ -69,3 +69,17 @@ def test_nan_output_stops_the_drive_naming_the_output_and_time(api: str, fmi_ver
     assert "instance 'left' failed at t = 0.050000 s" in text
     assert "non-finite output (wheel_speed = nan" in text
     assert "\n" not in text
+
+
+def test_a_failing_inertia_probe_is_explained_not_just_named() -> None:
+    drive = FmuDrive(
+        fmu_file=faulty(),  # type: ignore[arg-type]
+        profile="velocity-servo",
+        motor=None,  # no motor model and no wheel_inertia_kgm2: the twin probes the FMU
+        mapping=FmuMapping(parameters={"fault_mode": FAULTS["nan"], "fault_time": 0.0}),
+    )
+    with pytest.raises(FmuError) as err, FmuDrivetrain(drive, ChassisParams.tb3_waffle(), step_ns=MS):
+        pass
+    text = str(err.value)
+    assert "instance 'probe' (a third instance the twin steps once before the run" in text
+    assert "drive.wheel_inertia_kgm2 or drive.motor skips it" in text

@@ -74,3 +74,31 @@ def test_fmu_check_says_model_exchange_and_the_solver(fmi_version: FmiVersion) -
     assert "Model Exchange" in result.stdout.splitlines()[1]
     assert "stepped as: Model Exchange (solver: CVode" in result.stdout
     assert "satisfies the velocity-servo contract" in result.stdout
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_a_discrete_input_is_set_in_event_mode_and_steps_as_a_continuous_one(fmi_version: FmiVersion) -> None:
+    # The variant's FMU refuses a discrete input set in continuous-time mode, as FMI requires.
+    discrete = model_exchange("xm430_w210_servo_me_discrete_load", fmi_version)
+    assert read_fmu_info(discrete).variables["load_torque"].variability == "discrete"
+    steps = 300
+    got = _run(discrete, "speed_setpoint", 0.05, steps)
+    want = _run(model_exchange("xm430_w210_servo_me", fmi_version), "speed_setpoint", 0.05, steps)
+    assert got == want
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_a_discrete_input_change_mid_run_takes_effect(fmi_version: FmiVersion) -> None:
+    with FmuFile(model_exchange("xm430_w210_servo_me_discrete_load", fmi_version)) as fmu:
+        vr = {name: v.value_reference for name, v in fmu.info.variables.items()}
+        wheel = fmu.instantiate(
+            "left", step_s=STEP_S, inputs=[vr["speed_setpoint"], vr["load_torque"]], outputs=[vr["current"]]
+        )
+        wheel.inputs[0] = 5.0
+        for k in range(200):
+            wheel.step(k * STEP_S)
+        no_load_a = wheel.outputs[0]
+        wheel.inputs[1] = 0.5
+        for k in range(200, 400):
+            wheel.step(k * STEP_S)
+        assert wheel.outputs[0] > no_load_a + 0.1  # the servo draws current against the new load

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
+from types import MappingProxyType
 
 import pytest
 
 from twin.core.config import load_config
 from twin.core.errors import ConfigError
+from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import RoleBinding
-from twin.robot.drivetrain import FmuDrive
+from twin.cosim.fmu import read_fmu_info
+from twin.robot.drivetrain import FmuDrive, MotorModel, motor_constants
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -80,3 +84,12 @@ def test_bad_drive_sections_name_file_line_and_key(tmp_path: Path, text: str, er
     path.write_text(text)
     with pytest.raises(ConfigError, match=error):
         load_config(FmuDrive, path)
+
+
+def test_a_motor_constant_named_after_an_array_parameter_is_a_config_error() -> None:
+    info = read_fmu_info(resolve_fmu("builtin:xm430_w210", fmi_version=3))
+    variables = dict(info.variables)
+    variables["R"] = dataclasses.replace(variables["R"], start="5.2 5.3", dimensions=1)
+    info = dataclasses.replace(info, variables=MappingProxyType(variables))
+    with pytest.raises(ConfigError, match=r"drive\.motor\.resistance_ohm: the FMU's 'R' .* not one number"):
+        motor_constants(MotorModel(), info, {})
