@@ -74,6 +74,7 @@ VALUE_CASES: dict[str, tuple[dict[str, Any], str]] = {
     "zero_max_duration": ({"max_duration_s": 0.0}, "max_duration_s"),
     "angle_min_above_max": ({"sensors.lidar.angle_min_rad": 1.0, "sensors.lidar.angle_max_rad": -1.0}, "angle_min"),
     "seed_text": ({"seed": "seven"}, "seed"),
+    "range_beyond_float32": ({"sensors.lidar.range_max_m": 3.4028235677973366e38}, "float32"),
 }
 
 
