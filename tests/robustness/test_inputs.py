@@ -111,6 +111,7 @@ FILE_CASES: dict[str, tuple[dict[str, Any], int, str]] = {
     "tree_no_main": ({"mission.tree": "no_main.xml"}, 6, "names no tree"),
     "tree_too_deep": ({"mission.tree": "deep.xml"}, 6, "nested deeper than"),
     "world_binary": ({"world.sdf": "binary.bin"}, 3, "binary.bin"),
+    "robot_model_missing": ({"robot.model": "no_such_robot"}, 3, "robot.model: model 'no_such_robot' not found"),
 }
 
 
@@ -381,6 +382,26 @@ def test_model_uri_cannot_escape_the_model_path(tmp_path: Path, capsys: pytest.C
     assert code == 3, err
     assert "model://m/../../secret/x.stl: refused: '..' would leave the model path" in err
     assert_one_line_error(err, contains="not found")
+
+
+def test_a_scenario_model_path_keeps_the_projects_robot_models(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # world.model_path replaces the default list; robot.model: turtlebot3_waffle must still be found.
+    crate = tmp_path / "models" / "crate"
+    crate.mkdir(parents=True)
+    (crate / "model.sdf").write_text(
+        "<sdf version='1.6'><model name='crate'><static>1</static><link name='l'><collision name='c'>"
+        "<geometry><box><size>0.5 0.5 0.5</size></box></geometry></collision></link></model></sdf>"
+    )
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><include><uri>model://crate</uri><pose>3 0 0.25 0 0 0</pose>"
+        "</include></world></sdf>"
+    )
+    path = write_scenario(tmp_path, {"world.sdf": "w.world", "world.model_path": ["models"]})
+    code, _, err = run(["scenario", "check", str(path)], capsys)
+    assert code == 0, err
 
 
 def test_signed_values_are_not_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -136,12 +136,12 @@ def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
     lidar = scenario.sensors.lidar
     if lidar.range_min_m is None and lidar.range_max_m is None:
         return
-    from twin.world import load_robot
+    from twin.sim.simulation import scenario_robot
 
     try:
-        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+        robot = scenario_robot(scenario)
     except TwinError as err:
-        raise err.with_context(before=f"{path}: robot.model: ") from None
+        raise err.with_context(before=f"{path}: ") from None
     if robot.lidar is None:
         return  # simulate names this itself
     range_min = lidar.range_min_m if lidar.range_min_m is not None else robot.lidar.range_min_m
@@ -210,12 +210,12 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
     """
     from twin.sim.navigation import check_map_extent
-    from twin.sim.simulation import spawn_monitor
-    from twin.world import build_scene, load_robot, load_world
+    from twin.sim.simulation import scenario_robot, spawn_monitor
+    from twin.world import build_scene, load_world
 
     try:
         world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
-        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+        robot = scenario_robot(scenario)
         scene = build_scene(world, exclude_models=(robot.name,))
         spawn_monitor(scene, robot, scenario.robot.initial_pose)
         check_map_extent(scenario, robot, scene)

@@ -1188,7 +1188,8 @@ def load_model(
         if folder is None:
             msg = (
                 f"model {text!r} not found: it is not a file and no folder {name!r} is on the model path "
-                f"[{', '.join(str(p) for p in search) or 'empty'}]; set TWIN_MODEL_PATH or pass a model path"
+                f"[{', '.join(str(p) for p in search) or 'empty'}]; add the folder holding it to the model path "
+                "(a scenario's world.model_path, --model-path or TWIN_MODEL_PATH)"
             )
             raise WorldError(msg)
         path = model_file(folder)

@@ -373,5 +373,5 @@ def test_load_model_by_name_drops_its_pose_and_finds_cylinders() -> None:
 
 
 def test_load_model_unknown_name_says_where_it_looked(tmp_path: Path) -> None:
-    with pytest.raises(WorldError, match=r"model 'ghost' not found.*set TWIN_MODEL_PATH"):
+    with pytest.raises(WorldError, match=r"model 'ghost' not found.*add the folder holding it to the model path"):
         load_model("ghost", model_path=[tmp_path], env={})
