@@ -413,3 +413,25 @@ def test_signed_values_are_not_refused(tmp_path: Path, capsys: pytest.CaptureFix
     }
     code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
     assert code == 0, err
+
+
+def test_spawning_inside_an_included_model_names_its_link_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    box = tmp_path / "models" / "box"
+    box.mkdir(parents=True)
+    (box / "model.sdf").write_text(
+        "<sdf version='1.6'><model name='box'><static>1</static><link name='box_link'><collision name='c'>"
+        "<geometry><box><size>1 1 1</size></box></geometry></collision></link></model></sdf>"
+    )
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><include><uri>model://box</uri><pose>0 0 0.5 0 0 0</pose></include>"
+        "<model name='shelf'><static>1</static><pose>5 0 0.5 0 0 0</pose><include><uri>model://box</uri></include>"
+        "</model></world></sdf>"
+    )
+    for x_m, inside in ((0.0, "inside box::box_link;"), (5.0, "inside shelf::box::box_link;")):
+        values = {"world.sdf": "w.world", "world.model_path": ["models"], "robot.initial_pose.x_m": x_m}
+        code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
+        assert code == 2, err
+        assert_one_line_error(err, contains=inside)

@@ -178,7 +178,7 @@ def spawn_monitor(scene: Scene, robot: RobotModelSpec, pose: InitialPose) -> tup
         c = contacts[0]
         msg = (
             f"robot.initial_pose: ({pose.x_m}, {pose.y_m}, {pose.yaw_rad}) puts {robot.name} inside "
-            f"{c.model}::{c.link}; choose a free spawn pose"
+            f"{c.link}; choose a free spawn pose"
         )
         raise ConfigError(msg)
     return body, monitor
