@@ -115,7 +115,9 @@ def model_file(model_dir: Path) -> Path:
     """
     config = model_dir / "model.config"
     if config.is_file():
-        root = parse_file(config)
+        # Read only for its <sdf> entries: a bare `&` in the description, which Gazebo's tinyxml2
+        # lets through, must not refuse the model.
+        root = parse_file(config, bare_ampersands=True)
         best: tuple[tuple[int, int], str] | None = None
         fallback: str | None = None
         for entry in root.findall("sdf"):

@@ -83,6 +83,34 @@ def test_errors_gazebo_also_refuses_still_fail_with_line_and_column(tmp_path: Pa
         load_world(world)
 
 
+def test_a_bare_ampersand_in_model_config_does_not_refuse_the_model(tmp_path: Path) -> None:
+    # Six AWS hospital models describe themselves as "portal, door & car"; tinyxml2 reads that.
+    model = tmp_path / "models" / "elevator_door"
+    model.mkdir(parents=True)
+    (model / "model.config").write_text(
+        '<?xml version="1.0" ?>\n<model><name>door</name><sdf version="1.6">door.sdf</sdf>\n'
+        "<description>3 parts: portal, door & car; &amp; &#38; &#x26; stay entities</description></model>\n"
+    )
+    (model / "door.sdf").write_text(f"<sdf version='1.6'><model name='door'>{_BOX_LINK}</model></sdf>")
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><include><uri>model://elevator_door</uri></include></world></sdf>"
+    )
+    loaded = load_world(world, model_path=[tmp_path / "models"])
+    assert [m.name for m in loaded.models] == ["door"] and not loaded.warnings
+
+
+def test_a_model_config_broken_otherwise_still_fails_with_its_line(tmp_path: Path) -> None:
+    # Only a stray `&` is forgiven: a model.config that is otherwise broken still names its line.
+    model = tmp_path / "models" / "m"
+    model.mkdir(parents=True)
+    (model / "model.config").write_text('<model>\n<sdf version="1.6">model.sdf</sdf>\n<description>a & b</model>\n')
+    world = tmp_path / "w.world"
+    world.write_text("<sdf version='1.6'><world name='w'><include><uri>model://m</uri></include></world></sdf>")
+    with pytest.raises(WorldError, match=r"m/model\.config:3:\d+: malformed XML: Opening and ending tag mismatch"):
+        load_world(world, model_path=[tmp_path / "models"])
+
+
 def test_a_visual_without_geometry_warns_and_a_collision_without_one_fails(tmp_path: Path) -> None:
     world = tmp_path / "v.sdf"
     world.write_text(
