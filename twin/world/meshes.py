@@ -6,7 +6,7 @@ COLLADA node (or the named OBJ/STL object) and may centre it, and `<scale>` appl
 needs no materials or textures: COLLADA is read into arrays with lxml, other formats through trimesh
 with materials skipped, and trimesh's own log records stay off the console.
 
-Boxes and polylines (most of an indoor world) are tessellated with numpy; trimesh, which takes
+Boxes, cones and polylines (most of an indoor world) are tessellated with numpy; trimesh, which takes
 about half a second to import, loads only for non-COLLADA mesh files, curved primitives and callers
 that ask for `trimesh.Trimesh` objects.
 """
@@ -31,6 +31,7 @@ from twin.core.native import cache_dir
 from twin.world.types import (
     Box,
     Capsule,
+    Cone,
     Cylinder,
     Ellipsoid,
     Geometry,
@@ -106,6 +107,24 @@ _UNIT_BOX_VERTICES, _UNIT_BOX_FACES = _unit_box()
 def box_arrays(size_m: tuple[float, float, float]) -> MeshArrays:
     """Return a box of the given edge lengths centred on the origin: 8 corners, 12 triangles."""
     return MeshArrays(_UNIT_BOX_VERTICES * np.asarray(size_m, dtype=np.float64), _UNIT_BOX_FACES.copy())
+
+
+def cone_arrays(radius_m: float, length_m: float, sections: int = _SECTIONS) -> MeshArrays:
+    """Return a cone as SDF places it: base circle of `radius_m` at z = -length/2, apex at +length/2.
+
+    The base is a regular polygon of `sections` corners on the circle, closed by a fan from its centre.
+    """
+    angles = np.arange(sections) * (2.0 * np.pi / sections)
+    half = length_m / 2.0
+    ring = np.column_stack([radius_m * np.cos(angles), radius_m * np.sin(angles), np.full(sections, -half)])
+    apex, centre = sections, sections + 1
+    vertices = np.vstack([ring, [[0.0, 0.0, half], [0.0, 0.0, -half]]])
+    k = np.arange(sections)
+    after = (k + 1) % sections
+    # Counter-clockwise seen from outside: up the side towards the apex, and the base seen from below.
+    sides = np.column_stack([k, after, np.full(sections, apex)])
+    base = np.column_stack([np.full(sections, centre), after, k])
+    return MeshArrays(vertices, np.vstack([sides, base]).astype(np.int64))
 
 
 class _Part(NamedTuple):
@@ -290,9 +309,11 @@ def _check_stl(path: Path, where: str) -> None:
     raise WorldError(msg)
 
 
-def _primitive_arrays(geometry: Box | Cylinder | Sphere | Capsule | Ellipsoid) -> MeshArrays:
+def _primitive_arrays(geometry: Box | Cone | Cylinder | Sphere | Capsule | Ellipsoid) -> MeshArrays:
     if isinstance(geometry, Box):
         return box_arrays(geometry.size_m)
+    if isinstance(geometry, Cone):
+        return cone_arrays(geometry.radius_m, geometry.length_m)
     path = _tessellation_path(geometry)
     if path is not None:
         try:
@@ -375,7 +396,7 @@ def geometry_arrays(geometry: Geometry, cache: MeshCache, where: str = "") -> Me
     Raises:
         WorldError: If a mesh file cannot be used.
     """
-    if isinstance(geometry, Box | Cylinder | Sphere | Capsule | Ellipsoid):
+    if isinstance(geometry, Box | Cone | Cylinder | Sphere | Capsule | Ellipsoid):
         cached = cache.primitives.get(geometry)
         if cached is None:
             cached = _primitive_arrays(geometry)

@@ -13,7 +13,7 @@ What is understood:
   `expressed_in` in 1.7+), converted to the joint frame;
 - a world's `<state>` block: model and link poses (world frame), nested model states,
   `<insertions>` and `<deletions>`, as Gazebo Classic applies it when it loads a world;
-- collision geometry: box, cylinder, sphere, plane, capsule, ellipsoid, polyline, mesh.
+- collision geometry: box, cylinder, cone, sphere, plane, capsule, ellipsoid, polyline, mesh.
 
 A missing visual mesh, an include that cannot be resolved offline, a plugin the twin does not run
 and an element it does not know are warnings (each once), collected in `World.warnings`. A
@@ -50,6 +50,7 @@ from twin.world.types import (
     Box,
     Capsule,
     Collision,
+    Cone,
     Cylinder,
     Ellipsoid,
     Frame,
@@ -144,7 +145,10 @@ _KNOWN: dict[str, frozenset[str]] = {
             "enable_wind",
         }
     ),
-    "collision": frozenset({"pose", "geometry", "surface", "laser_retro", "max_contacts"}),
+    # `density` and `auto_inertia_params` (SDF 1.11) feed Gazebo's automatic inertia, not collision.
+    "collision": frozenset(
+        {"pose", "geometry", "surface", "laser_retro", "max_contacts", "density", "auto_inertia_params"}
+    ),
     "visual": frozenset(
         {
             "pose",
@@ -183,6 +187,7 @@ _UNSUPPORTED_WORLD = {
 _GEOMETRY_TAGS = (
     "box",
     "cylinder",
+    "cone",
     "sphere",
     "plane",
     "capsule",
@@ -850,6 +855,8 @@ class _Loader:
             return Box(size_m=(size[0], size[1], size[2]))
         if tag == "cylinder":
             return Cylinder(radius_m=shape.float_at("radius", 1.0), length_m=shape.float_at("length", 1.0))
+        if tag == "cone":
+            return Cone(radius_m=shape.float_at("radius", 1.0), length_m=shape.float_at("length", 1.0))
         if tag == "sphere":
             return Sphere(radius_m=shape.float_at("radius", 1.0))
         if tag == "capsule":
