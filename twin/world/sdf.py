@@ -260,6 +260,8 @@ class _RawModel:
     plugins: list[Plugin] = field(default_factory=list)
     #: Names of the nested includes that could not be resolved and were skipped with a warning.
     skipped: set[str] = field(default_factory=set)
+    #: The `<include>` that brought this model in (None for a `<model>` written in place).
+    include: XmlNode | None = None
 
     @property
     def pose_node(self) -> XmlNode | None:
@@ -436,6 +438,11 @@ class _Loader:
             else:
                 self.check_known("model", child)
         self.check_unique(raw)
+        nested: dict[str, _RawModel] = {}
+        for model in raw.models:
+            if model.name in nested and not model.merged:
+                raise WorldError(_second_model_message(model, nested[model.name], f"model {raw.name!r}"))
+            nested.setdefault(model.name, model)
         return raw
 
     def check_unique(self, raw: _RawModel) -> None:
@@ -519,6 +526,7 @@ class _Loader:
             raw = self.parse_model(model_node, version, target, parent_static=static)
         finally:
             self._include_stack.pop()
+        raw.include = node
         name = node.text_at("name")
         if name:
             raw.name = name
@@ -949,6 +957,21 @@ def _material_color(node: XmlNode) -> tuple[float, float, float, float] | None:
     return None
 
 
+def _second_model_message(raw: _RawModel, first: _RawModel, where: str) -> str:
+    """Say that `raw` repeats the name of `first`, at the line to change: its <include> or its <model>."""
+    first_at = (first.include or first.node).where
+    if raw.include is not None:
+        uri = raw.include.text_at("uri") or ""
+        return (
+            f"{raw.include.where}: <include> {uri!r} is a second model named {raw.name!r} in {where} "
+            f"(the first is at {first_at}); give it a <name>"
+        )
+    return (
+        f"{raw.node.where}: a second model named {raw.name!r} in {where} (the first is at {first_at}); "
+        "model names must be unique: rename it"
+    )
+
+
 def _not_sdf_message(path: Path, root: XmlNode) -> str:
     tag = root.tag
     if tag == "robot":
@@ -1065,8 +1088,7 @@ def _world_from_node(loader: _Loader, world_node: XmlNode, version: tuple[int, i
     names: dict[str, _RawModel] = {}
     for raw in raw_models:
         if raw.name in names:
-            msg = f"{raw.node.where}: a second model named {raw.name!r} in world; model names must be unique"
-            raise WorldError(msg)
+            raise WorldError(_second_model_message(raw, names[raw.name], "the world"))
         names[raw.name] = raw
     overrides = _StateOverrides()
     for state in state_nodes:

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -375,3 +376,57 @@ def test_load_model_by_name_drops_its_pose_and_finds_cylinders() -> None:
 def test_load_model_unknown_name_says_where_it_looked(tmp_path: Path) -> None:
     with pytest.raises(WorldError, match=r"model 'ghost' not found.*add the folder holding it to the model path"):
         load_model("ghost", model_path=[tmp_path], env={})
+
+
+def _crate_models(tmp_path: Path) -> Path:
+    crate = tmp_path / "models" / "crate"
+    crate.mkdir(parents=True)
+    (crate / "model.sdf").write_text(
+        "<sdf version='1.6'>\n<model name='crate'><link name='l'/></model></sdf>"  # the name is on line 2
+    )
+    return tmp_path / "models"
+
+
+def test_a_second_include_of_a_model_points_at_that_include_and_asks_for_a_name(tmp_path: Path) -> None:
+    models = _crate_models(tmp_path)
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n"
+        "<include><uri>model://crate</uri></include>\n"
+        "<include><uri>model://crate</uri><name>crate_2</name></include>\n"
+        "<include>\n<pose>1 0 0 0 0 0</pose><uri>model://crate</uri></include>\n"
+        "</world></sdf>"
+    )
+    with pytest.raises(WorldError) as raised:
+        load_world(world, model_path=[models])
+    assert str(raised.value) == (
+        f"{world}:4: <include> 'model://crate' is a second model named 'crate' in the world "
+        f"(the first is at {world}:2); give it a <name>"
+    )
+
+
+def test_a_second_nested_include_and_a_second_model_in_place_are_refused_where_they_are(tmp_path: Path) -> None:
+    models = _crate_models(tmp_path)
+    world = tmp_path / "w.world"
+    at = re.escape(str(world))
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><model name='shelf'>\n"
+        "<include><uri>model://crate</uri></include>\n<include><uri>model://crate</uri></include>\n"
+        "</model></world></sdf>"
+    )
+    with pytest.raises(
+        WorldError,
+        match=rf"^{at}:3: <include> 'model://crate' is a second model named 'crate' in "
+        rf"model 'shelf' \(the first is at {at}:2\); give it a <name>$",
+    ):
+        load_world(world, model_path=[models])
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n<model name='a'><link name='l'/></model>\n"
+        "<model name='a'><link name='l'/></model></world></sdf>"
+    )
+    with pytest.raises(
+        WorldError,
+        match=rf"^{at}:3: a second model named 'a' in the world \(the first is at "
+        rf"{at}:2\); model names must be unique: rename it$",
+    ):
+        load_world(world)
