@@ -39,10 +39,12 @@ from twin.world._xml import XmlNode, parse_file, parse_pose, parse_string
 from twin.world.paths import (
     MAX_SDF_VERSION,
     find_model_dir,
+    folder_to_add,
     fuel_model_dir,
     fuel_model_name,
     model_file,
     resolve_resource,
+    resolve_resource_ignoring_case,
     sdf_version,
     search_path,
 )
@@ -672,6 +674,17 @@ class _Loader:
                 return True
         return False
 
+    def missing_mesh_message(self, shape: XmlNode, uri: str, base_dir: Path, owner: str) -> str:
+        """Say which collision mesh is missing and which folder the model path needs for it."""
+        head = f"{shape.where}: collision mesh {uri!r} {owner} not found (searched {base_dir} and the model path)"
+        folder = folder_to_add(uri, base_dir)
+        if folder is None:
+            return f"{head}; add the folder holding it to the model path"
+        relative = uri.strip().removeprefix("file://")
+        if (folder / relative).is_file():
+            return f"{head}; it is {folder / relative}: add {folder} to the model path"
+        return f"{head}; {uri!r} is relative to a folder on the model path, such as {folder}, which lacks it"
+
     def element_pose(self, node: XmlNode, scope: _Scope, T_model_link: Mat4, link_name: str) -> Mat4:
         """Return the pose of a collision/visual/sensor/inertial in its link frame."""
         pose_node = node.find("pose")
@@ -894,12 +907,17 @@ class _Loader:
                 )
                 return None
             if path is None or not path.is_file():
-                if collision:
-                    msg = (
-                        f"{shape.where}: collision mesh {uri!r} of link {link!r} in model {model!r} not found "
-                        f"(searched {base_dir} and the model path); add the folder holding it to the model path"
+                path = resolve_resource_ignoring_case(uri, base_dir=base_dir, search=self.fallback_search(base_dir))
+                if path is not None:
+                    self.warn(
+                        f"mesh-case:{uri}",
+                        f"{shape.where}: mesh {uri!r} not found; using {path}, whose name differs only in letter "
+                        "case (as Gazebo on a case-insensitive file system does); rename one to match the other",
                     )
-                    raise WorldError(msg)
+            if path is None or not path.is_file():
+                if collision:
+                    owner = f"of link {link!r} in model {model!r}"
+                    raise WorldError(self.missing_mesh_message(shape, uri, base_dir, owner))
                 self.warn(f"mesh:{uri}", f"{shape.where}: visual mesh {uri!r} not found; the visual is kept without it")
                 path = None
             scale = _vector(shape, "scale", (1.0, 1.0, 1.0))
