@@ -338,6 +338,30 @@ CLI_CASES: dict[str, tuple[list[str], int, str]] = {
     "bag_info_missing": (["bag", "info", "{d}/nowhere"], 5, "nowhere"),
     "world_info_missing": (["world", "info", "{d}/nowhere.world"], 3, "nowhere.world"),
     "tree_validate_missing": (["tree", "validate", "{d}/nowhere.xml"], 6, "nowhere.xml"),
+    # A model path that does not exist was silently searched: 87 warnings, exit 0, on a real world.
+    "world_info_model_path_missing": (
+        ["world", "info", "{fixtures}/gazebo_classic/worlds/empty_world.world", "--model-path", "{d}/nowhere"],
+        2,
+        "--model-path {d}/nowhere: no such folder",
+    ),
+    "world_info_model_path_in_a_list": (
+        ["world", "info", "{fixtures}/gazebo_classic/worlds/empty_world.world", "--model-path", "{d}:{d}/nowhere"],
+        2,
+        "--model-path {d}/nowhere: no such folder",
+    ),
+    "map_save_model_path_missing": (
+        [
+            "map",
+            "save",
+            "{fixtures}/gazebo_classic/worlds/empty_world.world",
+            "--out",
+            "{d}/map.yaml",
+            "--model-path",
+            "{d}/nowhere",
+        ],
+        2,
+        "--model-path {d}/nowhere: no such folder",
+    ),
 }
 
 
@@ -347,6 +371,7 @@ def test_other_commands_refuse_with_one_line(
 ) -> None:
     argv, exit_code, contains = CLI_CASES[case]
     args = [a.replace("{d}", str(tmp_path)).replace("{fixtures}", str(fixtures)) for a in argv]
+    contains = contains.replace("{d}", str(tmp_path))
     code, out, err = run(args, capsys)
     assert code == exit_code, out + err
     if "twin: error:" in err:
