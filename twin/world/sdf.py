@@ -980,9 +980,10 @@ def _second_model_message(raw: _RawModel, first: _RawModel, where: str) -> str:
     first_at = (first.include or first.node).where
     if raw.include is not None:
         uri = raw.include.text_at("uri") or ""
+        fix = "give it another <name>" if raw.include.text_at("name") else "give it a <name>"
         return (
             f"{raw.include.where}: <include> {uri!r} is a second model named {raw.name!r} in {where} "
-            f"(the first is at {first_at}); give it a <name>"
+            f"(the first is at {first_at}); {fix}"
         )
     return (
         f"{raw.node.where}: a second model named {raw.name!r} in {where} (the first is at {first_at}); "

@@ -403,6 +403,19 @@ def test_a_second_include_of_a_model_points_at_that_include_and_asks_for_a_name(
         f"{world}:4: <include> 'model://crate' is a second model named 'crate' in the world "
         f"(the first is at {world}:2); give it a <name>"
     )
+    # A <name> given twice (leon's warehouse.world: 'pallet B-1-1-1 support'): another one.
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n"
+        "<include><uri>model://crate</uri><name>a</name></include>\n"
+        "<include><uri>model://crate</uri><name>a</name></include>\n"
+        "</world></sdf>"
+    )
+    with pytest.raises(
+        WorldError,
+        match=r"w\.world:3: <include> 'model://crate' is a second model named 'a' .*"
+        r"give it another <name>$",
+    ):
+        load_world(world, model_path=[models])
 
 
 def test_a_second_nested_include_and_a_second_model_in_place_are_refused_where_they_are(tmp_path: Path) -> None:
