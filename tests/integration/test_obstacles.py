@@ -231,3 +231,29 @@ def test_nav2_costmaps_learn_an_obstacle_from_the_scan_and_the_map_does_not_hold
     assert _cells(local, *crate).max() == 100  # lethal where the scan hits the crate
     _, global_costmap = messages["/global_costmap/costmap"][-1]
     assert _cells(global_costmap, *crate).max() == 100
+
+
+def _nested_box_world(folder: Path) -> Path:
+    """A world whose model 'shelf' (1.2 m ahead of the origin) includes model://box (link box_link)."""
+    box = folder / "models" / "box"
+    box.mkdir(parents=True)
+    (box / "model.sdf").write_text(
+        "<sdf version='1.6'><model name='box'><link name='box_link'><collision name='collision'>"
+        "<geometry><box><size>0.3 0.3 0.4</size></box></geometry></collision></link></model></sdf>"
+    )
+    world = folder / "nested.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><model name='shelf'><static>true</static>"
+        "<pose>1.2 0 0.2 0 0 0</pose><include><uri>model://box</uri></include></model></world></sdf>"
+    )
+    return world
+
+
+def test_contact_with_a_nested_world_model_names_each_scope_once(tmp_path: Path) -> None:
+    world = _nested_box_world(tmp_path)
+    text = (
+        f"name: nested\nworld: {{sdf: {world}, model_path: [{tmp_path / 'models'}]}}\nlocalization: {{type: none}}\n"
+        "mission: {type: cmd_vel_script, segments: [{duration_s: 6.0, linear_mps: 0.2}]}\n"
+    )
+    contacts = _run(tmp_path, text)["/contacts"]
+    assert [m.world_collision for _, m in contacts] == ["shelf::box::box_link::collision"]

@@ -75,6 +75,7 @@ VALUE_CASES: dict[str, tuple[dict[str, Any], str]] = {
     "angle_min_above_max": ({"sensors.lidar.angle_min_rad": 1.0, "sensors.lidar.angle_max_rad": -1.0}, "angle_min"),
     "seed_text": ({"seed": "seven"}, "seed"),
     "negative_floor_height": ({"world.floor_height_m": -0.1}, "floor_height_m"),
+    "range_beyond_float32": ({"sensors.lidar.range_max_m": 3.4028235677973366e38}, "float32"),
 }
 
 
@@ -111,6 +112,7 @@ FILE_CASES: dict[str, tuple[dict[str, Any], int, str]] = {
     "tree_no_main": ({"mission.tree": "no_main.xml"}, 6, "names no tree"),
     "tree_too_deep": ({"mission.tree": "deep.xml"}, 6, "nested deeper than"),
     "world_binary": ({"world.sdf": "binary.bin"}, 3, "binary.bin"),
+    "robot_model_missing": ({"robot.model": "no_such_robot"}, 3, "robot.model: model 'no_such_robot' not found"),
 }
 
 
@@ -337,6 +339,30 @@ CLI_CASES: dict[str, tuple[list[str], int, str]] = {
     "bag_info_missing": (["bag", "info", "{d}/nowhere"], 5, "nowhere"),
     "world_info_missing": (["world", "info", "{d}/nowhere.world"], 3, "nowhere.world"),
     "tree_validate_missing": (["tree", "validate", "{d}/nowhere.xml"], 6, "nowhere.xml"),
+    # A model path that does not exist was silently searched: 87 warnings, exit 0, on a real world.
+    "world_info_model_path_missing": (
+        ["world", "info", "{fixtures}/gazebo_classic/worlds/empty_world.world", "--model-path", "{d}/nowhere"],
+        2,
+        "--model-path {d}/nowhere: no such folder",
+    ),
+    "world_info_model_path_in_a_list": (
+        ["world", "info", "{fixtures}/gazebo_classic/worlds/empty_world.world", "--model-path", "{d}:{d}/nowhere"],
+        2,
+        "--model-path {d}/nowhere: no such folder",
+    ),
+    "map_save_model_path_missing": (
+        [
+            "map",
+            "save",
+            "{fixtures}/gazebo_classic/worlds/empty_world.world",
+            "--out",
+            "{d}/map.yaml",
+            "--model-path",
+            "{d}/nowhere",
+        ],
+        2,
+        "--model-path {d}/nowhere: no such folder",
+    ),
 }
 
 
@@ -346,6 +372,7 @@ def test_other_commands_refuse_with_one_line(
 ) -> None:
     argv, exit_code, contains = CLI_CASES[case]
     args = [a.replace("{d}", str(tmp_path)).replace("{fixtures}", str(fixtures)) for a in argv]
+    contains = contains.replace("{d}", str(tmp_path))
     code, out, err = run(args, capsys)
     assert code == exit_code, out + err
     if "twin: error:" in err:
@@ -381,6 +408,26 @@ def test_model_uri_cannot_escape_the_model_path(tmp_path: Path, capsys: pytest.C
     assert code == 3, err
     assert "model://m/../../secret/x.stl: refused: '..' would leave the model path" in err
     assert_one_line_error(err, contains="not found")
+
+
+def test_a_scenario_model_path_keeps_the_projects_robot_models(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # world.model_path replaces the default list; robot.model: turtlebot3_waffle must still be found.
+    crate = tmp_path / "models" / "crate"
+    crate.mkdir(parents=True)
+    (crate / "model.sdf").write_text(
+        "<sdf version='1.6'><model name='crate'><static>1</static><link name='l'><collision name='c'>"
+        "<geometry><box><size>0.5 0.5 0.5</size></box></geometry></collision></link></model></sdf>"
+    )
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><include><uri>model://crate</uri><pose>3 0 0.25 0 0 0</pose>"
+        "</include></world></sdf>"
+    )
+    path = write_scenario(tmp_path, {"world.sdf": "w.world", "world.model_path": ["models"]})
+    code, _, err = run(["scenario", "check", str(path)], capsys)
+    assert code == 0, err
 
 
 def test_signed_values_are_not_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -437,3 +484,25 @@ def test_a_world_too_large_to_map_names_the_world_and_map(tmp_path: Path, capsys
     assert code == 2, err
     line = assert_one_line_error(err, contains=f"{world}: the world's obstacles span 400.2 x 0.2 m")
     assert "give `map:` a map_server YAML" in line
+
+
+def test_spawning_inside_an_included_model_names_its_link_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    box = tmp_path / "models" / "box"
+    box.mkdir(parents=True)
+    (box / "model.sdf").write_text(
+        "<sdf version='1.6'><model name='box'><static>1</static><link name='box_link'><collision name='c'>"
+        "<geometry><box><size>1 1 1</size></box></geometry></collision></link></model></sdf>"
+    )
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><include><uri>model://box</uri><pose>0 0 0.5 0 0 0</pose></include>"
+        "<model name='shelf'><static>1</static><pose>5 0 0.5 0 0 0</pose><include><uri>model://box</uri></include>"
+        "</model></world></sdf>"
+    )
+    for x_m, inside in ((0.0, "inside box::box_link;"), (5.0, "inside shelf::box::box_link;")):
+        values = {"world.sdf": "w.world", "world.model_path": ["models"], "robot.initial_pose.x_m": x_m}
+        code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
+        assert code == 2, err
+        assert_one_line_error(err, contains=inside)

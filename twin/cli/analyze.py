@@ -116,8 +116,9 @@ def _walls(args: argparse.Namespace) -> Any:
     if args.world is None:
         return None
     from twin.analysis.report import world_walls
+    from twin.cli.world import model_path_folders
 
-    return world_walls(args.world, args.model_path)
+    return world_walls(args.world, model_path_folders(args.model_path))
 
 
 def _analyze(args: argparse.Namespace) -> int:

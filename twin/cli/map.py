@@ -68,6 +68,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
 
 def _save(args: argparse.Namespace) -> int:
+    from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
     from twin.nav.map_server import map_from_scene, save_map
     from twin.world import build_scene, load_world
@@ -78,8 +79,7 @@ def _save(args: argparse.Namespace) -> int:
     if args.out.suffix not in (".yaml", ".yml"):
         msg = f"--out {str(args.out)!r} must name the map's YAML file (DIR/map.yaml)"
         raise ConfigError(msg)
-    model_path = [Path(part) for item in args.model_path for part in str(item).split(os.pathsep) if part]
-    world = load_world(args.world, model_path=model_path)
+    world = load_world(args.world, model_path=model_path_folders(args.model_path))
     occupancy = map_from_scene(
         build_scene(world),
         height_m=args.height,

@@ -80,10 +80,12 @@ def _yaml_path(p: Path) -> str:
 def _replay(args: argparse.Namespace) -> int:
     from twin.analysis.compare import compare_bags, write_comparison
     from twin.analysis.report import world_walls
+    from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
     from twin.sim.scenario import load_scenario
     from twin.sim.simulation import Simulation
 
+    model_path_folders(args.model_path)  # refuse a folder that does not exist before anything runs
     bag = args.bag
     out = args.out if args.out is not None else Path("bags") / f"{bag.resolve().name}_replay"
     try:

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from twin.cli.play import live_banner, speed_arg
 from twin.cli.progress import Progress
-from twin.core.errors import ConfigError, Interrupted, SimulationError, TwinError
+from twin.core.errors import ConfigError, Interrupted, SimulationError, TwinError, WorldError
 
 if TYPE_CHECKING:
     from twin.sim.executor import Sink
@@ -359,6 +359,8 @@ def _run(
     except BaseException as err:
         if not existed and bag_path.is_dir():  # refused after the bag folder was made: leave nothing behind
             shutil.rmtree(bag_path, ignore_errors=True)
+        if isinstance(err, WorldError) and str(err).startswith("robot.model: "):
+            raise err.with_context(before=f"{path}: ") from err  # the robot the scenario names
         if not isinstance(err, ConfigError):
             raise
         # A scenario value the loaded world or robot refuses: name the scenario file too.

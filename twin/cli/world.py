@@ -7,6 +7,7 @@ import json
 import os
 import sys
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,7 +24,7 @@ examples:
 model://NAME resolves against TWIN_MODEL_PATH, then --model-path, then GAZEBO_MODEL_PATH and
 GZ_SIM_RESOURCE_PATH. Fuel includes that cannot be fetched offline are skipped with a warning
 (Ground Plane and Sun have built-in stand-ins). Exit status: 0 when the world loads (warnings
-included), 3 when it cannot be loaded.
+included), 2 when a --model-path folder does not exist, 3 when the world cannot be loaded.
 """
 
 
@@ -63,6 +64,24 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     )
     info.add_argument("--json", action="store_true", help="print the summary as JSON")
     info.set_defaults(func=_info)
+
+
+def model_path_folders(values: Sequence[str | Path]) -> list[Path]:
+    """Return the folders given with `--model-path` (repeatable, each may be os.pathsep-separated).
+
+    Raises:
+        ConfigError: Naming the first one that is not a folder (a typo would otherwise only show
+            as a warning per include it failed to find).
+    """
+    from twin.core.errors import ConfigError
+
+    folders = [Path(part) for item in values for part in str(item).split(os.pathsep) if part]
+    for folder in folders:
+        if not folder.is_dir():
+            problem = "not a folder" if folder.exists() else "no such folder"
+            msg = f"--model-path {folder}: {problem}; give folders that hold model folders"
+            raise ConfigError(msg)
+    return folders
 
 
 def summarize(world: World) -> dict[str, Any]:
@@ -106,7 +125,7 @@ def summarize(world: World) -> dict[str, Any]:
 def _info(args: argparse.Namespace) -> int:
     from twin.world import load_world
 
-    model_path = [Path(part) for item in args.model_path for part in str(item).split(os.pathsep) if part]
+    model_path = model_path_folders(args.model_path)
     world = load_world(args.world, model_path=model_path, missing_includes="error" if args.strict else "warn")
     facts = summarize(world)
     if args.json:

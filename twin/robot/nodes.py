@@ -201,7 +201,7 @@ class DiffDriveNode(Node):
         args = (t_ns, event)
         kwargs: dict[str, Any] = {
             "robot_collision": c.robot_link,
-            "world_collision": f"{c.model}::{c.link}::{c.collision}",
+            "world_collision": f"{c.link}::{c.collision}",  # c.link is scoped: model::link
             "position_m": c.point,
             "normal": c.normal,
             "depth_m": c.depth_m,
@@ -211,9 +211,9 @@ class DiffDriveNode(Node):
         )
         if begin:
             self.contacts += 1
-            _log.warning("t=%.3f s: contact with %s::%s; the robot stops", ns_to_s(t_ns), c.model, c.link)
+            _log.warning("t=%.3f s: contact with %s; the robot stops", ns_to_s(t_ns), c.link)
         else:
-            _log.info("t=%.3f s: contact with %s::%s ended", ns_to_s(t_ns), c.model, c.link)
+            _log.info("t=%.3f s: contact with %s ended", ns_to_s(t_ns), c.link)
 
 
 class ObstacleNode(Node):

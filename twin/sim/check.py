@@ -28,6 +28,8 @@ _MAY_BE_INFINITE: frozenset[str] = frozenset()
 _MIN_RATE_HZ = 1e-3
 # More rays per scan than any real lidar has (the TB3's LDS-01 has 360); each costs memory and time.
 _MAX_SAMPLES = 100_000
+# A LaserScan carries the lidar's angles and ranges as float32: a larger number cannot be recorded.
+_FLOAT32_MAX = 3.4028234663852886e38
 # Numbers that cannot be negative: durations, distances, rates, gains, limits, noise levels.
 _UNSIGNED_SUFFIXES = ("_hz", "_s", "_m", "_kgm2", "_per_rev", "gain", "samples", "precision", "_fraction")
 _SIGNED_PREFIXES = ("x_", "y_", "z_")  # coordinates: x_m, x_min_m, y_max_m, ...
@@ -89,6 +91,9 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
     if not scenario.max_duration_s > 0:
         raise _refuse(path, "max_duration_s", f"must be a positive number of seconds, got {scenario.max_duration_s}")
     lidar = scenario.sensors.lidar
+    for key, value in _values(lidar, "sensors.lidar"):
+        if isinstance(value, float) and abs(value) > _FLOAT32_MAX:
+            raise _refuse(path, key, f"{value!r} does not fit a LaserScan's float32 fields; give at most 3.4e+38")
     if lidar.samples is not None and not 1 <= lidar.samples <= _MAX_SAMPLES:
         raise _refuse(path, "sensors.lidar.samples", f"must be between 1 and {_MAX_SAMPLES}, got {lidar.samples}")
     if lidar.range_min_m is not None and lidar.range_max_m is not None and lidar.range_min_m >= lidar.range_max_m:
@@ -131,12 +136,12 @@ def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
     lidar = scenario.sensors.lidar
     if lidar.range_min_m is None and lidar.range_max_m is None:
         return
-    from twin.world import load_robot
+    from twin.sim.simulation import scenario_robot
 
     try:
-        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+        robot = scenario_robot(scenario)
     except TwinError as err:
-        raise err.with_context(before=f"{path}: robot.model: ") from None
+        raise err.with_context(before=f"{path}: ") from None
     if robot.lidar is None:
         return  # simulate names this itself
     range_min = lidar.range_min_m if lidar.range_min_m is not None else robot.lidar.range_min_m
@@ -205,12 +210,12 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
     """
     from twin.sim.navigation import check_map_extent
-    from twin.sim.simulation import spawn_monitor
-    from twin.world import build_scene, load_robot, load_world
+    from twin.sim.simulation import scenario_robot, spawn_monitor
+    from twin.world import build_scene, load_world
 
     try:
         world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
-        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+        robot = scenario_robot(scenario)
         scene = build_scene(world, exclude_models=(robot.name,), floor_height_m=scenario.world.floor_height_m)
         spawn_monitor(scene, robot, scenario.robot.initial_pose, floor_height_m=scenario.world.floor_height_m)
         check_map_extent(scenario, robot, scene)

@@ -38,11 +38,17 @@ _log = logging.getLogger(__name__)
 
 _DATA = Path(__file__).resolve().parent.parent / "data"
 DEFAULTS_PATH = _DATA / "scenario_defaults.yaml"
+#: The project's own robot models (turtlebot3_waffle, turtlebot3_burger), in a source checkout.
+PACKAGED_MODELS = _DATA.parent.parent / "sdf" / "models"
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class WorldSection:
-    """Which world to load and where `model://` URIs resolve."""
+    """Which world to load and where `model://` URIs resolve.
+
+    `model_path` always ends with the project's own `sdf/models` (when it exists): a scenario that
+    names its own folders still finds `robot.model: turtlebot3_waffle`, after them.
+    """
 
     sdf: Path
     model_path: tuple[Path, ...] = ()
@@ -52,6 +58,8 @@ class WorldSection:
         if not 0.0 <= self.floor_height_m <= 0.5:
             msg = f"floor_height_m must be between 0 and 0.5 m, got {self.floor_height_m}"
             raise ValueError(msg)
+        if PACKAGED_MODELS not in self.model_path and PACKAGED_MODELS.is_dir():
+            object.__setattr__(self, "model_path", (*self.model_path, PACKAGED_MODELS))
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

@@ -26,7 +26,7 @@ import numpy as np
 from twin.bag import Recorder
 from twin.core.clock import NS_PER_S, s_to_ns
 from twin.core.closing import Closing
-from twin.core.errors import ConfigError
+from twin.core.errors import ConfigError, WorldError
 from twin.core.gcpolicy import resume_collection
 from twin.estimation import OdometryFilter
 from twin.estimation.node import EkfNode
@@ -153,6 +153,18 @@ def _yaw_inertia(robot: RobotModelSpec) -> float:
     return total
 
 
+def scenario_robot(scenario: Scenario) -> RobotModelSpec:
+    """Load the scenario's `robot.model` from its `world.model_path` (the project's own models last).
+
+    Raises:
+        WorldError: The loader's error, led by the scenario key `robot.model`.
+    """
+    try:
+        return load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+    except WorldError as err:
+        raise err.with_context(before="robot.model: ") from None
+
+
 _LOW_OBSTACLE_M = 0.2
 """An obstacle the robot is spawned inside whose top is no higher than this may be a raised floor."""
 
@@ -174,7 +186,7 @@ def spawn_monitor(
         c = contacts[0]
         msg = (
             f"robot.initial_pose: ({pose.x_m}, {pose.y_m}, {pose.yaw_rad}) puts {robot.name} inside "
-            f"{c.model}::{c.link}; choose a free spawn pose"
+            f"{c.link}; choose a free spawn pose"
         )
         top = scene.top_m(c)
         if top is not None and floor_height_m < top <= _LOW_OBSTACLE_M:
@@ -222,8 +234,7 @@ class Simulation(Closing):
         world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
         for warning in world.warnings:
             _log.warning("%s", warning)
-        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
-        robot = _lidar_spec(robot, scenario.sensors.lidar)
+        robot = _lidar_spec(scenario_robot(scenario), scenario.sensors.lidar)
         if robot.drive is None:
             msg = f"robot {robot.name!r} has no differential drive (wheel joints or a diff-drive plugin) in its SDF"
             raise ConfigError(msg)

@@ -8,6 +8,7 @@ of this module.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -179,8 +180,17 @@ _TOLERATED_TYPES = frozenset({"ERR_HYPHEN_IN_COMMENT"})
 _TOLERATED_DOMAINS = frozenset({"NAMESPACE"})
 
 
-def parse_file(path: Path) -> XmlNode:
+#: An `&` that starts no entity or character reference (`portal, door & car`).
+_BARE_AMPERSAND = re.compile(rb"&(?!(?:[A-Za-z_:][\w.:-]*|#[0-9]+|#x[0-9A-Fa-f]+);)")
+
+
+def parse_file(path: Path, *, bare_ampersands: bool = False) -> XmlNode:
     """Read an XML file into an `XmlNode` tree.
+
+    Args:
+        path: The file.
+        bare_ampersands: Read an `&` that starts no entity as the character itself, as tinyxml2
+            does (for model.config, whose free-text `<description>` often has one).
 
     Raises:
         WorldError: If the file cannot be read or is not well-formed XML (with line and column).
@@ -190,6 +200,8 @@ def parse_file(path: Path) -> XmlNode:
     except OSError as err:
         msg = f"{path}: cannot read: {err.strerror or err}"
         raise WorldError(msg) from None
+    if bare_ampersands:
+        data = _BARE_AMPERSAND.sub(b"&amp;", data)
     return _parse(data, path)
 
 

@@ -1,12 +1,14 @@
-"""Triangle meshes for geometry: mesh files through trimesh, primitives tessellated.
+"""Triangle meshes for geometry: mesh files read as triangles only, primitives tessellated.
 
 Mesh files are read as Gazebo reads them: COLLADA's `<unit meter=...>` scales the vertices (its
 `<up_axis>` is ignored, as Gazebo ignores it), `<submesh>` selects the geometry under the named
-COLLADA node (or the named OBJ/STL object) and may centre it, and `<scale>` applies last.
+COLLADA node (or the named OBJ/STL object) and may centre it, and `<scale>` applies last. Collision
+needs no materials or textures: COLLADA is read into arrays with lxml, other formats through trimesh
+with materials skipped, and trimesh's own log records stay off the console.
 
-Boxes and polylines (most of an indoor world) are tessellated with numpy; trimesh, which takes
-about half a second to import, loads only for mesh files, curved primitives and callers that ask
-for `trimesh.Trimesh` objects.
+Boxes, cones and polylines (most of an indoor world) are tessellated with numpy; trimesh, which takes
+about half a second to import, loads only for non-COLLADA mesh files, curved primitives and callers
+that ask for `trimesh.Trimesh` objects.
 """
 
 from __future__ import annotations
@@ -17,12 +19,11 @@ import importlib.util
 import logging
 import os
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
-from lxml import etree
 from numpy.typing import NDArray
 
 from twin.core.errors import WorldError
@@ -30,6 +31,7 @@ from twin.core.native import cache_dir
 from twin.world.types import (
     Box,
     Capsule,
+    Cone,
     Cylinder,
     Ellipsoid,
     Geometry,
@@ -44,6 +46,8 @@ if TYPE_CHECKING:
 __all__ = ["MeshArrays", "MeshCache", "geometry_arrays", "geometry_mesh"]
 
 _log = logging.getLogger(__name__)
+
+F64 = NDArray[np.float64]
 
 # Tessellation of curved primitives where an exact shape is not needed (bounds, viewers, slices of
 # tilted shapes). Ray casting and collision use the exact shapes where they can.
@@ -105,40 +109,71 @@ def box_arrays(size_m: tuple[float, float, float]) -> MeshArrays:
     return MeshArrays(_UNIT_BOX_VERTICES * np.asarray(size_m, dtype=np.float64), _UNIT_BOX_FACES.copy())
 
 
+def cone_arrays(radius_m: float, length_m: float, sections: int = _SECTIONS) -> MeshArrays:
+    """Return a cone as SDF places it: base circle of `radius_m` at z = -length/2, apex at +length/2.
+
+    The base is a regular polygon of `sections` corners on the circle, closed by a fan from its centre.
+    """
+    angles = np.arange(sections) * (2.0 * np.pi / sections)
+    half = length_m / 2.0
+    ring = np.column_stack([radius_m * np.cos(angles), radius_m * np.sin(angles), np.full(sections, -half)])
+    apex, centre = sections, sections + 1
+    vertices = np.vstack([ring, [[0.0, 0.0, half], [0.0, 0.0, -half]]])
+    k = np.arange(sections)
+    after = (k + 1) % sections
+    # Counter-clockwise seen from outside: up the side towards the apex, and the base seen from below.
+    sides = np.column_stack([k, after, np.full(sections, apex)])
+    base = np.column_stack([np.full(sections, centre), after, k])
+    return MeshArrays(vertices, np.vstack([sides, base]).astype(np.int64))
+
+
+class _Part(NamedTuple):
+    """The triangles of one mesh instance in a file, in the file's frame with its unit applied."""
+
+    labels: frozenset[str]
+    """Names a `<submesh>` may use to select it: its COLLADA geometry id and enclosing node names and
+    ids, or the node and geometry names of other formats."""
+    vertices: NDArray[np.float64]
+    faces: NDArray[np.int64]
+
+
 class MeshCache:
-    """Loads each mesh file once per world (the same file is often used by many collisions)."""
+    """Loads each mesh file once per world (the same file is often used by many collisions).
+
+    Only triangles are read: collision needs no materials, textures or normals, so COLLADA files are
+    read straight into arrays (`twin.world._collada`; trimesh would load and pack every texture the
+    file names) and other formats through trimesh without their materials.
+    """
 
     def __init__(self) -> None:
-        self._files: dict[Path, trimesh.Scene] = {}
-        self._units: dict[Path, float] = {}
+        self._files: dict[Path, tuple[_Part, ...]] = {}
         # Primitive shapes by value: a world of 10,000 equal boxes builds one box mesh (callers copy
         # before they transform, never change a mesh they are given).
         self.primitives: dict[object, MeshArrays] = {}
 
-    def scene(self, path: Path, where: str) -> tuple[trimesh.Scene, float]:
-        """Return the file's meshes as a trimesh Scene and its unit scale (metres per unit).
+    def _parts(self, path: Path, where: str) -> tuple[_Part, ...]:
+        """Return the file's mesh instances (read on first use).
 
         Raises:
-            WorldError: If the file cannot be read as a mesh.
+            WorldError: If the file cannot be read as a mesh or holds no triangles.
         """
-        import trimesh
+        parts = self._files.get(path)
+        if parts is not None:
+            return parts
+        if path.suffix.lower() == ".stl":
+            _check_stl(path, where)
+        try:
+            parts = _collada_parts(path) if path.suffix.lower() == ".dae" else _trimesh_parts(path)
+        except Exception as err:  # the readers raise many kinds; all mean "not a mesh we can read"
+            msg = f"{where}: cannot read mesh {path}: {type(err).__name__}: {err}"
+            raise WorldError(msg) from None
+        if not any(len(part.faces) for part in parts):
+            msg = f"{where}: mesh {path} holds no triangles"
+            raise WorldError(msg)
+        self._files[path] = parts
+        return parts
 
-        if path not in self._files:
-            if path.suffix.lower() == ".stl":
-                _check_stl(path, where)
-            try:
-                loaded = trimesh.load(str(path), force="scene", process=False)
-            except Exception as err:  # trimesh raises many kinds; all mean "not a mesh we can read"
-                msg = f"{where}: cannot read mesh {path}: {type(err).__name__}: {err}"
-                raise WorldError(msg) from None
-            if not isinstance(loaded, trimesh.Scene) or not loaded.geometry:
-                msg = f"{where}: mesh {path} holds no triangles"
-                raise WorldError(msg)
-            self._files[path] = loaded
-            self._units[path] = _collada_unit(path) if path.suffix.lower() == ".dae" else 1.0
-        return self._files[path], self._units[path]
-
-    def mesh(self, geometry: Mesh, where: str) -> trimesh.Trimesh:
+    def arrays(self, geometry: Mesh, where: str) -> MeshArrays:
         """Return the mesh of a `<mesh>` geometry in its own frame (unit, submesh and scale applied).
 
         Raises:
@@ -147,41 +182,100 @@ class MeshCache:
         if geometry.path is None:
             msg = f"{where}: mesh {geometry.uri!r} was not found"
             raise WorldError(msg)
-        import trimesh
-
-        scene, unit = self.scene(geometry.path, where)
+        parts = self._parts(geometry.path, where)
         if geometry.submesh:
-            wanted = _submesh_geometry_names(geometry.path, geometry.submesh)
-            nodes = [
-                node
-                for node in scene.graph.nodes_geometry
-                if (
-                    scene.graph[node][1] in wanted
-                    or node == geometry.submesh
-                    or scene.graph[node][1] == geometry.submesh
-                )
-            ]
-            if not nodes:
-                names = sorted(scene.geometry)
+            chosen = [part for part in parts if geometry.submesh in part.labels]
+            if not chosen:
+                names = sorted({label for part in parts for label in part.labels})
                 msg = f"{where}: submesh {geometry.submesh!r} not found in {geometry.path} (it has: {', '.join(names)})"
                 raise WorldError(msg)
-            parts = []
-            for node in nodes:
-                transform, name = scene.graph[node]
-                part = scene.geometry[name].copy()
-                part.apply_transform(transform)
-                parts.append(part)
-            merged: Any = trimesh.util.concatenate(parts)
-        else:
-            merged = scene.to_geometry() if hasattr(scene, "to_geometry") else scene.dump(concatenate=True)
-        mesh = trimesh.Trimesh(
-            vertices=np.asarray(merged.vertices) * unit, faces=np.asarray(merged.faces), process=False
-        )
-        if geometry.submesh and geometry.center_submesh:
-            mesh.apply_translation(-mesh.bounds.mean(axis=0))
+            parts = tuple(chosen)
+        vertices, faces = _joined(parts)
+        if geometry.submesh and geometry.center_submesh and len(faces):
+            used = vertices[np.unique(faces)]
+            vertices = vertices - (used.min(axis=0) + used.max(axis=0)) / 2.0
         if geometry.scale != (1.0, 1.0, 1.0):
-            mesh.apply_scale(np.asarray(geometry.scale, dtype=float))  # type: ignore[no-untyped-call]
-        return mesh
+            vertices = vertices * np.asarray(geometry.scale, dtype=np.float64)
+        return MeshArrays(vertices, faces)
+
+    def mesh(self, geometry: Mesh, where: str) -> trimesh.Trimesh:
+        """Return the mesh of a `<mesh>` geometry as a new `trimesh.Trimesh` (see `arrays`).
+
+        Raises:
+            WorldError: If the file is missing or unreadable, or the submesh does not exist.
+        """
+        return self.arrays(geometry, where).to_trimesh()
+
+
+def _joined(parts: Sequence[_Part]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Return one or more parts as one vertex array and one face array (faces renumbered)."""
+    if len(parts) == 1:
+        return parts[0].vertices, parts[0].faces
+    offsets = np.cumsum([0, *(len(part.vertices) for part in parts[:-1])])
+    vertices = np.concatenate([part.vertices for part in parts])
+    faces = np.concatenate([part.faces + offset for part, offset in zip(parts, offsets, strict=True)])
+    return vertices, faces
+
+
+def _placed(vertices: NDArray[Any], faces: NDArray[Any], T: NDArray[Any]) -> tuple[F64, NDArray[np.int64]]:
+    """Return the vertices the faces use, moved by the 4x4 transform T, and the faces renumbered to them."""
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    used, renumbered = np.unique(faces, return_inverse=True)
+    points = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)[used]
+    T = np.asarray(T, dtype=np.float64)
+    return points @ T[:3, :3].T + T[:3, 3], renumbered.reshape(-1, 3).astype(np.int64)
+
+
+def _collada_parts(path: Path) -> tuple[_Part, ...]:
+    from twin.world._collada import read_collada  # only worlds with COLLADA meshes need it
+
+    return tuple(_Part(part.labels, part.vertices, part.faces) for part in read_collada(path))
+
+
+def _trimesh_parts(path: Path) -> tuple[_Part, ...]:
+    """Read the triangles of a mesh file through trimesh (materials skipped where it allows)."""
+    import trimesh
+
+    options: dict[str, Any] = {"skip_materials": True} if path.suffix.lower() == ".obj" else {}
+    with _trimesh_log_kept(path):
+        loaded = trimesh.load(str(path), force="scene", process=False, **options)
+    if not isinstance(loaded, trimesh.Scene):
+        return ()
+    parts: list[_Part] = []
+    for node in loaded.graph.nodes_geometry:
+        transform, name = loaded.graph[node]
+        geometry = loaded.geometry[name]
+        if isinstance(geometry, trimesh.Trimesh) and len(geometry.faces):
+            vertices, faces = _placed(geometry.vertices, geometry.faces, transform)
+            parts.append(_Part(frozenset({str(node), str(name)}), vertices, faces))
+    return tuple(parts)
+
+
+@contextlib.contextmanager
+def _trimesh_log_kept(path: Path) -> Iterator[None]:
+    """Keep trimesh's log records (texture and material complaints) off the user's console.
+
+    While a file loads, trimesh's logger hands its records to a list instead of the application's
+    handlers; they are then logged here once, at debug level, as one line.
+    """
+    logger = logging.getLogger("trimesh")
+    kept: list[str] = []
+
+    class _Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            kept.append(record.getMessage())
+
+    handler = _Keep()
+    propagate = logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+        if kept:
+            _log.debug("%s: trimesh said: %s", path, "; ".join(dict.fromkeys(kept)))
 
 
 def _check_stl(path: Path, where: str) -> None:
@@ -215,37 +309,11 @@ def _check_stl(path: Path, where: str) -> None:
     raise WorldError(msg)
 
 
-def _collada_unit(path: Path) -> float:
-    """Return COLLADA's `<asset><unit meter=...>` (1.0 when absent)."""
-    try:
-        for _event, elem in etree.iterparse(str(path), events=("end",), tag="{*}unit"):
-            value = elem.get("meter")
-            return float(value) if value else 1.0
-    except (etree.XMLSyntaxError, ValueError, OSError):
-        return 1.0
-    return 1.0
-
-
-def _submesh_geometry_names(path: Path, name: str) -> set[str]:
-    """Return the COLLADA geometry ids instanced under nodes called `name`."""
-    if path.suffix.lower() != ".dae":
-        return {name}
-    try:
-        tree = etree.parse(str(path))
-    except (etree.XMLSyntaxError, OSError):
-        return {name}
-    out: set[str] = set()
-    for node in tree.iter("{*}node"):
-        if name in (node.get("name"), node.get("id")):
-            for inst in node.iter("{*}instance_geometry"):
-                url = inst.get("url") or ""
-                out.add(url.lstrip("#"))
-    return out or {name}
-
-
-def _primitive_arrays(geometry: Box | Cylinder | Sphere | Capsule | Ellipsoid) -> MeshArrays:
+def _primitive_arrays(geometry: Box | Cone | Cylinder | Sphere | Capsule | Ellipsoid) -> MeshArrays:
     if isinstance(geometry, Box):
         return box_arrays(geometry.size_m)
+    if isinstance(geometry, Cone):
+        return cone_arrays(geometry.radius_m, geometry.length_m)
     path = _tessellation_path(geometry)
     if path is not None:
         try:
@@ -322,12 +390,13 @@ def _arrays_of(mesh: trimesh.Trimesh) -> MeshArrays:
 def geometry_arrays(geometry: Geometry, cache: MeshCache, where: str = "") -> MeshArrays | None:
     """Return a triangle mesh of a geometry in its own frame as arrays (None for infinite planes).
 
-    The arrays of a primitive are shared by every equal primitive of the cache: copy before changing.
+    The arrays of a primitive are shared by every equal primitive of the cache, those of a mesh file
+    by the collisions that use it unscaled: copy before changing.
 
     Raises:
         WorldError: If a mesh file cannot be used.
     """
-    if isinstance(geometry, Box | Cylinder | Sphere | Capsule | Ellipsoid):
+    if isinstance(geometry, Box | Cone | Cylinder | Sphere | Capsule | Ellipsoid):
         cached = cache.primitives.get(geometry)
         if cached is None:
             cached = _primitive_arrays(geometry)
@@ -337,7 +406,7 @@ def geometry_arrays(geometry: Geometry, cache: MeshCache, where: str = "") -> Me
         case Polyline():
             return polyline_arrays(geometry)
         case Mesh():
-            return _arrays_of(cache.mesh(geometry, where))
+            return cache.arrays(geometry, where)
     return None
 
 

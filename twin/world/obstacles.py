@@ -553,7 +553,7 @@ class ObstacleField:
             out.append(
                 Contact(
                     model=ob.name,
-                    link="link",
+                    link=f"{ob.name}::link",  # scoped, as the Scene's contacts name links
                     collision=ob.spec.shape,
                     robot_link=part.link,
                     point=(float(contact.pos[0]), float(contact.pos[1]), float(contact.pos[2])),

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
@@ -20,11 +20,13 @@ from twin.world._xml import parse_file
 __all__ = [
     "MAX_SDF_VERSION",
     "find_model_dir",
+    "folder_to_add",
     "fuel_cache_roots",
     "fuel_model_dir",
     "fuel_model_name",
     "model_file",
     "resolve_resource",
+    "resolve_resource_ignoring_case",
     "sdf_version",
     "search_path",
 ]
@@ -115,7 +117,9 @@ def model_file(model_dir: Path) -> Path:
     """
     config = model_dir / "model.config"
     if config.is_file():
-        root = parse_file(config)
+        # Read only for its <sdf> entries: a bare `&` in the description, which Gazebo's tinyxml2
+        # lets through, must not refuse the model.
+        root = parse_file(config, bare_ampersands=True)
         best: tuple[tuple[int, int], str] | None = None
         fallback: str | None = None
         for entry in root.findall("sdf"):
@@ -148,28 +152,70 @@ def resolve_resource(uri: str, *, base_dir: Path, search: Sequence[Path]) -> Pat
     Fuel cache (see `fuel_model_dir`), any other to None.
     """
     uri = uri.strip()
+    if uri.startswith(("http://", "https://")):
+        return _fuel_file(uri)
+    return next((candidate for candidate in _candidates(uri, base_dir, search) if candidate.exists()), None)
+
+
+def resolve_resource_ignoring_case(uri: str, *, base_dir: Path, search: Sequence[Path]) -> Path | None:
+    """Return a file whose name differs only in letter case from one a URI names, in the same folder.
+
+    For a URI `resolve_resource` does not find: Gazebo on a case-insensitive file system (macOS,
+    Windows) opens `aws_spotlight_01_collision.DAE` for `.../aws_Spotlight_01_collision.DAE`.
+    None for web URIs, or when no folder the URI names holds such a file.
+    """
+    uri = uri.strip()
+    if uri.startswith(("http://", "https://")):
+        return None
+    for candidate in _candidates(uri, base_dir, search):
+        folder, wanted = candidate.parent, candidate.name.lower()
+        if not folder.is_dir():
+            continue
+        for entry in sorted(folder.iterdir()):
+            if entry.name.lower() == wanted and entry.is_file():
+                return entry
+    return None
+
+
+def folder_to_add(uri: str, base_dir: Path) -> Path | None:
+    """Return the folder that, on the model path, would resolve a relative URI (`file://models/x/a.dae`).
+
+    Such URIs are relative to a folder on Gazebo's resource path, usually one holding the `models`
+    folder the file is in: of `base_dir` and its parents, the one where most of the URI's leading
+    folders exist (the whole file, if it exists). None for `model://`, web and absolute URIs, or if
+    no parent holds even the first folder of the URI.
+    """
+    text = uri.strip()
+    if text.startswith(("model://", "package://", "http://", "https://")):
+        return None
+    relative = Path(text.removeprefix("file://"))
+    if relative.is_absolute() or not relative.parts:
+        return None
+    best: tuple[int, Path] | None = None
+    for folder in (base_dir, *base_dir.parents):
+        depth = 0
+        while depth < len(relative.parts) and (folder.joinpath(*relative.parts[: depth + 1])).exists():
+            depth += 1
+        if depth == len(relative.parts):
+            return folder
+        if depth and (best is None or depth > best[0]):
+            best = (depth, folder)
+    return best[1] if best is not None else None
+
+
+def _candidates(uri: str, base_dir: Path, search: Sequence[Path]) -> Iterator[Path]:
+    """Yield the paths a local (non-web) URI may name, in the order Gazebo tries them."""
     for scheme in ("model://", "package://"):
         if uri.startswith(scheme):
             rest = uri[len(scheme) :].lstrip("/")
-            if _escapes(uri, rest):
-                return None
-            for base in search:
-                candidate = base / rest
-                if candidate.exists():
-                    return candidate
-            return None
-    if uri.startswith(("http://", "https://")):
-        return _fuel_file(uri)
-    if uri.startswith("file://"):
-        uri = uri[len("file://") :]
-    path = Path(uri).expanduser()
+            if not _escapes(uri, rest):
+                yield from (base / rest for base in search)
+            return
+    path = Path(uri.removeprefix("file://")).expanduser()
     if path.is_absolute():
-        return path if path.exists() else None
-    for base in (base_dir, *search):
-        candidate = base / path
-        if candidate.exists():
-            return candidate
-    return None
+        yield path
+        return
+    yield from (base / path for base in (base_dir, *search))
 
 
 # --- Gazebo Fuel's local cache ---------------------------------------------------------------------

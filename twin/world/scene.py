@@ -890,7 +890,10 @@ def obstacle_extent(
     Raises:
         WorldError: If a collision mesh cannot be read.
     """
-    placed = [vertices for _, _, vertices in _placed_obstacles(world, exclude_models, floor_height_m, MeshCache())]
+    placed = [
+        MeshArrays(vertices, local.faces).bounds()  # the vertices its faces use, as the Scene's bounds
+        for _, local, vertices in _placed_obstacles(world, exclude_models, floor_height_m, MeshCache())
+    ]
     if not placed:
         return 0, None
     every = np.concatenate(placed)

@@ -13,7 +13,7 @@ What is understood:
   `expressed_in` in 1.7+), converted to the joint frame;
 - a world's `<state>` block: model and link poses (world frame), nested model states,
   `<insertions>` and `<deletions>`, as Gazebo Classic applies it when it loads a world;
-- collision geometry: box, cylinder, sphere, plane, capsule, ellipsoid, polyline, mesh.
+- collision geometry: box, cylinder, cone, sphere, plane, capsule, ellipsoid, polyline, mesh.
 
 A missing visual mesh, an include that cannot be resolved offline, a plugin the twin does not run
 and an element it does not know are warnings (each once), collected in `World.warnings`. A
@@ -39,10 +39,12 @@ from twin.world._xml import XmlNode, parse_file, parse_pose, parse_string
 from twin.world.paths import (
     MAX_SDF_VERSION,
     find_model_dir,
+    folder_to_add,
     fuel_model_dir,
     fuel_model_name,
     model_file,
     resolve_resource,
+    resolve_resource_ignoring_case,
     sdf_version,
     search_path,
 )
@@ -50,6 +52,7 @@ from twin.world.types import (
     Box,
     Capsule,
     Collision,
+    Cone,
     Cylinder,
     Ellipsoid,
     Frame,
@@ -144,7 +147,10 @@ _KNOWN: dict[str, frozenset[str]] = {
             "enable_wind",
         }
     ),
-    "collision": frozenset({"pose", "geometry", "surface", "laser_retro", "max_contacts"}),
+    # `density` and `auto_inertia_params` (SDF 1.11) feed Gazebo's automatic inertia, not collision.
+    "collision": frozenset(
+        {"pose", "geometry", "surface", "laser_retro", "max_contacts", "density", "auto_inertia_params"}
+    ),
     "visual": frozenset(
         {
             "pose",
@@ -183,6 +189,7 @@ _UNSUPPORTED_WORLD = {
 _GEOMETRY_TAGS = (
     "box",
     "cylinder",
+    "cone",
     "sphere",
     "plane",
     "capsule",
@@ -255,6 +262,8 @@ class _RawModel:
     plugins: list[Plugin] = field(default_factory=list)
     #: Names of the nested includes that could not be resolved and were skipped with a warning.
     skipped: set[str] = field(default_factory=set)
+    #: The `<include>` that brought this model in (None for a `<model>` written in place).
+    include: XmlNode | None = None
 
     @property
     def pose_node(self) -> XmlNode | None:
@@ -431,6 +440,11 @@ class _Loader:
             else:
                 self.check_known("model", child)
         self.check_unique(raw)
+        nested: dict[str, _RawModel] = {}
+        for model in raw.models:
+            if model.name in nested and not model.merged:
+                raise WorldError(_second_model_message(model, nested[model.name], f"model {raw.name!r}"))
+            nested.setdefault(model.name, model)
         return raw
 
     def check_unique(self, raw: _RawModel) -> None:
@@ -514,6 +528,7 @@ class _Loader:
             raw = self.parse_model(model_node, version, target, parent_static=static)
         finally:
             self._include_stack.pop()
+        raw.include = node
         name = node.text_at("name")
         if name:
             raw.name = name
@@ -658,6 +673,17 @@ class _Loader:
                 )
                 return True
         return False
+
+    def missing_mesh_message(self, shape: XmlNode, uri: str, base_dir: Path, owner: str) -> str:
+        """Say which collision mesh is missing and which folder the model path needs for it."""
+        head = f"{shape.where}: collision mesh {uri!r} {owner} not found (searched {base_dir} and the model path)"
+        folder = folder_to_add(uri, base_dir)
+        if folder is None:
+            return f"{head}; add the folder holding it to the model path"
+        relative = uri.strip().removeprefix("file://")
+        if (folder / relative).is_file():
+            return f"{head}; it is {folder / relative}: add {folder} to the model path"
+        return f"{head}; {uri!r} is relative to a folder on the model path, such as {folder}, which lacks it"
 
     def element_pose(self, node: XmlNode, scope: _Scope, T_model_link: Mat4, link_name: str) -> Mat4:
         """Return the pose of a collision/visual/sensor/inertial in its link frame."""
@@ -850,6 +876,8 @@ class _Loader:
             return Box(size_m=(size[0], size[1], size[2]))
         if tag == "cylinder":
             return Cylinder(radius_m=shape.float_at("radius", 1.0), length_m=shape.float_at("length", 1.0))
+        if tag == "cone":
+            return Cone(radius_m=shape.float_at("radius", 1.0), length_m=shape.float_at("length", 1.0))
         if tag == "sphere":
             return Sphere(radius_m=shape.float_at("radius", 1.0))
         if tag == "capsule":
@@ -879,12 +907,17 @@ class _Loader:
                 )
                 return None
             if path is None or not path.is_file():
-                if collision:
-                    msg = (
-                        f"{shape.where}: collision mesh {uri!r} of link {link!r} in model {model!r} not found "
-                        f"(searched {base_dir} and the model path); add the folder holding it to the model path"
+                path = resolve_resource_ignoring_case(uri, base_dir=base_dir, search=self.fallback_search(base_dir))
+                if path is not None:
+                    self.warn(
+                        f"mesh-case:{uri}",
+                        f"{shape.where}: mesh {uri!r} not found; using {path}, whose name differs only in letter "
+                        "case (as Gazebo on a case-insensitive file system does); rename one to match the other",
                     )
-                    raise WorldError(msg)
+            if path is None or not path.is_file():
+                if collision:
+                    owner = f"of link {link!r} in model {model!r}"
+                    raise WorldError(self.missing_mesh_message(shape, uri, base_dir, owner))
                 self.warn(f"mesh:{uri}", f"{shape.where}: visual mesh {uri!r} not found; the visual is kept without it")
                 path = None
             scale = _vector(shape, "scale", (1.0, 1.0, 1.0))
@@ -940,6 +973,22 @@ def _material_color(node: XmlNode) -> tuple[float, float, float, float] | None:
             if len(values) == 3:
                 return (values[0], values[1], values[2], 1.0)
     return None
+
+
+def _second_model_message(raw: _RawModel, first: _RawModel, where: str) -> str:
+    """Say that `raw` repeats the name of `first`, at the line to change: its <include> or its <model>."""
+    first_at = (first.include or first.node).where
+    if raw.include is not None:
+        uri = raw.include.text_at("uri") or ""
+        fix = "give it another <name>" if raw.include.text_at("name") else "give it a <name>"
+        return (
+            f"{raw.include.where}: <include> {uri!r} is a second model named {raw.name!r} in {where} "
+            f"(the first is at {first_at}); {fix}"
+        )
+    return (
+        f"{raw.node.where}: a second model named {raw.name!r} in {where} (the first is at {first_at}); "
+        "model names must be unique: rename it"
+    )
 
 
 def _not_sdf_message(path: Path, root: XmlNode) -> str:
@@ -1058,8 +1107,7 @@ def _world_from_node(loader: _Loader, world_node: XmlNode, version: tuple[int, i
     names: dict[str, _RawModel] = {}
     for raw in raw_models:
         if raw.name in names:
-            msg = f"{raw.node.where}: a second model named {raw.name!r} in world; model names must be unique"
-            raise WorldError(msg)
+            raise WorldError(_second_model_message(raw, names[raw.name], "the world"))
         names[raw.name] = raw
     overrides = _StateOverrides()
     for state in state_nodes:
@@ -1188,7 +1236,8 @@ def load_model(
         if folder is None:
             msg = (
                 f"model {text!r} not found: it is not a file and no folder {name!r} is on the model path "
-                f"[{', '.join(str(p) for p in search) or 'empty'}]; set TWIN_MODEL_PATH or pass a model path"
+                f"[{', '.join(str(p) for p in search) or 'empty'}]; add the folder holding it to the model path "
+                "(a scenario's world.model_path, --model-path or TWIN_MODEL_PATH)"
             )
             raise WorldError(msg)
         path = model_file(folder)

@@ -21,6 +21,7 @@ __all__ = [
     "Box",
     "Capsule",
     "Collision",
+    "Cone",
     "Cylinder",
     "Ellipsoid",
     "Frame",
@@ -102,6 +103,14 @@ class Ellipsoid:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class Cone:
+    """A cone centred on its frame (SDF 1.11): base of `radius_m` at z = -length/2, apex at +length/2."""
+
+    radius_m: float
+    length_m: float
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class Plane:
     """An infinite plane through the frame origin (Gazebo's physics ignores `size_m`)."""
 
@@ -128,7 +137,7 @@ class Mesh:
     center_submesh: bool = False
 
 
-Geometry = Box | Cylinder | Sphere | Capsule | Ellipsoid | Plane | Polyline | Mesh
+Geometry = Box | Cylinder | Cone | Sphere | Capsule | Ellipsoid | Plane | Polyline | Mesh
 
 
 def geometry_kind(geometry: Geometry) -> str:

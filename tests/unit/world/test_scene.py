@@ -12,7 +12,7 @@ from twin.world import load_world
 from twin.world.meshes import MeshCache, geometry_arrays, geometry_mesh
 from twin.world.robot_model import load_robot
 from twin.world.scene import CollisionMonitor, RayCaster, Scene, build_scene, obstacle_extent
-from twin.world.types import Box, Capsule, Cylinder, Ellipsoid, Sphere
+from twin.world.types import Box, Capsule, Cone, Cylinder, Ellipsoid, Sphere
 
 REPO = Path(__file__).resolve().parents[3]
 FIXTURES = REPO.parent / "shared" / "fixtures"
@@ -342,3 +342,48 @@ def test_a_floor_mesh_with_a_step_keeps_the_step_and_not_the_ground(tmp_path: Pa
     # the lidar sees the step's face, not the ground
     ranges = scene.ray_caster(0.132).cast_fan((0.0, 0.0), 0.0, 1.0, 1, 10.0)
     assert ranges[0] == pytest.approx(1.25, abs=1e-6)
+
+
+def _cone_world(tmp_path: Path) -> Scene:
+    # A cone of base radius 0.4 m, 1 m tall, standing on the floor 2 m ahead (its frame at half height).
+    return _world(
+        tmp_path,
+        _static("cone", "2 0 0.5 0 0 0", "<cone><radius>0.4</radius><length>1</length></cone>"),
+        version="1.11",
+    )
+
+
+@pytest.mark.parametrize("z", [0.1, 0.5, 0.9])
+def test_rays_hit_a_cone_where_its_radius_at_that_height_is(tmp_path: Path, z: float) -> None:
+    scene = _cone_world(tmp_path)
+    (collision,) = scene.obstacles
+    assert collision.geometry == Cone(radius_m=0.4, length_m=1.0)
+    radius = 0.4 * (1.0 - z)  # base at z = 0, apex at z = 1
+    angles = np.linspace(-0.8 * radius / 2, 0.8 * radius / 2, 9)  # beams that hit, towards the cone's axis
+    for caster in _casters(scene, z):
+        got = caster.cast_rays((0.0, 0.0), angles, 10.0)
+        hits = got[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        from_axis = np.hypot(hits[:, 0] - 2.0, hits[:, 1])
+        # The slice is the 48-gon through points of the circle: between its inner circle and the circle.
+        assert np.all(from_axis >= radius * math.cos(math.pi / 48) - 1e-9)
+        assert np.all(from_axis <= radius + 1e-9)
+    assert scene.ray_caster(1.05).cast_rays((0.0, 0.0), np.array([0.0]), 10.0)[0] == math.inf  # above the apex
+
+
+def test_the_robot_touches_a_cone_at_its_base_not_at_its_apex_height(tmp_path: Path) -> None:
+    scene = _cone_world(tmp_path)
+    robot = load_robot("turtlebot3_waffle", model_path=[REPO / "sdf" / "models"])
+    body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
+    # The waffle reaches 0.073 m ahead of base_footprint near the floor, where the cone is 0.4 m wide.
+    assert scene.collides(body, 2.0 - 0.4 - 0.073 - 0.01, 0.0, 0.0) == ()
+    (contact, *_) = scene.collides(body, 2.0 - 0.4 - 0.073 + 0.02, 0.0, 0.0)
+    assert contact.link == "cone::l" and contact.collision == "c"
+
+
+def test_cone_mesh_is_closed_and_placed_as_sdf_defines() -> None:
+    mesh = geometry_mesh(Cone(radius_m=0.4, length_m=1.0), MeshCache())
+    assert mesh is not None and mesh.is_watertight and mesh.volume > 0  # outward faces
+    assert mesh.bounds[:, 2] == pytest.approx([-0.5, 0.5])
+    assert mesh.volume == pytest.approx(math.pi * 0.4**2 / 3, rel=0.01)
+    apex = mesh.vertices[np.argmax(mesh.vertices[:, 2])]
+    assert apex == pytest.approx([0, 0, 0.5])

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -373,5 +374,132 @@ def test_load_model_by_name_drops_its_pose_and_finds_cylinders() -> None:
 
 
 def test_load_model_unknown_name_says_where_it_looked(tmp_path: Path) -> None:
-    with pytest.raises(WorldError, match=r"model 'ghost' not found.*set TWIN_MODEL_PATH"):
+    with pytest.raises(WorldError, match=r"model 'ghost' not found.*add the folder holding it to the model path"):
         load_model("ghost", model_path=[tmp_path], env={})
+
+
+def _crate_models(tmp_path: Path) -> Path:
+    crate = tmp_path / "models" / "crate"
+    crate.mkdir(parents=True)
+    (crate / "model.sdf").write_text(
+        "<sdf version='1.6'>\n<model name='crate'><link name='l'/></model></sdf>"  # the name is on line 2
+    )
+    return tmp_path / "models"
+
+
+def test_a_second_include_of_a_model_points_at_that_include_and_asks_for_a_name(tmp_path: Path) -> None:
+    models = _crate_models(tmp_path)
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n"
+        "<include><uri>model://crate</uri></include>\n"
+        "<include><uri>model://crate</uri><name>crate_2</name></include>\n"
+        "<include>\n<pose>1 0 0 0 0 0</pose><uri>model://crate</uri></include>\n"
+        "</world></sdf>"
+    )
+    with pytest.raises(WorldError) as raised:
+        load_world(world, model_path=[models])
+    assert str(raised.value) == (
+        f"{world}:4: <include> 'model://crate' is a second model named 'crate' in the world "
+        f"(the first is at {world}:2); give it a <name>"
+    )
+    # A <name> given twice (leon's warehouse.world: 'pallet B-1-1-1 support'): another one.
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n"
+        "<include><uri>model://crate</uri><name>a</name></include>\n"
+        "<include><uri>model://crate</uri><name>a</name></include>\n"
+        "</world></sdf>"
+    )
+    with pytest.raises(
+        WorldError,
+        match=r"w\.world:3: <include> 'model://crate' is a second model named 'a' .*"
+        r"give it another <name>$",
+    ):
+        load_world(world, model_path=[models])
+
+
+def test_a_second_nested_include_and_a_second_model_in_place_are_refused_where_they_are(tmp_path: Path) -> None:
+    models = _crate_models(tmp_path)
+    world = tmp_path / "w.world"
+    at = re.escape(str(world))
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><model name='shelf'>\n"
+        "<include><uri>model://crate</uri></include>\n<include><uri>model://crate</uri></include>\n"
+        "</model></world></sdf>"
+    )
+    with pytest.raises(
+        WorldError,
+        match=rf"^{at}:3: <include> 'model://crate' is a second model named 'crate' in "
+        rf"model 'shelf' \(the first is at {at}:2\); give it a <name>$",
+    ):
+        load_world(world, model_path=[models])
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n<model name='a'><link name='l'/></model>\n"
+        "<model name='a'><link name='l'/></model></world></sdf>"
+    )
+    with pytest.raises(
+        WorldError,
+        match=rf"^{at}:3: a second model named 'a' in the world \(the first is at "
+        rf"{at}:2\); model names must be unique: rename it$",
+    ):
+        load_world(world)
+
+
+def _stl(path: Path) -> None:
+    """Write a binary STL of one triangle."""
+    import struct
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    corners = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0)
+    path.write_bytes(b"\0" * 80 + struct.pack("<I", 1) + struct.pack("<12fH", 0, 0, 1, *corners, 0))
+
+
+def _bookstore(tmp_path: Path, uri: str) -> tuple[Path, Path]:
+    """A package folder holding models/shelf, whose collision mesh is named by `uri`; and a world including it."""
+    root = tmp_path / "bookstore"
+    model = root / "models" / "shelf"
+    model.mkdir(parents=True)
+    (model / "model.sdf").write_text(
+        "<sdf version='1.6'><model name='shelf'><static>1</static><link name='link'><collision name='c'>"
+        f"<geometry><mesh><uri>{uri}</uri></mesh></geometry></collision></link></model></sdf>"
+    )
+    world = root / "worlds" / "w.world"
+    world.parent.mkdir()
+    world.write_text("<sdf version='1.6'><world name='w'><include><uri>model://shelf</uri></include></world></sdf>")
+    return root, world
+
+
+def test_a_file_uri_relative_to_the_package_names_the_folder_to_add(tmp_path: Path) -> None:
+    root, world = _bookstore(tmp_path, "file://models/shelf/meshes/shelf_collision.stl")
+    _stl(root / "models" / "shelf" / "meshes" / "shelf_collision.stl")
+    with pytest.raises(WorldError) as raised:
+        load_world(world, model_path=[root / "models"])
+    mesh = root / "models" / "shelf" / "meshes" / "shelf_collision.stl"
+    assert str(raised.value).endswith(f"; it is {mesh}: add {root} to the model path")
+    loaded = load_world(world, model_path=[root / "models", root])  # as the message says
+    assert loaded.models[0].links[0].collisions[0].geometry == Mesh(
+        uri=f"file://models/shelf/meshes/{mesh.name}", path=mesh
+    )
+
+
+def test_a_missing_relative_mesh_says_which_folder_lacks_it(tmp_path: Path) -> None:
+    root, world = _bookstore(tmp_path, "file://models/shelf/meshes/gone.stl")
+    (root / "models" / "shelf" / "meshes").mkdir()
+    with pytest.raises(
+        WorldError,
+        match=r"'file://models/shelf/meshes/gone.stl' is relative to a folder on the "
+        rf"model path, such as {re.escape(str(root))}, which lacks it$",
+    ):
+        load_world(world, model_path=[root / "models"])
+
+
+def test_a_mesh_whose_name_differs_only_in_case_is_used_with_one_warning(tmp_path: Path) -> None:
+    # aws_robomaker_retail_Spotlight_01 names aws_Spotlight_01_collision.DAE; the file is aws_spotlight_...
+    root, world = _bookstore(tmp_path, "file://models/shelf/meshes/Shelf_Collision.STL")
+    actual = root / "models" / "shelf" / "meshes" / "shelf_collision.stl"
+    _stl(actual)
+    loaded = load_world(world, model_path=[root / "models", root])
+    geometry = loaded.models[0].links[0].collisions[0].geometry
+    assert isinstance(geometry, Mesh) and geometry.path == actual
+    (warning,) = loaded.warnings
+    assert f"mesh 'file://models/shelf/meshes/Shelf_Collision.STL' not found; using {actual}, whose name" in warning

@@ -15,7 +15,7 @@ import trimesh
 
 from twin.core.errors import WorldError
 from twin.world import load_world
-from twin.world.types import Box, Mesh
+from twin.world.types import Box, Cone, Mesh
 
 
 @pytest.fixture(autouse=True)
@@ -81,6 +81,50 @@ def test_errors_gazebo_also_refuses_still_fail_with_line_and_column(tmp_path: Pa
     world.write_text(text)
     with pytest.raises(WorldError, match=rf"bad\.sdf:\d+:\d+: malformed XML: {reason}"):
         load_world(world)
+
+
+def test_a_bare_ampersand_in_model_config_does_not_refuse_the_model(tmp_path: Path) -> None:
+    # Six AWS hospital models describe themselves as "portal, door & car"; tinyxml2 reads that.
+    model = tmp_path / "models" / "elevator_door"
+    model.mkdir(parents=True)
+    (model / "model.config").write_text(
+        '<?xml version="1.0" ?>\n<model><name>door</name><sdf version="1.6">door.sdf</sdf>\n'
+        "<description>3 parts: portal, door & car; &amp; &#38; &#x26; stay entities</description></model>\n"
+    )
+    (model / "door.sdf").write_text(f"<sdf version='1.6'><model name='door'>{_BOX_LINK}</model></sdf>")
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><include><uri>model://elevator_door</uri></include></world></sdf>"
+    )
+    loaded = load_world(world, model_path=[tmp_path / "models"])
+    assert [m.name for m in loaded.models] == ["door"] and not loaded.warnings
+
+
+def test_a_model_config_broken_otherwise_still_fails_with_its_line(tmp_path: Path) -> None:
+    # Only a stray `&` is forgiven: a model.config that is otherwise broken still names its line.
+    model = tmp_path / "models" / "m"
+    model.mkdir(parents=True)
+    (model / "model.config").write_text('<model>\n<sdf version="1.6">model.sdf</sdf>\n<description>a & b</model>\n')
+    world = tmp_path / "w.world"
+    world.write_text("<sdf version='1.6'><world name='w'><include><uri>model://m</uri></include></world></sdf>")
+    with pytest.raises(WorldError, match=r"m/model\.config:3:\d+: malformed XML: Opening and ending tag mismatch"):
+        load_world(world, model_path=[tmp_path / "models"])
+
+
+def test_sdf_1_11_inertia_elements_and_cones_load_without_warnings(tmp_path: Path) -> None:
+    # gz-sim's auto-inertia examples: <density> and <auto_inertia_params> in <collision> and <inertial>.
+    world = tmp_path / "shapes.sdf"
+    world.write_text(
+        '<sdf version="1.11"><world name="w"><model name="cone"><link name="l">'
+        '<inertial auto="true"><density>500</density></inertial>'
+        "<collision name='c'><density>1240.0</density><auto_inertia_params><gz:voxel_size>0.01</gz:voxel_size>"
+        "</auto_inertia_params><geometry><cone><radius>0.5</radius><length>1.0</length></cone></geometry>"
+        "</collision></link></model></world></sdf>"
+    )
+    loaded = load_world(world)
+    assert loaded.warnings == () and loaded.unknown == ()
+    (collision,) = loaded.all_collisions()
+    assert collision.geometry == Cone(radius_m=0.5, length_m=1.0)
 
 
 def test_a_visual_without_geometry_warns_and_a_collision_without_one_fails(tmp_path: Path) -> None:
