@@ -5,9 +5,10 @@ robot, building the FMU, creating the bag) and into the run. The process must en
 print no traceback.
 
 Before twin's first line runs, CPython itself is starting: a SIGINT before it has installed any
-handler kills it by SIGINT (a shell reports 130 too), and one while it imports `site` makes CPython
-print "Fatal Python error: init_import_site" and exit 1. Neither involves twin's code; both are
-accepted for the earliest moment only, and named as such.
+handler kills it by SIGINT (a shell reports 130 too), and one while it initialises (importing `site`,
+setting up its file-system encoding or standard streams) makes CPython print "Fatal Python error:
+init_..." and exit 1. Neither involves twin's code; both are accepted for the earliest moment only
+(on a loaded machine CPython may still be starting 50 ms in), and named as such.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ def test_ctrl_c_at_any_moment_is_one_line_and_exit_130(delay_s: float, tmp_path:
     time.sleep(delay_s)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
-    if delay_s == MOMENTS_S[0] and (proc.returncode == -signal.SIGINT or "init_import_site" in err):
+    if delay_s == MOMENTS_S[0] and (proc.returncode == -signal.SIGINT or "Fatal Python error: init_" in err):
         return  # CPython's own start-up, before any twin code (see above)
     assert "Traceback" not in err, err
     assert proc.returncode == 130, err
