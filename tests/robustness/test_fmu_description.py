@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from tests.robustness.helpers import assert_one_line_error
+from tests.robustness.test_fmu_binary import _rebuilt
 from twin.cli import main
 from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
@@ -24,14 +25,7 @@ Edit = Callable[[str, bytes], tuple[str, bytes] | None]
 
 def _copy(tmp_path: Path, edit: Edit, *, fmi_version: int = 2) -> Path:
     """A copy of the built-in XM430 FMU with each member passed through `edit` (None drops it)."""
-    source = resolve_fmu("builtin:xm430_w210", fmi_version=fmi_version)  # type: ignore[arg-type]
-    target = tmp_path / "case.fmu"
-    with zipfile.ZipFile(source) as src, zipfile.ZipFile(target, "w") as dst:
-        for name in src.namelist():
-            kept = edit(name, src.read(name))
-            if kept is not None:
-                dst.writestr(*kept)
-    return target
+    return _rebuilt(tmp_path, fmi_version, edit)
 
 
 def _description(change: Callable[[str], str]) -> Edit:
