@@ -18,7 +18,7 @@ from twin.bt.node import (
 from twin.bt.ports import PortSpec, bidirectional_port, input_port
 from twin.bt.script import Script, parse_script, script_truth
 from twin.bt.status import FAILURE, RUNNING, SUCCESS, NodeStatus
-from twin.bt.tree import TimerHandle
+from twin.bt.ticking import TimerHandle
 from twin.bt.values import ConversionError, PortType
 from twin.core.errors import TreeError
 

@@ -17,7 +17,7 @@ from twin.bt.node import DecoratorNode, NodeConfig, TreeNode, remapped_key
 from twin.bt.ports import PortSpec, bidirectional_port, input_port, output_port
 from twin.bt.script import script_truth
 from twin.bt.status import FAILURE, IDLE, RUNNING, SKIPPED, SUCCESS, NodeKind, NodeStatus, PortDirection
-from twin.bt.tree import TimerHandle
+from twin.bt.ticking import TimerHandle
 from twin.bt.values import PortType
 from twin.core.errors import TreeError
 

@@ -17,7 +17,7 @@ import difflib
 import re
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final
+from typing import Any, Final, Protocol
 from xml.parsers import expat
 
 from twin.bt.blackboard import Blackboard
@@ -37,10 +37,7 @@ from twin.bt.values import ConversionError, PortType
 from twin.core.config import read_text_file, suggest
 from twin.core.errors import TreeError
 
-if TYPE_CHECKING:
-    from twin.bt.factory import BehaviorTreeFactory
-
-__all__ = ["Document", "TreeParser", "XmlElement", "model_ports", "parse_xml"]
+__all__ = ["Document", "NodeTypes", "TreeParser", "XmlElement", "model_ports", "parse_xml"]
 
 BUILTIN_TAGS: Final = {kind.value: kind for kind in NodeKind}
 
@@ -322,16 +319,34 @@ def model_ports(element: XmlElement, report: Report) -> dict[str, PortSpec]:
     return ports
 
 
+class NodeTypes(Protocol):
+    """What the loader needs of a `BehaviorTreeFactory`: its node types and a way to build one."""
+
+    @property
+    def manifests(self) -> Mapping[str, NodeManifest]:
+        """Every registered or declared node type by ID."""
+        ...
+
+    @property
+    def enums(self) -> Mapping[str, int]:
+        """The scripting enums by name."""
+        ...
+
+    def build_node(self, node_id: str, name: str, config: NodeConfig) -> TreeNode:
+        """Create one node of a registered type."""
+        ...
+
+
 class TreeParser:
     """Loads XML documents and instantiates trees from them (BT.CPP `XMLParser`).
 
     Args:
-        factory: where node types are looked up.
+        factory: where node types are looked up (a `BehaviorTreeFactory`).
         strict: also report what BT.CPP accepts silently but is almost surely a mistake
             (v3-only attributes in a v4 file); used by `validate`.
     """
 
-    def __init__(self, factory: BehaviorTreeFactory, *, strict: bool = False) -> None:
+    def __init__(self, factory: NodeTypes, *, strict: bool = False) -> None:
         self.factory = factory
         self.strict = strict
         self.documents: list[Document] = []

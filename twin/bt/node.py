@@ -21,17 +21,15 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, ClassVar, Final
+from typing import Any, ClassVar, Final
 
 from twin.bt.blackboard import Blackboard
 from twin.bt.ports import NO_DEFAULT, PortSpec
 from twin.bt.script import Environment, Script, script_truth
 from twin.bt.status import FAILURE, IDLE, RUNNING, SKIPPED, SUCCESS, NodeKind, NodeStatus
+from twin.bt.ticking import TickContext
 from twin.bt.values import ConversionError, PortType, cast_value, parse_string
 from twin.core.errors import TreeError
-
-if TYPE_CHECKING:
-    from twin.bt.tree import Tree
 
 __all__ = [
     "ActionNode",
@@ -166,7 +164,7 @@ class TreeNode:
         self._config = config
         self._status = IDLE
         self._notify: Callable[[TreeNode, NodeStatus, NodeStatus], None] | None = None
-        self._tree: Tree | None = None
+        self._tree: TickContext | None = None
         self._registration_id = config.manifest.registration_id if config.manifest else type(self).__name__
         self._pre = config.pre_conditions if any(s is not None for s in config.pre_conditions) else None
         self._post = config.post_conditions if any(s is not None for s in config.post_conditions) else None
@@ -217,11 +215,11 @@ class TreeNode:
         return self._status
 
     @property
-    def tree(self) -> Tree | None:
-        """The tree the node belongs to (None while it is being built)."""
+    def tree(self) -> TickContext | None:
+        """The time, timers and wake-up signal of the tree the node belongs to (None while it is being built)."""
         return self._tree
 
-    def _attach(self, tree: Tree, notify: Callable[[TreeNode, NodeStatus, NodeStatus], None] | None) -> None:
+    def _attach(self, tree: TickContext, notify: Callable[[TreeNode, NodeStatus, NodeStatus], None] | None) -> None:
         self._tree = tree
         self._notify = notify
 

@@ -17,7 +17,6 @@ Listeners get every stored status change: `listener(t_ns, node_path, uid, prev, 
 from __future__ import annotations
 
 import dataclasses
-import heapq
 import logging
 from collections.abc import Callable, Iterator, Sequence
 from typing import Final
@@ -25,6 +24,7 @@ from typing import Final
 from twin.bt.blackboard import Blackboard
 from twin.bt.node import TreeNode
 from twin.bt.status import FAILURE, RUNNING, SUCCESS, NodeStatus
+from twin.bt.ticking import TickContext
 from twin.core.errors import TreeError
 
 _NEVER: Final = 2**63 - 1  # a settled tick with no wake time repeats until something changes
@@ -43,8 +43,6 @@ __all__ = [
     "ManualClock",
     "StatusListener",
     "SubtreeInstance",
-    "TimerHandle",
-    "TimerQueue",
     "Tree",
 ]
 
@@ -79,73 +77,6 @@ class ManualClock:
         self.t_ns += dt_ns
 
 
-class TimerHandle:
-    """A pending timer; `cancel()` it before it fires to run its callback with `aborted=True`."""
-
-    __slots__ = ("_callback", "_state", "due_ns")
-
-    _PENDING: Final = 0
-    _FIRED: Final = 1
-    _CANCELLED: Final = 2
-
-    def __init__(self, due_ns: int, callback: Callable[[bool], None]) -> None:
-        self.due_ns = due_ns
-        self._callback = callback
-        self._state = TimerHandle._PENDING
-
-    @property
-    def pending(self) -> bool:
-        """True until the timer fired or was cancelled."""
-        return self._state == TimerHandle._PENDING
-
-    def cancel(self) -> bool:
-        """Cancel a pending timer: its callback runs now with `aborted=True`. False if too late."""
-        if self._state != TimerHandle._PENDING:
-            return False
-        self._state = TimerHandle._CANCELLED
-        self._callback(True)
-        return True
-
-    def _fire(self) -> None:
-        if self._state == TimerHandle._PENDING:
-            self._state = TimerHandle._FIRED
-            self._callback(False)
-
-
-class TimerQueue:
-    """Timers on the simulation clock, fired in due order (then in the order they were added)."""
-
-    __slots__ = ("_heap", "_seq")
-
-    def __init__(self) -> None:
-        self._heap: list[tuple[int, int, TimerHandle]] = []
-        self._seq = 0
-
-    def add(self, due_ns: int, callback: Callable[[bool], None]) -> TimerHandle:
-        """Schedule `callback(aborted=False)` at `due_ns`."""
-        handle = TimerHandle(due_ns, callback)
-        self._seq += 1
-        heapq.heappush(self._heap, (due_ns, self._seq, handle))
-        return handle
-
-    def fire_due(self, now_ns: int) -> int:
-        """Fire every pending timer due at or before `now_ns`; return how many came due."""
-        heap = self._heap
-        count = 0
-        while heap and heap[0][0] <= now_ns:
-            _, _, handle = heapq.heappop(heap)
-            handle._fire()
-            count += 1
-        return count
-
-    def next_due_ns(self) -> int | None:
-        """When the next pending timer is due, or None."""
-        heap = self._heap
-        while heap and not heap[0][2].pending:
-            heapq.heappop(heap)
-        return heap[0][0] if heap else None
-
-
 @dataclasses.dataclass(frozen=True, kw_only=True, slots=True)
 class SubtreeInstance:
     """One instantiated (sub)tree: its path (empty for the main tree), tree ID and blackboard."""
@@ -155,7 +86,7 @@ class SubtreeInstance:
     blackboard: Blackboard
 
 
-class Tree:
+class Tree(TickContext):
     """A tree ready to tick. Build it with `BehaviorTreeFactory.create_tree_*`.
 
     Args:
@@ -173,21 +104,16 @@ class Tree:
         subtrees: Sequence[SubtreeInstance],
         clock: Callable[[], int],
     ) -> None:
+        super().__init__(clock)
         self.root = root
         self.nodes: tuple[TreeNode, ...] = tuple(nodes)
         self.subtrees: tuple[SubtreeInstance, ...] = tuple(subtrees)
-        self.clock = clock
-        self.timers = TimerQueue()
         self._listeners: tuple[StatusListener, ...] = ()
-        self._wake_up = False
         self._reticks_capped = False
-        self._now_ns = clock()
         self._by_uid = {node.uid: node for node in self.nodes}
         for node in self.nodes:
             node._attach(self, None)
         # settled ticks (see tick_unless_settled)
-        self._status_changes = 0
-        self._unsettled = False
         self._timers_fired = 0
         self._settled: tuple[int, object, int] | None = None
         self._timed = tuple(node for node in self.nodes if type(node).wake_ns is not TreeNode.wake_ns)
@@ -198,11 +124,6 @@ class Tree:
     def root_blackboard(self) -> Blackboard:
         """The blackboard of the main tree."""
         return self.subtrees[0].blackboard
-
-    @property
-    def now_ns(self) -> int:
-        """The simulation time of the current (or last) tick."""
-        return self._now_ns
 
     def node(self, path: str) -> TreeNode:
         """The node with a full path.
@@ -262,15 +183,6 @@ class Tree:
                 listener(t_ns, config.path, config.uid, prev, new)
 
     # -- ticking -------------------------------------------------------------------------------
-
-    def emit_wake_up_signal(self) -> None:
-        """Ask `tick_once()` to tick the root again (BT.CPP `WakeUpSignal::emitSignal`)."""
-        self._wake_up = True
-
-    def _take_wake_up(self) -> bool:
-        woken = self._wake_up
-        self._wake_up = False
-        return woken
 
     def _begin_tick(self) -> None:
         now = self.clock()

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from twin.bt import BehaviorTreeFactory, ManualClock, NodeStatus
-from twin.bt.tree import MAX_WAKE_UP_RETICKS, TimerQueue
+from twin.bt.ticking import TimerQueue
+from twin.bt.tree import MAX_WAKE_UP_RETICKS
 from twin.core.errors import TreeError
 
 from .helpers import v4
