@@ -65,25 +65,12 @@ from numpy.typing import NDArray
 from twin.core.errors import EstimationError
 from twin.estimation._native import LAYOUT_NAMES, load_ekf_kernel
 from twin.estimation.config import EstimationSection
+from twin.estimation.state import N_STATE, NOT_POSITIVE_DEFINITE, FloatArray
 
 # `SolvedEkf` is here too, loaded on first use (module `__getattr__`); its home is twin.estimation.solved.
-__all__ = ["STATE_NAMES", "UNOBSERVED_VARIANCE", "OdometryEstimate", "OdometryFilter"]
+__all__ = ["UNOBSERVED_VARIANCE", "OdometryEstimate", "OdometryFilter"]
 
 _log = logging.getLogger(__name__)
-
-FloatArray = NDArray[np.float64]
-
-STATE_NAMES = (
-    "x_m",
-    "y_m",
-    "yaw_rad",
-    "v_mps",
-    "yaw_rate_radps",
-    "gyro_bias_radps",
-    "wheel_left_rad",
-    "wheel_right_rad",
-)
-_N = len(STATE_NAMES)
 
 UNOBSERVED_VARIANCE = 1e12
 """Variance published for what a planar filter does not estimate (z, roll, pitch; vy, vz, wx, wy),
@@ -95,11 +82,11 @@ _SLIP_RELEASE_RAD2 = 1e4
 
 def _gather(state: tuple[int, ...], ros: tuple[int, ...], unobserved: tuple[int, ...]) -> NDArray[np.intp]:
     """Indices into `[P.ravel(), 0, UNOBSERVED_VARIANCE]` that build a ROS 6x6 covariance (row-major)."""
-    out = np.full(36, _N * _N)  # zero
-    out[[i * 7 for i in unobserved]] = _N * _N + 1
+    out = np.full(36, N_STATE * N_STATE)  # zero
+    out[[i * 7 for i in unobserved]] = N_STATE * N_STATE + 1
     for a, ra in zip(state, ros, strict=True):
         for b, rb in zip(state, ros, strict=True):
-            out[ra * 6 + rb] = a * _N + b
+            out[ra * 6 + rb] = a * N_STATE + b
     return out
 
 
@@ -109,12 +96,8 @@ _TWIST_GATHER = _gather((3, 4), (0, 5), unobserved=(1, 2, 3, 4))
 _BOTH_GATHER = np.concatenate((_POSE_GATHER, _TWIST_GATHER))
 _new_estimate = tuple.__new__  # builds the NamedTuple without its keyword-parsing __new__
 _RELEASE = _SLIP_RELEASE_RAD2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-_STRICTLY_LOWER = np.tril(np.ones((_N, _N), dtype=bool), -1)
 _ANGLES, _SPEEDS, _STILL = 0, 1, 2  # what the wheel rows measure (the kernel's kinds)
 _COVARIANCE_ROWS = 256  # published covariances allocated at once (the kernel writes one row per step)
-_NOT_POSITIVE_DEFINITE = (
-    "EKF innovation covariance is not positive definite; every measurement needs a positive variance"
-)
 
 
 class OdometryEstimate(NamedTuple):
@@ -264,9 +247,9 @@ class OdometryFilter:
         inv_r, half_b = 1.0 / wheel_radius_m, 0.5 * wheel_separation_m / wheel_radius_m
         # Measurement rows by kind (_ANGLES, _SPEEDS, _STILL); the third row is the gyro.
         self._h = (
-            _rows(_N, [{6: 1.0}, {7: 1.0}, {4: 1.0, 5: 1.0}]),
-            _rows(_N, [{3: inv_r, 4: -half_b}, {3: inv_r, 4: half_b}, {4: 1.0, 5: 1.0}]),
-            _rows(_N, [{3: 1.0}, {4: 1.0}, {4: 1.0, 5: 1.0}]),
+            _rows(N_STATE, [{6: 1.0}, {7: 1.0}, {4: 1.0, 5: 1.0}]),
+            _rows(N_STATE, [{3: inv_r, 4: -half_b}, {3: inv_r, 4: half_b}, {4: 1.0, 5: 1.0}]),
+            _rows(N_STATE, [{3: 1.0}, {4: 1.0}, {4: 1.0, 5: 1.0}]),
         )
         self._wheel_rows = tuple(np.asfortranarray(h[:2]) for h in self._h)
         self._sparse = tuple([[(j, float(c)) for j, c in enumerate(row) if c] for row in h.tolist()] for h in self._h)
@@ -281,7 +264,7 @@ class OdometryFilter:
         self._gyro_count = 0
         self._t_ns: int | None = None
         self.slip_detections = 0
-        self._padded = np.zeros(_N * _N + 2)
+        self._padded = np.zeros(N_STATE * N_STATE + 2)
         self._padded[-1] = UNOBSERVED_VARIANCE
         self.native = kernel is not None
         """True when the compiled kernel steps the filter."""
@@ -300,8 +283,8 @@ class OdometryFilter:
         ws_c = (ctypes.c_double * at["SIZE"])()
         ws = np.frombuffer(ws_c, dtype=np.float64)
         ekf = self.ekf
-        x = ws[at["X"] : at["X"] + _N]
-        p = ws[at["P"] : at["P"] + _N * _N].reshape(_N, _N)
+        x = ws[at["X"] : at["X"] + N_STATE]
+        p = ws[at["P"] : at["P"] + N_STATE * N_STATE].reshape(N_STATE, N_STATE)
         x[:], p[:] = ekf.x, ekf.P
         ws[at["PAD"] : at["PAD"] + 2] = (0.0, UNOBSERVED_VARIANCE)
         gate = -1.0 if self._gate is None else self._gate
@@ -353,7 +336,7 @@ class OdometryFilter:
 
     @property
     def state(self) -> FloatArray:
-        """A copy of the state (see `STATE_NAMES`; yaw not wrapped)."""
+        """A copy of the state (see `twin.estimation.state.STATE_NAMES`; yaw not wrapped)."""
         state: FloatArray = self.ekf.x.copy()
         return state
 
@@ -500,7 +483,7 @@ class OdometryFilter:
         status = self._kernel_step()
         if status:
             if status < 0:
-                raise EstimationError(_NOT_POSITIVE_DEFINITE)
+                raise EstimationError(NOT_POSITIVE_DEFINITE)
             self._slip_detected(t_ns)
         self._gyro_anchor_rad = mark
         self._gyro_count = 0
@@ -575,7 +558,7 @@ class OdometryFilter:
 
     def _make_estimate(self, t_ns: int) -> OdometryEstimate:
         padded = self._padded
-        padded[: _N * _N] = self.ekf.P.ravel(order="K")  # no copy; P is symmetric, so the order does not matter
+        padded[: N_STATE * N_STATE] = self.ekf.P.ravel(order="K")  # no copy; P is symmetric, so order does not matter
         both = padded[_BOTH_GATHER]  # a fresh array: the estimate owns its covariances
         x, y, yaw, v, rate, bias, _, _ = self.ekf.x.tolist()
         yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi

@@ -17,7 +17,7 @@ from scipy.linalg.blas import dgemm, dsymm, dsyr2k, dsyrk, dtrmm
 from scipy.linalg.lapack import dposv
 
 from twin.core.errors import EstimationError
-from twin.estimation.ekf import _N, _NOT_POSITIVE_DEFINITE, _STRICTLY_LOWER, FloatArray
+from twin.estimation.state import N_STATE, NOT_POSITIVE_DEFINITE, STRICTLY_LOWER, FloatArray
 
 __all__ = ["SolvedEkf"]
 
@@ -44,17 +44,17 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
     """
 
     def __init__(self, x0: FloatArray, p0: FloatArray, *, wheel_radius_m: float, wheel_separation_m: float) -> None:
-        super().__init__(dim_x=_N, dim_z=3)
+        super().__init__(dim_x=N_STATE, dim_z=3)
         self.x = np.array(x0, dtype=float)
         self.P = np.array(p0, dtype=float, order="F")
-        self._ft = np.asfortranarray(np.eye(_N))  # F^T, Fortran-ordered, for BLAS
+        self._ft = np.asfortranarray(np.eye(N_STATE))  # F^T, Fortran-ordered, for BLAS
         self.F = self._ft.T  # filterpy's F: a view, so writing F[i, j] writes F^T[j, i]
         self.dt = 0.0
         self.rate_variances = (0.0, 0.0, 0.0)
         self.slip_variance_per_rad = 0.0
         self._inv_r = 1.0 / wheel_radius_m
         self._half_b = 0.5 * wheel_separation_m
-        self._rhs = {m: np.empty((m, _N + 1), order="F") for m in (1, 2, 3)}
+        self._rhs = {m: np.empty((m, N_STATE + 1), order="F") for m in (1, 2, 3)}
         self._travel = (0.0, 0.0)
 
     def predict_x(self, u: Any = 0) -> None:
@@ -154,18 +154,18 @@ class SolvedEkf(ExtendedKalmanFilter):  # type: ignore[misc]
         s = dgemm(1.0, hp, hf, 1.0, r, trans_b=1)  # H P H^T + R
         y = z - hf @ self.x if innovation is None else innovation
         rhs = self._rhs[len(y)]
-        rhs[:, :_N] = hp
-        rhs[:, _N] = y
+        rhs[:, :N_STATE] = hp
+        rhs[:, N_STATE] = y
         u, sol, info = dposv(s, rhs)
         if info:
-            raise EstimationError(_NOT_POSITIVE_DEFINITE)
-        if gate is not None and y @ sol[:, _N] > gate:
+            raise EstimationError(NOT_POSITIVE_DEFINITE)
+        if gate is not None and y @ sol[:, N_STATE] > gate:
             return False
-        kt = sol[:, :_N]  # K^T
+        kt = sol[:, :N_STATE]  # K^T
         self.x += y @ kt
         p = dsyr2k(-1.0, hp, kt, 1.0, p, trans=1, overwrite_c=1)  # P - K H P - P H^T K^T (upper)
         p = dsyrk(1.0, dtrmm(1.0, u, kt), 1.0, p, trans=1, overwrite_c=1)  # + K S K^T (upper)
-        np.copyto(p, p.T, where=_STRICTLY_LOWER)  # mirror the upper triangle
+        np.copyto(p, p.T, where=STRICTLY_LOWER)  # mirror the upper triangle
         self.P = p
         self.K, self.S, self.y = kt.T, s, y
         return True
