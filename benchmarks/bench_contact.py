@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import yaml
 
-from twin.sim.scenario import load_scenario
+from twin.sim.scenario_file import load_scenario
 from twin.sim.simulation import Simulation
 
 DRIVES = {

@@ -29,7 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from tests.foxglove_client import Watch, watch
 from twin.live import LiveServer, LiveSink, Pacer
-from twin.sim.scenario import default_scenario_path, load_scenario
+from twin.sim.scenario import default_scenario_path
+from twin.sim.scenario_file import load_scenario
 from twin.sim.simulation import Simulation
 
 

@@ -39,7 +39,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from twin.robot.drivetrain import FmuDrive
-from twin.sim.scenario import KinematicDrive, default_scenario_path, load_scenario
+from twin.sim.scenario import KinematicDrive, default_scenario_path
+from twin.sim.scenario_file import load_scenario
 from twin.sim.simulation import Simulation
 
 
@@ -89,7 +90,7 @@ _ONE_RUN = """
 import json, sys, tempfile, time
 from pathlib import Path
 sys.path.insert(0, sys.argv[1])
-from twin.sim.scenario import load_scenario
+from twin.sim import load_scenario  # the package, whose exports a baseline commit has too
 from twin.sim.simulation import Simulation
 scenario = load_scenario(Path(sys.argv[2]))
 with tempfile.TemporaryDirectory() as tmp, Simulation(scenario, bag_path=Path(tmp) / "bag") as sim:

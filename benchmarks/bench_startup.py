@@ -45,7 +45,7 @@ import sys, time
 from twin.core.gcpolicy import defer_collection
 defer_collection()  # as `twin simulate`'s entry point does (twin.cli.run); the loop turns collection back on
 from pathlib import Path
-from twin.sim.scenario import default_scenario_path, load_scenario
+from twin.sim import default_scenario_path, load_scenario  # the package, whose exports a baseline commit has too
 from twin.sim.simulation import Simulation
 
 class _First(Exception):

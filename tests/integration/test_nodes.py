@@ -14,7 +14,7 @@ import pytest
 
 from tests.conftest import run_twin
 from twin.bag import read_messages
-from twin.sim.scenario import load_scenario
+from twin.sim.scenario_file import load_scenario
 from twin.world import build_scene, load_robot, load_world
 
 pytestmark = pytest.mark.slow

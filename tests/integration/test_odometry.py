@@ -17,7 +17,8 @@ from rosbags.highlevel import AnyReader
 from scipy.stats import chi2
 
 from twin.robot.disturbances import Disturbances, WheelSlip
-from twin.sim.scenario import Scenario, load_scenario
+from twin.sim.scenario import Scenario
+from twin.sim.scenario_file import load_scenario
 from twin.sim.simulation import Simulation
 
 DRIVE_S = 120.0

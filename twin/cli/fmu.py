@@ -337,7 +337,7 @@ def _scenario_drive(path: Path) -> FmuDrive:
         ConfigError: If the scenario does not load, its drive is not an FMU drive or has `motor: null`.
     """
     from twin.robot.drivetrain import FmuDrive
-    from twin.sim.scenario import load_scenario
+    from twin.sim.scenario_file import load_scenario
 
     drive = load_scenario(path).drive
     if not isinstance(drive, FmuDrive):

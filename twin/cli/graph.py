@@ -50,7 +50,8 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 def graph_data(scenario_path: Path | None, measure_s: float) -> dict[str, Any]:
     """Return {"nodes": [...], "topics": [...]} of a scenario, with rates measured over `measure_s`."""
     from twin.core.errors import ConfigError
-    from twin.sim.scenario import default_scenario_path, load_scenario
+    from twin.sim.scenario import default_scenario_path
+    from twin.sim.scenario_file import load_scenario
     from twin.sim.simulation import Simulation
 
     if not measure_s >= 0.0 or measure_s == float("inf"):

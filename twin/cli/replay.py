@@ -82,7 +82,7 @@ def _replay(args: argparse.Namespace) -> int:
     from twin.analysis.report import world_walls
     from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
-    from twin.sim.scenario import load_scenario
+    from twin.sim.scenario_file import load_scenario
     from twin.sim.simulation import Simulation
 
     model_path_folders(args.model_path)  # refuse a folder that does not exist before anything runs

@@ -48,7 +48,7 @@ def _plain(value: Any) -> Any:
 
 def _check(args: argparse.Namespace) -> int:
     from twin.sim.check import check_inputs, check_scenario
-    from twin.sim.scenario import load_scenario
+    from twin.sim.scenario_file import load_scenario
 
     scenario = load_scenario(args.file)
     check_scenario(scenario, args.file)

@@ -173,7 +173,7 @@ def _result(summary: RunSummary) -> str:
 def _from_bag(bag: Path) -> tuple[Scenario, float | None, Mapping[str, str]]:
     """The scenario, duration limit and provenance a twin bag recorded."""
     from twin.bag import read_provenance
-    from twin.sim.scenario import load_scenario
+    from twin.sim.scenario_file import load_scenario
 
     provenance = read_provenance(bag)
     if provenance is None or "scenario_yaml" not in provenance:
@@ -274,7 +274,8 @@ class _Guard:
 
 def _simulate(args: argparse.Namespace) -> int:
     from twin.sim.check import check_scenario
-    from twin.sim.scenario import default_scenario_path, load_scenario
+    from twin.sim.scenario import default_scenario_path
+    from twin.sim.scenario_file import load_scenario
 
     _check_options(args)
     provenance: Mapping[str, str] | None = None

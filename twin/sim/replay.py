@@ -7,6 +7,7 @@ bag's `/clock` (record time -> sim time, interpolated), else its record time.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -17,9 +18,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.core.errors import BagError
-from twin.sim.scenario import ReplayMission
+from twin.sim.scenario import InitialPose, ReplayMission, Scenario
 
-__all__ = ["RecordedCommands", "check_bag", "first_pose", "load_commands", "start_moving"]
+__all__ = ["RecordedCommands", "check_bag", "first_pose", "load_commands", "start_moving", "with_replay_start"]
 
 _log = logging.getLogger(__name__)
 
@@ -189,3 +190,20 @@ def start_moving(drive: object, v_mps: float, w_radps: float) -> bool:
         return False
     setter(v_mps, w_radps)
     return True
+
+
+def with_replay_start(scenario: Scenario) -> Scenario:
+    """The scenario with `robot.initial_pose` at a replay mission's first recorded pose (else unchanged).
+
+    Raises:
+        BagError: If the bag is unreadable, has no commands on the mission's topic, or no poses.
+    """
+    mission = scenario.mission
+    if not isinstance(mission, ReplayMission):
+        return scenario
+    check_bag(mission)
+    if mission.initial_pose != "bag":
+        return scenario
+    x, y, yaw = first_pose(mission)
+    pose = InitialPose(x_m=x, y_m=y, yaw_rad=yaw)
+    return dataclasses.replace(scenario, robot=dataclasses.replace(scenario.robot, initial_pose=pose))

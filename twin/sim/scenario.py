@@ -1,12 +1,12 @@
-"""The scenario: one YAML file per run, laid over the packaged defaults, loaded into frozen dataclasses.
+"""The scenario: what one run is made of, as the frozen dataclasses a scenario file is loaded into.
 
-Paths in a scenario are relative to the file that names them. `recording.out_dir` is relative to
+`twin.sim.scenario_file.load_scenario` reads a file into them, laid over the packaged defaults
+(`DEFAULTS_PATH`). Paths in a scenario are relative to the file that names them. `recording.out_dir` is relative to
 the working directory, like a shell's output path.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import re
@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from twin.core.config import load_config
 from twin.core.native import compiler_candidates, find_compiler
 from twin.estimation import EstimationSection
 from twin.nav.follower import FollowerParams
@@ -30,8 +29,6 @@ __all__ = [
     "Scenario",
     "default_scenario_path",
     "fmu_fallback",
-    "load_scenario",
-    "with_replay_start",
 ]
 
 _log = logging.getLogger(__name__)
@@ -411,39 +408,3 @@ class Scenario:
 def default_scenario_path() -> Path:
     """Return the shipped default scenario (the thesis's house mission)."""
     return Path(__file__).resolve().parent.parent.parent / "scenarios" / "default.yaml"
-
-
-def load_scenario(path: Path) -> Scenario:
-    """Load a scenario file laid over the packaged defaults.
-
-    A `type: replay` mission with `initial_pose: bag` sets `robot.initial_pose` to the bag's
-    first pose.
-
-    Raises:
-        ConfigError: Naming file, line and key, if the file is unreadable or any key is wrong.
-        BagError: If a replay mission's bag is unreadable or lacks its command or pose topic.
-    """
-    scenario = load_config(Scenario, path, defaults=DEFAULTS_PATH)
-    # A scenario recorded in a bag (`--from-bag`) keeps the file it came from, where its nodes' modules are.
-    source = scenario.source_path or Path(path).resolve()
-    return with_replay_start(dataclasses.replace(scenario, source_path=source))
-
-
-def with_replay_start(scenario: Scenario) -> Scenario:
-    """The scenario with `robot.initial_pose` at a replay mission's first recorded pose (else unchanged).
-
-    Raises:
-        BagError: If the bag is unreadable, has no commands on the mission's topic, or no poses.
-    """
-    mission = scenario.mission
-    if not isinstance(mission, ReplayMission):
-        return scenario
-    # Imported here: twin.sim.replay imports this module, and only replay missions read a bag.
-    from twin.sim.replay import check_bag, first_pose
-
-    check_bag(mission)
-    if mission.initial_pose != "bag":
-        return scenario
-    x, y, yaw = first_pose(mission)
-    pose = InitialPose(x_m=x, y_m=y, yaw_rad=yaw)
-    return dataclasses.replace(scenario, robot=dataclasses.replace(scenario.robot, initial_pose=pose))

@@ -209,7 +209,7 @@ def _path(base_dir: Path, node: yaml.Node, value: Any) -> Path:
 
 
 def _check_scenario(path: Path, node: yaml.Node) -> None:
-    from twin.sim.scenario import load_scenario
+    from twin.sim.scenario_file import load_scenario
 
     if not path.is_file():
         _fail(node, "scenario", f"{path} not found; the path is relative to the sweep file")

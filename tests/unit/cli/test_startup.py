@@ -113,7 +113,8 @@ NOT_FOR_A_DEFAULT_RUN = (
 
 _FIRST_STEP = """
 from pathlib import Path
-from twin.sim.scenario import default_scenario_path, load_scenario
+from twin.sim.scenario import default_scenario_path
+from twin.sim.scenario_file import load_scenario
 from twin.sim.simulation import Simulation
 
 class _First(Exception):

@@ -16,7 +16,8 @@ from tests.unit.robot.test_drivetrain import ACME_MOTOR
 from twin.core.errors import FmuError
 from twin.robot.chassis import ChassisParams, SlipModel, SlipRegion
 from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
-from twin.sim.scenario import default_scenario_path, load_scenario
+from twin.sim.scenario import default_scenario_path
+from twin.sim.scenario_file import load_scenario
 from twin.world import build_scene, load_robot, load_world
 from twin.world.scene import CollisionMonitor
 

@@ -11,7 +11,8 @@ import pytest
 from twin.core.errors import ConfigError
 from twin.sim.obstacles import scenario_obstacles
 from twin.sim.rng import RngStreams
-from twin.sim.scenario import BlocksSection, NoMission, load_scenario
+from twin.sim.scenario import BlocksSection, NoMission
+from twin.sim.scenario_file import load_scenario
 
 REPO = Path(__file__).resolve().parents[3]
 LOCATIONS = {  # trees/sim_house_locations.yaml (TB3_FACTS.md §5.2)

@@ -6,7 +6,8 @@ from pathlib import Path
 import pytest
 
 from twin.core.errors import ConfigError
-from twin.sim.scenario import DEFAULTS_PATH, Scenario, default_scenario_path, load_scenario
+from twin.sim.scenario import DEFAULTS_PATH, Scenario, default_scenario_path
+from twin.sim.scenario_file import load_scenario
 
 
 def test_default_scenario_loads_and_points_at_shipped_files(repo: Path) -> None:
