@@ -24,7 +24,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from twin.cosim.build import resolve_fmu
-from twin.cosim.fmu import FmuFile, StepGroup
+from twin.cosim.fmu import FmuFile
+from twin.cosim.step_group import StepGroup
 from twin.robot.chassis import Chassis, ChassisParams
 from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
 

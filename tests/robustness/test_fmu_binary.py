@@ -17,7 +17,8 @@ from tests.robustness.helpers import assert_one_line_error
 from twin.cli import main
 from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
-from twin.cosim.fmu import FmuFile, binary_problem, read_fmu_info
+from twin.cosim.description import binary_problem, read_fmu_info
+from twin.cosim.fmu import FmuFile
 
 
 def _rebuilt(tmp_path: Path, fmi_version: int, edit: Callable[[str, bytes], tuple[str, bytes] | None]) -> Path:

@@ -18,7 +18,7 @@ from tests.robustness.test_fmu_binary import _rebuilt
 from twin.cli import main
 from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
-from twin.cosim.fmu import read_fmu_info
+from twin.cosim.description import read_fmu_info
 
 Edit = Callable[[str, bytes], tuple[str, bytes] | None]
 

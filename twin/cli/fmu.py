@@ -144,7 +144,7 @@ def _mapping(path: Path | None) -> FmuMapping:
 def _check(args: argparse.Namespace) -> int:
     from twin.cosim.build import resolve_fmu
     from twin.cosim.contract import Profile, check_contract
-    from twin.cosim.fmu import binary_problem, read_fmu_info, stepping, stepping_problem
+    from twin.cosim.description import binary_problem, read_fmu_info, stepping, stepping_problem
 
     path = resolve_fmu(args.fmu, fmi_version=args.fmi)
     info = read_fmu_info(path)

@@ -4,9 +4,11 @@ The project's FMUs are built from `fmus/`; any FMI 2.0/3.0 Co-Simulation FMU loa
 that imports fmpy.
 """
 
+from twin.cosim.adapter import Stepper
 from twin.cosim.build import build_all, build_fmu, resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, RoleBinding, RoleMap, bind, check_contract, load_mapping
-from twin.cosim.fmu import FmuFile, FmuInfo, Stepper, read_fmu_info
+from twin.cosim.description import FmuInfo, read_fmu_info
+from twin.cosim.fmu import FmuFile
 
 __all__ = [
     "Binding",

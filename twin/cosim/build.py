@@ -42,7 +42,7 @@ from twin.core.native import (
     compiler_version,
     find_compiler,
 )
-from twin.cosim.fmu import fmu_file_problem
+from twin.cosim.description import fmu_file_problem
 from twin.cosim.units import BASE_NAMES, find_unit
 
 __all__ = [

@@ -29,7 +29,7 @@ from types import MappingProxyType
 
 from twin.core.config import load_config, suggest
 from twin.core.errors import FmuError
-from twin.cosim.fmu import FmuInfo, stepping_problem
+from twin.cosim.description import FmuInfo, stepping_problem
 from twin.cosim.units import UNITS, Unit, find_unit
 
 __all__ = [

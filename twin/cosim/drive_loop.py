@@ -18,7 +18,7 @@ import functools
 from collections.abc import Iterable, Sequence
 
 from twin.core.errors import FmuError
-from twin.cosim.fmu import StepGroup
+from twin.cosim.step_group import StepGroup
 
 __all__ = ["DriveLoop"]
 

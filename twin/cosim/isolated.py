@@ -6,10 +6,10 @@ parent writes the inputs into `Stepper.inputs`, `step_next` sends one byte throu
 steps every instance and answers with one byte, and the parent reads `Stepper.outputs`. A child
 that dies (a segfault, an abort) or does not answer within `timeout_s` (a hang) raises `FmuError`
 naming the FMU, the sim time and what happened; the child is killed. An FMU that reports an error
-status is reported as in-process (`twin.cosim.fmu`). The FMU's own log messages are sent to the
+status is reported as in-process (`twin.cosim.adapter`). The FMU's own log messages are sent to the
 parent ahead of each reply and logged there (so they reach the console and `/rosout` as in-process).
 
-The group has the interface of `twin.cosim.fmu.StepGroup` that the Python step loops use
+The group has the interface of `twin.cosim.step_group.StepGroup` that the Python step loops use
 (`step_next`, `raise_failure`, `index`, `compiled`, `shim`), so the drivetrain steps it unchanged.
 """
 

@@ -35,20 +35,14 @@ import numpy as np
 
 from twin.core.closing import Closing
 from twin.core.errors import ConfigError, FmuError
+from twin.cosim.adapter import Api, Stepper
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, bind, load_mapping
+from twin.cosim.description import FmuInfo, binary_problem, read_fmu_info, stepping_problem
 from twin.cosim.drive_loop import MAX_RUN, DriveLoop
-from twin.cosim.fmu import (
-    Api,
-    FmuFile,
-    FmuInfo,
-    StepGroup,
-    Stepper,
-    binary_problem,
-    read_fmu_info,
-    stepping_problem,
-)
+from twin.cosim.fmu import FmuFile
 from twin.cosim.isolated import IsolatedGroup
+from twin.cosim.step_group import StepGroup
 from twin.robot.chassis import (
     Chassis,
     ChassisDynamics,

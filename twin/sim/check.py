@@ -192,7 +192,7 @@ def _check_files(scenario: Scenario, path: Path) -> None:
 
 def _check_fmu_file(fmu_file: Path, path: Path) -> None:
     """Refuse an FMU file whose description does not read or whose binary does not load here."""
-    from twin.cosim.fmu import binary_problem, read_fmu_info
+    from twin.cosim.description import binary_problem, read_fmu_info
 
     try:
         problem = binary_problem(read_fmu_info(fmu_file))

@@ -13,7 +13,7 @@ from tests.unit.cosim.helpers import acme
 from twin.core.errors import ConfigError, FmuError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import FmuMapping, Profile, RoleBinding, RoleMap, bind, check_contract, load_mapping
-from twin.cosim.fmu import read_fmu_info
+from twin.cosim.description import read_fmu_info
 
 REPO = Path(__file__).resolve().parents[3]
 ACME_MAP = REPO / "fmus" / "maps" / "acme_drive.yaml"

@@ -17,7 +17,7 @@ from tests.unit.cosim.helpers import acme
 from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import FmuMapping, Profile, RoleBinding, RoleMap, bind, check_contract, load_mapping
-from twin.cosim.fmu import read_fmu_info
+from twin.cosim.description import read_fmu_info
 from twin.robot.chassis import ChassisParams
 from twin.robot.drivetrain import FmuDrive, FmuDrivetrain, MotorModel
 

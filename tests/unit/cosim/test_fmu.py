@@ -11,7 +11,8 @@ from tests.unit.cosim.helpers import acme
 from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import FmuMapping, Profile, check_contract
-from twin.cosim.fmu import FmuFile, read_fmu_info
+from twin.cosim.description import read_fmu_info
+from twin.cosim.fmu import FmuFile
 
 
 def _vrs(fmu: FmuFile, *names: str) -> list[int]:

@@ -10,7 +10,8 @@ from tests.conftest import run_twin
 from tests.unit.cosim.helpers import model_exchange
 from twin.cosim.build import FmiVersion, resolve_fmu
 from twin.cosim.contract import FmuMapping, Profile, check_contract
-from twin.cosim.fmu import FmuFile, read_fmu_info, stepping
+from twin.cosim.description import read_fmu_info, stepping
+from twin.cosim.fmu import FmuFile
 
 STEP_S = 1e-3
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from twin.cosim.fmu import _cvode, _event_update, _integrate
+from twin.cosim.exchange import cvode, event_update, integrate
 
 G_MPS2 = 9.81
 RESTITUTION = 0.7
@@ -59,7 +59,7 @@ class _Ball:
 def _adapter(ball: _Ball, step_s: float) -> SimpleNamespace:
     adapter = SimpleNamespace(_fmu=ball, _h=step_s, _next_event_s=math.inf, _update_events=ball.newDiscreteStates)
     adapter.name = "ball"
-    adapter._solver = _cvode(
+    adapter._solver = cvode(
         ball, ball.getDerivatives, ball.getNominalsOfContinuousStates, nx=2, nz=1, t0_s=0.0, max_step_s=step_s
     )
     return adapter
@@ -80,10 +80,10 @@ def _exact_height(t_s: float) -> float:
 def test_state_event_reverses_the_ball_within_a_communication_step(step_s: float) -> None:
     ball = _Ball()
     adapter = _adapter(ball, step_s)
-    assert not _event_update(adapter)  # type: ignore[arg-type]
+    assert not event_update(adapter)  # type: ignore[arg-type]
     steps = round(0.9 / step_s)
     for k in range(steps):
-        assert not _integrate(adapter, k * step_s)  # type: ignore[arg-type]
+        assert not integrate(adapter, k * step_s)  # type: ignore[arg-type]
     assert ball.events == 1  # the bounce at 0.4515 s, found inside a step
     assert ball.x[0] == pytest.approx(_exact_height(steps * step_s), abs=1e-3)
     assert ball.x[0] > 0.0

@@ -12,7 +12,7 @@ from twin.core.config import load_config
 from twin.core.errors import ConfigError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import RoleBinding
-from twin.cosim.fmu import read_fmu_info
+from twin.cosim.description import read_fmu_info
 from twin.robot.drivetrain import FmuDrive, MotorModel, motor_constants
 
 REPO = Path(__file__).resolve().parents[3]

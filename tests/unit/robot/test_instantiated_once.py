@@ -11,7 +11,8 @@ import pytest
 from tests.unit.cosim.helpers import FAULTS, faulty
 from twin.core.errors import ConfigError, FmuError
 from twin.cosim.contract import FmuMapping
-from twin.cosim.fmu import FmuFile, read_fmu_info
+from twin.cosim.description import read_fmu_info
+from twin.cosim.fmu import FmuFile
 from twin.robot.chassis import ChassisParams
 from twin.robot.drivetrain import FmuDrive, FmuDrivetrain, check_fmu_drive
 
