@@ -27,7 +27,8 @@ from twin.cosim.build import resolve_fmu
 from twin.cosim.fmu import FmuFile
 from twin.cosim.step_group import StepGroup
 from twin.robot.chassis import Chassis, ChassisParams
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
+from twin.robot.fmu_drive import FmuDrive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 
 STEP_S = 0.001
 

@@ -38,7 +38,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from twin.robot.drivetrain import FmuDrive
+from twin.robot.fmu_drive import FmuDrive
 from twin.sim.scenario import KinematicDrive, default_scenario_path
 from twin.sim.scenario_file import load_scenario
 from twin.sim.simulation import Simulation

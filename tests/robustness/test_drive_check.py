@@ -1,7 +1,7 @@
 """`twin scenario check` refuses every FMU drive `twin simulate` refuses before its first step, with the same line.
 
 Both bind the drive contract, resolve the motor model and design the speed loop through one code path
-(`twin.robot.drivetrain.plan_fmu_drive`); `scenario check` does it without instantiating the FMU.
+(`twin.robot.fmu_drive.plan_fmu_drive`); `scenario check` does it without instantiating the FMU.
 """
 
 from __future__ import annotations

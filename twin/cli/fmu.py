@@ -17,7 +17,7 @@ from twin.core.errors import BagError, ConfigError, FmuError
 
 if TYPE_CHECKING:
     from twin.cosim.contract import FmuMapping
-    from twin.robot.drivetrain import FmuDrive
+    from twin.robot.fmu_drive import FmuDrive
 
 # twin.cosim.contract.Profile's values, spelled here so `--help` need not import fmpy (a test compares).
 PROFILES = ("voltage", "velocity-servo")
@@ -256,7 +256,8 @@ def _check_step_response_args(args: argparse.Namespace) -> None:
 
 def _step_response(args: argparse.Namespace) -> int:
     from twin.cosim.build import resolve_fmu
-    from twin.robot.drivetrain import MotorModelError, fmu_step_response
+    from twin.robot.fmu_drive import MotorModelError
+    from twin.robot.step_response import fmu_step_response
 
     _check_step_response_args(args)
 
@@ -336,7 +337,7 @@ def _scenario_drive(path: Path) -> FmuDrive:
     Raises:
         ConfigError: If the scenario does not load, its drive is not an FMU drive or has `motor: null`.
     """
-    from twin.robot.drivetrain import FmuDrive
+    from twin.robot.fmu_drive import FmuDrive
     from twin.sim.scenario_file import load_scenario
 
     drive = load_scenario(path).drive

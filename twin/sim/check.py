@@ -246,7 +246,7 @@ def in_scenario(err: TwinError, path: Path) -> TwinError:
 def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
     """Bind the FMU drive as `simulate` does before its first step (contract, motor model, speed loop)."""
     from twin.core.clock import s_to_ns
-    from twin.robot.drivetrain import FmuDrive, check_fmu_drive
+    from twin.robot.fmu_drive import FmuDrive, check_fmu_drive
     from twin.sim.scenario import fmu_fallback
     from twin.sim.simulation import fmu_drive_section
 

@@ -20,7 +20,7 @@ from twin.estimation import EstimationSection
 from twin.nav.follower import FollowerParams
 from twin.nav.navigator import ProgressParams
 from twin.robot.disturbances import Disturbances
-from twin.robot.drivetrain import FmuDrive
+from twin.robot.fmu_drive import FmuDrive
 from twin.world.obstacles import ObstacleSpec
 
 __all__ = [

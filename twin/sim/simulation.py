@@ -35,8 +35,10 @@ from twin.nav.mission_node import MissionNode
 from twin.nav.nav2_nodes import Nav2Navigator
 from twin.node import Node
 from twin.robot.chassis import ChassisParams, SlipModel
-from twin.robot.drivetrain import Drivetrain, FmuDrive, FmuDrivetrain
+from twin.robot.drivetrain import Drivetrain
 from twin.robot.encoders import EncoderModel, EncoderSpec
+from twin.robot.fmu_drive import FmuDrive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 from twin.robot.imu import ImuModel, imu_model_spec
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
 from twin.robot.lidar import Lidar

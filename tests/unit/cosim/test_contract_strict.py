@@ -19,7 +19,8 @@ from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import FmuMapping, Profile, RoleBinding, RoleMap, bind, check_contract, load_mapping
 from twin.cosim.description import read_fmu_info
 from twin.robot.chassis import ChassisParams
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain, MotorModel
+from twin.robot.fmu_drive import FmuDrive, MotorModel
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 
 REPO = Path(__file__).resolve().parents[3]
 ACME_MAP = REPO / "fmus" / "maps" / "acme_drive.yaml"

@@ -12,7 +12,8 @@ from twin.cosim.build import cache_dir, resolve_fmu
 from twin.cosim.contract import FmuMapping
 from twin.cosim.fmu import FmuFile
 from twin.robot.chassis import ChassisParams
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
+from twin.robot.fmu_drive import FmuDrive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 
 MS = 1_000_000
 

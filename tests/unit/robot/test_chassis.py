@@ -7,7 +7,8 @@ import math
 import pytest
 
 from twin.robot.chassis import Chassis, ChassisParams, SlipModel, SlipRegion
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
+from twin.robot.fmu_drive import FmuDrive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 
 MS = 1_000_000
 WAFFLE = ChassisParams.tb3_waffle()

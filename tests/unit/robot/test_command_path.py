@@ -10,7 +10,8 @@ import pytest
 
 from tests.unit.robot.gazebo_replay import FIXTURES, STEP_NS, WAFFLE_BAG, read_gazebo_run, replay
 from twin.robot.chassis import ChassisParams
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
+from twin.robot.fmu_drive import FmuDrive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
 from twin.world import load_robot
 

@@ -15,14 +15,9 @@ from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import load_mapping
 from twin.robot.chassis import ChassisParams
 from twin.robot.drive_control import MotorConstants, design_speed_pi, motor_transfer_function
-from twin.robot.drivetrain import (
-    CommandLimits,
-    FmuDrive,
-    FmuDrivetrain,
-    MotorModel,
-    fmu_step_response,
-    wheel_setpoints,
-)
+from twin.robot.fmu_drive import CommandLimits, FmuDrive, MotorModel
+from twin.robot.fmu_drivetrain import FmuDrivetrain, wheel_setpoints
+from twin.robot.step_response import fmu_step_response
 
 REPO = Path(__file__).resolve().parents[3]
 RPM = 2 * math.pi / 60

@@ -13,7 +13,7 @@ from twin.core.errors import ConfigError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import RoleBinding
 from twin.cosim.description import read_fmu_info
-from twin.robot.drivetrain import FmuDrive, MotorModel, motor_constants
+from twin.robot.fmu_drive import FmuDrive, MotorModel, motor_constants
 
 REPO = Path(__file__).resolve().parents[3]
 

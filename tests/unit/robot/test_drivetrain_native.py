@@ -15,7 +15,8 @@ from tests.unit.cosim.helpers import acme
 from tests.unit.robot.test_drivetrain import ACME_MOTOR
 from twin.core.errors import FmuError
 from twin.robot.chassis import ChassisParams, SlipModel, SlipRegion
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
+from twin.robot.fmu_drive import FmuDrive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 from twin.sim.scenario import default_scenario_path
 from twin.sim.scenario_file import load_scenario
 from twin.world import build_scene, load_robot, load_world

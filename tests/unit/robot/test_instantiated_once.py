@@ -14,7 +14,8 @@ from twin.cosim.contract import FmuMapping
 from twin.cosim.description import read_fmu_info
 from twin.cosim.fmu import FmuFile
 from twin.robot.chassis import ChassisParams
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain, check_fmu_drive
+from twin.robot.fmu_drive import FmuDrive, check_fmu_drive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 
 MS = 1_000_000
 

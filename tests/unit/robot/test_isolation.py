@@ -9,7 +9,8 @@ from tests.unit.cosim.helpers import FAULTS, faulty
 from twin.core.errors import FmuError
 from twin.cosim.contract import FmuMapping
 from twin.robot.chassis import ChassisParams
-from twin.robot.drivetrain import FmuDrive, FmuDrivetrain
+from twin.robot.fmu_drive import FmuDrive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
 
 MS = 1_000_000
 
