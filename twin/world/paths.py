@@ -19,12 +19,15 @@ from twin.world._xml import parse_file
 
 __all__ = [
     "MAX_SDF_VERSION",
+    "fallback_search",
     "find_model_dir",
     "folder_to_add",
     "fuel_cache_roots",
     "fuel_model_dir",
     "fuel_model_name",
+    "missing_mesh_message",
     "model_file",
+    "resolve_include",
     "resolve_resource",
     "resolve_resource_ignoring_case",
     "sdf_version",
@@ -306,3 +309,44 @@ def fuel_model_name(uri: str) -> str | None:
     """Return the model name a Fuel URI names (`Ground Plane`), or None if it is not a Fuel model URI."""
     found = _fuel_parts(uri)
     return found[2] if found is not None else None
+
+
+def fallback_search(search: Sequence[Path], base_dir: Path) -> tuple[Path, ...]:
+    """Return the model path plus the folder holding the current model folder.
+
+    The extra entry, searched last, lets a model name itself or a sibling model
+    (`model://mailbox/meshes/...` inside `.../mailbox/model.sdf`) when its parent folder is not
+    on the model path, as happens with models nested inside another model's folder.
+    """
+    extra = base_dir.parent
+    return tuple(search) if extra in search else (*search, extra)
+
+
+def resolve_include(uri: str, file: Path, search: Sequence[Path]) -> Path | None:
+    """Return the SDF file an `<include>` URI in `file` names (a model folder's chosen file), or None."""
+    uri = uri.strip()
+    path: Path | None
+    search = fallback_search(search, file.parent)
+    if uri.startswith(("model://", "package://")):
+        name = uri.split("://", 1)[1]
+        path = find_model_dir(name, search)
+    elif uri.startswith(("http://", "https://")):
+        # The local Fuel cache first, then a folder of the model's name on the model path.
+        path = fuel_model_dir(uri) or find_model_dir(fuel_model_name(uri) or uri.rstrip("/").rsplit("/", 1)[-1], search)
+    else:
+        path = resolve_resource(uri, base_dir=file.parent, search=search)
+    if path is None:
+        return None
+    return model_file(path) if path.is_dir() else path
+
+
+def missing_mesh_message(where: str, uri: str, base_dir: Path, owner: str) -> str:
+    """Say which collision mesh is missing and which folder the model path needs for it."""
+    head = f"{where}: collision mesh {uri!r} {owner} not found (searched {base_dir} and the model path)"
+    folder = folder_to_add(uri, base_dir)
+    if folder is None:
+        return f"{head}; add the folder holding it to the model path"
+    relative = uri.strip().removeprefix("file://")
+    if (folder / relative).is_file():
+        return f"{head}; it is {folder / relative}: add {folder} to the model path"
+    return f"{head}; {uri!r} is relative to a folder on the model path, such as {folder}, which lacks it"
