@@ -129,6 +129,37 @@ def map_change(draw: st.DrawFn) -> tuple[Any, ...]:
     return ("image_bytes", draw(st.binary(max_size=64)))
 
 
+# The parameters that size what the twin builds or set the rate its timers fire at, with the values
+# that break such things (0, negatives, the tiny and the huge, NaN, the wrong type).
+RISKY = (
+    (("controller_server",), "controller_frequency"),
+    (("controller_server",), "FollowPath.vx_samples"),
+    (("controller_server",), "FollowPath.vtheta_samples"),
+    (("controller_server",), "FollowPath.sim_time"),
+    (("controller_server",), "FollowPath.linear_granularity"),
+    (("local_costmap", "local_costmap"), "width"),
+    (("local_costmap", "local_costmap"), "resolution"),
+    (("local_costmap", "local_costmap"), "update_frequency"),
+    (("global_costmap", "global_costmap"), "resolution"),
+    (("global_costmap", "global_costmap"), "inflation_layer.inflation_radius"),
+    (("amcl",), "max_particles"),
+    (("amcl",), "laser_likelihood_max_dist"),
+    (("bt_navigator",), "bt_loop_duration"),
+)
+risky_values = st.sampled_from(
+    [0, 0.0, -20.0, 1e-5, 1e-9, 100000, 10**9, 10**12, 1e300, math.nan, math.inf, -math.inf, "fast", None, [1.0]]
+)
+
+
+@st.composite
+def risky_change(draw: st.DrawFn) -> tuple[Any, ...]:
+    node, key = draw(st.sampled_from(RISKY))
+    return ("set", node, key, draw(risky_values))
+
+
+risky_cases = st.tuples(st.lists(risky_change(), min_size=1, max_size=2), st.just([]))
+"""One or two sizing or rate parameters set to a breaking value: what whole runs are tried on."""
+
 cases = st.tuples(st.lists(params_change(), max_size=3), st.lists(map_change(), max_size=2)).filter(
     lambda case: bool(case[0] or case[1])
 )
@@ -221,12 +252,12 @@ def whole_run(scenario: Path, out: Path, *, duration_s: float = 2.0) -> tuple[in
     """
     argv = [sys.executable, "-m", "twin", "simulate", str(scenario), "--duration", str(duration_s), "--out", str(out)]
     try:
-        proc = subprocess.run(  # noqa: S603 - our own interpreter and arguments
+        proc = subprocess.run(
             argv,
             capture_output=True,
             text=True,
             timeout=WHOLE_RUN_TIMEOUT_S,
-            preexec_fn=_limit_memory,  # noqa: PLW1509 - no threads in the child before exec
+            preexec_fn=_limit_memory,
             check=False,
         )
     except subprocess.TimeoutExpired as err:
