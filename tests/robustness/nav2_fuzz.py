@@ -65,7 +65,7 @@ def _flat(prefix: str, value: Any) -> list[str]:
 @functools.cache
 def parameters() -> tuple[tuple[tuple[str, ...], str], ...]:
     """Every (node, flattened parameter) of TB3's waffle file for the nodes the twin runs."""
-    out = []
+    out: list[tuple[tuple[str, ...], str]] = []
     for node in NODES:
         section = _section(waffle(), node)
         out.extend((node, key) for key in _flat("", section or {}))
@@ -261,7 +261,7 @@ def whole_run(scenario: Path, out: Path, *, duration_s: float = 2.0) -> tuple[in
             check=False,
         )
     except subprocess.TimeoutExpired as err:
-        stderr = err.stderr.decode() if isinstance(err.stderr, bytes) else (err.stderr or "")
+        stderr = err.stderr.decode(errors="replace") if isinstance(err.stderr, bytes) else str(err.stderr)
         return -9, stderr + f"\n(timed out after {WHOLE_RUN_TIMEOUT_S:g} s)", math.nan
     peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0  # the largest child so far, MiB
     return proc.returncode, proc.stderr, peak

@@ -514,8 +514,11 @@ def _check_set_keys(params: Nav2Params, source: ParamSource, known: Mapping[str,
         short = written.partition(".")[0]
         if node not in known and nodes.get(short) is None:
             close = difflib.get_close_matches(short, sorted(nodes), n=1, cutoff=0.6)
-            hint = f"did you mean '{close[0]}'?" if close else "name one of the twin's nodes"
-            msg = f"{SET_KEY}.{written}: the twin runs no Nav2 node {short!r}{hint}; it runs {', '.join(sorted(nodes))}"
+            hint = f"did you mean '{close[0]}'?" if close else "remove it"
+            if short == "map_server":
+                hint = "the scenario's `map:` names the map the twin serves; set that"
+            runs = ", ".join(sorted(nodes))
+            msg = f"{SET_KEY}.{written}: the twin runs no Nav2 node {short!r}; {hint} (it runs {runs})"
             raise ConfigError(msg)
         keys = set(known.get(node, known.get(nodes.get(short, node), ())))
         if key in keys:
