@@ -148,6 +148,7 @@ RISKY = (
 )
 risky_values = st.sampled_from(
     [0, 0.0, -20.0, 1e-5, 1e-9, 100000, 10**9, 10**12, 1e300, math.nan, math.inf, -math.inf, "fast", None, [1.0]]
+    + [1, 3000, 0.5, 5.0, 20.0]  # values that run: the run must stay within its limits too
 )
 
 

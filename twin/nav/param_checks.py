@@ -37,6 +37,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+import yaml
+
+from twin.core import yaml_numbers
 from twin.core.errors import ConfigError
 from twin.nav.params import (
     MAX_DISTANCE_M,
@@ -534,30 +537,54 @@ def _check_set_keys(params: Nav2Params, source: ParamSource, known: Mapping[str,
 _FLOAT32_TINY = 1.1754943508222875e-38  # the smallest normal float32: OccupancyGrid's resolution is a float32
 
 
+def _at(where: str, key: str) -> str:
+    """`FILE:LINE` of a map YAML's top-level `key` (`FILE` alone when the file does not say)."""
+    try:
+        node = yaml_numbers.compose(Path(where).read_text(encoding="utf-8"), where)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError):
+        return where
+    if isinstance(node, yaml.MappingNode):
+        for key_node, _ in node.value:
+            if key_node.value == key:
+                return f"{where}:{key_node.start_mark.line + 1}"
+    return where
+
+
 def check_map_fields(
     where: str, *, resolution_m: float, origin: tuple[float, float, float], occupied: float, free: float, scale: bool
 ) -> None:
     """Refuse map YAML numbers the map cannot be used with (after their types are checked).
 
+    Args:
+        where: The map YAML file (its lines are looked up for the message).
+        resolution_m: `resolution`.
+        origin: `origin` (x, y, yaw).
+        occupied: `occupied_thresh`.
+        free: `free_thresh`.
+        scale: True in `mode: scale`.
+
     Raises:
-        ConfigError: `FILE: 'key' problem; fix`.
+        ConfigError: `FILE:LINE: 'key' problem; fix`.
     """
     if not _FLOAT32_TINY <= resolution_m <= MAX_DISTANCE_M:
         msg = (
-            f"{where}: 'resolution' must be between {_FLOAT32_TINY:.3g} and {MAX_DISTANCE_M:g} m "
+            f"{_at(where, 'resolution')}: 'resolution' must be between {_FLOAT32_TINY:.3g} and {MAX_DISTANCE_M:g} m "
             f"(an OccupancyGrid carries it as a float32), got {resolution_m!r}; fix it (TurtleBot3's map: 0.05)"
         )
         raise ConfigError(msg)
     for name, value in zip(("x", "y", "yaw"), origin, strict=True):
         if not (math.isfinite(value) and abs(value) <= MAX_DISTANCE_M):
-            msg = f"{where}: 'origin' {name} must be a finite number within ±{MAX_DISTANCE_M:g}, got {value!r}; fix it"
+            bound = f"a finite number within ±{MAX_DISTANCE_M:g}"
+            msg = f"{_at(where, 'origin')}: 'origin' {name} must be {bound}, got {value!r}; fix it"
             raise ConfigError(msg)
     for key, value in (("occupied_thresh", occupied), ("free_thresh", free)):
         if not 0.0 <= value <= 1.0:
-            msg = f"{where}: '{key}' must be between 0 and 1, got {value!r}; fix it (map_saver writes 0.65 and 0.25)"
+            fix = "fix it (map_saver writes 0.65 and 0.25)"
+            msg = f"{_at(where, key)}: '{key}' must be between 0 and 1, got {value!r}; {fix}"
             raise ConfigError(msg)
     if scale and not free < occupied:
-        msg = f"{where}: 'free_thresh' ({free}) must be below 'occupied_thresh' ({occupied}) in scale mode; fix them"
+        problem = f"'free_thresh' ({free}) must be below 'occupied_thresh' ({occupied}) in scale mode"
+        msg = f"{_at(where, 'free_thresh')}: {problem}; fix them"
         raise ConfigError(msg)
 
 
