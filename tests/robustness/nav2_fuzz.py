@@ -146,7 +146,23 @@ RISKY = (
     (("amcl",), "laser_likelihood_max_dist"),
     (("bt_navigator",), "bt_loop_duration"),
 )
-_BREAKING = [0, 0.0, -20.0, 1e-5, 1e-9, 100000, 10**9, 10**12, 1e300, math.nan, math.inf, -math.inf, "fast", None, [1.0]]
+_BREAKING = [
+    0,
+    0.0,
+    -20.0,
+    1e-5,
+    1e-9,
+    100000,
+    10**9,
+    10**12,
+    1e300,
+    math.nan,
+    math.inf,
+    -math.inf,
+    "fast",
+    None,
+    [1.0],
+]
 _RUNNING = [1, 3000, 0.5, 5.0, 20.0]  # values that run: the run must stay within its limits too
 risky_values = st.sampled_from([*_BREAKING, *_RUNNING])
 
