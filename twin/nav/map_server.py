@@ -30,8 +30,11 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from twin.core import yaml_numbers
+from twin.core.config import read_text_file
 from twin.core.errors import ConfigError
 from twin.nav._native import load_kernel
+from twin.nav.param_checks import check_map_fields, check_map_image
 from twin.world.scene import Scene
 
 __all__ = ["MapMode", "OccupancyMap", "load_map", "map_from_scene", "save_map"]
@@ -111,7 +114,7 @@ def _read_image(path: Path, where: str) -> tuple[NDArray[np.float64], NDArray[np
             else:
                 rgb = np.asarray(img.convert("RGB"), dtype=np.float64)
                 shade = rgb.mean(axis=2)
-    except (OSError, UnidentifiedImageError, ValueError, SyntaxError) as err:
+    except (OSError, UnidentifiedImageError, ValueError, SyntaxError, Image.DecompressionBombError) as err:
         msg = f"{where}: map image {str(path)!r} cannot be read ({err}); give a valid PGM or PNG"
         raise ConfigError(msg) from None
     return shade, alpha
@@ -126,11 +129,8 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
     yaml_path = Path(yaml_path)
     where = str(yaml_path)
     try:
-        doc = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
-    except OSError as err:
-        msg = f"{where}: cannot read map YAML ({err.strerror or err}); check the path"
-        raise ConfigError(msg) from None
-    except yaml.YAMLError as err:
+        doc = yaml_numbers.safe_load(read_text_file(yaml_path, ConfigError, what="a map YAML file"))
+    except (yaml.YAMLError, RecursionError) as err:
         msg = f"{where}: malformed map YAML ({getattr(err, 'problem', None) or err}); fix the YAML syntax"
         raise ConfigError(msg) from None
     if not isinstance(doc, dict):
@@ -160,7 +160,12 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
     except ValueError:
         msg = f"{where}: 'mode' must be trinary, scale or raw, got {mode_text!r}; fix it"
         raise ConfigError(msg) from None
+    xyz = (float(origin[0]), float(origin[1]), float(origin[2]))
+    check_map_fields(
+        where, resolution_m=resolution, origin=xyz, occupied=occupied, free=free, scale=mode is MapMode.SCALE
+    )
     image_path = Path(image) if Path(image).is_absolute() else yaml_path.parent / image
+    check_map_image(image_path, where)
     shade255, alpha = _read_image(image_path, where)
     data = occupancy_from_image(
         shade255, alpha, mode=mode, negate=bool(negate), occupied_thresh=occupied, free_thresh=free

@@ -25,6 +25,8 @@ from typing import Any
 
 import yaml
 
+from twin.core import yaml_numbers
+from twin.core.config import read_text_file
 from twin.core.errors import ConfigError
 
 __all__ = [
@@ -34,6 +36,8 @@ __all__ = [
     "Nav2Params",
     "ObservationSource",
     "ObstacleLayerParams",
+    "ParamReader",
+    "ParamSource",
     "StaticLayerParams",
     "default_params_path",
     "load_nav2_params",
@@ -215,6 +219,10 @@ class Nav2Params:
     local_costmap: CostmapParams
     raw: Mapping[str, Mapping[str, ParamValue]]
     unused_keys: tuple[str, ...] = field(default=())
+    #: Where each value came from (file and line, or the scenario's `navigation.set`), for messages.
+    origin: ParamSource | None = field(default=None, compare=False)
+    #: The parameters the twin read of AMCL and the costmaps (defaults included), per node as in `raw`.
+    read_keys: Mapping[str, frozenset[str]] = field(default_factory=dict)
 
     def node(self, name: str) -> Mapping[str, ParamValue]:
         """Return a node's flattened parameters (empty when the file has none); `name` as in `raw` or its last part."""
@@ -256,14 +264,21 @@ def _flatten(prefix: str, value: Any, out: dict[str, ParamValue], where: str) ->
     out[prefix] = value
 
 
+def _node_name(raw_key: object, namespace: str) -> str:
+    key = str(raw_key).strip("/") if str(raw_key) != "/**" else "**"
+    return f"{namespace}/{key}" if namespace else key
+
+
 def _collect_nodes(
     tree: Mapping[str, Any], namespace: str, nodes: dict[str, dict[str, ParamValue]], where: str
 ) -> None:
     for raw_key, body in tree.items():
-        key = str(raw_key).strip("/") if str(raw_key) != "/**" else "**"
-        name = f"{namespace}/{key}" if namespace else key
+        name = _node_name(raw_key, namespace)
         if not isinstance(body, Mapping):
-            msg = f"{where}: {name!r} must be a mapping holding 'ros__parameters' or nested node names"
+            msg = (
+                f"{where}: {name!r} must be a mapping holding 'ros__parameters' or nested node names, "
+                f"got {body!r}; put its parameters under '{raw_key}: ros__parameters:'"
+            )
             raise ConfigError(msg)
         for sub_key, sub in body.items():
             if sub_key == "ros__parameters":
@@ -277,18 +292,17 @@ def _collect_nodes(
 
 
 def _read_file(path: Path) -> dict[str, dict[str, ParamValue]]:
+    text = read_text_file(path, ConfigError, what="a Nav2 params YAML file")
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as err:
-        msg = f"{path}: cannot read Nav2 params ({err.strerror or err}); check the path"
-        raise ConfigError(msg) from None
-    try:  # libyaml when PyYAML has it (the same resolvers as safe_load, several times faster)
-        doc = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        doc = yaml_numbers.safe_load(text)  # `1e-5` is a number, as ROS 2's parameter parser reads it
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         line = f":{mark.line + 1}" if mark is not None else ""
         problem = getattr(err, "problem", None) or "invalid YAML"
         msg = f"{path}{line}: malformed Nav2 params YAML ({problem}); fix the YAML syntax"
+        raise ConfigError(msg) from None
+    except RecursionError:
+        msg = f"{path}: Nav2 params YAML nested too deeply; flatten it"
         raise ConfigError(msg) from None
     if doc is None:
         doc = {}
@@ -300,36 +314,125 @@ def _read_file(path: Path) -> dict[str, dict[str, ParamValue]]:
     return nodes
 
 
-class _Reader:
-    """Typed access to one node's flattened parameters, recording which keys were read."""
+def _key_lines(node: yaml.Node | None, namespace: str, out: dict[tuple[str, str], int]) -> None:
+    """Map (node, flattened parameter) to its 1-based line, walking the file as `_collect_nodes` reads it."""
+    if not isinstance(node, yaml.MappingNode):
+        return
+    for key_node, body in node.value:
+        name = _node_name(key_node.value, namespace)
+        if not isinstance(body, yaml.MappingNode):
+            continue
+        for sub_key, sub in body.value:
+            if sub_key.value == "ros__parameters":
+                _param_lines(sub, name, "", out)
+            else:
+                _key_lines(yaml.MappingNode("tag:yaml.org,2002:map", [(sub_key, sub)]), name, out)
 
-    def __init__(self, source: str, node: str, params: Mapping[str, ParamValue]) -> None:
+
+def _param_lines(node: yaml.Node, name: str, prefix: str, out: dict[tuple[str, str], int]) -> None:
+    if not isinstance(node, yaml.MappingNode):
+        return
+    for key_node, value in node.value:
+        key = f"{prefix}.{key_node.value}" if prefix else str(key_node.value)
+        out.setdefault((name, key), key_node.start_mark.line + 1)
+        _param_lines(value, name, key, out)
+
+
+class ParamSource:
+    """Where a node's parameter came from, for messages: the params file and its line, or `navigation.set`.
+
+    Args:
+        path: The params file.
+        overridden: (node, parameter) -> the `navigation.set` key that gave its value.
+    """
+
+    def __init__(self, path: Path, overridden: Mapping[tuple[str, str], str] | None = None) -> None:
+        self.path = path
+        self.overridden: Mapping[tuple[str, str], str] = overridden or {}
+        self._lines: dict[tuple[str, str], int] | None = None
+
+    def line(self, node: str, key: str) -> int | None:
+        """The 1-based line of `node`'s `key` in the file (or of the `/**` wildcard's), if the file sets it."""
+        if self._lines is None:  # parsed again only when a message needs a line
+            self._lines = {}
+            try:
+                text = self.path.read_text(encoding="utf-8")
+                _key_lines(yaml_numbers.compose(text, str(self.path)), "", self._lines)
+            except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError):
+                pass
+        return self._lines.get((node, key), self._lines.get(("**", key)))
+
+    def locate(self, node: str, key: str) -> str:
+        """`FILE:LINE: node.key`, or `navigation.set.KEY` when the scenario's overrides set the value.
+
+        A `navigation.set` location holds no file name: `simulate` and `scenario check` put the
+        scenario's file in front of it.
+        """
+        override = self.overridden.get((node, key))
+        if override is not None:
+            return f"{SET_KEY}.{override}"
+        line = self.line(node, key)
+        return f"{self.path}{f':{line}' if line is not None else ''}: {node}.{key}"
+
+
+SET_KEY = "navigation.set"
+"""The scenario key holding single-value overrides of a params file."""
+
+
+class ParamReader:
+    """Typed, range-checked access to one node's flattened parameters, recording which keys were read.
+
+    Every read names what it expects; a value of the wrong type or out of range is a `ConfigError`
+    naming where the value came from (`FILE:LINE: node.key` or `navigation.set.node.key`) and the fix.
+    """
+
+    def __init__(self, source: ParamSource, node: str, params: Mapping[str, ParamValue]) -> None:
         self.source = source
         self.node = node
         self.params = params
         self.used: set[str] = set(_ALWAYS_USED)
 
+    def fail(self, key: str, problem: str, fix: str = "fix the value") -> ConfigError:
+        """The error for `key`: `WHERE: problem; fix`."""
+        return ConfigError(f"{self.source.locate(self.node, key)}: {problem}; {fix}")
+
     def _fail(self, key: str, want: str, value: object) -> ConfigError:
-        return ConfigError(f"{self.source}: {self.node}.{key}: expected {want}, got {value!r}; fix the value")
+        return self.fail(key, f"expected {want}, got {value!r}")
 
     def has(self, key: str) -> bool:
+        """True when the node's parameters hold `key`."""
         return key in self.params
 
-    def number(self, key: str, default: float) -> float:
+    def number(
+        self,
+        key: str,
+        default: float,
+        *,
+        above: float | None = None,
+        low: float | None = None,
+        high: float | None = None,
+        unit: str = "",
+    ) -> float:
+        """A finite number; `above` is an exclusive lower bound, `low` and `high` inclusive bounds."""
         self.used.add(key)
         value = self.params.get(key, default)
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise self._fail(key, "a finite number", value)
-        return float(value)
+        out = float(value)
+        _check_range(self, key, out, above=above, low=low, high=high, unit=unit)
+        return out
 
-    def integer(self, key: str, default: int) -> int:
+    def integer(self, key: str, default: int, *, low: int | None = None, high: int | None = None) -> int:
+        """A whole number (ROS 2 declares these as integers: `20.0` is refused as it would be there)."""
         self.used.add(key)
         value = self.params.get(key, default)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self._fail(key, "an integer", value)
+        _check_range(self, key, value, low=low, high=high)
         return value
 
     def flag(self, key: str, default: bool) -> bool:
+        """A bool (ROS 2 reads `true`/`false`; 1 and 0 are refused as it refuses them)."""
         self.used.add(key)
         value = self.params.get(key, default)
         if not isinstance(value, bool):
@@ -337,6 +440,7 @@ class _Reader:
         return value
 
     def text(self, key: str, default: str) -> str:
+        """A string."""
         self.used.add(key)
         value = self.params.get(key, default)
         if not isinstance(value, str):
@@ -344,6 +448,7 @@ class _Reader:
         return value
 
     def str_list(self, key: str, default: tuple[str, ...]) -> tuple[str, ...]:
+        """A list of strings (or one space-separated string)."""
         self.used.add(key)
         value = self.params.get(key, list(default))
         if isinstance(value, str):  # `observation_sources: scan bump` is a space-separated list
@@ -353,109 +458,135 @@ class _Reader:
         return tuple(value)
 
     def unused(self) -> list[str]:
+        """The node's keys nothing read, as `node.key`."""
         return [f"{self.node}.{key}" for key in self.params if key not in self.used]
 
 
-def _amcl(r: _Reader) -> AmclParams:
+def _check_range(
+    r: ParamReader,
+    key: str,
+    value: float,
+    *,
+    above: float | None = None,
+    low: float | None = None,
+    high: float | None = None,
+    unit: str = "",
+) -> None:
+    u = f" {unit}" if unit else ""
+    if above is not None and not value > above:
+        raise r.fail(key, f"must be above {above:g}{u}, got {value!r}")
+    if low is not None and not value >= low:
+        raise r.fail(key, f"must be at least {low:g}{u}, got {value!r}")
+    if high is not None and not value <= high:
+        raise r.fail(key, f"must be at most {high:g}{u}, got {value!r}")
+
+
+# Rates the twin's timers run at: at least once in 16 minutes (as scenario rates), and at most a
+# million a second (the physics rate, checked with the scenario, is lower still).
+MIN_RATE_HZ = 1e-3
+MAX_RATE_HZ = 1e6
+# A distance, in metres, beyond any map or sensor the twin handles (1000 km).
+MAX_DISTANCE_M = 1e6
+
+
+def _amcl(r: ParamReader) -> AmclParams:
     model = r.text("laser_model_type", "likelihood_field")
     if model != "likelihood_field":
-        msg = (
-            f"{r.source}: amcl.laser_model_type: the twin runs 'likelihood_field' only, got {model!r}; "
-            "use likelihood_field"
-        )
-        raise ConfigError(msg)
+        problem = f"the twin runs 'likelihood_field' only, got {model!r}"
+        raise r.fail("laser_model_type", problem, "use likelihood_field")
     motion = r.text("robot_model_type", "nav2_amcl::DifferentialMotionModel")
     if not motion.endswith("DifferentialMotionModel"):
-        msg = (
-            f"{r.source}: amcl.robot_model_type: the twin runs the differential motion model only, got {motion!r}; "
-            "use nav2_amcl::DifferentialMotionModel"
+        raise r.fail(
+            "robot_model_type",
+            f"the twin runs the differential motion model only, got {motion!r}",
+            "use nav2_amcl::DifferentialMotionModel",
         )
-        raise ConfigError(msg)
+    d = MAX_DISTANCE_M
     spec = AmclParams(
-        alpha1=r.number("alpha1", 0.2),
-        alpha2=r.number("alpha2", 0.2),
-        alpha3=r.number("alpha3", 0.2),
-        alpha4=r.number("alpha4", 0.2),
-        alpha5=r.number("alpha5", 0.2),
+        alpha1=r.number("alpha1", 0.2, low=0.0, high=d),
+        alpha2=r.number("alpha2", 0.2, low=0.0, high=d),
+        alpha3=r.number("alpha3", 0.2, low=0.0, high=d),
+        alpha4=r.number("alpha4", 0.2, low=0.0, high=d),
+        alpha5=r.number("alpha5", 0.2, low=0.0, high=d),
         base_frame_id=r.text("base_frame_id", "base_footprint"),
         global_frame_id=r.text("global_frame_id", "map"),
         odom_frame_id=r.text("odom_frame_id", "odom"),
         laser_model_type=model,
         robot_model_type=motion,
-        laser_likelihood_max_dist_m=r.number("laser_likelihood_max_dist", 2.0),
-        laser_max_range_m=r.number("laser_max_range", 100.0),
-        laser_min_range_m=r.number("laser_min_range", -1.0),
-        max_beams=r.integer("max_beams", 60),
-        min_particles=r.integer("min_particles", 500),
-        max_particles=r.integer("max_particles", 2000),
-        pf_err=r.number("pf_err", 0.05),
-        pf_z=r.number("pf_z", 0.99),
-        recovery_alpha_slow=r.number("recovery_alpha_slow", 0.0),
-        recovery_alpha_fast=r.number("recovery_alpha_fast", 0.0),
-        resample_interval=r.integer("resample_interval", 1),
-        sigma_hit_m=r.number("sigma_hit", 0.2),
-        z_hit=r.number("z_hit", 0.5),
-        z_rand=r.number("z_rand", 0.5),
-        z_max=r.number("z_max", 0.05),
-        z_short=r.number("z_short", 0.05),
-        lambda_short=r.number("lambda_short", 0.1),
-        update_min_d_m=r.number("update_min_d", 0.25),
-        update_min_a_rad=r.number("update_min_a", 0.2),
-        transform_tolerance_s=r.number("transform_tolerance", 1.0),
+        laser_likelihood_max_dist_m=r.number("laser_likelihood_max_dist", 2.0, above=0.0, high=d, unit="m"),
+        laser_max_range_m=r.number("laser_max_range", 100.0, low=-d, high=d, unit="m"),
+        laser_min_range_m=r.number("laser_min_range", -1.0, low=-d, high=d, unit="m"),
+        max_beams=r.integer("max_beams", 60, low=1),
+        min_particles=r.integer("min_particles", 500, low=1),
+        max_particles=r.integer("max_particles", 2000, low=1),
+        pf_err=r.number("pf_err", 0.05, above=0.0, high=1.0),
+        pf_z=r.number("pf_z", 0.99, low=0.0, high=d),
+        recovery_alpha_slow=r.number("recovery_alpha_slow", 0.0, low=0.0, high=1.0),
+        recovery_alpha_fast=r.number("recovery_alpha_fast", 0.0, low=0.0, high=1.0),
+        resample_interval=r.integer("resample_interval", 1, low=1),
+        sigma_hit_m=r.number("sigma_hit", 0.2, above=0.0, high=d, unit="m"),
+        z_hit=r.number("z_hit", 0.5, low=0.0, high=d),
+        z_rand=r.number("z_rand", 0.5, low=0.0, high=d),
+        z_max=r.number("z_max", 0.05, low=0.0, high=d),
+        z_short=r.number("z_short", 0.05, low=0.0, high=d),
+        lambda_short=r.number("lambda_short", 0.1, low=0.0, high=d),
+        update_min_d_m=r.number("update_min_d", 0.25, low=0.0, high=d, unit="m"),
+        update_min_a_rad=r.number("update_min_a", 0.2, low=0.0, high=d, unit="rad"),
+        transform_tolerance_s=r.number("transform_tolerance", 1.0, low=0.0, high=d, unit="s"),
         tf_broadcast=r.flag("tf_broadcast", True),
-        save_pose_rate_hz=r.number("save_pose_rate", 0.5),
+        save_pose_rate_hz=r.number("save_pose_rate", 0.5, low=0.0, high=MAX_RATE_HZ, unit="Hz"),
         scan_topic=r.text("scan_topic", "scan"),
         set_initial_pose=r.flag("set_initial_pose", False),
-        initial_pose_x_m=r.number("initial_pose.x", 0.0),
-        initial_pose_y_m=r.number("initial_pose.y", 0.0),
-        initial_pose_yaw_rad=r.number("initial_pose.yaw", 0.0),
+        initial_pose_x_m=r.number("initial_pose.x", 0.0, low=-d, high=d, unit="m"),
+        initial_pose_y_m=r.number("initial_pose.y", 0.0, low=-d, high=d, unit="m"),
+        initial_pose_yaw_rad=r.number("initial_pose.yaw", 0.0, low=-d, high=d, unit="rad"),
         do_beamskip=r.flag("do_beamskip", False),
     )
     for key in ("initial_pose.z", "z_max", "z_short", "lambda_short"):
         r.used.discard(key)  # beam-model parameters: read for completeness, unused by likelihood_field
-    for key in ("max_beams", "min_particles", "max_particles", "resample_interval"):
-        if getattr(spec, key) < 1:
-            raise r._fail(key, "an integer >= 1", getattr(spec, key))
     if spec.min_particles > spec.max_particles:
-        msg = (
-            f"{r.source}: amcl.min_particles ({spec.min_particles}) exceeds max_particles "
-            f"({spec.max_particles}); swap them"
+        key = "min_particles" if (r.node, "min_particles") in r.source.overridden else "max_particles"
+        raise r.fail(
+            key, f"min_particles ({spec.min_particles}) exceeds max_particles ({spec.max_particles})", "swap them"
         )
-        raise ConfigError(msg)
-    if spec.sigma_hit_m <= 0.0:
-        raise r._fail("sigma_hit", "a number > 0", spec.sigma_hit_m)
     return spec
 
 
-def _footprint(r: _Reader) -> tuple[tuple[float, float], ...]:
+def _footprint(r: ParamReader) -> tuple[tuple[float, float], ...]:
     text = r.text("footprint", "[]")
     try:
-        points = yaml.safe_load(text)
-    except yaml.YAMLError:
+        points = yaml_numbers.safe_load(text)
+    except (yaml.YAMLError, RecursionError):
         points = None
     if points in (None, []):
         return ()
     ok = isinstance(points, list) and len(points) >= 3
-    ok = ok and all(isinstance(p, list) and len(p) == 2 and all(isinstance(v, int | float) for v in p) for p in points)
+    ok = ok and all(
+        isinstance(p, list)
+        and len(p) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) and abs(v) <= MAX_DISTANCE_M for v in p)
+        for p in points
+    )
     if not ok:
         raise r._fail("footprint", "a string '[[x, y], [x, y], [x, y], ...]' of at least 3 points", text)
     return tuple((float(p[0]), float(p[1])) for p in points)
 
 
-def _source(r: _Reader, layer: str, name: str) -> ObservationSource:
+def _source(r: ParamReader, layer: str, name: str) -> ObservationSource:
     p = f"{layer}.{name}."
+    d = MAX_DISTANCE_M
     return ObservationSource(
         name=name,
         topic=r.text(p + "topic", ""),
         data_type=r.text(p + "data_type", "LaserScan"),
         marking=r.flag(p + "marking", True),
         clearing=r.flag(p + "clearing", False),
-        obstacle_max_range_m=r.number(p + "obstacle_max_range", 2.5),
-        obstacle_min_range_m=r.number(p + "obstacle_min_range", 0.0),
-        raytrace_max_range_m=r.number(p + "raytrace_max_range", 3.0),
-        raytrace_min_range_m=r.number(p + "raytrace_min_range", 0.0),
-        min_obstacle_height_m=r.number(p + "min_obstacle_height", 0.0),
-        max_obstacle_height_m=r.number(p + "max_obstacle_height", 0.0),
+        obstacle_max_range_m=r.number(p + "obstacle_max_range", 2.5, low=0.0, high=d, unit="m"),
+        obstacle_min_range_m=r.number(p + "obstacle_min_range", 0.0, low=0.0, high=d, unit="m"),
+        raytrace_max_range_m=r.number(p + "raytrace_max_range", 3.0, low=0.0, high=d, unit="m"),
+        raytrace_min_range_m=r.number(p + "raytrace_min_range", 0.0, low=0.0, high=d, unit="m"),
+        min_obstacle_height_m=r.number(p + "min_obstacle_height", 0.0, low=-d, high=d, unit="m"),
+        max_obstacle_height_m=r.number(p + "max_obstacle_height", 0.0, low=-d, high=d, unit="m"),
         inf_is_valid=r.flag(p + "inf_is_valid", False),
     )
 
@@ -469,7 +600,8 @@ _PLUGIN_BY_NAME = {
 }
 
 
-def _costmap(r: _Reader, name: str) -> CostmapParams:
+def _costmap(r: ParamReader, name: str) -> CostmapParams:
+    d = MAX_DISTANCE_M
     plugins = r.str_list("plugins", ("static_layer", "obstacle_layer", "inflation_layer"))
     static: StaticLayerParams | None = None
     obstacles: list[ObstacleLayerParams] = []
@@ -492,7 +624,9 @@ def _costmap(r: _Reader, name: str) -> CostmapParams:
                     plugin=plugin,
                     enabled=r.flag(f"{layer}.enabled", True),
                     footprint_clearing_enabled=r.flag(f"{layer}.footprint_clearing_enabled", True),
-                    max_obstacle_height_m=r.number(f"{layer}.max_obstacle_height", 2.0),
+                    max_obstacle_height_m=r.number(
+                        f"{layer}.max_obstacle_height", 2.0, low=-MAX_DISTANCE_M, high=MAX_DISTANCE_M, unit="m"
+                    ),
                     sources=tuple(_source(r, layer, s) for s in sources),
                 )
             )
@@ -500,35 +634,35 @@ def _costmap(r: _Reader, name: str) -> CostmapParams:
             inflation = InflationParams(
                 name=layer,
                 enabled=r.flag(f"{layer}.enabled", True),
-                inflation_radius_m=r.number(f"{layer}.inflation_radius", 0.55),
-                cost_scaling_factor=r.number(f"{layer}.cost_scaling_factor", 10.0),
+                inflation_radius_m=r.number(f"{layer}.inflation_radius", 0.55, low=0.0, high=MAX_DISTANCE_M, unit="m"),
+                cost_scaling_factor=r.number(f"{layer}.cost_scaling_factor", 10.0, low=0.0, high=MAX_DISTANCE_M),
                 inflate_unknown=r.flag(f"{layer}.inflate_unknown", False),
                 inflate_around_unknown=r.flag(f"{layer}.inflate_around_unknown", False),
             )
         else:
-            msg = (
-                f"{r.source}: {r.node}.{layer}.plugin: the twin has no costmap layer {plugin!r}; "
-                "use StaticLayer, ObstacleLayer, VoxelLayer or InflationLayer"
+            raise r.fail(
+                f"{layer}.plugin",
+                f"the twin has no costmap layer {plugin!r}",
+                "use StaticLayer, ObstacleLayer, VoxelLayer or InflationLayer",
             )
-            raise ConfigError(msg)
     spec = CostmapParams(
         name=name,
-        update_frequency_hz=r.number("update_frequency", 5.0),
-        publish_frequency_hz=r.number("publish_frequency", 1.0),
+        update_frequency_hz=r.number("update_frequency", 5.0, low=MIN_RATE_HZ, high=MAX_RATE_HZ, unit="Hz"),
+        publish_frequency_hz=r.number("publish_frequency", 1.0, low=MIN_RATE_HZ, high=MAX_RATE_HZ, unit="Hz"),
         global_frame=r.text("global_frame", "map"),
         robot_base_frame=r.text("robot_base_frame", "base_link"),
         rolling_window=r.flag("rolling_window", False),
-        width_m=r.number("width", 5.0),
-        height_m=r.number("height", 5.0),
-        resolution_m=r.number("resolution", 0.1),
-        origin_x_m=r.number("origin_x", 0.0),
-        origin_y_m=r.number("origin_y", 0.0),
-        robot_radius_m=r.number("robot_radius", 0.1),
+        width_m=r.number("width", 5.0, above=0.0, high=d, unit="m"),
+        height_m=r.number("height", 5.0, above=0.0, high=d, unit="m"),
+        resolution_m=r.number("resolution", 0.1, above=0.0, high=d, unit="m"),
+        origin_x_m=r.number("origin_x", 0.0, low=-d, high=d, unit="m"),
+        origin_y_m=r.number("origin_y", 0.0, low=-d, high=d, unit="m"),
+        robot_radius_m=r.number("robot_radius", 0.1, low=0.0, high=d, unit="m"),
         footprint=_footprint(r),
-        footprint_padding_m=r.number("footprint_padding", 0.01),
+        footprint_padding_m=r.number("footprint_padding", 0.01, low=-d, high=d, unit="m"),
         track_unknown_space=r.flag("track_unknown_space", False),
-        lethal_cost_threshold=r.integer("lethal_cost_threshold", 100),
-        unknown_cost_value=r.integer("unknown_cost_value", 255),
+        lethal_cost_threshold=r.integer("lethal_cost_threshold", 100, low=0, high=255),
+        unknown_cost_value=r.integer("unknown_cost_value", 255, low=0, high=255),
         trinary_costmap=r.flag("trinary_costmap", True),
         always_send_full_costmap=r.flag("always_send_full_costmap", False),
         plugins=plugins,
@@ -536,9 +670,6 @@ def _costmap(r: _Reader, name: str) -> CostmapParams:
         obstacle_layers=tuple(obstacles),
         inflation=inflation,
     )
-    for key in ("resolution", "update_frequency", "width", "height"):
-        if r.params.get(key, 1.0) <= 0.0:  # type: ignore[operator]
-            raise r._fail(key, "a number > 0", r.params[key])
     return spec
 
 
@@ -549,48 +680,58 @@ def _costmap_node(nodes: Mapping[str, Any], name: str) -> str:
     return f"{name}/{name}"
 
 
-def _set_override(nodes: dict[str, dict[str, ParamValue]], key: str, value: Any, where: str) -> None:
+def _set_override(
+    nodes: dict[str, dict[str, ParamValue]], key: str, value: Any, overridden: dict[tuple[str, str], str]
+) -> None:
     node_short, _, param = key.partition(".")
     if not param:
-        msg = f"{where}: override {key!r} must name node and parameter ('amcl.max_particles'); fix the key"
+        msg = f"{SET_KEY}.{key}: an override must name node and parameter ('amcl.max_particles'); fix the key"
         raise ConfigError(msg)
     matches = [n for n in nodes if n == node_short or n.rsplit("/", 1)[-1] == node_short]
     node = matches[0] if matches else (f"{node_short}/{node_short}" if node_short.endswith("costmap") else node_short)
     flat: dict[str, ParamValue] = {}
-    _flatten(param, value, flat, f"{where}: override {key}")
+    _flatten(param, value, flat, f"{SET_KEY}.{key}")
     nodes.setdefault(node, {}).update(flat)
+    for name in flat:
+        overridden[(node, name)] = f"{node_short}.{name}"
 
 
 def load_nav2_params(path: str | Path, *, overrides: Mapping[str, Any] | None = None) -> Nav2Params:
     """Read a Nav2 params YAML and apply single-value overrides.
 
+    Values are checked as they are read (types, ranges); `twin.nav.param_checks` checks the rest
+    (the navigation servers' parameters, memory, the override keys) once the map is known.
+
     Args:
         path: The params file (TB3's `param/humble/waffle.yaml`, Nav2's `nav2_params.yaml`, ...).
-        overrides: Values that replace the file's, keyed `node.param` (`amcl.max_particles`,
-            `local_costmap.inflation_layer.inflation_radius`), or nested mappings of the same.
+        overrides: A scenario's `navigation.set`: values that replace the file's, keyed `node.param`
+            (`amcl.max_particles`, `local_costmap.inflation_layer.inflation_radius`), or nested
+            mappings of the same. A bad value among them is reported as `navigation.set.KEY`.
 
     Raises:
         ConfigError: If the file cannot be read or parsed, a node's section is not a mapping, or a
-            parameter the twin uses has the wrong type or an unusable value (one line naming file and key).
+            parameter the twin uses has the wrong type or an unusable value (one line naming file,
+            line and key, or the override).
     """
     path = Path(path)
-    where = str(path)
     nodes = _read_file(path)
     flat_overrides: dict[str, ParamValue] = {}
     if overrides:
-        _flatten("", overrides, flat_overrides, f"{where}: overrides")
+        _flatten("", overrides, flat_overrides, SET_KEY)
+    overridden: dict[tuple[str, str], str] = {}
     for key, value in flat_overrides.items():
-        _set_override(nodes, key, value, where)
+        _set_override(nodes, key, value, overridden)
+    source = ParamSource(path, overridden)
     wildcard = nodes.pop("**", {})
     merged = {name: {**wildcard, **params} for name, params in nodes.items()}
     amcl_name = "amcl" if "amcl" in merged else next((n for n in merged if n.endswith("/amcl")), "amcl")
-    amcl_reader = _Reader(where, amcl_name, merged.get(amcl_name, dict(wildcard)))
+    amcl_reader = ParamReader(source, amcl_name, merged.get(amcl_name, dict(wildcard)))
     amcl = _amcl(amcl_reader)
     readers = [amcl_reader]
     costmaps: dict[str, CostmapParams] = {}
     for short in ("global_costmap", "local_costmap"):
         node = _costmap_node(merged, short)
-        reader = _Reader(where, node, merged.get(node, dict(wildcard)))
+        reader = ParamReader(source, node, merged.get(node, dict(wildcard)))
         costmaps[short] = _costmap(reader, short)
         readers.append(reader)
     unused: list[str] = []
@@ -607,10 +748,12 @@ def load_nav2_params(path: str | Path, *, overrides: Mapping[str, Any] | None = 
         unused.extend(f"{node}.{k}" for k in params if k not in _ALWAYS_USED)
     raw = MappingProxyType({name: MappingProxyType(dict(params)) for name, params in merged.items()})
     return Nav2Params(
-        source=where,
+        source=str(path),
         amcl=amcl,
         global_costmap=costmaps["global_costmap"],
         local_costmap=costmaps["local_costmap"],
         raw=raw,
         unused_keys=tuple(unused),
+        origin=source,
+        read_keys=MappingProxyType({r.node: frozenset(r.used) for r in readers}),
     )

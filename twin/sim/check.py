@@ -15,10 +15,13 @@ import dataclasses
 import math
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from twin.core.errors import ConfigError, FmuError, TwinError
 from twin.sim.scenario import BehaviorTreeMission, Scenario
+
+if TYPE_CHECKING:
+    from twin.world import RobotModelSpec
 
 __all__ = ["check_inputs", "check_scenario", "in_scenario"]
 
@@ -221,7 +224,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         check_map_extent(scenario, robot, scene)
         if isinstance(scenario.mission, BehaviorTreeMission):
             _load_tree(scenario.mission)
-        _load_navigation(scenario)
+        _load_navigation(scenario, robot)
     except TwinError as err:
         if str(err).startswith(str(path)):
             raise
@@ -271,19 +274,28 @@ def _load_tree(mission: BehaviorTreeMission) -> None:
     factory.create_tree_from_file(mission.tree, main_tree=mission.main_tree, clock=lambda: 0)
 
 
-def _load_navigation(scenario: Scenario) -> None:
-    """Read the map, the Nav2 params file and the navigator tree the run would read."""
+def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
+    """Read the map, the Nav2 params file (with `navigation.set`) and the navigator tree the run would read."""
     from twin.nav.bt_nodes import nav2_factory
     from twin.nav.map_server import load_map
     from twin.nav.nav2_nodes import nav2_config
-    from twin.nav.params import load_nav2_params
+    from twin.nav.param_checks import check_nav2_inputs
+    from twin.nav.params import default_params_path, load_nav2_params
 
-    if scenario.map != "from_world":
-        load_map(Path(scenario.map))
+    occupancy = load_map(Path(scenario.map)) if scenario.map != "from_world" else None
     nav = scenario.navigation
-    if nav.params is not None:
-        params = load_nav2_params(nav.params, overrides=dict(nav.set))
-        if nav.type == "nav2":
+    amcl = scenario.localization.type == "amcl" and robot.lidar is not None
+    nav2 = isinstance(scenario.mission, BehaviorTreeMission) and nav.type == "nav2" and robot.lidar is not None
+    if amcl or nav2 or nav.params is not None:
+        try:
+            path = nav.params if nav.params is not None else default_params_path(robot.name)
+        except ConfigError as err:
+            raise err.with_context(before="navigation.params: ") from None
+        params = load_nav2_params(path, overrides=dict(nav.set))
+        map_source = None if scenario.map == "from_world" else str(scenario.map)
+        step_s = scenario.physics.step_s
+        check_nav2_inputs(params, occupancy, map_source=map_source, amcl=amcl, nav2=nav2, physics_step_s=step_s)
+        if nav2:
             nav2_config(params)
     if nav.type == "nav2" and nav.bt_xml is not None:
         nav2_factory().create_tree_from_file(nav.bt_xml, clock=lambda: 0)

@@ -36,6 +36,7 @@ from twin.nav.nav2_nodes import (
     VelocitySmootherNode,
     nav2_config,
 )
+from twin.nav.param_checks import check_nav2_inputs
 from twin.nav.params import Nav2Params, default_params_path, load_nav2_params
 from twin.node import Node
 from twin.sim.scenario import BehaviorTreeMission, Scenario
@@ -160,6 +161,10 @@ class NavigationStack:
         params = load_nav2_params(params_path, overrides=dict(sc.navigation.set))
         laser = LaserGeometry.from_spec(robot.lidar)
         occupancy = cls._map(sc, robot, scene)
+        map_source = None if sc.map == "from_world" else str(sc.map)
+        check_nav2_inputs(
+            params, occupancy, map_source=map_source, amcl=wants_amcl, nav2=wants_nav2, physics_step_s=sc.physics.step_s
+        )
         pose = sc.robot.initial_pose
         amcl = None
         initial = None

@@ -89,11 +89,14 @@ def test_wildcard_nested_namespaces_and_overrides(tmp_path: Path) -> None:
     ("text", "match"),
     [
         ("amcl:\n  ros__parameters:\n    alpha1: [0.2\n", r"p\.yaml:\d+: malformed Nav2 params YAML"),
-        ("amcl:\n  ros__parameters:\n    max_particles: many\n", r"p\.yaml: amcl\.max_particles: expected an integer"),
+        (
+            "amcl:\n  ros__parameters:\n    max_particles: many\n",
+            r"p\.yaml:3: amcl\.max_particles: expected an integer",
+        ),
         ("amcl:\n  ros__parameters:\n    tf_broadcast: 1\n", r"amcl\.tf_broadcast: expected true or false"),
         (
             "global_costmap:\n  global_costmap:\n    ros__parameters:\n      inflation_layer:\n        cost_scaling_factor: high\n",
-            r"global_costmap/global_costmap\.inflation_layer\.cost_scaling_factor: expected a finite number",
+            r"p\.yaml:5: global_costmap/global_costmap\.inflation_layer\.cost_scaling_factor: expected a finite number",
         ),
         ("amcl: 3\n", r"'amcl' must be a mapping"),
         ("- a\n- b\n", "must map node names"),
