@@ -113,6 +113,12 @@ class PoseTrack:
         return np.frombuffer(self._vals, dtype=np.float64).reshape(-1, 5) if self._vals else np.zeros((0, 5))
 
 
+def _steady(intervals: NDArray[np.float64]) -> bool:
+    """Whether intervals (s) look like a periodic topic's: positive on average and not spread wide."""
+    mean = float(intervals.mean()) if len(intervals) else 0.0
+    return len(intervals) >= 3 and mean > 0.0 and float(intervals.std()) < 0.5 * mean
+
+
 @dataclass(kw_only=True, slots=True)
 class TopicHealth:
     """Running statistics of one topic's message times, updated a block of messages at a time.
@@ -199,7 +205,7 @@ class TopicHealth:
             dt = np.diff(t) * 1e-9
         if len(dt):
             if self._period_s is None:
-                self._settle(dt)
+                self._settle(dt, np.diff(self._stamps()[0]) * 1e-9 if self.stamp_kind == 1 else None)
             assert self._period_s is not None
             self.sum_dt += float(dt.sum())
             self.sum_dt2 += float(np.dot(dt, dt))
@@ -208,12 +214,7 @@ class TopicHealth:
         self.count += len(t)
         self.last_ns = int(t[-1])
         if self.stamp_kind:
-            raw = np.frombuffer(bytes(self.stamp_buf), dtype=np.dtype([("s", "<i4"), ("n", "<u4")]))
-            if not self.little_endian:
-                raw = raw.byteswap()
-            stamps = raw["s"].astype(np.int64) * 1_000_000_000 + raw["n"].astype(np.int64)
-            has = stamps > 0
-            st = stamps[has]
+            st, has = self._stamps()
             if len(st):
                 if self.stamp_kind == 2:
                     self._count_backwards_per_pair(st, np.frombuffer(self.tf_ids, dtype=np.int32)[has])
@@ -231,6 +232,15 @@ class TopicHealth:
         del self.stamp_buf[:]
         del self.tf_ids[:]
 
+    def _stamps(self) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+        """The buffered block's header stamps that are set, ns, and which messages carry one."""
+        raw = np.frombuffer(bytes(self.stamp_buf), dtype=np.dtype([("s", "<i4"), ("n", "<u4")]))
+        if not self.little_endian:
+            raw = raw.byteswap()
+        stamps = raw["s"].astype(np.int64) * 1_000_000_000 + raw["n"].astype(np.int64)
+        has = stamps > 0
+        return stamps[has], has
+
     def _count_backwards_per_pair(self, stamps: NDArray[np.int64], ids: NDArray[np.int32]) -> None:
         last = self._tf_last
         for ident in np.unique(ids).tolist():
@@ -240,15 +250,24 @@ class TopicHealth:
             self.non_monotonic += int(np.count_nonzero(np.diff(seq) < 0))
             last[ident] = int(st[-1])
 
-    def _settle(self, warm: NDArray[np.float64]) -> None:
+    def _settle(self, warm: NDArray[np.float64], warm_stamps: NDArray[np.float64] | None = None) -> None:
+        """Judge the topic's steady period from its first block of record intervals.
+
+        A driver that writes its records in bunches (two `/odom` within a millisecond, stamped 50 ms
+        apart) looks aperiodic by record times; its header stamps (`warm_stamps`, their intervals)
+        then tell the steady period.
+        """
         median = float(np.median(warm))
         self._steady_s = median if median > 0.0 else None
         if self.expected_rate_hz:
             self._period_s = 1.0 / self.expected_rate_hz
             return
-        mean = float(warm.mean())
         # Only a periodic topic has gaps: events (logs, parameters) come when they come.
-        self.periodic = len(warm) >= 3 and mean > 0.0 and float(warm.std()) < 0.5 * mean
+        self.periodic = _steady(warm)
+        if not self.periodic and warm_stamps is not None and _steady(warm_stamps):
+            self.periodic = True
+            median = float(np.median(warm_stamps))
+            self._steady_s = median
         self._period_s = median if self.periodic else math.inf
 
     def finish(self) -> None:
