@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.analysis import _cdr
+from twin.analysis.series import TopicSeries, series_kind
 from twin.bag import BagInfo, open_bag, read_messages, read_raw
 from twin.bag.raw import raw_readable
 from twin.bag.reader import undecodable
@@ -58,7 +59,8 @@ _DECODED_TOPICS = (
     "/robot_description",
 )
 
-#: Rates a TurtleBot3 system publishes at (the twin's and Gazebo's TB3 defaults), Hz.
+#: Rates the twin publishes at (Gazebo's TurtleBot3 defaults), Hz: expected only of the twin's own bags;
+#: another bag's topics are judged against their own steady rate.
 EXPECTED_RATE_HZ: dict[str, float] = {
     "/imu": 200.0,
     "/odom": 30.0,
@@ -111,6 +113,12 @@ class PoseTrack:
         return np.frombuffer(self._vals, dtype=np.float64).reshape(-1, 5) if self._vals else np.zeros((0, 5))
 
 
+def _steady(intervals: NDArray[np.float64]) -> bool:
+    """Whether intervals (s) look like a periodic topic's: positive on average and not spread wide."""
+    mean = float(intervals.mean()) if len(intervals) else 0.0
+    return len(intervals) >= 3 and mean > 0.0 and float(intervals.std()) < 0.5 * mean
+
+
 @dataclass(kw_only=True, slots=True)
 class TopicHealth:
     """Running statistics of one topic's message times, updated a block of messages at a time.
@@ -139,6 +147,7 @@ class TopicHealth:
     skew_sum_s: float = 0.0
     periodic: bool = True
     _period_s: float | None = None
+    _steady_s: float | None = None  # the median interval of the first block, s
     _last_stamp: int = 0
     t_buf: array[int] = field(default_factory=lambda: array("q"))
     stamp_buf: bytearray = field(default_factory=bytearray)
@@ -196,7 +205,7 @@ class TopicHealth:
             dt = np.diff(t) * 1e-9
         if len(dt):
             if self._period_s is None:
-                self._settle(dt)
+                self._settle(dt, np.diff(self._stamps()[0]) * 1e-9 if self.stamp_kind == 1 else None)
             assert self._period_s is not None
             self.sum_dt += float(dt.sum())
             self.sum_dt2 += float(np.dot(dt, dt))
@@ -205,12 +214,7 @@ class TopicHealth:
         self.count += len(t)
         self.last_ns = int(t[-1])
         if self.stamp_kind:
-            raw = np.frombuffer(bytes(self.stamp_buf), dtype=np.dtype([("s", "<i4"), ("n", "<u4")]))
-            if not self.little_endian:
-                raw = raw.byteswap()
-            stamps = raw["s"].astype(np.int64) * 1_000_000_000 + raw["n"].astype(np.int64)
-            has = stamps > 0
-            st = stamps[has]
+            st, has = self._stamps()
             if len(st):
                 if self.stamp_kind == 2:
                     self._count_backwards_per_pair(st, np.frombuffer(self.tf_ids, dtype=np.int32)[has])
@@ -228,6 +232,15 @@ class TopicHealth:
         del self.stamp_buf[:]
         del self.tf_ids[:]
 
+    def _stamps(self) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+        """The buffered block's header stamps that are set, ns, and which messages carry one."""
+        raw = np.frombuffer(bytes(self.stamp_buf), dtype=np.dtype([("s", "<i4"), ("n", "<u4")]))
+        if not self.little_endian:
+            raw = raw.byteswap()
+        stamps = raw["s"].astype(np.int64) * 1_000_000_000 + raw["n"].astype(np.int64)
+        has = stamps > 0
+        return stamps[has], has
+
     def _count_backwards_per_pair(self, stamps: NDArray[np.int64], ids: NDArray[np.int32]) -> None:
         last = self._tf_last
         for ident in np.unique(ids).tolist():
@@ -237,14 +250,25 @@ class TopicHealth:
             self.non_monotonic += int(np.count_nonzero(np.diff(seq) < 0))
             last[ident] = int(st[-1])
 
-    def _settle(self, warm: NDArray[np.float64]) -> None:
+    def _settle(self, warm: NDArray[np.float64], warm_stamps: NDArray[np.float64] | None = None) -> None:
+        """Judge the topic's steady period from its first block of record intervals.
+
+        A driver that writes its records in bunches (two `/odom` within a millisecond, stamped 50 ms
+        apart) looks aperiodic by record times; its header stamps (`warm_stamps`, their intervals)
+        then tell the steady period.
+        """
+        median = float(np.median(warm))
+        self._steady_s = median if median > 0.0 else None
         if self.expected_rate_hz:
             self._period_s = 1.0 / self.expected_rate_hz
             return
-        mean = float(warm.mean())
         # Only a periodic topic has gaps: events (logs, parameters) come when they come.
-        self.periodic = len(warm) >= 3 and mean > 0.0 and float(warm.std()) < 0.5 * mean
-        self._period_s = float(np.median(warm)) if self.periodic else math.inf
+        self.periodic = _steady(warm)
+        if not self.periodic and warm_stamps is not None and _steady(warm_stamps):
+            self.periodic = True
+            median = float(np.median(warm_stamps))
+            self._steady_s = median
+        self._period_s = median if self.periodic else math.inf
 
     def finish(self) -> None:
         """Reduce what is still buffered."""
@@ -257,6 +281,13 @@ class TopicHealth:
         """Mean rate, Hz (None below two messages)."""
         n = self.count - 1
         return n / self.sum_dt if n > 0 and self.sum_dt > 0 else None
+
+    @property
+    def steady_rate_hz(self) -> float | None:
+        """The topic's own steady rate (1 / the median interval of its first messages), Hz; None if not periodic."""
+        if not self.periodic or self._steady_s is None:
+            return None
+        return 1.0 / self._steady_s
 
     @property
     def jitter_s(self) -> float | None:
@@ -277,6 +308,7 @@ class TopicHealth:
             "count": self.count,
             "rate_hz": self.rate_hz,
             "expected_rate_hz": self.expected_rate_hz,
+            "steady_rate_hz": self.steady_rate_hz,
             "jitter_ms": None if self.jitter_s is None else self.jitter_s * 1e3,
             "max_interval_s": self.max_gap_s if self.count > 1 else None,
             "gaps_over_3_periods": self.gaps if self.periodic else None,
@@ -303,6 +335,7 @@ class BagData:
 
     info: BagInfo
     start_ns: int
+    twin_bag: bool = False  # recorded by the twin (it has the twin's provenance)
     poses: dict[str, PoseTrack] = field(default_factory=dict)
     cmd: tuple[array[float], array[float], array[float]] | None = None  # t s, v, ω
     cmd_stamped: bool = False
@@ -319,6 +352,7 @@ class BagData:
     contacts: list[ContactEvent] | None = None
     occupancy: tuple[F64, float, float, float] | None = None  # grid (rows=y), resolution, origin x, y
     robot_description: str | None = None
+    series: dict[str, TopicSeries] = field(default_factory=dict)  # standard types the fixed sections leave out
 
     def has(self, topic: str) -> bool:
         """Whether the bag has `topic` with at least one message."""
@@ -374,6 +408,16 @@ def _pose_topics(types: dict[str, str], extra: Iterable[str]) -> list[str]:
     return out
 
 
+def _is_twin_bag(bag: Path) -> bool:
+    from twin.bag import read_provenance
+    from twin.core.errors import BagError
+
+    try:
+        return read_provenance(bag) is not None
+    except BagError:
+        return False
+
+
 def collect(
     path: str | os.PathLike[str],
     *,
@@ -383,6 +427,7 @@ def collect(
     decoded: bool = True,
     progress: Callable[[float], None] | None = None,
     pose_topics: Iterable[str] = (),
+    series: bool = False,
 ) -> BagData:
     """Read the bag once (twice with `decoded`) and keep the series analysis uses.
 
@@ -395,6 +440,8 @@ def collect(
         progress: Called with the fraction of the bag's time read, now and then.
         pose_topics: Topics to read poses from besides POSE_TOPICS (a bag without any of those reads
             every topic of a pose type); `data.poses` holds them most trusted first.
+        series: Also keep samples of every topic of a standard type the other series leave out
+            (IMU, joint states, battery, GNSS, other Twist and LaserScan topics) in `data.series`.
 
     Raises:
         BagError: If the folder is not a readable bag; a truncated storage file says to run
@@ -406,7 +453,8 @@ def collect(
         for _ in read_messages(bag, []):
             pass
     info = open_bag(bag)
-    data = BagData(info=info, start_ns=info.start_ns)
+    data = BagData(info=info, start_ns=info.start_ns, twin_bag=_is_twin_bag(bag))
+    nominal = EXPECTED_RATE_HZ if data.twin_bag else {}
     names = {t.name for t in info.topics}
     by_name = {t.name: t for t in info.topics}
     types = {t.name: message_type_name(t.msgtype) for t in info.topics}  # full names, as the fast readers know them
@@ -424,7 +472,7 @@ def collect(
                 topic=ti.name,
                 msgtype=ti.msgtype,
                 decodable=ti.decodable,
-                expected_rate_hz=EXPECTED_RATE_HZ.get(ti.name),
+                expected_rate_hz=nominal.get(ti.name),
             )
     pose_fns = {t: fn for t in pose_list if (fn := _cdr.pose_reader(types[t])) is not None}
     for t in pose_fns:
@@ -467,6 +515,8 @@ def collect(
                 rare = _rare_handler(data, name, types[name])
                 if rare is not None:
                     handlers[name] = rare
+    if series:
+        _add_series(data, handlers, types, wanted)
     health_of = data.health if health else {}
     route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]] = {
         name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
@@ -504,6 +554,28 @@ def collect(
     for h in data.health.values():
         h.finish()
     return data
+
+
+def _add_series(
+    data: BagData, handlers: dict[str, Callable[[int, bytes], None]], types: dict[str, str], wanted: list[str] | None
+) -> None:
+    store = _cdr.type_store()
+    for ti in data.info.topics:
+        kind = series_kind(types[ti.name])
+        if kind is None or ti.name in handlers or not ti.decodable or (wanted is not None and ti.name not in wanted):
+            continue
+        if types[ti.name] not in store.fielddefs:
+            continue
+        ts = data.series[ti.name] = TopicSeries.for_topic(ti.name, kind, ti.message_count)
+        handlers[ti.name] = _series_handler(ts, store, types[ti.name])
+
+
+def _series_handler(ts: TopicSeries, store: Any, msgtype: str) -> Callable[[int, bytes], None]:
+    def handle(t_ns: int, buf: bytes) -> None:
+        if ts.wants():
+            ts.add(t_ns, store.deserialize_cdr(bytes(buf), msgtype))
+
+    return handle
 
 
 def _pose_handler(

@@ -146,15 +146,15 @@ class RunMetrics:
     bag: str
     outcome: str  # SUCCESS, FAILURE, running (the bag ended first) or unknown (no behaviour-tree log)
     goals: tuple[GoalResult, ...]
-    goals_succeeded: int
-    recoveries: int
+    goals_succeeded: int | None  # None: the bag has no behaviour-tree log to tell (not zero)
+    recoveries: int | None
     duration_s: float  # the bag: first to last message
     mission_duration_s: float | None  # the tree's root: start to end (to the bag's end while running)
     pose_source: str | None  # the topic path and speed come from
     path_length_m: float | None
     mean_speed_mps: float | None  # path length over the time moving (span minus time stopped)
     max_speed_mps: float | None
-    rms_jerk_mps3: float | None  # of the pose source's forward speed
+    rms_jerk_mps3: float | None  # of the pose source's forward speed, on its header stamps
     time_stopped_s: float | None
     contacts: int | None
     localization_source: str | None
@@ -238,7 +238,8 @@ def compute_metrics(data: BagData) -> RunMetrics:
     duration_s = data.info.duration_ns * 1e-9
     if timeline is None:
         notes.append("outcome and goals need /behavior_tree_log")
-        outcome, recoveries, mission_s = "unknown", 0, None
+        outcome, mission_s = "unknown", None
+        recoveries: int | None = None
         goals: tuple[GoalResult, ...] = ()
     else:
         outcome, goals, recoveries = timeline.outcome, timeline.goals, len(timeline.recoveries)
@@ -253,8 +254,11 @@ def compute_metrics(data: BagData) -> RunMetrics:
     if track is None:
         notes.append("path and speed need /ground_truth/odom, /odom or /amcl_pose")
     else:
-        vals = track.values
-        t = track.t_ns.astype(np.float64) * 1e-9
+        # Header stamps, where the messages carry them: a driver's records may bunch up (a real robot's
+        # /odom written twice within a millisecond) while its stamps stay on its own clock.
+        order = np.argsort(track.stamp_ns, kind="stable")
+        vals = track.values[order]
+        t = track.stamp_ns[order].astype(np.float64) * 1e-9
         path = path_length(vals[:, :2])
         span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
         moving = span
@@ -299,7 +303,7 @@ def compute_metrics(data: BagData) -> RunMetrics:
         bag=str(data.info.path),
         outcome=outcome,
         goals=tuple(goals),
-        goals_succeeded=sum(1 for g in goals if g.result == "SUCCESS"),
+        goals_succeeded=None if timeline is None else sum(1 for g in goals if g.result == "SUCCESS"),
         recoveries=recoveries,
         duration_s=duration_s,
         mission_duration_s=mission_s,

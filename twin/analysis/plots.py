@@ -20,6 +20,7 @@ __all__ = [
     "localization_plot",
     "map_plot",
     "overlay_plot",
+    "series_plot",
     "timeline_plot",
     "velocity_plot",
 ]
@@ -218,5 +219,27 @@ def overlay_plot(tracks: Mapping[str, F64], walls: F64 | None, title: str) -> by
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def series_plot(
+    t_s: F64, values: F64, columns: Sequence[str], panels: Sequence[tuple[str, Sequence[int]]], title: str
+) -> bytes:
+    """Columns of `values` (shape (N, C)) against time, one panel per (y label, column indices)."""
+    fig = Figure(figsize=(8, 1.0 + 2.0 * len(panels)))
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    idx = np.arange(len(t_s))
+    (keep,) = _thin(idx.astype(np.float64))
+    k = keep.astype(np.int64)
+    for ax, (label, cols) in zip(axes, panels, strict=True):
+        for c in cols:
+            ax.plot(t_s[k], values[k, c], lw=1.0, label=columns[c])
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(alpha=0.3)
+        if len(cols) > 1:
+            ax.legend(loc="upper right", fontsize=7)
+    axes[-1].set_xlabel("time from bag start (s)")
+    axes[0].set_title(title, fontsize=10)
     fig.tight_layout()
     return _png(fig)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import datetime as dt
+import functools
 import html
 import json
 import math
@@ -119,7 +120,7 @@ def analyze(
         BagError: If it is not a readable bag.
     """
     bag = Path(path)
-    data = collect(bag, scan_points=walls is None, progress=progress)
+    data = collect(bag, scan_points=walls is None, progress=progress, series=True)
     metrics = compute_metrics(data)
     info = data.info
     timeline = bag_timeline(data)
@@ -250,6 +251,16 @@ def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str,
     else:
         add(Section(name="timeline", available=False, needs="/behavior_tree_log (nav2_msgs/BehaviorTreeLog)"))
 
+    # One plot per topic of a standard type the sections above leave out (IMU, joints, battery, ...).
+    for topic, ts in data.series.items():
+        rec_ns, values = ts.arrays()
+        if not len(rec_ns) or not ts.panels:
+            continue
+        name = ts.kind.name + topic.replace("/", "_")
+        t_s = data_t_s(data, rec_ns)
+        make = functools.partial(plots.series_plot, t_s, values, ts.columns, ts.panels, f"{title}: {topic}")
+        _plot(report, name, render, make)
+
 
 def data_t_s(data: BagData, t_ns: NDArray[np.int64]) -> F64:
     """Record times as seconds from the bag's start."""
@@ -325,14 +336,24 @@ def _health_flags(h: dict[str, Any]) -> list[str]:
     flags = []
     if not h["decodable"]:
         flags.append(f"type {h['type']} cannot be decoded")
-    rate, expected = h["rate_hz"], h["expected_rate_hz"]
+    rate, expected, steady = h["rate_hz"], h["expected_rate_hz"], h.get("steady_rate_hz")
     if rate is not None and expected is not None and abs(rate - expected) > 0.1 * expected:
         flags.append(f"rate {rate:.1f} Hz, expected {expected:g} Hz")
+    elif rate is not None and expected is None and steady is not None and abs(rate - steady) > 0.1 * steady:
+        flags.append(f"rate {rate:.1f} Hz, its steady rate {steady:.1f} Hz")
     if h["gaps_over_3_periods"]:
         flags.append(f"{h['gaps_over_3_periods']} gaps > 3 periods (longest {h['max_interval_s']:.3f} s)")
     if h["non_monotonic_stamps"]:
         flags.append(f"{h['non_monotonic_stamps']} stamps going backwards")
     return flags
+
+
+def _expected(h: dict[str, Any]) -> str:
+    """The rate a topic is judged by: the twin's nominal one (its own bags), else the topic's own steady rate."""
+    if h["expected_rate_hz"] is not None:
+        return _fmt(h["expected_rate_hz"], "", 0)
+    steady = h.get("steady_rate_hz")
+    return "n/a" if steady is None else f"{steady:.1f} (steady)"
 
 
 def _markdown(report: Report) -> str:
@@ -386,7 +407,7 @@ def _markdown(report: Report) -> str:
     for h in d["topic_health"]:
         out.append(
             f"| {h['topic']} | {h['type']} | {h['count']} | {_fmt(h['rate_hz'], '', 2)} | "
-            f"{_fmt(h['expected_rate_hz'], '', 0)} | {_fmt(h['jitter_ms'], '', 2)} | "
+            f"{_expected(h)} | {_fmt(h['jitter_ms'], '', 2)} | "
             f"{_fmt(h['gaps_over_3_periods']) if h['gaps_over_3_periods'] is not None else 'aperiodic'} | "
             f"{_fmt(h['max_interval_s'], '', 3)} | {h['non_monotonic_stamps']} | "
             f"{_fmt(h['stamp_offset_mean_s'], '', 3)} | "
@@ -428,7 +449,10 @@ def _html(report: Report, markdown: str) -> str:
         elif line.startswith("- "):
             body.append(f"<li>{html.escape(line[2:])}</li>")
         elif line.strip():
-            body.append(f"<p>{html.escape(line.replace('**', '').replace('`', '').replace('_', ' ').strip())}</p>")
+            text = line.replace("**", "").replace("`", "").strip()
+            if len(text) > 1 and text[0] == text[-1] == "_":  # a line in italics; names keep their underscores
+                text = text[1:-1]
+            body.append(f"<p>{html.escape(text)}</p>")
     if in_table:
         body.append("</table>")
     style = (

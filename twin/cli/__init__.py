@@ -112,6 +112,23 @@ def _named_command(argv: Sequence[str]) -> str | None:
     return None
 
 
+_NODE_LOGGER = "twin.node."
+# Loggers under twin.node. that are modules, not nodes; FMU instances name themselves in their lines.
+_NOT_NODES = ("twin.node.node", "twin.node.readers", "twin.node.fmu")
+
+
+class _ConsoleFormatter(logging.Formatter):
+    """`twin: LEVEL: message`; a node's lines (its `get_logger()`) carry its name, as ROS 2 prints them."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        name = record.name
+        if name.startswith(_NODE_LOGGER) and not name.startswith(_NOT_NODES):
+            node = name.removeprefix(_NODE_LOGGER)
+            fields = {**record.__dict__, "msg": f"[{node}] %s", "args": (record.getMessage(),)}
+            record = logging.makeLogRecord(fields)
+        return super().format(record)
+
+
 def _configure_logging(args: argparse.Namespace) -> None:
     level = logging.WARNING
     if getattr(args, "verbose", False):
@@ -121,7 +138,7 @@ def _configure_logging(args: argparse.Namespace) -> None:
     if getattr(args, "quiet", False):
         level = logging.ERROR
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("twin: %(levelname)s: %(message)s"))
+    handler.setFormatter(_ConsoleFormatter("twin: %(levelname)s: %(message)s"))
     handler.setLevel(level)
     root = logging.getLogger()
     for old in list(root.handlers):

@@ -28,7 +28,8 @@ The filter steps on every joint state and fuses the gyro samples in between (doc
 It writes DIR/odometry (a rosbag2 with nav_msgs/Odometry, odom -> base_footprint) and
 DIR/odometry.csv, and compares the result with the bag's own odometry topic when there is one.
 Wheel radius, separation and joint names come from the flags, else from the bag's
-/robot_description (URDF: the outermost pair of wheel joints with cylinder links), else the
+/robot_description (URDF: the outermost pair of wheel joints with cylinder links; a skid-steer
+robot's front axle), else the
 TurtleBot3 Waffle's (0.033 m, 0.287 m, wheel_left_joint/wheel_right_joint); the summary says
 which, and from where.
 """
@@ -132,6 +133,13 @@ def _topic_hint(topics: Any, args: argparse.Namespace, missing: list[str]) -> st
         args.imu_topic: ("--imu-topic", "sensor_msgs/msg/Imu"),
         args.joint_topic: ("--joint-topic", "sensor_msgs/msg/JointState"),
     }
+    if args.joint_topic in missing and not any(t.msgtype == "sensor_msgs/msg/JointState" for t in topics):
+        # Without wheel joint states there is nothing to fuse: --no-gyro would fail the same way.
+        listing = ", ".join(sorted(t.name for t in topics)) or "no topics"
+        return (
+            "the EKF needs the wheels' joint states (sensor_msgs/JointState) and the bag has none "
+            f"(it has {listing}); record the robot's /joint_states (or its wheel encoders as JointState)"
+        )
     hints = []
     for name in missing:
         flag, msgtype = flags[name]
@@ -252,6 +260,9 @@ def _resolve_geometry(args: argparse.Namespace, bag_mod: ModuleType) -> dict[str
             setattr(args, key, found[key])
             assert urdf is not None
             sources[key] = f"/robot_description (URDF of {urdf.robot or 'the robot'})"
+            if urdf.skid_steer and key in ("left_joint", "right_joint"):
+                side = urdf.left_joints if key == "left_joint" else urdf.right_joints
+                sources[key] += f"; skid-steer, the front one of {'/'.join(side)}"
         else:
             setattr(args, key, default)
             reason = "no /robot_description" if urdf is None and not found else "not in the URDF"

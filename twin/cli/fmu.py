@@ -31,8 +31,9 @@ examples:
 
 _CHECK_EPILOG = """\
 examples:
-  twin fmu check builtin:xm430_w210
-  twin fmu check builtin:xm430_w210_servo --profile velocity-servo
+  twin fmu check builtin:xm430_w210              a voltage-driven motor (profile inferred: voltage)
+  twin fmu check builtin:xm430_w210_servo        the default drive's servo (inferred: velocity-servo)
+  twin fmu check builtin:xm430_w210 --profile velocity-servo   check against a profile of your choice
   twin fmu check vendor_motor.fmu --map fmus/maps/acme_drive.yaml --json   your FMU, its names mapped
 exit status: 0 when the FMU satisfies the contract, 4 when it does not, cannot be read, or has no
 loadable binary for this platform (binaries/linux64/NAME.so for FMI 2.0, binaries/x86_64-linux/ for 3.0).
@@ -84,7 +85,14 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         parents=[common],
     )
     check.add_argument("fmu", metavar="FMU", help=".fmu file or builtin:NAME")
-    check.add_argument("--profile", choices=PROFILES, default=PROFILES[0])
+    check.add_argument(
+        "--profile",
+        choices=PROFILES,
+        default=None,
+        help="the contract to check: voltage (the FMU takes a voltage, the twin closes the speed loop) or "
+        "velocity-servo (it takes a speed setpoint and closes its own, as a Dynamixel in velocity mode); "
+        "default: inferred from the FMU's inputs, and said",
+    )
     check.add_argument("--map", type=Path, metavar="FILE", help="mapping file (roles, parameters, start_values)")
     check.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of a built-in (default 2)")
     check.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -92,12 +100,13 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
     step = sub.add_parser(
         "step-response",
-        help="compare an FMU's no-load voltage step with the linear motor model",
+        help="compare a voltage-profile FMU's no-load voltage step with the linear motor model",
         description=(
             "Step the FMU with a constant voltage and no load torque and print, next to it, python-control's "
             "response of the analytic transfer function w(s)/V(s) built from the FMU's parameters "
             "(R, L, Kt, Ke, J_rotor, b_rotor, N, J_wheel), or from a scenario's drive.motor (--scenario) for an "
-            "FMU whose parameters are named otherwise."
+            "FMU whose parameters are named otherwise. Supports voltage-profile FMUs only (a voltage input); "
+            "a velocity-servo FMU (a speed-setpoint input) is refused, saying so."
         ),
         epilog=_STEP_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -143,7 +152,7 @@ def _mapping(path: Path | None) -> FmuMapping:
 
 def _check(args: argparse.Namespace) -> int:
     from twin.cosim.build import resolve_fmu
-    from twin.cosim.contract import Profile, check_contract
+    from twin.cosim.contract import Profile, check_contract, infer_profile
     from twin.cosim.description import binary_problem, read_fmu_info, stepping, stepping_problem
 
     path = resolve_fmu(args.fmu, fmi_version=args.fmi)
@@ -152,7 +161,12 @@ def _check(args: argparse.Namespace) -> int:
     if problem is not None:
         msg = f"{path}: {problem}"
         raise FmuError(msg)
-    report = check_contract(info, _mapping(args.map), Profile(args.profile))
+    mapping = _mapping(args.map)
+    if args.profile is None:
+        profile, profile_reason = infer_profile(info, mapping)
+    else:
+        profile, profile_reason = Profile(args.profile), "--profile"
+    report = check_contract(info, mapping, profile)
     stepped_as = None if stepping_problem(info) is not None else stepping(info)
     if args.json:
         doc = {
@@ -177,6 +191,8 @@ def _check(args: argparse.Namespace) -> int:
                 for v in info.variables.values()
             ],
             "profile": report.profile.value,
+            "profile_from": "given" if args.profile is not None else "inferred",
+            "profile_reason": profile_reason,
             "ok": report.ok,
             "missing_roles": list(report.missing),
             "roles": [
@@ -211,7 +227,8 @@ def _check(args: argparse.Namespace) -> int:
     for row in (header, *rows):
         cells = [f"{cell:<{w}}" for cell, w in zip(row, widths, strict=False)]
         print("    " + "  ".join([*cells, row[-1]]).rstrip())
-    print(f"  contract ({report.profile.value}):")
+    how = "given with --profile" if args.profile is not None else f"inferred: {profile_reason}"
+    print(f"  contract ({report.profile.value}; {how}):")
     for r in report.roles:
         kind = "required" if r.required else "optional"
         if r.problem is None:
@@ -271,6 +288,7 @@ def _step_response(args: argparse.Namespace) -> int:
                 mapping = drive.resolved_mapping()
             except ConfigError as err:
                 raise err.with_context(before=f"{args.scenario}: drive.mapping: ") from None
+    _refuse_servo(path, mapping, args.fmu)
     try:
         comparison, motor = fmu_step_response(
             path,
@@ -329,6 +347,21 @@ def _step_response(args: argparse.Namespace) -> int:
     if args.out is not None:
         print(f"  plot: {args.out}")
     return 0
+
+
+def _refuse_servo(path: Path, mapping: FmuMapping, name: str) -> None:
+    """Refuse, in words, an FMU that takes a speed setpoint: the step response steps a voltage."""
+    from twin.cosim.contract import Profile, infer_profile
+    from twin.cosim.description import read_fmu_info
+
+    profile, _ = infer_profile(read_fmu_info(path), mapping)
+    if profile is Profile.VELOCITY_SERVO:
+        msg = (
+            f"{path}: step-response supports voltage-profile FMUs only (it steps the motor voltage, no load), "
+            "and this one is a velocity-servo FMU (a speed-setpoint input, no voltage input); "
+            f"`twin fmu check {name}` checks it, and a drive runs it with profile: velocity-servo"
+        )
+        raise FmuError(msg)
 
 
 def _scenario_drive(path: Path) -> FmuDrive:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 from typing import Any
 
@@ -18,12 +17,16 @@ examples:
 Writes into --out (default: bags/<BAG name>_replay): scenario.yaml (the replay as a scenario
 `twin simulate` runs again), bag/ (the twin's run) and the comparison of the twin's
 /ground_truth/odom against the bag's pose topic: comparison.json, overlay.png,
-compare_error.png. The robot defaults to the model named in the bag's /robot_description when
-the model path has it. Exit codes: 0 done (and within --max-position-error), 1 over it, 2
-scenario error, 3 world error, 4 FMU error, 5 bag error (e.g. no /cmd_vel to replay).
+compare_error.png. The robot is the one the bag's /robot_description names, found on --model-path
+or among the project's models, else the model whose wheels (joint names, separation, radius)
+match the URDF's; a bag that matches none is refused: choose with --robot. --drive fmu runs that
+robot's own motors as `twin simulate` does (fmu: auto, velocity-servo). Exit codes: 0 done (and
+within --max-position-error), 1 over it, 2 scenario error (or no robot matches the bag), 3 world
+error, 4 FMU error, 5 bag error (e.g. no /cmd_vel to replay).
 """
 
-_FMU_DRIVE = "{type: fmu, fmu: 'builtin:xm430_w210', fmi_version: 2, profile: voltage}"
+# The robot's own motors (Burger XL430, Waffle XM430) in the project's default profile, as `simulate` runs them.
+_FMU_DRIVE = "{type: fmu, fmu: auto, profile: velocity-servo}"
 
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
@@ -44,7 +47,9 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--model-path", type=Path, action="append", default=[], metavar="DIR", help="where model:// URIs resolve"
     )
-    parser.add_argument("--robot", metavar="MODEL", help="robot model (default: the bag's /robot_description name)")
+    parser.add_argument(
+        "--robot", metavar="MODEL", help="robot model (default: the model matching the bag's /robot_description)"
+    )
     parser.add_argument(
         "--drive", choices=("kinematic", "fmu"), default="kinematic", help="drivetrain (default: kinematic)"
     )
@@ -60,19 +65,6 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.set_defaults(func=_replay)
 
 
-def _robot_name(bag: Path, model_path: list[Path]) -> str | None:
-    """The <robot name> of the bag's /robot_description, if a model of that name is on the model path."""
-    from twin.bag import open_bag, read_messages
-
-    if "/robot_description" not in {t.name for t in open_bag(bag).topics}:
-        return None
-    for m in read_messages(bag, ["/robot_description"]):
-        match = re.search(r"<robot\s[^>]*name\s*=\s*[\"']([^\"']+)", str(m.msg.data))
-        if match and any((p / match.group(1) / "model.config").exists() for p in model_path):
-            return match.group(1)
-    return None
-
-
 def _yaml_path(p: Path) -> str:
     return json.dumps(str(p.resolve()))
 
@@ -82,6 +74,8 @@ def _replay(args: argparse.Namespace) -> int:
     from twin.analysis.report import world_walls
     from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
+    from twin.sim.replay import check_bag
+    from twin.sim.scenario import ReplayMission
     from twin.sim.scenario_file import load_scenario
     from twin.sim.simulation import Simulation
 
@@ -93,7 +87,14 @@ def _replay(args: argparse.Namespace) -> int:
     except OSError as err:
         msg = f"{out}: cannot create the output folder ({err.strerror or err}); choose another --out"
         raise ConfigError(msg) from None
-    robot = args.robot or _robot_name(bag, args.model_path) or "turtlebot3_waffle"
+    check_bag(ReplayMission(bag=bag, topic=args.topic))  # no commands to replay is said before the robot
+    if args.robot:
+        robot, robot_reason = args.robot, "--robot"
+    else:
+        from twin.sim.bag_robot import robot_from_bag
+
+        chosen = robot_from_bag(bag, args.model_path)
+        robot, robot_reason = chosen.model, chosen.reason
     drive = "{type: kinematic}" if args.drive == "kinematic" else _FMU_DRIVE
     model_path = "[" + ", ".join(_yaml_path(p) for p in args.model_path) + "]"
     pose_topic = json.dumps(args.pose_topic) if args.pose_topic else "null"
@@ -123,6 +124,7 @@ def _replay(args: argparse.Namespace) -> int:
     d = result.to_dict()
     d.update(
         robot=robot,
+        robot_reason=robot_reason,
         drive=args.drive,
         replay_bag=str(run_bag),
         scenario=str(scenario_file),
@@ -136,6 +138,7 @@ def _replay(args: argparse.Namespace) -> int:
         print(json.dumps(d, indent=2))
     else:
         print(f"replayed {bag} with {robot} ({args.drive} drive): {summary.sim_s:.2f} s in {summary.wall_s:.2f} s")
+        print(f"robot: {robot} ({robot_reason})")
         print("\n".join(result.summary_lines()))
         print(f"output: {out} (scenario.yaml, bag/, comparison.json, overlay.png, compare_error.png)")
     return 1 if over else 0

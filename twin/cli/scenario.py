@@ -8,6 +8,15 @@ import json
 from pathlib import Path
 from typing import Any
 
+_CHECK_EPILOG = """\
+examples:
+  twin scenario check scenarios/house_burger.yaml          valid: prints what it would run, exit 0
+  twin scenario check my.yaml --json                       the resolved scenario, for a script
+  twin scenario check bad.yaml                             a problem: one line, e.g.
+    twin: error: bad.yaml:2: drive.type: unknown type 'kinematc'; did you mean 'kinematic'?
+  for f in scenarios/*.yaml; do twin scenario check "$f" >/dev/null || exit 1; done   in CI
+"""
+
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     """Add the `scenario` command group."""
@@ -27,6 +36,8 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
             "names (world, robot, tree, locations, FMU mapping) and print the resolved scenario. Exit 0 when "
             "it is valid; else one line naming file, key and fix, exit 2 (3 world, 4 FMU, 6 tree)."
         ),
+        epilog=_CHECK_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
     check.add_argument("file", type=Path, metavar="FILE", help="scenario YAML file")

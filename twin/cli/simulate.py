@@ -156,9 +156,19 @@ def _graceful_signals(flag: _StopFlag) -> Iterator[None]:
             signal.signal(sig, handler)
 
 
+def _duration(seconds: float, digits: int) -> str:
+    """A duration with the digits it has: `28.0 s`, `0.140 s`, `1.6 ms`, never `0.00 s` beside a speed-up."""
+    if seconds >= 10.0 ** (1 - digits):
+        return f"{seconds:.{digits}f} s"
+    if seconds >= 0.01:
+        return f"{seconds:.3f} s"
+    return f"{seconds * 1e3:.2g} ms"
+
+
 def _summary_line(summary: RunSummary) -> str:
     return (
-        f"simulated {summary.sim_s:.1f} s in {summary.wall_s:.2f} s ({summary.real_time_factor:.0f}x real time), "
+        f"simulated {_duration(summary.sim_s, 1)} in {_duration(summary.wall_s, 2)} "
+        f"({summary.real_time_factor:.0f}x real time), "
         f"{summary.messages} messages, {summary.contacts} contacts, "
         f"{f'{summary.drive} drive, ' if summary.drive else ''}"
         f"{f'{summary.drive_notes}, ' if summary.drive_notes else ''}{summary.ended_by}"

@@ -46,6 +46,7 @@ __all__ = [
     "RoleSpec",
     "bind",
     "check_contract",
+    "infer_profile",
     "load_mapping",
 ]
 
@@ -342,3 +343,21 @@ def bind(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Binding:
     for role in ("voltage", "speed_setpoint"):
         bound.pop(role, None)
     return Binding(profile=profile, inputs=inputs, outputs=MappingProxyType(bound), start=mapping.start())
+
+
+def infer_profile(info: FmuInfo, mapping: FmuMapping) -> tuple[Profile, str]:
+    """The profile an FMU is built for, read from its variables (and the mapping's roles), and why.
+
+    The profile whose contract the FMU satisfies; when both do, `voltage` (the twin's own speed
+    loop); when neither does, the one missing fewer required roles (`voltage` on a tie).
+    """
+    reports = {p: check_contract(info, mapping, p) for p in Profile}
+    ok = [p for p in Profile if reports[p].ok]
+    command = {Profile.VOLTAGE: "voltage", Profile.VELOCITY_SERVO: "speed_setpoint"}
+    if len(ok) == 1:
+        chosen = ok[0]
+        return chosen, f"its {mapping.binding(command[chosen]).name!r} input satisfies only the {chosen.value} contract"
+    if len(ok) == 2:
+        return Profile.VOLTAGE, "it satisfies both contracts; voltage is the default (the twin closes the speed loop)"
+    chosen = min(Profile, key=lambda p: len(reports[p].missing))
+    return chosen, f"it satisfies neither contract; {chosen.value} misses the fewest required roles"

@@ -4,7 +4,8 @@ Each topic becomes a channel with message encoding `cdr` and a `ros2msg` schema 
 definition text a rosbag2 MCAP embeds), so Foxglove decodes the bytes as ROS 2 messages and its 3D
 panel draws the robot from `/robot_description`, the scan, the map and the transforms. Topics a ROS 2
 publisher would latch (transient local durability: `/tf_static`, `/robot_description`, `/map`) keep
-their last message(s), sent again to every client that subscribes later.
+their last message(s), sent again to every client that subscribes later. Clients connect through a
+front (`twin.live.front`) that lets those still on the `foxglove.websocket.v1` subprotocol in.
 
 ```python
 from twin.bag.typesys import TypeRegistry
@@ -19,9 +20,11 @@ with LiveServer(port=0) as server:             # 127.0.0.1, a free port
 from __future__ import annotations
 
 import logging
+import socket
 import threading
 from collections import deque
 from dataclasses import dataclass
+from urllib.parse import quote
 
 import foxglove
 from foxglove.websocket import Capability, ChannelView, Client, ServerListener
@@ -29,6 +32,7 @@ from foxglove.websocket import Capability, ChannelView, Client, ServerListener
 from twin.bag.typesys import MessageDefinition
 from twin.core.closing import Closing
 from twin.core.errors import ConfigError
+from twin.live.front import HandshakeFront
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LiveServer"]
 
@@ -56,6 +60,21 @@ class _Listener(ServerListener):
         self._server._resend_latched(channel.id)
 
 
+def _listen(host: str, port: int) -> socket.socket:
+    """A listening socket on the public address.
+
+    Raises:
+        ConfigError: If it cannot be bound (port in use, unknown host).
+    """
+    try:
+        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
+        return socket.create_server((host, port), family=family, backlog=16)
+    except OSError as err:
+        reason = (err.strerror or str(err)).lower()
+        msg = f"cannot serve on {host}:{port}: {reason}; choose another port with --port (or --host)"
+        raise ConfigError(msg) from None
+
+
 class LiveServer(Closing):
     """A Foxglove WebSocket server for one run or one bag. Use as a context manager.
 
@@ -79,22 +98,26 @@ class LiveServer(Closing):
         self._by_id: dict[int, _Channel] = {}
         self._lock = threading.Lock()
         self._next_time_ns = 0
+        listener = _listen(host, port)
         try:
+            # The SDK's server on a private loopback port; clients meet the front (twin.live.front).
             self._server = foxglove.start_server(
                 name=name,
-                host=host,
-                port=port,
+                host="127.0.0.1",
+                port=0,
                 context=self._context,
                 server_listener=_Listener(self),
                 capabilities=[Capability.Time],
                 supported_encodings=["cdr"],
             )
         except RuntimeError as err:
+            listener.close()
             reason = str(err).removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
             reason = reason.split(" (os error", 1)[0].lower()
             msg = f"cannot serve on {host}:{port}: {reason}; choose another port with --port (or --host)"
             raise ConfigError(msg) from None
-        self.port: int = self._server.port
+        self._front = HandshakeFront(listener, ("127.0.0.1", self._server.port))
+        self.port: int = self._front.port
         self._closed = False
 
     @property
@@ -105,7 +128,11 @@ class LiveServer(Closing):
 
     def app_url(self) -> str | None:
         """A link that opens this server in the Foxglove web app."""
-        return self._server.app_url()
+        link = self._server.app_url()
+        if link is None:
+            return None
+        private = quote(f"ws://127.0.0.1:{self._server.port}", safe="")
+        return link.replace(private, quote(self.url, safe=""))
 
     # -- channels --------------------------------------------------------------------------------
 
@@ -171,6 +198,7 @@ class LiveServer(Closing):
         if self._closed:
             return
         self._closed = True
+        self._front.close()
         for entry in self._channels:
             entry.channel.close()
         self._server.stop()

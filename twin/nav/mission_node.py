@@ -26,8 +26,8 @@ class MissionLike(Protocol):
     done: bool
     result: str
 
-    def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
-        """Return (linear m/s, angular rad/s) for now."""
+    def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float] | None:
+        """Return (linear m/s, angular rad/s) for now, or None when there is nothing new to send."""
         ...
 
 
@@ -106,8 +106,9 @@ class MissionNode(Node):
         def on_timer(t_ns: int) -> None:
             if pose_source is not None:
                 pose[0], pose[1], pose[2] = pose_source()
-            v, w = command(t_ns, pose[0], pose[1], pose[2])
-            cmd_pub.publish(Encoded((encode, (v, w), (v, w))))
+            cmd = command(t_ns, pose[0], pose[1], pose[2])
+            if cmd is not None:  # None: nothing new to send (a replay sends each recorded command once)
+                cmd_pub.publish(Encoded((encode, cmd, cmd)))
 
         self.create_rate_timer(command_rate_hz, on_timer, priority=PRIORITY_COMMAND)
         self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)

@@ -7,6 +7,7 @@ rate (`tick`), like the thesis's autonomy node on its 500 ms timer.
 
 from __future__ import annotations
 
+import bisect
 import logging
 import random
 from collections.abc import Callable, Sequence
@@ -71,8 +72,8 @@ class CmdVelScript:
 class BagReplay:
     """Replays a bag's velocity commands at their recorded sim times; done at the bag's last pose.
 
-    The command in force at `t_ns` is the last one recorded at or before it; before the first,
-    the bag's first velocity (the robot keeps doing what it was doing); after the bag's end, zero.
+    Each recorded command is sent once, at the first loop tick at or after its time; the drive holds
+    it. Before the first, the bag's first velocity holds (the robot keeps doing what it was doing).
 
     Raises:
         BagError: If the bag is unreadable or lacks the command topic or poses (see `load_commands`).
@@ -98,17 +99,30 @@ class BagReplay:
             self.end_ns * 1e-9,
         )
 
-    def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float]:
-        """Return the recorded command in force at `t_ns` (times must not go backwards)."""
+    def command(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float) -> tuple[float, float] | None:
+        """Return the latest recorded command due by `t_ns` if not sent yet, else None (nothing to send).
+
+        The bag's commands are sent once each, as recorded; the drive holds the last one (the first
+        pose's velocity before the first). Times must not go backwards.
+        """
         if t_ns >= self.end_ns:
             self.done, self.result = True, "complete"
-            return (0.0, 0.0)
+            return None
         times = self._t
-        while self._i + 1 < len(times) and times[self._i + 1] <= t_ns:
-            self._i += 1
-        if self._i < 0:
-            return self._before
-        return (self._v[self._i], self._w[self._i])
+        i = self._i
+        while i + 1 < len(times) and times[i + 1] <= t_ns:
+            i += 1
+        if i == self._i:
+            return None
+        self._i = i
+        return (self._v[i], self._w[i])
+
+    def command_in_force(self, t_ns: int) -> tuple[float, float]:
+        """The recorded command in force at `t_ns` (the first pose's velocity before the first; zero after the end)."""
+        if t_ns >= self.end_ns:
+            return (0.0, 0.0)
+        i = bisect.bisect_right(self._t, t_ns) - 1
+        return self._before if i < 0 else (self._v[i], self._w[i])
 
 
 class WaypointFollower:

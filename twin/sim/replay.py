@@ -2,7 +2,8 @@
 
 Sim time 0 of the replay is the bag's first pose on the pose topic (its header stamp). A command's
 time is its header stamp when it has one (TwistStamped), else its record time mapped through the
-bag's `/clock` (record time -> sim time, interpolated), else its record time.
+bag's `/clock` (record time -> sim time, interpolated), else its record time. Commands recorded
+before the first pose are not replayed: the first pose's velocity stands for them.
 """
 
 from __future__ import annotations
@@ -159,10 +160,21 @@ def load_commands(spec: ReplayMission) -> RecordedCommands:
         source = "record times mapped through /clock"
     else:
         source = "record times (no /clock)"
+    t = t - t0_ns
+    # A command recorded before the bag's first pose reached no drive that published poses (Gazebo's
+    # diff drive subscribes when it starts): the robot's state at the first pose already holds its effect.
+    after = t >= 0
+    if not after.all():
+        _log.info(
+            "%d command(s) on %s recorded before the first pose on %s are not replayed",
+            int(np.count_nonzero(~after)),
+            spec.topic,
+            pose_topic,
+        )
     return RecordedCommands(
-        t_ns=t - t0_ns,
-        v_mps=np.asarray(v, dtype=np.float64),
-        w_radps=np.asarray(w, dtype=np.float64),
+        t_ns=t[after],
+        v_mps=np.asarray(v, dtype=np.float64)[after],
+        w_radps=np.asarray(w, dtype=np.float64)[after],
         start_pose=pose,
         start_velocity=velocity,
         end_ns=last_ns - t0_ns,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import logging
 import math
 import re
 import statistics
@@ -15,6 +16,8 @@ from twin.sweep.engine import SweepResult
 from twin.sweep.runner import METRIC_COLUMNS
 
 __all__ = ["columns", "wilson_interval", "write_reports"]
+
+_log = logging.getLogger(__name__)
 
 _Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
 
@@ -75,6 +78,11 @@ def _write_parquet(path: Path, names: Sequence[str], rows: Sequence[dict[str, An
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError:
+        _log.warning(
+            "%s not written: pyarrow is not installed (pip install 'twin[parquet]'); %s has the same table",
+            path.name,
+            path.with_suffix(".csv").name,
+        )
         return None
     data: dict[str, list[Any]] = {}
     for name in names:

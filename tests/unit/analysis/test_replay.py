@@ -12,7 +12,11 @@ import pytest
 from tests.conftest import run_twin
 from tests.unit.analysis.test_analyze_cli import _copy_topics, _one_line_error
 from twin.analysis.compare import compare_bags
-from twin.bag import read_messages
+from twin.bag import Recorder, open_bag, read_messages
+from twin.core.errors import ConfigError
+from twin.sim.bag_robot import robot_from_bag, robot_from_urdf
+from twin.sim.replay import load_commands
+from twin.sim.scenario import ReplayMission
 
 
 def _replay(fixtures: Path, gazebo_bag: Path, out: Path, drive: str) -> dict:
@@ -61,16 +65,17 @@ def kinematic_replay(fixtures: Path, gazebo_bag: Path, tmp_path_factory: pytest.
     return _replay(fixtures, gazebo_bag, out, "kinematic"), out
 
 
-def test_kinematic_replay_of_the_gazebo_bag_stays_within_5_cm(
+def test_kinematic_replay_of_the_gazebo_bag_stays_within_10_mm_at_25_s(
     kinematic_replay: tuple[dict, Path], gazebo_bag: Path
 ) -> None:
     result, out = kinematic_replay
     assert result["robot"] == "turtlebot3_waffle_pi"  # from the bag's /robot_description
+    assert "/robot_description names turtlebot3_waffle_pi" in result["robot_reason"]
     src = _odom(gazebo_bag, "/odom")
     twin = _odom(out / "bag", "/ground_truth/odom")
     end = src[-1][0] - src[0][0]
     assert end > 25.0
-    assert _error_at(src, twin, 25.0) <= 0.05
+    assert _error_at(src, twin, 25.0) <= 0.010  # measured 2.9 mm
     assert _error_at(src, twin, end) <= 0.05
     # The reported comparison says the same.
     assert result["position_error_final_m"] == pytest.approx(_error_at(src, twin, result["matched_span_s"]), abs=1e-6)
@@ -90,11 +95,12 @@ def test_fmu_replay_figure(fixtures: Path, gazebo_bag: Path, tmp_path: Path) -> 
     src = _odom(gazebo_bag, "/odom")
     twin = _odom(tmp_path / "fmu" / "bag", "/ground_truth/odom")
     at_25, at_end = _error_at(src, twin, 25.0), _error_at(src, twin, src[-1][0] - src[0][0])
-    # Measured: 4 cm at 25 s and 11 cm at the end (the XM430 FMU turns more slowly than Gazebo's
-    # ideal diff drive in the final turns); a regression guard, not the kinematic 5 cm.
-    assert at_25 <= 0.06
-    assert at_end <= 0.15
+    # Measured: 2.8 mm at 25 s and 4.9 mm at the end with the robot's own XM430 servos (fmu: auto,
+    # velocity-servo, as `simulate` runs them); the voltage-profile motor gave 20 mm and 109 mm.
+    assert at_25 <= 0.010
+    assert at_end <= 0.015
     assert result["drive"] == "fmu"
+    assert "fmu: auto" in (tmp_path / "fmu" / "scenario.yaml").read_text()
 
 
 def test_scenario_file_replay_mission_runs_under_simulate(fixtures: Path, gazebo_bag: Path, tmp_path: Path) -> None:
@@ -157,3 +163,124 @@ def test_replayed_commands_match_the_bags_at_their_sim_times(
     # Held commands on one sim clock: equal but within the 5 ms the loop may apply them late.
     assert cmd["linear.x"]["rms_diff"] < 1e-3
     assert cmd["angular.z"]["rms_diff"] < 1e-3
+
+
+def test_replay_bag_holds_the_commands_as_sent(kinematic_replay: tuple[dict, Path], gazebo_bag: Path) -> None:
+    _, out = kinematic_replay
+    sent = [(m.msg.linear.x, m.msg.angular.z) for m in read_messages(gazebo_bag, ["/cmd_vel"])]
+    replayed = [(m.msg.linear.x, m.msg.angular.z) for m in read_messages(out / "bag", ["/cmd_vel"])]
+    assert replayed == sent  # each once, in order: not a resample at the loop's rate
+
+
+def test_a_waffle_pi_bag_without_its_model_runs_on_the_waffles_wheels(gazebo_bag: Path) -> None:
+    chosen = robot_from_bag(gazebo_bag, [])  # the project has no Waffle Pi; the Waffle has its wheels
+    assert chosen.model == "turtlebot3_waffle"
+    assert "turtlebot3_waffle_pi" in chosen.reason and "wheel_left_joint" in chosen.reason
+
+
+def test_a_robot_no_model_matches_is_refused_naming_the_urdf_and_robot_option() -> None:
+    urdf = (
+        '<robot name="rover4"><link name="base"/>'
+        '<link name="l"><collision><geometry><cylinder radius="0.1" length="0.05"/></geometry></collision></link>'
+        '<link name="r"><collision><geometry><cylinder radius="0.1" length="0.05"/></geometry></collision></link>'
+        '<joint name="left_wheel" type="continuous"><parent link="base"/><child link="l"/>'
+        '<origin xyz="0 0.3 0"/></joint>'
+        '<joint name="right_wheel" type="continuous"><parent link="base"/><child link="r"/>'
+        '<origin xyz="0 -0.3 0"/></joint></robot>'
+    )
+    with pytest.raises(ConfigError) as err:
+        robot_from_urdf(urdf, [], where="some_bag")
+    line = str(err.value)
+    assert "\n" not in line and "some_bag" in line and "'rover4'" in line and "0.6 m" in line
+    assert "--robot" in line and "--model-path" in line
+
+
+def test_replay_of_a_bag_without_robot_description_asks_for_robot(
+    fixtures: Path, twin_bag: Path, tmp_path: Path
+) -> None:
+    bag = _copy_topics(twin_bag, tmp_path / "no_urdf", ["/odom", "/clock", "/cmd_vel"])
+    proc = run_twin(
+        "replay",
+        str(bag),
+        "--world",
+        str(fixtures / "gazebo_classic" / "worlds" / "turtlebot3_world.world"),
+        "--model-path",
+        str(fixtures / "gazebo_classic" / "models"),
+        "--out",
+        str(tmp_path / "out"),
+    )
+    line = _one_line_error(proc, code=2)
+    assert "/robot_description" in line and "--robot" in line and str(bag) in line
+
+
+def test_commands_recorded_before_the_first_pose_are_not_replayed(gazebo_bag: Path, tmp_path: Path) -> None:
+    # As the ros2_walker bag: a command sent before Gazebo's diff drive ran (no pose yet) reached no one.
+    topics = ["/odom", "/clock", "/cmd_vel"]
+    info = open_bag(gazebo_bag)
+    first_odom = next(iter(read_messages(gazebo_bag, ["/odom"], decode=False))).t_ns
+    moving = next(m for m in read_messages(gazebo_bag, ["/cmd_vel"]) if m.msg.linear.x > 0.1)
+    raw = next(m.msg for m in read_messages(gazebo_bag, ["/cmd_vel"], decode=False) if m.t_ns == moving.t_ns)
+    bag = tmp_path / "early_command"
+    with Recorder(bag) as rec:
+        handles = {t: rec.add_topic(t, info.topic(t).msgtype) for t in topics}
+        rec.write(handles["/cmd_vel"], first_odom - 300_000_000, raw)
+        for m in read_messages(gazebo_bag, topics, decode=False):
+            rec.write(handles[m.topic], m.t_ns, m.msg)
+    spec = ReplayMission(bag=bag, pose_topic="/odom")
+    plain = load_commands(ReplayMission(bag=gazebo_bag, pose_topic="/odom"))
+    early = load_commands(spec)
+    assert (early.t_ns >= 0).all()
+    assert early.t_ns.tolist() == plain.t_ns.tolist()
+    assert early.v_mps.tolist() == plain.v_mps.tolist()
+
+
+@pytest.fixture(scope="module")
+def burger_bag(fixtures: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A Burger driven by a short cmd_vel script in Gazebo's empty world (no public Burger bag here)."""
+    tmp = tmp_path_factory.mktemp("burger")
+    scenario = tmp / "burger.yaml"
+    scenario.write_text(
+        "name: burger_script\n"
+        f"world: {{sdf: {fixtures}/gazebo_classic/worlds/empty_world.world, "
+        f"model_path: [{fixtures}/gazebo_classic/models]}}\n"
+        "robot: {model: turtlebot3_burger}\n"
+        "drive: {type: kinematic}\n"
+        "localization: {type: none}\n"
+        "mission:\n"
+        "  type: cmd_vel_script\n"
+        "  segments:\n"
+        "    - {duration_s: 6, linear_mps: 0.1}\n"
+        "    - {duration_s: 4, angular_radps: 0.5}\n"
+        "    - {duration_s: 8, linear_mps: 0.06, angular_radps: -0.3}\n"
+        "    - {duration_s: 6, linear_mps: 0.08, angular_radps: 0.4}\n"
+        "    - {duration_s: 4}\n"
+    )
+    proc = run_twin("simulate", str(scenario), "--out", str(tmp / "bag"))
+    assert proc.returncode == 0, proc.stderr
+    return tmp / "bag"
+
+
+@pytest.mark.parametrize("drive", ["kinematic", "fmu"])
+def test_a_burger_bag_replays_as_a_burger_with_its_own_motors(
+    fixtures: Path, burger_bag: Path, tmp_path: Path, drive: str
+) -> None:
+    proc = run_twin(
+        "replay",
+        str(burger_bag),
+        "--world",
+        str(fixtures / "gazebo_classic" / "worlds" / "empty_world.world"),
+        "--drive",
+        drive,
+        "--out",
+        str(tmp_path / "out"),
+        "--json",
+        "-v",
+    )
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    assert result["robot"] == "turtlebot3_burger"  # no --robot, no --model-path: the bag's URDF says so
+    src = _odom(burger_bag, "/ground_truth/odom")
+    twin = _odom(tmp_path / "out" / "bag", "/ground_truth/odom")
+    assert _error_at(src, twin, 25.0) <= 0.010
+    if drive == "fmu":  # the Burger's XL430 servos, as `simulate` runs them (fmu: auto), not the Waffle's XM430
+        assert "xl430_w250_servo" in proc.stderr and "xm430" not in proc.stderr

@@ -154,3 +154,18 @@ def test_the_command_is_registered_and_explains_itself(repo: Path) -> None:
     assert done.returncode == 0
     assert "--joint-velocity-units" in done.stdout
     assert "examples:" in done.stdout
+
+
+def test_a_bag_without_joint_states_gets_a_hint_that_works(
+    gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = tmp_path / "no_wheels"
+    _copy_without(gazebo_bag, bag, {"/imu", "/joint_states", "/scan", "/tf", "/tf_static", "/rosout"})
+    for extra in ((), ("--no-gyro",)):
+        code, out, err = replay(capsys, bag, "--out", tmp_path / f"out{len(extra)}", *extra)
+        assert code == EstimationError.exit_code
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and out == ""
+        # --no-gyro would fail the same way: the line says what the EKF needs instead
+        assert "--no-gyro" not in lines[0]
+        assert "sensor_msgs/JointState" in lines[0] and "/joint_states" in lines[0] and str(bag) in lines[0]

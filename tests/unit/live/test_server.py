@@ -115,3 +115,44 @@ def test_definitions_of_the_twins_bag_are_the_ones_it_embedded(tmp_path: Path) -
     definitions = message_definitions(tmp_path / "bag")
     assert definitions == {"std_msgs/msg/String": REGISTRY.definition("std_msgs/msg/String")}
     assert [m.msg.data for m in read_messages(tmp_path / "bag")] == ["<robot/>"]
+
+
+def test_a_client_on_the_older_foxglove_websocket_v1_subprotocol_connects_and_receives(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # foxglove-sdk's own server answers this client HTTP 400; the front renames the subprotocol for it.
+    import tests.foxglove_client
+
+    monkeypatch.setattr(tests.foxglove_client, "SUBPROTOCOLS", ["foxglove.websocket.v1"])
+    encoder = StringEncoder()
+    with LiveServer(port=0) as server:
+        latched = server.add_channel("/robot_description", REGISTRY.definition(encoder.msgtype), latched=True)
+        server.publish(latched, 7, encoder.encode("<robot name='tb3'/>"))
+        seen = asyncio.run(
+            watch(
+                server.url, ["/robot_description"], stop=lambda w: bool(w.messages["/robot_description"]), timeout_s=10
+            )
+        )
+    assert seen.subprotocol == "foxglove.websocket.v1"
+    assert [(t, seen.decode("/robot_description", p).data) for t, p in seen.messages["/robot_description"]] == [
+        (7, "<robot name='tb3'/>")
+    ]
+
+
+def test_a_client_on_an_unknown_subprotocol_is_refused_with_one_log_line(caplog: pytest.LogCaptureFixture) -> None:
+    import websockets
+
+    async def attempts(url: str) -> list[int]:
+        codes = []
+        for _ in range(5):  # a client retries, as Foxglove does
+            with pytest.raises(websockets.InvalidStatus) as err:
+                await websockets.connect(url, subprotocols=["foxglove.websocket.v2"], proxy=None)  # type: ignore[list-item]
+            codes.append(err.value.response.status_code)
+        return codes
+
+    with caplog.at_level("WARNING"), LiveServer(port=0) as server:
+        assert asyncio.run(attempts(server.url)) == [400] * 5
+    lines = [r.getMessage() for r in caplog.records if r.levelname in ("WARNING", "ERROR")]
+    assert len(lines) == 1, lines
+    assert "foxglove.websocket.v2" in lines[0] and "foxglove.sdk.v1" in lines[0] and "foxglove.websocket.v1" in lines[0]
+    assert "handshake failed" not in " ".join(r.getMessage() for r in caplog.records)
