@@ -15,11 +15,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import yaml
+
 from twin.core.config import load_config
 from twin.core.native import compiler_candidates, find_compiler
 from twin.estimation import EstimationSection
-from twin.nav.follower import FollowerParams
-from twin.nav.navigator import ProgressParams
+from twin.mission.path_follower import FollowerParams
 from twin.robot.disturbances import Disturbances
 from twin.robot.drivetrain import FmuDrive
 from twin.world.obstacles import ObstacleSpec
@@ -32,6 +33,7 @@ __all__ = [
     "fmu_fallback",
     "load_scenario",
     "with_replay_start",
+    "without_retired_keys",
 ]
 
 _log = logging.getLogger(__name__)
@@ -228,27 +230,11 @@ class ReplayMission:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
-class PlannerSection:
-    """The global planner on the world's grid (Nav2 NavFn-like; TB3 Nav2 values as defaults)."""
-
-    resolution_m: float = 0.05
-    robot_radius_m: float | None = None  # null: the circle around the robot's collision shapes
-    inflation_radius_m: float = 0.55
-    cost_scaling_factor: float = 3.0
-    tolerance_m: float = 0.5
-
-    def __post_init__(self) -> None:
-        if not 0.005 <= self.resolution_m <= 0.5:
-            msg = f"resolution_m must be between 0.005 and 0.5 m, got {self.resolution_m}"
-            raise ValueError(msg)
-
-
-@dataclass(frozen=True, kw_only=True, slots=True)
 class BehaviorTreeMission:
     """A BehaviorTree.CPP mission (v3 or v4 XML) ticked like the thesis's autonomy node.
 
-    `GoToPose` goals go to the twin's navigator: a plan on the world's grid, followed on the
-    robot's odometry. The run ends when the tree returns SUCCESS or FAILURE.
+    `GoToPose` goals go to Nav2's bt_navigator as NavigateToPose goals (`navigation:`). The run ends
+    when the tree returns SUCCESS or FAILURE.
     """
 
     type: Literal["behavior_tree"] = "behavior_tree"
@@ -257,9 +243,6 @@ class BehaviorTreeMission:
     locations: Path | None = None  # set as `location_file` on the blackboard
     tick_rate_hz: float = 2.0  # the thesis's 500 ms timer
     controller_rate_hz: float = 10.0  # TB3 Nav2 controller_frequency
-    follower: FollowerParams = field(default_factory=FollowerParams)
-    planner: PlannerSection = field(default_factory=PlannerSection)
-    progress: ProgressParams = field(default_factory=ProgressParams)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -352,12 +335,20 @@ class LocalizationSection:
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class NavigationSection:
-    """How `GoToPose` goals are carried out: Nav2's stack, or the twin's older grid follower by name."""
+    """How `GoToPose` goals are carried out: Nav2's stack (the only navigator; the grid stand-in is retired)."""
 
-    type: Literal["nav2", "grid"] = "nav2"
+    type: str = "nav2"
     params: Path | None = None  # a Nav2 params YAML; null: TurtleBot3's Humble file for the robot model
     bt_xml: Path | None = None  # null: Nav2 Humble's navigate_to_pose_w_replanning_and_recovery.xml
     set: Mapping[str, Any] = field(default_factory=dict)  # single values over the params file, `node.param: value`
+
+    def __post_init__(self) -> None:
+        if self.type == "grid":
+            msg = "type 'grid': the grid stand-in is gone, Nav2's stack is the navigator; remove `type: grid`"
+            raise ValueError(msg)
+        if self.type != "nav2":
+            msg = f"type {self.type!r} is not allowed; the navigator is 'nav2' (Nav2's stack)"
+            raise ValueError(msg)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -427,6 +418,27 @@ def load_scenario(path: Path) -> Scenario:
     # A scenario recorded in a bag (`--from-bag`) keeps the file it came from, where its nodes' modules are.
     source = scenario.source_path or Path(path).resolve()
     return with_replay_start(dataclasses.replace(scenario, source_path=source))
+
+
+_RETIRED_TREE_MISSION_KEYS = ("follower", "planner", "progress")  # the grid stand-in's, retired with it
+
+
+def without_retired_keys(text: str) -> str:
+    """A recorded scenario (a bag's provenance) without the keys an older twin wrote for the grid stand-in.
+
+    An older twin recorded `mission.follower`, `mission.planner` and `mission.progress` of every
+    behaviour-tree mission (their defaults, which only the retired grid navigator read); they are
+    dropped so that `--from-bag` re-runs such a bag. A scenario a user writes gets no such leniency.
+    """
+    data = yaml.safe_load(text)
+    mission = data.get("mission") if isinstance(data, dict) else None
+    if not isinstance(mission, dict) or mission.get("type") != "behavior_tree":
+        return text
+    if not any(key in mission for key in _RETIRED_TREE_MISSION_KEYS):
+        return text
+    for key in _RETIRED_TREE_MISSION_KEYS:
+        mission.pop(key, None)
+    return str(yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
 
 
 def with_replay_start(scenario: Scenario) -> Scenario:
