@@ -284,7 +284,7 @@ NAV2_LEAVES: Final[dict[str, tuple[NodeKind, tuple[PortSpec, ...]]]] = {
 }
 
 
-# Nav2's decorators other than RateController (implemented in `twin.nav.bt_leaves`).
+# Nav2's decorators other than RateController (implemented in `twin.nav.bt_navigator.leaves`).
 NAV2_DECORATORS: Final[dict[str, tuple[PortSpec, ...]]] = {
     "DistanceController": (
         input_port("distance", float, 1.0, "Distance"),

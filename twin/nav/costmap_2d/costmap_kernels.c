@@ -336,7 +336,7 @@ int twin_costmap_scan_update(unsigned char *layer, const unsigned char *base, un
    edge walked as nav2_util's LineIterator (Bresenham) walks it: a line's cost is 254 (lethal) at its
    first lethal cell, and the walk stops when the running maximum is lethal (an unknown 255 seen on an
    earlier edge outranks it, as in Nav2); 254 for a footprint point off the grid. Same arithmetic as
-   behaviors.footprint_cost_py. */
+   footprint.footprint_cost_py. */
 int twin_footprint_cost(const unsigned char *cost, long rows, long cols, double ox, double oy, double res,
                         const double *fx, const double *fy, long n, double x, double y, double yaw) {
     enum { LETHAL = 254 };

@@ -20,7 +20,7 @@ What carries over from Nav2 (facts in TB3_FACTS §4.3 and §4.8):
 - Grid nodes: as Humble's NavfnPlanner, world -> node by rounding (x - origin) / resolution and
   node -> world as origin + node * resolution (a node sits on a cell's corner, not its centre).
 
-The two loops (potential, trace) run in C (`_navfn_native`); `_potential_py` and `_trace_py` are
+The two loops (potential, trace) run in C (`_native`, `navfn_kernels.c`); `_potential_py` and `_trace_py` are
 the same algorithm in Python (a fallback used only without a C compiler, and the tests' reference).
 """
 

@@ -5,7 +5,7 @@
    distance maps over the local costmap, RotateToGoal's window), iterate the velocity samples as
    XYThetaIterator does, roll every sample out as StandardTrajectoryGenerator does (or
    LimitedAccelGenerator), score it with the configured critics in their order, and keep the first
-   lowest total among the legal ones. Python keeps the critics' state between cycles (twin/nav/dwb.py)
+   lowest total among the legal ones. Python keeps the critics' state between cycles (local_planner.py, critics.py)
    and has a numpy implementation of the same cycle for machines without a C compiler.
 
    Where this differs from a literal transcription, it gives the same answers faster:
@@ -45,7 +45,7 @@ enum {
     P_N_CRITICS, P_CRITICS /* then (code, scale) pairs */
 };
 
-/* critic codes, as twin/nav/dwb.py numbers them */
+/* critic codes, as dwb_params.py numbers them */
 enum { C_ROTATE = 1, C_OSCILLATION, C_BASE_OBSTACLE, C_GOAL_ALIGN, C_PATH_ALIGN, C_PATH_DIST, C_GOAL_DIST };
 
 /* per-cycle state: st[] (ROT_* are read and written back) */
