@@ -40,8 +40,9 @@ from twin.bt import (  # noqa: E402
     Tree,
 )
 from twin.bt.log import StatusChangeBuffer  # noqa: E402
-from twin.bt.mission_nodes import NavigationStatus, Pose2D, register_mission_nodes  # noqa: E402
-from twin.nav.bt_nodes import NAV2_LEAVES, nav2_factory  # noqa: E402
+from twin.mission.bt_nodes import NavigationStatus, Pose2D, register_mission_nodes  # noqa: E402
+from twin.nav.bt_navigator.factory import nav2_factory  # noqa: E402
+from twin.nav.bt_navigator.tree_nodes import NAV2_LEAVES  # noqa: E402
 
 TREES = REPO / "trees"
 BUDGET_MS_PER_SIM_S = 10.0

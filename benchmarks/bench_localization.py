@@ -33,9 +33,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from twin.nav.amcl import Amcl, LaserGeometry  # noqa: E402
-from twin.nav.costmap import Costmap, Observation, scan_observation  # noqa: E402
-from twin.nav.map_server import load_map  # noqa: E402
+from twin.nav.amcl.filter import Amcl  # noqa: E402
+from twin.nav.costmap_2d.layered_costmap import Costmap, Observation, scan_observation  # noqa: E402
+from twin.nav.frames import LaserGeometry  # noqa: E402
+from twin.nav.map_server.map_io import load_map  # noqa: E402
 from twin.nav.params import Nav2Params, default_params_path, load_nav2_params  # noqa: E402
 from twin.robot.lidar import Lidar  # noqa: E402
 from twin.world import build_scene, load_robot, load_world  # noqa: E402

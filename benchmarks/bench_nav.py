@@ -40,13 +40,13 @@ sys.path.insert(0, str(REPO))
 
 from tests.unit.nav.costmaps import house_costmap  # noqa: E402
 from twin.bt import ManualClock  # noqa: E402
-from twin.nav.behaviors import make_behavior  # noqa: E402
-from twin.nav.bt_leaves import ActionState, ActionUpdate  # noqa: E402
-from twin.nav.bt_nodes import nav2_factory  # noqa: E402
-from twin.nav.costmap_grid import CostGrid  # noqa: E402
-from twin.nav.dwb import DwbController  # noqa: E402
-from twin.nav.navfn import NavfnPlanner, Plan  # noqa: E402
-from twin.nav.smoother import VelocitySmoother  # noqa: E402
+from twin.nav.actions import ActionState, ActionUpdate  # noqa: E402
+from twin.nav.behaviors.behavior_server import make_behavior  # noqa: E402
+from twin.nav.bt_navigator.factory import nav2_factory  # noqa: E402
+from twin.nav.controller.dwb.local_planner import DwbController  # noqa: E402
+from twin.nav.costmap_2d.costmap_2d import CostGrid  # noqa: E402
+from twin.nav.planner.navfn import NavfnPlanner, Plan  # noqa: E402
+from twin.nav.velocity_smoother.velocity_smoother import VelocitySmoother  # noqa: E402
 
 TREE = REPO / "trees" / "navigate_to_pose_w_replanning_and_recovery.xml"
 START = (-1.0, -0.5, 0.0)

@@ -322,7 +322,7 @@ EMPTY_WORLD = FIXTURES / "gazebo_classic" / "worlds" / "empty_world.world"
 
 def _room_map(tmp_path: Path) -> Path:
     """A 10 x 10 m room (walls 0.1 m thick) holding a closed 2 x 2 m box around (3, 3); origin (-5, -5)."""
-    from twin.nav.map_server import OccupancyMap, save_map
+    from twin.nav.map_server.map_io import OccupancyMap, save_map
 
     data = np.zeros((200, 200), dtype=np.int8)
     data[:2, :] = data[-2:, :] = data[:, :2] = data[:, -2:] = 100

@@ -142,6 +142,19 @@ def test_world_that_is_not_sdf_is_one_line_exit_3(tmp_path: Path) -> None:
     assert len(lines) == 1 and str(world) in lines[0] and "Traceback" not in result.stderr
 
 
+def test_a_scenario_asking_for_the_retired_grid_navigator_is_one_line_exit_2(tmp_path: Path) -> None:
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("name: t\nnavigation:\n  type: grid\n")
+    result = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr
+    assert (
+        f"{scenario}:3: navigation: type 'grid': the grid stand-in is gone, Nav2's stack is the navigator" in lines[0]
+    )
+    assert not (tmp_path / "bag").exists()
+
+
 def test_spawning_inside_a_wall_is_refused_before_the_run(tmp_path: Path) -> None:
     scenario = tmp_path / "s.yaml"
     scenario.write_text("name: t\nrobot: {initial_pose: {x_m: -0.536, y_m: -1.356}}\n")

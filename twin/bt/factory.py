@@ -1,6 +1,6 @@
 """The factory: node types by name, scripting enums, plugins, and tree creation from XML.
 
-    factory = BehaviorTreeFactory()                 # BT.CPP 4.x built-ins (+ Nav2 control nodes)
+    factory = BehaviorTreeFactory()                 # BT.CPP 4.x built-ins
     factory.register_node_type(GoToPose, "GoToPose", navigator)
     tree = factory.create_tree_from_file(Path("trees/tree.xml"), clock=sim_clock)
     status = tree.tick_once()
@@ -140,7 +140,7 @@ class BehaviorTreeFactory:
     Args:
         builtins: register BT.CPP 4.x's built-in nodes (and the v3 BlackboardCheck nodes).
 
-    Nav2's control nodes and leaves live in `twin.nav.bt_nodes` (`nav2_factory`, `register_nav2_nodes`),
+    Nav2's control nodes and leaves live in `twin.nav.bt_navigator.factory` (`nav2_factory`),
     registered as BT.CPP plugins are; the engine itself knows nothing of Nav2.
     """
 

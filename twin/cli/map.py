@@ -70,7 +70,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 def _save(args: argparse.Namespace) -> int:
     from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
-    from twin.nav.map_server import map_from_scene, save_map
+    from twin.nav.map_server.map_io import map_from_scene, save_map
     from twin.world import build_scene, load_world
 
     if args.resolution <= 0.0 or args.height < 0.0:

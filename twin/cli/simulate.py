@@ -183,7 +183,7 @@ def _result(summary: RunSummary) -> str:
 def _from_bag(bag: Path) -> tuple[Scenario, float | None, Mapping[str, str]]:
     """The scenario, duration limit and provenance a twin bag recorded."""
     from twin.bag import read_provenance
-    from twin.sim.scenario_file import load_scenario
+    from twin.sim.scenario_file import load_scenario, without_retired_keys
 
     provenance = read_provenance(bag)
     if provenance is None or "scenario_yaml" not in provenance:
@@ -191,7 +191,7 @@ def _from_bag(bag: Path) -> tuple[Scenario, float | None, Mapping[str, str]]:
         raise ConfigError(msg)
     with tempfile.TemporaryDirectory(prefix="twin-from-bag-") as tmp:
         recorded = Path(tmp) / "scenario.yaml"
-        recorded.write_text(provenance["scenario_yaml"], encoding="utf-8")
+        recorded.write_text(without_retired_keys(provenance["scenario_yaml"]), encoding="utf-8")
         scenario = load_scenario(recorded)
     duration = provenance.get("duration_s", "")
     return scenario, (float(duration) if duration else None), provenance

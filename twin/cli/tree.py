@@ -162,9 +162,9 @@ def _add_nodes_option(parser: argparse.ArgumentParser) -> None:
 
 
 def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] = ()) -> BehaviorTreeFactory:
-    from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
     from twin.bt.validate import declare_node_models
-    from twin.nav.bt_nodes import nav2_factory
+    from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes
+    from twin.nav.bt_navigator.factory import nav2_factory
 
     factory = nav2_factory()
     register_mission_nodes(
@@ -400,9 +400,9 @@ class _Defaulting(dict[str, tuple["Step", ...]]):
 
 def _run_xml(args: argparse.Namespace) -> StatusLog:
     from twin.bt.log import StatusLog
-    from twin.bt.mission_nodes import LOCATION_FILE_KEY, load_locations
     from twin.bt.tree import ManualClock
     from twin.core.clock import NS_PER_S
+    from twin.mission.bt_nodes import LOCATION_FILE_KEY, load_locations
 
     if args.period_ms <= 0 or args.ticks <= 0:
         msg = "--period-ms and --ticks must be positive"

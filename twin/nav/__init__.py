@@ -1,34 +1,23 @@
-"""Layer 2: navigation: Nav2 Humble's parts, and the older grid stand-in for GoToPose.
+"""Layer 2: navigation: Nav2 Humble's parts, one subpackage per Nav2 package the twin reproduces.
 
-Nav2's components, pure and array-based, for the node graph to wire: `NavfnPlanner` (navfn),
-`DwbController` and `RppController` behind `FollowPathTask` (controller_server's cycle, with the
-goal and progress checkers; `controller_for_plugin`), `VelocitySmoother`, the behaviours
-(`twin.nav.behaviors`), and Nav2's BT nodes (`nav2_factory`, leaves calling `NavigationServices`).
-The grid stand-in (`GridNavigator`, `GridPlanner`) plans on the static world and follows on odometry.
+- `map_server` (nav2_map_server): `OccupancyMap`, `load_map`/`save_map`, `map_from_scene`, `MapServerNode`.
+- `amcl` (nav2_amcl): the particle filter and likelihood field (`filter`), `AmclNode`, `InitialPoseNode`.
+- `costmap_2d` (nav2_costmap_2d): the `CostGrid` layout and cost values (`costmap_2d`), the layered
+  costmap with its static, obstacle and inflation layers (`layered_costmap`), the footprint and its
+  collision check (`footprint`), `CostmapNode`.
+- `planner` (nav2_planner + nav2_navfn_planner): `NavfnPlanner` (`navfn`), `PlannerServer` and its node.
+- `controller` (nav2_controller): `ControllerServer` and its node, the goal and progress checkers,
+  DWB (`controller.dwb`: trajectory generator, critics, local planner, its C kernel) and Regulated
+  Pure Pursuit (`regulated_pure_pursuit`).
+- `velocity_smoother` (nav2_velocity_smoother), `smoother` (nav2_smoother's SimpleSmoother).
+- `behaviors` (nav2_behaviors): Spin, BackUp, DriveOnHeading, Wait and `BehaviorServer`.
+- `bt_navigator` (nav2_bt_navigator + nav2_behavior_tree): Nav2's BT control nodes and leaves,
+  `nav2_factory`, the servers as the leaves reach them (`Nav2Servers`), `BtNavigator` and its node.
+- Shared: `frames` (the transforms the nodes look up, the laser's mount), `params` (reading a Nav2
+  params file), `server_params` (the servers' sections of it), `actions` (a goal's state and result).
+
+Each part's C kernel sits beside the Python that calls it. The package and its subpackages import
+nothing themselves, so a command that needs one part (e.g. `twin map`) loads only that part.
 """
 
-from twin.nav.bt_leaves import NavigationServices
-from twin.nav.bt_nodes import nav2_factory
-from twin.nav.controller import FollowPathTask, controller_for_plugin
-from twin.nav.dwb import DwbController
-from twin.nav.grid import NavGrid, build_grid
-from twin.nav.navfn import NavfnPlanner
-from twin.nav.navigator import GridNavigator
-from twin.nav.planner import GridPlanner
-from twin.nav.rpp import RppController
-from twin.nav.smoother import VelocitySmoother
-
-__all__ = [
-    "DwbController",
-    "FollowPathTask",
-    "GridNavigator",
-    "GridPlanner",
-    "NavGrid",
-    "NavfnPlanner",
-    "NavigationServices",
-    "RppController",
-    "VelocitySmoother",
-    "build_grid",
-    "controller_for_plugin",
-    "nav2_factory",
-]
+__all__: list[str] = []

@@ -1,5 +1,8 @@
 """The planar transforms Nav2's nodes look up through TF: odom→base from `/odom`, map→odom from AMCL.
 
+`LaserGeometry` is the lidar's scan layout and its mount in the base frame (what AMCL and the
+costmaps read from a scan's header and the base→laser transform).
+
 In ROS each Nav2 node keeps a tf2 buffer; in the twin the navigation nodes share one `Frames`
 object, fed by their `/odom` subscriptions and by the AMCL node. Poses are `(x_m, y_m, yaw_rad)`.
 """
@@ -7,12 +10,16 @@ object, fed by their `/odom` subscriptions and by the AMCL node. Poses are `(x_m
 from __future__ import annotations
 
 import math
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from twin.node import Encoded
 from twin.node.readers import odometry_pose
 
-__all__ = ["Frames", "compose", "invert"]
+if TYPE_CHECKING:
+    from twin.world.robot_model import LidarSpec
+
+__all__ = ["Frames", "LaserGeometry", "compose", "invert"]
 
 Pose = tuple[float, float, float]
 
@@ -28,6 +35,39 @@ def invert(a: Pose) -> Pose:
     """Return the inverse transform of `a`."""
     c, s = math.cos(a[2]), math.sin(a[2])
     return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class LaserGeometry:
+    """A LaserScan's fixed fields and the laser's mount in the robot base frame.
+
+    Beam i points at `mount_yaw_rad + angle_min_rad + i * angle_increment_rad` in the base frame;
+    for a lidar mounted upside down (rolled by pi) pass `-angle_min` and `-angle_increment`, as
+    AMCL does when it transforms the scan's angles into the base frame.
+    """
+
+    angle_min_rad: float
+    angle_increment_rad: float
+    range_min_m: float
+    range_max_m: float
+    mount_x_m: float = 0.0
+    mount_y_m: float = 0.0
+    mount_yaw_rad: float = 0.0
+
+    @classmethod
+    def from_spec(cls, spec: LidarSpec) -> LaserGeometry:
+        """Return the geometry of a robot's lidar as its scans are published (mirrored if mounted upside down)."""
+        mount = spec.mount
+        sweep = 1.0 if math.cos(mount.roll_rad) * math.cos(mount.pitch_rad) >= 0.0 else -1.0
+        return cls(
+            angle_min_rad=sweep * spec.angle_min_rad,
+            angle_increment_rad=sweep * spec.angle_increment_rad,
+            range_min_m=spec.range_min_m,
+            range_max_m=spec.range_max_m,
+            mount_x_m=mount.x_m,
+            mount_y_m=mount.y_m,
+            mount_yaw_rad=mount.yaw_rad,
+        )
 
 
 class Frames:

@@ -171,7 +171,7 @@ def _check_files(scenario: Scenario, path: Path) -> None:
             raise _refuse(path, key, f"{folder}: no such folder; fix the model path")
     mission = scenario.mission
     if isinstance(mission, BehaviorTreeMission) and mission.locations is not None:
-        from twin.bt.mission_nodes import load_locations
+        from twin.mission.bt_nodes import load_locations
 
         try:
             locations = load_locations(mission.locations)
@@ -265,8 +265,8 @@ def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
 def _load_tree(mission: BehaviorTreeMission) -> None:
     import random
 
-    from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
-    from twin.nav.bt_nodes import nav2_factory
+    from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes
+    from twin.nav.bt_navigator.factory import nav2_factory
 
     factory = nav2_factory()
     register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
@@ -276,11 +276,11 @@ def _load_tree(mission: BehaviorTreeMission) -> None:
 
 def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
     """Read the map, the Nav2 params file (with `navigation.set`) and the navigator tree the run would read."""
-    from twin.nav.bt_nodes import nav2_factory
-    from twin.nav.map_server import load_map
-    from twin.nav.nav2_nodes import nav2_config
+    from twin.nav.bt_navigator.factory import nav2_factory
+    from twin.nav.map_server.map_io import load_map
     from twin.nav.param_checks import check_nav2_inputs
     from twin.nav.params import default_params_path, load_nav2_params
+    from twin.nav.server_params import nav2_config
 
     occupancy = load_map(Path(scenario.map)) if scenario.map != "from_world" else None
     nav = scenario.navigation

@@ -15,16 +15,15 @@ from typing import TYPE_CHECKING, Protocol
 
 from twin.bt import NodeStatus
 from twin.bt.log import StatusChange, StatusChangeBuffer
-from twin.bt.mission_nodes import LOCATION_FILE_KEY, register_mission_nodes
 from twin.core.clock import s_to_ns
-from twin.nav.bt_nodes import nav2_factory
-from twin.nav.follower import PathFollower
+from twin.mission.bt_nodes import LOCATION_FILE_KEY, register_mission_nodes
+from twin.mission.path_follower import PathFollower
+from twin.nav.bt_navigator.factory import nav2_factory
 from twin.sim.replay import load_commands
 from twin.sim.scenario import BehaviorTreeMission, CmdVelScriptMission, ReplayMission, WaypointsMission
 
 if TYPE_CHECKING:
-    from twin.nav.nav2_nodes import Nav2Navigator
-    from twin.nav.navigator import GridNavigator
+    from twin.mission.navigate_to_pose import Nav2Navigator
 
 __all__ = ["BagReplay", "CmdVelScript", "Mission", "TreeMission", "WaypointFollower"]
 
@@ -164,7 +163,7 @@ class TreeMission:
     def __init__(
         self,
         spec: BehaviorTreeMission,
-        navigator: GridNavigator | Nav2Navigator,
+        navigator: Nav2Navigator,
         *,
         clock: Callable[[], int],
         seed: int,

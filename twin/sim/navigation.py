@@ -20,24 +20,23 @@ from typing import Any
 import numpy as np
 
 from twin.core.errors import ConfigError
-from twin.nav.amcl import Amcl, LaserGeometry
-from twin.nav.costmap import Costmap
-from twin.nav.frames import Frames
-from twin.nav.localization_nodes import AmclNode, CostmapNode, InitialPoseNode, MapServerNode
-from twin.nav.map_server import OccupancyMap, load_map, map_from_scene
-from twin.nav.nav2_nodes import (
-    BehaviorServerNode,
-    BtNavigator,
-    BtNavigatorNode,
-    ControllerServerNode,
-    Nav2Config,
-    Nav2Servers,
-    PlannerServerNode,
-    VelocitySmootherNode,
-    nav2_config,
-)
+from twin.nav.amcl.amcl_node import AmclNode, InitialPoseNode
+from twin.nav.amcl.filter import Amcl
+from twin.nav.behaviors.behavior_server import BehaviorServerNode
+from twin.nav.bt_navigator.action_servers import Nav2Servers
+from twin.nav.bt_navigator.bt_navigator_node import BtNavigatorNode
+from twin.nav.bt_navigator.navigator import BtNavigator
+from twin.nav.controller.controller_server import ControllerServerNode
+from twin.nav.costmap_2d.costmap_node import CostmapNode
+from twin.nav.costmap_2d.layered_costmap import Costmap
+from twin.nav.frames import Frames, LaserGeometry
+from twin.nav.map_server.map_io import OccupancyMap, load_map, map_from_scene
+from twin.nav.map_server.map_server_node import MapServerNode
 from twin.nav.param_checks import check_nav2_inputs
 from twin.nav.params import Nav2Params, default_params_path, load_nav2_params
+from twin.nav.planner.planner_server import PlannerServerNode
+from twin.nav.server_params import Nav2Config, nav2_config
+from twin.nav.velocity_smoother.velocity_smoother import VelocitySmootherNode
 from twin.node import Node
 from twin.sim.scenario import BehaviorTreeMission, Scenario
 from twin.world import RobotModelSpec
@@ -288,7 +287,7 @@ def _map_bounds(sc: Scenario, scene: Scene, *, margin_m: float = 1.0) -> tuple[f
     """
     points = [("robot.initial_pose", sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m)]
     if isinstance(sc.mission, BehaviorTreeMission) and sc.mission.locations is not None:
-        from twin.bt.mission_nodes import load_locations
+        from twin.mission.bt_nodes import load_locations
 
         with contextlib.suppress(OSError, ValueError, TypeError):  # the mission reports a bad file itself
             locations = load_locations(sc.mission.locations)
@@ -344,7 +343,7 @@ def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
 
 def _check_locations_on_map(path: Path, occupancy: OccupancyMap) -> None:
     """Refuse a mission location the robot could never be sent to: one off the map."""
-    from twin.bt.mission_nodes import load_locations
+    from twin.mission.bt_nodes import load_locations
 
     try:
         locations = load_locations(path)

@@ -80,7 +80,7 @@ def scenario_obstacles(scenario: Scenario, rng: np.random.Generator) -> tuple[Ob
             "none; use a behavior_tree mission with locations, or count: 0"
         )
         raise ConfigError(msg)
-    from twin.bt.mission_nodes import load_locations
+    from twin.mission.bt_nodes import load_locations
 
     locations = {name: (p.x_m, p.y_m, p.yaw_rad) for name, p in load_locations(mission.locations).items()}
     return specs + block_obstacles(scenario.blocks, locations, rng)

@@ -17,8 +17,7 @@ from typing import Any, Literal
 
 from twin.core.native import compiler_candidates, find_compiler
 from twin.estimation import EstimationSection
-from twin.nav.follower import FollowerParams
-from twin.nav.navigator import ProgressParams
+from twin.mission.path_follower import FollowerParams
 from twin.robot.disturbances import Disturbances
 from twin.robot.fmu_drive import FmuDrive
 from twin.world.obstacles import ObstacleSpec
@@ -225,27 +224,11 @@ class ReplayMission:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
-class PlannerSection:
-    """The global planner on the world's grid (Nav2 NavFn-like; TB3 Nav2 values as defaults)."""
-
-    resolution_m: float = 0.05
-    robot_radius_m: float | None = None  # null: the circle around the robot's collision shapes
-    inflation_radius_m: float = 0.55
-    cost_scaling_factor: float = 3.0
-    tolerance_m: float = 0.5
-
-    def __post_init__(self) -> None:
-        if not 0.005 <= self.resolution_m <= 0.5:
-            msg = f"resolution_m must be between 0.005 and 0.5 m, got {self.resolution_m}"
-            raise ValueError(msg)
-
-
-@dataclass(frozen=True, kw_only=True, slots=True)
 class BehaviorTreeMission:
     """A BehaviorTree.CPP mission (v3 or v4 XML) ticked like the thesis's autonomy node.
 
-    `GoToPose` goals go to the twin's navigator: a plan on the world's grid, followed on the
-    robot's odometry. The run ends when the tree returns SUCCESS or FAILURE.
+    `GoToPose` goals go to Nav2's bt_navigator as NavigateToPose goals (`navigation:`). The run ends
+    when the tree returns SUCCESS or FAILURE.
     """
 
     type: Literal["behavior_tree"] = "behavior_tree"
@@ -254,9 +237,6 @@ class BehaviorTreeMission:
     locations: Path | None = None  # set as `location_file` on the blackboard
     tick_rate_hz: float = 2.0  # the thesis's 500 ms timer
     controller_rate_hz: float = 10.0  # TB3 Nav2 controller_frequency
-    follower: FollowerParams = field(default_factory=FollowerParams)
-    planner: PlannerSection = field(default_factory=PlannerSection)
-    progress: ProgressParams = field(default_factory=ProgressParams)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -349,12 +329,20 @@ class LocalizationSection:
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class NavigationSection:
-    """How `GoToPose` goals are carried out: Nav2's stack, or the twin's older grid follower by name."""
+    """How `GoToPose` goals are carried out: Nav2's stack (the only navigator; the grid stand-in is retired)."""
 
-    type: Literal["nav2", "grid"] = "nav2"
+    type: str = "nav2"
     params: Path | None = None  # a Nav2 params YAML; null: TurtleBot3's Humble file for the robot model
     bt_xml: Path | None = None  # null: Nav2 Humble's navigate_to_pose_w_replanning_and_recovery.xml
     set: Mapping[str, Any] = field(default_factory=dict)  # single values over the params file, `node.param: value`
+
+    def __post_init__(self) -> None:
+        if self.type == "grid":
+            msg = "type 'grid': the grid stand-in is gone, Nav2's stack is the navigator; remove `type: grid`"
+            raise ValueError(msg)
+        if self.type != "nav2":
+            msg = f"type {self.type!r} is not allowed; the navigator is 'nav2' (Nav2's stack)"
+            raise ValueError(msg)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

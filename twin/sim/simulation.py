@@ -30,9 +30,8 @@ from twin.core.errors import ConfigError, WorldError
 from twin.core.gcpolicy import resume_collection
 from twin.estimation import OdometryFilter
 from twin.estimation.node import EkfNode
-from twin.nav import GridNavigator, GridPlanner, build_grid
-from twin.nav.mission_node import MissionNode
-from twin.nav.nav2_nodes import Nav2Navigator
+from twin.mission.mission_node import MissionNode
+from twin.mission.navigate_to_pose import Nav2Navigator
 from twin.node import Node
 from twin.robot.chassis import ChassisParams, SlipModel
 from twin.robot.drivetrain import Drivetrain

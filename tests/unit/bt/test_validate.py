@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from twin.bt import BehaviorTreeFactory
-from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
 from twin.bt.validate import validate_file, validate_text
-from twin.nav.bt_nodes import nav2_factory
+from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes
+from twin.nav.bt_navigator.factory import nav2_factory
 
 TREES = Path(__file__).resolve().parents[3] / "trees"
 

@@ -35,6 +35,7 @@ HEAVY = (
     "twin.estimation",
     "twin.cosim",
     "twin.bt",
+    "twin.mission",
 )
 
 
@@ -131,7 +132,7 @@ with Simulation(load_scenario({scenario}), bag_path=Path({bag!r}), duration_s=1.
 """
 
 
-@pytest.mark.parametrize("scenario", ["default", "house_grid"])
+@pytest.mark.parametrize("scenario", ["default", "house_tour"])
 def test_a_run_reaches_its_first_step_without_the_libraries_it_does_not_use(scenario: str, tmp_path: Path) -> None:
     path = (
         "default_scenario_path()"

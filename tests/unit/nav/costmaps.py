@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import math
 from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import distance_transform_edt
 
-from twin.nav.costmap_grid import CostGrid
+from twin.nav.costmap_2d.costmap_2d import CostGrid
+
+if TYPE_CHECKING:
+    from twin.world.scene import Scene
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -36,13 +41,38 @@ def grid(
     )
 
 
+def _walls(scene: Scene, heights_m: tuple[float, ...], resolution_m: float, padding_m: float) -> tuple[Any, ...]:
+    """The world's obstacle outlines at `heights_m` marked on a grid over their bounds plus `padding_m`."""
+    (x0, y0, _), (x1, y1, _) = scene.bounds
+    x0, y0, x1, y1 = x0 - padding_m, y0 - padding_m, x1 + padding_m, y1 + padding_m
+    cols, rows = math.ceil((x1 - x0) / resolution_m), math.ceil((y1 - y0) / resolution_m)
+    occupied = np.zeros((rows, cols), dtype=bool)
+    origin = np.array([x0, y0])
+
+    def mark(points: NDArray[np.float64]) -> None:
+        cells = np.floor((points - origin) / resolution_m).astype(np.int64)
+        keep = (cells[:, 0] >= 0) & (cells[:, 0] < cols) & (cells[:, 1] >= 0) & (cells[:, 1] < rows)
+        occupied[cells[keep, 1], cells[keep, 0]] = True
+
+    for height in heights_m:
+        caster = scene.ray_caster(height)
+        for sx, sy, ex, ey in np.asarray(caster.segments, dtype=np.float64).reshape(-1, 4):
+            n = max(2, math.ceil(math.hypot(ex - sx, ey - sy) / (0.25 * resolution_m)) + 1)
+            t = np.linspace(0.0, 1.0, n)[:, None]
+            mark(np.array([sx, sy]) + t * np.array([ex - sx, ey - sy]))
+        for cx, cy, r in np.asarray(caster.circles, dtype=np.float64).reshape(-1, 3):
+            xs = x0 + (np.arange(cols) + 0.5) * resolution_m
+            ys = y0 + (np.arange(rows) + 0.5) * resolution_m
+            occupied |= (xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2 <= (r + 0.5 * resolution_m) ** 2
+    return occupied, (float(x0), float(y0))
+
+
 @cache
 def house_costmap(inscribed_m: float = 0.22, inflation_m: float = 0.55) -> CostGrid:
-    """The house world's global costmap (walls at lidar height, inflated as TB3's waffle global costmap)."""
-    from twin.nav import build_grid
+    """The house world's global costmap (walls at two heights through the robot, inflated as TB3's waffle global costmap)."""
     from twin.world import build_scene, load_world
 
     scene = build_scene(load_world(REPO / "sdf" / "worlds" / "house.sdf", model_path=[REPO / "sdf" / "models"]))
-    nav = build_grid(scene, heights_m=(0.05, 0.15))
-    cost = inflate(nav.occupied, nav.resolution_m, inscribed_m=inscribed_m, inflation_m=inflation_m)
-    return grid(cost, resolution_m=nav.resolution_m, origin_m=nav.origin_xy_m)
+    occupied, origin = _walls(scene, (0.05, 0.15), 0.05, 1.0)
+    cost = inflate(occupied, 0.05, inscribed_m=inscribed_m, inflation_m=inflation_m)
+    return grid(cost, resolution_m=0.05, origin_m=origin)

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from twin.core.errors import ConfigError
+from twin.nav.costmap_2d.costmap_node import costmap_translation
 from twin.nav.frames import Frames, compose, invert
-from twin.nav.localization_nodes import costmap_translation
-from twin.nav.nav2_nodes import nav2_config, smooth_path
 from twin.nav.params import default_params_path, load_nav2_params
+from twin.nav.server_params import nav2_config
+from twin.nav.smoother.simple_smoother import smooth_path
 
 
 def test_costmap_translation_is_nav2s_table() -> None:

@@ -57,3 +57,50 @@ def test_overriding_one_key_keeps_the_rest(tmp_path: Path) -> None:
     assert scenario.robot.initial_pose.x_m == 0.0
     assert scenario.recording.storage == "sqlite3"
     assert scenario.recording.distro == "humble"
+
+
+def test_the_retired_grid_navigator_is_named_gone_with_its_line(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nnavigation:\n  type: grid\n")
+    with pytest.raises(
+        ConfigError,
+        match=rf"^{path}:3: navigation: type 'grid': the grid stand-in is gone, Nav2's stack is the navigator",
+    ):
+        load_scenario(path)
+
+
+def test_a_navigator_other_than_nav2_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nnavigation:\n  type: navfn_only\n")
+    with pytest.raises(ConfigError, match=r"navigation: type 'navfn_only' is not allowed; the navigator is 'nav2'"):
+        load_scenario(path)
+
+
+def test_the_grid_planners_mission_keys_are_unknown_now(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nmission:\n  planner:\n    resolution_m: 0.05\n")
+    with pytest.raises(ConfigError, match=rf"^{path}:3: mission.planner: unknown key"):
+        load_scenario(path)
+
+
+def test_a_bag_recorded_before_the_grid_was_retired_loads_without_its_grid_keys(tmp_path: Path) -> None:
+    # An older twin recorded the grid stand-in's mission keys (their defaults) in every tree mission's provenance.
+    import yaml
+
+    from twin.sim.provenance import scenario_yaml
+    from twin.sim.scenario_file import without_retired_keys
+
+    scenario = load_scenario(default_scenario_path())
+    data = yaml.safe_load(scenario_yaml(scenario))
+    data["mission"]["follower"] = {"max_linear_mps": 0.22, "tolerance_m": 0.1}
+    data["mission"]["planner"] = {"resolution_m": 0.05, "robot_radius_m": None}
+    data["mission"]["progress"] = {"required_movement_radius_m": 0.5}
+    recorded = yaml.safe_dump(data, sort_keys=False)
+    strict = tmp_path / "as_written.yaml"
+    strict.write_text(recorded)
+    with pytest.raises(ConfigError, match=r"mission.follower: unknown key"):
+        load_scenario(strict)  # a file a user writes keeps failing on them
+    cleaned = tmp_path / "from_bag.yaml"
+    cleaned.write_text(without_retired_keys(recorded))
+    again = load_scenario(cleaned)
+    assert dataclasses.replace(again, source_path=None) == dataclasses.replace(scenario, source_path=None)

@@ -1,0 +1,331 @@
+/* nav2_amcl's hot loops in C (loaded by twin/nav/amcl/_native.py): the laser model, motion
+   sampling, the likelihood field's distances, KLD-sampling, resampling, clusters and the estimate. */
+
+#include <math.h>
+#include <stdlib.h>
+
+/* AMCL likelihood field: out[j] = 1 + sum_i pz3[row, col] over the beams' endpoints, in beam order.
+   Particle j at poses[j] = (x, y, yaw) has the grid position gx = (x - ox) * inv_res + 0.5 (likewise
+   gy) and heading cos, sin; beam i's endpoint in the base frame in cells is (ex, ey). The endpoint's
+   cell is (floor(gx + c ex - s ey), floor(gy + s ex + c ey)), AMCL's rounding lookup; off the map it
+   weighs `off_value`. Beam by beam over all particles: one beam's endpoints from a cluster of
+   particles fall in a few neighbouring cells, which keeps the lookups in cache. Returns -1 when
+   memory runs out. */
+int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, double inv_res,
+                         const double *ex, const double *ey, long nb,
+                         const double *pz3, long rows, long cols, double off_value, double *out) {
+    double *buf = malloc(4 * sizeof(double) * (size_t)(n > 0 ? n : 1));
+    if (!buf) return -1;
+    double *gx = buf, *gy = buf + n, *c = buf + 2 * n, *s = buf + 3 * n;
+    for (long j = 0; j < n; ++j) {
+        gx[j] = (poses[3 * j] - ox) * inv_res + 0.5;
+        gy[j] = (poses[3 * j + 1] - oy) * inv_res + 0.5;
+        c[j] = cos(poses[3 * j + 2]);
+        s[j] = sin(poses[3 * j + 2]);
+        out[j] = 0.0;
+    }
+    for (long i = 0; i < nb; ++i) {
+        double bx = ex[i], by = ey[i];
+        for (long j = 0; j < n; ++j) {
+            double fc = gx[j] + c[j] * bx - s[j] * by;
+            double fr = gy[j] + s[j] * bx + c[j] * by;
+            long col = (long)fc, row = (long)fr;   /* floor without a libm call: truncate, step down below 0 */
+            col -= (double)col > fc;
+            row -= (double)row > fr;
+            out[j] += (col >= 0 && col < cols && row >= 0 && row < rows) ? pz3[row * cols + col] : off_value;
+        }
+    }
+    for (long j = 0; j < n; ++j) out[j] += 1.0;
+    free(buf);
+    return 0;
+}
+
+/* The differential motion model's sampling (DifferentialMotionModel::odometryUpdate) given the
+   standard normal draws (3 per particle): rot1 - n0 sd_rot1, trans - n1 sd_trans, rot2 - n2 sd_rot2
+   applied to each pose; headings are not folded. */
+void twin_amcl_motion(double *poses, long n, const double *noise, double rot1, double trans, double rot2,
+                      double sd_rot1, double sd_trans, double sd_rot2) {
+    for (long j = 0; j < n; ++j) {
+        double r1 = rot1 - noise[3 * j] * sd_rot1;
+        double t = trans - noise[3 * j + 1] * sd_trans;
+        double r2 = rot2 - noise[3 * j + 2] * sd_rot2;
+        double heading = poses[3 * j + 2] + r1;
+        poses[3 * j] += t * cos(heading);
+        poses[3 * j + 1] += t * sin(heading);
+        poses[3 * j + 2] += r1 + r2;
+    }
+}
+
+/* Nav2 AMCL's likelihood-field distances (map_update_cspace): every occupied cell starts at 0 in a
+   priority queue (a binary heap kept as libstdc++'s std::priority_queue keeps it: push_heap and
+   pop_heap, smallest distance on top), pushed column by column; while the queue is not empty the
+   top cell's four neighbours (x - 1, y - 1, x + 1, y + 1) not yet reached take the distance in cells
+   from the top cell's source (sqrt(dx^2 + dy^2), if it is at most int(max_dist / scale)) times
+   scale and join the queue, then the top is popped (whichever cell is on top by then). Cells never
+   reached keep max_dist. occupied and out are row-major (row = y). Returns -1 when memory runs out. */
+typedef struct { double key; int i, j, si, sj; } twin_cell;
+
+static void cell_push(twin_cell *h, long hole, long top, twin_cell v) {   /* std::__push_heap */
+    long parent = (hole - 1) / 2;
+    while (hole > top && h[parent].key > v.key) { h[hole] = h[parent]; hole = parent; parent = (hole - 1) / 2; }
+    h[hole] = v;
+}
+
+static void cell_pop(twin_cell *h, long len) {   /* std::pop_heap: __pop_heap then __adjust_heap */
+    if (len < 2) return;
+    long last = len - 1;
+    twin_cell v = h[last];
+    h[last] = h[0];
+    long n = last, hole = 0, child = 0;
+    while (child < (n - 1) / 2) {
+        child = 2 * (child + 1);
+        if (h[child].key > h[child - 1].key) child--;   /* comp(right, left): right is "less" */
+        h[hole] = h[child];
+        hole = child;
+    }
+    if ((n & 1) == 0 && child == (n - 2) / 2) {
+        child = 2 * (child + 1);
+        h[hole] = h[child - 1];
+        hole = child - 1;
+    }
+    cell_push(h, hole, 0, v);
+}
+
+int twin_amcl_distances(const unsigned char *occupied, long width, long height, double scale, double max_dist,
+                        double *out) {
+    long cells = width * height;
+    int radius = (int)(max_dist / scale);
+    unsigned char *marked = calloc((size_t)(cells > 0 ? cells : 1), 1);
+    twin_cell *heap = malloc(sizeof(twin_cell) * (size_t)(cells > 0 ? cells : 1));
+    double *table = malloc(sizeof(double) * (size_t)(radius + 2) * (size_t)(radius + 2));
+    if (!marked || !heap || !table) { free(marked); free(heap); free(table); return -1; }
+    for (int a = 0; a <= radius + 1; ++a)
+        for (int b = 0; b <= radius + 1; ++b) table[a * (radius + 2) + b] = sqrt((double)(a * a + b * b));
+    long len = 0;
+    for (long i = 0; i < width; ++i) {
+        for (long j = 0; j < height; ++j) {
+            long k = j * width + i;
+            if (occupied[k]) {
+                out[k] = 0.0;
+                marked[k] = 1;
+                twin_cell c = {0.0, (int)i, (int)j, (int)i, (int)j};
+                cell_push(heap, len++, 0, c);
+            } else {
+                out[k] = max_dist;
+            }
+        }
+    }
+    while (len > 0) {
+        twin_cell cur = heap[0];
+        for (int nb = 0; nb < 4; ++nb) {
+            long i = cur.i + (nb == 0 ? -1 : nb == 2 ? 1 : 0), j = cur.j + (nb == 1 ? -1 : nb == 3 ? 1 : 0);
+            if (i < 0 || j < 0 || i >= width || j >= height) continue;
+            long k = j * width + i;
+            if (marked[k]) continue;
+            long di = i > cur.si ? i - cur.si : cur.si - i, dj = j > cur.sj ? j - cur.sj : cur.sj - j;
+            double d = table[di * (radius + 2) + dj];
+            if (d > radius) continue;
+            out[k] = d * scale;
+            twin_cell c = {out[k], (int)i, (int)j, cur.si, cur.sj};
+            cell_push(heap, len++, 0, c);
+            marked[k] = 1;
+        }
+        cell_pop(heap, len--);
+    }
+    free(marked); free(heap); free(table);
+    return 0;
+}
+
+/* KLD-sampling's stop (pf_update_resample): particles are taken in order, each counted into its
+   (x, y, yaw) histogram bin (keys, 3 per particle); the count stops at the first n with
+   n > limit[k], k the bins occupied by the first n. Returns n (m when it never stops), or -1 when
+   memory runs out. */
+long twin_kld_count(const long *keys, long m, const double *limit) {
+    long size = 1;
+    while (size < 2 * m + 2) size <<= 1;
+    long *table = malloc(sizeof(long) * 3 * (size_t)size);
+    char *used = calloc((size_t)size, 1);
+    if (!table || !used) { free(table); free(used); return -1; }
+    long k = 0, n = m;
+    for (long i = 0; i < m; ++i) {
+        const long *key = keys + 3 * i;
+        unsigned long h = (unsigned long)key[0] * 73856093UL ^ (unsigned long)key[1] * 19349663UL
+                          ^ (unsigned long)key[2] * 83492791UL;
+        long slot = (long)(h & (unsigned long)(size - 1));
+        for (;;) {
+            if (!used[slot]) {
+                used[slot] = 1;
+                table[3 * slot] = key[0]; table[3 * slot + 1] = key[1]; table[3 * slot + 2] = key[2];
+                ++k;
+                break;
+            }
+            if (table[3 * slot] == key[0] && table[3 * slot + 1] == key[1] && table[3 * slot + 2] == key[2]) break;
+            slot = (slot + 1) & (size - 1);
+        }
+        if ((double)(i + 1) > limit[k]) { n = i + 1; break; }
+    }
+    free(table); free(used);
+    return n;
+}
+
+/* pf_update_resample without recovery draws: sample j is the particle whose cumulative weight
+   first exceeds u[j] (numpy's searchsorted, side right, capped at n - 1), counted into its
+   histogram bin (floor of pose / bin_size), until the count exceeds limit[bins] as in
+   twin_kld_count. Writes the kept poses to out; returns their number, or -1 when memory runs out. */
+long twin_pf_resample(const double *poses, long n, const double *cumulative, const double *u, long m,
+                      const double *bin_size, const double *limit, double *out) {
+    long size = 1;
+    while (size < 2 * m + 2) size <<= 1;
+    long *table = malloc(sizeof(long) * 3 * (size_t)size);
+    char *used = calloc((size_t)size, 1);
+    if (!table || !used) { free(table); free(used); return -1; }
+    long k = 0, kept = m;
+    for (long j = 0; j < m; ++j) {
+        double v = u[j];
+        const double *b = cumulative;   /* branch-free search: the count of cumulative values <= v */
+        long len = n;
+        while (len > 1) {
+            long half = len >> 1;
+            b += (b[half] <= v) ? half : 0;
+            len -= half;
+        }
+        long lo = (long)(b - cumulative) + (*b <= v);
+        if (lo > n - 1) lo = n - 1;
+        const double *p = poses + 3 * lo;
+        double *o = out + 3 * j;
+        o[0] = p[0]; o[1] = p[1]; o[2] = p[2];
+        long key0 = (long)floor(p[0] / bin_size[0]), key1 = (long)floor(p[1] / bin_size[1]);
+        long key2 = (long)floor(p[2] / bin_size[2]);
+        unsigned long h = (unsigned long)key0 * 73856093UL ^ (unsigned long)key1 * 19349663UL
+                          ^ (unsigned long)key2 * 83492791UL;
+        long slot = (long)(h & (unsigned long)(size - 1));
+        for (;;) {
+            if (!used[slot]) {
+                used[slot] = 1;
+                table[3 * slot] = key0; table[3 * slot + 1] = key1; table[3 * slot + 2] = key2;
+                ++k;
+                break;
+            }
+            if (table[3 * slot] == key0 && table[3 * slot + 1] == key1 && table[3 * slot + 2] == key2) break;
+            slot = (slot + 1) & (size - 1);
+        }
+        if ((double)(j + 1) > limit[k]) { kept = j + 1; break; }
+    }
+    free(table); free(used);
+    return kept;
+}
+
+/* AMCL's estimate from clustered particles (label from twin_pf_clusters, 1..count): the heaviest
+   cluster's weighted mean (x, y, and yaw as atan2 of the weighted sines and cosines; the first
+   cluster of the largest weight), then the whole set's weighted x, y covariance and circular
+   yaw variance -2 ln R. Sums run in particle order. out: x, y, yaw, var x, var y, cov xy, var yaw.
+   Returns -1 when memory runs out. */
+int twin_pf_estimate(const double *poses, const double *w, long n, const long *label, long count, double *out) {
+    double *cw = calloc((size_t)(count + 1), sizeof(double));
+    if (!cw) return -1;
+    for (long i = 0; i < n; ++i) cw[label[i]] += w[i];
+    long best = 0;
+    for (long c = 1; c <= count; ++c) if (cw[c] > cw[best]) best = c;
+    double tw = 0.0, tx = 0.0, ty = 0.0, tc = 0.0, ts = 0.0;
+    double sw = 0.0, sx = 0.0, sy = 0.0, sxx = 0.0, syy = 0.0, sxy = 0.0, sc = 0.0, ss = 0.0;
+    for (long i = 0; i < n; ++i) {
+        double x = poses[3 * i], y = poses[3 * i + 1], c = cos(poses[3 * i + 2]), s = sin(poses[3 * i + 2]);
+        double wi = w[i];
+        if (label[i] == best) { tw += wi; tx += wi * x; ty += wi * y; tc += wi * c; ts += wi * s; }
+        sw += wi; sx += wi * x; sy += wi * y; sxx += wi * x * x; syy += wi * y * y; sxy += wi * x * y;
+        sc += wi * c; ss += wi * s;
+    }
+    free(cw);
+    out[0] = tx / tw;
+    out[1] = ty / tw;
+    out[2] = atan2(ts, tc);
+    double mx = sx / sw, my = sy / sw;
+    out[3] = sxx / sw - mx * mx;
+    out[4] = syy / sw - my * my;
+    out[5] = sxy / sw - mx * my;
+    double r = hypot(sc / sw, ss / sw);
+    out[6] = -2.0 * log(r > 1e-300 ? r : 1e-300);
+    return 0;
+}
+
+static int leaf_cmp(const void *a, const void *b) {
+    const long *x = a, *y = b;   /* (x, y, yaw, leaf) */
+    for (int d = 0; d < 3; ++d) if (x[d] != y[d]) return x[d] < y[d] ? -1 : 1;
+    return 0;
+}
+
+/* pf_kdtree_cluster: the occupied histogram bins (keys, 3 per particle) joined when they touch
+   (26-neighbourhood); label[i] is particle i's cluster, numbered from 1 in the order of each
+   cluster's smallest bin (x, then y, then yaw). Returns the number of clusters, or -1 when memory
+   runs out. */
+long twin_pf_clusters(const long *keys, long n, long *label) {
+    long size = 1;
+    while (size < 2 * n + 2) size <<= 1;
+    long cap = n > 0 ? n : 1;
+    long *slots = malloc(sizeof(long) * (size_t)size);
+    long *leaf_of = malloc(sizeof(long) * (size_t)cap);
+    long *leaves = malloc(sizeof(long) * 4 * (size_t)cap);   /* key, then the leaf's first-seen index */
+    long *leaf_label = calloc((size_t)cap, sizeof(long));
+    long *stack = malloc(sizeof(long) * (size_t)cap);
+    long *keyed = malloc(sizeof(long) * 3 * (size_t)cap);    /* leaf keys by first-seen index */
+    if (!slots || !leaf_of || !leaves || !leaf_label || !stack || !keyed) {
+        free(slots); free(leaf_of); free(leaves); free(leaf_label); free(stack); free(keyed);
+        return -1;
+    }
+    for (long i = 0; i < size; ++i) slots[i] = -1;
+#define TWIN_HASH(a, b, c) ((long)(((unsigned long)(a) * 73856093UL ^ (unsigned long)(b) * 19349663UL \
+                                    ^ (unsigned long)(c) * 83492791UL) & (unsigned long)(size - 1)))
+    long nl = 0;
+    for (long i = 0; i < n; ++i) {
+        const long *key = keys + 3 * i;
+        long slot = TWIN_HASH(key[0], key[1], key[2]);
+        for (;;) {
+            long o = slots[slot];
+            if (o < 0) {
+                slots[slot] = nl;
+                keyed[3 * nl] = key[0]; keyed[3 * nl + 1] = key[1]; keyed[3 * nl + 2] = key[2];
+                leaf_of[i] = nl++;
+                break;
+            }
+            if (keyed[3 * o] == key[0] && keyed[3 * o + 1] == key[1] && keyed[3 * o + 2] == key[2]) {
+                leaf_of[i] = o;
+                break;
+            }
+            slot = (slot + 1) & (size - 1);
+        }
+    }
+    for (long l = 0; l < nl; ++l) {
+        leaves[4 * l] = keyed[3 * l]; leaves[4 * l + 1] = keyed[3 * l + 1]; leaves[4 * l + 2] = keyed[3 * l + 2];
+        leaves[4 * l + 3] = l;
+    }
+    qsort(leaves, (size_t)nl, 4 * sizeof(long), leaf_cmp);
+    long clusters = 0;
+    for (long r = 0; r < nl; ++r) {   /* leaves in raster order; leaf_label indexed by first-seen index */
+        long l = leaves[4 * r + 3];
+        if (leaf_label[l]) continue;
+        leaf_label[l] = ++clusters;
+        long top = 0;
+        stack[top++] = l;
+        while (top) {
+            long q = stack[--top];
+            for (long dx = -1; dx <= 1; ++dx)
+                for (long dy = -1; dy <= 1; ++dy)
+                    for (long da = -1; da <= 1; ++da) {
+                        long a = keyed[3 * q] + dx, b = keyed[3 * q + 1] + dy, c = keyed[3 * q + 2] + da;
+                        long slot = TWIN_HASH(a, b, c);
+                        while (slots[slot] >= 0) {
+                            long o = slots[slot];
+                            if (keyed[3 * o] == a && keyed[3 * o + 1] == b && keyed[3 * o + 2] == c) {
+                                if (!leaf_label[o]) { leaf_label[o] = clusters; stack[top++] = o; }
+                                break;
+                            }
+                            slot = (slot + 1) & (size - 1);
+                        }
+                    }
+        }
+    }
+#undef TWIN_HASH
+    for (long i = 0; i < n; ++i) label[i] = leaf_label[leaf_of[i]];
+    free(slots); free(leaf_of); free(leaves); free(leaf_label); free(stack); free(keyed);
+    return clusters;
+}

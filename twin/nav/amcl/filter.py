@@ -1,0 +1,562 @@
+"""AMCL as Nav2 Humble runs it: a particle filter on the map, fed odometry and laser scans.
+
+What it does, step for step as `nav2_amcl` (amcl_node, pf, DifferentialMotionModel,
+LikelihoodFieldModel), vectorised over particles and beams:
+
+- **Gating.** Scans are ignored until an initial pose is set. The first scan after one only
+  weighs the particles; later scans update the filter only once odometry has moved more than
+  `update_min_d` along x or along y, or turned more than `update_min_a` since the last update.
+- **Motion** (differential model, alpha1..alpha4): the odometry change is split into rotate,
+  translate, rotate; each particle gets that change with Gaussian noise of standard deviation
+  `sqrt(alpha1 rot^2 + alpha2 trans^2)` on the rotations and `sqrt(alpha3 trans^2 + alpha4 (rot1^2
+  + rot2^2))` on the translation (rotations folded to the nearer of forward and backward motion).
+  Particle yaws are never folded into [-pi, pi), as in Nav2's filter: a cloud heading west stays
+  one histogram cluster instead of splitting at the seam.
+- **Laser** (likelihood field): `max_beams` beams, every `(n - 1) // (max_beams - 1)`-th; ranges
+  at or below range_min count as range_max, and range_max readings are skipped. Each endpoint's
+  distance `z` to the nearest occupied map cell (capped at `laser_likelihood_max_dist`; off the
+  map it is the cap) gives `pz = z_hit exp(-z^2 / (2 sigma_hit^2)) + z_rand / range_max`, and a
+  particle's weight is multiplied by `1 + sum(pz^3)`. Map cells are looked up as AMCL does,
+  rounding (not flooring) world / resolution.
+- **Resampling** every `resample_interval` updates, KLD-sampling: particles are drawn by weight
+  (or, with recovery alphas, uniformly in free space with probability `1 - w_fast / w_slow`) until
+  their count exceeds the KLD bound for the number of occupied (0.5 m, 0.5 m, 10 deg) histogram
+  bins, `ceil((k - 1) / (2 pf_err) (1 - 2 / (9 (k - 1)) + sqrt(2 / (9 (k - 1))) pf_z)^3)`, within
+  [min_particles, max_particles]. `pf_z` is used as given (0.99), as Nav2 does.
+- **Estimate**: particles are clustered by connected histogram bins; the pose is the mean of the
+  heaviest cluster (yaw a circular mean); the covariance is the whole set's (x, y block and
+  the circular variance `-2 ln R` of yaw), as `amcl_pose` carries them.
+- **map -> odom** is the estimate composed with the inverse of the odometry pose of the scan that
+  produced it; Nav2 re-sends it on every scan stamped scan time + transform_tolerance.
+
+Random numbers come from the `numpy.random.Generator` passed in (seeded by the caller).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from twin.core.errors import ConfigError
+from twin.nav.amcl._native import load_kernel
+from twin.nav.frames import LaserGeometry
+from twin.nav.map_server.map_io import OccupancyMap
+from twin.nav.params import AmclParams
+
+__all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField", "nav2_distances"]
+
+F64 = NDArray[np.float64]
+
+_BIN_SIZE = np.array([0.5, 0.5, math.radians(10.0)])  # pf_kdtree's histogram: x m, y m, yaw rad
+
+
+def _angle_diff(a: float, b: float) -> float:
+    """Nav2's angle_diff: a - b folded into [-pi, pi]."""
+    d = math.atan2(math.sin(a), math.cos(a)) - math.atan2(math.sin(b), math.cos(b))
+    d1 = d
+    d2 = 2.0 * math.pi - abs(d1)
+    if d1 > 0.0:
+        d2 *= -1.0
+    return d1 if abs(d1) < abs(d2) else d2
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class AmclEstimate:
+    """AMCL's pose in the map frame with its covariance (x, y, yaw; 3x3), and the map->odom it implies."""
+
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    covariance: F64
+    map_odom: tuple[float, float, float]
+    particles: int
+
+    def covariance_6x6(self) -> list[float]:
+        """Return the 36 values of PoseWithCovariance.covariance as amcl_pose fills them."""
+        out = [0.0] * 36
+        c = self.covariance
+        for i in range(2):
+            for j in range(2):
+                out[6 * i + j] = float(c[i, j])
+        out[35] = float(c[2, 2])
+        return out
+
+
+def _bin_keys(bins: NDArray[np.int64]) -> NDArray[np.int64]:
+    """One integer per (x, y, yaw) histogram bin."""
+    local = bins - bins.min(axis=0)
+    span = local.max(axis=0) + 1
+    return np.asarray((local[:, 0] * span[1] + local[:, 1]) * span[2] + local[:, 2], dtype=np.int64)
+
+
+def nav2_distances(occupied: NDArray[np.bool_], resolution_m: float, max_dist_m: float, *, native: bool = True) -> F64:
+    """Distances (m) from each cell to an occupied one, spread as Nav2's `map_update_cspace` spreads them.
+
+    Every occupied cell enters a priority queue at 0 (column by column, each column bottom to top);
+    while the queue holds cells, the top cell's neighbours at x - 1, y - 1, x + 1, y + 1 that no cell
+    has reached take the distance to the top cell's source, if it is at most `int(max_dist /
+    resolution)` cells, and join the queue; then the top is popped, whichever cell is on top by then.
+    The queue is a binary heap kept as libstdc++'s `std::priority_queue` keeps it, so cells of equal
+    distance leave it in Nav2's order. Cells never reached are `max_dist_m` away.
+
+    Args:
+        occupied: (rows, cols) obstacle cells, row = y.
+        resolution_m: Cell size.
+        max_dist_m: `laser_likelihood_max_dist`.
+        native: Use the C kernel when it can be built.
+    """
+    rows, cols = occupied.shape
+    out = np.empty((rows, cols))
+    lib = load_kernel() if native else None
+    if lib is not None:
+        cells = np.ascontiguousarray(occupied, dtype=np.uint8)
+        if lib.twin_amcl_distances(cells.ctypes.data, cols, rows, resolution_m, max_dist_m, out.ctypes.data):
+            raise MemoryError("amcl likelihood field: out of memory")
+        return out
+    radius = int(max_dist_m / resolution_m)
+    table = np.sqrt(np.add.outer(np.arange(radius + 2) ** 2, np.arange(radius + 2) ** 2).astype(np.float64))
+    dist = np.full(rows * cols, max_dist_m)
+    marked = occupied.reshape(-1).copy()
+    dist[marked] = 0.0
+    heap: list[tuple[float, int, int, int, int]] = []  # (distance, x, y, source x, source y)
+    for i, j in zip(*np.nonzero(occupied.T), strict=True):  # x outer, y inner, as Nav2 pushes them
+        _heap_push(heap, (0.0, int(i), int(j), int(i), int(j)))
+    while heap:
+        _, i, j, si, sj = heap[0]
+        for x, y in ((i - 1, j), (i, j - 1), (i + 1, j), (i, j + 1)):
+            if x < 0 or y < 0 or x >= cols or y >= rows or marked[y * cols + x]:
+                continue
+            d = float(table[abs(x - si), abs(y - sj)])
+            if d > radius:
+                continue
+            dist[y * cols + x] = d * resolution_m
+            _heap_push(heap, (d * resolution_m, x, y, si, sj))
+            marked[y * cols + x] = True
+        _heap_pop(heap)
+    return dist.reshape(rows, cols)
+
+
+_Cell = tuple[float, int, int, int, int]
+
+
+def _heap_push(heap: list[_Cell], value: _Cell) -> None:
+    """std::push_heap with the smallest distance on top."""
+    heap.append(value)
+    _sift_up(heap, len(heap) - 1, value)
+
+
+def _sift_up(heap: list[_Cell], hole: int, value: _Cell) -> None:
+    parent = (hole - 1) // 2
+    while hole > 0 and heap[parent][0] > value[0]:
+        heap[hole] = heap[parent]
+        hole = parent
+        parent = (hole - 1) // 2
+    heap[hole] = value
+
+
+def _heap_pop(heap: list[_Cell]) -> None:
+    """std::pop_heap (libstdc++'s __adjust_heap: the hole goes down to a leaf, then the last value up)."""
+    n = len(heap) - 1
+    if n < 1:
+        heap.pop()
+        return
+    value = heap[n]
+    heap[n] = heap[0]
+    hole = child = 0
+    while child < (n - 1) // 2:
+        child = 2 * (child + 1)
+        if heap[child][0] > heap[child - 1][0]:
+            child -= 1
+        heap[hole] = heap[child]
+        hole = child
+    if n % 2 == 0 and child == (n - 2) // 2:
+        child = 2 * (child + 1)
+        heap[hole] = heap[child - 1]
+        hole = child - 1
+    _sift_up(heap, hole, value)
+    heap.pop()
+
+
+class LikelihoodField:
+    """The map's distance to the nearest occupied cell as Nav2's AMCL computes it, and per-cell likelihood cubes.
+
+    Nav2 (`map_update_cspace`) does not take the exact distance transform: it spreads distances from
+    the occupied cells through a priority queue, each cell taking the distance to the source of the
+    first neighbour that reaches it (up to `int(max_dist / resolution)` cells). About one cell in ten
+    then lies up to a few centimetres further from the wall than it is; the filter's statistics
+    follow, so the twin spreads them the same way, in the same order (`nav2_distances`).
+
+    Args:
+        occupancy: The map (cells equal to 100 are obstacles, as AMCL reads them).
+        max_dist_m: `laser_likelihood_max_dist`: distances are capped here (and off the map).
+        native: Use the C kernel when it can be built (else the same steps in Python, much slower).
+    """
+
+    def __init__(self, occupancy: OccupancyMap, max_dist_m: float, *, native: bool = True) -> None:
+        res = occupancy.resolution_m
+        self.max_dist_m = float(max_dist_m)
+        self.distance_m: F64 = nav2_distances(occupancy.data == 100, res, self.max_dist_m, native=native)
+        self.resolution_m = res
+        self.origin_x_m = occupancy.origin_x_m
+        self.origin_y_m = occupancy.origin_y_m
+        self.free_cells = np.argwhere(occupancy.data == 0)  # (row, col) for uniform pose draws
+        self._cubes: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
+
+    def cubes(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
+        """Return (pz^3 per map cell, pz^3 of an endpoint off the map), pz as the likelihood-field model's."""
+        key = (z_hit, z_rand, sigma_hit_m, range_max_m)
+        if key not in self._cubes:
+            denominator = 2.0 * sigma_hit_m**2
+            pz = z_hit * np.exp(-(self.distance_m**2) / denominator) + z_rand / range_max_m
+            off = z_hit * math.exp(-(self.max_dist_m**2) / denominator) + z_rand / range_max_m
+            self._cubes[key] = (np.ascontiguousarray(pz**3), off**3)
+        return self._cubes[key]
+
+
+class Amcl:
+    """Nav2's AMCL filter: set an initial pose, then feed every scan with the odometry pose at its time.
+
+    Args:
+        params: The `amcl` node's parameters.
+        occupancy: The map it localises against (`/map`).
+        laser: The scan's geometry and the laser's mount in the base frame.
+        rng: The filter's random numbers (seed it from the scenario seed).
+        native: Use the C kernel for the laser model when it can be built (else numpy).
+    """
+
+    def __init__(
+        self,
+        params: AmclParams,
+        occupancy: OccupancyMap,
+        laser: LaserGeometry,
+        rng: np.random.Generator,
+        *,
+        native: bool = True,
+    ) -> None:
+        self._lib = load_kernel() if native else None
+        self.params = params
+        self.map = occupancy
+        self.laser = laser
+        self._rng = rng
+        self.field = LikelihoodField(occupancy, params.laser_likelihood_max_dist_m, native=native)
+        range_max = laser.range_max_m
+        if params.laser_max_range_m > 0.0:
+            range_max = min(range_max, params.laser_max_range_m)
+        self._range_max = range_max
+        self._range_min = max(laser.range_min_m, params.laser_min_range_m)
+        self._cubes, self._off_map = self.field.cubes(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
+        # KLD-sampling's particle bound for k occupied bins, k = 0 .. max_particles (one table, both paths)
+        self._kld_limits = np.ascontiguousarray(self._kld_limit(np.arange(params.max_particles + 1)))
+        self.poses: F64 = np.zeros((0, 3))
+        self.weights: F64 = np.zeros(0)
+        self._w_slow = 0.0
+        self._w_fast = 0.0
+        self._initialised = False  # an initial pose was given
+        self._pf_init = False  # the first scan after it was taken (odometry reference set)
+        self._odom_ref = (0.0, 0.0, 0.0)
+        self._resample_count = 0
+        self.estimate: AmclEstimate | None = None
+
+    # --- inputs -------------------------------------------------------------------------------
+
+    def set_initial_pose(self, x_m: float, y_m: float, yaw_rad: float, covariance: F64) -> None:
+        """Spread `max_particles` particles from a Gaussian around a map pose (/initialpose).
+
+        Args:
+            x_m: Map x.
+            y_m: Map y.
+            yaw_rad: Map yaw.
+            covariance: 3x3 covariance of (x, y, yaw), or the message's 36 values (6x6 row-major).
+
+        Raises:
+            ConfigError: If the pose lies outside the map or the covariance is not symmetric positive semi-definite.
+        """
+        if self.map.world_to_cell(x_m, y_m) is None:
+            msg = (
+                f"initial pose ({x_m:.3f}, {y_m:.3f}) lies outside the map (x from {self.map.origin_x_m:.2f}, "
+                f"y from {self.map.origin_y_m:.2f}, {self.map.width} x {self.map.height} cells of "
+                f"{self.map.resolution_m} m); give a pose on the map"
+            )
+            raise ConfigError(msg)
+        cov = np.asarray(covariance, dtype=np.float64)
+        if cov.size == 36:
+            full = cov.reshape(6, 6)
+            cov = np.array([[full[0, 0], full[0, 1], 0.0], [full[1, 0], full[1, 1], 0.0], [0.0, 0.0, full[5, 5]]])
+        cov = cov.reshape(3, 3)
+        values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
+        if not np.all(np.isfinite(values)) or values.min() < -1e-12:
+            msg = f"initial pose covariance {cov.tolist()} is not positive semi-definite; fix the covariance"
+            raise ConfigError(msg)
+        n = self.params.max_particles
+        draws = self._rng.standard_normal((n, 3)) * np.sqrt(np.maximum(values, 0.0))
+        poses = np.array([x_m, y_m, yaw_rad]) + draws @ vectors.T
+        self.poses = poses
+        self.weights = np.full(n, 1.0 / n)
+        self._w_slow = self._w_fast = 0.0
+        self._initialised = True
+        self._pf_init = False
+        self._resample_count = 0
+
+    def process_scan(self, odom_pose: tuple[float, float, float], ranges: NDArray[np.floating]) -> AmclEstimate | None:
+        """Take one scan with the odometry pose (odom frame, base) at its stamp.
+
+        Returns:
+            The new estimate when the filter updated (then `amcl_pose` and `particle_cloud` are
+            published), else None. Before an initial pose every scan is ignored. `map_odom()`
+            holds the transform to broadcast on every scan once an estimate exists.
+        """
+        if not self._initialised:
+            return None
+        p = self.params
+        x, y, yaw = odom_pose
+        if not self._pf_init:
+            self._odom_ref = (x, y, yaw)
+            self._pf_init = True
+            self._resample_count = 0
+        else:
+            rx, ry, ryaw = self._odom_ref
+            dx, dy, dyaw = x - rx, y - ry, _angle_diff(yaw, ryaw)
+            if not (abs(dx) > p.update_min_d_m or abs(dy) > p.update_min_d_m or abs(dyaw) > p.update_min_a_rad):
+                return None
+            self._motion(dx, dy, dyaw, ryaw)
+        if p.max_beams >= 2:  # Nav2's likelihood model refuses fewer than two beams (no weighting)
+            self._sensor(np.asarray(ranges, dtype=np.float64))
+        self._odom_ref = (x, y, yaw)
+        self._resample_count += 1
+        if self._resample_count % p.resample_interval == 0:
+            self._resample()
+        self.estimate = self._estimate(odom_pose)
+        return self.estimate
+
+    @property
+    def has_initial_pose(self) -> bool:
+        """True once an initial pose was set (before it, scans are ignored)."""
+        return self._initialised
+
+    def map_odom(self) -> tuple[float, float, float] | None:
+        """Return the latest map->odom (x, y, yaw), or None before the first estimate."""
+        return None if self.estimate is None else self.estimate.map_odom
+
+    # --- the filter ---------------------------------------------------------------------------
+
+    def _motion(self, dx: float, dy: float, dyaw: float, old_yaw: float) -> None:
+        p = self.params
+        trans = math.hypot(dx, dy)
+        rot1 = 0.0 if trans < 0.01 else _angle_diff(math.atan2(dy, dx), old_yaw)
+        rot2 = _angle_diff(dyaw, rot1)
+        rot1_noise = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, math.pi)))
+        rot2_noise = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, math.pi)))
+        n = len(self.poses)
+        noise = self._rng.standard_normal((n, 3))
+        sd_rot1 = math.sqrt(p.alpha1 * rot1_noise**2 + p.alpha2 * trans**2)
+        sd_trans = math.sqrt(p.alpha3 * trans**2 + p.alpha4 * rot1_noise**2 + p.alpha4 * rot2_noise**2)
+        sd_rot2 = math.sqrt(p.alpha1 * rot2_noise**2 + p.alpha2 * trans**2)
+        if self._lib is not None:
+            poses = np.ascontiguousarray(self.poses)
+            self._lib.twin_amcl_motion(
+                poses.ctypes.data, n, noise.ctypes.data, rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2
+            )
+            self.poses = poses
+            return
+        rot1_hat = rot1 - noise[:, 0] * sd_rot1
+        trans_hat = trans - noise[:, 1] * sd_trans
+        rot2_hat = rot2 - noise[:, 2] * sd_rot2
+        heading = self.poses[:, 2] + rot1_hat
+        self.poses[:, 0] += trans_hat * np.cos(heading)
+        self.poses[:, 1] += trans_hat * np.sin(heading)
+        self.poses[:, 2] += rot1_hat + rot2_hat
+
+    def _beams(self, ranges: F64) -> tuple[F64, F64]:
+        """Return the used beams' endpoints in the base frame (bx, by)."""
+        p, laser = self.params, self.laser
+        count = len(ranges)
+        step = max(1, (count - 1) // (p.max_beams - 1)) if p.max_beams > 1 else max(1, count)
+        index = np.arange(0, count, step)
+        r = ranges[index].copy()
+        r[r <= self._range_min] = self._range_max
+        keep = (r < self._range_max) & ~np.isnan(r)
+        r, index = r[keep], index[keep]
+        angle = laser.mount_yaw_rad + laser.angle_min_rad + index * laser.angle_increment_rad
+        return laser.mount_x_m + r * np.cos(angle), laser.mount_y_m + r * np.sin(angle)
+
+    def _sensor(self, ranges: F64) -> None:
+        bx, by = self._beams(ranges)
+        poses = self.poses
+        n = len(poses)
+        if len(bx):
+            field = self.field
+            inv_res = 1.0 / field.resolution_m
+            ex, ey = bx * inv_res, by * inv_res  # each beam's endpoint in the base frame, in cells
+            cubes = self._cubes
+            rows, cols = cubes.shape
+            if self._lib is not None:
+                poses = np.ascontiguousarray(poses)
+                self.poses = poses
+                likelihood = np.empty(n)
+                status = self._lib.twin_amcl_likelihood(
+                    poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
+                    ex.ctypes.data, ey.ctypes.data, len(ex),
+                    cubes.ctypes.data, rows, cols, self._off_map, likelihood.ctypes.data,
+                )  # fmt: skip
+                if status != 0:
+                    raise MemoryError("amcl likelihood: out of memory")
+            else:
+                # grid coordinates of each particle (AMCL rounds: +0.5 then floor), its heading
+                gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
+                gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
+                c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+                col = np.floor(gx[:, None] + c[:, None] * ex - s[:, None] * ey).astype(np.intp)
+                row = np.floor(gy[:, None] + s[:, None] * ex + c[:, None] * ey).astype(np.intp)
+                inside = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
+                values = cubes[np.clip(row, 0, rows - 1), np.clip(col, 0, cols - 1)]
+                likelihood = 1.0 + np.where(inside, values, self._off_map).sum(axis=1)
+        else:
+            likelihood = np.ones(n)
+        weights = self.weights * likelihood
+        total = float(weights.sum())
+        p = self.params
+        if total > 0.0 and math.isfinite(total):
+            self.weights = weights / total
+            w_avg = total / len(weights)
+            self._w_slow = (
+                w_avg if self._w_slow == 0.0 else self._w_slow + p.recovery_alpha_slow * (w_avg - self._w_slow)
+            )
+            self._w_fast = (
+                w_avg if self._w_fast == 0.0 else self._w_fast + p.recovery_alpha_fast * (w_avg - self._w_fast)
+            )
+        else:
+            self.weights = np.full(len(weights), 1.0 / len(weights))
+
+    def _bins(self, poses: F64) -> NDArray[np.int64]:
+        """Each particle's (x, y, yaw) histogram bin, as pf_kdtree keys them (floor of pose / bin size)."""
+        keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
+        return keys
+
+    def _kld_limit(self, k: NDArray[np.int64]) -> NDArray[np.float64]:
+        p = self.params
+        kk = np.maximum(k - 1, 1).astype(np.float64)
+        b = 2.0 / (9.0 * kk)
+        x = 1.0 - b + np.sqrt(b) * p.pf_z
+        n = np.ceil(kk / (2.0 * p.pf_err) * x**3)
+        n = np.clip(n, p.min_particles, p.max_particles)
+        return np.where(k <= 1, float(p.max_particles), n)
+
+    def _resample(self) -> None:
+        p = self.params
+        rng = self._rng
+        m = p.max_particles
+        w_diff = 0.0
+        if self._w_slow > 0.0:
+            w_diff = max(0.0, 1.0 - self._w_fast / self._w_slow)
+        cumulative = np.cumsum(self.weights)
+        cumulative /= cumulative[-1]
+        draws = rng.random(m)
+        recovering = w_diff > 0.0 and len(self.field.free_cells) > 0
+        if self._lib is not None and not recovering:  # draw, histogram and stop in one pass
+            out = np.empty((m, 3))
+            n = int(
+                self._lib.twin_pf_resample(
+                    self.poses.ctypes.data, len(self.poses), cumulative.ctypes.data, draws.ctypes.data, m,
+                    _BIN_SIZE.ctypes.data, self._kld_limits.ctypes.data, out.ctypes.data,
+                )
+            )  # fmt: skip
+            if n < 0:
+                raise MemoryError("amcl resampling: out of memory")
+            self.poses = out[:n]
+            self.weights = np.full(n, 1.0 / n)
+            return
+        pick = np.minimum(np.searchsorted(cumulative, draws, side="right"), len(cumulative) - 1)
+        new = self.poses[pick]
+        if recovering:
+            random = rng.random(m) < w_diff
+            count = int(random.sum())
+            if count:
+                cells = self.field.free_cells[rng.integers(0, len(self.field.free_cells), count)]
+                res = self.field.resolution_m
+                new[random, 0] = self.field.origin_x_m + cells[:, 1] * res
+                new[random, 1] = self.field.origin_y_m + cells[:, 0] * res
+                new[random, 2] = rng.uniform(-math.pi, math.pi, count)
+            self._w_slow = self._w_fast = 0.0
+        n = self._kld_count(self._bins(new))
+        self.poses = new[:n]
+        self.weights = np.full(n, 1.0 / n)
+
+    def _kld_count(self, bins: NDArray[np.int64]) -> int:
+        """How many of the drawn particles KLD-sampling keeps: the first n with n > limit(bins among them)."""
+        m = len(bins)
+        if self._lib is not None:
+            n = int(self._lib.twin_kld_count(bins.ctypes.data, m, self._kld_limits.ctypes.data))
+            if n < 0:
+                raise MemoryError("amcl resampling: out of memory")
+            return n
+        _, first = np.unique(_bin_keys(bins), return_index=True)
+        is_first = np.zeros(m, dtype=bool)
+        is_first[first] = True
+        leaves = np.cumsum(is_first)
+        stop = np.nonzero(np.arange(1, m + 1) > self._kld_limits[leaves])[0]
+        return int(stop[0]) + 1 if len(stop) else m
+
+    def _clusters(self, bins: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]:
+        """Each particle's cluster (bins that touch, 26-neighbourhood), numbered from 1 in raster order of the bins."""
+        if self._lib is not None:
+            labels = np.empty(len(bins), dtype=np.int64)
+            count = int(self._lib.twin_pf_clusters(bins.ctypes.data, len(bins), labels.ctypes.data))
+            if count < 0:
+                raise MemoryError("amcl clustering: out of memory")
+            return labels, count
+        from scipy import ndimage  # the numpy path only: scipy is slow to import
+
+        lo = bins.min(axis=0)
+        shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
+        grid = np.zeros(shape, dtype=bool)
+        local = bins - lo
+        grid[local[:, 0], local[:, 1], local[:, 2]] = True
+        labels, count = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
+        return np.asarray(labels[local[:, 0], local[:, 1], local[:, 2]], dtype=np.int64), int(count)
+
+    def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
+        poses, w = self.poses, self.weights
+        cluster, count = self._clusters(self._bins(poses))
+        cov = np.zeros((3, 3))
+        if self._lib is not None:
+            out = np.empty(7)
+            if self._lib.twin_pf_estimate(
+                poses.ctypes.data, w.ctypes.data, len(w), cluster.ctypes.data, count, out.ctypes.data
+            ):
+                raise MemoryError("amcl estimate: out of memory")
+            mx, my, myaw = float(out[0]), float(out[1]), float(out[2])
+            cov[0, 0], cov[1, 1], cov[0, 1], cov[2, 2] = out[3], out[4], out[5], out[6]
+            cov[1, 0] = cov[0, 1]
+        else:
+            cw = np.bincount(cluster, weights=w, minlength=count + 1)
+            mask = cluster == int(np.argmax(cw))
+            wc = w[mask]
+            total = float(wc.sum())
+            mx = float((wc * poses[mask, 0]).sum() / total)
+            my = float((wc * poses[mask, 1]).sum() / total)
+            myaw = math.atan2(float((wc * np.sin(poses[mask, 2])).sum()), float((wc * np.cos(poses[mask, 2])).sum()))
+            # The whole set's covariance, as amcl_pose carries it.
+            wt = float(w.sum())
+            sx, sy = float((w * poses[:, 0]).sum() / wt), float((w * poses[:, 1]).sum() / wt)
+            cov[0, 0] = float((w * poses[:, 0] ** 2).sum() / wt) - sx * sx
+            cov[1, 1] = float((w * poses[:, 1] ** 2).sum() / wt) - sy * sy
+            cov[0, 1] = cov[1, 0] = float((w * poses[:, 0] * poses[:, 1]).sum() / wt) - sx * sy
+            mc, ms = float((w * np.cos(poses[:, 2])).sum() / wt), float((w * np.sin(poses[:, 2])).sum() / wt)
+            cov[2, 2] = -2.0 * math.log(max(math.hypot(mc, ms), 1e-300))
+        ox, oy, oyaw = odom_pose
+        # map->odom = map->base * (odom->base)^-1
+        tyaw = myaw - oyaw
+        c, s = math.cos(tyaw), math.sin(tyaw)
+        tx = mx - (c * ox - s * oy)
+        ty = my - (s * ox + c * oy)
+        return AmclEstimate(
+            x_m=mx,
+            y_m=my,
+            yaw_rad=myaw,
+            covariance=cov,
+            map_odom=(tx, ty, math.atan2(math.sin(tyaw), math.cos(tyaw))),
+            particles=len(poses),
+        )

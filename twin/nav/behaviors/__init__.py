@@ -1,0 +1,1 @@
+"""nav2_behaviors: Spin, BackUp and DriveOnHeading, Wait, on `TimedBehavior`; `BehaviorServer` and its node."""

@@ -1,0 +1,193 @@
+"""The navigation servers' parameters, read from a Nav2 params file.
+
+`nav2_config` reads what controller_server (controllers, goal and progress checkers),
+planner_server (NavFn), velocity_smoother, behavior_server and bt_navigator take from a params
+file (`twin.nav.params.load_nav2_params`), refusing a plugin or value the twin cannot run before the
+run starts. Costmaps and AMCL read their own sections in `twin.nav.params`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from twin.core.errors import ConfigError
+from twin.nav.behaviors.timed_behavior import BehaviorParams
+from twin.nav.controller.checkers import SimpleGoalChecker
+from twin.nav.controller.controller_server import controller_for_plugin
+from twin.nav.params import Nav2Params
+from twin.nav.planner.navfn import NavfnParams
+from twin.nav.velocity_smoother.velocity_smoother import SmootherParams
+
+__all__ = ["Nav2Config", "nav2_config"]
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Nav2Config:
+    """What the navigation servers read from a Nav2 params file (TB3 Humble values by default)."""
+
+    controller_frequency_hz: float = 10.0
+    failure_tolerance_s: float = 0.3
+    velocity_thresholds: tuple[float, float] = (0.001, 0.001)
+    controllers: Mapping[str, tuple[str, Mapping[str, object]]] = field(default_factory=dict)
+    goal_checkers: Mapping[str, SimpleGoalChecker] = field(default_factory=dict)
+    progress_radius_m: float = 0.5
+    progress_allowance_s: float = 10.0
+    planner: NavfnParams = field(default_factory=NavfnParams)
+    behaviors: BehaviorParams = field(default_factory=BehaviorParams)
+    smoother: SmootherParams = field(default_factory=SmootherParams)
+    bt_loop_duration_s: float = 0.01
+    used: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+
+
+def _num(section: Mapping[str, Any], key: str, default: float, where: str) -> float:
+    value = section.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        msg = f"{where}.{key}: expected a number, got {value!r}; fix the params file"
+        raise ConfigError(msg)
+    return float(value)
+
+
+def _flag(section: Mapping[str, Any], key: str, default: bool, where: str) -> bool:
+    value = section.get(key, default)
+    if not isinstance(value, bool):
+        msg = f"{where}.{key}: expected true or false, got {value!r}; fix the params file"
+        raise ConfigError(msg)
+    return value
+
+
+def _names(section: Mapping[str, Any], key: str, default: Sequence[str], where: str) -> tuple[str, ...]:
+    value = section.get(key, list(default))
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        msg = f"{where}.{key}: expected a list of names, got {value!r}; fix the params file"
+        raise ConfigError(msg)
+    return tuple(value)
+
+
+def _sub(section: Mapping[str, Any], prefix: str) -> dict[str, object]:
+    return {k[len(prefix) + 1 :]: v for k, v in section.items() if k.startswith(prefix + ".")}
+
+
+def _triple(section: Mapping[str, Any], key: str, default: tuple[float, float], where: str) -> tuple[float, float]:
+    value = section.get(key)
+    if value is None:
+        return default
+    if not isinstance(value, list) or len(value) != 3 or not all(isinstance(v, int | float) for v in value):
+        msg = f"{where}.{key}: expected [x, y, theta], got {value!r}; fix the params file"
+        raise ConfigError(msg)
+    return (float(value[0]), float(value[2]))
+
+
+def nav2_config(params: Nav2Params) -> Nav2Config:
+    """Read the controller, planner, behaviour, smoother and navigator parameters of a Nav2 params file.
+
+    Raises:
+        ConfigError: A value of the wrong type, or a controller plugin the twin does not implement.
+    """
+    src = params.source
+    cs = params.node("controller_server")
+    where = f"{src}: controller_server"
+    used: dict[str, list[str]] = {"controller_server": [], "planner_server": [], "bt_navigator": []}
+    cu = used["controller_server"]
+    plugins = _names(cs, "controller_plugins", ("FollowPath",), where)
+    frequency = _num(cs, "controller_frequency", 20.0, where)
+    controllers: dict[str, tuple[str, Mapping[str, object]]] = {}
+    for name in plugins:
+        section = _sub(cs, name)
+        plugin = str(section.get("plugin", "dwb_core::DWBLocalPlanner"))
+        # refuses unknown plugins, critics and bad values now, before the run
+        controller_for_plugin(plugin, section, where=f"{where}.{name}", controller_frequency_hz=frequency)
+        controllers[name] = (plugin, section)
+        cu.extend(f"{name}.{k}" for k in section)
+    checker_names = _names(cs, "goal_checker_plugins", (), where) or (
+        str(cs.get("goal_checker_plugin", "goal_checker")),
+    )
+    checkers = {}
+    for name in checker_names:
+        section = _sub(cs, name)
+        checkers[name] = SimpleGoalChecker(
+            xy_goal_tolerance_m=_num(section, "xy_goal_tolerance", 0.25, f"{where}.{name}"),
+            yaw_goal_tolerance_rad=_num(section, "yaw_goal_tolerance", 0.25, f"{where}.{name}"),
+            stateful=bool(section.get("stateful", True)),
+        )
+        cu.extend(f"{name}.{k}" for k in section)
+    progress_name = str(cs.get("progress_checker_plugin", "progress_checker"))
+    progress = _sub(cs, progress_name)
+    cu.extend(f"{progress_name}.{k}" for k in progress)
+    cu += ["controller_frequency", "failure_tolerance", "controller_plugins", "goal_checker_plugins"]
+    cu += ["min_x_velocity_threshold", "min_theta_velocity_threshold"]
+    cu += ["goal_checker_plugin", "progress_checker_plugin"]
+    ps = params.node("planner_server")
+    pwhere = f"{src}: planner_server"
+    planner_names = _names(ps, "planner_plugins", ("GridBased",), pwhere)
+    grid = _sub(ps, planner_names[0])
+    plugin = str(grid.get("plugin", "nav2_navfn_planner/NavfnPlanner"))
+    if plugin.replace("::", "/") != "nav2_navfn_planner/NavfnPlanner":
+        msg = (
+            f"{pwhere}.{planner_names[0]}.plugin: unknown planner plugin {plugin!r}; "
+            "the twin has nav2_navfn_planner/NavfnPlanner"
+        )
+        raise ConfigError(msg)
+    planner = NavfnParams(
+        tolerance_m=_num(grid, "tolerance", 0.5, f"{pwhere}.{planner_names[0]}"),
+        use_astar=bool(grid.get("use_astar", False)),
+        allow_unknown=bool(grid.get("allow_unknown", True)),
+    )
+    used["planner_server"] = ["planner_plugins", *(f"{planner_names[0]}.{k}" for k in grid)]
+    bt = params.node("bt_navigator")
+    loop_ms = _num(bt, "bt_loop_duration", 10.0, f"{src}: bt_navigator")
+    used["bt_navigator"] = ["bt_loop_duration", "global_frame", "robot_base_frame", "odom_topic"]
+    vs = params.node("velocity_smoother")
+    vwhere = f"{src}: velocity_smoother"
+    if str(vs.get("feedback", "OPEN_LOOP")) != "OPEN_LOOP":
+        msg = f"{vwhere}.feedback: only OPEN_LOOP (Nav2's default) is implemented, got {vs['feedback']!r}"
+        raise ConfigError(msg)
+    defaults = SmootherParams()
+    smoother = SmootherParams(
+        smoothing_frequency_hz=_num(vs, "smoothing_frequency", defaults.smoothing_frequency_hz, vwhere),
+        max_velocity=_triple(vs, "max_velocity", defaults.max_velocity, vwhere),
+        min_velocity=_triple(vs, "min_velocity", defaults.min_velocity, vwhere),
+        max_accel=_triple(vs, "max_accel", defaults.max_accel, vwhere),
+        max_decel=_triple(vs, "max_decel", defaults.max_decel, vwhere),
+        deadband_velocity=_triple(vs, "deadband_velocity", defaults.deadband_velocity, vwhere),
+        velocity_timeout_s=_num(vs, "velocity_timeout", defaults.velocity_timeout_s, vwhere),
+        scale_velocities=_flag(vs, "scale_velocities", defaults.scale_velocities, vwhere),
+    )
+    used["velocity_smoother"] = [
+        "smoothing_frequency", "max_velocity", "min_velocity", "max_accel", "max_decel",
+        "deadband_velocity", "velocity_timeout", "feedback", "scale_velocities",
+    ]  # fmt: skip
+    bs = params.node("behavior_server")
+    bwhere = f"{src}: behavior_server"
+    bd = BehaviorParams()
+    behaviors = BehaviorParams(
+        cycle_frequency_hz=_num(bs, "cycle_frequency", bd.cycle_frequency_hz, bwhere),
+        simulate_ahead_time_s=_num(bs, "simulate_ahead_time", bd.simulate_ahead_time_s, bwhere),
+        max_rotational_vel=_num(bs, "max_rotational_vel", bd.max_rotational_vel, bwhere),
+        min_rotational_vel=_num(bs, "min_rotational_vel", bd.min_rotational_vel, bwhere),
+        rotational_acc_lim=_num(bs, "rotational_acc_lim", bd.rotational_acc_lim, bwhere),
+    )
+    used["behavior_server"] = [
+        "cycle_frequency", "simulate_ahead_time", "max_rotational_vel", "min_rotational_vel", "rotational_acc_lim",
+    ]  # fmt: skip
+    return Nav2Config(
+        controller_frequency_hz=frequency,
+        failure_tolerance_s=_num(cs, "failure_tolerance", 0.0, where),
+        velocity_thresholds=(
+            _num(cs, "min_x_velocity_threshold", 0.0001, where),
+            _num(cs, "min_theta_velocity_threshold", 0.0001, where),
+        ),
+        controllers=controllers,
+        goal_checkers=checkers,
+        progress_radius_m=_num(progress, "required_movement_radius", 0.5, f"{where}.{progress_name}"),
+        progress_allowance_s=_num(progress, "movement_time_allowance", 10.0, f"{where}.{progress_name}"),
+        planner=planner,
+        behaviors=behaviors,
+        smoother=smoother,
+        bt_loop_duration_s=loop_ms / 1000.0,
+        used={k: tuple(v) for k, v in used.items()},
+    )

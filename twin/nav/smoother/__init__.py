@@ -1,0 +1,1 @@
+"""nav2_smoother: the SimpleSmoother smoother_server runs for SmoothPath (`simple_smoother`)."""

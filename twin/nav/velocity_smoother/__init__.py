@@ -1,0 +1,1 @@
+"""nav2_velocity_smoother: `VelocitySmoother` (open loop) and `VelocitySmootherNode`."""
