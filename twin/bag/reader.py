@@ -248,11 +248,19 @@ def _open_reader(bag: Path) -> Reader:
     try:
         reader = Reader(bag)
         reader.open()
-    except (FileNotFoundError, ReaderError, OSError) as err:
+    except (FileNotFoundError, ReaderError, OSError, ValueError, KeyError, TypeError) as err:
+        # ValueError (UnicodeDecodeError among them), KeyError, TypeError: rosbags meets storage
+        # tables whose text is damaged (a QoS string without its fields, bytes that are not UTF-8)
         meta = bag_metadata(bag)  # names a missing metadata.yaml or storage file, the usual causes
         if isinstance(err, FileNotFoundError):
             raise
-        msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, meta)}"
+        if isinstance(err, (ValueError, KeyError, TypeError)):
+            msg = (
+                f"{bag}: cannot read the bag: its storage's tables do not parse "
+                f"({type(err).__name__}: {_one_line(err)}); they may be damaged: run `twin bag recover {bag}`"
+            )
+        else:
+            msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, meta)}"
         raise BagError(msg) from None
     return reader
 
