@@ -296,6 +296,7 @@ def _complete_report(bag: Path, mcaps: list[Path], dbs: list[Path], previous: Ba
         return None
     total = 0
     firsts: list[bytes] = []
+    stored: dict[str, str] = {}  # each topic's type as the storage names it
     try:
         for file in mcaps:
             scan = scan_mcap(file)
@@ -303,6 +304,9 @@ def _complete_report(bag: Path, mcaps: list[Path], dbs: list[Path], previous: Ba
                 return None
             total += scan.stats().message_count
             firsts += [c.first_data for c in scan.chunks[:1]]
+            for channel in scan.channels.values():
+                schema = scan.schemas.get(channel.schema_id)
+                stored.setdefault(channel.topic, schema.name if schema else "")
         for file in dbs:
             if sqlite_needs_repair(file):
                 return None
@@ -310,12 +314,16 @@ def _complete_report(bag: Path, mcaps: list[Path], dbs: list[Path], previous: Ba
             try:
                 total += int(db.execute("SELECT count(*) FROM messages").fetchone()[0])
                 firsts += _first_sqlite_data(db)
+                for name, msgtype in db.execute("SELECT name, type FROM topics"):
+                    stored.setdefault(str(name), str(msgtype))
             finally:
                 db.close()
     except (ValueError, OSError, sqlite3.Error):
         return None  # the recovery proper names the problem
     if total != previous.message_count:
         return None
+    if any(stored.get(t.name, t.msgtype) != t.msgtype for t in previous.topics):
+        return None  # metadata.yaml names a type the storage does not: rewrite it from the storage
     if _compressed_messages(firsts) and previous.compression_mode.lower() != "message":
         return None  # zstd frames the metadata does not announce: readers would take them for CDR
     return RecoveryReport(
