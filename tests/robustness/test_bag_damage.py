@@ -20,6 +20,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import CompressionType, Writer
 
 from tests.conftest import run_twin
 from tests.robustness.helpers import assert_one_line_error
@@ -96,19 +97,52 @@ def _mcap_messages(file: Path) -> Counter[tuple[str, int, bytes]]:
         return Counter((channel.topic, m.log_time, m.data) for _, channel, m in reader.iter_messages())
 
 
+def _as_other_writer(source: Path, bag: Path) -> Path:
+    """The run as the mcap library writes it (as rosbag2's writer does): zstd chunks with CRCs, schemas inside."""
+    bag.mkdir()
+    shutil.copy(source.parent / "metadata.yaml", bag / "metadata.yaml")
+    file = bag / source.name
+    with source.open("rb") as stream, file.open("wb") as out:
+        reader = make_reader(stream)
+        writer = Writer(out, chunk_size=100_000, compression=CompressionType.ZSTD, enable_crcs=True)
+        writer.start(profile="ros2", library="mcap python")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages():
+            assert schema is not None
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id], dict(channel.metadata)
+                )
+            writer.add_message(
+                channels[channel.id],
+                log_time=message.log_time,
+                data=message.data,
+                publish_time=message.publish_time,
+                sequence=message.sequence,
+            )
+        writer.finish()
+    return bag
+
+
+@pytest.mark.parametrize("writer", ["twin", "mcap_zstd_crc"])
 def test_recover_keeps_every_intact_mcap_chunk_and_the_original(
-    runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    writer: str, runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     (source,) = runs["mcap"].glob("*.mcap")
+    if writer != "twin":
+        (source,) = _as_other_writer(source, tmp_path / "other").glob("*.mcap")
     data = source.read_bytes()
     chunks = _mcap_chunks(data)
     total = sum(sum(c.values()) for _, _, c in chunks)
     assert len(chunks) >= 20 and total > 5000
-    rng = random.Random("mcap-flips")
+    rng = random.Random(f"mcap-flips-{writer}")
     must_total = got_total = 0
     for i in range(COPIES):
         bag = tmp_path / f"flipped{i}"
-        shutil.copytree(runs["mcap"], bag)
+        shutil.copytree(source.parent, bag)
         flipped, where = _flip(data, rng, flips=1 + 3 * i)
         file = bag / source.name
         file.write_bytes(flipped)
@@ -123,7 +157,10 @@ def test_recover_keeps_every_intact_mcap_chunk_and_the_original(
         assert not missing, f"copy {i} ({len(where)} flips): {sum(missing.values())} messages of intact chunks lost"
         must_total += sum(must.values())
         got_total += sum(got.values())
-    _REPORT.append(f"mcap: {COPIES} copies of {total} messages: intact chunks hold {must_total}, recovered {got_total}")
+    _REPORT.append(
+        f"mcap ({writer}, {len(chunks)} chunks): {COPIES} copies of {total} messages: "
+        f"intact chunks hold {must_total}, recovered {got_total}"
+    )
     print("\n" + _REPORT[-1])
 
 
@@ -133,7 +170,9 @@ def test_recover_keeps_every_intact_mcap_chunk_and_the_original(
 def _sqlite_rows(file: Path) -> Counter[tuple[int, int, bytes]]:
     db = sqlite3.connect(f"{file.resolve().as_uri()}?mode=ro&immutable=1", uri=True)
     try:
-        return Counter((int(t), int(s), bytes(d)) for t, s, d in db.execute("SELECT topic_id, timestamp, data FROM messages"))
+        return Counter(
+            (int(t), int(s), bytes(d)) for t, s, d in db.execute("SELECT topic_id, timestamp, data FROM messages")
+        )
     finally:
         db.close()
 

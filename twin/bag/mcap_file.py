@@ -948,12 +948,29 @@ def scan_mcap(path: Path) -> McapScan:
             scan.data_end = pos
             scan.found_data_end = True
             _add_summary_definitions(scan, view)
+            _check_channels(scan, path)
             scan.complete = not scan.damaged and _summary_agrees(scan, view)
             return scan
         pos += 9 + length
         scan.data_end = pos
     _add_summary_definitions(scan, view)
+    _check_channels(scan, path)
     return scan
+
+
+def _check_channels(scan: McapScan, path: Path) -> None:
+    """Count a chunk with messages on a channel defined nowhere as damaged (a flipped channel id, a lost channel)."""
+    for chunk in scan.chunks:
+        unknown = set(np.unique(chunk.channels).tolist()) - scan.channels.keys()
+        if unknown:
+            _log.warning(
+                "%s: the chunk at byte %d has messages on undefined channel %d; it is damaged",
+                path,
+                chunk.offset,
+                min(unknown),
+            )
+            scan.damaged.append((chunk.offset, chunk.offset + chunk.length))
+    scan.damaged.sort()
 
 
 def _summary_span(view: memoryview) -> tuple[int, int, int] | None:
