@@ -146,3 +146,15 @@ def test_a_wal_with_frames_is_recovered_with_its_messages(
     assert sorted(p.name for p in killed.iterdir()) == sorted([db3.name, "metadata.yaml"])
     assert open_bag(killed).message_count == count + 50
     assert sum(1 for _ in read_messages(killed, decode=False)) == count + 50
+
+
+def test_a_rewritten_metadata_keeps_the_bags_version_and_distro(bags: dict[str, Path], tmp_path: Path) -> None:
+    """A Galactic bag whose metadata.yaml miscounts is rewritten as Galactic wrote it: version 5, no distro."""
+    bag = tmp_path / "galactic"
+    shutil.copytree(bags["gazebo_galactic"], bag)
+    edit_metadata(bag, lambda meta: dataclasses.replace(meta, message_count=meta.message_count + 1))
+    assert main(["bag", "recover", str(bag)]) == 0
+    text = (bag / "metadata.yaml").read_text()
+    assert "  version: 5\n" in text and "ros_distro" not in text
+    assert open_bag(bag).message_count == sum(1 for _ in read_messages(bag, decode=False))
+    assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml", "metadata.yaml.orig", "rosbag_0.db3"]
