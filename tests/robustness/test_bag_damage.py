@@ -238,3 +238,29 @@ def test_recover_keeps_every_intact_sqlite3_row_and_the_original(
         f" ({refused} refused: schema page hit)"
     )
     print("\n" + _REPORT[-1])
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_reading_a_damaged_bag_is_one_line_never_an_internal_error(
+    storage: str, runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before any recover: what reads a damaged bag reads it, or says in one line that it is damaged."""
+    (source,) = (p for p in runs[storage].iterdir() if p.suffix in (".mcap", ".db3"))
+    data = source.read_bytes()
+    rng = random.Random(f"read-{storage}")
+    for i in range(8):
+        bag = tmp_path / f"flipped{i}"
+        shutil.copytree(runs[storage], bag)
+        flipped, _ = _flip(data, rng, flips=1 + 8 * i)
+        (bag / source.name).write_bytes(flipped)
+        for argv in (
+            ["bag", "info", str(bag)],
+            ["analyze", str(bag), "--out", str(tmp_path / f"analysis{i}"), "--no-plots"],
+            ["bag", "export", str(bag), "--topics", "/odom", "/scan", "--out", str(tmp_path / f"export{i}")],
+        ):
+            code = main(argv)
+            err = capsys.readouterr().err
+            assert code in (0, 5), f"{argv}: {err}"
+            if code:
+                assert_one_line_error(err)
+        assert (bag / source.name).read_bytes() == flipped

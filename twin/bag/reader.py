@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from apsw import Error as _SqliteError  # rosbags reads sqlite3 through apsw (a damaged page: apsw.CorruptError)
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
@@ -506,6 +507,12 @@ def read_messages(
             yield BagMessage(conn.topic, conn.msgtype, t_ns, msg_obj)
     except ReaderError as err:
         msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, _metadata_or_none(bag))}"
+        raise BagError(msg) from None
+    except (_SqliteError, MemoryError, struct.error, EOFError, OverflowError, ValueError, KeyError, IndexError) as err:
+        # rosbags meeting a damaged storage file: a page SQLite finds malformed, an MCAP length
+        # that runs past the file or asks for more memory than there is
+        what = _one_line(err) if str(err).strip() else type(err).__name__
+        msg = f"{bag}: cannot read the bag ({what}); its storage is damaged: run `twin bag recover {bag}`"
         raise BagError(msg) from None
     finally:
         reader.close()
