@@ -576,11 +576,14 @@ class _Cursor:
         return self.take(self.u32()).decode()
 
     def mapping(self) -> dict[str, str]:
-        end = self.pos + self.u32()
+        length = self.u32()
+        end = self.pos + length
         out: dict[str, str] = {}
         while self.pos < end:
             key = self.string()
             out[key] = self.string()
+        if self.pos != end:
+            raise ValueError("map entries run past the map's length")
         return out
 
 
@@ -609,13 +612,19 @@ class McapScan:
     """What a pass over an MCAP file's data section found."""
 
     library: str = ""
+    header: bytes = b""  #: the Header record as found (empty if it was damaged)
     schemas: dict[int, SchemaRecord] = field(default_factory=dict)
     channels: dict[int, ChannelRecord] = field(default_factory=dict)
     metadata: list[tuple[int, int, str, dict[str, str]]] = field(default_factory=list)  # offset, length, name, map
     chunks: list[_ChunkInfo] = field(default_factory=list)
     loose_messages: int = 0  #: Message records outside chunks (counted, not indexed)
-    data_end: int = 0  #: offset just after the last complete data record
-    complete: bool = False  #: DataEnd, summary and Footer all present
+    #: Data-section records a rebuilt file keeps, in file order: (opcode, offset, length).
+    kept: list[tuple[int, int, int]] = field(default_factory=list)
+    #: Byte ranges skipped as damaged (a record that did not parse, up to the next valid one).
+    damaged: list[tuple[int, int]] = field(default_factory=list)
+    data_end: int = 0  #: offset just after the last complete data record (at DataEnd: its offset)
+    found_data_end: bool = False  #: the scan reached the DataEnd record
+    complete: bool = False  #: undamaged, with DataEnd, a summary that agrees with the data and the Footer
     file_size: int = 0
 
     def stats(self) -> _Stats:
@@ -644,13 +653,37 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
     raise ValueError(msg)
 
 
+_COMPRESSIONS = frozenset({"", "zstd", "lz4"})
+
+
 def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
+    """Parse the Chunk record at `offset`, checking that every field agrees with the others.
+
+    Raises:
+        ValueError: If the chunk is damaged: its length, sizes, CRC (when the writer stored one),
+            inner records or message times disagree.
+    """
     cur = _Cursor(view, offset + 9)
     start_ns, end_ns, size = cur.u64(), cur.u64(), cur.u64()
-    cur.u32()  # crc, checked by readers that want to
+    crc = cur.u32()
     compression = cur.string()
+    if compression not in _COMPRESSIONS:
+        msg = f"unknown chunk compression {compression[:20]!r}"
+        raise ValueError(msg)
     compressed_size = cur.u64()
-    records = _decompress(compression, cur.take(compressed_size), size)
+    if cur.pos + compressed_size != offset + length or (not compression and compressed_size != size):
+        msg = "chunk sizes disagree with its record length"
+        raise ValueError(msg)
+    try:
+        records = _decompress(compression, cur.take(compressed_size), size)
+    except ValueError:
+        raise
+    except Exception as err:  # each decompressor has its own error type for a damaged frame
+        msg = f"chunk does not decompress: {err}"
+        raise ValueError(msg) from None
+    if len(records) != size or (crc and zlib.crc32(records) != crc):
+        msg = "chunk CRC or size mismatch"
+        raise ValueError(msg)
     channels: list[int] = []
     times: list[int] = []
     offsets: list[int] = []
@@ -664,6 +697,9 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
         rec_len = inner.u64()
         body = _Cursor(inner.take(rec_len))
         if op == OP_MESSAGE:
+            if rec_len < 22:
+                msg = "message record too short"
+                raise ValueError(msg)
             channels.append(body.u16())
             body.u32()
             times.append(body.u64())
@@ -671,9 +707,15 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
             if not first_data:
                 first_data = bytes(body.data[22:])  # after channel, sequence, log and publish time
         elif op == OP_SCHEMA:
-            schemas.append(_schema_record(body))
+            schemas.append(_schema_record(body, exact=True))
         elif op == OP_CHANNEL:
-            channel_records.append(_channel_record(body))
+            channel_records.append(_channel_record(body, exact=True))
+        else:
+            msg = f"record with opcode {op:#x} inside a chunk"
+            raise ValueError(msg)
+    if times and (min(times) < start_ns or max(times) > end_ns):
+        msg = "message times outside the chunk's time range"
+        raise ValueError(msg)
     return _ChunkInfo(
         offset=offset,
         length=length,
@@ -691,16 +733,26 @@ def _parse_chunk(view: memoryview, offset: int, length: int) -> _ChunkInfo:
     )
 
 
-def _schema_record(cur: _Cursor) -> SchemaRecord:
+def _exact(cur: _Cursor, exact: bool) -> None:
+    if exact and cur.pos != len(cur.data):
+        msg = "record length disagrees with its fields"
+        raise ValueError(msg)
+
+
+def _schema_record(cur: _Cursor, *, exact: bool = False) -> SchemaRecord:
     sid = cur.u16()
     name, encoding = cur.string(), cur.string()
-    return SchemaRecord(id=sid, name=name, encoding=encoding, data=cur.take(cur.u32()))
+    record = SchemaRecord(id=sid, name=name, encoding=encoding, data=cur.take(cur.u32()))
+    _exact(cur, exact)
+    return record
 
 
-def _channel_record(cur: _Cursor) -> ChannelRecord:
+def _channel_record(cur: _Cursor, *, exact: bool = False) -> ChannelRecord:
     cid, sid = cur.u16(), cur.u16()
     topic, encoding = cur.string(), cur.string()
-    return ChannelRecord(id=cid, schema_id=sid, topic=topic, message_encoding=encoding, metadata=cur.mapping())
+    record = ChannelRecord(id=cid, schema_id=sid, topic=topic, message_encoding=encoding, metadata=cur.mapping())
+    _exact(cur, exact)
+    return record
 
 
 def _records(view: memoryview, pos: int) -> Iterator[tuple[int, int, int]]:
@@ -714,60 +766,276 @@ def _records(view: memoryview, pos: int) -> Iterator[tuple[int, int, int]]:
         pos += 9 + length
 
 
-def scan_mcap(path: Path) -> McapScan:
-    """Scan an MCAP file that may end anywhere (a killed writer).
+#: Records a scan resynchronises on after damage: what writers put between chunks.
+_RESYNC_OPS = (OP_SCHEMA, OP_CHANNEL, OP_CHUNK, OP_METADATA, OP_DATA_END)
+#: Summary-section records, skipped by length if met in the data section.
+_SUMMARY_OPS = frozenset({OP_CHUNK_INDEX, 0x0A, OP_STATISTICS, OP_METADATA_INDEX, OP_SUMMARY_OFFSET})
+_OP_ATTACHMENT = 0x09
+
+
+def _body(view: memoryview, offset: int, length: int) -> _Cursor:
+    """A cursor over one record's content only (so a field cannot read into the next record)."""
+    return _Cursor(view[offset + 9 : offset + 9 + length])
+
+
+def _take_record(scan: McapScan, view: memoryview, op: int, offset: int, length: int) -> bool:
+    """Parse one data-section record into `scan`; True at DataEnd.
 
     Raises:
-        ValueError: If the file is not MCAP (bad magic or header).
+        ValueError: If the record is damaged (it does not parse exactly as its opcode says).
+    """
+    cur = _body(view, offset, length)
+    if op == OP_CHUNK:
+        chunk = _parse_chunk(view, offset, 9 + length)
+        scan.chunks.append(chunk)
+        scan.schemas.update((schema.id, schema) for schema in chunk.schemas)
+        scan.channels.update((channel.id, channel) for channel in chunk.channel_records)
+    elif op == OP_MESSAGE_INDEX:
+        cur.u16()
+        if cur.u32() != length - 6 or (length - 6) % 16:
+            msg = "message index length disagrees with its entries"
+            raise ValueError(msg)
+        return False  # rebuilt from its chunk, never copied
+    elif op == OP_SCHEMA:
+        schema = _schema_record(cur, exact=True)
+        scan.schemas[schema.id] = schema
+    elif op == OP_CHANNEL:
+        channel = _channel_record(cur, exact=True)
+        scan.channels[channel.id] = channel
+    elif op == OP_METADATA:
+        name = cur.string()
+        values = cur.mapping()
+        _exact(cur, True)
+        scan.metadata.append((offset, 9 + length, name, values))
+    elif op == OP_MESSAGE:
+        if length < 22:
+            msg = "message record too short"
+            raise ValueError(msg)
+        scan.loose_messages += 1
+    elif op == OP_DATA_END:
+        if length != 4:
+            msg = "DataEnd record of the wrong length"
+            raise ValueError(msg)
+        return True
+    elif op in _SUMMARY_OPS:
+        return False  # an index out of place: rebuilt, never copied
+    elif op != _OP_ATTACHMENT:
+        msg = f"unknown record opcode {op:#x}"
+        raise ValueError(msg)
+    scan.kept.append((op, offset, 9 + length))
+    return False
+
+
+def _valid_at(view: memoryview, pos: int) -> bool:
+    """Whether a data-section record that a resync can start from begins at `pos`.
+
+    A chunk checks itself (lengths, sizes, inner records); any other record must parse exactly
+    and be followed by the start of another record (DataEnd: by the Footer).
+    """
+    size = len(view)
+    op, length = _RECORD.unpack_from(view, pos)
+    end = pos + 9 + length
+    if end > size:
+        return False
+    try:
+        _take_record(McapScan(), view, op, pos, length)
+    except (ValueError, UnicodeDecodeError, struct.error):
+        return False
+    if op == OP_CHUNK:
+        return True
+    if op == OP_DATA_END:
+        return _has_footer(view)
+    if end + 9 > size:
+        return False
+    next_op, next_length = _RECORD.unpack_from(view, end)
+    return next_op in (*_RESYNC_OPS, OP_MESSAGE_INDEX) and end + 9 + next_length <= size
+
+
+def _resync(view: memoryview, start: int) -> int | None:
+    """The offset of the next valid record at or after `start`, or None if there is none.
+
+    Candidates are found with numpy (an opcode a writer puts between chunks, then a length below
+    4 GiB that fits in the file), and checked one by one, nearest first.
+    """
+    arr = np.frombuffer(view, dtype=np.uint8)
+    size = arr.size
+    lo, window = start, 1 << 20
+    while lo + 9 <= size:
+        hi = min(size - 8, lo + window)
+        n = hi - lo
+        seg = arr[lo : hi + 8]
+        mask = np.isin(seg[:n], _RESYNC_OPS)
+        for k in range(5, 9):  # the length's high four bytes
+            mask &= seg[k : k + n] == 0
+        for i in np.flatnonzero(mask).tolist():
+            if _valid_at(view, lo + i):
+                return int(lo + i)
+        lo, window = hi, window * 4
+    return None
+
+
+def _header_at(view: memoryview, pos: int) -> bool:
+    if pos + 9 > len(view):
+        return False
+    op, length = _RECORD.unpack_from(view, pos)
+    if op != OP_HEADER or pos + 9 + length > len(view):
+        return False
+    cur = _body(view, pos, length)
+    try:
+        cur.string()
+        cur.string()
+    except (ValueError, UnicodeDecodeError):
+        return False
+    return bool(cur.pos == length)
+
+
+def scan_mcap(path: Path) -> McapScan:
+    """Scan an MCAP file that may end anywhere (a killed writer) or hold damaged records.
+
+    A record that does not parse as its opcode says (a chunk whose sizes, CRC, inner records or
+    times disagree; a schema, channel or metadata record whose fields do not fill its length) is
+    skipped up to the next valid record, which chunks' own lengths and checks make findable: one
+    damaged chunk costs that chunk, not what follows it. A file that ends inside a record (a
+    killed writer) keeps every complete record before it.
+
+    Raises:
+        ValueError: If the file is not MCAP (bad magic and no Header record after it).
+        OSError: If it cannot be read.
     """
     data = path.read_bytes()
     view = memoryview(data)
-    if data[:8] != MAGIC:
-        msg = "not an MCAP file (bad magic)"
-        raise ValueError(msg)
     scan = McapScan(file_size=len(data))
+    if data[:8] != MAGIC:
+        if not _header_at(view, 8):
+            msg = "not an MCAP file (bad magic)"
+            raise ValueError(msg)
+        scan.damaged.append((0, 8))
+    size = len(data)
     pos = 8
-    last_chunk: _ChunkInfo | None = None
-    data_end = 0
-    for op, offset, length in _records(view, pos):
-        cur = _Cursor(view, offset + 9)
+    if _header_at(view, pos):
+        _op, length = _RECORD.unpack_from(view, pos)
+        cur = _body(view, pos, length)
+        cur.string()
+        scan.library = cur.string()
+        scan.header = bytes(view[pos : pos + 9 + length])
+        pos += 9 + length
+    scan.data_end = pos
+    while pos + 9 <= size:
+        op, length = _RECORD.unpack_from(view, pos)
         try:
-            if op == OP_HEADER:
-                cur.string()
-                scan.library = cur.string()
-            elif op == OP_SCHEMA:
-                schema = _schema_record(cur)
-                scan.schemas[schema.id] = schema
-            elif op == OP_CHANNEL:
-                channel = _channel_record(cur)
-                scan.channels[channel.id] = channel
-            elif op == OP_CHUNK:
-                last_chunk = _parse_chunk(view, offset, 9 + length)
-                scan.chunks.append(last_chunk)
-                scan.schemas.update((schema.id, schema) for schema in last_chunk.schemas)
-                scan.channels.update((channel.id, channel) for channel in last_chunk.channel_records)
-            elif op == OP_MESSAGE_INDEX and last_chunk is not None:
-                ch = cur.u16()
-                last_chunk.index_offsets[ch] = offset
-                last_chunk.index_length += 9 + length
-            elif op == OP_METADATA:
-                name = cur.string()
-                scan.metadata.append((offset, 9 + length, name, cur.mapping()))
-            elif op == OP_MESSAGE:
-                scan.loose_messages += 1
-            elif op == OP_DATA_END:
-                scan.data_end = offset
-                scan.complete = _has_footer(view)
-                return scan
-        except (ValueError, UnicodeDecodeError):
-            _log.warning("%s: record at byte %d is damaged; keeping what precedes it", path, offset)
-            if op == OP_CHUNK and scan.chunks and scan.chunks[-1].offset == offset:
-                scan.chunks.pop()
-            break
-        data_end = offset + 9 + length
-    # No DataEnd: a killed writer. Keep whole chunks with their (complete) message indexes.
-    scan.data_end = data_end
+            if pos + 9 + length > size:
+                msg = "record runs past the end of the file"
+                raise ValueError(msg)
+            at_end = _take_record(scan, view, op, pos, length)
+        except (ValueError, UnicodeDecodeError, struct.error) as err:
+            resumed = _resync(view, pos + 1)
+            if resumed is None:
+                if pos + 9 + length <= size:  # not a cut-off tail: a damaged record
+                    scan.damaged.append((pos, size))
+                    _log.warning("%s: record at byte %d is damaged (%s); nothing valid follows it", path, pos, err)
+                break
+            _log.warning(
+                "%s: bytes %d to %d are damaged (%s); skipped to the next valid record",
+                path,
+                pos,
+                resumed,
+                err,
+            )
+            scan.damaged.append((pos, resumed))
+            pos = resumed
+            continue
+        if at_end:
+            scan.data_end = pos
+            scan.found_data_end = True
+            _add_summary_definitions(scan, view)
+            _check_channels(scan, path)
+            scan.complete = not scan.damaged and _summary_agrees(scan, view)
+            return scan
+        pos += 9 + length
+        scan.data_end = pos
+    _add_summary_definitions(scan, view)
+    _check_channels(scan, path)
     return scan
+
+
+def _check_channels(scan: McapScan, path: Path) -> None:
+    """Count a chunk with messages on a channel defined nowhere as damaged (a flipped channel id, a lost channel)."""
+    for chunk in scan.chunks:
+        unknown = set(np.unique(chunk.channels).tolist()) - scan.channels.keys()
+        if unknown:
+            _log.warning(
+                "%s: the chunk at byte %d has messages on undefined channel %d; it is damaged",
+                path,
+                chunk.offset,
+                min(unknown),
+            )
+            scan.damaged.append((chunk.offset, chunk.offset + chunk.length))
+    scan.damaged.sort()
+
+
+def _summary_span(view: memoryview) -> tuple[int, int, int] | None:
+    """(summary start, footer offset, footer CRC) of a file that ends with its Footer, else None."""
+    if not _has_footer(view):
+        return None
+    footer = len(view) - 8 - _FOOTER.size
+    _op, _length, summary_start, _offsets_start, crc = _FOOTER.unpack_from(view, footer)
+    if not 8 < summary_start <= footer:
+        return None
+    return summary_start, footer, crc
+
+
+def _add_summary_definitions(scan: McapScan, view: memoryview) -> None:
+    """Add the summary's schemas and channels that the data section lost to damage."""
+    span = _summary_span(view)
+    if span is None:
+        return
+    start, footer, _crc = span
+    for op, offset, length in _records(view[:footer], start):
+        try:
+            if op == OP_SCHEMA:
+                schema = _schema_record(_body(view, offset, length), exact=True)
+                scan.schemas.setdefault(schema.id, schema)
+            elif op == OP_CHANNEL:
+                channel = _channel_record(_body(view, offset, length), exact=True)
+                scan.channels.setdefault(channel.id, channel)
+        except (ValueError, UnicodeDecodeError, struct.error):
+            continue
+
+
+def _summary_agrees(scan: McapScan, view: memoryview) -> bool:
+    """Whether the summary section is intact and describes the data section the scan found."""
+    if not _has_footer(view):
+        return False
+    footer = len(view) - 8 - _FOOTER.size
+    summary_start = _FOOTER.unpack_from(view, footer)[2]
+    if summary_start == 0:
+        return not scan.chunks  # no summary: fine for a file without chunks to index
+    span = _summary_span(view)
+    if span is None or span[0] < scan.data_end + 13:  # after the 13-byte DataEnd
+        return False
+    start, footer, crc = span
+    if crc and zlib.crc32(view[start : footer + 9 + 16]) != crc:
+        return False
+    chunk_offsets: set[int] = set()
+    count = None
+    pos = start
+    try:
+        for op, offset, length in _records(view[:footer], start):
+            cur = _body(view, offset, length)
+            if op == OP_STATISTICS:
+                count = _STATS_HEAD.unpack(cur.take(_STATS_HEAD.size))[0]
+            elif op == OP_CHUNK_INDEX:
+                cur.u64()
+                cur.u64()
+                chunk_offsets.add(cur.u64())
+            pos = offset + 9 + length
+    except ValueError:
+        return False
+    if pos != footer:
+        return False
+    if chunk_offsets != {c.offset for c in scan.chunks}:
+        return False
+    return count is None or count == scan.stats().message_count + scan.loose_messages
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -887,78 +1155,107 @@ def _has_footer(view: memoryview) -> bool:
 class McapRecovery:
     """The outcome of `recover_mcap`."""
 
-    scan: McapScan  #: the file as it is now (complete)
-    was_complete: bool  #: it already had its summary and footer
-    dropped_bytes: int  #: bytes of partial records cut off its end
+    scan: McapScan  #: the repaired file's scan (complete), or the source's if it was complete
+    was_complete: bool  #: it already had its summary and footer, and nothing was damaged: nothing written
+    dropped_bytes: int  #: bytes of the source not carried over (a partial record at its end, damaged records)
+    damaged: tuple[tuple[int, int], ...]  #: byte ranges of the source skipped as damaged
+    lost_messages: int  #: messages of undamaged chunks left out (their channel is defined nowhere)
+    #: The source only lacked its end, as a killed writer leaves it: undamaged, no DataEnd. Anything
+    #: else (damaged records, a summary or footer that does not check out) is damage.
+    killed_writer: bool
 
 
-def recover_mcap(path: Path) -> McapRecovery:
-    """Make a killed writer's MCAP file complete, in place.
+def recover_mcap(source: Path, target: Path) -> McapRecovery:
+    """Write a complete MCAP file at `target` from what `source` holds; `source` is only read.
 
-    Keeps every complete record of the data section, drops a trailing partial record, writes
-    message indexes for the last chunk if they were cut off, then DataEnd, a rebuilt summary
-    (schemas, channels, statistics, chunk and metadata indexes) and the Footer. A file that is
-    already complete is left as it is.
+    Keeps every valid record of the data section (a damaged record is skipped up to the next
+    valid one; a partial record at the end is dropped), writes fresh message indexes after each
+    chunk, then DataEnd, a rebuilt summary (schemas, channels, statistics, chunk and metadata
+    indexes) and the Footer. A complete, undamaged source is left alone and nothing is written.
 
     Raises:
-        ValueError: If the file is not MCAP.
-        OSError: If the file cannot be rewritten.
+        ValueError: If the source is not MCAP or holds no record at all.
+        OSError: If the source cannot be read or the target written (it must not exist).
     """
-    scan = scan_mcap(path)
+    scan = scan_mcap(source)
     if scan.complete:
-        return McapRecovery(scan=scan, was_complete=True, dropped_bytes=0)
-    if scan.data_end == 0:
+        return McapRecovery(
+            scan=scan, was_complete=True, dropped_bytes=0, damaged=(), lost_messages=0, killed_writer=False
+        )
+    if scan.data_end <= 8 and not scan.chunks:
         msg = "the file ends before its header: nothing was recorded"
         raise ValueError(msg)
-    end = scan.data_end
-    tail = b""
-    if scan.chunks:
-        last = scan.chunks[-1]
-        chunk_end = last.offset + last.length
-        expected = len(np.unique(last.channels))
-        if len(last.index_offsets) != expected or end < chunk_end + last.index_length:
-            # The indexes after the last chunk were cut off: rewrite them after the chunk.
-            end = chunk_end
-            tail, last.index_offsets = _message_indexes(last.channels, last.times, last.offsets, chunk_end)
-            last.index_length = len(tail)
-        for meta in [m for m in scan.metadata if m[0] >= end]:
-            scan.metadata.remove(meta)
-    with open(path, "r+b") as out:
-        out.truncate(end)
-        out.seek(end)
-        out.write(tail)
-        pos = end + len(tail)
-        data_end = _record(OP_DATA_END, _U32.pack(0))
-        out.write(data_end)
-        pos += len(data_end)
-        metadata_indexes = [
-            _record(OP_METADATA_INDEX, _U64.pack(off) + _U64.pack(length) + _string(name))
-            for off, length, name, _ in scan.metadata
-        ]
-        chunk_indexes = [
-            _chunk_index(
-                start_ns=c.start_ns,
-                end_ns=c.end_ns,
-                chunk_offset=c.offset,
-                chunk_length=c.length,
-                index_offsets=c.index_offsets,
-                index_length=c.index_length,
-                size=c.size,
-                compression=c.compression,
-                compressed_size=c.compressed_size,
+    view = memoryview(source.read_bytes())
+    kept_chunks = {c.offset: c for c in scan.chunks if set(np.unique(c.channels).tolist()) <= scan.channels.keys()}
+    lost = sum(len(c.channels) for c in scan.chunks if c.offset not in kept_chunks)
+    if lost:
+        _log.warning("%s: %d messages of intact chunks left out: their channels are defined nowhere", source, lost)
+    header = scan.header or _record(OP_HEADER, _string("ros2") + _string(scan.library or "twin bag recover"))
+    parts: list[bytes | memoryview] = [MAGIC, header]
+    parts += [s.encode() for s in scan.schemas.values()]
+    parts += [c.encode() for c in scan.channels.values()]
+    pos = sum(map(len, parts))
+    chunks: list[_ChunkInfo] = []
+    chunk_indexes: list[bytes] = []
+    metadata_indexes: list[bytes] = []
+    for op, offset, length in scan.kept:
+        if op in (OP_SCHEMA, OP_CHANNEL) or (op == OP_CHUNK and offset not in kept_chunks):
+            continue
+        parts.append(view[offset : offset + length])
+        if op == OP_METADATA:
+            name = next(m[2] for m in scan.metadata if m[0] == offset)
+            metadata_indexes.append(_record(OP_METADATA_INDEX, _U64.pack(pos) + _U64.pack(length) + _string(name)))
+        elif op == OP_CHUNK:
+            chunk = kept_chunks[offset]
+            indexes, index_offsets = _message_indexes(chunk.channels, chunk.times, chunk.offsets, pos + length)
+            parts.append(indexes)
+            chunks.append(chunk)
+            chunk_indexes.append(
+                _chunk_index(
+                    start_ns=chunk.start_ns,
+                    end_ns=chunk.end_ns,
+                    chunk_offset=pos,
+                    chunk_length=length,
+                    index_offsets=index_offsets,
+                    index_length=len(indexes),
+                    size=chunk.size,
+                    compression=chunk.compression,
+                    compressed_size=chunk.compressed_size,
+                )
             )
-            for c in scan.chunks
-        ]
-        out.write(
-            _summary_section(
-                start=pos,
-                schemas=list(scan.schemas.values()),
-                channels=list(scan.channels.values()),
-                stats=scan.stats(),
-                chunk_indexes=chunk_indexes,
-                metadata_indexes=metadata_indexes,
-            )
+            pos += len(indexes)
+        pos += length
+    data_end = _record(OP_DATA_END, _U32.pack(0))
+    parts.append(data_end)
+    stats = _Stats()
+    for chunk in chunks:
+        stats.add(chunk.channels, chunk.times)
+    parts.append(
+        _summary_section(
+            start=pos + len(data_end),
+            schemas=list(scan.schemas.values()),
+            channels=list(scan.channels.values()),
+            stats=stats,
+            chunk_indexes=chunk_indexes,
+            metadata_indexes=metadata_indexes,
         )
+    )
+    with open(target, "xb") as out:
+        for part in parts:
+            out.write(part)
         out.flush()
         os.fsync(out.fileno())
-    return McapRecovery(scan=scan_mcap(path), was_complete=False, dropped_bytes=scan.file_size - end)
+    repaired = scan_mcap(target)
+    damaged_to_end = bool(scan.damaged) and scan.damaged[-1][1] == scan.file_size
+    tail = 0 if scan.found_data_end or damaged_to_end else scan.file_size - scan.data_end
+    if not repaired.complete or repaired.stats().message_count != stats.message_count:
+        msg = "the repaired file does not read back as written"  # a bug, never the input's fault
+        raise RuntimeError(msg)
+    return McapRecovery(
+        scan=repaired,
+        was_complete=False,
+        dropped_bytes=sum(b - a for a, b in scan.damaged) + tail,
+        damaged=tuple(scan.damaged),
+        lost_messages=lost,
+        killed_writer=not scan.damaged and not scan.found_data_end,
+    )

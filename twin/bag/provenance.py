@@ -9,6 +9,7 @@ list of `{file, sha256, model_name, guid}`.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sqlite3
@@ -18,6 +19,7 @@ from pathlib import Path
 
 from twin.bag.mcap_file import scan_mcap
 from twin.bag.metadata import METADATA_FILE, read_metadata
+from twin.bag.sqlite_file import connect_readonly
 from twin.core.errors import BagError
 
 __all__ = ["PROVENANCE_NAME", "PROVENANCE_TOPIC", "decode_provenance_message", "read_provenance"]
@@ -63,7 +65,7 @@ def read_provenance(path: str | os.PathLike[str]) -> Mapping[str, str] | None:
                     if name == PROVENANCE_NAME:
                         return dict(values)
             else:
-                with sqlite3.connect(f"file:{file}?mode=ro", uri=True) as db:
+                with contextlib.closing(connect_readonly(file)) as db:
                     row = db.execute(
                         "SELECT m.data FROM messages m JOIN topics t ON m.topic_id = t.id WHERE t.name = ? LIMIT 1",
                         (PROVENANCE_TOPIC,),

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from apsw import Error as _SqliteError  # rosbags reads sqlite3 through apsw (a damaged page: apsw.CorruptError)
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
@@ -244,15 +245,72 @@ def _typestore_for(bag: Path, connections: Sequence[Connection]) -> tuple[TypeRe
     return registry, embedded
 
 
+def _storage_types(reader: Reader) -> dict[str, Connection]:
+    """Each topic's connection as the bag folder's storage files name it (one type per topic); {} for a single file.
+
+    A single storage file has no metadata.yaml: its connections are its own already.
+    """
+    storages = getattr(reader.storage, "storages", None)
+    if storages is None:
+        return {}
+    found: dict[str, dict[str, Connection]] = {}
+    for storage in storages:
+        for conn in storage.connections:
+            found.setdefault(conn.topic, {}).setdefault(conn.msgtype, conn)
+    return {topic: next(iter(types.values())) for topic, types in found.items() if len(types) == 1}
+
+
+@functools.cache
+def _warn_retyped(bag: Path, topic: str, listed: str, stored: str) -> None:
+    """Say once per process that metadata.yaml and the storage disagree on a topic's type."""
+    _log.warning(
+        "%s: %s names %s's type %s, its storage %s; reading it as %s, the storage's",
+        bag,
+        METADATA_FILE,
+        topic,
+        listed,
+        stored,
+        stored,
+    )
+
+
+def _connections(bag: Path, reader: Reader) -> list[Connection]:
+    """The bag's connections, each with the type its storage file gives it.
+
+    metadata.yaml is a copy of what the storage says, and copies go wrong (edited by hand, written
+    by another tool); the MCAP schema or the sqlite3 topics table is what the messages were
+    written as. Trusting metadata.yaml would read such a topic as no message at all.
+    """
+    stored = _storage_types(reader)
+    out = []
+    for listed in reader.connections:
+        actual = stored.get(listed.topic)
+        if actual is not None and actual.msgtype != listed.msgtype:
+            _warn_retyped(bag, listed.topic, listed.msgtype, actual.msgtype)
+            digest = actual.digest or listed.digest
+            out.append(listed._replace(msgtype=actual.msgtype, msgdef=actual.msgdef, digest=digest))
+        else:
+            out.append(listed)
+    return out
+
+
 def _open_reader(bag: Path) -> Reader:
     try:
         reader = Reader(bag)
         reader.open()
-    except (FileNotFoundError, ReaderError, OSError) as err:
+    except (FileNotFoundError, ReaderError, OSError, ValueError, KeyError, TypeError) as err:
+        # ValueError (UnicodeDecodeError among them), KeyError, TypeError: rosbags meets storage
+        # tables whose text is damaged (a QoS string without its fields, bytes that are not UTF-8)
         meta = bag_metadata(bag)  # names a missing metadata.yaml or storage file, the usual causes
         if isinstance(err, FileNotFoundError):
             raise
-        msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, meta)}"
+        if isinstance(err, (ValueError, KeyError, TypeError)):
+            msg = (
+                f"{bag}: cannot read the bag: its storage's tables do not parse "
+                f"({type(err).__name__}: {_one_line(err)}); they may be damaged: run `twin bag recover {bag}`"
+            )
+        else:
+            msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, meta)}"
         raise BagError(msg) from None
     return reader
 
@@ -283,7 +341,7 @@ def open_bag(path: str | os.PathLike[str]) -> BagInfo:
     """
     bag = _bag_dir(path)
     meta = bag_metadata(bag)
-    embedded, known = _definitions(bag, meta)
+    embedded, known, types = _definitions(bag, meta)
     files = []
     for file in storage_paths(bag, meta):
         count = next((f.message_count for f in meta.files if Path(f.path).name == file.name), 0)
@@ -292,15 +350,15 @@ def open_bag(path: str | os.PathLike[str]) -> BagInfo:
     topics = tuple(
         TopicInfo(
             name=t.name,
-            msgtype=t.msgtype,
+            msgtype=(msgtype := types.get(t.name, t.msgtype)),
             message_count=t.message_count,
             serialization_format=t.serialization_format,
             qos=t.offered_qos_profiles,
             type_hash=t.type_description_hash,
             definition=(
                 "embedded"
-                if message_type_name(t.msgtype) in embedded
-                else ("type store" if message_type_name(t.msgtype) in known else "none")
+                if message_type_name(msgtype) in embedded
+                else ("type store" if message_type_name(msgtype) in known else "none")
             ),
         )
         for t in meta.topics
@@ -322,19 +380,25 @@ def open_bag(path: str | os.PathLike[str]) -> BagInfo:
     )
 
 
-def _definitions(bag: Path, meta: BagMetadata) -> tuple[set[str], set[str]]:
-    """Types with definitions embedded in the bag, and all types that can be decoded."""
+def _definitions(bag: Path, meta: BagMetadata) -> tuple[set[str], set[str], dict[str, str]]:
+    """Types with definitions embedded in the bag, all types that can be decoded, and each topic's type.
+
+    A topic's type is its storage's (see `_connections`), or metadata.yaml's if the storage cannot be read.
+    """
     try:
         reader = _open_reader(bag)
     except BagError as err:
         _log.warning("%s", err)
         registry = TypeRegistry()
-        return set(), {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
+        known = {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
+        return set(), known, {t.name: t.msgtype for t in meta.topics}
     try:
-        registry, embedded = _typestore_for(bag, reader.connections)
+        connections = _connections(bag, reader)
+        registry, embedded = _typestore_for(bag, connections)
     finally:
         reader.close()
-    return embedded, {name for t in meta.topics if registry.knows(name := message_type_name(t.msgtype))}
+    types = {c.topic: c.msgtype for c in connections}
+    return embedded, {name for t in types.values() if registry.knows(name := message_type_name(t))}, types
 
 
 def undecodable(
@@ -405,13 +469,14 @@ def read_messages(
     zstd_messages = bag.is_file() and storage_file_metadata(bag).compression_mode == "message"
     reader = _open_reader(bag)
     try:
-        registry, _ = _typestore_for(bag, reader.connections)
+        connections = _connections(bag, reader)
+        registry, _ = _typestore_for(bag, connections)
         by_topic: dict[str, list[Connection]] = {}
-        for conn in reader.connections:
+        for conn in connections:
             by_topic.setdefault(conn.topic, []).append(conn)
         if topics is None:
-            wanted = [c for c in reader.connections if not decode or registry.knows(message_type_name(c.msgtype))]
-            skipped = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections if c not in wanted})
+            wanted = [c for c in connections if not decode or registry.knows(message_type_name(c.msgtype))]
+            skipped = sorted({f"{c.topic} ({c.msgtype})" for c in connections if c not in wanted})
             if skipped:
                 _log.warning("%s: no definition for %s; skipping", bag, ", ".join(skipped))
         else:
@@ -443,6 +508,12 @@ def read_messages(
     except ReaderError as err:
         msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, _metadata_or_none(bag))}"
         raise BagError(msg) from None
+    except (_SqliteError, MemoryError, struct.error, EOFError, OverflowError, ValueError, KeyError, IndexError) as err:
+        # rosbags meeting a damaged storage file: a page SQLite finds malformed, an MCAP length
+        # that runs past the file or asks for more memory than there is
+        what = _one_line(err) if str(err).strip() else type(err).__name__
+        msg = f"{bag}: cannot read the bag ({what}); its storage is damaged: run `twin bag recover {bag}`"
+        raise BagError(msg) from None
     finally:
         reader.close()
 
@@ -467,9 +538,10 @@ def message_definitions(path: str | os.PathLike[str]) -> dict[str, MessageDefini
     bag = _bag_dir(path)
     reader = _open_reader(bag)
     try:
-        registry, _ = _typestore_for(bag, reader.connections)
+        connections = _connections(bag, reader)
+        registry, _ = _typestore_for(bag, connections)
         definitions: dict[str, MessageDefinition] = {}
-        for conn in reader.connections:
+        for conn in connections:
             if conn.msgtype in definitions or not registry.knows(message_type_name(conn.msgtype)):
                 continue
             try:

@@ -21,7 +21,7 @@ import yaml
 from twin.bag.mcap_file import read_mcap_summary
 from twin.bag.metadata import BagMetadata, FileInformation, TopicMetadata
 from twin.bag.qos import parse_qos_profiles
-from twin.bag.sqlite_file import sqlite_topic_stats
+from twin.bag.sqlite_file import connect_readonly, sqlite_topic_stats
 from twin.core.errors import BagError
 from twin.core.yaml_numbers import safe_load
 
@@ -125,7 +125,7 @@ def _mcap_metadata(path: Path) -> BagMetadata:
 
 def _sqlite_metadata(path: Path) -> BagMetadata:
     try:
-        db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+        db = connect_readonly(path)
         try:
             tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
             if not {"topics", "messages"} <= tables:

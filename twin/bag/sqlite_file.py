@@ -9,21 +9,51 @@ readers decode types they have never seen.
 Crash safety: the database uses a rollback journal (not WAL), and every batch is one
 transaction, so between commits the `.db3` file alone holds every committed message. A process
 killed mid-commit leaves a hot journal that the next read-write open rolls back, which
-`recover_sqlite()` does.
+`recover_sqlite()` does, on a copy: the original file is only ever read.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import shutil
 import sqlite3
 from collections.abc import Sequence
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path
 
-__all__ = ["Sqlite3Writer", "SqliteTopicStats", "recover_sqlite", "sqlite_topic_stats"]
+__all__ = [
+    "Sqlite3Writer",
+    "SqliteRecovery",
+    "SqliteTopicStats",
+    "connect_readonly",
+    "pending_side_files",
+    "recover_sqlite",
+    "sqlite_needs_repair",
+    "sqlite_topic_stats",
+]
 
 _INSERT = "INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)"
 _TIME_INDEX = "CREATE INDEX IF NOT EXISTS timestamp_idx ON messages (timestamp ASC)"
+
+
+def connect_readonly(path: Path) -> sqlite3.Connection:
+    """Open a bag database for reading only, writing nothing beside it.
+
+    `mode=ro` alone still creates `-wal` and `-shm` files beside a WAL-mode database (as rosbag2
+    writes them); `immutable=1` tells SQLite the file cannot change, so it takes no locks and
+    creates no files. A WAL file's frames are not read that way: a complete bag has none (rosbag2
+    checkpoints on close), and a killed recording's are `twin bag recover`'s to judge.
+    """
+    db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro&immutable=1", uri=True)
+    db.text_factory = _lenient_text
+    return db
+
+
+def _lenient_text(raw: bytes) -> str:
+    """Text as UTF-8, a damaged byte shown as U+FFFD (never an exception in the middle of a query)."""
+    return raw.decode("utf-8", "replace")
 
 
 class Sqlite3Writer:
@@ -205,14 +235,133 @@ def sqlite_topic_stats(db: sqlite3.Connection) -> list[SqliteTopicStats]:
     return out
 
 
-def recover_sqlite(path: Path) -> tuple[list[SqliteTopicStats], str]:
-    """Bring a killed writer's database back to its last commit and index it.
+_JOURNAL_MAGIC = bytes.fromhex("d9d505f920a163d7")
+_WAL_MAGICS = frozenset({0x377F0682, 0x377F0683})
+_WAL_HEADER = 32
+_BLOCK_ROWS = 4096
 
-    Returns:
-        The topics with their statistics, and the `ros_distro` the schema table names ("" if none).
+
+def pending_side_files(path: Path) -> list[Path]:
+    """The side files that hold content the database file alone lacks: a hot journal, a WAL with frames.
+
+    Judged by content: an empty WAL (what a reader opening a WAL-mode database without
+    `immutable` leaves), a WAL with only its header, or a zeroed journal say nothing about a
+    killed recording.
+    """
+    pending = []
+    journal = path.with_name(path.name + "-journal")
+    wal = path.with_name(path.name + "-wal")
+    try:
+        with journal.open("rb") as f:
+            if f.read(8) == _JOURNAL_MAGIC:
+                pending.append(journal)
+    except FileNotFoundError:
+        pass
+    try:
+        with wal.open("rb") as f:
+            head = f.read(_WAL_HEADER + 1)
+        if len(head) > _WAL_HEADER and int.from_bytes(head[:4], "big") in _WAL_MAGICS:
+            pending.append(wal)
+    except FileNotFoundError:
+        pass
+    return pending
+
+
+def sqlite_needs_repair(path: Path) -> bool:
+    """Whether the bag database at `path` needs `recover_sqlite` (read only; nothing written).
+
+    It does when a side file holds content the file lacks, when it fails SQLite's integrity
+    check, or when it lacks the time index a killed recording never built.
 
     Raises:
-        sqlite3.Error: If the file is not a database or is damaged beyond its journal.
+        sqlite3.Error: If the file is not a database at all.
+    """
+    if pending_side_files(path):
+        return True
+    db = connect_readonly(path)
+    try:
+        try:
+            result = db.execute("PRAGMA quick_check").fetchone()
+        except sqlite3.DatabaseError:
+            return True
+        if result is None or result[0] != "ok" or _bad_text(db):
+            return True
+        names = {row[0] for row in db.execute("SELECT name FROM sqlite_master")}
+        return "messages" in names and "timestamp_idx" not in names
+    finally:
+        db.close()
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class SqliteRecovery:
+    """The outcome of `recover_sqlite`."""
+
+    rows: list[SqliteTopicStats]  #: the repaired file's topics with their statistics
+    distro: str  #: the `ros_distro` its schema table names ("" if none)
+    #: It was damaged: it failed the integrity check (its readable rows were copied into a new
+    #: database), or text in its small tables was not UTF-8 (replaced by U+FFFD).
+    salvaged: bool
+
+
+def recover_sqlite(source: Path, target: Path, *, max_rowid: int | None = None) -> SqliteRecovery:
+    """Write a complete, indexed copy of a bag database at `target`; `source` and its side files are only read.
+
+    The copy takes the source's hot journal (rolled back: the interrupted transaction is undone)
+    or WAL (its committed frames kept) with it. A copy that fails SQLite's integrity check is
+    salvaged: every row that still reads is copied, block by block, into a fresh database with
+    the same tables, a damaged page costing only the rows on it.
+
+    Args:
+        source: The database.
+        target: Where the repaired database goes (it must not exist).
+        max_rowid: The highest row id worth trying when the table's own maximum does not read
+            (e.g. the message count metadata.yaml names); default: one per 16 bytes of the file.
+
+    Raises:
+        sqlite3.Error: If the file is not a rosbag2 database, or is damaged beyond any row.
+        OSError: If the copy cannot be written.
+    """
+    side = pending_side_files(source)
+    with source.open("rb") as src, target.open("xb") as out:
+        shutil.copyfileobj(src, out)
+    for file in side:
+        shutil.copyfile(file, target.with_name(target.name + file.name[len(source.name) :]))
+    try:
+        rows, distro, mended = _repair(target)
+        salvaged = mended > 0
+    except sqlite3.DatabaseError as err:
+        if "not a rosbag2 database" in str(err):
+            _remove_with_side_files(target)
+            raise
+        salvage = target.with_name(target.name + ".salvage")
+        _remove_with_side_files(salvage)
+        try:
+            _salvage(target, salvage, max_rowid or source.stat().st_size // 16)
+            rows, distro, _ = _repair(salvage)
+        except BaseException:
+            _remove_with_side_files(salvage)
+            _remove_with_side_files(target)
+            raise
+        _remove_with_side_files(target)
+        os.replace(salvage, target)
+        salvaged = True
+    except BaseException:
+        _remove_with_side_files(target)
+        raise
+    return SqliteRecovery(rows=rows, distro=distro, salvaged=salvaged)
+
+
+def _remove_with_side_files(path: Path) -> None:
+    for end in ("", "-journal", "-wal", "-shm"):
+        path.with_name(path.name + end).unlink(missing_ok=True)
+
+
+def _repair(path: Path) -> tuple[list[SqliteTopicStats], str, int]:
+    """Roll back or replay what the side files hold, check integrity, mend text, index by time; the file is a copy.
+
+    Returns:
+        The topics with their statistics, the distro the schema table names, and how many text
+        values were not UTF-8 (and now hold U+FFFD instead).
     """
     db = sqlite3.connect(path, isolation_level=None)
     try:
@@ -225,12 +374,142 @@ def recover_sqlite(path: Path) -> tuple[list[SqliteTopicStats], str]:
         if not {"topics", "messages"} <= tables:
             msg = "not a rosbag2 database (no topics and messages tables)"
             raise sqlite3.DatabaseError(msg)
+        mended = _mend_text(db)
         db.execute(_TIME_INDEX)
         distro = ""
         if "schema" in tables:
             row = db.execute("SELECT ros_distro FROM schema").fetchone()
             distro = str(row[0]) if row else ""
-        db.execute("PRAGMA journal_mode=DELETE")
-        return sqlite_topic_stats(db), distro
+        db.execute("PRAGMA journal_mode=DELETE")  # readers open it immutable: everything in the one file
+        return sqlite_topic_stats(db), distro, mended
     finally:
         db.close()
+
+
+#: The tables whose text readers decode (topic names and types, definitions, the distro).
+_TEXT_TABLES = ("schema", "metadata", "topics", "message_definitions")
+
+
+def _bad_text(db: sqlite3.Connection) -> list[tuple[str, str, int, bytes]]:
+    """Text values of the bag's small tables that are not UTF-8 (damage the integrity check does not see)."""
+    names = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    bad = []
+    for table in (t for t in _TEXT_TABLES if t in names):
+        for column in [row[1] for row in db.execute(f"PRAGMA table_info({table})")]:
+            quoted = '"' + str(column).replace('"', '""') + '"'
+            query = f"SELECT rowid, CAST({quoted} AS BLOB) FROM {table} WHERE typeof({quoted}) = 'text'"
+            for rowid, raw in db.execute(query):
+                try:
+                    bytes(raw).decode("utf-8")
+                except UnicodeDecodeError:
+                    bad.append((table, quoted, int(rowid), bytes(raw)))
+    return bad
+
+
+def _mend_text(db: sqlite3.Connection) -> int:
+    """Replace the bytes of non-UTF-8 text in the small tables by U+FFFD, so readers open the bag; return how many."""
+    bad = _bad_text(db)
+    for table, column, rowid, raw in bad:
+        db.execute(f"UPDATE {table} SET {column} = ? WHERE rowid = ?", (raw.decode("utf-8", "replace"), rowid))
+    return len(bad)
+
+
+def _salvage(damaged: Path, target: Path, max_rowid: int) -> None:
+    """Copy every row of `damaged` that still reads into a new database `target` with the same tables.
+
+    Rows are copied by row id in blocks; a block that fails is halved until the rows that do
+    not read are found, so a damaged page loses only its own rows.
+
+    Raises:
+        sqlite3.DatabaseError: If not even the table definitions read.
+    """
+    db = sqlite3.connect(target, isolation_level=None)
+    try:
+        db.execute("PRAGMA journal_mode=DELETE")
+        db.execute("PRAGMA synchronous=OFF")
+        db.execute("ATTACH DATABASE ? AS old", (str(damaged),))
+        try:
+            entries = db.execute("SELECT type, name, sql FROM old.sqlite_master WHERE sql IS NOT NULL").fetchall()
+        except sqlite3.DatabaseError as err:
+            msg = f"damaged beyond repair: its table definitions do not read ({err})"
+            raise sqlite3.DatabaseError(msg) from None
+        tables = [(name, sql) for kind, name, sql in entries if kind == "table" and not name.startswith("sqlite_")]
+        if not {"topics", "messages"} <= {name for name, _ in tables}:
+            msg = "not a rosbag2 database (no topics and messages tables)"
+            raise sqlite3.DatabaseError(msg)
+        for _, sql in tables:
+            db.execute(sql)
+        for name, _ in tables:
+            _copy_rows(db, name, max_rowid)
+        for kind, _, sql in entries:
+            if kind == "index":
+                try:
+                    db.execute(sql)
+                except sqlite3.DatabaseError:
+                    continue
+        db.execute("DETACH DATABASE old")
+    finally:
+        db.close()
+
+
+def _copy_rows(db: sqlite3.Connection, table: str, max_rowid: int) -> None:
+    """Copy the rows of `old.table` that read into `main.table`, by row id ranges.
+
+    A range's row ids are listed in both directions: a damaged page with a row id out of order
+    ends SQLite's range scan silently (ascending at an id above the range, descending below it),
+    so what one direction misses beyond such a page, the other finds. What lies between the two,
+    and any range whose listing fails, is tried again in smaller ranges. Rows are copied one by
+    one inside SQLite (their text is never decoded), so a row that does not read costs only itself.
+    """
+    quoted = '"' + table.replace('"', '""') + '"'
+    listing = f"SELECT rowid FROM old.{quoted} WHERE rowid BETWEEN ? AND ? ORDER BY rowid "
+    copy = f"INSERT OR IGNORE INTO main.{quoted} SELECT * FROM old.{quoted} WHERE rowid = ?"
+    try:
+        row = db.execute(f"SELECT max(rowid) FROM old.{quoted}").fetchone()
+        top = min(max(int(row[0] or 0), max_rowid), 16 * max_rowid)
+    except sqlite3.DatabaseError:
+        top = max_rowid
+    ranges = [(lo, min(lo + _BLOCK_ROWS - 1, top)) for lo in range(top - (top - 1) % _BLOCK_ROWS, 0, -_BLOCK_ROWS)]
+    while ranges:
+        lo, hi = ranges.pop()
+        ids: set[int] = set()
+        failed = False
+        ends: list[int | None] = []
+        for order in ("ASC", "DESC"):
+            last = None
+            try:
+                for (rowid,) in db.execute(listing + order, (lo, hi)):
+                    ids.add(rowid)
+                    if lo <= rowid <= hi:
+                        last = rowid
+            except sqlite3.DatabaseError:
+                failed = True
+            ends.append(last)
+        _copy_each(db, copy, sorted(ids))
+        up, down = ends
+        gap_lo = lo if up is None else up + 1
+        gap_hi = hi if down is None else down - 1
+        if gap_lo > gap_hi:
+            continue
+        if (gap_lo, gap_hi) != (lo, hi):
+            ranges.append((gap_lo, gap_hi))
+        elif failed and lo < hi:
+            mid = (lo + hi) // 2
+            ranges += [(mid + 1, hi), (lo, mid)]
+
+
+def _copy_each(db: sqlite3.Connection, copy: str, rowids: list[int]) -> None:
+    """Copy rows one by one: in one transaction, or, if that does not commit, each in its own."""
+    try:
+        db.execute("BEGIN")
+        for rowid in rowids:
+            with contextlib.suppress(sqlite3.DatabaseError):
+                db.execute(copy, (rowid,))
+        db.execute("COMMIT")
+        return
+    except sqlite3.DatabaseError:
+        if db.in_transaction:
+            db.execute("ROLLBACK")
+    for rowid in rowids:
+        with contextlib.suppress(sqlite3.DatabaseError):
+            db.execute(copy, (rowid,))

@@ -30,8 +30,11 @@ examples:
 
 A killed recording leaves its storage file without an end (MCAP: no summary or footer, maybe a
 partial chunk; sqlite3: maybe an interrupted transaction) and no metadata.yaml. recover keeps every
-complete record, finishes the file in place and writes metadata.yaml. On a complete bag it only
-rewrites metadata.yaml.
+complete record and writes metadata.yaml. A damaged file loses only its damaged parts: an MCAP
+chunk that does not check out is skipped (not everything after it), a sqlite3 file that fails its
+integrity check keeps every row that still reads. A storage file is never changed in place: the
+repaired copy is written beside it and read back first, and a damaged original is kept as
+<name>.orig. A complete bag is left untouched.
 """
 
 
@@ -195,6 +198,7 @@ def _recover_json(report: RecoveryReport) -> dict[str, Any]:
         "topics": dict(report.topic_counts),
         "was_complete": report.was_complete,
         "dropped_bytes": report.dropped_bytes,
+        "kept_originals": dict(report.kept_originals),
         "metadata_version": report.metadata.version,
         "ros_distro": report.metadata.ros_distro,
     }
@@ -209,6 +213,10 @@ def _recover(args: argparse.Namespace) -> int:
         return 0
     if report.was_complete:
         state = "complete (nothing changed)"
+    elif report.kept_originals:
+        kept = ", ".join(f"{name} as {orig}" for name, orig in report.kept_originals)
+        lost = f"{_size(report.dropped_bytes)} of damaged records skipped; " if report.dropped_bytes else ""
+        state = f"recovered from damage ({lost}original kept: {kept})"
     elif report.dropped_bytes:
         state = f"recovered ({_size(report.dropped_bytes)} of partial records cut)"
     else:
