@@ -70,7 +70,10 @@ VALUE_CASES: dict[str, tuple[dict[str, Any], str]] = {
     "lidar_above_physics": ({"sensors.lidar.rate_hz": 2000.0}, "above the physics rate"),
     "clock_above_physics": ({"physics.step_s": 0.01, "sensors.clock.rate_hz": 200.0}, "above the physics rate"),
     "negative_noise": ({"sensors.lidar.noise_std_m": -0.01}, "noise_std_m"),
-    "negative_tolerance": ({"mission.follower.tolerance_m": -0.1}, "tolerance_m"),
+    "negative_tolerance": (
+        {"mission.type": "waypoints", "mission.points": [[0.0, 0.0], [1.0, 0.0]], "mission.follower.tolerance_m": -0.1},
+        "tolerance_m",
+    ),
     "zero_max_duration": ({"max_duration_s": 0.0}, "max_duration_s"),
     "angle_min_above_max": ({"sensors.lidar.angle_min_rad": 1.0, "sensors.lidar.angle_max_rad": -1.0}, "angle_min"),
     "seed_text": ({"seed": "seven"}, "seed"),

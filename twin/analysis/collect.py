@@ -163,7 +163,8 @@ class TopicHealth:
         self.t_buf.append(t_ns)
         kind = self.stamp_kind
         if kind == 1:
-            self.stamp_buf += buf[4:12]
+            # a message too short to hold a stamp (a damaged record) counts as one without a stamp
+            self.stamp_buf += buf[4:12] if len(buf) >= 12 else bytes(8)
         elif kind == 2:
             self.add_tf_stamp(buf)
         if len(self.t_buf) >= _BLOCK:
@@ -538,7 +539,7 @@ def collect(
             tb.append(t_ns)
             kind = th.stamp_kind
             if kind == 1:
-                th.stamp_buf += buf[4:12]
+                th.stamp_buf += buf[4:12] if len(buf) >= 12 else bytes(8)  # too short: a damaged record
             elif kind == 2:
                 th.add_tf_stamp(buf)
             if len(tb) >= block:
@@ -571,9 +572,22 @@ def _add_series(
 
 
 def _series_handler(ts: TopicSeries, store: Any, msgtype: str) -> Callable[[int, bytes], None]:
+    skipped = 0
+
     def handle(t_ns: int, buf: bytes) -> None:
-        if ts.wants():
-            ts.add(t_ns, store.deserialize_cdr(bytes(buf), msgtype))
+        nonlocal skipped
+        if not ts.wants():
+            return
+        try:
+            msg = store.deserialize_cdr(bytes(buf), msgtype)
+        except Exception as err:  # rosbags raises several kinds; a damaged message is skipped, not fatal
+            skipped += 1
+            if skipped == 1:  # once per topic: a damaged bag may hold thousands
+                _log.warning(
+                    "%s at %d ns does not decode as %s (%s); skipped, and so are any more", ts.topic, t_ns, msgtype, err
+                )
+            return
+        ts.add(t_ns, msg)
 
     return handle
 
