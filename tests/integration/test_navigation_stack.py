@@ -120,6 +120,7 @@ def test_a_map_server_yaml_is_what_the_robot_localises_on(tmp_path: Path) -> Non
         f"world: {{sdf: {world}, model_path: [{models}]}}\n"
         "robot: {initial_pose: {x_m: -2.0, y_m: -0.5}}\n"
         f"map: {TB3_MAP}\n"
+        "localization: {type: amcl}\n"  # a scripted drive asks for AMCL by name (auto runs it for a tree)
         "mission: {type: cmd_vel_script, segments: [{duration_s: 8, linear_mps: 0.2, angular_radps: 0.15}]}\n"
     )
     result, bag = simulate(tmp_path, "tb3world", body)

@@ -136,7 +136,7 @@ def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
     lidar = scenario.sensors.lidar
     if lidar.range_min_m is None and lidar.range_max_m is None:
         return
-    from twin.sim.simulation import scenario_robot
+    from twin.sim.robot_group import scenario_robot
 
     try:
         robot = scenario_robot(scenario)
@@ -210,7 +210,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
     """
     from twin.sim.navigation import check_map_extent
-    from twin.sim.simulation import scenario_robot, spawn_monitor
+    from twin.sim.robot_group import scenario_robot, spawn_monitor
     from twin.world import build_scene, load_world
 
     try:
@@ -247,8 +247,8 @@ def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
     """Bind the FMU drive as `simulate` does before its first step (contract, motor model, speed loop)."""
     from twin.core.clock import s_to_ns
     from twin.robot.drivetrain import FmuDrive, check_fmu_drive
+    from twin.sim.robot_group import fmu_drive_section
     from twin.sim.scenario import fmu_fallback
-    from twin.sim.simulation import fmu_drive_section
 
     if not isinstance(scenario.drive, FmuDrive) or fmu_fallback(scenario.drive) is not None:
         return

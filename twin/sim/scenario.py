@@ -338,9 +338,12 @@ class InitialPoseEstimate:
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class LocalizationSection:
-    """AMCL on the map (Nav2's), or none: map→odom stays the identity and the robot steers on `/odom`."""
+    """AMCL on the map (Nav2's), or none: map→odom stays the identity and the robot steers on `/odom`.
 
-    type: Literal["amcl", "none"] = "amcl"
+    auto (the default): AMCL when the mission navigates on the map (a behaviour tree), none otherwise.
+    """
+
+    type: Literal["auto", "amcl", "none"] = "auto"
     initial_pose: InitialPoseEstimate | None = field(default_factory=InitialPoseEstimate)  # null: a node sends it
     map_offset_m: tuple[float, float] = (0.0, 0.0)  # the map drawn this far off the world (a misaligned SLAM map)
 
