@@ -290,6 +290,10 @@ class Simulation(Closing):
         mission = self.groups[0].mission_node
         done = None if mission is None or self._run_to_limit else self.mission  # its `done` ends the run
         resume_collection()  # `twin simulate` built all this without the cyclic collector: freeze it, resume
+        if self.recorder is not None:
+            # Start the recorder's wall-clock flush interval with the loop, not when the recorder was made:
+            # what setup took before (longer on a cold cache) must not decide where its first chunk ends.
+            self.recorder.flush()
         wall0 = time.perf_counter()
         why = self.executor.spin(self.end_k, done=done, should_stop=should_stop, progress=progress)
         wall_s = time.perf_counter() - wall0
