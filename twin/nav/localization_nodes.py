@@ -54,7 +54,7 @@ class MapServerNode(Node):
             occupancy.height,
             (occupancy.origin_x_m, occupancy.origin_y_m, occupancy.origin_yaw_rad),
         )
-        pub = self.create_publisher(OccupancyGridEncoder.msgtype, "/map", LATCHED)
+        pub = self.create_publisher(OccupancyGridEncoder.msgtype, "map", LATCHED)
         cells = occupancy.data
 
         def publish(t_ns: int) -> None:
@@ -68,7 +68,7 @@ class InitialPoseNode(Node):
 
     def __init__(self, pose: tuple[float, float, float], *, xy_variance_m2: float, yaw_variance_rad2: float) -> None:
         super().__init__("initial_pose")
-        pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "/initialpose", 10)
+        pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "initialpose", 10)
         encode = PoseWithCovarianceStampedEncoder("map").encode
         log = self.get_logger()
         now = self._graph_now
@@ -119,8 +119,8 @@ class AmclNode(Node):
         pose_encode = PoseWithCovarianceStampedEncoder(global_frame).encode
         cloud_encode = ParticleCloudEncoder(global_frame).encode
         tf_encode = TFEncoder([(global_frame, odom_frame)]).encode_planar
-        pose_pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "/amcl_pose", LATCHED)
-        cloud_pub = self.create_publisher(ParticleCloudEncoder.msgtype, "/particle_cloud", 10)
+        pose_pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "amcl_pose", LATCHED)
+        cloud_pub = self.create_publisher(ParticleCloudEncoder.msgtype, "particle_cloud", 10)
         tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
         tolerance_ns = round(transform_tolerance_s * 1e9)
         now = self._graph_now
@@ -194,10 +194,10 @@ class AmclNode(Node):
             odoms.clear()
             pending.clear()
 
-        self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
-        self.create_subscription("sensor_msgs/msg/LaserScan", "/scan", on_scan, 10, raw=True)
+        self.create_subscription("nav_msgs/msg/Odometry", "odom", on_odom, 10, raw=True)
+        self.create_subscription("sensor_msgs/msg/LaserScan", "scan", on_scan, 10, raw=True)
         self.create_subscription(
-            "geometry_msgs/msg/PoseWithCovarianceStamped", "/initialpose", on_initial_pose, 10, raw=True
+            "geometry_msgs/msg/PoseWithCovarianceStamped", "initialpose", on_initial_pose, 10, raw=True
         )
 
 
@@ -266,8 +266,9 @@ class CostmapNode(Node):
             cells = table[grid.cost]
             pub.publish(Encoded((encoder.encode, (t_ns, cells), grid)))
 
-        self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
+        robot_ns = self.get_namespace().rpartition("/")[0]  # the costmap's own namespace is <robot's>/<name>
+        self.create_subscription("nav_msgs/msg/Odometry", f"{robot_ns}/odom", on_odom, 10, raw=True)
         if use_scan:
-            self.create_subscription("sensor_msgs/msg/LaserScan", "/scan", on_scan, 10, raw=True)
+            self.create_subscription("sensor_msgs/msg/LaserScan", f"{robot_ns}/scan", on_scan, 10, raw=True)
         self.create_rate_timer(params.update_frequency_hz, on_update, priority=PRIORITY_USER - 5)
         self.create_rate_timer(params.publish_frequency_hz, on_publish, priority=PRIORITY_USER - 4)

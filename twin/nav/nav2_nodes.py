@@ -756,7 +756,7 @@ class PlannerServerNode(Node):
 
     def __init__(self, servers: Nav2Servers) -> None:
         super().__init__("planner_server")
-        pub = self.create_publisher(PathEncoder.msgtype, "/plan", 10)
+        pub = self.create_publisher(PathEncoder.msgtype, "plan", 10)
         encode = PathEncoder("map").encode
 
         def on_plan(t_ns: int, path: F64) -> None:
@@ -771,7 +771,7 @@ class ControllerServerNode(Node):
     def __init__(self, servers: Nav2Servers) -> None:
         super().__init__("controller_server")
         cmd_pub = self.create_publisher(TwistEncoder.msgtype, "cmd_vel_nav", 10)
-        plan_pub = self.create_publisher(PathEncoder.msgtype, "/local_plan", 10)
+        plan_pub = self.create_publisher(PathEncoder.msgtype, "local_plan", 10)
         encode = TwistEncoder().encode
         plan_encode = PathEncoder("odom").encode
         cycle = servers.controller_cycle
@@ -794,7 +794,7 @@ class VelocitySmootherNode(Node):
     def __init__(self, params: SmootherParams) -> None:
         super().__init__("velocity_smoother")
         smoother = VelocitySmoother(params)
-        pub = self.create_publisher(TwistEncoder.msgtype, "/cmd_vel", 10)
+        pub = self.create_publisher(TwistEncoder.msgtype, "cmd_vel", 10)
         encode = TwistEncoder().encode
         now = self._graph_now
 
@@ -823,7 +823,7 @@ class BehaviorServerNode(Node):
 
     def __init__(self, servers: Nav2Servers) -> None:
         super().__init__("behavior_server")
-        pub = self.create_publisher(TwistEncoder.msgtype, "/cmd_vel", 10)
+        pub = self.create_publisher(TwistEncoder.msgtype, "cmd_vel", 10)
         encode = TwistEncoder().encode
         cycle = servers.behavior_cycle
 
@@ -838,11 +838,11 @@ class BehaviorServerNode(Node):
 class BtNavigatorNode(Node):
     """bt_navigator: ticks the navigation tree every bt_loop_duration while a goal runs."""
 
-    FEEDBACK_TOPIC = "/navigate_to_pose/feedback"
+    FEEDBACK_TOPIC = "navigate_to_pose/feedback"
 
     def __init__(self, navigator: BtNavigator, frames: Frames) -> None:
         super().__init__("bt_navigator")
-        log_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "/behavior_tree_log", 10)
+        log_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "behavior_tree_log", 10)
         log_encode = BehaviorTreeLogEncoder().encode
         feedback_pub = self.create_publisher(NavigationFeedbackEncoder.msgtype, self.FEEDBACK_TOPIC, 10)
         feedback_encode = NavigationFeedbackEncoder().encode

@@ -41,11 +41,11 @@ from twin.nav.nav2_nodes import (
 )
 from twin.nav.params import Nav2Params, default_params_path, load_nav2_params
 from twin.node import Node
-from twin.sim.scenario import BehaviorTreeMission, Scenario
+from twin.sim.scenario import BehaviorTreeMission, Scenario, runs_amcl, runs_nav2
 from twin.world import RobotModelSpec
 from twin.world.scene import Scene
 
-__all__ = ["DEFAULT_BT_XML", "LocalizationLog", "NavigationStack", "check_map_extent", "runs_amcl", "runs_nav2"]
+__all__ = ["DEFAULT_BT_XML", "LocalizationLog", "NavigationStack", "check_map_extent"]
 
 _log = logging.getLogger(__name__)
 
@@ -97,17 +97,6 @@ def _params_path(scenario: Scenario, robot: RobotModelSpec) -> Path:
     except ConfigError as err:
         msg = f"navigation.params: {err}"
         raise ConfigError(msg) from None
-
-
-def runs_nav2(sc: Scenario) -> bool:
-    """Whether Nav2's stack (costmaps, servers, bt_navigator) runs: only a behaviour-tree mission sends goals."""
-    return isinstance(sc.mission, BehaviorTreeMission)
-
-
-def runs_amcl(sc: Scenario) -> bool:
-    """Whether AMCL runs: `localization.type` amcl, or auto (the default) with a mission that navigates on the map."""
-    kind = sc.localization.type
-    return kind == "amcl" or (kind == "auto" and runs_nav2(sc))
 
 
 class NavigationStack:

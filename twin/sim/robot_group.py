@@ -61,6 +61,8 @@ from twin.sim.scenario import (
     ReplayMission,
     Scenario,
     fmu_fallback,
+    runs_amcl,
+    runs_nav2,
 )
 from twin.world import RobotModelSpec, load_robot, urdf_from_robot
 from twin.world.obstacles import ObstacleField, ObstacleMonitor
@@ -275,8 +277,6 @@ class RobotGroup:
     # -- what the nodes simulate -----------------------------------------------------------------
 
     def _make_navigation(self, scene: Scene, rng: RngStreams) -> NavigationStack | None:
-        from twin.sim.navigation import runs_amcl, runs_nav2
-
         if not (runs_amcl(self.scenario) or runs_nav2(self.scenario)):
             return None  # no map, AMCL or Nav2 stack: nothing is imported for them either
         from twin.sim.navigation import NavigationStack
@@ -441,7 +441,7 @@ class RobotGroup:
                 if by_nav2
                 else (spec.controller_rate_hz if isinstance(spec, BehaviorTreeMission) else spec.rate_hz),
                 tree_rate_hz=spec.tick_rate_hz if isinstance(spec, BehaviorTreeMission) else None,
-                bt_log_topic="/mission/behavior_tree_log" if by_nav2 else "/behavior_tree_log",
+                bt_log_topic="mission/behavior_tree_log" if by_nav2 else "behavior_tree_log",
                 pose_source=frames.map_pose if frames is not None and tree else None,
                 ready=(lambda: frames.localized) if frames is not None and tree else None,
             )

@@ -31,6 +31,8 @@ __all__ = [
     "default_scenario_path",
     "fmu_fallback",
     "load_scenario",
+    "runs_amcl",
+    "runs_nav2",
     "with_replay_start",
 ]
 
@@ -450,3 +452,14 @@ def with_replay_start(scenario: Scenario) -> Scenario:
     x, y, yaw = first_pose(mission)
     pose = InitialPose(x_m=x, y_m=y, yaw_rad=yaw)
     return dataclasses.replace(scenario, robot=dataclasses.replace(scenario.robot, initial_pose=pose))
+
+
+def runs_nav2(sc: Scenario) -> bool:
+    """Whether the robot runs Nav2's stack (costmaps, servers, bt_navigator): a behaviour-tree mission sends goals."""
+    return isinstance(sc.mission, BehaviorTreeMission)
+
+
+def runs_amcl(sc: Scenario) -> bool:
+    """Whether the robot runs AMCL: `localization.type` amcl, or auto (the default) with a mission that navigates."""
+    kind = sc.localization.type
+    return kind == "amcl" or (kind == "auto" and runs_nav2(sc))
