@@ -118,6 +118,7 @@ def test_a_cold_cache_and_a_warm_cache_give_byte_identical_bags(tmp_path: Path) 
     assert cold.keys() == warm.keys()
     for name in cold:
         assert cold[name] == warm[name], f"{name} differs between the cold-cache and the warm-cache run"
+        assert str(cache).encode() not in cold[name], f"{name} names the cache folder"  # messages and metadata
     with AnyReader([bags[0]]) as reader:
         for con, _, raw in reader.messages():
             assert str(cache).encode() not in bytes(raw), f"{con.topic} names the cache folder"
