@@ -14,7 +14,6 @@ import functools
 import inspect
 import logging
 import math
-import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -76,6 +75,8 @@ class LocalizationLog:
         """Median, max and final errors and the series (empty before the first update)."""
         if not self.samples:
             return {}
+        import statistics  # with its fractions and decimal: for the summary at the end only
+
         pos = [s[1] for s in self.samples]
         yaw = [s[2] for s in self.samples]
         return {
