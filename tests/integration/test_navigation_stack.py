@@ -113,6 +113,31 @@ def test_localization_none_keeps_the_static_map_to_odom(tmp_path: Path) -> None:
     assert ("map", "odom") in static
 
 
+def _burger_without_lidar(folder: Path) -> Path:
+    """The project's Burger with its ray sensor cut out of the SDF."""
+    text = (REPO / "sdf" / "models" / "turtlebot3_burger" / "model.sdf").read_text()
+    start = text.index('<sensor name="hls_lfcd_lds" type="ray">')
+    end = text.index("</sensor>", start) + len("</sensor>")
+    model = folder / "blind_burger"
+    model.mkdir()
+    (model / "model.sdf").write_text(text[:start] + text[end:])
+    return model / "model.sdf"
+
+
+def test_a_robot_without_a_lidar_sent_to_navigate_is_one_line_and_exit_2(tmp_path: Path) -> None:
+    model = _burger_without_lidar(tmp_path)
+    result, bag = simulate(tmp_path, "blind", f"robot: {{model: {model}}}\n")
+    assert result.returncode == 2, result.stderr  # type: ignore[attr-defined]
+    lines = [ln for ln in result.stderr.splitlines() if ln.startswith("twin: error")]  # type: ignore[attr-defined]
+    assert len(lines) == 1 and "has no lidar" in lines[0] and "cmd_vel_script" in lines[0], result.stderr  # type: ignore[attr-defined]
+    assert not bag.exists()
+    # ... while a scripted drive needs no lidar: it builds no map, AMCL or Nav2 stack
+    body = f"robot: {{model: {model}}}\nmission: {{type: cmd_vel_script, segments: [{{duration_s: 1, linear_mps: 0.1}}]}}\n"
+    result, bag = simulate(tmp_path, "blind_script", body)
+    assert result.returncode == 0, result.stderr  # type: ignore[attr-defined]
+    assert "/scan" not in topics_of(bag) and "/map" not in topics_of(bag)
+
+
 def test_a_map_server_yaml_is_what_the_robot_localises_on(tmp_path: Path) -> None:
     world = FIXTURES / "gazebo_classic" / "worlds" / "turtlebot3_world.world"
     models = FIXTURES / "gazebo_classic" / "models"
@@ -120,6 +145,7 @@ def test_a_map_server_yaml_is_what_the_robot_localises_on(tmp_path: Path) -> Non
         f"world: {{sdf: {world}, model_path: [{models}]}}\n"
         "robot: {initial_pose: {x_m: -2.0, y_m: -0.5}}\n"
         f"map: {TB3_MAP}\n"
+        "localization: {type: amcl}\n"  # a scripted drive asks for AMCL by name (auto runs it for a tree)
         "mission: {type: cmd_vel_script, segments: [{duration_s: 8, linear_mps: 0.2, angular_radps: 0.15}]}\n"
     )
     result, bag = simulate(tmp_path, "tb3world", body)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -88,6 +89,40 @@ def test_same_seed_gives_identical_messages_and_another_seed_other_noise(tmp_pat
     assert bags[0] == bags[1]
     scans = [[raw for topic, _, raw in bag if topic == "/scan"] for bag in bags]
     assert scans[0] != scans[2]
+
+
+def _bag_files(bag: Path) -> dict[str, bytes]:
+    return {f.name: f.read_bytes() for f in sorted(bag.iterdir())}
+
+
+def test_a_cold_cache_and_a_warm_cache_give_byte_identical_bags(tmp_path: Path) -> None:
+    """A run on an empty cache folder builds its kernels and FMUs there; its bag must not show it."""
+    cache = tmp_path / "cache"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "TWIN_CACHE_DIR": str(cache)}
+    bags = []
+    for name in ("cold", "warm"):
+        bag = tmp_path / name / "run"  # the same folder name: metadata.yaml names the file after it
+        result = subprocess.run(
+            [sys.executable, "-m", "twin", "simulate", "--duration", "10", "--out", str(bag)],
+            cwd=REPO,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=900,
+            check=False,
+        )
+        assert result.returncode == 0, result.stderr
+        bags.append(bag)
+    assert any((cache / "kernels").iterdir()), "the cold run built nothing into the cache folder"
+    cold, warm = (_bag_files(b) for b in bags)
+    assert cold.keys() == warm.keys()
+    for name in cold:
+        assert cold[name] == warm[name], f"{name} differs between the cold-cache and the warm-cache run"
+        assert str(cache).encode() not in cold[name], f"{name} names the cache folder"  # messages and metadata
+    with AnyReader([bags[0]]) as reader:
+        for con, _, raw in reader.messages():
+            assert str(cache).encode() not in bytes(raw), f"{con.topic} names the cache folder"
+            assert str(REPO).encode() not in bytes(raw), f"{con.topic} names the checkout's folder"
 
 
 def test_sqlite3_storage_records_the_same_topics(tmp_path: Path) -> None:

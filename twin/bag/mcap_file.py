@@ -257,9 +257,11 @@ class McapWriter:
         self._metadata_indexes: list[bytes] = []
         self.stats = _Stats()
         self._closed = False
-        # The compiled chunk builder (loaded at the first batch) and its buffers, grown as needed.
+        # The compiled chunk builder and its buffers, grown as needed. Loaded here, not at the first
+        # batch: building it on a cold cache inside a flush would stall the recording, and the
+        # recorder's wall-clock flushes would then cut chunks where a warm cache's run does not.
         self._native = native
-        self._kernel: Any = None
+        self._kernel: Any = (load_chunk_kernel() or False) if native else None
         self._inputs = np.zeros((3, 0), dtype=np.int64)  # channels, times, lengths
         self._out = np.zeros(0, dtype=np.uint8)
         self._work = np.zeros(0, dtype=np.int64)

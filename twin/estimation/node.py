@@ -26,7 +26,7 @@ class EkfNode(Node):
         names = tuple(wheel_joints)
         encode_odom = OdometryEncoder("odom", base_frame).encode
         encode_tf = TFEncoder([("odom", base_frame)]).encode_planar
-        odom_pub = self.create_publisher(OdometryEncoder.msgtype, "/odom", 10)
+        odom_pub = self.create_publisher(OdometryEncoder.msgtype, "odom", 10)
         tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
         add_wheel_positions = ekf.add_wheel_positions
 
@@ -54,5 +54,5 @@ class EkfNode(Node):
                 else:
                     add_gyro(*imu_yaw_rate(msg))
 
-            self.create_subscription("sensor_msgs/msg/Imu", "/imu", on_imu, 10, raw=True)
-        self.create_subscription("sensor_msgs/msg/JointState", "/joint_states", on_joint_states, 10, raw=True)
+            self.create_subscription("sensor_msgs/msg/Imu", "imu", on_imu, 10, raw=True)
+        self.create_subscription("sensor_msgs/msg/JointState", "joint_states", on_joint_states, 10, raw=True)

@@ -80,7 +80,7 @@ class MissionNode(Node):
         initial_pose: tuple[float, float, float],
         command_rate_hz: float | None,
         tree_rate_hz: float | None = None,
-        bt_log_topic: str = "/behavior_tree_log",
+        bt_log_topic: str = "behavior_tree_log",
         pose_source: Callable[[], tuple[float, float, float]] | None = None,
         ready: Callable[[], bool] | None = None,
     ) -> None:
@@ -99,7 +99,7 @@ class MissionNode(Node):
             self._add_tree(mission, tree_rate_hz, bt_log_topic)  # type: ignore[arg-type]
         if command_rate_hz is None:  # Nav2 drives the robot; the mission only sends goals
             return
-        cmd_pub = self.create_publisher(TwistEncoder.msgtype, "/cmd_vel", 10)
+        cmd_pub = self.create_publisher(TwistEncoder.msgtype, "cmd_vel", 10)
         encode = TwistEncoder().encode
         command = mission.command
 
@@ -111,12 +111,12 @@ class MissionNode(Node):
                 cmd_pub.publish(Encoded((encode, cmd, cmd)))
 
         self.create_rate_timer(command_rate_hz, on_timer, priority=PRIORITY_COMMAND)
-        self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
+        self.create_subscription("nav_msgs/msg/Odometry", "odom", on_odom, 10, raw=True)
 
     def _add_tree(self, mission: TreeMissionLike, rate_hz: float, bt_log_topic: str) -> None:
         bt_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, bt_log_topic, 10)
         bt_encode = BehaviorTreeLogEncoder().encode
-        plan_pub = self.create_publisher(PathEncoder.msgtype, "/plan", 10)
+        plan_pub = self.create_publisher(PathEncoder.msgtype, "plan", 10)
         plan_encode = PathEncoder("map").encode
         navigator = mission.navigator
         plans = [0]

@@ -337,10 +337,15 @@ class Parameter:
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class LaunchArguments:
-    """What a launch file gives a node: its name and namespace, parameter overrides, remappings."""
+    """What a launch file gives a node: its name and namespace, parameter overrides, remappings.
+
+    `push_namespace` is what an enclosing group pushes (launch's `PushRosNamespace`): it leads the
+    node's namespace (`namespace`, else the one the node's code gives) unless that is absolute.
+    """
 
     name: str | None = None
     namespace: str = ""
+    push_namespace: str = ""
     parameters: Mapping[str, Any] = field(default_factory=dict)
     remappings: Mapping[str, str] = field(default_factory=dict)
 
@@ -383,6 +388,8 @@ class Node:
             msg = f"node name {name!r} must be letters, digits and _ and not start with a digit"
             raise ConfigError(msg)
         ns = launch.namespace or namespace
+        if not ns.startswith("/"):
+            ns = f"{launch.push_namespace.strip('/')}/{ns}"
         self._name = name
         self._namespace = "/" + ns.strip("/") if ns.strip("/") else ""
         self._overrides: dict[str, Any] = {**(parameter_overrides or {}), **launch.parameters}

@@ -144,11 +144,11 @@ class DiffDriveNode(Node):
             else:
                 set_cmd_vel(*twist_of(msg))
 
-        self.create_subscription("geometry_msgs/msg/Twist", "/cmd_vel", on_cmd_vel, 10, raw=True)
-        self._contact_pub = self.create_publisher(ContactEncoder.msgtype, "/contacts", 10)
+        self.create_subscription("geometry_msgs/msg/Twist", "cmd_vel", on_cmd_vel, 10, raw=True)
+        self._contact_pub = self.create_publisher(ContactEncoder.msgtype, "contacts", 10)
         self._contact_enc = ContactEncoder("map")
         if motor_joints:
-            motor_pub = self.create_publisher(MotorStateEncoder.msgtype, "/motor_state", 10)
+            motor_pub = self.create_publisher(MotorStateEncoder.msgtype, "motor_state", 10)
             encode = MotorStateEncoder(list(motor_joints)).encode
             wheel_state = drive.wheel_state
 
@@ -286,7 +286,7 @@ class LidarNode(Node):
             range_max_m=geo.range_max_m,
             samples=geo.num_ranges,
         ).encode
-        pub = self.create_publisher(ScanEncoder.msgtype, "/scan", SENSOR_DATA)
+        pub = self.create_publisher(ScanEncoder.msgtype, "scan", SENSOR_DATA)
         scan = lidar.scan
 
         def on_timer(t_ns: int) -> None:
@@ -321,7 +321,7 @@ class ImuNode(Node):
             linear_acceleration_covariance=imu.linear_acceleration_covariance,
         )
         encode = encoder.encode
-        pub = self.create_publisher(ImuEncoder.msgtype, "/imu", SENSOR_DATA)
+        pub = self.create_publisher(ImuEncoder.msgtype, "imu", SENSOR_DATA)
         compiled = None
         if chassis_address is not None:
             compiled = imu.compiled_sampler(chassis_address, initial_yaw_rad, encoder)
@@ -367,7 +367,7 @@ class JointStateNode(Node):
     ) -> None:
         super().__init__("joint_states")
         encode = JointStateEncoder(list(names), with_effort=with_effort).encode
-        pub = self.create_publisher(JointStateEncoder.msgtype, "/joint_states", 10)
+        pub = self.create_publisher(JointStateEncoder.msgtype, "joint_states", 10)
 
         def on_timer(t_ns: int) -> None:
             ws = wheel_state()
@@ -398,7 +398,7 @@ class GazeboOdometryNode(Node):
         cov = np.diag(_ODOM_COV)
         encode_odom = OdometryEncoder("odom", base_frame, pose_covariance=cov, twist_covariance=cov).encode
         encode_tf = TFEncoder([("odom", base_frame)]).encode_planar
-        odom_pub = self.create_publisher(OdometryEncoder.msgtype, "/odom", 10)
+        odom_pub = self.create_publisher(OdometryEncoder.msgtype, "odom", 10)
         tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
 
         def on_timer(t_ns: int) -> None:
@@ -416,7 +416,7 @@ class GroundTruthNode(Node):
     def __init__(self, base_frame: str, rate_hz: float, chassis: Callable[[], ChassisState]) -> None:
         super().__init__("ground_truth")
         encode = OdometryEncoder("map", base_frame).encode
-        pub = self.create_publisher(OdometryEncoder.msgtype, "/ground_truth/odom", 10)
+        pub = self.create_publisher(OdometryEncoder.msgtype, "ground_truth/odom", 10)
 
         def on_timer(t_ns: int) -> None:
             state = chassis()[:5]  # x, y, yaw, v, yaw rate (a plain tuple)
@@ -488,7 +488,7 @@ class RobotStatePublisher(Node):
         static_encoder = TFEncoder([(p, c) for p, c, _ in static])
         poses = [pose for _, _, pose in static]
         tf_static = self.create_publisher(TFEncoder.msgtype, "/tf_static", LATCHED)
-        description = self.create_publisher(StringEncoder.msgtype, "/robot_description", LATCHED)
+        description = self.create_publisher(StringEncoder.msgtype, "robot_description", LATCHED)
 
         def publish_static(t_ns: int) -> None:
             tf_static.publish(Encoded((static_encoder.encode, (t_ns, poses), None)))
@@ -512,4 +512,4 @@ class RobotStatePublisher(Node):
                 t_ns, (pl, pr) = read
             tf_pub.publish(Encoded((encode, (t_ns, (left.at(pl), right.at(pr))), None)))
 
-        self.create_subscription(JointStateEncoder.msgtype, "/joint_states", on_joint_states, 10, raw=True)
+        self.create_subscription(JointStateEncoder.msgtype, "joint_states", on_joint_states, 10, raw=True)

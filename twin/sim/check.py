@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twin.core.errors import ConfigError, FmuError, TwinError
-from twin.sim.scenario import BehaviorTreeMission, Scenario
+from twin.sim.scenario import BehaviorTreeMission, Scenario, runs_amcl, runs_nav2
 
 if TYPE_CHECKING:
     from twin.world import RobotModelSpec
@@ -139,7 +139,7 @@ def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
     lidar = scenario.sensors.lidar
     if lidar.range_min_m is None and lidar.range_max_m is None:
         return
-    from twin.sim.simulation import scenario_robot
+    from twin.sim.robot_group import scenario_robot
 
     try:
         robot = scenario_robot(scenario)
@@ -213,7 +213,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
     """
     from twin.sim.navigation import check_map_extent
-    from twin.sim.simulation import scenario_robot, spawn_monitor
+    from twin.sim.robot_group import scenario_robot, spawn_monitor
     from twin.world import build_scene, load_world
 
     try:
@@ -250,8 +250,8 @@ def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
     """Bind the FMU drive as `simulate` does before its first step (contract, motor model, speed loop)."""
     from twin.core.clock import s_to_ns
     from twin.robot.fmu_drive import FmuDrive, check_fmu_drive
+    from twin.sim.robot_group import fmu_drive_section
     from twin.sim.scenario import fmu_fallback
-    from twin.sim.simulation import fmu_drive_section
 
     if not isinstance(scenario.drive, FmuDrive) or fmu_fallback(scenario.drive) is not None:
         return
@@ -284,8 +284,8 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
 
     occupancy = load_map(Path(scenario.map)) if scenario.map != "from_world" else None
     nav = scenario.navigation
-    amcl = scenario.localization.type == "amcl" and robot.lidar is not None
-    nav2 = isinstance(scenario.mission, BehaviorTreeMission) and nav.type == "nav2" and robot.lidar is not None
+    amcl = runs_amcl(scenario) and robot.lidar is not None
+    nav2 = runs_nav2(scenario) and nav.type == "nav2" and robot.lidar is not None
     if amcl or nav2 or nav.params is not None:
         try:
             path = nav.params if nav.params is not None else default_params_path(robot.name)

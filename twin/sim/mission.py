@@ -18,7 +18,6 @@ from twin.bt.log import StatusChange, StatusChangeBuffer
 from twin.core.clock import s_to_ns
 from twin.mission.bt_nodes import LOCATION_FILE_KEY, register_mission_nodes
 from twin.mission.path_follower import PathFollower
-from twin.nav.bt_navigator.factory import nav2_factory
 from twin.sim.replay import load_commands
 from twin.sim.scenario import BehaviorTreeMission, CmdVelScriptMission, ReplayMission, WaypointsMission
 
@@ -170,6 +169,8 @@ class TreeMission:
     ) -> None:
         self.spec = spec
         self.navigator = navigator
+        from twin.nav.bt_navigator.factory import nav2_factory  # only a tree mission needs Nav2's BT nodes
+
         factory = nav2_factory()
         register_mission_nodes(factory, navigator=navigator, rng=random.Random(seed))
         factory.load_plugins()

@@ -10,15 +10,17 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
+import inspect
 import logging
 import math
-import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from twin.core.cache import cached_arrays
 from twin.core.errors import ConfigError
 from twin.nav.amcl.amcl_node import AmclNode, InitialPoseNode
 from twin.nav.amcl.filter import Amcl
@@ -38,11 +40,11 @@ from twin.nav.planner.planner_server import PlannerServerNode
 from twin.nav.server_params import Nav2Config, nav2_config
 from twin.nav.velocity_smoother.velocity_smoother import VelocitySmootherNode
 from twin.node import Node
-from twin.sim.scenario import BehaviorTreeMission, Scenario
+from twin.sim.scenario import BehaviorTreeMission, Scenario, runs_amcl, runs_nav2
 from twin.world import RobotModelSpec
 from twin.world.scene import Scene
 
-__all__ = ["DEFAULT_BT_XML", "LocalizationLog", "NavigationStack"]
+__all__ = ["DEFAULT_BT_XML", "LocalizationLog", "NavigationStack", "check_map_extent"]
 
 _log = logging.getLogger(__name__)
 
@@ -73,6 +75,8 @@ class LocalizationLog:
         """Median, max and final errors and the series (empty before the first update)."""
         if not self.samples:
             return {}
+        import statistics  # with its fractions and decimal: for the summary at the end only
+
         pos = [s[1] for s in self.samples]
         yaw = [s[2] for s in self.samples]
         return {
@@ -146,15 +150,23 @@ class NavigationStack:
             TreeError: A navigator tree the twin cannot run.
         """
         sc = scenario
-        wants_amcl = sc.localization.type == "amcl"
-        wants_nav2 = isinstance(sc.mission, BehaviorTreeMission) and sc.navigation.type == "nav2"
-        if robot.lidar is None and (wants_amcl or wants_nav2):
-            _log.warning(
-                "robot %s has no lidar: AMCL and Nav2's costmaps cannot run; goals use the grid follower", robot.name
-            )
-            return None
+        wants_amcl = runs_amcl(sc)
+        wants_nav2 = runs_nav2(sc)
         if not (wants_amcl or wants_nav2):
             return None
+        if robot.lidar is None:
+            if wants_nav2:
+                msg = (
+                    f"robot {robot.name!r} has no lidar: Nav2's costmaps and AMCL need /scan to carry out the "
+                    "mission's goals; give the robot a ray sensor in its SDF, or choose a mission that does not "
+                    "navigate (cmd_vel_script, waypoints, none)"
+                )
+            else:
+                msg = (
+                    f"localization: AMCL needs /scan but robot {robot.name!r} has no lidar; give the robot a ray "
+                    "sensor in its SDF, or set localization: {type: none}"
+                )
+            raise ConfigError(msg)
         assert robot.lidar is not None
         params_path = _params_path(sc, robot)
         params = load_nav2_params(params_path, overrides=dict(sc.navigation.set))
@@ -216,13 +228,7 @@ class NavigationStack:
             assert robot.lidar is not None
             pose = sc.robot.initial_pose
             height = max(0.01, robot.base_height_m + robot.lidar.mount.z_m)  # the beam plane, as the lidar casts it
-            occupancy = map_from_scene(
-                scene,
-                height_m=height,
-                resolution_m=0.05,
-                free_xy_m=(pose.x_m, pose.y_m),
-                bounds_xy_m=_map_bounds(sc, scene),
-            )
+            occupancy = _map_from_world(scene, height, (pose.x_m, pose.y_m), _map_bounds(sc, scene))
         dx, dy = sc.localization.map_offset_m
         if dx or dy:
             occupancy = dataclasses.replace(
@@ -329,15 +335,47 @@ def _map_bounds(sc: Scenario, scene: Scene, *, margin_m: float = 1.0) -> tuple[f
     return (x0, y0, x1, y1)
 
 
+_MAP_CODE = Path(inspect.getfile(map_from_scene))
+"""The file of the code that makes a map from the world: its bytes key the cached maps."""
+
+
+@functools.cache
+def _map_code() -> bytes:
+    return _MAP_CODE.read_bytes()
+
+
+def _map_from_world(
+    scene: Scene, height_m: float, free_xy_m: tuple[float, float], bounds_xy_m: tuple[float, float, float, float]
+) -> OccupancyMap:
+    """`map_from_scene` at 0.05 m, through the derived-artefact cache.
+
+    The key is what the map is made of: the world's cross-section at the beam height (the ray
+    caster's segments and circles, which the lidar builds anyway), the parameters, and the code that
+    makes it (map_from_scene's module), so a changed world, mesh, pose or algorithm is a new entry.
+    """
+    resolution_m = 0.05
+    caster = scene.ray_caster(height_m)
+    source = _map_code()
+    parts = (source, caster.segments, caster.circles, height_m, resolution_m, free_xy_m, bounds_xy_m)
+
+    def build() -> dict[str, np.ndarray]:
+        made = map_from_scene(
+            scene, height_m=height_m, resolution_m=resolution_m, free_xy_m=free_xy_m, bounds_xy_m=bounds_xy_m
+        )
+        return {"data": made.data, "frame": np.array([made.resolution_m, made.origin_x_m, made.origin_y_m])}
+
+    arrays = cached_arrays("world_map", 1, parts, build)
+    res, x0, y0 = (float(v) for v in arrays["frame"])
+    return OccupancyMap(resolution_m=res, origin_x_m=x0, origin_y_m=y0, data=arrays["data"].astype(np.int8))
+
+
 def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
     """Refuse a scenario whose map made from the world would be too large, as `NavigationStack.build` would.
 
     Raises:
         ConfigError: As `_map_bounds`.
     """
-    wants_amcl = sc.localization.type == "amcl"
-    wants_nav2 = isinstance(sc.mission, BehaviorTreeMission) and sc.navigation.type == "nav2"
-    if sc.map == "from_world" and robot.lidar is not None and (wants_amcl or wants_nav2):
+    if sc.map == "from_world" and robot.lidar is not None and (runs_amcl(sc) or runs_nav2(sc)):
         _map_bounds(sc, scene)
 
 

@@ -47,9 +47,13 @@ def scenario_yaml(scenario: Scenario) -> str:
 
 
 def fmu_record(path: Path, *, model_name: str, guid: str) -> dict[str, str]:
-    """An FMU's entry in the provenance: file name, SHA-256 of the file, model name, GUID / token."""
+    """An FMU's entry in the provenance: file name, SHA-256 of the file, model name, GUID / token.
+
+    Not the file's folder: a built-in FMU lives in this machine's cache folder, and a bag carries
+    nothing of the machine it was made on (the SHA-256 names the file wherever it is).
+    """
     digest = hashlib.sha256(path.read_bytes()).hexdigest()
-    return {"file": path.name, "path": str(path), "sha256": digest, "model_name": model_name, "guid": guid}
+    return {"file": path.name, "sha256": digest, "model_name": model_name, "guid": guid}
 
 
 def run_provenance(

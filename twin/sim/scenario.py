@@ -28,6 +28,8 @@ __all__ = [
     "Scenario",
     "default_scenario_path",
     "fmu_fallback",
+    "runs_amcl",
+    "runs_nav2",
 ]
 
 _log = logging.getLogger(__name__)
@@ -315,9 +317,12 @@ class InitialPoseEstimate:
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class LocalizationSection:
-    """AMCL on the map (Nav2's), or none: map→odom stays the identity and the robot steers on `/odom`."""
+    """AMCL on the map (Nav2's), or none: map→odom stays the identity and the robot steers on `/odom`.
 
-    type: Literal["amcl", "none"] = "amcl"
+    auto (the default): AMCL when the mission navigates on the map (a behaviour tree), none otherwise.
+    """
+
+    type: Literal["auto", "amcl", "none"] = "auto"
     initial_pose: InitialPoseEstimate | None = field(default_factory=InitialPoseEstimate)  # null: a node sends it
     map_offset_m: tuple[float, float] = (0.0, 0.0)  # the map drawn this far off the world (a misaligned SLAM map)
 
@@ -396,3 +401,14 @@ class Scenario:
 def default_scenario_path() -> Path:
     """Return the shipped default scenario (the thesis's house mission)."""
     return Path(__file__).resolve().parent.parent.parent / "scenarios" / "default.yaml"
+
+
+def runs_nav2(sc: Scenario) -> bool:
+    """Whether the robot runs Nav2's stack (costmaps, servers, bt_navigator): a behaviour-tree mission sends goals."""
+    return isinstance(sc.mission, BehaviorTreeMission)
+
+
+def runs_amcl(sc: Scenario) -> bool:
+    """Whether the robot runs AMCL: `localization.type` amcl, or auto (the default) with a mission that navigates."""
+    kind = sc.localization.type
+    return kind == "amcl" or (kind == "auto" and runs_nav2(sc))

@@ -142,3 +142,23 @@ def test_a_run_reaches_its_first_step_without_the_libraries_it_does_not_use(scen
     modules = _imported_by(_FIRST_STEP.format(scenario=path, bag=str(tmp_path / "bag")))
     assert "twin.sim.simulation" in modules
     assert sorted(m for m in modules if m in NOT_FOR_A_DEFAULT_RUN or m.split(".")[0] in NOT_FOR_A_DEFAULT_RUN) == []
+
+
+@pytest.mark.parametrize(
+    "mission",
+    [
+        "{type: cmd_vel_script, segments: [{duration_s: 1, linear_mps: 0.1}]}",
+        "{type: waypoints, points: [[1.0, 0.0]]}",
+        "{type: none}",
+    ],
+)
+def test_a_mission_that_does_not_navigate_builds_and_imports_no_map_localization_or_nav2_stack(
+    mission: str, tmp_path: Path
+) -> None:
+    scenario = tmp_path / "drive.yaml"
+    scenario.write_text(f"name: drive\nmission: {mission}\n")
+    code = _FIRST_STEP.format(scenario=f"Path({str(scenario)!r})", bag=str(tmp_path / "bag"))
+    modules = _imported_by(code + "\nassert sim.navigation is None\n")
+    assert "twin.sim.simulation" in modules
+    unused = {"navigation", "amcl", "map_server", "costmap_2d", "planner", "controller", "bt_navigator", "params"}
+    assert sorted(m for m in modules if m.startswith("twin.") and unused & set(m.split("."))) == []

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from twin.core.errors import ConfigError
-from twin.nav.server_params import nav2_config
 from twin.nav.param_checks import check_map_fields, check_map_image, check_nav2_inputs, memory_budget_bytes
 from twin.nav.params import default_params_path, load_nav2_params
+from twin.nav.server_params import nav2_config
 
 
 @pytest.mark.parametrize("model", ["burger", "waffle", "waffle_pi"])

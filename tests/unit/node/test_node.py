@@ -44,6 +44,40 @@ def test_launch_arguments_reach_a_node_built_with_no_arguments() -> None:
     assert node.pub.topic_name == "/raw"  # /robot1/cmd_vel remapped
 
 
+class SubNamespaced(Node):
+    def __init__(self) -> None:
+        super().__init__("costmap", namespace="local")
+        self.pub = self.create_publisher(Twist, "out", 10)
+
+
+@pytest.mark.parametrize(
+    ("arguments", "namespace"),
+    [
+        (LaunchArguments(push_namespace="robot1"), "/robot1/local"),  # a group's namespace leads the node's own
+        (LaunchArguments(push_namespace="/robot1/"), "/robot1/local"),
+        (LaunchArguments(push_namespace="robot1", namespace="arm"), "/robot1/arm"),  # the entry's replaces the code's
+        (LaunchArguments(push_namespace="robot1", namespace="/abs"), "/abs"),  # an absolute one stays as given
+        (LaunchArguments(), "/local"),
+    ],
+)
+def test_a_pushed_namespace_leads_the_nodes_own_as_a_launch_group_does(
+    arguments: LaunchArguments, namespace: str
+) -> None:
+    with launch_context(arguments):
+        node = SubNamespaced()
+    assert node.get_namespace() == namespace
+    assert node.pub.topic_name == f"{namespace}/out"
+
+
+def test_a_group_remapping_moves_an_absolute_topic_into_the_namespace() -> None:
+    with launch_context(LaunchArguments(push_namespace="robot1", remappings={"/tf": "tf"})):
+        node = Node("broadcaster")
+        pub = node.create_publisher("tf2_msgs/msg/TFMessage", "/tf", 10)
+        clock = node.create_publisher("rosgraph_msgs/msg/Clock", "/clock", 10)
+    assert pub.topic_name == "/robot1/tf"
+    assert clock.topic_name == "/clock"  # absolute names not remapped stay where they are
+
+
 def test_a_parameter_of_the_wrong_type_is_refused_with_its_name() -> None:
     with launch_context(LaunchArguments(parameters={"count": "three"})), pytest.raises(ConfigError, match="count"):
         Talker()

@@ -34,7 +34,7 @@ class InitialPoseNode(Node):
 
     def __init__(self, pose: tuple[float, float, float], *, xy_variance_m2: float, yaw_variance_rad2: float) -> None:
         super().__init__("initial_pose")
-        pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "/initialpose", 10)
+        pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "initialpose", 10)
         encode = PoseWithCovarianceStampedEncoder("map").encode
         log = self.get_logger()
         now = self._graph_now
@@ -85,8 +85,8 @@ class AmclNode(Node):
         pose_encode = PoseWithCovarianceStampedEncoder(global_frame).encode
         cloud_encode = ParticleCloudEncoder(global_frame).encode
         tf_encode = TFEncoder([(global_frame, odom_frame)]).encode_planar
-        pose_pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "/amcl_pose", LATCHED)
-        cloud_pub = self.create_publisher(ParticleCloudEncoder.msgtype, "/particle_cloud", 10)
+        pose_pub = self.create_publisher(PoseWithCovarianceStampedEncoder.msgtype, "amcl_pose", LATCHED)
+        cloud_pub = self.create_publisher(ParticleCloudEncoder.msgtype, "particle_cloud", 10)
         tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
         tolerance_ns = round(transform_tolerance_s * 1e9)
         now = self._graph_now
@@ -160,8 +160,8 @@ class AmclNode(Node):
             odoms.clear()
             pending.clear()
 
-        self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
-        self.create_subscription("sensor_msgs/msg/LaserScan", "/scan", on_scan, 10, raw=True)
+        self.create_subscription("nav_msgs/msg/Odometry", "odom", on_odom, 10, raw=True)
+        self.create_subscription("sensor_msgs/msg/LaserScan", "scan", on_scan, 10, raw=True)
         self.create_subscription(
-            "geometry_msgs/msg/PoseWithCovarianceStamped", "/initialpose", on_initial_pose, 10, raw=True
+            "geometry_msgs/msg/PoseWithCovarianceStamped", "initialpose", on_initial_pose, 10, raw=True
         )

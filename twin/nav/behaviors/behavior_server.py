@@ -115,7 +115,7 @@ class BehaviorServerNode(Node):
     def __init__(self, servers: _Servers) -> None:
         super().__init__("behavior_server")
         server = servers.behavior_server
-        pub = self.create_publisher(TwistEncoder.msgtype, "/cmd_vel", 10)
+        pub = self.create_publisher(TwistEncoder.msgtype, "cmd_vel", 10)
         encode = TwistEncoder().encode
         cycle = server.cycle
 

@@ -21,11 +21,11 @@ __all__ = ["BtNavigatorNode"]
 class BtNavigatorNode(Node):
     """bt_navigator: ticks the navigation tree every bt_loop_duration while a goal runs."""
 
-    FEEDBACK_TOPIC = "/navigate_to_pose/feedback"
+    FEEDBACK_TOPIC = "navigate_to_pose/feedback"
 
     def __init__(self, navigator: BtNavigator, frames: Frames) -> None:
         super().__init__("bt_navigator")
-        log_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "/behavior_tree_log", 10)
+        log_pub = self.create_publisher(BehaviorTreeLogEncoder.msgtype, "behavior_tree_log", 10)
         log_encode = BehaviorTreeLogEncoder().encode
         feedback_pub = self.create_publisher(NavigationFeedbackEncoder.msgtype, self.FEEDBACK_TOPIC, 10)
         feedback_encode = NavigationFeedbackEncoder().encode

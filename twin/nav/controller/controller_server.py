@@ -349,7 +349,7 @@ class ControllerServerNode(Node):
         super().__init__("controller_server")
         server = servers.controller_server
         cmd_pub = self.create_publisher(TwistEncoder.msgtype, "cmd_vel_nav", 10)
-        plan_pub = self.create_publisher(PathEncoder.msgtype, "/local_plan", 10)
+        plan_pub = self.create_publisher(PathEncoder.msgtype, "local_plan", 10)
         encode = TwistEncoder().encode
         plan_encode = PathEncoder("odom").encode
         cycle = server.cycle

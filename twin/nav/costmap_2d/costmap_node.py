@@ -94,8 +94,9 @@ class CostmapNode(Node):
             cells = table[grid.cost]
             pub.publish(Encoded((encoder.encode, (t_ns, cells), grid)))
 
-        self.create_subscription("nav_msgs/msg/Odometry", "/odom", on_odom, 10, raw=True)
+        robot_ns = self.get_namespace().rpartition("/")[0]  # the costmap's own namespace is <robot's>/<name>
+        self.create_subscription("nav_msgs/msg/Odometry", f"{robot_ns}/odom", on_odom, 10, raw=True)
         if use_scan:
-            self.create_subscription("sensor_msgs/msg/LaserScan", "/scan", on_scan, 10, raw=True)
+            self.create_subscription("sensor_msgs/msg/LaserScan", f"{robot_ns}/scan", on_scan, 10, raw=True)
         self.create_rate_timer(params.update_frequency_hz, on_update, priority=PRIORITY_USER - 5)
         self.create_rate_timer(params.publish_frequency_hz, on_publish, priority=PRIORITY_USER - 4)

@@ -23,7 +23,7 @@ class MapServerNode(Node):
             occupancy.height,
             (occupancy.origin_x_m, occupancy.origin_y_m, occupancy.origin_yaw_rad),
         )
-        pub = self.create_publisher(OccupancyGridEncoder.msgtype, "/map", LATCHED)
+        pub = self.create_publisher(OccupancyGridEncoder.msgtype, "map", LATCHED)
         cells = occupancy.data
 
         def publish(t_ns: int) -> None:

@@ -87,7 +87,7 @@ class PlannerServerNode(Node):
 
     def __init__(self, servers: _Servers) -> None:
         super().__init__("planner_server")
-        pub = self.create_publisher(PathEncoder.msgtype, "/plan", 10)
+        pub = self.create_publisher(PathEncoder.msgtype, "plan", 10)
         encode = PathEncoder("map").encode
 
         def on_plan(t_ns: int, path: F64) -> None:

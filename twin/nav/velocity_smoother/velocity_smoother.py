@@ -115,7 +115,7 @@ class VelocitySmootherNode(Node):
     def __init__(self, params: SmootherParams) -> None:
         super().__init__("velocity_smoother")
         smoother = VelocitySmoother(params)
-        pub = self.create_publisher(TwistEncoder.msgtype, "/cmd_vel", 10)
+        pub = self.create_publisher(TwistEncoder.msgtype, "cmd_vel", 10)
         encode = TwistEncoder().encode
         now = self._graph_now
 

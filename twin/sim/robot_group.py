@@ -1,0 +1,483 @@
+"""One robot as a group of nodes under a namespace, as a launch file's `GroupAction` with `PushRosNamespace`.
+
+A `RobotGroup` is made from the robot's sections of a scenario (`robot`, `drive`, `sensors`,
+`odometry`, `estimation`, `localization`, `navigation`, `mission`, `disturbances`: a `Scenario`
+whose top-level sections are that robot's) and a namespace. The simulation builds the world once
+and then, for each robot:
+
+1. `RobotGroup.load`: the robot's model (its name is left out of the world's scene);
+2. `spawn(scene)`: its collision body, refused where the spawn pose is not free;
+3. `build(...)`: what its nodes simulate: the drive, the lidar, IMU and encoder models, the EKF,
+   its localization and Nav2 stack, its mission; only what its sections ask for;
+4. `nodes()`: its nodes in launch order, each constructed under the group's namespace: relative
+   topic names resolve under it, and `/tf` and `/tf_static` are remapped into it as nav2_bringup's
+   multi-robot launch does. With the namespace `""` every name is the single robot's, as before
+   groups existed.
+
+Node order within a group (it fixes which timer fires first among equals and which subscriber
+hears first): robot_state_publisher, the navigation stack (map_server, initial_pose, amcl,
+costmaps, servers, bt_navigator), mission, [obstacles], lidar, joint_states, [gazebo_odometry],
+ground_truth, imu, diff_drive, ekf_odometry.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from twin.core.clock import NS_PER_S
+from twin.core.errors import ConfigError, WorldError
+from twin.node import LaunchArguments, Node, launch_context
+from twin.robot.chassis import ChassisParams, SlipModel
+from twin.robot.drivetrain import Drivetrain
+from twin.robot.encoders import EncoderModel, EncoderSpec
+from twin.robot.fmu_drive import FmuDrive
+from twin.robot.fmu_drivetrain import FmuDrivetrain
+from twin.robot.imu import ImuModel, imu_model_spec
+from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
+from twin.robot.lidar import Lidar
+from twin.robot.nodes import (
+    ContactTracker,
+    DiffDriveNode,
+    GazeboOdometryNode,
+    GroundTruthNode,
+    ImuNode,
+    JointStateNode,
+    LidarNode,
+    ObstacleNode,
+    RobotStatePublisher,
+    tf_pose,
+)
+from twin.sim.rng import RngStreams
+from twin.sim.scenario import (
+    BehaviorTreeMission,
+    CmdVelScriptMission,
+    InitialPose,
+    LidarSection,
+    NoMission,
+    ReplayMission,
+    Scenario,
+    fmu_fallback,
+    runs_amcl,
+    runs_nav2,
+)
+from twin.world import RobotModelSpec, load_robot, urdf_from_robot
+from twin.world.obstacles import ObstacleField, ObstacleMonitor
+from twin.world.scene import CollisionMonitor, RobotBody, Scene
+from twin.world.tf_static import static_frames
+
+if TYPE_CHECKING:
+    from twin.estimation import OdometryFilter
+    from twin.mission.mission_node import MissionNode
+    from twin.sim.mission import BagReplay, CmdVelScript, TreeMission, WaypointFollower
+    from twin.sim.navigation import NavigationStack
+
+    Mission = TreeMission | WaypointFollower | CmdVelScript | BagReplay
+
+__all__ = ["RobotGroup", "fmu_drive_section", "scenario_robot", "spawn_monitor"]
+
+_log = logging.getLogger(__name__)
+
+_TF_INTO_NAMESPACE = {"/tf": "tf", "/tf_static": "tf_static"}
+"""nav2_bringup's multi-robot remapping: each robot's TF tree on its own `/<ns>/tf`."""
+
+WheelFrame = tuple[str, str, str, np.ndarray, tuple[float, float, float]]
+
+
+def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
+    overrides = {f.name: getattr(section, f.name) for f in dataclasses.fields(section)}
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    if not overrides:
+        return robot
+    if robot.lidar is None:
+        msg = f"sensors.lidar: sets {', '.join(overrides)} but robot {robot.name!r} has no lidar in its SDF"
+        raise ConfigError(msg)
+    return dataclasses.replace(robot, lidar=dataclasses.replace(robot.lidar, **overrides))
+
+
+def fmu_drive_section(sc: Scenario) -> FmuDrive:
+    """Return the FMU drive section with `disturbances.wheel_slip` moved into its chassis slip model.
+
+    Raises:
+        ConfigError: If slip is set in both places, or in a form the FMU chassis cannot model.
+    """
+    assert isinstance(sc.drive, FmuDrive)
+    slip = sc.disturbances.wheel_slip
+    if not slip.regions and slip.left_fraction == 0.0 and slip.right_fraction == 0.0:
+        return sc.drive
+    if sc.drive.slip != SlipModel():
+        msg = "slip is set twice, in disturbances.wheel_slip and in drive.slip; keep one"
+        raise ConfigError(msg)
+    if slip.regions or slip.left_fraction != slip.right_fraction:
+        msg = (
+            "disturbances.wheel_slip: the FMU chassis slips both wheels alike; give equal left and right "
+            "fractions, use drive.slip for rectangular slippery regions, or the kinematic drive for the rest"
+        )
+        raise ConfigError(msg)
+    return dataclasses.replace(sc.drive, slip=SlipModel(slip=slip.left_fraction))
+
+
+def _yaw_inertia(robot: RobotModelSpec) -> float:
+    """Moment of inertia of the whole robot about the base frame's z axis, kg·m²."""
+    total = 0.0
+    for part in robot.inertias:
+        ixx, iyy, izz, ixy, ixz, iyz = part.inertia_kgm2
+        inertia = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+        rot = part.T_base_com[:3, :3]
+        x, y = float(part.T_base_com[0, 3]), float(part.T_base_com[1, 3])
+        total += float((rot @ inertia @ rot.T)[2, 2]) + part.mass_kg * (x * x + y * y)
+    return total
+
+
+def scenario_robot(scenario: Scenario) -> RobotModelSpec:
+    """Load the scenario's `robot.model` from its `world.model_path` (the project's own models last).
+
+    Raises:
+        WorldError: The loader's error, led by the scenario key `robot.model`.
+    """
+    try:
+        return load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+    except WorldError as err:
+        raise err.with_context(before="robot.model: ") from None
+
+
+_LOW_OBSTACLE_M = 0.2
+"""An obstacle the robot is spawned inside whose top is no higher than this may be a raised floor."""
+
+
+def spawn_monitor(
+    scene: Scene, robot: RobotModelSpec, pose: InitialPose, *, floor_height_m: float = 0.01
+) -> tuple[RobotBody, CollisionMonitor]:
+    """The robot's collision body and contact monitor, after checking the spawn pose is free.
+
+    Raises:
+        ConfigError: If the robot at `pose` overlaps the world (naming the model and link it is inside;
+            a low one may be a floor slab standing a little above z = 0: the error names
+            `world.floor_height_m` then).
+    """
+    body = scene.robot_body(robot.collisions, base_height_m=robot.base_height_m)
+    monitor = CollisionMonitor(scene, body)
+    contacts = monitor.check(pose.x_m, pose.y_m, pose.yaw_rad)
+    if contacts:
+        c = contacts[0]
+        msg = (
+            f"robot.initial_pose: ({pose.x_m}, {pose.y_m}, {pose.yaw_rad}) puts {robot.name} inside "
+            f"{c.link}; choose a free spawn pose"
+        )
+        top = scene.top_m(c)
+        if top is not None and floor_height_m < top <= _LOW_OBSTACLE_M:
+            msg += (
+                f", or, if that is the floor (its top is {100 * top:.1f} cm above z = 0), set world.floor_height_m "
+                f"to {math.ceil(top * 100 + 0.5) / 100:g} (now {floor_height_m:g}: shapes whose top is at or below "
+                "it are floor)"
+            )
+        raise ConfigError(msg)
+    return body, monitor
+
+
+class RobotGroup:
+    """One robot's models and nodes under a namespace (see the module docstring for the phases).
+
+    Args:
+        scenario: The robot's view of the scenario (its sections at the top level).
+        robot: Its model, with the scenario's lidar overrides (`RobotGroup.load` reads it).
+        namespace: Pushed onto every node of the group (`""`: none).
+    """
+
+    def __init__(self, scenario: Scenario, robot: RobotModelSpec, *, namespace: str = "") -> None:
+        self.scenario = scenario
+        self.robot = robot
+        self.namespace = namespace
+        self.launch = LaunchArguments(push_namespace=namespace, remappings=_TF_INTO_NAMESPACE)
+        self.body: RobotBody | None = None
+        self.monitor: CollisionMonitor | None = None
+        self.drive: Drivetrain | None = None
+        self.mission_node: MissionNode | None = None
+
+    @classmethod
+    def load(cls, scenario: Scenario, *, namespace: str = "") -> RobotGroup:
+        """Read the robot's model.
+
+        Raises:
+            WorldError: The robot model cannot be loaded.
+            ConfigError: The model has no differential drive, or lidar overrides without a lidar.
+        """
+        robot = _lidar_spec(scenario_robot(scenario), scenario.sensors.lidar)
+        if robot.drive is None:
+            msg = f"robot {robot.name!r} has no differential drive (wheel joints or a diff-drive plugin) in its SDF"
+            raise ConfigError(msg)
+        return cls(scenario, robot, namespace=namespace)
+
+    def spawn(self, scene: Scene) -> RobotBody:
+        """Make the robot's collision body in the world's scene, checking its spawn pose is free.
+
+        Raises:
+            ConfigError: As `spawn_monitor`.
+        """
+        floor_m = self.scenario.world.floor_height_m
+        self.body, self.monitor = spawn_monitor(
+            scene, self.robot, self.scenario.robot.initial_pose, floor_height_m=floor_m
+        )
+        return self.body
+
+    def build(
+        self,
+        scene: Scene,
+        *,
+        obstacles: ObstacleField | None,
+        rng: RngStreams,
+        step_ns: int,
+        now: Callable[[], int],
+    ) -> None:
+        """Build what the robot's nodes simulate; on failure the drive it made is closed again.
+
+        Args:
+            scene: The world's static obstacles.
+            obstacles: The world's moving and appearing obstacles (None without any).
+            rng: The run's seeded streams.
+            step_ns: The physics step.
+            now: The executor's clock (ns).
+
+        Raises:
+            TwinError: Any section that cannot be honoured.
+        """
+        assert self.body is not None and self.monitor is not None
+        self.obstacles = obstacles
+        self.step_ns = step_ns
+        self._now = now
+        contact: CollisionMonitor | ObstacleMonitor = self.monitor
+        if obstacles is not None:
+            contact = ObstacleMonitor(self.monitor, obstacles)
+        self.tracker = ContactTracker(contact)
+        robot = self.robot
+        self.lidar = (
+            Lidar.from_robot(robot, scene, rng.stream("lidar"), obstacles=obstacles)
+            if robot.lidar is not None
+            else None
+        )
+        self.drive = self._make_drive(self.body.radius_m, contact)
+        try:  # from here on, a failure must release the drive (FMU instances) it leaves behind
+            self.wheels = self._wheel_frames()
+            self.imu = self._make_imu(rng)
+            self.encoders, self.ekf = self._make_odometry(rng)
+            self.navigation = self._make_navigation(scene, rng)
+            self.mission = self._make_mission()
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Release the drive (its FMU instances); idempotent."""
+        if self.drive is not None:
+            self.drive.close()
+
+    # -- what the nodes simulate -----------------------------------------------------------------
+
+    def _make_navigation(self, scene: Scene, rng: RngStreams) -> NavigationStack | None:
+        if not (runs_amcl(self.scenario) or runs_nav2(self.scenario)):
+            return None  # no map, AMCL or Nav2 stack: nothing is imported for them either
+        from twin.sim.navigation import NavigationStack
+
+        return NavigationStack.build(self.scenario, self.robot, scene, rng.stream("amcl"))
+
+    def _make_mission(self) -> Mission | None:
+        spec = self.scenario.mission
+        if isinstance(spec, NoMission):
+            return None
+        from twin.sim import mission
+
+        if isinstance(spec, BehaviorTreeMission):
+            from twin.mission.navigate_to_pose import Nav2Navigator
+
+            nav = self.navigation
+            assert nav is not None and nav.navigates  # a tree mission always has Nav2's stack (or refused)
+            navigator = Nav2Navigator(lambda: nav.navigator)
+            return mission.TreeMission(spec, navigator, clock=self._now, seed=self.scenario.seed)
+        if isinstance(spec, CmdVelScriptMission):
+            return mission.CmdVelScript(spec)
+        if isinstance(spec, ReplayMission):
+            from twin.sim.replay import start_moving
+
+            replay = mission.BagReplay(spec)
+            assert self.drive is not None
+            start_moving(self.drive, *replay.commands.start_velocity)
+            return replay
+        return mission.WaypointFollower(spec)
+
+    def _wheel_frames(self) -> list[WheelFrame]:
+        """(joint, parent, child, T_parent, axis) of the left and right wheel joints, in that order."""
+        drive = self.robot.drive
+        assert drive is not None
+        side = {drive.left_joint: 0, drive.right_joint: 1}
+        wheels = [(f.joint, f.parent, f.name, f.T_parent, f.axis) for f in self.robot.frames if f.joint in side]
+        return sorted(wheels, key=lambda w: side[w[0]])
+
+    def _make_imu(self, rng: RngStreams) -> ImuModel | None:
+        spec = self.robot.imu
+        if not self.scenario.sensors.imu.enabled:
+            return None
+        if spec is None:
+            _log.info("robot %s has no IMU: /imu is not published and the EKF uses the wheels alone", self.robot.name)
+            return None
+        model_spec = self.scenario.disturbances.imu.apply(imu_model_spec(spec))
+        return ImuModel(model_spec, gyro_rng=rng.stream("imu.gyro"), accel_rng=rng.stream("imu.accel"))
+
+    def _make_odometry(self, rng: RngStreams) -> tuple[EncoderModel | None, OdometryFilter | None]:
+        robot, sc = self.robot, self.scenario
+        assert robot.drive is not None
+        if len(self.wheels) != 2:
+            _log.warning("robot %s: wheel joints not found among its frames; no /joint_states or /odom", robot.name)
+            return None, None
+        rate = robot.joint_states.rate_hz if robot.joint_states is not None else 30.0
+        spec = EncoderSpec(
+            rate_hz=rate,
+            joint_names=(robot.drive.left_joint, robot.drive.right_joint),
+            wheel_radius_m=robot.drive.wheel_radius_m,
+        )
+        encoders = EncoderModel(spec, sc.disturbances.encoders, rng.stream("encoders"))
+        if sc.odometry == "ground_truth":
+            return encoders, None
+        from twin.estimation import OdometryFilter
+
+        estimation = sc.estimation
+        if self.imu is None and estimation.fuse_gyro:
+            estimation = dataclasses.replace(estimation, fuse_gyro=False)
+        pose = sc.robot.initial_pose
+        ekf = OdometryFilter(
+            estimation,
+            wheel_radius_m=robot.drive.wheel_radius_m,
+            wheel_separation_m=robot.drive.wheel_separation_m,
+            initial_pose=(pose.x_m, pose.y_m, pose.yaw_rad),
+            gyro_samples="interval_mean",
+        )
+        return encoders, ekf
+
+    def _make_drive(self, bounding_radius_m: float, monitor: CollisionMonitor | ObstacleMonitor) -> Drivetrain:
+        sc, robot = self.scenario, self.robot
+        assert robot.drive is not None
+        pose = (sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m, sc.robot.initial_pose.yaw_rad)
+        drive_spec = sc.drive
+        if isinstance(drive_spec, FmuDrive) and (fallback := fmu_fallback(drive_spec)) is not None:
+            drive_spec = fallback
+        if drive_spec.type == "kinematic":
+            accel = drive_spec.max_wheel_acceleration_mps2
+            params = KinematicParams(
+                wheel_radius_m=robot.drive.wheel_radius_m,
+                wheel_separation_m=robot.drive.wheel_separation_m,
+                max_wheel_acceleration_mps2=accel if accel > 0.0 else math.inf,
+                bounding_radius_m=bounding_radius_m,
+            )
+            return KinematicDrivetrain(
+                params,
+                step_ns=self.step_ns,
+                pose=pose,
+                contact=self.tracker.touches,
+                free_distance=monitor.free_m,
+                slip=sc.disturbances.wheel_slip,
+            )
+        chassis = ChassisParams(
+            wheel_radius_m=robot.drive.wheel_radius_m,
+            wheel_separation_m=robot.drive.wheel_separation_m,
+            mass_kg=robot.mass_kg,
+            yaw_inertia_kgm2=_yaw_inertia(robot),
+        )
+        return FmuDrivetrain(
+            fmu_drive_section(sc),
+            chassis,
+            step_ns=self.step_ns,
+            pose=pose,
+            contact=self.tracker.touches,
+            free_distance=monitor.free_m,
+            bounding_radius_m=bounding_radius_m,
+            plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2,
+            robot_name=robot.name,
+        )
+
+    # -- the nodes -------------------------------------------------------------------------------
+
+    def nodes(self) -> list[Node]:
+        """The group's nodes in launch order, each under the group's namespace (a new set on each call)."""
+        with launch_context(self.launch):
+            return self._nodes()
+
+    def _nodes(self) -> list[Node]:
+        robot, sc, drive = self.robot, self.scenario, self.drive
+        assert robot.drive is not None and drive is not None
+        chassis = drive.chassis_state
+        nodes: list[Node] = []
+
+        # Latched, once at t = 0: the robot's fixed frames (and map -> odom, which nothing
+        # localises yet) and its description; the wheels' transforms on every joint state.
+        nav = self.navigation
+        localizes = nav is not None and nav.localizes
+        static = [] if localizes else [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
+        static += [(parent, child, tf_pose(T)) for parent, child, T in static_frames(robot)]  # casters, optical frames
+        nodes.append(RobotStatePublisher(urdf_from_robot(robot), static, self.wheels))
+
+        def truth() -> tuple[float, float, float]:
+            c = chassis()
+            return (c.x_m, c.y_m, c.yaw_rad)
+
+        if nav is not None:
+            nodes += nav.nodes(now=self._now, truth=truth)
+
+        pose = sc.robot.initial_pose
+        self.mission_node = None
+        if self.mission is not None:
+            from twin.mission.mission_node import MissionNode
+
+            spec = sc.mission
+            assert not isinstance(spec, NoMission)
+            by_nav2 = nav is not None and nav.navigates
+            tree = isinstance(spec, BehaviorTreeMission)
+            frames = nav.frames if nav is not None and localizes else None
+            self.mission_node = MissionNode(
+                self.mission,
+                initial_pose=(pose.x_m, pose.y_m, pose.yaw_rad),
+                command_rate_hz=None
+                if by_nav2
+                else (spec.controller_rate_hz if isinstance(spec, BehaviorTreeMission) else spec.rate_hz),
+                tree_rate_hz=spec.tick_rate_hz if isinstance(spec, BehaviorTreeMission) else None,
+                bt_log_topic="mission/behavior_tree_log" if by_nav2 else "behavior_tree_log",
+                pose_source=frames.map_pose if frames is not None and tree else None,
+                ready=(lambda: frames.localized) if frames is not None and tree else None,
+            )
+            nodes.append(self.mission_node)
+
+        if self.obstacles is not None:  # the world's; it reports its contacts to this robot
+            period_s = self.obstacles.update_period_ns / NS_PER_S
+            nodes.append(ObstacleNode(self.obstacles, self.tracker, chassis, rate_hz=1.0 / period_s))
+        if self.lidar is not None and robot.lidar is not None:
+            nodes.append(LidarNode(self.lidar, robot.lidar.frame_id, robot.lidar.rate_hz, chassis))
+
+        names = [w[0] for w in self.wheels]
+        fmu = isinstance(drive, FmuDrivetrain) and len(self.wheels) == 2
+        with_effort = fmu and isinstance(drive, FmuDrivetrain) and drive.has_effort
+        if self.encoders is not None:
+            rate = self.encoders.spec.rate_hz
+            encoders = self.encoders if self.ekf is not None else None
+            nodes.append(JointStateNode(names, rate, drive.wheel_state, encoders, with_effort=with_effort))
+            if self.ekf is None:
+                nodes.append(GazeboOdometryNode(robot.base_frame, rate, chassis))
+
+        nodes.append(GroundTruthNode(robot.base_frame, sc.sensors.ground_truth.rate_hz, chassis))
+        if self.imu is not None:
+            address = drive.chassis_address if isinstance(drive, FmuDrivetrain) else None
+            nodes.append(ImuNode(self.imu, chassis, pose.yaw_rad, chassis_address=address))
+
+        motor_rate = robot.joint_states.rate_hz if robot.joint_states is not None else 30.0
+        self.drive_node = DiffDriveNode(
+            drive, self.tracker, motor_joints=names if fmu else (), motor_rate_hz=motor_rate
+        )
+        nodes.append(self.drive_node)
+        if self.ekf is not None:
+            from twin.estimation.node import EkfNode
+
+            fuse_gyro = self.imu is not None and sc.estimation.fuse_gyro
+            nodes.append(EkfNode(self.ekf, base_frame=robot.base_frame, wheel_joints=names, fuse_gyro=fuse_gyro))
+        return nodes
