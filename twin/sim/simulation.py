@@ -106,6 +106,7 @@ class RunSummary:
     drive: str = ""  # the drive that ran, e.g. `fmu xm430_w210_servo (FMI 2, velocity-servo)` or `kinematic`
     drive_notes: str = ""  # e.g. commands clamped to the motors' reach ('' when none)
     localization: dict[str, Any] = field(default_factory=dict)  # AMCL vs the true pose ({} without AMCL)
+    refused_messages: dict[str, int] = field(default_factory=dict)  # topic -> non-finite messages from users' nodes
 
 
 def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
@@ -254,7 +255,7 @@ class Simulation(Closing):
         )
         self.drive = self._make_drive(body.radius_m, contact)
         self.recorder: Recorder | None = None
-        self.executor = Executor(self.step_ns, profile=profile)
+        self.executor = Executor(self.step_ns, profile=profile, non_finite=scenario.non_finite_messages)
         try:  # from here on, a failure must release the drive (FMU instances) it leaves behind
             self._wheels = self._wheel_frames()
             self._imu = self._make_imu()
@@ -609,4 +610,5 @@ class Simulation(Closing):
             drive=self.drive.label,
             drive_notes=self.drive.saturation.describe() if isinstance(self.drive, FmuDrivetrain) else "",
             localization=self.navigation.log.summary() if self.navigation is not None else {},
+            refused_messages=dict(self.executor.refused),
         )

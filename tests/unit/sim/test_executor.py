@@ -238,3 +238,19 @@ def test_a_cancelled_timer_stops_firing() -> None:
     talker.timers[0].cancel()
     ex.spin(600)
     assert talker.n == 2
+
+
+def test_a_stop_is_seen_within_20_ms_of_sim_time_not_at_the_next_second() -> None:
+    # In a world that runs slower than real time a simulated second can take many wall seconds; a
+    # SIGTERM (a sweep's timeout) must not wait for it.
+    ex = Executor(MS)
+    log = Log()
+    ex.add_node(Publisher("p", "/chatter", 0.001, log))
+    asked = []
+
+    def should_stop() -> bool:
+        asked.append(ex.now_ns)
+        return len(asked) == 2  # asked to stop between the first and the second look
+
+    assert ex.spin(10_000, should_stop=should_stop) == "interrupted"
+    assert asked == [MS, 21 * MS]  # the first event (the timer at 1 ms), then 20 ms of sim time later
