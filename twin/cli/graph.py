@@ -70,6 +70,7 @@ def graph_data(
     """
     from twin.cli.watch import Guard, build_watched
     from twin.core.errors import ConfigError
+    from twin.core.numbers import number_problem
     from twin.sim.check import check_scenario
     from twin.sim.scenario import default_scenario_path, load_scenario
     from twin.sim.simulation import Simulation
@@ -77,6 +78,10 @@ def graph_data(
 
     if not measure_s >= 0.0 or measure_s == float("inf"):
         msg = f"--measure-s must be a finite number of seconds >= 0, got {measure_s}"
+        raise ConfigError(msg)
+    problem = number_problem(measure_s, "--measure-s", unit="s")
+    if problem is not None:
+        msg = f"--measure-s {problem}"
         raise ConfigError(msg)
     if not watchdog_s > 0:  # NaN too; inf turns the stuck-step check off
         msg = f"--watchdog-s must be a positive number of seconds (inf: no watchdog), got {watchdog_s}"

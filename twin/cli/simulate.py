@@ -22,6 +22,7 @@ from twin.cli.play import live_banner, speed_arg
 from twin.cli.progress import Progress
 from twin.cli.watch import Guard, build_watched
 from twin.core.errors import ConfigError, Interrupted, TwinError, WorldError
+from twin.core.numbers import number_problem
 
 if TYPE_CHECKING:
     from twin.sim.executor import Sink
@@ -231,6 +232,10 @@ def _check_fmus(recorded: Mapping[str, str], bag: Path) -> None:
 def _check_options(args: argparse.Namespace) -> None:
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         msg = f"--duration must be a positive, finite number of seconds, got {args.duration}"
+        raise ConfigError(msg)
+    problem = None if args.duration is None else number_problem(args.duration, "--duration", unit="s")
+    if problem is not None:
+        msg = f"--duration {problem}"
         raise ConfigError(msg)
     if not args.watchdog_s > 0:  # NaN too; inf turns the stuck-step check off
         msg = f"--watchdog-s must be a positive number of seconds (inf: no watchdog), got {args.watchdog_s}"
