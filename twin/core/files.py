@@ -35,4 +35,4 @@ def read_input(path: Path, *, max_bytes: int) -> bytes:
         data = stream.read(max_bytes + 1)
     if len(data) > max_bytes:  # it grew while being read
         raise OSError(errno.EFBIG, f"larger than the {max_bytes / 2**20:.0f} MiB an input file may be", str(path))
-    return data if isinstance(data, bytes) else bytes(data)
+    return data
