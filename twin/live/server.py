@@ -29,6 +29,7 @@ from foxglove.websocket import Capability, ChannelView, Client, ServerListener
 from twin.bag.typesys import MessageDefinition
 from twin.core.closing import Closing
 from twin.core.errors import ConfigError
+from twin.live.throttle import PeerLogThrottle
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LiveServer"]
 
@@ -79,6 +80,8 @@ class LiveServer(Closing):
         self._by_id: dict[int, _Channel] = {}
         self._lock = threading.Lock()
         self._next_time_ns = 0
+        self.peer_errors = PeerLogThrottle()  # one line per kind of failing peer, then a count
+        self.peer_errors.attach()
         try:
             self._server = foxglove.start_server(
                 name=name,
@@ -93,6 +96,7 @@ class LiveServer(Closing):
             reason = str(err).removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
             reason = reason.split(" (os error", 1)[0].lower()
             msg = f"cannot serve on {host}:{port}: {reason}; choose another port with --port (or --host)"
+            self.peer_errors.detach()
             raise ConfigError(msg) from None
         self.port: int = self._server.port
         self._closed = False
@@ -174,3 +178,5 @@ class LiveServer(Closing):
         for entry in self._channels:
             entry.channel.close()
         self._server.stop()
+        self.peer_errors.detach()
+        self.peer_errors.flush()

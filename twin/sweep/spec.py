@@ -350,6 +350,8 @@ def _absolute_scenario(path: Path) -> dict[str, Any]:
 
     raw = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
     fixed: dict[str, Any] = _fix_paths(raw, Scenario, path.parent)
+    # Each run's scenario is written into its own folder; its nodes' modules stay those beside this file.
+    fixed.setdefault("source_path", str(path.resolve()))
     return fixed
 
 
