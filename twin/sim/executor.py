@@ -165,6 +165,7 @@ class Executor:
             msg = f"two nodes are named {name}; give one of them another `name:` in the scenario's nodes"
             raise ConfigError(msg)
         self.nodes[name] = node
+        timers = list(node.timers)  # those created from here on (a callback on a latched message) start themselves
         node.bind(self)
         trusted = bool(getattr(node, "builtin", False)) or type(node).__module__.startswith("twin.")
         for pub in node.publishers:
@@ -183,7 +184,7 @@ class Executor:
                 topic.user_callbacks.append(callback)
             for old in topic.latched:
                 callback(old)
-        for timer in node.timers:
+        for timer in timers:
             self._add_timer(timer, guarded=not trusted)
 
     def _msgtype(self, msg_type: type | str, node: Node) -> str:
