@@ -153,3 +153,31 @@ def test_a_non_finite_initial_pose_never_reaches_amcl(tmp_path: Path, capsys: py
     # AMCL still localises from the scenario's own initial pose: /amcl_pose stays finite.
     poses = [m.msg.pose.pose.position for m in read_messages(bag, topics=["/amcl_pose"])]
     assert poses and all(math.isfinite(p.x) and math.isfinite(p.y) for p in poses)
+
+
+def test_a_replayed_bags_non_finite_commands_are_skipped(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    # A recorded /cmd_vel with NaN (another robot's bag) reaches the drive through the replay mission,
+    # not a user's node: it is refused the same way, the drive keeping the command before it.
+    import numpy as np
+
+    from twin.sim import mission
+    from twin.sim.replay import RecordedCommands
+    from twin.sim.scenario import ReplayMission
+
+    recorded = RecordedCommands(
+        t_ns=np.array([0, 100_000_000, 200_000_000, 300_000_000], dtype=np.int64),
+        v_mps=np.array([0.1, float("nan"), 0.2, float("inf")]),
+        w_radps=np.array([0.0, 0.0, 0.1, 0.0]),
+        start_pose=(0.0, 0.0, 0.0),
+        start_velocity=(float("nan"), 0.0),
+        end_ns=1_000_000_000,
+        pose_topic="/odom",
+        time_source="header stamps",
+    )
+    monkeypatch.setattr(mission, "load_commands", lambda spec: recorded)
+    replay = mission.BagReplay(ReplayMission(bag=tmp_path / "bag"))
+    assert "2 of 4 commands on /cmd_vel hold NaN or infinity (the first at 0.100 s: nan, 0.0): skipped" in caplog.text
+    times_ns = (0, 150_000_000, 250_000_000, 350_000_000)
+    assert [replay.command(t, 0.0, 0.0, 0.0) for t in times_ns] == [(0.1, 0.0), (0.1, 0.0), (0.2, 0.1), (0.2, 0.1)]
