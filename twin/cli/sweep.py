@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
 import time
@@ -109,6 +110,10 @@ def _sweep(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         msg = f"--workers must be at least 1, got {args.workers}"
+        raise ConfigError(msg)
+    cores = os.cpu_count() or 1
+    if args.workers is not None and args.workers > 4 * cores:  # each is a process running one run on one core
+        msg = f"--workers {args.workers}: this machine has {cores} cores and a run uses one; give at most {4 * cores}"
         raise ConfigError(msg)
     if args.workers is not None and args.scheduler is not None:
         msg = "--workers sizes the local cluster; with --scheduler the cluster's own workers run the sweep"
