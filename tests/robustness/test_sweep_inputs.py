@@ -145,3 +145,27 @@ def test_a_sweep_whose_runs_did_not_complete_exits_1_naming_them(
     assert "no_such_robot" in line
     (row,) = read_table(tmp_path / "out")
     assert row["outcome"] == "error"
+
+
+@pytest.mark.parametrize(
+    ("body", "contains"),
+    [
+        ("runs: 1000000000", "runs: 1000000000 runs is more than a sweep makes (at most 100000)"),
+        ("seeds: [-3]", "seeds: -3: must be a non-negative whole number"),
+        ("timeout_s: 1e300", "timeout_s: 1e+300 s is out of range"),
+        (
+            "vary: {robot.initial_pose.x_m: [" + ", ".join(map(str, range(400))) + "],"
+            " robot.initial_pose.y_m: [" + ", ".join(map(str, range(400))) + "]}",
+            "vary: 160000 combinations x 1 seeds is more runs than a sweep makes",
+        ),
+    ],
+    ids=["runs_1e9", "negative_seed", "timeout_1e300", "grid_160000"],
+)
+def test_sweep_numbers_are_bounded_before_any_cluster(
+    body: str, contains: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sweep = write_inputs(tmp_path, f"scenario: base.yaml\n{body}\n")
+    code = main(["sweep", str(sweep), "--out", str(tmp_path / "out"), "--workers", "1"])
+    _, err = capsys.readouterr()
+    assert code == 2, err
+    assert_one_line_error(err, contains=contains)
