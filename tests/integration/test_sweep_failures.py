@@ -1,5 +1,5 @@
 """A sweep survives its runs' failures: a run that raises, one past its timeout, and one whose Dask worker
-is killed mid-run are marked with their reasons; the other runs complete."""
+is killed mid-run are marked with their reasons; the other runs complete, and the sweep exits 1."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from tests.integration.sweep_helpers import env, read_table, write_inputs
+from tests.robustness.helpers import assert_bag_reads_back
 
 SPIN = "{type: cmd_vel_script, segments: [{duration_s: 100000, angular_radps: 0.3}]}"
 NEAR = "{type: behavior_tree, tree: tree.xml, locations: near.yaml}"
@@ -93,8 +94,9 @@ def test_a_run_that_raises_and_one_whose_worker_is_killed_fail_alone(tmp_path: P
         finally:
             if sweep.poll() is None:
                 sweep.kill()
-    assert sweep.returncode == 0, stderr
+    assert sweep.returncode == 1, stderr  # runs that did not complete: the sweep says so
     assert "3 runs: 1 succeeded" in stdout
+    assert "twin: error: 2 of 3 runs did not complete (1 error, 1 worker lost); first, r0001: " in stderr
     out = tmp_path / "out"
     rows = {r["run_id"]: r for r in read_table(out)}
     assert rows["r0000"]["outcome"] == "success"
@@ -112,13 +114,16 @@ def test_a_run_that_raises_and_one_whose_worker_is_killed_fail_alone(tmp_path: P
 def test_a_run_past_its_timeout_is_stopped_and_marked(tmp_path: Path) -> None:
     with _sweep(tmp_path, TIMEOUT, workers=1) as sweep:
         stdout, stderr = sweep.communicate(timeout=600)
-    assert sweep.returncode == 0, stderr
+    assert sweep.returncode == 1, stderr
     assert "1 runs: 0 succeeded" in stdout
     out = tmp_path / "out"
     (row,) = read_table(out)
     assert row["outcome"] == "timeout"
     assert row["reason"] == "still running after timeout_s=5 s"
     assert float(row["wall_s"]) >= 5.0
+    # SIGTERM was honoured within the grace (no SIGKILL): the bag is complete and reads back.
+    assert row["bag_path"] and (Path(row["bag_path"]) / "metadata.yaml").exists()
+    assert_bag_reads_back(Path(row["bag_path"]))
     summary = (out / "summary.md").read_text(encoding="utf-8")
     assert "| 1 | timeout: still running after timeout_s=5 s | r0000 |" in summary
     assert _running(str(out / "runs" / "r0000")) == []

@@ -10,6 +10,7 @@ that reads back). A refused `simulate` leaves no bag folder. Cases run in-proces
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -78,7 +79,27 @@ VALUE_CASES: dict[str, tuple[dict[str, Any], str]] = {
     "angle_min_above_max": ({"sensors.lidar.angle_min_rad": 1.0, "sensors.lidar.angle_max_rad": -1.0}, "angle_min"),
     "seed_text": ({"seed": "seven"}, "seed"),
     "negative_floor_height": ({"world.floor_height_m": -0.1}, "floor_height_m"),
-    "range_beyond_float32": ({"sensors.lidar.range_max_m": 3.4028235677973366e38}, "float32"),
+    "range_beyond_float32": ({"sensors.lidar.range_max_m": 3.4028235677973366e38}, "range_max_m: 3.40282e+38 m"),
+    # One finite-and-bounded check for every number (hardening issue, defect 5): these overflowed in the run.
+    "max_duration_1e300": ({"max_duration_s": 1e300}, "max_duration_s: 1e+300 s is out of range"),
+    "obstacle_path_1e300": (
+        {
+            "obstacles": [
+                {"shape": "box", "size_m": [0.3, 0.3, 0.4], "path_xy_m": [[3, 3], [1e300, 3]], "speed_mps": 0.5}
+            ]
+        },
+        "obstacles[0].path_xy_m[1][0]: 1e+300 m is out of range",
+    ),
+    "appear_1e300": (
+        {"obstacles": [{"shape": "box", "size_m": [0.3, 0.3, 0.4], "pose": {"x_m": 3, "y_m": 3}, "appear_s": 1e300}]},
+        "appear_s: 1e+300 s is out of range",
+    ),
+    "seed_beyond_int64": ({"seed": 2**70}, "seed: 1180591620717411303424 does not fit a 64-bit whole number"),
+    "noise_1e300": ({"sensors.lidar.noise_std_m": 1e300}, "noise_std_m: 1e+300 m is out of range"),
+    "voltage_1e300": (
+        {"drive.type": "fmu", "drive.speed_loop.voltage_limit_v": 1e300},
+        "voltage_limit_v: 1e+300 is out",
+    ),
 }
 
 
@@ -116,10 +137,15 @@ FILE_CASES: dict[str, tuple[dict[str, Any], int, str]] = {
     "tree_too_deep": ({"mission.tree": "deep.xml"}, 6, "nested deeper than"),
     "world_binary": ({"world.sdf": "binary.bin"}, 3, "binary.bin"),
     "robot_model_missing": ({"robot.model": "no_such_robot"}, 3, "robot.model: model 'no_such_robot' not found"),
+    # A device read for 13 s into a MemoryError; a FIFO would block for ever.
+    "world_dev_zero": ({"world.sdf": "/dev/zero"}, 2, "world.sdf: /dev/zero: not a regular file"),
+    "tree_dev_zero": ({"mission.tree": "/dev/zero"}, 2, "mission.tree: /dev/zero: not a regular file"),
+    "locations_fifo": ({"mission.locations": "fifo"}, 2, "fifo: not a regular file"),
 }
 
 
 def _fixture_files(folder: Path) -> None:
+    os.mkfifo(folder / "fifo")
     (folder / "locations_list.yaml").write_text("- [1.0, 2.0, 0.0]\n")
     (folder / "locations_empty.yaml").write_text("{}\n")
     (folder / "binary.bin").write_bytes(bytes(range(256)) * 8)
@@ -227,6 +253,8 @@ OPTION_CASES: dict[str, tuple[list[str], str]] = {
     "seed_negative": (["--seed", "-3"], "--seed"),
     "watchdog_zero": (["--watchdog-s", "0"], "--watchdog-s"),
     "watchdog_nan": (["--watchdog-s", "nan"], "--watchdog-s"),
+    "duration_1e300": (["--duration", "1e300"], "--duration 1e+300 s is out of range"),
+    "seed_beyond_int64": (["--seed", str(2**70)], "seed"),
 }
 
 
@@ -338,6 +366,45 @@ CLI_CASES: dict[str, tuple[list[str], int, str]] = {
         5,
         "cannot write",
     ),
+    "step_response_step_1e-300": (
+        ["fmu", "step-response", "builtin:xm430_w210", "--step-ms", "1e-300"],
+        2,
+        "--step-ms must be a communication step from 1e-06 ms (1 ns)",
+    ),
+    "step_response_voltage_1e300": (
+        ["fmu", "step-response", "builtin:xm430_w210", "--voltage", "1e300"],
+        2,
+        "--voltage must be a finite number of volts, at most 1000 V",
+    ),
+    "graph_measure_1e300": (["graph", "--measure-s", "1e300"], 2, "--measure-s 1e+300 s is out of range"),
+    "map_save_resolution_1e-300": (
+        [
+            "map",
+            "save",
+            "{fixtures}/gazebo_classic/worlds/empty_world.world",
+            "--out",
+            "{d}/m.yaml",
+            "--resolution",
+            "1e-300",
+        ],
+        2,
+        "--resolution must be a cell size from 0.005 to 10 m",
+    ),
+    "map_save_height_1e300": (
+        [
+            "map",
+            "save",
+            "{fixtures}/gazebo_classic/worlds/empty_world.world",
+            "--out",
+            "{d}/m.yaml",
+            "--height",
+            "1e300",
+        ],
+        2,
+        "--height must be a height >= 0 m: 1e+300 m is out of range",
+    ),
+    "world_info_dev_zero": (["world", "info", "/dev/zero"], 3, "/dev/zero: cannot read: not a regular file"),
+    "sweep_workers_1e20": (["sweep", "{d}/nowhere.yaml", "--workers", str(10**20)], 2, "--workers 1000"),
     "fmu_check_missing": (["fmu", "check", "{d}/nowhere.fmu"], 4, "nowhere.fmu"),
     "bag_info_missing": (["bag", "info", "{d}/nowhere"], 5, "nowhere"),
     "world_info_missing": (["world", "info", "{d}/nowhere.world"], 3, "nowhere.world"),
@@ -509,3 +576,43 @@ def test_spawning_inside_an_included_model_names_its_link_once(
         code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
         assert code == 2, err
         assert_one_line_error(err, contains=inside)
+
+
+# -- bag metadata times that no rosbag2 writes (int64 nanoseconds) --------------------------------------
+
+YEAR_318857_NS = (318857 - 1970) * 365_2425 * 86_400 * 10**5  # about 1e22 ns since the epoch
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key"),
+    [
+        ("nanoseconds: 29842068479", "nanoseconds: 1e30", "nanoseconds"),
+        (
+            "nanoseconds_since_epoch: 1701217690319080701",
+            f"nanoseconds_since_epoch: {YEAR_318857_NS}",
+            "nanoseconds_since_epoch",
+        ),
+    ],
+    ids=["duration_1e30_ns", "start_in_year_318857"],
+)
+def test_bag_info_refuses_a_metadata_time_beyond_int64(
+    old: str, new: str, key: str, tmp_path: Path, fixtures: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = fixtures / "bags" / "tb3_waffle_gazebo_humble"
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "rosbag_0.db3").write_bytes((source / "rosbag_0.db3").read_bytes())
+    (bag / "metadata.yaml").write_text((source / "metadata.yaml").read_text().replace(old, new, 1))
+    code, _, err = run(["bag", "info", str(bag)], capsys)
+    assert code == 5, err
+    assert_one_line_error(err, contains=f"{key}: ")
+    assert "does not fit a 64-bit whole number" in err
+
+
+def test_an_obstacle_too_slow_to_reach_its_path_end_in_any_run_still_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    obstacle = {"shape": "box", "size_m": [0.3, 0.3, 0.4], "path_xy_m": [[3, 3], [4, 3]], "speed_mps": 1e-300}
+    path = write_scenario(tmp_path, {"obstacles": [obstacle], "drive.type": "kinematic", "mission": {"type": "none"}})
+    code, _, err = run(["simulate", str(path), "--duration", "0.5", "--out", str(tmp_path / "bag")], capsys)
+    assert code == 0, err

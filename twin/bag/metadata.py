@@ -20,6 +20,7 @@ import yaml
 
 from twin.bag.qos import QosProfile, parse_qos_profiles, qos_profiles_to_yaml, qos_yaml_string_scalar
 from twin.core.errors import BagError
+from twin.core.numbers import number_problem
 from twin.core.yaml_numbers import safe_load
 
 __all__ = ["BagMetadata", "FileInformation", "TopicMetadata", "read_metadata", "render_metadata", "write_metadata"]
@@ -195,10 +196,15 @@ def _get(node: Mapping[str, Any], key: str, path: Path, version: int) -> Any:
 
 def _nanoseconds(node: Any, key: str, path: Path) -> int:
     try:
-        return int(node[key])
-    except (KeyError, TypeError, ValueError):
+        value = int(node[key])
+    except (KeyError, TypeError, ValueError, OverflowError):
         msg = f"{path}: expected a mapping with {key!r}, got {node!r}"
         raise BagError(msg) from None
+    problem = number_problem(value, key)  # rosbag2 keeps these in int64 (a year-318857 start is not one)
+    if problem is not None:
+        msg = f"{path}: {key}: {problem}; not a time rosbag2 writes, `twin bag recover` rebuilds the metadata"
+        raise BagError(msg)
+    return value
 
 
 def parse_metadata(text: str, path: Path) -> BagMetadata:

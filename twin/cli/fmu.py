@@ -47,6 +47,10 @@ examples:
 """
 
 
+# No robot motor's step response is asked at more than this (the TB3's DYNAMIXELs take 12 V).
+_MAX_VOLTAGE_V = 1000.0
+
+
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     """Add the `fmu` command group."""
     parser = subparsers.add_parser(
@@ -250,8 +254,8 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _check_step_response_args(args: argparse.Namespace) -> None:
-    if not (math.isfinite(args.step_ms) and 0.0 < args.step_ms <= 1000.0):
-        msg = f"--step-ms must be a communication step between 0 and 1000 ms, got {args.step_ms}"
+    if not (math.isfinite(args.step_ms) and 1e-6 <= args.step_ms <= 1000.0):  # at least the clock's 1 ns
+        msg = f"--step-ms must be a communication step from 1e-06 ms (1 ns) to 1000 ms, got {args.step_ms}"
         raise ConfigError(msg)
     if args.duration_s is not None and not (math.isfinite(args.duration_s) and args.duration_s > 0.0):
         msg = f"--duration-s must be a positive, finite number of seconds, got {args.duration_s}"
@@ -259,8 +263,8 @@ def _check_step_response_args(args: argparse.Namespace) -> None:
     if args.duration_s is not None and args.duration_s / (args.step_ms * 1e-3) > 10_000_000:
         msg = f"--duration-s {args.duration_s} at --step-ms {args.step_ms} is over 10 million steps; shorten it"
         raise ConfigError(msg)
-    if not math.isfinite(args.voltage):
-        msg = f"--voltage must be a finite number of volts, got {args.voltage}"
+    if not (math.isfinite(args.voltage) and abs(args.voltage) <= _MAX_VOLTAGE_V):
+        msg = f"--voltage must be a finite number of volts, at most {_MAX_VOLTAGE_V:g} V either way, got {args.voltage}"
         raise ConfigError(msg)
     if args.out is not None:
         folder = args.out.parent if str(args.out.parent) else Path(".")

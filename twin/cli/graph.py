@@ -7,6 +7,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+_WATCHDOG_S = 10.0
+
 _EPILOG = """\
 examples:
   twin graph                                   the default scenario's nodes and topics
@@ -44,39 +46,88 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         metavar="S",
         help="simulated seconds to run to measure rates (default 5; 0: none)",
     )
+    parser.add_argument(
+        "--watchdog-s",
+        type=float,
+        default=_WATCHDOG_S,
+        metavar="S",
+        help=f"end (exit 8) when a step or a node's constructor has not returned for S wall seconds "
+        f"(default {_WATCHDOG_S:g}; inf: no watchdog)",
+    )
     parser.set_defaults(func=_graph)
 
 
-def graph_data(scenario_path: Path | None, measure_s: float) -> dict[str, Any]:
-    """Return {"nodes": [...], "topics": [...]} of a scenario, with rates measured over `measure_s`."""
+def graph_data(
+    scenario_path: Path | None, measure_s: float, *, watchdog_s: float = _WATCHDOG_S, debug: bool = False
+) -> dict[str, Any]:
+    """Return {"nodes": [...], "topics": [...]} of a scenario, with rates measured over `measure_s`.
+
+    Runs under the watchdog, as `twin simulate` does: a node that spins in a callback or its
+    constructor ends the command (exit 8) instead of hanging it.
+
+    Raises:
+        TwinError: The scenario's error, or a SimulationError naming what was stuck.
+    """
+    from twin.cli.watch import Guard, build_watched
     from twin.core.errors import ConfigError
+    from twin.core.numbers import number_problem
+    from twin.sim.check import check_scenario
     from twin.sim.scenario import default_scenario_path
     from twin.sim.scenario_file import load_scenario
     from twin.sim.simulation import Simulation
+    from twin.sim.watchdog import Watchdog, WatchdogAbort
 
     if not measure_s >= 0.0 or measure_s == float("inf"):
         msg = f"--measure-s must be a finite number of seconds >= 0, got {measure_s}"
         raise ConfigError(msg)
-    scenario = load_scenario(scenario_path or default_scenario_path())
-    with Simulation(scenario, bag_path=None, duration_s=measure_s) as sim:
-        if measure_s > 0:
-            sim.run()
-        executor = sim.executor
-        nodes = executor.describe()
-        topics = []
-        for name, topic in sorted(executor.topics.items()):
-            rate = topic.count / measure_s if measure_s > 0 and topic.publishers else None
-            topics.append(
-                {
-                    "topic": name,
-                    "type": topic.msgtype,
-                    "rate_hz": round(rate, 2) if rate is not None else None,
-                    "publishers": topic.publishers,
-                    "subscribers": topic.subscribers,
-                    "latched": topic.latch_depth > 0,
-                }
-            )
-    return {"scenario": scenario.name, "measured_s": measure_s, "nodes": nodes, "topics": topics}
+    problem = number_problem(measure_s, "--measure-s", unit="s")
+    if problem is not None:
+        msg = f"--measure-s {problem}"
+        raise ConfigError(msg)
+    if not watchdog_s > 0:  # NaN too; inf turns the stuck-step check off
+        msg = f"--watchdog-s must be a positive number of seconds (inf: no watchdog), got {watchdog_s}"
+        raise ConfigError(msg)
+    path = scenario_path or default_scenario_path()
+    scenario = load_scenario(path)
+    check_scenario(scenario, path)
+    simulation = build_watched(
+        lambda: Simulation(scenario, bag_path=None, duration_s=measure_s), timeout_s=watchdog_s, debug=debug
+    )
+    guard = Guard(simulation, debug=debug)
+    try:
+        with simulation as sim:
+            if measure_s > 0:
+                watchdog = Watchdog(
+                    lambda: sim.t_s, timeout_s=watchdog_s, on_stuck=guard.on_stuck, on_signal=guard.on_signal
+                )
+                with watchdog:
+                    sim.run()
+    except WatchdogAbort:
+        if guard.report is None:  # not ours: never hide an exception
+            raise
+        raise guard.error() from None
+    finally:
+        guard.done.set()
+    return _describe(scenario.name, sim, measure_s)
+
+
+def _describe(scenario_name: str, sim: Any, measure_s: float) -> dict[str, Any]:
+    """The graph of a simulation that ran `measure_s`."""
+    executor = sim.executor
+    topics = []
+    for name, topic in sorted(executor.topics.items()):
+        rate = topic.count / measure_s if measure_s > 0 and topic.publishers else None
+        topics.append(
+            {
+                "topic": name,
+                "type": topic.msgtype,
+                "rate_hz": round(rate, 2) if rate is not None else None,
+                "publishers": topic.publishers,
+                "subscribers": topic.subscribers,
+                "latched": topic.latch_depth > 0,
+            }
+        )
+    return {"scenario": scenario_name, "measured_s": measure_s, "nodes": executor.describe(), "topics": topics}
 
 
 def _dot(data: dict[str, Any]) -> str:
@@ -120,7 +171,9 @@ def _text(data: dict[str, Any]) -> str:
 
 
 def _graph(args: argparse.Namespace) -> int:
-    data = graph_data(args.scenario, args.measure_s)
+    data = graph_data(
+        args.scenario, args.measure_s, watchdog_s=args.watchdog_s, debug=bool(getattr(args, "debug", False))
+    )
     if args.json:
         print(json.dumps(data, indent=2))
     elif args.dot:

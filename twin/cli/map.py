@@ -67,14 +67,27 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     save.set_defaults(func=_save)
 
 
+# Cell sizes `map save` takes: the planner's finest (a finer grid of a house is hundreds of MB) to 10 m.
+_MIN_RESOLUTION_M = 0.005
+_MAX_RESOLUTION_M = 10.0
+
+
 def _save(args: argparse.Namespace) -> int:
     from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
+    from twin.core.numbers import number_problem
     from twin.nav.map_server.map_io import map_from_scene, save_map
     from twin.world import build_scene, load_world
 
-    if args.resolution <= 0.0 or args.height < 0.0:
-        msg = f"--resolution must be > 0 and --height >= 0 (got {args.resolution}, {args.height})"
+    if not (_MIN_RESOLUTION_M <= args.resolution <= _MAX_RESOLUTION_M):  # NaN too
+        msg = (
+            f"--resolution must be a cell size from {_MIN_RESOLUTION_M:g} to {_MAX_RESOLUTION_M:g} m "
+            f"(Nav2 maps use 0.05), got {args.resolution}"
+        )
+        raise ConfigError(msg)
+    problem = number_problem(args.height, "--height", unit="m")
+    if problem is not None or args.height < 0.0:
+        msg = f"--height must be a height >= 0 m: {problem or f'got {args.height}'}"
         raise ConfigError(msg)
     if args.out.suffix not in (".yaml", ".yml"):
         msg = f"--out {str(args.out)!r} must name the map's YAML file (DIR/map.yaml)"

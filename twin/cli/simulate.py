@@ -20,13 +20,14 @@ from typing import TYPE_CHECKING, Any
 
 from twin.cli.play import live_banner, speed_arg
 from twin.cli.progress import Progress
-from twin.core.errors import ConfigError, Interrupted, SimulationError, TwinError, WorldError
+from twin.cli.watch import Guard, build_watched
+from twin.core.errors import ConfigError, Interrupted, TwinError, WorldError
+from twin.core.numbers import number_problem
 
 if TYPE_CHECKING:
     from twin.sim.executor import Sink
     from twin.sim.scenario import Scenario
-    from twin.sim.simulation import RunSummary, Simulation
-    from twin.sim.watchdog import StuckReport
+    from twin.sim.simulation import RunSummary
 
 _EPILOG = """\
 examples:
@@ -60,9 +61,6 @@ exit codes:
 
 
 _WATCHDOG_S = 10.0
-# After the watchdog asks a stuck main thread to unwind, how long it waits before it closes the bag
-# itself and ends the process (the thread is then inside a C call, e.g. an FMU's doStep).
-_UNWIND_S = 2.0
 
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
@@ -146,6 +144,27 @@ class _StopFlag:
         self.signum = signum
 
 
+class _Terminated(BaseException):
+    """SIGTERM during start-up (a BaseException, as KeyboardInterrupt is: no `except Exception` keeps it)."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise _Terminated
+
+
+@contextmanager
+def _terminated_raises() -> Iterator[None]:
+    """While start-up runs, SIGTERM unwinds it (the bag folder, if made, is removed) instead of killing the process."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 @contextmanager
 def _graceful_signals(flag: _StopFlag) -> Iterator[None]:
     previous = {sig: signal.signal(sig, flag.handle) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -171,9 +190,17 @@ def _summary_line(summary: RunSummary) -> str:
         f"({summary.real_time_factor:.0f}x real time), "
         f"{summary.messages} messages, {summary.contacts} contacts, "
         f"{f'{summary.drive} drive, ' if summary.drive else ''}"
-        f"{f'{summary.drive_notes}, ' if summary.drive_notes else ''}{summary.ended_by}"
+        f"{f'{summary.drive_notes}, ' if summary.drive_notes else ''}{_refused(summary)}{summary.ended_by}"
         f"{_result(summary)}: {summary.bag_path}"
     )
+
+
+def _refused(summary: RunSummary) -> str:
+    refused = summary.refused_messages
+    if not refused:
+        return ""
+    topics = ", ".join(f"{n} on {t}" for t, n in refused.items())
+    return f"{sum(refused.values())} non-finite messages refused ({topics}), "
 
 
 def _result(summary: RunSummary) -> str:
@@ -216,6 +243,10 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         msg = f"--duration must be a positive, finite number of seconds, got {args.duration}"
         raise ConfigError(msg)
+    problem = None if args.duration is None else number_problem(args.duration, "--duration", unit="s")
+    if problem is not None:
+        msg = f"--duration {problem}"
+        raise ConfigError(msg)
     if not args.watchdog_s > 0:  # NaN too; inf turns the stuck-step check off
         msg = f"--watchdog-s must be a positive number of seconds (inf: no watchdog), got {args.watchdog_s}"
         raise ConfigError(msg)
@@ -224,65 +255,19 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ConfigError(msg)
 
 
-class _Guard:
-    """The watchdog's actions for `twin simulate`: unwind the main thread, else save the bag and exit."""
-
-    def __init__(self, sim: Simulation, *, debug: bool) -> None:
-        self.sim = sim
-        self.debug = debug
-        self.main = threading.get_ident()
-        self.done = threading.Event()  # set by the main thread once the bag is closed
-        self.report: StuckReport | None = None
-        self.signum: int | None = None
-
-    def message(self) -> str:
-        report = self.report
-        assert report is not None
-        bag = self.sim.recorder.path if self.sim.recorder is not None else "no bag"
-        if self.signum is None:
-            return (
-                f"the step at t={report.sim_t_s:.3f} s has not returned for {report.stuck_s:.1f} s of wall time "
-                f"(watchdog): stuck in {report.where}; the bag up to t={report.sim_t_s:.3f} s is in {bag}"
-            )
-        name = signal.Signals(self.signum).name
-        return (
-            f"stopped by {name} while the step at t={report.sim_t_s:.3f} s was stuck in {report.where}; "
-            f"the bag up to t={report.sim_t_s:.3f} s is in {bag}"
-        )
-
-    def exit_code(self) -> int:
-        if self.signum is None:
-            return SimulationError.exit_code
-        return Interrupted.exit_code if self.signum == signal.SIGINT else 128 + self.signum
-
-    def on_stuck(self, report: StuckReport) -> None:
-        self._abort(report, None)
-
-    def on_signal(self, signum: int, report: StuckReport) -> None:
-        self._abort(report, signum)
-
-    def _abort(self, report: StuckReport, signum: int | None) -> None:
-        self.report, self.signum = report, signum
-        from twin.sim.watchdog import interrupt_main_thread
-
-        interrupt_main_thread(self.main, signum)  # a Python loop unwinds: the main thread closes the bag
-        if self.done.wait(_UNWIND_S):
-            return
-        # The main thread is inside a C call and cannot unwind: save the bag from here and end the process.
-        try:
-            if self.sim.recorder is not None:
-                self.sim.recorder.close()
-        except BaseException as err:  # the process ends either way; say what happened
-            print(f"twin: error: closing the bag failed: {err}", file=sys.stderr)
-        if self.debug:
-            print(f"twin: stuck main thread:\n{report.stack}", file=sys.stderr, end="")
-        print(f"twin: error: {self.message()}", file=sys.stderr)
-        sys.stderr.flush()
-        sys.stdout.flush()
-        os._exit(self.exit_code())
-
-
 def _simulate(args: argparse.Namespace) -> int:
+    # SIGTERM during start-up (reading, checking, building: seconds for a large world) stops it at
+    # once, as Ctrl-C does, and leaves no half-made bag; during the run it ends the run cleanly.
+    with _terminated_raises():
+        try:
+            return _simulate_checked(args)
+        except _Terminated:
+            err = Interrupted("stopped by SIGTERM before the run started; nothing was recorded")
+            err.exit_code = 128 + signal.SIGTERM  # type: ignore[misc]
+            raise err from None
+
+
+def _simulate_checked(args: argparse.Namespace) -> int:
     from twin.sim.check import check_scenario
     from twin.sim.scenario import default_scenario_path
     from twin.sim.scenario_file import load_scenario
@@ -359,13 +344,18 @@ def _run(
     progress = Progress(args.duration or scenario.max_duration_s)
     # Crash tests set TWIN_BAG_WRITE_LOG to learn what the recorder was handed, and when.
     write_log = os.environ.get("TWIN_BAG_WRITE_LOG")
+    debug = bool(getattr(args, "debug", False))
     try:
-        simulation = Simulation(
-            scenario,
-            bag_path=bag_path,
-            duration_s=args.duration,
-            write_log=Path(write_log) if write_log else None,
-            sinks=sinks,
+        simulation = build_watched(
+            lambda: Simulation(
+                scenario,
+                bag_path=bag_path,
+                duration_s=args.duration,
+                write_log=Path(write_log) if write_log else None,
+                sinks=sinks,
+            ),
+            timeout_s=args.watchdog_s,
+            debug=debug,
         )
     except BaseException as err:
         if not existed and bag_path.is_dir():  # refused after the bag folder was made: leave nothing behind
@@ -379,7 +369,7 @@ def _run(
         if named is err:
             raise
         raise named from err
-    guard = _Guard(simulation, debug=bool(getattr(args, "debug", False)))
+    guard = Guard(simulation, debug=debug)
     try:
         with _graceful_signals(flag), simulation as sim:
             watchdog = Watchdog(

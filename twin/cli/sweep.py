@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
 import time
@@ -30,8 +31,9 @@ A sweep file names a base scenario and what varies (docs/sweeps.md):
 Each run is one `twin simulate` process in a Dask task: a crash or timeout fails that run only.
 Running the same sweep again skips the runs that finished. Results: DIR/results.csv (and .parquet),
 DIR/summary.md (success rate, 95 % Wilson interval, failures by reason), DIR/mission_time.png.
-Exit codes: 0 the sweep ran (whatever its runs' outcomes), 2 a bad sweep file or an unreachable
-scheduler.
+Exit codes: 0 every run completed (its mission succeeded or failed: both are results), 1 some runs
+did not complete (error, crash, timeout, worker lost; the tables are written all the same), 2 a bad
+sweep file, an --out that cannot be written, or a scheduler that is not a reachable Dask scheduler.
 """
 
 
@@ -96,15 +98,31 @@ class _Bar:
 
 def _sweep(args: argparse.Namespace) -> int:
     from twin.core.config import load_yaml
-    from twin.sweep import Cluster, load_sweep, run_sweep, wilson_interval, write_reports
+    from twin.sweep import (
+        Cluster,
+        check_out_dir,
+        check_scheduler,
+        load_sweep,
+        run_sweep,
+        wilson_interval,
+        write_reports,
+    )
 
     if args.workers is not None and args.workers < 1:
         msg = f"--workers must be at least 1, got {args.workers}"
+        raise ConfigError(msg)
+    cores = os.cpu_count() or 1
+    if args.workers is not None and args.workers > 4 * cores:  # each is a process running one run on one core
+        msg = f"--workers {args.workers}: this machine has {cores} cores and a run uses one; give at most {4 * cores}"
         raise ConfigError(msg)
     if args.workers is not None and args.scheduler is not None:
         msg = "--workers sizes the local cluster; with --scheduler the cluster's own workers run the sweep"
         raise ConfigError(msg)
     load_yaml(args.sweep)  # a missing or malformed file is told at once, before any cluster starts
+    if args.scheduler is not None:
+        check_scheduler(args.scheduler)  # an address Dask would hang on, or crash on, is told at once
+    if args.out is not None:
+        check_out_dir(args.out)  # before any run: an unwritable --out would fail every run's results
     if not (args.verbose or args.debug):  # Dask's own shutdown notices are not the user's business
         logging.getLogger("distributed").setLevel(logging.CRITICAL)
     bar = _Bar(sys.stderr)
@@ -116,6 +134,8 @@ def _sweep(args: argparse.Namespace) -> int:
         with Cluster(workers=args.workers, scheduler=args.scheduler) as cluster:
             spec = load_sweep(args.sweep)
             out = args.out if args.out is not None else Path("bags") / f"{spec.name}_sweep"
+            if args.out is None:
+                check_out_dir(out, option="the default output folder")
             result = run_sweep(spec, out_dir=out, keep_bags=args.keep_bags, progress=bar, cluster=cluster)
     finally:
         signal.signal(signal.SIGTERM, previous)
@@ -123,6 +143,7 @@ def _sweep(args: argparse.Namespace) -> int:
     files = write_reports(result)
     runs = len(result.rows)
     ok = sum(1 for r in result.rows if r.get("outcome") == "success")
+    unfinished = [r for r in result.rows if r.get("outcome") not in ("success", "failure")]
     low, high = wilson_interval(ok, runs)
     if args.json:
         doc = {
@@ -143,7 +164,25 @@ def _sweep(args: argparse.Namespace) -> int:
             f"{runs} runs{resumed}: {ok} succeeded ({100 * ok / runs:.1f} %, 95 % CI {100 * low:.1f} to "
             f"{100 * high:.1f} %), {runs - ok} did not; {result.out_dir / 'summary.md'}"
         )
+    if unfinished:
+        # The success rate leaves these runs out of what it measured: say so, and exit 1 for scripts and CI.
+        kinds = ", ".join(f"{n} {o}" for o, n in _counts(unfinished).items())
+        first = unfinished[0]
+        print(
+            f"twin: error: {len(unfinished)} of {runs} runs did not complete ({kinds}); first, "
+            f"{first.get('run_id')}: {first.get('reason')}",
+            file=sys.stderr,
+        )
+        return 1
     return 0
+
+
+def _counts(rows: list[dict[str, Any]]) -> dict[str, int]:
+    counts: dict[str, int] = {}
+    for row in rows:
+        outcome = str(row.get("outcome"))
+        counts[outcome] = counts.get(outcome, 0) + 1
+    return counts
 
 
 def _interrupt(signum: int, frame: object) -> None:

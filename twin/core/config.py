@@ -27,6 +27,8 @@ from typing import Any, TypeVar
 import yaml
 
 from twin.core.errors import ConfigError, TwinError
+from twin.core.files import read_input
+from twin.core.numbers import number_problem
 from twin.core.yaml_numbers import compose
 
 __all__ = ["ConfigNode", "build", "load_config", "load_yaml", "location", "read_text_file", "suggest"]
@@ -36,6 +38,8 @@ T = TypeVar("T")
 ConfigNode = yaml.Node
 
 _CONSTRUCTOR = yaml.constructor.SafeConstructor()
+# A YAML file larger than this is no configuration (the largest shipped is a few kB).
+_MAX_TEXT_BYTES = 64 * 2**20
 
 
 def suggest(word: str, choices: Sequence[str]) -> str:
@@ -69,7 +73,7 @@ def read_text_file(path: Path, error: type[TwinError], *, what: str) -> str:
         what: What the file should be, for the message (e.g. "a UTF-8 YAML file").
     """
     try:
-        data = path.read_bytes()
+        data = read_input(path, max_bytes=_MAX_TEXT_BYTES)
     except FileNotFoundError:
         msg = f"{path}: file not found"
         raise error(msg) from None
@@ -259,10 +263,12 @@ def _build_plain(tp: Any, node: yaml.Node, key: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             _fail(node, key, f"expected a whole number, got {value!r}")
+        _check_number(value, node, key)
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             _fail(node, key, f"expected a number, got {value!r}")
+        _check_number(value, node, key)
         return float(value)
     if tp is str:
         if value is None or isinstance(value, bool | dict | list):
@@ -281,6 +287,13 @@ def _build_plain(tp: Any, node: yaml.Node, key: str) -> Any:
         return None
     msg = f"config type {_describe(tp)} is not supported (key {key})"
     raise TypeError(msg)
+
+
+def _check_number(value: float, node: yaml.Node, key: str) -> None:
+    """Every number of a config file is finite and in its unit's range (`twin.core.numbers`)."""
+    problem = number_problem(value, key)
+    if problem is not None:
+        _fail(node, key, problem)
 
 
 def _build_union(args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:

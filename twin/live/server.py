@@ -33,6 +33,7 @@ from twin.bag.typesys import MessageDefinition
 from twin.core.closing import Closing
 from twin.core.errors import ConfigError
 from twin.live.front import HandshakeFront
+from twin.live.throttle import PeerLogThrottle
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LiveServer"]
 
@@ -99,6 +100,8 @@ class LiveServer(Closing):
         self._lock = threading.Lock()
         self._next_time_ns = 0
         listener = _listen(host, port)
+        self.peer_errors = PeerLogThrottle()  # one line per kind of failing peer, then a count
+        self.peer_errors.attach()
         try:
             # The SDK's server on a private loopback port; clients meet the front (twin.live.front).
             self._server = foxglove.start_server(
@@ -115,6 +118,7 @@ class LiveServer(Closing):
             reason = str(err).removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
             reason = reason.split(" (os error", 1)[0].lower()
             msg = f"cannot serve on {host}:{port}: {reason}; choose another port with --port (or --host)"
+            self.peer_errors.detach()
             raise ConfigError(msg) from None
         self._front = HandshakeFront(listener, ("127.0.0.1", self._server.port))
         self.port: int = self._front.port
@@ -202,3 +206,5 @@ class LiveServer(Closing):
         for entry in self._channels:
             entry.channel.close()
         self._server.stop()
+        self.peer_errors.detach()
+        self.peer_errors.flush()

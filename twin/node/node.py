@@ -24,6 +24,7 @@ from twin.core.clock import NS_PER_S
 from twin.core.errors import ConfigError
 
 __all__ = [
+    "MAX_TIMER_PERIOD_S",
     "PRIORITY_CLOCK",
     "PRIORITY_COMMAND",
     "PRIORITY_SENSOR",
@@ -58,6 +59,9 @@ PRIORITY_STATE = 60
 PRIORITY_CLOCK = 90
 
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+
+#: The longest timer period a node may ask for (about 31.7 years of sim time; nothing runs longer).
+MAX_TIMER_PERIOD_S = 1e9
 
 
 def validate_topic_name(name: str) -> str | None:
@@ -183,6 +187,10 @@ class Graph(Protocol):
     @property
     def now_ns(self) -> int:
         """The simulation time, ns."""
+        ...
+
+    def add_timer(self, timer: Timer) -> None:
+        """Start a timer a node created while running (in a callback): first firing one period from now."""
         ...
 
 
@@ -462,16 +470,36 @@ class Node:
         return sub
 
     def create_timer(self, timer_period_sec: float, callback: Callable[[], None]) -> Timer:
-        """Call `callback()` every `timer_period_sec` of simulation time, first one period after the start.
+        """Call `callback()` every `timer_period_sec` of simulation time, first one period after it is created.
+
+        As rclpy's: a timer created in a callback fires too, and a period shorter than the physics
+        step fires once per step (missed periods are skipped, not caught up).
 
         Raises:
-            ConfigError: If the period is not a positive, finite number of seconds.
+            ConfigError: If the period is not a positive, finite number of seconds of at least 1 ns
+                (the clock's resolution) and at most `MAX_TIMER_PERIOD_S`.
         """
-        if isinstance(timer_period_sec, bool) or not 0 < timer_period_sec < float("inf"):
-            msg = f"node {self._name}: timer period must be a positive number of seconds, got {timer_period_sec!r}"
+        period: object = timer_period_sec  # users' code passes anything
+        if isinstance(period, bool) or not isinstance(period, int | float) or not 0 < period < float("inf"):
+            msg = f"node {self._name}: timer period must be a positive number of seconds, got {period!r}"
             raise ConfigError(msg)
-        timer = Timer(node=self, period_ns=round(timer_period_sec * NS_PER_S), callback=callback)
+        period_ns = round(period * NS_PER_S)
+        if period_ns < 1:
+            msg = (
+                f"node {self._name}: timer period {period!r} s is below the clock's resolution (1 ns); "
+                "give 1e-09 s or more"
+            )
+            raise ConfigError(msg)
+        if period > MAX_TIMER_PERIOD_S:
+            msg = (
+                f"node {self._name}: timer period {period!r} s is longer than any run "
+                f"({MAX_TIMER_PERIOD_S:g} s at most)"
+            )
+            raise ConfigError(msg)
+        timer = Timer(node=self, period_ns=period_ns, callback=callback)
         self.timers.append(timer)
+        if self._graph is not None:  # created while running: the executor starts it now
+            self._graph.add_timer(timer)
         return timer
 
     def create_rate_timer(

@@ -12,12 +12,12 @@ also loads what the run would load (world, robot, behaviour tree) for `twin scen
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twin.core.errors import ConfigError, FmuError, TwinError
+from twin.core.numbers import number_problem
 from twin.sim.scenario import BehaviorTreeMission, Scenario, runs_amcl, runs_nav2
 
 if TYPE_CHECKING:
@@ -69,11 +69,10 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
     """
     physics_hz = 1.0 / scenario.physics.step_s
     for key, value in _values(scenario, ""):
-        if isinstance(value, float) and not isinstance(value, bool):
-            if math.isnan(value):
-                raise _refuse(path, key, "is NaN; give a number")
-            if math.isinf(value) and key not in _MAY_BE_INFINITE:
-                raise _refuse(path, key, f"is {value}; give a finite number")
+        if isinstance(value, int | float) and key not in _MAY_BE_INFINITE:
+            problem = number_problem(value, key)  # what the loader checks, for values set in code (--seed)
+            if problem is not None:
+                raise _refuse(path, key, problem)
         if key.endswith("_hz") and isinstance(value, int | float) and not isinstance(value, bool):
             if not value >= _MIN_RATE_HZ:
                 raise _refuse(path, key, f"must be a rate of at least {_MIN_RATE_HZ:g} Hz, got {value}")
@@ -166,6 +165,8 @@ def _check_files(scenario: Scenario, path: Path) -> None:
             continue
         if isinstance(value, Path) and not in_model_path and not value.exists():
             raise _refuse(path, key, f"{value}: file not found; fix the path (relative to {path.parent})")
+        if isinstance(value, Path) and not in_model_path and not (value.is_file() or value.is_dir()):
+            raise _refuse(path, key, f"{value}: not a regular file (a device, pipe or socket); give a file")
     for key, folder in _values(scenario.world.model_path, "world.model_path"):
         if isinstance(folder, Path) and not folder.is_dir():
             raise _refuse(path, key, f"{folder}: no such folder; fix the model path")

@@ -22,12 +22,14 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from fractions import Fraction
+from typing import Any, Literal, Protocol
 
 from twin.bag import QOS_BEST_EFFORT, QOS_LATCHED, QOS_RELIABLE, QosProfile, default_qos
 from twin.core.clock import NS_PER_S, ns_to_s
 from twin.core.errors import ConfigError, SimulationError, TwinError
 from twin.node import Encoded, Node, QoSProfile, Subscription, Timer
+from twin.node.finite import checks_finite, nonfinite_field
 from twin.sim.scheduler import Scheduler
 
 __all__ = ["Executor", "RecordFilter", "Sink", "Topic"]
@@ -77,6 +79,7 @@ class Topic:
     publishers: list[str] = field(default_factory=list)  # node names
     subscribers: list[str] = field(default_factory=list)
     callbacks: list[Callable[[Any], None]] = field(default_factory=list)  # subscriptions, in order
+    user_callbacks: list[Callable[[Any], None]] = field(default_factory=list)  # those of users' nodes
     sinks: list[tuple[Callable[[Any, int, bytes], None], Any]] = field(default_factory=list)  # (write, handle)
     count: int = 0
     latched: list[Any] = field(default_factory=list)  # the last messages, for late subscribers
@@ -103,6 +106,10 @@ class Executor:
         step_ns: The physics step.
         sinks: Where messages are serialised to (the recorder first), each with the topics it takes.
         profile: Time each timer callback and the physics (for benchmarks).
+        non_finite: What a message from a user's node with a NaN or infinite number in a field the
+            twin's own nodes read does (`twin.node.finite`): `drop` keeps it from them (the bag and
+            users' nodes still get it; one warning per publisher and topic; counted in `refused`),
+            `error` ends the run with a SimulationError.
 
     Raises:
         ValueError: If the step is not positive.
@@ -114,6 +121,7 @@ class Executor:
         *,
         sinks: Sequence[tuple[Sink, RecordFilter]] = (),
         profile: bool = False,
+        non_finite: Literal["drop", "error"] = "drop",
     ) -> None:
         self.step_ns = step_ns
         self.scheduler = Scheduler(step_ns)
@@ -128,6 +136,9 @@ class Executor:
         self._after_advance: Callable[[int], None] | None = None
         self._pending: Any = None
         self._failure: BaseException | None = None
+        self.non_finite = non_finite
+        self.refused: dict[str, int] = {}  # topic -> messages kept from the twin's nodes (non-finite)
+        self._warned: set[tuple[str, str]] = set()
 
     # -- the graph -------------------------------------------------------------------------------
 
@@ -154,6 +165,7 @@ class Executor:
             msg = f"two nodes are named {name}; give one of them another `name:` in the scenario's nodes"
             raise ConfigError(msg)
         self.nodes[name] = node
+        timers = list(node.timers)  # those created from here on (a callback on a latched message) start themselves
         node.bind(self)
         trusted = bool(getattr(node, "builtin", False)) or type(node).__module__.startswith("twin.")
         for pub in node.publishers:
@@ -168,9 +180,11 @@ class Executor:
             topic.subscribers.append(name)
             callback = self._delivery(topic, sub, guarded=not trusted)
             topic.callbacks.append(callback)
+            if not trusted:
+                topic.user_callbacks.append(callback)
             for old in topic.latched:
                 callback(old)
-        for timer in node.timers:
+        for timer in timers:
             self._add_timer(timer, guarded=not trusted)
 
     def _msgtype(self, msg_type: type | str, node: Node) -> str:
@@ -251,15 +265,56 @@ class Executor:
         if not checked:
             return publish
         unchecked = publish
+        guard_finite = checks_finite(msgtype)
 
         def checked_publish(msg: Any) -> None:
-            if type(msg) is not Encoded and getattr(msg, "__msgtype__", None) != msgtype:
-                given = getattr(msg, "__msgtype__", type(msg).__name__)
-                text = f"node {node.get_name()} published a {given} on {topic.name}, which carries {msgtype}"
-                raise SimulationError(text)
+            if type(msg) is not Encoded:
+                if getattr(msg, "__msgtype__", None) != msgtype:
+                    given = getattr(msg, "__msgtype__", type(msg).__name__)
+                    text = f"node {node.get_name()} published a {given} on {topic.name}, which carries {msgtype}"
+                    raise SimulationError(text)
+                if guard_finite and len(topic.callbacks) > len(topic.user_callbacks):  # a twin node listens
+                    bad = nonfinite_field(msg, msgtype)
+                    if bad is not None:
+                        self._refuse(node, topic, bad)
+                        self._publish_refused(topic, msg)
+                        return
             unchecked(msg)
 
         return checked_publish
+
+    def _refuse(self, node: Node, topic: Topic, bad: str) -> None:
+        """A user's node published a non-finite number the twin's nodes would read: count and warn, or end the run.
+
+        Raises:
+            SimulationError: With `non_finite: error`.
+        """
+        what = f"node {node.get_name()} published {bad} on {topic.name} at t={ns_to_s(self.now_ns):.3f} s"
+        if self.non_finite == "error":
+            msg = f"{what}; the scenario's non_finite_messages: error ends the run (drop: refuse it and go on)"
+            raise SimulationError(msg)
+        self.refused[topic.name] = self.refused.get(topic.name, 0) + 1
+        key = (node.get_fully_qualified_name(), topic.name)
+        if key not in self._warned:
+            self._warned.add(key)
+            _log.warning(
+                "%s: refused: the twin's own subscribers never see it and keep their last finite input (the "
+                "drive holds its last command, as Nav2 drops a NaN velocity); warned once per publisher and "
+                "topic, the run summary counts them",
+                what,
+            )
+
+    def _publish_refused(self, topic: Topic, msg: Any) -> None:
+        """Deliver a refused message to the sinks (a bag records what was published) and to users' nodes only."""
+        from twin.msgs import serialize
+
+        topic.count += 1
+        if topic.sinks:
+            data = serialize(msg, topic.msgtype)
+            for write, handle in topic.sinks:
+                write(handle, self.now_ns, data)
+        for callback in topic.user_callbacks:
+            callback(msg)
 
     def _delivery(self, topic: Topic, sub: Subscription, *, guarded: bool) -> Callable[[Any], None]:
         callback = sub.callback
@@ -288,6 +343,12 @@ class Executor:
                 fn(*args)
             except TwinError:
                 raise
+            except SystemExit as err:  # sys.exit() in a callback: the node's fault, not the run's exit status
+                msg = (
+                    f"node {node.get_name()}: {what} called sys.exit({err.code!r}) at t={ns_to_s(self.now_ns):.3f} s; "
+                    "a node cannot end the run (end it with the scenario's max_duration_s or the mission)"
+                )
+                raise SimulationError(msg) from err
             except Exception as err:
                 msg = (
                     f"node {node.get_name()}: {what} raised {type(err).__name__}: {err} "
@@ -297,7 +358,13 @@ class Executor:
 
         return guarded
 
-    def _add_timer(self, timer: Timer, *, guarded: bool) -> None:
+    def add_timer(self, timer: Timer) -> None:
+        """Start a timer a node created while running: it first fires one period from now, as rclpy's."""
+        node = timer.node
+        trusted = bool(getattr(node, "builtin", False)) or type(node).__module__.startswith("twin.")
+        self._add_timer(timer, guarded=not trusted, origin_k=self._k)
+
+    def _add_timer(self, timer: Timer, *, guarded: bool, origin_k: int = 0) -> None:
         node = timer.node
         callback = timer.callback
         label = f"{node.get_name()}.{getattr(callback, '__name__', type(callback).__name__)}"
@@ -315,10 +382,15 @@ class Executor:
         if self._profile:
             fn = self._timed(label, fn)
         if timer.period_ns == 0:
-            self.scheduler.once(label, fn, at_k=0, priority=timer.priority)
+            self.scheduler.once(label, fn, at_k=origin_k, priority=timer.priority)
             return
-        rate_hz = timer.rate_hz if timer.rate_hz is not None else NS_PER_S / timer.period_ns
-        self.scheduler.add(label, rate_hz, fn, priority=timer.priority, start_k=0 if timer.fire_at_start else 1)
+        start_k = origin_k if timer.fire_at_start else origin_k + 1
+        if timer.rate_hz is not None:
+            self.scheduler.add(label, timer.rate_hz, fn, priority=timer.priority, start_k=start_k, origin_k=origin_k)
+            return
+        # A user's timer: its exact period; shorter than a step, it fires once a step (rclpy skips missed periods).
+        rate = Fraction(NS_PER_S, max(timer.period_ns, self.step_ns))
+        self.scheduler.add(label, rate, fn, priority=timer.priority, start_k=start_k, origin_k=origin_k)
 
     def _timed(self, name: str, fn: Callable[[int], None]) -> Callable[[int], None]:
         timings = self.timings_s
@@ -389,7 +461,10 @@ class Executor:
         fire_due, heap = scheduler.fire_due, scheduler._heap  # the heap's head is the next due step
         step_ns = self.step_ns
         steps_per_s = max(1, NS_PER_S // step_ns)
-        next_report = self._k
+        # A stop (SIGTERM, Ctrl-C) is looked for every 20 ms of sim time, progress told every second:
+        # in a world that runs slower than real time a second of sim time may take many wall seconds.
+        steps_per_check = max(1, steps_per_s // 50)
+        next_report = next_check = self._k
         k = self._k
         ended = "duration"
         while True:
@@ -408,13 +483,15 @@ class Executor:
             if done is not None and done.done:
                 end_k = k  # this step's publications are the last
                 ended = "done"
-            if k >= next_report:
+            if k >= next_check:
                 if should_stop():
                     ended = "interrupted"
                     break
-                if progress is not None:
-                    progress(k / steps_per_s, self.message_count)
-                next_report = k + steps_per_s
+                next_check = k + steps_per_check
+                if k >= next_report:
+                    if progress is not None:
+                        progress(k / steps_per_s, self.message_count)
+                    next_report = k + steps_per_s
         return ended
 
     def describe(self) -> list[dict[str, Any]]:

@@ -22,7 +22,7 @@ from twin.core.errors import ConfigError, TwinError
 from twin.node import LaunchArguments, Node, launch_context
 from twin.sim.scenario import NodeSpec, Scenario
 
-__all__ = ["ENTRY_POINT_GROUP", "known_node_plugins", "load_nodes"]
+__all__ = ["ENTRY_POINT_GROUP", "constructing_node", "known_node_plugins", "load_nodes"]
 
 ENTRY_POINT_GROUP = "twin.nodes"
 
@@ -88,7 +88,7 @@ def _resolve_class(spec: NodeSpec, where: str, folder: Path | None) -> type:
             raise ConfigError(msg) from None
         except TwinError:
             raise
-        except Exception as err:
+        except (Exception, SystemExit) as err:
             msg = f"{where}.plugin: importing {module_name!r} raised {type(err).__name__}: {err}"
             raise ConfigError(msg) from None
     cls = getattr(module, class_name, None)
@@ -101,6 +101,27 @@ def _resolve_class(spec: NodeSpec, where: str, folder: Path | None) -> type:
         msg = f"{where}.plugin: {plugin} is not a twin.node.Node subclass; derive it from twin.node.Node"
         raise ConfigError(msg)
     return cls
+
+
+def _construct(cls: type, arguments: LaunchArguments, folder: Path | None) -> Any:
+    """Call a user node's constructor (`constructing_node` finds a thread inside it by this frame)."""
+    with launch_context(arguments), _importable(folder):
+        return cls()
+
+
+def constructing_node(ident: int) -> str | None:
+    """The class of the user node whose constructor thread `ident` is running (in `load_nodes`), or None.
+
+    A watchdog reads it from its own thread: a constructor that does not return is a node's fault,
+    while the rest of a start-up (a large world, a first compile) may take as long as it takes.
+    """
+    frame = sys._current_frames().get(ident)
+    while frame is not None:
+        if frame.f_code is _construct.__code__:
+            cls = frame.f_locals.get("cls")
+            return getattr(cls, "__name__", "a node")
+        frame = frame.f_back
+    return None
 
 
 def load_nodes(scenario: Scenario) -> list[Node]:
@@ -124,14 +145,13 @@ def load_nodes(scenario: Scenario) -> list[Node]:
             remappings=dict(spec.remappings),
         )
         try:
-            with launch_context(arguments), _importable(folder):
-                node: Any = cls()
+            node = _construct(cls, arguments, folder)
         except ConfigError as err:
             msg = f"{where}: {err}"
             raise ConfigError(msg) from None
         except TwinError:
             raise
-        except Exception as err:
+        except (Exception, SystemExit) as err:  # sys.exit() in a constructor too: the node's fault
             msg = f"{where}: constructing {cls.__name__} raised {type(err).__name__}: {err}"
             raise ConfigError(msg) from None
         nodes.append(node)

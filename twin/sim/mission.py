@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import bisect
 import logging
+import math
 import random
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Protocol
@@ -80,11 +81,26 @@ class BagReplay:
     def __init__(self, spec: ReplayMission) -> None:
         self.spec = spec
         self.commands = load_commands(spec)
-        self._t = self.commands.t_ns.tolist()
-        self._v = self.commands.v_mps.tolist()
-        self._w = self.commands.w_radps.tolist()
+        t, v, w = self.commands.t_ns.tolist(), self.commands.v_mps.tolist(), self.commands.w_radps.tolist()
+        finite = [math.isfinite(a) and math.isfinite(b) for a, b in zip(v, w, strict=True)]
+        if not all(finite):  # refused as a user node's are: the drive keeps the command before them
+            first = finite.index(False)
+            _log.warning(
+                "%s: %d of %d commands on %s hold NaN or infinity (the first at %.3f s: %s, %s): skipped, the "
+                "drive keeps the command before each, as Nav2 drops a NaN velocity",
+                spec.bag,
+                finite.count(False),
+                len(finite),
+                spec.topic,
+                t[first] / 1e9,
+                v[first],
+                w[first],
+            )
+            t, v, w = ([x for x, ok in zip(seq, finite, strict=True) if ok] for seq in (t, v, w))
+        self._t, self._v, self._w = t, v, w
         self.end_ns = self.commands.end_ns
-        self._before = self.commands.start_velocity
+        start = self.commands.start_velocity
+        self._before = start if all(math.isfinite(x) for x in start) else (0.0, 0.0)
         self._i = -1
         self.done = False
         self.result = "running"

@@ -395,6 +395,9 @@ class Scenario:
     blocks: BlocksSection = field(default_factory=BlocksSection)
     seed: int = 0
     max_duration_s: float = 600.0
+    # A user node's NaN or infinity in a field the twin's nodes read (`/cmd_vel`, `/initialpose`...):
+    # drop (refused, warned once, counted in the summary) or error (the run ends, exit 8).
+    non_finite_messages: Literal["drop", "error"] = "drop"
     source_path: Path | None = None  # the scenario file (set by the loader; user modules are found beside it)
 
 

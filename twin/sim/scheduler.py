@@ -32,6 +32,7 @@ class Task:
     step_ns: int
     count: int = 0
     due_k: int = field(default=0)
+    origin_k: int = 0  # the step its grid starts from (a timer created while running: its creation)
     # The i-th firing is at step ceil(i * ns_den / num_step): both factors fixed, kept for the hot loop.
     ns_den: int = field(init=False, repr=False)
     num_step: int = field(init=False, repr=False)
@@ -42,7 +43,7 @@ class Task:
 
     def due_step(self, i: int) -> int:
         """Return the step index of the i-th firing."""
-        return -(-i * self.ns_den // self.num_step)
+        return self.origin_k - (-i * self.ns_den // self.num_step)
 
 
 class Scheduler:
@@ -57,17 +58,37 @@ class Scheduler:
         self._seq = 0
         self.tasks: list[Task] = []
 
-    def add(self, name: str, rate_hz: float, fn: TaskFn, *, priority: int = 50, start_k: int = 0) -> Task:
-        """Add a task firing at `rate_hz` from step `start_k` on.
+    def add(
+        self,
+        name: str,
+        rate_hz: float | Fraction,
+        fn: TaskFn,
+        *,
+        priority: int = 50,
+        start_k: int = 0,
+        origin_k: int = 0,
+    ) -> Task:
+        """Add a task firing at `rate_hz` from step `start_k` on, on a grid that starts at step `origin_k`.
+
+        A float rate is taken as the nearest fraction with a denominator up to 10^6; a `Fraction`
+        (e.g. `Fraction(NS_PER_S, period_ns)`) exactly.
 
         Raises:
             ValueError: If the rate is not positive.
         """
-        if not rate_hz > 0.0:
+        if not rate_hz > 0:
             msg = f"{name}: rate must be positive, got {rate_hz} Hz"
             raise ValueError(msg)
-        frac = Fraction(rate_hz).limit_denominator(1_000_000)
-        task = Task(name=name, fn=fn, priority=priority, num=frac.numerator, den=frac.denominator, step_ns=self.step_ns)
+        frac = rate_hz if isinstance(rate_hz, Fraction) else Fraction(rate_hz).limit_denominator(1_000_000)
+        task = Task(
+            name=name,
+            fn=fn,
+            priority=priority,
+            num=frac.numerator,
+            den=frac.denominator,
+            step_ns=self.step_ns,
+            origin_k=origin_k,
+        )
         first = 0
         while task.due_step(first) < start_k:
             first += 1
@@ -103,6 +124,6 @@ class Scheduler:
             task.fn(t_ns)
             count = task.count = task.count + 1
             if task.num:
-                due = task.due_k = -(-count * task.ns_den // task.num_step)
+                due = task.due_k = task.origin_k - (-count * task.ns_den // task.num_step)
                 seq = self._seq = self._seq + 1
                 push(heap, (due, task.priority, seq, task))

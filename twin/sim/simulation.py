@@ -76,6 +76,7 @@ class RunSummary:
     drive: str = ""  # the drive that ran, e.g. `fmu xm430_w210_servo (FMI 2, velocity-servo)` or `kinematic`
     drive_notes: str = ""  # e.g. commands clamped to the motors' reach ('' when none)
     localization: dict[str, Any] = field(default_factory=dict)  # AMCL vs the true pose ({} without AMCL)
+    refused_messages: dict[str, int] = field(default_factory=dict)  # topic -> non-finite messages from users' nodes
 
 
 class Simulation(Closing):
@@ -122,7 +123,7 @@ class Simulation(Closing):
         body = group.spawn(scene)
         self.obstacles = self._make_obstacles(body)
         self.recorder: Recorder | None = None
-        self.executor = Executor(self.step_ns, profile=profile)
+        self.executor = Executor(self.step_ns, profile=profile, non_finite=scenario.non_finite_messages)
         group.build(scene, obstacles=self.obstacles, rng=self._rng, step_ns=self.step_ns, now=self._now)
         try:  # from here on, a failure must release the drives (FMU instances) the groups hold
             user_nodes = load_nodes(scenario)
@@ -327,4 +328,5 @@ class Simulation(Closing):
             drive=self.drive.label,
             drive_notes=self.drive.saturation.describe() if isinstance(self.drive, FmuDrivetrain) else "",
             localization=self.navigation.log.summary() if self.navigation is not None else {},
+            refused_messages=dict(self.executor.refused),
         )

@@ -8,6 +8,7 @@ mission_time.png. The only package that imports dask.
 """
 
 from twin.sweep.engine import Cluster, SweepResult, run_sweep
+from twin.sweep.preflight import check_out_dir, check_scheduler
 from twin.sweep.report import wilson_interval, write_reports
 from twin.sweep.spec import RunSpec, SweepSpec, expand_runs, load_sweep
 
@@ -16,6 +17,8 @@ __all__ = [
     "RunSpec",
     "SweepResult",
     "SweepSpec",
+    "check_out_dir",
+    "check_scheduler",
     "expand_runs",
     "load_sweep",
     "run_sweep",

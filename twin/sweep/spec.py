@@ -37,6 +37,7 @@ import yaml
 
 from twin.core.config import load_yaml, location, suggest
 from twin.core.errors import ConfigError
+from twin.core.numbers import number_problem
 
 __all__ = ["Draw", "RunSpec", "SweepSpec", "expand_runs", "load_sweep"]
 
@@ -66,6 +67,10 @@ class SweepSpec:
     random: tuple[Draw, ...]
     random_seed: int
     timeout_s: float
+
+
+#: The most runs one sweep makes (each is a process, a folder and a row).
+MAX_RUNS = 100_000
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -128,14 +133,28 @@ def load_sweep(path: Path) -> SweepSpec:
         )
     draws = _draws(raw.get("random") or {}, nodes.get("random"))
     seeds = _seeds(raw, nodes)
+    combos = len(vary[0][1]) if zip_flag and vary else math.prod(len(v) for _, v in vary)
+    if combos * len(seeds) > MAX_RUNS:
+        where = nodes.get("vary", nodes.get("runs", nodes.get("seeds", node)))
+        _fail(
+            where,
+            "vary",
+            f"{combos} combinations x {len(seeds)} seeds is more runs than a sweep makes (at most {MAX_RUNS})",
+        )
     if seeds != (None,) and "seed" in [k for k, _ in vary] + [d.key for d in draws]:
         _fail(nodes.get("runs", nodes.get("seeds", node)), "seed", "vary the seed or give runs:/seeds:, not both")
     timeout_s = raw.get("timeout_s", 600.0)
     if isinstance(timeout_s, bool) or not isinstance(timeout_s, int | float) or not 0 < timeout_s < math.inf:
         _fail(nodes.get("timeout_s", node), "timeout_s", f"expected a positive number of seconds, got {timeout_s!r}")
+    problem = number_problem(timeout_s, "timeout_s")
+    if problem is not None:
+        _fail(nodes.get("timeout_s", node), "timeout_s", problem)
     random_seed = raw.get("random_seed", 0)
     if isinstance(random_seed, bool) or not isinstance(random_seed, int):
         _fail(nodes.get("random_seed", node), "random_seed", f"expected a whole number, got {random_seed!r}")
+    problem = number_problem(random_seed, "random_seed")
+    if problem is not None:
+        _fail(nodes.get("random_seed", node), "random_seed", problem)
     name = raw.get("name", path.stem)
     return SweepSpec(
         path=path,
@@ -223,11 +242,17 @@ def _seeds(raw: dict[str, Any], nodes: dict[str, yaml.Node]) -> tuple[int | None
         runs = raw["runs"]
         if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
             _fail(nodes["runs"], "runs", f"expected a whole number of runs (seeds 0..N-1), got {runs!r}")
+        if runs > MAX_RUNS:
+            _fail(nodes["runs"], "runs", f"{runs} runs is more than a sweep makes (at most {MAX_RUNS})")
         return tuple(range(runs))
     if "seeds" in raw:
         seeds = raw["seeds"]
         if not isinstance(seeds, list) or not seeds or not all(type(s) is int for s in seeds):
             _fail(nodes["seeds"], "seeds", f"expected a non-empty list of whole numbers, got {seeds!r}")
+        for seed in seeds:
+            problem = number_problem(seed, "seed") if seed >= 0 else "must be a non-negative whole number"
+            if problem is not None:
+                _fail(nodes["seeds"], "seeds", f"{seed}: {problem}")
         return tuple(seeds)
     return (None,)  # one run per combination, with the scenario's own seed
 
@@ -350,6 +375,8 @@ def _absolute_scenario(path: Path) -> dict[str, Any]:
 
     raw = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
     fixed: dict[str, Any] = _fix_paths(raw, Scenario, path.parent)
+    # Each run's scenario is written into its own folder; its nodes' modules stay those beside this file.
+    fixed.setdefault("source_path", str(path.resolve()))
     return fixed
 
 

@@ -17,10 +17,13 @@ import numpy as np
 from lxml import etree
 
 from twin.core.errors import WorldError
+from twin.core.files import read_input
 from twin.core.geometry import Mat4, Pose, matrix_from_pose
 
 __all__ = ["XmlNode", "parse_file", "parse_string"]
 
+# An SDF, URDF or model.config larger than this is no description (the largest real worlds are a few MB).
+_MAX_XML_BYTES = 256 * 2**20
 _EYE4 = np.eye(4)  # copied: faster than np.eye for the many small matrices of a big world
 
 
@@ -196,7 +199,7 @@ def parse_file(path: Path, *, bare_ampersands: bool = False) -> XmlNode:
         WorldError: If the file cannot be read or is not well-formed XML (with line and column).
     """
     try:
-        data = path.read_bytes()
+        data = read_input(path, max_bytes=_MAX_XML_BYTES)
     except OSError as err:
         msg = f"{path}: cannot read: {err.strerror or err}"
         raise WorldError(msg) from None

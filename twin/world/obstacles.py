@@ -179,9 +179,10 @@ class _Obstacle:
             self.length_m = self.cumulative[-1]
             assert spec.speed_mps is not None
             self.speed_mps = float(spec.speed_mps)
-            # Stops moving here (None: never, it walks back and forth).
+            # Stops moving here (None: never, it walks back and forth, or its walk outlasts any run).
+            walk_ns = self.length_m / self.speed_mps * _NS_PER_S
             self.stop_ns: int | None = (
-                None if spec.loop else self.walk_start_ns + math.ceil(self.length_m / self.speed_mps * _NS_PER_S)
+                None if spec.loop or not walk_ns < _NEVER else self.walk_start_ns + math.ceil(walk_ns)
             )
         else:
             assert spec.pose is not None

@@ -238,3 +238,49 @@ def test_a_cancelled_timer_stops_firing() -> None:
     talker.timers[0].cancel()
     ex.spin(600)
     assert talker.n == 2
+
+
+def test_a_stop_is_seen_within_20_ms_of_sim_time_not_at_the_next_second() -> None:
+    # In a world that runs slower than real time a simulated second can take many wall seconds; a
+    # SIGTERM (a sweep's timeout) must not wait for it.
+    ex = Executor(MS)
+    log = Log()
+    ex.add_node(Publisher("p", "/chatter", 0.001, log))
+    asked = []
+
+    def should_stop() -> bool:
+        asked.append(ex.now_ns)
+        return len(asked) == 2  # asked to stop between the first and the second look
+
+    assert ex.spin(10_000, should_stop=should_stop) == "interrupted"
+    assert asked == [MS, 21 * MS]  # the first event (the timer at 1 ms), then 20 ms of sim time later
+
+
+class _LatchedTalker(Node):
+    def __init__(self) -> None:
+        super().__init__("talker")
+        self.pub = self.create_publisher(String, "/latched", QoSProfile(depth=1, durability="transient_local"))
+        self.create_one_shot(lambda t_ns: self.pub.publish(String(data="hello")), priority=PRIORITY_STATE)
+
+
+class _TimerOnMessage(Node):
+    """Creates a 10 ms timer when its first message arrives (a latched one: while it joins the graph)."""
+
+    def __init__(self) -> None:
+        super().__init__("late_timer")
+        self.fired: list[int] = []
+        self.create_subscription(String, "/latched", self.on_message, 10)
+
+    def on_message(self, msg: Any) -> None:
+        if not self.timers:
+            self.create_timer(0.01, lambda: self.fired.append(self.get_clock().now().nanoseconds))
+
+
+def test_a_timer_created_in_a_callback_fires_once_per_period_also_on_a_latched_message() -> None:
+    ex = Executor(MS)
+    ex.add_node(_LatchedTalker())
+    ex.spin(1)  # the latched message is published at t = 0
+    node = _TimerOnMessage()
+    ex.add_node(node)  # gets the latched message while it joins: creates its timer then
+    ex.spin(50)
+    assert node.fired == [11 * MS, 21 * MS, 31 * MS, 41 * MS]  # one period after its creation (at 1 ms), once each
