@@ -51,11 +51,12 @@ def _sha(a: np.ndarray) -> str:
 def test_the_recorded_set_covers_the_issue() -> None:
     metas = [_load(f)[0] for f in FILES]
     groups = {m["group"] for m in metas}
-    assert {"synthetic", "random", "house_mission", "house_pairs"} <= groups
-    assert len(metas) >= 200
+    assert {"synthetic", "random", "house_mission", "house_pairs", "tb3_world_mission"} <= groups
+    assert sum(m["group"].startswith("house") for m in metas) >= 200
+    assert len(metas) >= 380
     assert len({m["nav2_commit"] for m in metas}) == 1  # one pinned Nav2 commit
     statuses = {m["status"] for m in metas}
-    assert {"ok", "fail lethal_start", "fail no_potential_within_tolerance", "fail goal_off_map"} <= statuses
+    assert {"ok", "fail lethal_start", "fail no_potential_within_tolerance", "fail goal_off_map", "fail trace"} <= statuses
     assert any(m["use_astar"] for m in metas) and any(not m["allow_unknown"] for m in metas)
 
 
