@@ -56,7 +56,13 @@ def test_the_recorded_set_covers_the_issue() -> None:
     assert len(metas) >= 380
     assert len({m["nav2_commit"] for m in metas}) == 1  # one pinned Nav2 commit
     statuses = {m["status"] for m in metas}
-    assert {"ok", "fail lethal_start", "fail no_potential_within_tolerance", "fail goal_off_map", "fail trace"} <= statuses
+    assert {
+        "ok",
+        "fail lethal_start",
+        "fail no_potential_within_tolerance",
+        "fail goal_off_map",
+        "fail trace",
+    } <= statuses
     assert any(m["use_astar"] for m in metas) and any(not m["allow_unknown"] for m in metas)
 
 
