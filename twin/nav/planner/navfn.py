@@ -1,34 +1,44 @@
 """NavFn as Nav2 Humble's planner_server runs it (`nav2_navfn_planner/NavfnPlanner`).
 
-What carries over from Nav2 (facts in TB3_FACTS §4.3 and §4.8):
+What carries over from Nav2 (and is held to it by recorded cases of Nav2's own code,
+tests/unit/nav/planner/navfn_cases):
 
 - Costs: a costmap cost c < 253 becomes 50 + 0.8 c (COST_NEUTRAL, COST_FACTOR; truncated to an
   integer as NavFn stores it); 253 (inscribed) and 254 (lethal) are forbidden; 255 (unknown) costs
   253 when `allow_unknown`, else is forbidden. The outermost ring of cells is forbidden too.
-- Potential: from the robot's cell outward, each cell's potential from its two lowest neighbours
-  by NavFn's quadratic interpolation of the Eikonal update; Dijkstra order (`use_astar: false`),
-  or A* with a heuristic of 50 per cell of Euclidean distance. The robot's own cell is cleared first
-  (Nav2's `clearRobotCell`). Propagation stops when the goal cell is settled.
-- Tolerance: when the goal cell has no potential, the reachable node nearest the goal within
-  `tolerance_m` (scanned on a grid of one cell) becomes the path's end.
-- Path: NavFn's calcPath: gradient descent on the potential from the end back to the robot in
-  half-cell steps (a lowest-neighbour step where the potential is not defined around the point or
-  the path oscillates), done when the nearest node has a potential below 50 (the robot's node is
-  then the last point), at most 4 x the costmap's larger side steps; reversed; the goal replaces
-  the last point if it is closer to the one before, else is appended.
-  Middle poses carry identity orientation (yaw 0), the last pose the goal's yaw.
-- Grid nodes: as Humble's NavfnPlanner, world -> node by rounding (x - origin) / resolution and
-  node -> world as origin + node * resolution (a node sits on a cell's corner, not its centre).
+- Potential: float32, as NavFn's. From the robot's cell outward in batches: each batch's cells are
+  updated from their two lowest neighbours by NavFn's quadratic interpolation of the Eikonal update;
+  an improved cell re-queues a neighbour only when that neighbour's potential lies past its own by
+  0.707 x the neighbour's cost, into the next batch while under a cost threshold (254 at first,
+  raised by 100 each time the batch under it runs dry), else into the overflow block. A cell can be
+  updated again later (there is no settled set). Propagation stops after the batch in which the
+  goal's cell first gets a value (`use_astar`: keys and the first threshold carry 50 per cell of
+  distance to the goal). The robot's own cell is cleared first (Nav2's `clearRobotCell`).
+- Tolerance: when the goal cell has no potential, Nav2's square scan: from (goal - tolerance) in
+  steps of one resolution (accumulated, so the last row or column may fall short), row by row, the
+  first point of least squared distance whose cell has a potential becomes the path's end.
+- Path: NavFn's calcPath in float32: gradient descent on the potential from the end back to the
+  robot in half-cell steps (a lowest-neighbour step where the potential is not defined around the
+  point or the path oscillates), done when the nearest node has a potential below 50 (the robot's
+  node is then the last point), at most 4 x the costmap's larger side steps; reversed; the end
+  replaces the last point if it is closer to the one before, else is appended. Middle poses carry
+  identity orientation (yaw 0), the last pose the goal's yaw.
+- Start == goal (the same x and y): no NavFn; a one-pose path at the start with the goal's yaw,
+  refused when the start's cell is lethal (254).
+- Grid nodes: world -> node by rounding (x - origin) / resolution half away from zero (`std::round`)
+  and node -> world as origin + node * resolution (a node sits on a cell's corner, not its centre).
 
 The two loops (potential, trace) run in C (`_native`, `navfn_kernels.c`); `_potential_py` and `_trace_py` are
-the same algorithm in Python (a fallback used only without a C compiler, and the tests' reference).
+the same algorithm in Python (a fallback used only without a C compiler, and the tests' reference) with
+every float32 operation rounded as C rounds it.
 """
 
 from __future__ import annotations
 
+import ctypes
 import enum
-import heapq
 import math
+from array import array
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,6 +62,8 @@ COST_NEUTRAL = 50
 COST_FACTOR = 0.8
 COST_OBS = 254
 POT_HIGH = 1.0e10
+BLOCK_CAP = 10000  # NavFn's PRIORITYBUFSIZE
+HALF_DIAGONAL = 0.707106781  # NavFn's INVSQRT2
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -88,6 +100,7 @@ class PlanFailureReason(enum.Enum):
     """Why NavFn returned no path (Nav2's planner_server logs and fails the action)."""
 
     START_OUTSIDE_MAP = "start outside the costmap"
+    START_IN_LETHAL = "start on a lethal cell (start == goal)"
     GOAL_OUTSIDE_MAP = "goal outside the costmap"
     NO_VALID_PATH = "no valid path"
 
@@ -128,8 +141,8 @@ class NavfnPlanner:
     def __init__(self, params: NavfnParams | None = None, *, native: bool = True) -> None:
         self.params = params or NavfnParams()
         self._kernel = load_navfn_kernel() if native else None
-        #: The potential of the last plan (rows x cols, POT_HIGH where unreached), for inspection.
-        self.potential: NDArray[np.float64] = np.zeros((0, 0))
+        #: The float32 potential of the last NavFn run (rows x cols, POT_HIGH where unreached), for inspection.
+        self.potential: NDArray[np.float32] = np.zeros((0, 0), dtype=np.float32)
 
     @property
     def native(self) -> bool:
@@ -142,9 +155,12 @@ class NavfnPlanner:
         """Plan from `start` to `goal` ((x_m, y_m, yaw_rad) in the costmap's frame).
 
         Returns:
-            The plan, or a `PlanFailure` (start or goal outside the costmap, or no path within tolerance).
+            The plan, or a `PlanFailure` (start or goal outside the costmap, a lethal start equal to the
+            goal, or no path within tolerance).
         """
-        res = costmap.resolution_m
+        self.potential = np.zeros((0, 0), dtype=np.float32)
+        if start[0] == goal[0] and start[1] == goal[1]:
+            return self._unique_pose(costmap, start, goal)
         ny, nx = costmap.cost.shape
         s_node = self._node(costmap, start[0], start[1])
         if s_node is None:
@@ -152,41 +168,37 @@ class NavfnPlanner:
                 reason=PlanFailureReason.START_OUTSIDE_MAP,
                 message=f"start ({start[0]:.2f}, {start[1]:.2f}) is outside the costmap",
             )
-        if self._node(costmap, goal[0], goal[1]) is None:
+        g_node = self._node(costmap, goal[0], goal[1])
+        if g_node is None:
             return PlanFailure(
                 reason=PlanFailureReason.GOAL_OUTSIDE_MAP,
                 message=f"goal ({goal[0]:.2f}, {goal[1]:.2f}) is outside the costmap",
             )
         grid = costmap.cost.copy()
         grid[s_node[1], s_node[0]] = 0  # Nav2's clearRobotCell
-        cost = navfn_costs(grid, allow_unknown=self.params.allow_unknown)
-        g_node = self._node(costmap, goal[0], goal[1])
-        assert g_node is not None
-        if s_node == g_node:
-            return Plan(frame_id=costmap.frame_id, poses=np.array([[goal[0], goal[1], goal[2]]]))
+        cost = np.ascontiguousarray(navfn_costs(grid, allow_unknown=self.params.allow_unknown).ravel())
         source = s_node[1] * nx + s_node[0]
-        target = g_node[1] * nx + g_node[0]
-        pot = self._potential(cost, nx, ny, source, target)
+        pot = self._potential(cost, nx, ny, source, g_node[1] * nx + g_node[0])
         self.potential = pot.reshape(ny, nx)
-        end = self._best_end(costmap, pot, nx, ny, goal)
+        end = self._best_end(costmap, pot, goal)
         if end is None:
             return PlanFailure(
                 reason=PlanFailureReason.NO_VALID_PATH,
                 message=f"no path to ({goal[0]:.2f}, {goal[1]:.2f}) within {self.params.tolerance_m} m",
             )
-        ex, ey = end
-        max_cycles = 4 * max(nx, ny)
-        trace = self._trace(
-            pot, cost, nx=nx, ny=ny, start=self._node_index(costmap, ex, ey, nx), goal=source, max_cycles=max_cycles
-        )
+        e_node = self._node(costmap, end[0], end[1])
+        assert e_node is not None  # the scan only keeps points whose node has a potential
+        end_cell = e_node[1] * nx + e_node[0]
+        trace = self._trace(pot, nx=nx, ny=ny, start=end_cell, goal=source, max_cycles=4 * max(nx, ny))
         if trace is None:
             return PlanFailure(
                 reason=PlanFailureReason.NO_VALID_PATH,
                 message=f"the path to ({goal[0]:.2f}, {goal[1]:.2f}) could not be traced on the potential",
             )
-        cells = trace[::-1]  # from the robot's node to the plan's end
+        cells = trace[::-1].astype(np.float64)  # from the robot's node to the plan's end
+        res = costmap.resolution_m
         xy = np.column_stack([costmap.origin_x_m + cells[:, 0] * res, costmap.origin_y_m + cells[:, 1] * res])
-        xy = _approach(xy, np.array([ex, ey]))
+        xy = _approach(xy, end)
         poses = np.zeros((len(xy), 3))
         poses[:, :2] = xy
         poses[-1, 2] = goal[2]
@@ -195,168 +207,198 @@ class NavfnPlanner:
     # -- internals -------------------------------------------------------------------------
 
     @staticmethod
+    def _unique_pose(
+        costmap: CostGrid, start: tuple[float, float, float], goal: tuple[float, float, float]
+    ) -> Plan | PlanFailure:
+        """Nav2's createPlan for start == goal: the start with the goal's yaw, unless its cell is lethal."""
+        col = math.floor((start[0] - costmap.origin_x_m) / costmap.resolution_m)
+        row = math.floor((start[1] - costmap.origin_y_m) / costmap.resolution_m)
+        if not (0 <= col < costmap.cols and 0 <= row < costmap.rows):
+            return PlanFailure(
+                reason=PlanFailureReason.START_OUTSIDE_MAP,
+                message=f"start ({start[0]:.2f}, {start[1]:.2f}) is outside the costmap",
+            )
+        if int(costmap.cost[row, col]) == COST_OBS:
+            return PlanFailure(
+                reason=PlanFailureReason.START_IN_LETHAL,
+                message=f"start ({start[0]:.2f}, {start[1]:.2f}) equals the goal and lies on a lethal cell",
+            )
+        return Plan(frame_id=costmap.frame_id, poses=np.array([[start[0], start[1], goal[2]]]))
+
+    @staticmethod
     def _node(costmap: CostGrid, x_m: float, y_m: float) -> tuple[int, int] | None:
+        """NavfnPlanner::worldToMap: the nearest node, halves rounded away from zero; None off the map."""
         if x_m < costmap.origin_x_m or y_m < costmap.origin_y_m:
             return None
-        mx = round((x_m - costmap.origin_x_m) / costmap.resolution_m)
-        my = round((y_m - costmap.origin_y_m) / costmap.resolution_m)
+        mx = _round_half_away((x_m - costmap.origin_x_m) / costmap.resolution_m)
+        my = _round_half_away((y_m - costmap.origin_y_m) / costmap.resolution_m)
         return (mx, my) if mx < costmap.cols and my < costmap.rows else None
 
-    def _node_index(self, costmap: CostGrid, x_m: float, y_m: float, nx: int) -> int:
-        node = self._node(costmap, x_m, y_m)
-        assert node is not None
-        return node[1] * nx + node[0]
-
     def _best_end(
-        self, costmap: CostGrid, pot: NDArray[np.float64], nx: int, ny: int, goal: tuple[float, float, float]
+        self, costmap: CostGrid, pot: NDArray[np.float32], goal: tuple[float, float, float]
     ) -> tuple[float, float] | None:
-        """The goal if it has a potential, else the nearest point within tolerance that has one."""
-        g_node = self._node(costmap, goal[0], goal[1])
-        if g_node is not None and pot[g_node[1] * nx + g_node[0]] < POT_HIGH:
-            return goal[0], goal[1]
-        res = costmap.resolution_m
-        tol = self.params.tolerance_m
-        steps = np.arange(-tol, tol + 1e-9, res)
-        xs = goal[0] + steps
-        ys = goal[1] + steps
-        gx, gy = np.meshgrid(xs, ys)
-        mx = np.rint((gx - costmap.origin_x_m) / res).astype(np.int64)
-        my = np.rint((gy - costmap.origin_y_m) / res).astype(np.int64)
-        inside = (gx >= costmap.origin_x_m) & (gy >= costmap.origin_y_m) & (mx < nx) & (my < ny)
-        d2 = (gx - goal[0]) ** 2 + (gy - goal[1]) ** 2
-        idx = np.where(inside, my * nx + mx, 0)
-        ok = inside & (pot[idx] < POT_HIGH) & (d2 <= tol * tol + 1e-12)
-        if not ok.any():
-            return None
-        flat = np.where(ok, d2, np.inf).ravel()
-        k = int(np.argmin(flat))
-        return float(gx.ravel()[k]), float(gy.ravel()[k])
+        """The goal if its node has a potential, else Nav2's scan of the tolerance square (see the module)."""
+        nx = costmap.cols
 
-    def _potential(self, cost: NDArray[np.uint8], nx: int, ny: int, source: int, target: int) -> NDArray[np.float64]:
-        pot = np.full(nx * ny, POT_HIGH)
+        def potential_at(x_m: float, y_m: float) -> float:
+            node = self._node(costmap, x_m, y_m)
+            return POT_HIGH if node is None else float(pot[node[1] * nx + node[0]])
+
+        if potential_at(goal[0], goal[1]) < POT_HIGH:
+            return goal[0], goal[1]
+        tol, res = self.params.tolerance_m, costmap.resolution_m
+        best: tuple[float, float] | None = None
+        best_d2 = math.inf
+        y = goal[1] - tol
+        while y <= goal[1] + tol:
+            x = goal[0] - tol
+            while x <= goal[0] + tol:
+                dx, dy = x - goal[0], y - goal[1]
+                d2 = dx * dx + dy * dy
+                if d2 < best_d2 and potential_at(x, y) < POT_HIGH:
+                    best, best_d2 = (x, y), d2
+                x += res
+            y += res
+        return best
+
+    def _potential(self, cost: NDArray[np.uint8], nx: int, ny: int, source: int, target: int) -> NDArray[np.float32]:
+        pot = np.empty(nx * ny, dtype=np.float32)
         astar = int(self.params.use_astar)
         if self._kernel is None:
-            _potential_py(cost.ravel(), pot, nx=nx, source=source, target=target, astar=astar)
+            pot[:] = _potential_py(cost, nx=nx, ny=ny, source=source, target=target, astar=astar)
             return pot
-        import ctypes
-
-        flat = np.ascontiguousarray(cost.ravel())
-        heap_cells = np.empty(4 * nx * ny, dtype=np.int32)
-        heap_keys = np.empty(4 * nx * ny, dtype=np.float64)
         self._kernel.twin_navfn_potential(
-            flat.ctypes.data_as(ctypes.POINTER(ctypes.c_ubyte)),
+            cost.ctypes.data_as(ctypes.POINTER(ctypes.c_ubyte)),
             nx,
             ny,
             source,
             target,
             astar,
-            pot.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
-            heap_cells.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
-            heap_keys.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
+            pot.ctypes.data_as(ctypes.POINTER(ctypes.c_float)),
+            np.empty(3 * BLOCK_CAP, dtype=np.int32).ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
             np.zeros(nx * ny, dtype=np.uint8).ctypes.data_as(ctypes.POINTER(ctypes.c_ubyte)),
         )
         return pot
 
     def _trace(
-        self,
-        pot: NDArray[np.float64],
-        cost: NDArray[np.uint8],
-        *,
-        nx: int,
-        ny: int,
-        start: int,
-        goal: int,
-        max_cycles: int,
-    ) -> NDArray[np.float64] | None:
+        self, pot: NDArray[np.float32], *, nx: int, ny: int, start: int, goal: int, max_cycles: int
+    ) -> NDArray[np.float32] | None:
         if self._kernel is None:
             return _trace_py(pot, nx=nx, ny=ny, start=start, goal=goal, max_cycles=max_cycles)
-        import ctypes
-
-        out = np.empty((max_cycles, 2))
-        flat = np.ascontiguousarray(cost.ravel())
+        out = np.empty((max_cycles, 2), dtype=np.float32)
         n = self._kernel.twin_navfn_trace(
-            pot.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
-            flat.ctypes.data_as(ctypes.POINTER(ctypes.c_ubyte)),
+            pot.ctypes.data_as(ctypes.POINTER(ctypes.c_float)),
             nx,
             ny,
             start,
             goal,
             max_cycles,
-            out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
-            max_cycles,
+            out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)),
         )
         return None if n < 0 else out[:n]
 
 
-def _approach(xy: NDArray[np.float64], end: NDArray[np.float64]) -> NDArray[np.float64]:
+def _round_half_away(v: float) -> int:
+    """C's round(): the nearest integer, halves away from zero."""
+    t = math.trunc(v)
+    if abs(v - t) >= 0.5:
+        t += 1 if v > 0 else -1
+    return t
+
+
+def _approach(xy: NDArray[np.float64], end: tuple[float, float]) -> NDArray[np.float64]:
     """Nav2's smoothApproachToGoal: the end replaces the last point if nearer the one before, else is appended."""
     if len(xy) >= 2:
-        before = xy[-2]
-        if float(np.sum((xy[-1] - before) ** 2)) > float(np.sum((end - before) ** 2)):
+        bx, by = float(xy[-2, 0]), float(xy[-2, 1])
+        lx, ly = float(xy[-1, 0]) - bx, float(xy[-1, 1]) - by
+        ex, ey = end[0] - bx, end[1] - by
+        if lx * lx + ly * ly > ex * ex + ey * ey:
             out = xy.copy()
             out[-1] = end
             return out
-    return np.vstack([xy, end])
+    return np.vstack([xy, np.array([end])])
 
 
-# -- the Python reference of the C kernel (same arithmetic, same order) -------------------------
+# -- the Python reference of the C kernel: the same operations, each float32 result rounded as C rounds it --
+
+_F32 = array("f", [0.0])
 
 
-def _cell_update(cost: NDArray[np.uint8], pot: NDArray[np.float64], nx: int, n: int) -> float:
-    left, right, up, down = float(pot[n - 1]), float(pot[n + 1]), float(pot[n - nx]), float(pot[n + nx])
-    ta = left if left < right else right
-    tc = up if up < down else down
-    hf = float(cost[n])
-    if tc < ta:
-        ta, tc = tc, ta
-    dc = tc - ta
-    if dc >= hf:
-        return ta + hf
-    q = dc / hf
-    v = -0.2301 * q * q + 0.5307 * q + 0.7040
-    return ta + hf * v
+def _f32(v: float) -> float:
+    """`v` rounded to float32 (a double result of float32 operands rounds to the float32 result exactly)."""
+    _F32[0] = v
+    return _F32[0]
 
 
-def _potential_py(
-    cost: NDArray[np.uint8], pot: NDArray[np.float64], *, nx: int, source: int, target: int, astar: int
-) -> int:
-    tx, ty = (target % nx, target // nx) if target >= 0 else (0, 0)
+def _potential_py(cost: NDArray[np.uint8], *, nx: int, ny: int, source: int, target: int, astar: int) -> array[float]:
+    """NavFn's batched propagation (see `twin_navfn_potential` in `_native`); the float32 potential."""
+    ns = nx * ny
+    c = cost.tolist()
+    pot = array("f", [POT_HIGH]) * ns
+    queued = bytearray(ns)
+    blocks: list[list[int]] = [[], [], []]
+    tx, ty = target % nx, target // nx
 
-    def heuristic(n: int) -> float:
-        if not astar:
-            return 0.0
-        dx, dy = float(n % nx - tx), float(n // nx - ty)
-        return COST_NEUTRAL * math.sqrt(dx * dx + dy * dy)
+    def enqueue(which: int, n: int) -> None:
+        if 0 <= n < ns and not queued[n] and c[n] < COST_OBS and len(blocks[which]) < BLOCK_CAP:
+            blocks[which].append(n)
+            queued[n] = 1
 
+    threshold = float(COST_OBS)
     pot[source] = 0.0
-    done = np.zeros(len(pot), dtype=bool)
-    heap: list[tuple[float, int]] = [(0.0, source)]
-    settled = 0
-    offsets = (1, -1, nx, -nx)
-    while heap:
-        key, n = heapq.heappop(heap)
-        if done[n] or key > pot[n] + heuristic(n):
-            continue
-        done[n] = True
-        settled += 1
-        if n == target:
+    for n in (source + 1, source - 1, source - nx, source + nx):
+        enqueue(0, n)
+    if astar:
+        threshold = _f32(_f32(math.sqrt((source % nx - tx) ** 2 + (source // nx - ty) ** 2) * COST_NEUTRAL) + threshold)
+    cycles = max(ns // 20, nx + ny)
+    for _ in range(cycles):
+        if not blocks[0] and not blocks[1]:
             break
-        for off in offsets:
-            m = n + off
-            if cost[m] >= COST_OBS or done[m]:
+        batch = blocks[0]
+        for n in batch:
+            queued[n] = 0
+        for n in batch:
+            left, right, below, above = pot[n - 1], pot[n + 1], pot[n - nx], pot[n + nx]
+            horizontal = left if left < right else right
+            vertical = below if below < above else above
+            hf = float(c[n])
+            low, gap = vertical, _f32(horizontal - vertical)
+            if gap < 0:
+                gap, low = -gap, horizontal
+            if gap >= hf:
+                p = _f32(low + hf)
+            else:
+                q = _f32(gap / hf)
+                weight = _f32(-0.2301 * q * q + 0.5307 * q + 0.7040)
+                p = _f32(low + _f32(hf * weight))
+            if not p < pot[n]:
                 continue
-            p = _cell_update(cost, pot, nx, m)
-            if p < pot[m]:
-                pot[m] = p
-                heapq.heappush(heap, (p + heuristic(m), m))
-    return settled
+            pot[n] = p
+            if astar:
+                p = _f32(p + _f32(math.sqrt((n % nx - tx) ** 2 + (n // nx - ty) ** 2) * COST_NEUTRAL))
+            which = 1 if p < threshold else 2
+            if left > _f32(p + _f32(HALF_DIAGONAL * c[n - 1])):
+                enqueue(which, n - 1)
+            if right > _f32(p + _f32(HALF_DIAGONAL * c[n + 1])):
+                enqueue(which, n + 1)
+            if below > _f32(p + _f32(HALF_DIAGONAL * c[n - nx])):
+                enqueue(which, n - nx)
+            if above > _f32(p + _f32(HALF_DIAGONAL * c[n + nx])):
+                enqueue(which, n + nx)
+        blocks[0], blocks[1] = blocks[1], []
+        if not blocks[0]:
+            threshold = _f32(threshold + 2 * COST_NEUTRAL)
+            blocks[0], blocks[2] = blocks[2], []
+        if pot[target] < POT_HIGH:
+            break
+    return pot
 
 
-def _gradient(pot: NDArray[np.float64], nx: int, n: int) -> tuple[float, float]:
-    """NavFn's gradCell: the normalised descent direction at a cell (0 on the grid's first and last rows)."""
+def _gradient(pot: array[float], nx: int, n: int) -> tuple[float, float]:
+    """NavFn's gradCell: the normalised descent direction at a cell (0 outside rows 1 .. ny-2), float32."""
     if n < nx or n > len(pot) - nx:
         return 0.0, 0.0
-    cv = float(pot[n])
+    cv = pot[n]
     dx = dy = 0.0
     if cv >= POT_HIGH:
         if pot[n - 1] < POT_HIGH:
@@ -369,71 +411,73 @@ def _gradient(pot: NDArray[np.float64], nx: int, n: int) -> tuple[float, float]:
             dy = COST_OBS
     else:
         if pot[n - 1] < POT_HIGH:
-            dx += float(pot[n - 1]) - cv
+            dx = _f32(dx + _f32(pot[n - 1] - cv))
         if pot[n + 1] < POT_HIGH:
-            dx += cv - float(pot[n + 1])
+            dx = _f32(dx + _f32(cv - pot[n + 1]))
         if pot[n - nx] < POT_HIGH:
-            dy += float(pot[n - nx]) - cv
+            dy = _f32(dy + _f32(pot[n - nx] - cv))
         if pot[n + nx] < POT_HIGH:
-            dy += cv - float(pot[n + nx])
-    norm = math.sqrt(dx * dx + dy * dy)
+            dy = _f32(dy + _f32(cv - pot[n + nx]))
+    norm = _f32(math.sqrt(dx * dx + dy * dy))
     if norm > 0.0:
-        norm = 1.0 / norm
-        dx *= norm
-        dy *= norm
-    return dx, dy
+        norm = _f32(1.0 / norm)
+        return _f32(norm * dx), _f32(norm * dy)
+    return 0.0, 0.0
+
+
+def _as_int(p: float) -> int:
+    """A float32 truncated to int as x86-64 does it (INT_MIN when out of range), NavFn's `int minp = potarr[...]`."""
+    return -(2**31) if not -(2.0**31) <= p < 2.0**31 else int(p)
 
 
 def _trace_py(
-    pot: NDArray[np.float64], *, nx: int, ny: int, start: int, goal: int, max_cycles: int
-) -> NDArray[np.float64] | None:
-    """NavFn's calcPath (see the C kernel): the points from `start` down to the source node `goal`."""
+    pot_np: NDArray[np.float32], *, nx: int, ny: int, start: int, goal: int, max_cycles: int
+) -> NDArray[np.float32] | None:
+    """NavFn's calcPath (see `twin_navfn_trace` in `_native`); (x, y) in cells, or None."""
+    pot = array("f", pot_np.tobytes())
     ns = nx * ny
-    stc = start
-    dx = dy = 0.0
-    points: list[tuple[float, float]] = []
     ring = (-nx - 1, -nx, -nx + 1, -1, 1, nx - 1, nx, nx + 1)
+    stc, dx, dy = start, 0.0, 0.0
+    xs: list[float] = []
+    ys: list[float] = []
     for _ in range(max_cycles):
-        near = min(max(stc + round(dx) + int(nx * round(dy)), 0), ns - 1)
+        near = min(max(stc + _round_half_away(dx) + nx * _round_half_away(dy), 0), ns - 1)
         if pot[near] < COST_NEUTRAL:
-            points.append((float(goal % nx), float(goal // nx)))
-            return np.array(points)
+            xs.append(float(goal % nx))
+            ys.append(float(goal // nx))
+            return np.array([xs, ys], dtype=np.float32).T.copy()
         if stc < nx or stc > ns - nx:
             return None
-        points.append((stc % nx + dx, stc // nx + dy))
-        oscillating = len(points) > 2 and points[-1] == points[-3]
-        high = pot[stc] >= POT_HIGH or any(pot[stc + r] >= POT_HIGH for r in ring)
-        if high or oscillating:
-            best, bp = stc, float(int(pot[stc]))  # NavFn keeps the running minimum in an int
+        xs.append(_f32(stc % nx + dx))
+        ys.append(_f32(stc // nx + dy))
+        oscillating = len(xs) > 2 and xs[-1] == xs[-3] and ys[-1] == ys[-3]
+        if oscillating or pot[stc] >= POT_HIGH or any(pot[stc + r] >= POT_HIGH for r in ring):
+            best, best_p = stc, _as_int(pot[stc])
             for r in ring:
-                if pot[stc + r] < bp:
-                    bp, best = float(int(pot[stc + r])), stc + r
+                if pot[stc + r] < _f32(float(best_p)):
+                    best, best_p = stc + r, _as_int(pot[stc + r])
             stc, dx, dy = best, 0.0, 0.0
             if pot[stc] >= POT_HIGH:
                 return None
             continue
         g0, g1, g2, g3 = (_gradient(pot, nx, c) for c in (stc, stc + 1, stc + nx, stc + nx + 1))
-        x1 = (1.0 - dx) * g0[0] + dx * g1[0]
-        x2 = (1.0 - dx) * g2[0] + dx * g3[0]
-        x = (1.0 - dy) * x1 + dy * x2
-        y1 = (1.0 - dx) * g0[1] + dx * g1[1]
-        y2 = (1.0 - dx) * g2[1] + dx * g3[1]
-        y = (1.0 - dy) * y1 + dy * y2
+        x1 = _f32((1.0 - dx) * g0[0] + _f32(dx * g1[0]))
+        x2 = _f32((1.0 - dx) * g2[0] + _f32(dx * g3[0]))
+        x = _f32((1.0 - dy) * x1 + _f32(dy * x2))
+        y1 = _f32((1.0 - dx) * g0[1] + _f32(dx * g1[1]))
+        y2 = _f32((1.0 - dx) * g2[1] + _f32(dx * g3[1]))
+        y = _f32((1.0 - dy) * y1 + _f32(dy * y2))
         if x == 0.0 and y == 0.0:
             return None
-        ss = 0.5 / math.sqrt(x * x + y * y)
-        dx += x * ss
-        dy += y * ss
+        ss = _f32(0.5 / _f32(math.sqrt(x * x + y * y)))
+        dx = _f32(dx + _f32(x * ss))
+        dy = _f32(dy + _f32(y * ss))
         if dx > 1.0:
-            stc += 1
-            dx -= 1.0
+            stc, dx = stc + 1, _f32(dx - 1.0)
         if dx < -1.0:
-            stc -= 1
-            dx += 1.0
+            stc, dx = stc - 1, _f32(dx + 1.0)
         if dy > 1.0:
-            stc += nx
-            dy -= 1.0
+            stc, dy = stc + nx, _f32(dy - 1.0)
         if dy < -1.0:
-            stc -= nx
-            dy += 1.0
+            stc, dy = stc - nx, _f32(dy + 1.0)
     return None

@@ -1,93 +1,120 @@
-/* NavFn's two hot loops (loaded by twin/nav/planner/_native.py; signatures in its docstring). */
+/* NavFn's two hot loops as Nav2 Humble runs them (loaded by twin/nav/planner/_native.py; signatures in its
+   docstring). Potentials are float32, as NavFn's potarr; every expression keeps NavFn's operand types, so a
+   double literal times a float is a double rounded once to float where NavFn assigns it to a float.
+   Built with -ffp-contract=off: a fused multiply-add would round differently from NavFn's build. */
 
 #include <math.h>
 
-#define POT_HIGH 1.0e10
+#define POT_HIGH 1.0e10f
 #define COST_OBS 254
 #define COST_NEUTRAL 50
+#define BLOCK_CAP 10000 /* NavFn's PRIORITYBUFSIZE: a push to a full block is dropped */
+#define HALF_DIAGONAL 0.707106781
 
-static void sift_up(int *cells, double *keys, int i) {
-    int c = cells[i]; double k = keys[i];
-    while (i > 0) {
-        int p = (i - 1) >> 1;
-        if (keys[p] < k || (keys[p] == k && cells[p] <= c)) break;
-        cells[i] = cells[p]; keys[i] = keys[p]; i = p;
+typedef struct {
+    const unsigned char *cost;
+    float *pot;
+    unsigned char *queued;
+    int nx, ns, astar, tx, ty;
+    float threshold;
+    int *block[3]; /* 0: this batch, 1: the next batch under the threshold, 2: past the threshold */
+    int fill[3];
+} Wave;
+
+static void enqueue(Wave *w, int which, int n) {
+    if (n < 0 || n >= w->ns || w->queued[n] || w->cost[n] >= COST_OBS || w->fill[which] >= BLOCK_CAP) return;
+    w->block[which][w->fill[which]++] = n;
+    w->queued[n] = 1;
+}
+
+static void swap_blocks(Wave *w, int a, int b) {
+    int *p = w->block[a], f = w->fill[a];
+    w->block[a] = w->block[b]; w->fill[a] = w->fill[b];
+    w->block[b] = p; w->fill[b] = f;
+}
+
+/* NavFn::updateCell / updateCellAstar: the interpolated update from the lower horizontal and vertical
+   neighbours; an improved cell hands each neighbour on whose potential lies past it by 0.707 x that
+   neighbour's cost, into the next batch below the threshold or the overflow block above it. */
+static void relax(Wave *w, int n) {
+    const int nx = w->nx;
+    float *pot = w->pot;
+    float left = pot[n - 1], right = pot[n + 1], below = pot[n - nx], above = pot[n + nx];
+    float horizontal = left < right ? left : right;
+    float vertical = below < above ? below : above;
+    if (w->cost[n] >= COST_OBS) return;
+    float hf = (float)w->cost[n];
+    float low = vertical, gap = horizontal - vertical;
+    if (gap < 0) { gap = -gap; low = horizontal; }
+    float p;
+    if (gap >= hf) {
+        p = low + hf;
+    } else {
+        float q = gap / hf;
+        float weight = -0.2301 * q * q + 0.5307 * q + 0.7040;
+        p = low + hf * weight;
     }
-    cells[i] = c; keys[i] = k;
-}
-
-static void sift_down(int *cells, double *keys, int n, int i) {
-    int c = cells[i]; double k = keys[i];
-    for (;;) {
-        int l = 2 * i + 1, r = l + 1, m = i;
-        int mc = c; double mk = k;
-        if (l < n && (keys[l] < mk || (keys[l] == mk && cells[l] < mc))) { m = l; mc = cells[l]; mk = keys[l]; }
-        if (r < n && (keys[r] < mk || (keys[r] == mk && cells[r] < mc))) { m = r; mc = cells[r]; mk = keys[r]; }
-        if (m == i) break;
-        cells[i] = mc; keys[i] = mk; i = m;
+    if (!(p < pot[n])) return;
+    float margin_l = HALF_DIAGONAL * (float)w->cost[n - 1];
+    float margin_r = HALF_DIAGONAL * (float)w->cost[n + 1];
+    float margin_b = HALF_DIAGONAL * (float)w->cost[n - nx];
+    float margin_a = HALF_DIAGONAL * (float)w->cost[n + nx];
+    pot[n] = p;
+    if (w->astar) {
+        float to_go = hypot(n % nx - w->tx, n / nx - w->ty) * (float)COST_NEUTRAL;
+        p += to_go;
     }
-    cells[i] = c; keys[i] = k;
-}
-
-static double heuristic(int astar, int n, int nx, int tx, int ty) {
-    if (!astar) return 0.0;
-    double dx = (double)(n % nx - tx), dy = (double)(n / nx - ty);
-    return COST_NEUTRAL * sqrt(dx * dx + dy * dy);
-}
-
-static double cell_update(const unsigned char *cost, const double *pot, int nx, int n) {
-    double l = pot[n - 1], r = pot[n + 1], u = pot[n - nx], d = pot[n + nx];
-    double ta = l < r ? l : r, tc = u < d ? u : d;
-    double hf = (double)cost[n];
-    if (tc < ta) { double t = ta; ta = tc; tc = t; }
-    double dc = tc - ta;
-    if (dc >= hf) return ta + hf;
-    double q = dc / hf;
-    double v = -0.2301 * q * q + 0.5307 * q + 0.7040;
-    return ta + hf * v;
+    int which = p < w->threshold ? 1 : 2;
+    if (left > p + margin_l) enqueue(w, which, n - 1);
+    if (right > p + margin_r) enqueue(w, which, n + 1);
+    if (below > p + margin_b) enqueue(w, which, n - nx);
+    if (above > p + margin_a) enqueue(w, which, n + nx);
 }
 
 int twin_navfn_potential(const unsigned char *cost, int nx, int ny, int source, int target, int astar,
-                         double *pot, int *heap_cells, double *heap_keys, unsigned char *done) {
-    int size = 0, settled = 0, cap = 4 * nx * ny;
-    int tx = target >= 0 ? target % nx : 0, ty = target >= 0 ? target / nx : 0;
-    pot[source] = 0.0;
-    heap_cells[0] = source; heap_keys[0] = 0.0; size = 1;
-    const int offs[4] = {1, -1, nx, -nx};
-    while (size > 0) {
-        int n = heap_cells[0]; double key = heap_keys[0];
-        --size;
-        if (size > 0) {
-            heap_cells[0] = heap_cells[size]; heap_keys[0] = heap_keys[size];
-            sift_down(heap_cells, heap_keys, size, 0);
-        }
-        double h = heuristic(astar, n, nx, tx, ty);
-        if (done[n] || key > pot[n] + h) continue; /* settled already, or a stale entry */
-        done[n] = 1;
-        ++settled;
-        if (n == target) break;
-        for (int j = 0; j < 4; ++j) {
-            int m = n + offs[j];
-            if (cost[m] >= COST_OBS || done[m]) continue;
-            double p = cell_update(cost, pot, nx, m);
-            if (p < pot[m]) {
-                pot[m] = p;
-                if (size >= cap) return -1;
-                double hm = heuristic(astar, m, nx, tx, ty);
-                heap_cells[size] = m; heap_keys[size] = p + hm;
-                sift_up(heap_cells, heap_keys, size); ++size;
-            }
-        }
+                         float *pot, int *blocks, unsigned char *queued) {
+    Wave w;
+    w.cost = cost; w.pot = pot; w.queued = queued;
+    w.nx = nx; w.ns = nx * ny; w.astar = astar;
+    w.tx = target % nx; w.ty = target / nx;
+    for (int k = 0; k < 3; ++k) { w.block[k] = blocks + k * BLOCK_CAP; w.fill[k] = 0; }
+    for (int i = 0; i < w.ns; ++i) pot[i] = POT_HIGH;
+    w.threshold = (float)COST_OBS;
+    const float step = 2 * COST_NEUTRAL;
+    /* NavFn::initCost: the source at 0, its four neighbours make the first batch */
+    pot[source] = 0;
+    enqueue(&w, 0, source + 1);
+    enqueue(&w, 0, source - 1);
+    enqueue(&w, 0, source - nx);
+    enqueue(&w, 0, source + nx);
+    if (astar) {
+        float span = hypot(source % nx - w.tx, source / nx - w.ty) * (float)COST_NEUTRAL;
+        w.threshold = span + w.threshold;
     }
-    return settled;
+    int cycles = nx * ny / 20 > nx + ny ? nx * ny / 20 : nx + ny;
+    int cycle = 0;
+    for (; cycle < cycles; ++cycle) {
+        if (w.fill[0] == 0 && w.fill[1] == 0) break;
+        int *batch = w.block[0], size = w.fill[0];
+        for (int i = 0; i < size; ++i) queued[batch[i]] = 0;
+        for (int i = 0; i < size; ++i) relax(&w, batch[i]);
+        swap_blocks(&w, 0, 1);
+        w.fill[1] = 0;
+        if (w.fill[0] == 0) {
+            w.threshold += step;
+            swap_blocks(&w, 0, 2);
+            w.fill[2] = 0;
+        }
+        if (pot[target] < POT_HIGH) break;
+    }
+    return cycle;
 }
 
-static void gradient(const double *pot, int ns, int nx, int n, double *gx, double *gy) {
-    /* NavFn::gradCell: the normalised descent direction at a cell (0 at the grid's first and last rows) */
-    double cv, dx = 0.0, dy = 0.0;
-    *gx = 0.0; *gy = 0.0;
+/* NavFn::gradCell: the normalised descent direction at a cell; 0 outside rows 1 .. ny-2 */
+static void gradient(const float *pot, int ns, int nx, int n, float *gx, float *gy) {
+    *gx = 0; *gy = 0;
     if (n < nx || n > ns - nx) return;
-    cv = pot[n];
+    float cv = pot[n], dx = 0, dy = 0;
     if (cv >= POT_HIGH) {
         if (pot[n - 1] < POT_HIGH) dx = -COST_OBS;
         else if (pot[n + 1] < POT_HIGH) dx = COST_OBS;
@@ -99,59 +126,71 @@ static void gradient(const double *pot, int ns, int nx, int n, double *gx, doubl
         if (pot[n - nx] < POT_HIGH) dy += pot[n - nx] - cv;
         if (pot[n + nx] < POT_HIGH) dy += cv - pot[n + nx];
     }
-    double norm = sqrt(dx * dx + dy * dy);
-    if (norm > 0.0) { norm = 1.0 / norm; dx *= norm; dy *= norm; }
-    *gx = dx; *gy = dy;
+    float norm = hypotf(dx, dy);
+    if (norm > 0) {
+        norm = 1.0 / norm;
+        *gx = norm * dx;
+        *gy = norm * dy;
+    }
 }
 
-int twin_navfn_trace(const double *pot, const unsigned char *cost, int nx, int ny, int start, int goal,
-                     int max_cycles, double *out_xy, int max_points) {
-    /* NavFn::calcPath: from `start` (the plan's end) down the potential to `goal` (the robot's node, where
-       the potential is 0); the last point written is `goal` itself. */
-    int ns = nx * ny, stc = start, count = 0;
-    double dx = 0.0, dy = 0.0;
-    const int ring[8] = {-nx - 1, -nx, -nx + 1, -1, 1, nx - 1, nx, nx + 1};
+/* float -> int as x86-64's cvttss2si does it (NavFn's `int minp = potarr[stc]`): INT_MIN when out of range */
+static int truncate_potential(float p) {
+    return (p >= 2147483648.0f || p < -2147483648.0f || p != p) ? (int)(-2147483647 - 1) : (int)p;
+}
+
+int twin_navfn_trace(const float *pot, int nx, int ny, int start, int goal, int max_cycles, float *out_xy) {
+    /* NavFn::calcPath: from cell `start` (the plan's end) down the potential to `goal` (the potential's
+       source); `out_xy` takes up to max_cycles (x, y) points in cells, the last one `goal` itself. */
+    const int ns = nx * ny;
+    int stc = start, count = 0;
+    float dx = 0, dy = 0;
     for (int cycle = 0; cycle < max_cycles; ++cycle) {
-        if (count >= max_points) return -1;
-        long near = (long)stc + (long)round(dx) + (long)(nx * round(dy));
+        int near = stc + (int)roundf(dx) + (int)(nx * roundf(dy));
         if (near < 0) near = 0;
         if (near > ns - 1) near = ns - 1;
         if (pot[near] < COST_NEUTRAL) {
-            out_xy[2 * count] = goal % nx; out_xy[2 * count + 1] = goal / nx; ++count;
-            return count;
+            out_xy[2 * count] = (float)(goal % nx);
+            out_xy[2 * count + 1] = (float)(goal / nx);
+            return count + 1;
         }
         if (stc < nx || stc > ns - nx) return -1;
-        out_xy[2 * count] = stc % nx + dx; out_xy[2 * count + 1] = stc / nx + dy; ++count;
+        out_xy[2 * count] = stc % nx + dx;
+        out_xy[2 * count + 1] = stc / nx + dy;
+        ++count;
         int oscillating = count > 2 && out_xy[2 * (count - 1)] == out_xy[2 * (count - 3)]
                           && out_xy[2 * (count - 1) + 1] == out_xy[2 * (count - 3) + 1];
-        int high = pot[stc] >= POT_HIGH;
-        for (int j = 0; j < 8 && !high; ++j) if (pot[stc + ring[j]] >= POT_HIGH) high = 1;
-        if (high || oscillating) {
-            /* the lowest of the eight neighbours; NavFn keeps the running minimum in an int */
-            int best = stc;
-            double bp = (double)(int)pot[stc];
+        const int ring[8] = {-nx - 1, -nx, -nx + 1, -1, 1, nx - 1, nx, nx + 1};
+        int boundary = pot[stc] >= POT_HIGH;
+        for (int j = 0; j < 8 && !boundary; ++j) boundary = pot[stc + ring[j]] >= POT_HIGH;
+        if (boundary || oscillating) {
+            /* follow the grid: the lowest of the eight neighbours, the running minimum kept in an int */
+            int best = stc, best_p = truncate_potential(pot[stc]);
             for (int j = 0; j < 8; ++j) {
                 int m = stc + ring[j];
-                if (pot[m] < bp) { bp = (double)(int)pot[m]; best = m; }
+                if (pot[m] < (float)best_p) { best_p = truncate_potential(pot[m]); best = m; }
             }
-            stc = best; dx = 0.0; dy = 0.0;
+            stc = best; dx = 0; dy = 0;
             if (pot[stc] >= POT_HIGH) return -1;
             continue;
         }
-        double g[4][2];
+        float g[4][2];
         gradient(pot, ns, nx, stc, &g[0][0], &g[0][1]);
         gradient(pot, ns, nx, stc + 1, &g[1][0], &g[1][1]);
         gradient(pot, ns, nx, stc + nx, &g[2][0], &g[2][1]);
         gradient(pot, ns, nx, stc + nx + 1, &g[3][0], &g[3][1]);
-        double x1 = (1.0 - dx) * g[0][0] + dx * g[1][0], x2 = (1.0 - dx) * g[2][0] + dx * g[3][0];
-        double x = (1.0 - dy) * x1 + dy * x2;
-        double y1 = (1.0 - dx) * g[0][1] + dx * g[1][1], y2 = (1.0 - dx) * g[2][1] + dx * g[3][1];
-        double y = (1.0 - dy) * y1 + dy * y2;
+        float x1 = (1.0 - dx) * g[0][0] + dx * g[1][0];
+        float x2 = (1.0 - dx) * g[2][0] + dx * g[3][0];
+        float x = (1.0 - dy) * x1 + dy * x2;
+        float y1 = (1.0 - dx) * g[0][1] + dx * g[1][1];
+        float y2 = (1.0 - dx) * g[2][1] + dx * g[3][1];
+        float y = (1.0 - dy) * y1 + dy * y2;
         if (x == 0.0 && y == 0.0) return -1;
-        double ss = 0.5 / sqrt(x * x + y * y);
-        dx += x * ss; dy += y * ss;
-        if (dx > 1.0) { stc += 1; dx -= 1.0; }
-        if (dx < -1.0) { stc -= 1; dx += 1.0; }
+        float ss = 0.5f / hypotf(x, y);
+        dx += x * ss;
+        dy += y * ss;
+        if (dx > 1.0) { ++stc; dx -= 1.0; }
+        if (dx < -1.0) { --stc; dx += 1.0; }
         if (dy > 1.0) { stc += nx; dy -= 1.0; }
         if (dy < -1.0) { stc -= nx; dy += 1.0; }
     }

@@ -126,3 +126,40 @@ def test_the_path_leaves_the_robot_at_once_and_ends_on_its_node() -> None:
     robot_node = (round((0.0 - house.origin_x_m) / 0.05), round((0.0 - house.origin_y_m) / 0.05))
     first = ((plan.poses[0, 0] - house.origin_x_m) / 0.05, (plan.poses[0, 1] - house.origin_y_m) / 0.05)
     assert first == pytest.approx(robot_node)
+
+
+def test_start_equal_to_goal_is_one_pose_refused_on_a_lethal_cell(planner: NavfnPlanner) -> None:
+    # Nav2's createPlan: the same x and y give the start with the goal's yaw, unless its cell is lethal
+    cost = np.zeros((20, 20), dtype=np.uint8)
+    cost[10, 10] = 254
+    cost[10, 11] = 253
+    costmap = grid(cost)
+    refused = planner.make_plan(costmap, (0.52, 0.52, 0.0), (0.52, 0.52, 1.0))
+    assert isinstance(refused, PlanFailure) and refused.reason is PlanFailureReason.START_IN_LETHAL
+    inscribed = planner.make_plan(costmap, (0.57, 0.52, 0.0), (0.57, 0.52, 1.0))
+    assert isinstance(inscribed, Plan) and inscribed.poses.tolist() == [[0.57, 0.52, 1.0]]
+    # the same node but not the same point: NavFn runs (the lethal start's node is cleared), the path
+    # is the robot's node and the goal
+    near = planner.make_plan(costmap, (0.52, 0.52, 0.0), (0.52, 0.49, 1.0))
+    assert isinstance(near, Plan) and near.poses.tolist() == [[0.5, 0.5, 0.0], [0.52, 0.49, 1.0]]
+
+
+def test_world_points_halfway_between_nodes_round_away_from_zero(planner: NavfnPlanner) -> None:
+    # std::round, not Python's round-half-to-even: x = 2.5 cells belongs to node 3, 4.5 to node 5
+    costmap = grid(np.zeros((20, 20), dtype=np.uint8), resolution_m=0.5)
+    plan = planner.make_plan(costmap, (1.25, 2.25, 0.0), (6.0, 2.0, 0.0))
+    assert isinstance(plan, Plan)
+    assert plan.poses[0, :2].tolist() == [1.5, 2.5]
+
+
+def test_a_goal_beyond_navfns_batch_budget_is_not_found(planner: NavfnPlanner) -> None:
+    # NavFn runs at most max(cells / 20, cols + rows) batches; down a long serpentine the goal never gets a value
+    cost = np.zeros((41, 41), dtype=np.uint8)
+    for i, row in enumerate(range(4, 40, 4)):
+        cost[row, :] = 254
+        cost[row, 1 if i % 2 else 39] = 0
+    costmap = grid(cost)
+    far = planner.make_plan(costmap, (0.1, 0.1, 0.0), (1.9, 1.9, 0.0))
+    assert isinstance(far, PlanFailure) and far.reason is PlanFailureReason.NO_VALID_PATH
+    assert isinstance(planner.make_plan(costmap, (0.1, 0.1, 0.0), (1.9, 0.5, 0.0)), Plan)
+    assert planner.potential.dtype == np.float32
