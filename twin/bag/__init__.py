@@ -11,8 +11,10 @@ from typing import TYPE_CHECKING, Any
 
 from twin.bag.encoders import (
     BehaviorTreeLogEncoder,
+    CameraInfoEncoder,
     ClockEncoder,
     ContactEncoder,
+    ImageEncoder,
     ImuEncoder,
     JointStateEncoder,
     LogEncoder,
@@ -72,9 +74,11 @@ __all__ = [
     "BagInfo",
     "BagMessage",
     "BehaviorTreeLogEncoder",
+    "CameraInfoEncoder",
     "ClockEncoder",
     "ContactEncoder",
     "Durability",
+    "ImageEncoder",
     "ImuEncoder",
     "JointStateEncoder",
     "LogEncoder",

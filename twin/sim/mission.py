@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from twin.bt import NodeStatus
 from twin.bt.log import StatusChange, StatusChangeBuffer
+from twin.bt.look_for_object import ImageSlot, register_vision_nodes
 from twin.bt.mission_nodes import LOCATION_FILE_KEY, register_mission_nodes
 from twin.core.clock import s_to_ns
 from twin.nav.bt_nodes import nav2_factory
@@ -159,6 +160,9 @@ class TreeMission:
         self.navigator = navigator
         factory = nav2_factory()
         register_mission_nodes(factory, navigator=navigator, rng=random.Random(seed))
+        self.images = ImageSlot()
+        """Where `LookForObject` finds the camera (filled in when the scenario's camera is on)."""
+        register_vision_nodes(factory, slot=self.images, target_color=spec.target_color)
         factory.load_plugins()
         self.tree = factory.create_tree_from_file(spec.tree, main_tree=spec.main_tree, clock=clock)
         if spec.locations is not None:

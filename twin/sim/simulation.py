@@ -55,6 +55,7 @@ from twin.robot.nodes import (
     RobotStatePublisher,
     tf_pose,
 )
+from twin.sim.camera import build_camera  # I_camera
 from twin.sim.executor import Executor, RecordFilter, Sink
 from twin.sim.launch import load_nodes
 from twin.sim.mission import BagReplay, CmdVelScript, TreeMission, WaypointFollower
@@ -275,6 +276,21 @@ class Simulation(Closing):
                 exclude=selection.exclude,
                 exclude_regex=selection.exclude_regex,
             )
+            # --- I_camera: the robot's camera (the lead ports this block into the robot's node group) ---
+            camera = build_camera(
+                scenario.sensors.camera,
+                robot,
+                world,
+                self.drive.chassis_state,
+                obstacles=self.obstacles,
+                rng=self._rng.stream("camera"),
+                recorded=keep.takes,
+            )
+            if camera is not None:
+                user_nodes = [*user_nodes, camera.node]
+                if isinstance(self.mission, TreeMission):
+                    self.mission.images.source = camera.feed
+            # --- end I_camera ---
             # Wire the graph once without sinks: a node that cannot join (a duplicate name, a topic of
             # another type) is refused before a bag folder exists.
             scratch = Executor(self.step_ns)

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from twin.core.geometry import Mat4
 from twin.world._render_native import load_render_kernel
 from twin.world.meshes import MeshArrays, MeshCache, box_arrays, geometry_arrays
-from twin.world.types import Plane, World
+from twin.world.types import Box, Cylinder, Plane, World
 
 __all__ = [
     "CameraModel",
@@ -44,6 +44,7 @@ __all__ = [
     "Renderer",
     "box_mesh",
     "lighting_of",
+    "shapes_mesh",
     "world_visuals",
 ]
 
@@ -213,10 +214,23 @@ def world_visuals(world: World, lighting: Lighting, *, exclude_models: Iterable[
     return _join(parts, lighting)
 
 
+def shapes_mesh(
+    shapes: Sequence[tuple[Box | Cylinder, Mat4, tuple[float, float, float]]], lighting: Lighting, cache: MeshCache
+) -> ColouredMesh:
+    """Boxes and cylinders (pose in the world frame, RGB) as one lit mesh: a scenario's obstacles and blocks."""
+    parts = []
+    for geometry, pose, rgb in shapes:
+        local = geometry_arrays(geometry, cache)
+        assert local is not None
+        T = np.asarray(pose)
+        parts.append((local.vertices @ T[:3, :3].T + T[:3, 3], local.faces, np.asarray(rgb, dtype=np.float64)))
+    return _join(parts, lighting)
+
+
 def box_mesh(
     boxes: Sequence[tuple[tuple[float, float, float], Mat4, tuple[float, float, float]]], lighting: Lighting
 ) -> ColouredMesh:
-    """Boxes (size m, pose in the world frame, RGB) as one lit mesh: a scenario's obstacles and blocks."""
+    """Boxes (size m, pose in the world frame, RGB) as one lit mesh."""
     parts = []
     for size, pose, rgb in boxes:
         local = box_arrays(size)
