@@ -1,0 +1,153 @@
+"""The camera in a run, tested from the bag: where a block appears, its depth, occlusion, clip, stamps, seeds."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from rosbags.highlevel import AnyReader
+
+from twin.sim.scenario_file import load_scenario
+from twin.sim.simulation import Simulation
+from twin.world import load_robot
+
+REPO = Path(__file__).resolve().parents[2]
+W, H = 160, 120
+
+WORLD = """<?xml version="1.0"?>
+<sdf version="1.7"><world name="yard">
+  <scene><ambient>1 1 1 1</ambient><background>0 0 0 1</background></scene>
+  <model name="ground"><static>true</static><link name="l">
+    <collision name="c"><geometry><plane><normal>0 0 1</normal><size>40 40</size></plane></geometry></collision>
+    <visual name="v"><geometry><plane><normal>0 0 1</normal><size>40 40</size></plane></geometry>
+      <material><diffuse>0.5 0.5 0.5 1</diffuse></material></visual></link></model>
+  <model name="wall"><static>true</static><link name="l"><pose>3.0 -1.0 0.5 0 0 0</pose>
+    <collision name="c"><geometry><box><size>0.1 1.0 1.0</size></box></geometry></collision>
+    <visual name="v"><geometry><box><size>0.1 1.0 1.0</size></box></geometry>
+      <material><diffuse>0.6 0.6 0.6 1</diffuse></material></visual></link></model>
+</world></sdf>
+"""
+
+# (x, y) of 0.1 m boxes in the world; the robot stands at the origin facing +x.
+BLOCKS = [(1.5, 0.0), (2.0, 0.55), (1.2, -0.5), (4.0, -1.0)]  # the last stands behind the wall
+
+
+def _scenario(tmp_path: Path, *, noise: bool, seed: int = 3) -> Path:
+    (tmp_path / "yard.sdf").write_text(WORLD)
+    data = {
+        "name": "camera",
+        "seed": seed,
+        "world": {"sdf": str(tmp_path / "yard.sdf")},
+        "mission": {"type": "none"},
+        "odometry": "ground_truth",
+        "sensors": {
+            "camera": {"enabled": True, "width": W, "height": H, "rate_hz": 5.0, "depth": True, "noise": noise}
+        },
+        "obstacles": [
+            {
+                "shape": "box",
+                "size_m": [0.1, 0.1, 0.1],
+                "pose": {"x_m": x, "y_m": y, "yaw_rad": 0.0},
+                "name": f"block{i}",
+                "color_rgba": [0.0, 0.0, 0.8, 1.0],
+            }
+            for i, (x, y) in enumerate(BLOCKS)
+        ],
+    }
+    path = tmp_path / "camera.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _record(tmp_path: Path, scenario: Path, name: str = "bag") -> dict[str, list[tuple[int, object]]]:
+    bag = tmp_path / name
+    with Simulation(load_scenario(scenario), bag_path=bag, duration_s=1.0) as sim:
+        sim.run()
+    out: dict[str, list[tuple[int, object]]] = {}
+    with AnyReader([bag]) as reader:
+        cons = [c for c in reader.connections if c.topic.startswith("/camera/")]
+        for c, t, raw in reader.messages(connections=cons):
+            out.setdefault(c.topic, []).append((t, reader.deserialize(raw, c.msgtype)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[tuple[int, object]]]:
+    tmp = tmp_path_factory.mktemp("camera")
+    return _record(tmp, _scenario(tmp, noise=False))
+
+
+def test_images_and_camera_info_at_the_sensors_rate_in_sim_time(clean) -> None:
+    images, infos = clean["/camera/image_raw"], clean["/camera/camera_info"]
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, m in images]
+    assert stamps == [0, 200_000_000, 400_000_000, 600_000_000, 800_000_000]  # 5 Hz over the first second
+    image = images[0][1]
+    assert (image.width, image.height, image.encoding, image.step) == (W, H, "rgb8", 3 * W)
+    assert image.header.frame_id == "camera_rgb_optical_frame"
+    info = infos[0][1]
+    f = (W / 2) / math.tan(1.02974 / 2)
+    assert list(info.k) == pytest.approx([f, 0, (W + 1) / 2, 0, f, (H + 1) / 2, 0, 0, 1])
+    assert list(info.p) == pytest.approx([f, 0, (W + 1) / 2, 0, 0, f, (H + 1) / 2, 0, 0, 0, 1, 0])
+    assert info.distortion_model == "plumb_bob" and not np.any(info.d)
+    depth = clean["/camera/depth/image_raw"][0][1]
+    assert (depth.encoding, depth.step) == ("32FC1", 4 * W)
+
+
+def _arrays(clean) -> tuple[np.ndarray, np.ndarray, tuple[float, ...]]:
+    image = clean["/camera/image_raw"][0][1]
+    rgb = np.asarray(image.data).reshape(H, W, 3)
+    depth_msg = clean["/camera/depth/image_raw"][0][1]
+    depth = np.frombuffer(np.asarray(depth_msg.data).tobytes(), dtype="<f4").reshape(H, W)
+    return rgb, depth, tuple(clean["/camera/camera_info"][0][1].k)
+
+
+@pytest.mark.parametrize("block", [0, 1, 2])
+def test_a_block_appears_where_K_predicts_at_the_distance_along_the_axis(clean, block: int) -> None:
+    rgb, depth, K = _arrays(clean)
+    (camera,) = load_robot("turtlebot3_waffle", model_path=[REPO / "sdf" / "models"]).cameras
+    T = np.asarray(camera.T_base_sensor)  # the robot stands at the world origin
+    x, y = BLOCKS[block]
+    front = np.array([x - 0.05, y, 0.05]) - T[:3, 3]  # the front face's centre, from the sensor
+    X, Y, Z = -front[1], -front[2], front[0]  # optical frame
+    u, v = K[0] * X / Z + K[2], K[4] * Y / Z + K[5]  # K counts pixels from 1
+    col, row = round(u - 1), round(v - 1)
+    assert 0 <= col < W and 0 <= row < H
+    window = depth[row - 1 : row + 2, col - 1 : col + 2]
+    assert np.abs(window - Z).min() < 1e-3  # the depth image: the distance along the optical axis
+    assert tuple(rgb[row, col]) == (0, 0, 204)
+    # The face's pixels centre on (u, v) within a pixel.
+    rows, cols = np.nonzero(np.abs(depth - Z) < 1e-3)
+    near = (np.abs(rows - row) < 6) & (np.abs(cols - col) < 6)
+    assert cols[near].mean() + 1 == pytest.approx(u, abs=1.0)
+    assert rows[near].mean() + 1 == pytest.approx(v, abs=1.0)
+
+
+def test_the_wall_hides_the_block_behind_it_and_the_sky_is_background_beyond_the_far_clip(clean) -> None:
+    rgb, depth, _ = _arrays(clean)
+    blue = (rgb[..., 0] == 0) & (rgb[..., 1] == 0) & (rgb[..., 2] == 204)
+    # Three blocks in view; the fourth behind the wall adds no pixels at its depth.
+    assert not np.any(np.abs(depth[blue] - (4.0 - 0.05 - 0.069)) < 0.05)
+    # Above the horizon nothing is within the far clip: +inf and the scene's background.
+    assert np.all(np.isposinf(depth[0]))
+    assert np.all(rgb[0] == 0)
+
+
+def test_the_same_seed_gives_byte_identical_noisy_images(tmp_path: Path) -> None:
+    one = _record(tmp_path, _scenario(tmp_path, noise=True, seed=5), "one")
+    two = _record(tmp_path, _scenario(tmp_path, noise=True, seed=5), "two")
+    other = _record(tmp_path, _scenario(tmp_path, noise=True, seed=6), "three")
+    frames = [[bytes(m.data) for _, m in run["/camera/image_raw"]] for run in (one, two, other)]
+    assert frames[0] == frames[1]
+    assert frames[0] != frames[2]
+
+
+def test_the_default_mission_has_no_camera(tmp_path: Path) -> None:
+    scenario = load_scenario(REPO / "scenarios" / "default.yaml")
+    assert not scenario.sensors.camera.enabled
+    with Simulation(scenario, bag_path=tmp_path / "bag", duration_s=0.2) as sim:
+        sim.run()
+    with AnyReader([tmp_path / "bag"]) as reader:
+        assert not [c.topic for c in reader.connections if c.topic.startswith("/camera")]
