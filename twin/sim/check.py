@@ -262,11 +262,13 @@ def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
 def _load_tree(mission: BehaviorTreeMission) -> None:
     import random
 
+    from twin.bt.look_for_object import ImageSlot, register_vision_nodes
     from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
     from twin.nav.bt_nodes import nav2_factory
 
     factory = nav2_factory()
     register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
+    register_vision_nodes(factory, slot=ImageSlot(), target_color=mission.target_color)
     factory.load_plugins()
     factory.create_tree_from_file(mission.tree, main_tree=mission.main_tree, clock=lambda: 0)
 
