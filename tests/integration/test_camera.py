@@ -35,7 +35,7 @@ WORLD = """<?xml version="1.0"?>
 BLOCKS = [(1.5, 0.0), (2.0, 0.55), (1.2, -0.5), (4.0, -1.0)]  # the last stands behind the wall
 
 
-def _scenario(tmp_path: Path, *, noise: bool, seed: int = 3) -> Path:
+def _scenario(tmp_path: Path, *, noise: bool, seed: int = 3, compressed: bool = False) -> Path:
     (tmp_path / "yard.sdf").write_text(WORLD)
     data = {
         "name": "camera",
@@ -44,7 +44,15 @@ def _scenario(tmp_path: Path, *, noise: bool, seed: int = 3) -> Path:
         "mission": {"type": "none"},
         "odometry": "ground_truth",
         "sensors": {
-            "camera": {"enabled": True, "width": W, "height": H, "rate_hz": 5.0, "depth": True, "noise": noise}
+            "camera": {
+                "enabled": True,
+                "width": W,
+                "height": H,
+                "rate_hz": 5.0,
+                "depth": True,
+                "noise": noise,
+                "compressed": compressed,
+            }
         },
         "obstacles": [
             {
@@ -151,3 +159,20 @@ def test_the_default_mission_has_no_camera(tmp_path: Path) -> None:
         sim.run()
     with AnyReader([tmp_path / "bag"]) as reader:
         assert not [c.topic for c in reader.connections if c.topic.startswith("/camera")]
+
+
+def test_compressed_images_are_the_jpeg_of_the_raw_ones(tmp_path: Path) -> None:
+    import io
+
+    from PIL import Image
+
+    run = _record(tmp_path, _scenario(tmp_path, noise=True, compressed=True))
+    raw = run["/camera/image_raw"]
+    jpegs = run["/camera/image_raw/compressed"]
+    assert len(jpegs) == len(raw) == 5
+    message = jpegs[0][1]
+    assert message.format == "rgb8; jpeg compressed bgr8"
+    assert message.header.frame_id == "camera_rgb_optical_frame"
+    decoded = np.asarray(Image.open(io.BytesIO(bytes(message.data))).convert("RGB")).astype(int)
+    original = np.asarray(raw[0][1].data).reshape(H, W, 3).astype(int)
+    assert np.abs(decoded - original).mean() < 3.0  # JPEG at quality 95

@@ -26,6 +26,7 @@ __all__ = [
     "BehaviorTreeLogEncoder",
     "CameraInfoEncoder",
     "ClockEncoder",
+    "CompressedImageEncoder",
     "ContactEncoder",
     "ImageEncoder",
     "ImuEncoder",
@@ -513,6 +514,32 @@ class ImageEncoder:
         sec, nanosec = divmod(stamp_ns, _NS)
         # The frame id string starts right after the 8-byte stamp: every later alignment is fixed.
         return b"".join((self._prefix_pack(ENCAPSULATION, sec, nanosec), self._body, data))
+
+
+class CompressedImageEncoder:
+    """`sensor_msgs/msg/CompressedImage` (image_transport's compressed plugin: `format` names the encodings)."""
+
+    msgtype: ClassVar[str] = "sensor_msgs/msg/CompressedImage"
+
+    def __init__(self, frame_id: str, *, format: str) -> None:
+        """Precompute the frame id and format.
+
+        Args:
+            frame_id: The optical frame.
+            format: e.g. `rgb8; jpeg compressed bgr8`, as image_transport's compressed plugin writes it.
+        """
+        w = CdrWriter()
+        w.string(frame_id)
+        w.string(format)
+        body = w.getvalue()[len(ENCAPSULATION) :]
+        self._body = body + bytes((-(8 + len(body))) % 4)
+        self._prefix_pack = struct.Struct("<4siI").pack
+        self._count = struct.Struct("<I").pack
+
+    def encode(self, stamp_ns: int, data: bytes) -> bytes:
+        """Encode one compressed frame."""
+        sec, nanosec = divmod(stamp_ns, _NS)
+        return b"".join((self._prefix_pack(ENCAPSULATION, sec, nanosec), self._body, self._count(len(data)), data))
 
 
 class CameraInfoEncoder:

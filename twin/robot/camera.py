@@ -4,6 +4,7 @@
 |---|---|
 | `camera` | `/camera/image_raw` (sensor_msgs/Image, rgb8 or mono8), `/camera/camera_info` |
 | | with depth: `/camera/depth/image_raw` (32FC1, metres) |
+| | compressed: `/camera/image_raw/compressed` (sensor_msgs/CompressedImage, JPEG quality 95) |
 
 (the topic names as the sensor's gazebo_ros_camera plugin sets them; these are the defaults)
 
@@ -16,13 +17,14 @@ records its image topic, otherwise only while a `LookForObject` node waits for a
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.bag import CameraInfoEncoder, ImageEncoder
+from twin.bag import CameraInfoEncoder, CompressedImageEncoder, ImageEncoder
 from twin.node import PRIORITY_SENSOR, Encoded, Node, QoSProfile
 from twin.robot.chassis import ChassisState
 from twin.world.meshes import MeshCache
@@ -64,6 +66,18 @@ class CameraFeed:
         return self.frame
 
 
+_JPEG_QUALITY = 95  # image_transport's compressed plugin's default jpeg_quality
+
+
+def _jpeg(image: NDArray[np.uint8]) -> bytes:
+    """JPEG bytes of an RGB or mono image (Pillow/libjpeg: the same image gives the same bytes)."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(image).save(buf, format="JPEG", quality=_JPEG_QUALITY)
+    return buf.getvalue()
+
+
 def _mono(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """Luma (ITU-R BT.601) of an RGB image, rounded, as an L8 camera gives it."""
     luma = rgb.astype(np.float32) @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
@@ -82,6 +96,7 @@ class CameraNode(Node):
         obstacles: The scenario's obstacles and blocks (None without any).
         rng: The camera's noise stream (one seed drawn per frame drawn).
         depth: Also publish the depth image.
+        compressed: Also publish the JPEG image (compressed only when a sink takes it).
         recorded: The recorder records the image topic: render every period.
     """
 
@@ -96,6 +111,7 @@ class CameraNode(Node):
         obstacles: ObstacleField | None,
         rng: np.random.Generator,
         depth: bool,
+        compressed: bool = False,
         recorded: bool,
     ) -> None:
         super().__init__(spec.name)
@@ -107,6 +123,16 @@ class CameraNode(Node):
         image_pub = self.create_publisher(ImageEncoder.msgtype, spec.image_topic, SENSOR_DATA)
         info_pub = self.create_publisher(CameraInfoEncoder.msgtype, spec.info_topic, SENSOR_DATA)
         depth_pub = self.create_publisher(ImageEncoder.msgtype, spec.depth_topic, SENSOR_DATA) if depth else None
+        jpeg_pub = None
+        if compressed:
+            fmt = f"{spec.encoding}; jpeg compressed {'mono8' if spec.encoding == 'mono8' else 'bgr8'}"
+            compressed_encode = CompressedImageEncoder(spec.frame_id, format=fmt).encode
+
+            def jpeg_encode(t_ns: int, image: NDArray[np.uint8]) -> bytes:
+                return compressed_encode(t_ns, _jpeg(image))
+
+            topic = f"{spec.image_topic}/compressed"
+            jpeg_pub = self.create_publisher(CompressedImageEncoder.msgtype, topic, SENSOR_DATA)
         T_base_sensor = np.asarray(spec.T_base_sensor)
         mono = spec.encoding == "mono8"
         noise_mean, noise_std = spec.noise_mean, spec.noise_std
@@ -149,6 +175,8 @@ class CameraNode(Node):
             feed.frame = (t_ns, image)
             image_pub.publish(Encoded((image_encode, (t_ns, image), image)))
             info_pub.publish(Encoded((info_encode, (t_ns,), cam)))
+            if jpeg_pub is not None:
+                jpeg_pub.publish(Encoded((jpeg_encode, (t_ns, image), image)))
             if depth_pub is not None:
                 depth_pub.publish(Encoded((depth_encode, (t_ns, frame.depth_m), frame.depth_m)))
 

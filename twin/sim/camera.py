@@ -92,8 +92,21 @@ def build_camera(
     renderer = Renderer(camera_model(spec), world_visuals(world, lighting, exclude_models=(robot.name,)), lighting)
     feed = CameraFeed()
     depth = section.depth or spec.depth
-    wanted = recorded(spec.image_topic) or (depth and recorded(spec.depth_topic))
+    wanted = (
+        recorded(spec.image_topic)
+        or (depth and recorded(spec.depth_topic))
+        or (section.compressed and recorded(f"{spec.image_topic}/compressed"))
+    )
     node = CameraNode(
-        spec, renderer, lighting, chassis, feed, obstacles=obstacles, rng=rng, depth=depth, recorded=wanted
+        spec,
+        renderer,
+        lighting,
+        chassis,
+        feed,
+        obstacles=obstacles,
+        rng=rng,
+        depth=depth,
+        compressed=section.compressed,
+        recorded=wanted,
     )
     return Camera(node, feed)

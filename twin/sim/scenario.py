@@ -118,6 +118,7 @@ class CameraSection:
     rate_hz: float | None = None
     depth: bool = False  # also /camera/depth/image_raw (a depth sensor in the SDF publishes it anyway)
     noise: bool = True  # the SDF's <noise>; false draws clean images
+    compressed: bool = False  # also <image_topic>/compressed (JPEG, as image_transport's compressed plugin)
 
     def __post_init__(self) -> None:
         for key, side in (("width", self.width), ("height", self.height)):

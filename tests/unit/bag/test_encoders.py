@@ -503,3 +503,12 @@ def test_camera_info(t: int, frame: str, w: int, h: int, f: float) -> None:
         roi=roi,
     )
     assert E.CameraInfoEncoder(frame, width=w, height=h, K=K, P=P).encode(t) == ser(expected)
+
+
+@settings(max_examples=40, deadline=None)
+@given(t=stamps, frame=frames, fmt=st.text(max_size=30), data=st.binary(max_size=40))
+def test_compressed_image(t: int, frame: str, fmt: str, data: bytes) -> None:
+    expected = T["sensor_msgs/msg/CompressedImage"](
+        header=header(t, frame), format=fmt, data=np.frombuffer(data, dtype=np.uint8)
+    )
+    assert E.CompressedImageEncoder(frame, format=fmt).encode(t, data) == ser(expected)
