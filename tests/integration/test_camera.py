@@ -176,3 +176,29 @@ def test_compressed_images_are_the_jpeg_of_the_raw_ones(tmp_path: Path) -> None:
     decoded = np.asarray(Image.open(io.BytesIO(bytes(message.data))).convert("RGB")).astype(int)
     original = np.asarray(raw[0][1].data).reshape(H, W, 3).astype(int)
     assert np.abs(decoded - original).mean() < 3.0  # JPEG at quality 95
+
+
+def test_bag_export_writes_each_frame_as_png(tmp_path: Path) -> None:
+    from PIL import Image
+
+    from tests.conftest import run_twin
+
+    run = _record(tmp_path, _scenario(tmp_path, noise=True, compressed=True))
+    out = tmp_path / "png"
+    topics = ["/camera/image_raw", "/camera/image_raw/compressed", "/camera/depth/image_raw"]
+    result = run_twin("bag", "export", str(tmp_path / "bag"), "--topics", *topics, "--format", "png", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    assert "/camera/image_raw: 5 frames" in result.stdout
+    t0, first = run["/camera/image_raw"][0]
+    png = np.asarray(Image.open(out / "camera_image_raw" / f"{t0}.png"))
+    assert np.array_equal(png, np.asarray(first.data).reshape(H, W, 3))
+    depth_png = np.asarray(Image.open(out / "camera_depth_image_raw" / f"{t0}.png"))
+    depth_msg = run["/camera/depth/image_raw"][0][1]
+    depth = np.frombuffer(np.asarray(depth_msg.data).tobytes(), dtype="<f4").reshape(H, W)
+    finite = np.isfinite(depth)
+    assert np.array_equal(depth_png[finite], np.round(depth[finite] * 1000).astype(np.uint16))
+    assert not depth_png[~finite].any()
+    assert len(list((out / "camera_image_raw_compressed").glob("*.png"))) == 5
+    bad = run_twin("bag", "export", str(tmp_path / "bag"), "--topics", "/camera/camera_info", "--format", "png")
+    assert bad.returncode == 5
+    assert "/camera/camera_info is sensor_msgs/msg/CameraInfo, not an image" in bad.stderr
