@@ -133,6 +133,22 @@ def test_a_block_appears_where_K_predicts_at_the_distance_along_the_axis(clean, 
     assert rows[near].mean() + 1 == pytest.approx(v, abs=1.0)
 
 
+def test_the_point_cloud_holds_each_pixels_point_in_the_optical_frame(clean) -> None:
+    rgb, depth, K = _arrays(clean)
+    cloud = clean["/camera/points"][0][1]
+    assert (cloud.width, cloud.height, cloud.point_step, cloud.is_dense) == (W, H, 32, False)
+    assert [(f.name, f.offset) for f in cloud.fields] == [("x", 0), ("y", 4), ("z", 8), ("rgb", 16)]
+    points = np.frombuffer(np.asarray(cloud.data).tobytes(), dtype="<f4").reshape(H, W, 8)
+    finite = np.isfinite(depth)
+    assert np.array_equal(points[..., 2][finite], depth[finite])
+    assert np.all(np.isnan(points[..., 2][~finite]))
+    # A pixel's point lies on its ray through K: x / z = (u - cx) / fx with u counted from 1.
+    row, col = np.argwhere(finite)[len(np.argwhere(finite)) // 2]
+    assert points[row, col, 0] / points[row, col, 2] == pytest.approx((col + 1 - K[2]) / K[0], abs=1e-6)
+    packed = points.view("<u4")[row, col, 4]
+    assert (packed >> 16 & 255, packed >> 8 & 255, packed & 255) == tuple(rgb[row, col])
+
+
 def test_the_wall_hides_the_block_behind_it_and_the_sky_is_background_beyond_the_far_clip(clean) -> None:
     rgb, depth, _ = _arrays(clean)
     blue = (rgb[..., 0] == 0) & (rgb[..., 1] == 0) & (rgb[..., 2] == 204)

@@ -39,6 +39,7 @@ __all__ = [
     "OdometryEncoder",
     "ParticleCloudEncoder",
     "PathEncoder",
+    "PointCloud2Encoder",
     "PoseStampedEncoder",
     "PoseWithCovarianceStampedEncoder",
     "ScanEncoder",
@@ -540,6 +541,58 @@ class CompressedImageEncoder:
         """Encode one compressed frame."""
         sec, nanosec = divmod(stamp_ns, _NS)
         return b"".join((self._prefix_pack(ENCAPSULATION, sec, nanosec), self._body, self._count(len(data)), data))
+
+
+class PointCloud2Encoder:
+    """`sensor_msgs/msg/PointCloud2` of a fixed layout (an organised cloud from a depth camera)."""
+
+    msgtype: ClassVar[str] = "sensor_msgs/msg/PointCloud2"
+
+    FLOAT32: ClassVar[int] = 7  # sensor_msgs/PointField.FLOAT32
+
+    def __init__(
+        self,
+        frame_id: str,
+        *,
+        width: int,
+        height: int,
+        fields: Sequence[tuple[str, int, int, int]],
+        point_step: int,
+        is_dense: bool = False,
+    ) -> None:
+        """Precompute everything but the stamp and the data.
+
+        Args:
+            frame_id: The frame of the points.
+            width: Points per row.
+            height: Rows (1 for an unorganised cloud).
+            fields: (name, offset, datatype, count) per field.
+            point_step: Bytes per point.
+            is_dense: True when no point is invalid.
+        """
+        self.size = width * height * point_step
+        w = CdrWriter()
+        w.string(frame_id)
+        w.pack("I", height, width)
+        w.count(len(fields))
+        for name, offset, datatype, count in fields:
+            w.string(name)
+            w.pack("I", offset)
+            w.pack("B", datatype)
+            w.pack("I", count)
+        w.pack("?", False)
+        w.pack("I", point_step, point_step * width, self.size)
+        self._body = w.getvalue()[len(ENCAPSULATION) :]
+        self._dense = b"\x01" if is_dense else b"\x00"
+        self._prefix_pack = struct.Struct("<4siI").pack
+
+    def encode(self, stamp_ns: int, data: bytes) -> bytes:
+        """Encode one cloud; `data` is `width * height * point_step` bytes."""
+        if len(data) != self.size:
+            msg = f"PointCloud2Encoder for {self.size} bytes got {len(data)}"
+            raise BagError(msg)
+        sec, nanosec = divmod(stamp_ns, _NS)
+        return b"".join((self._prefix_pack(ENCAPSULATION, sec, nanosec), self._body, data, self._dense))
 
 
 class CameraInfoEncoder:

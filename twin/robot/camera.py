@@ -3,7 +3,7 @@
 | node | publishes |
 |---|---|
 | `camera` | `/camera/image_raw` (sensor_msgs/Image, rgb8 or mono8), `/camera/camera_info` |
-| | with depth: `/camera/depth/image_raw` (32FC1, metres) |
+| | with depth: `/camera/depth/image_raw` (32FC1, metres), `/camera/points` (PointCloud2) |
 | | compressed: `/camera/image_raw/compressed` (sensor_msgs/CompressedImage, JPEG quality 95) |
 
 (the topic names as the sensor's gazebo_ros_camera plugin sets them; these are the defaults)
@@ -24,7 +24,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.bag import CameraInfoEncoder, CompressedImageEncoder, ImageEncoder
+from twin.bag import CameraInfoEncoder, CompressedImageEncoder, ImageEncoder, PointCloud2Encoder
 from twin.node import PRIORITY_SENSOR, Encoded, Node, QoSProfile
 from twin.robot.chassis import ChassisState
 from twin.world.meshes import MeshCache
@@ -78,6 +78,27 @@ def _jpeg(image: NDArray[np.uint8]) -> bytes:
     return buf.getvalue()
 
 
+_POINT_FIELDS = (("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("rgb", 16, 7, 1))  # 7: FLOAT32
+_POINT_STEP = 32  # x, y, z, padding, rgb, padding: PCL's PointXYZRGB layout, as gazebo_ros fills it
+
+
+def cloud_bytes(image: NDArray[np.uint8], depth_m: NDArray[np.float32], f_px: float) -> bytes:
+    """An organised XYZRGB cloud in the optical frame from a depth image (NaN where no depth)."""
+    h, w = depth_m.shape
+    z = depth_m.astype(np.float32)
+    u = ((np.arange(w, dtype=np.float32) + 0.5 - w / 2) / np.float32(f_px))[None, :]
+    v = ((np.arange(h, dtype=np.float32) + 0.5 - h / 2) / np.float32(f_px))[:, None]
+    valid = np.isfinite(z)
+    out = np.zeros((h, w, _POINT_STEP // 4), dtype=np.float32)
+    out[..., 0] = np.where(valid, u * z, np.nan)
+    out[..., 1] = np.where(valid, v * z, np.nan)
+    out[..., 2] = np.where(valid, z, np.nan)
+    rgb = image if image.ndim == 3 else np.repeat(image[:, :, None], 3, axis=2)
+    packed = (rgb[..., 0].astype(np.uint32) << 16) | (rgb[..., 1].astype(np.uint32) << 8) | rgb[..., 2]
+    out.view(np.uint32)[..., 4] = packed
+    return out.tobytes()
+
+
 def _mono(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """Luma (ITU-R BT.601) of an RGB image, rounded, as an L8 camera gives it."""
     luma = rgb.astype(np.float32) @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
@@ -123,6 +144,17 @@ class CameraNode(Node):
         image_pub = self.create_publisher(ImageEncoder.msgtype, spec.image_topic, SENSOR_DATA)
         info_pub = self.create_publisher(CameraInfoEncoder.msgtype, spec.info_topic, SENSOR_DATA)
         depth_pub = self.create_publisher(ImageEncoder.msgtype, spec.depth_topic, SENSOR_DATA) if depth else None
+        points_pub = (
+            self.create_publisher(PointCloud2Encoder.msgtype, spec.points_topic, SENSOR_DATA) if depth else None
+        )
+        cloud_encode = PointCloud2Encoder(
+            spec.frame_id, width=w, height=h, fields=_POINT_FIELDS, point_step=_POINT_STEP
+        ).encode
+        f_px = renderer.camera.f_px
+
+        def points_encode(t_ns: int, image: NDArray[np.uint8], depth_m: NDArray[np.float32]) -> bytes:
+            return cloud_encode(t_ns, cloud_bytes(image, depth_m, f_px))
+
         jpeg_pub = None
         if compressed:
             fmt = f"{spec.encoding}; jpeg compressed {'mono8' if spec.encoding == 'mono8' else 'bgr8'}"
@@ -179,5 +211,7 @@ class CameraNode(Node):
                 jpeg_pub.publish(Encoded((jpeg_encode, (t_ns, image), image)))
             if depth_pub is not None:
                 depth_pub.publish(Encoded((depth_encode, (t_ns, frame.depth_m), frame.depth_m)))
+            if points_pub is not None:
+                points_pub.publish(Encoded((points_encode, (t_ns, image, frame.depth_m), frame.depth_m)))
 
         self.create_rate_timer(spec.rate_hz, on_timer, priority=PRIORITY_SENSOR)

@@ -94,7 +94,7 @@ def build_camera(
     depth = section.depth or spec.depth
     wanted = (
         recorded(spec.image_topic)
-        or (depth and recorded(spec.depth_topic))
+        or (depth and (recorded(spec.depth_topic) or recorded(spec.points_topic)))
         or (section.compressed and recorded(f"{spec.image_topic}/compressed"))
     )
     node = CameraNode(

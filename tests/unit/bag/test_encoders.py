@@ -512,3 +512,24 @@ def test_compressed_image(t: int, frame: str, fmt: str, data: bytes) -> None:
         header=header(t, frame), format=fmt, data=np.frombuffer(data, dtype=np.uint8)
     )
     assert E.CompressedImageEncoder(frame, format=fmt).encode(t, data) == ser(expected)
+
+
+@settings(max_examples=30, deadline=None)
+@given(t=stamps, frame=frames, w=st.integers(1, 5), h=st.integers(1, 4), dense=st.booleans())
+def test_point_cloud2(t: int, frame: str, w: int, h: int, dense: bool) -> None:
+    fields = [("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("rgb", 16, 7, 1)]
+    data = np.random.default_rng(w * h).integers(0, 256, w * h * 32, dtype=np.uint8)
+    point_fields = [T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=c) for n, o, d, c in fields]
+    expected = T["sensor_msgs/msg/PointCloud2"](
+        header=header(t, frame),
+        height=h,
+        width=w,
+        fields=point_fields,
+        is_bigendian=False,
+        point_step=32,
+        row_step=32 * w,
+        data=data,
+        is_dense=dense,
+    )
+    enc = E.PointCloud2Encoder(frame, width=w, height=h, fields=fields, point_step=32, is_dense=dense)
+    assert enc.encode(t, data.tobytes()) == ser(expected)
