@@ -218,3 +218,23 @@ def test_bag_export_writes_each_frame_as_png(tmp_path: Path) -> None:
     bad = run_twin("bag", "export", str(tmp_path / "bag"), "--topics", "/camera/camera_info", "--format", "png")
     assert bad.returncode == 5
     assert "/camera/camera_info is sensor_msgs/msg/CameraInfo, not an image" in bad.stderr
+
+
+def test_analyze_puts_the_camera_frames_into_the_report(tmp_path: Path) -> None:
+    from twin.analysis.export_images import pick_frames
+    from twin.analysis.report import analyze
+
+    run = _record(tmp_path, _scenario(tmp_path, noise=False))
+    report = analyze(tmp_path / "bag")
+    section = next(s for s in report.sections if s.name == "camera")
+    assert section.available
+    assert section.plot == "camera.png"
+    assert report.pngs["camera.png"].startswith(b"\x89PNG")
+    # The sheet's frames are the bag's own: the first and the last.
+    frames = pick_frames(
+        tmp_path / "bag", "/camera/image_raw", "sensor_msgs/msg/Image", [("first", 0), ("last", 10**9)]
+    )
+    images = run["/camera/image_raw"]
+    assert [label for label, _ in frames] == ["first", "last"]
+    assert np.array_equal(frames[0][1], np.asarray(images[0][1].data).reshape(H, W, 3))
+    assert np.array_equal(frames[1][1], np.asarray(images[-1][1].data).reshape(H, W, 3))

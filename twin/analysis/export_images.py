@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from twin.bag import open_bag, read_messages
 from twin.core.errors import BagError
 
-__all__ = ["IMAGE_TYPES", "export_images", "image_array"]
+__all__ = ["IMAGE_TYPES", "export_images", "image_array", "pick_frames"]
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 _CHANNELS = {"rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "mono8": 1}
@@ -89,3 +89,34 @@ def export_images(bag: str | os.PathLike[str], topics: Sequence[str], out_dir: P
         Image.fromarray(pixels).save(folders[m.topic] / f"{m.t_ns}.png")
         counts[m.topic] += 1
     return {t: (folders[t], counts[t]) for t in topics}
+
+
+def pick_frames(
+    bag: str | os.PathLike[str], topic: str, msgtype: str, picks: Sequence[tuple[str, int]]
+) -> list[tuple[str, NDArray[Any]]]:
+    """The frames of `topic` nearest each (label, record time ns) of `picks`, in their order.
+
+    Only the chosen frames are decoded. Frames that cannot be read are left out.
+    """
+    stamps = [m.t_ns for m in read_messages(bag, [topic], decode=False)]
+    if not stamps:
+        return []
+    times = np.asarray(stamps, dtype=np.int64)
+    wanted: dict[int, list[int]] = {}  # frame index -> positions in `picks`
+    for position, (_, t_ns) in enumerate(picks):
+        index = int(np.clip(np.searchsorted(times, t_ns), 0, len(times) - 1))
+        if index > 0 and abs(times[index - 1] - t_ns) <= abs(times[index] - t_ns):
+            index -= 1
+        wanted.setdefault(index, []).append(position)
+    found: dict[int, NDArray[Any]] = {}
+    for index, positions in wanted.items():
+        t_ns = int(times[index])
+        for m in read_messages(bag, [topic], start_ns=t_ns, stop_ns=t_ns + 1):
+            try:
+                image = image_array(m.msg, msgtype)
+            except (ValueError, OSError):
+                break
+            for position in positions:
+                found[position] = image
+            break
+    return [(label, found[i]) for i, (label, _) in enumerate(picks) if i in found]
