@@ -238,3 +238,33 @@ def test_analyze_puts_the_camera_frames_into_the_report(tmp_path: Path) -> None:
     assert [label for label, _ in frames] == ["first", "last"]
     assert np.array_equal(frames[0][1], np.asarray(images[0][1].data).reshape(H, W, 3))
     assert np.array_equal(frames[1][1], np.asarray(images[-1][1].data).reshape(H, W, 3))
+
+
+def test_a_users_node_subscribed_to_the_images_makes_the_camera_render(tmp_path: Path) -> None:
+    (tmp_path / "watcher.py").write_text(
+        """
+from twin.node import Node
+
+
+class Watcher(Node):
+    seen = []
+
+    def __init__(self) -> None:
+        super().__init__("watcher")
+        self.create_subscription("sensor_msgs/msg/Image", "/camera/image_raw", self.on_image, 10)
+
+    def on_image(self, msg) -> None:
+        Watcher.seen.append((msg.header.stamp.sec, msg.header.stamp.nanosec, msg.width, msg.height))
+"""
+    )
+    path = _scenario(tmp_path, noise=False)
+    data = yaml.safe_load(path.read_text())
+    data["nodes"] = [{"plugin": "watcher:Watcher"}]
+    data["recording"] = {"topics": {"exclude_regex": "/camera/.*"}}  # nothing of the camera recorded
+    path.write_text(yaml.safe_dump(data))
+    with Simulation(load_scenario(path), bag_path=tmp_path / "bag", duration_s=1.0) as sim:
+        sim.run()
+    import sys
+
+    seen = sys.modules["watcher"].Watcher.seen
+    assert seen == [(0, n * 200_000_000, W, H) for n in range(5)]

@@ -79,7 +79,8 @@ def build_camera(
         chassis: The robot's planar pose now.
         obstacles: The scenario's obstacles and blocks.
         rng: The camera's noise stream.
-        recorded: Whether the recorder records a topic (then the camera renders every period).
+        recorded: Whether the recorder records a topic or a user's node subscribes to it (then the
+            camera renders every period).
 
     Raises:
         ConfigError: See `camera_spec`.

@@ -284,7 +284,9 @@ class Simulation(Closing):
                 self.drive.chassis_state,
                 obstacles=self.obstacles,
                 rng=self._rng.stream("camera"),
-                recorded=keep.takes,
+                recorded=lambda topic: (
+                    keep.takes(topic) or any(s.topic == topic for n in user_nodes for s in n.subscriptions)
+                ),
             )
             if camera is not None:
                 user_nodes = [*user_nodes, camera.node]
