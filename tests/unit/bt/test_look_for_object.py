@@ -141,3 +141,53 @@ def test_an_unknown_target_color_is_refused() -> None:
     xml = '<root BTCPP_format="4"><BehaviorTree ID="T"><LookForObject/></BehaviorTree></root>'
     with pytest.raises(Exception, match="target_color 'purple' is not one of red, green, blue"):
         factory.create_tree_from_text(xml, clock=ManualClock())
+
+
+@pytest.mark.parametrize("tree_file", ["search_naive.xml", "search_queue.xml"])
+def test_the_demos_trees_search_until_the_camera_sees_the_colour(house, tree_file: str) -> None:
+    """The demos' trees as they are (SetLocations with only num_locs; the queue on the blackboard)."""
+    import random
+
+    from twin.bt.mission_nodes import ScriptedNavigator, register_mission_nodes
+
+    navigator = ScriptedNavigator(polls_to_arrive=2)
+    frames = {name: _frame_at(house, name, "green" if name == "location3" else None) for name in LOCATIONS}
+
+    class AtTheGoal:
+        """The camera of a robot standing where the navigator last sent it."""
+
+        def __init__(self) -> None:
+            self.now_ns = 0
+
+        def want(self, on: bool) -> None:
+            pass
+
+        def latest(self):
+            if not navigator.goals:
+                return None
+            pose = navigator.goals[-1][0]
+            name = next(n for n, p in LOCATIONS.items() if (p.x_m, p.y_m) == (pose.x_m, pose.y_m))
+            return (self.now_ns, frames[name])
+
+    camera = AtTheGoal()
+    factory = BehaviorTreeFactory()
+    register_mission_nodes(factory, navigator=navigator, rng=random.Random(4))
+    slot = ImageSlot()
+    slot.source = camera
+    register_vision_nodes(factory, slot=slot, target_color="green")
+    clock = ManualClock()
+    tree = factory.create_tree_from_file(ROOT / "trees" / tree_file, clock=clock)
+    tree.root_blackboard.set("location_file", str(ROOT / "trees" / "sim_house_locations.yaml"))
+    statuses = []
+    for _ in range(100):
+        status = tree.tick_once()
+        statuses.append(status)
+        if status.is_completed:
+            break
+        clock.advance(500_000_000)
+        camera.now_ns = clock()
+    assert statuses[-1] is NodeStatus.SUCCESS
+    last = navigator.goals[-1][0]
+    assert (last.x_m, last.y_m) == (LOCATIONS["location3"].x_m, LOCATIONS["location3"].y_m)
+    if tree_file == "search_naive.xml":  # locations in file order: 1, 2, then 3 where the block is
+        assert len(navigator.goals) == 3
