@@ -268,3 +268,20 @@ class Watcher(Node):
 
     seen = sys.modules["watcher"].Watcher.seen
     assert seen == [(0, n * 200_000_000, W, H) for n in range(5)]
+
+
+def test_a_search_for_a_colour_no_block_has_ends_in_failure_with_the_reason(tmp_path: Path) -> None:
+    from tests.conftest import run_twin
+
+    data = yaml.safe_load((REPO / "scenarios" / "house_search_queue.yaml").read_text())
+    data["mission"]["tree"] = str(REPO / "trees" / "search_queue.xml")
+    data["blocks"] = {"count": 2}  # red and green only
+    data["recording"] = {"topics": {"exclude_regex": "/camera/.*"}}
+    path = tmp_path / "search.yaml"
+    path.write_text(yaml.safe_dump(data))
+    result = run_twin("simulate", str(path), "--out", str(tmp_path / "bag"), "-v")
+    assert result.returncode == 1, result.stderr
+    lines = result.stderr.splitlines()
+    looked = [line for line in lines if "INFO" in line and "look_for_obj: no blue object in view" in line]
+    assert len(looked) == 4  # every location was looked at
+    assert "no blue object in view" in lines[-1]  # the run's summary names the demos' reason
