@@ -115,6 +115,20 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
     _check_files(scenario, path)
     _check_blocks(scenario, path)
     _check_lidar_of_robot(scenario, path)
+    _check_camera_of_robot(scenario, path)
+
+
+def _check_camera_of_robot(scenario: Scenario, path: Path) -> None:
+    """An enabled camera needs a camera sensor in the robot's SDF (and a rate)."""
+    if not scenario.sensors.camera.enabled:
+        return
+    from twin.sim.camera import camera_spec
+    from twin.sim.simulation import scenario_robot
+
+    try:
+        camera_spec(scenario_robot(scenario), scenario.sensors.camera)
+    except TwinError as err:
+        raise err.with_context(before=f"{path}: ") from None
 
 
 def _check_blocks(scenario: Scenario, path: Path) -> None:

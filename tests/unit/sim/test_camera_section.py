@@ -45,3 +45,14 @@ def test_a_camera_on_a_robot_without_one_is_refused() -> None:
     robot = load_robot("turtlebot3_burger", model_path=[MODELS])
     with pytest.raises(ConfigError, match=r"robot 'turtlebot3_burger' has no <sensor type=\"camera\"> in its SDF"):
         camera_spec(robot, CameraSection(enabled=True))
+
+
+def test_scenario_check_refuses_a_camera_on_a_robot_without_one(tmp_path: Path) -> None:
+    from twin.sim.check import check_scenario
+
+    path = tmp_path / "s.yaml"
+    path.write_text("robot: {model: turtlebot3_burger}\nsensors:\n  camera: {enabled: true}\n")
+    with pytest.raises(ConfigError, match=r"s.yaml: sensors.camera.enabled: robot 'turtlebot3_burger' has no"):
+        check_scenario(load_scenario(path), path)
+    path.write_text("sensors:\n  camera: {enabled: true}\n")  # the default robot, the Waffle, has one
+    check_scenario(load_scenario(path), path)
