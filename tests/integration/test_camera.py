@@ -285,3 +285,25 @@ def test_a_search_for_a_colour_no_block_has_ends_in_failure_with_the_reason(tmp_
     looked = [line for line in lines if "INFO" in line and "look_for_obj: no blue object in view" in line]
     assert len(looked) == 4  # every location was looked at
     assert "no blue object in view" in lines[-1]  # the run's summary names the demos' reason
+
+
+def test_the_camera_draws_nothing_while_nobody_takes_its_images(tmp_path: Path, monkeypatch) -> None:
+    from twin.world.render import Renderer
+
+    calls: list[int] = []
+    draw = Renderer.render
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return draw(self, *args, **kwargs)
+
+    monkeypatch.setattr(Renderer, "render", counted)
+    path = _scenario(tmp_path, noise=True)
+    data = yaml.safe_load(path.read_text())
+    data["recording"] = {"topics": {"exclude_regex": "/camera/.*"}}
+    path.write_text(yaml.safe_dump(data))
+    with Simulation(load_scenario(path), bag_path=tmp_path / "bag", duration_s=1.0) as sim:
+        sim.run()
+    assert calls == []  # no recorder, no subscriber, no LookForObject: no frame drawn
+    _record(tmp_path, _scenario(tmp_path, noise=True), "recorded")
+    assert len(calls) == 5  # recorded: every period
