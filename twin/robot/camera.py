@@ -29,7 +29,7 @@ from twin.node import PRIORITY_SENSOR, Encoded, Node, QoSProfile
 from twin.robot.chassis import ChassisState
 from twin.world.meshes import MeshCache
 from twin.world.obstacles import ObstacleField
-from twin.world.render import CameraModel, ColouredMesh, Lighting, Renderer, shapes_mesh
+from twin.world.render import Body, CameraModel, ColouredMesh, Lighting, Renderer, join_meshes, shapes_mesh
 from twin.world.robot_model import CameraSpec
 from twin.world.types import Box, Cylinder
 
@@ -118,6 +118,7 @@ class CameraNode(Node):
         rng: The camera's noise stream (one seed drawn per frame drawn).
         depth: Also publish the depth image.
         compressed: Also publish the JPEG image (compressed only when a sink takes it).
+        body: The robot's own visuals in its base frame (drawn where the robot stands).
         recorded: The recorder records the image topic: render every period.
     """
 
@@ -134,6 +135,7 @@ class CameraNode(Node):
         depth: bool,
         compressed: bool = False,
         recorded: bool,
+        body: Body | None = None,
     ) -> None:
         super().__init__(spec.name)
         w, h = spec.width, spec.height
@@ -200,8 +202,16 @@ class CameraNode(Node):
                 [[c, -sn, 0.0, s.x_m], [sn, c, 0.0, s.y_m], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
             )
             seed = int(rng.integers(0, 2**63))
+            parts = [] if body is None else [body.placed(T_world_base, lighting)]
+            extra = obstacle_mesh()
+            if extra is not None:
+                parts.append(extra)
             frame = renderer.render(
-                T_world_base @ T_base_sensor, obstacle_mesh(), noise_mean=noise_mean, noise_std=noise_std, seed=seed
+                T_world_base @ T_base_sensor,
+                join_meshes(parts),
+                noise_mean=noise_mean,
+                noise_std=noise_std,
+                seed=seed,
             )
             image: NDArray[np.uint8] = _mono(frame.rgb) if mono else frame.rgb
             feed.frame = (t_ns, image)

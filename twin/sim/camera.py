@@ -19,7 +19,7 @@ from twin.robot.chassis import ChassisState
 from twin.sim.scenario import CameraSection
 from twin.world import RobotModelSpec, World
 from twin.world.obstacles import ObstacleField
-from twin.world.render import Renderer, lighting_of, world_visuals
+from twin.world.render import Renderer, body_of, lighting_of, world_visuals
 from twin.world.robot_model import CameraSpec
 
 __all__ = ["Camera", "build_camera", "camera_spec"]
@@ -109,5 +109,6 @@ def build_camera(
         depth=depth,
         compressed=section.compressed,
         recorded=wanted,
+        body=body_of(robot.model.all_links(), robot.T_base_model),
     )
     return Camera(node, feed)

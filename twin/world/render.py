@@ -34,15 +34,18 @@ from numpy.typing import NDArray
 from twin.core.geometry import Mat4
 from twin.world._render_native import load_render_kernel
 from twin.world.meshes import MeshArrays, MeshCache, box_arrays, geometry_arrays
-from twin.world.types import Box, Cylinder, Plane, World
+from twin.world.types import Box, Cylinder, Link, Plane, World
 
 __all__ = [
+    "Body",
     "CameraModel",
     "ColouredMesh",
     "Frame",
     "Lighting",
     "Renderer",
+    "body_of",
     "box_mesh",
+    "join_meshes",
     "lighting_of",
     "shapes_mesh",
     "world_visuals",
@@ -179,6 +182,63 @@ def _join(parts: Sequence[tuple[F64, NDArray[np.int64], F64]], lighting: Lightin
     all_v = np.concatenate(vertices)
     all_f = np.concatenate(faces).astype(np.int32)
     return ColouredMesh(all_v, all_f, lighting.shade(all_v, all_f, np.concatenate(rgb)))
+
+
+class Body(NamedTuple):
+    """A robot's visuals in its base frame, unlit: placed and lit per frame (`Body.placed`)."""
+
+    vertices: F64
+    faces: NDArray[np.int32]
+    rgb: F64
+    """(M, 3) material colour per face."""
+
+    def placed(self, T_world_base: Mat4, lighting: Lighting) -> ColouredMesh:
+        """The body at a pose in the world, lit as the world is."""
+        T = np.asarray(T_world_base)
+        vertices = self.vertices @ T[:3, :3].T + T[:3, 3]
+        return ColouredMesh(vertices, self.faces, lighting.shade(vertices, self.faces, self.rgb))
+
+
+def body_of(links: Iterable[Link], T_base_model: Mat4) -> Body:
+    """The visuals of a robot's links (their joints at zero) in its base frame.
+
+    Raises:
+        WorldError: If a visual's mesh cannot be read.
+    """
+    cache = MeshCache()
+    vertices, faces, rgb = [], [], []
+    offset = 0
+    for link in links:
+        for visual in link.visuals:
+            if isinstance(visual.geometry, Plane):
+                continue
+            local = geometry_arrays(visual.geometry, cache, f"{link.scoped_name}::{visual.name}")
+            if local is None or len(local.faces) == 0:
+                continue
+            T = np.asarray(T_base_model) @ np.asarray(link.T_model) @ np.asarray(visual.T_link)
+            vertices.append(local.vertices @ T[:3, :3].T + T[:3, 3])
+            faces.append(local.faces + offset)
+            colour = visual.color_rgba[:3] if visual.color_rgba is not None else _DEFAULT_RGB
+            rgb.append(np.broadcast_to(np.asarray(colour, dtype=np.float64), (len(local.faces), 3)))
+            offset += len(local.vertices)
+    if not faces:
+        return Body(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32), np.zeros((0, 3)))
+    return Body(np.concatenate(vertices), np.concatenate(faces).astype(np.int32), np.concatenate(rgb))
+
+
+def join_meshes(meshes: Sequence[ColouredMesh]) -> ColouredMesh | None:
+    """One mesh of several (None for none)."""
+    present = [m for m in meshes if len(m.faces)]
+    if not present:
+        return None
+    if len(present) == 1:
+        return present[0]
+    offsets = np.cumsum([0] + [len(m.vertices) for m in present[:-1]])
+    return ColouredMesh(
+        np.concatenate([m.vertices for m in present]),
+        np.concatenate([m.faces + o for m, o in zip(present, offsets, strict=True)]).astype(np.int32),
+        np.concatenate([m.colours for m in present]),
+    )
 
 
 def world_visuals(world: World, lighting: Lighting, *, exclude_models: Iterable[str] = ()) -> ColouredMesh:

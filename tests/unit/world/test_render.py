@@ -148,3 +148,24 @@ def test_the_same_seed_gives_the_same_noisy_image_and_another_seed_another(tmp_p
     assert noise[..., 0].std() == pytest.approx(0.007 * 255, rel=0.15)
     unclamped = (clean[..., 2] > 10) & (clean[..., 0] < 245)
     assert np.array_equal(noise[..., 0][unclamped], noise[..., 2][unclamped])
+
+
+def test_the_robots_own_body_is_drawn_where_it_stands_and_the_r200_does_not_see_it(tmp_path: Path) -> None:
+    from twin.world import load_robot
+    from twin.world.render import body_of
+
+    robot = load_robot("turtlebot3_waffle", model_path=[Path(__file__).parents[3] / "sdf" / "models"])
+    body = body_of(robot.model.all_links(), robot.T_base_model)
+    renderer = _renderer(_world(tmp_path, _box("far", 9.0, 0.0, 0.0, (0.1, 8.0, 4.0), RED)))
+    lighting = lighting_of(load_world(tmp_path / "w.sdf"))
+    robot_at = np.eye(4)
+    robot_at[:3, 3] = (2.0, 0.0, 0.0)
+    # A camera at the origin, 2 m behind the robot, sees its body in front of the far wall.
+    seen = renderer.render(np.eye(4), body.placed(robot_at, lighting))
+    alone = renderer.render(np.eye(4))
+    assert np.count_nonzero(np.any(seen.rgb != alone.rgb, axis=2)) > 500
+    assert np.nanmin(seen.depth_m[np.isfinite(seen.depth_m)]) == pytest.approx(2.0 - 0.197, abs=0.01)
+    # The R200 on that robot sees the wall, not its own body.
+    T_sensor = robot_at @ np.asarray(robot.cameras[0].T_base_sensor)
+    own = renderer.render(T_sensor, body.placed(robot_at, lighting))
+    assert np.array_equal(own.rgb, renderer.render(T_sensor).rgb)
