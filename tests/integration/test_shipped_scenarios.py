@@ -15,6 +15,7 @@ from twin.sweep.spec import _absolute_scenario
 SCENARIOS = sorted(p for p in (REPO / "scenarios").glob("*.yaml"))
 ROBOTS = ("turtlebot3_waffle", "turtlebot3_burger")
 QUEUE = {"house_queue"}  # the queue tree ends in FAILURE by design once every location was visited
+CAMERA = {"house_search_naive", "house_search_queue"}  # need the Waffle's camera: a Burger has none
 
 
 def _run_as(tmp_path: Path, scenario: Path, robot: str) -> tuple[object, dict[str, object]]:
@@ -45,6 +46,11 @@ def test_a_shipped_scenario_completes_without_touching_anything(tmp_path: Path, 
     result, summary = _run_as(tmp_path, scenario, robot)
     stderr = result.stderr  # type: ignore[attr-defined]
     assert "Traceback" not in stderr
+    if scenario.stem in CAMERA and robot == "turtlebot3_burger":  # refused up front, in one line
+        assert result.returncode == 2, stderr  # type: ignore[attr-defined]
+        assert "sensors.camera.enabled: robot 'turtlebot3_burger' has no <sensor type=\"camera\">" in stderr
+        assert len(stderr.strip().splitlines()) == 1, stderr
+        return
     assert summary["contacts"] == 0, summary
     if scenario.stem in QUEUE:  # every location visited, then the queue runs dry: FAILURE, exit 1
         assert result.returncode == 1, stderr  # type: ignore[attr-defined]

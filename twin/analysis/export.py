@@ -25,7 +25,7 @@ from twin.core.errors import BagError, ConfigError, TwinError
 
 __all__ = ["FORMATS", "export_topics", "flatten"]
 
-FORMATS = ("csv", "parquet")
+FORMATS = ("csv", "parquet", "png")
 _BLOCK_ROWS = 10_000
 
 
@@ -159,6 +159,10 @@ def export_topics(
     if fmt not in FORMATS:
         msg = f"--format {fmt!r}: choose one of {', '.join(FORMATS)}"
         raise ConfigError(msg)
+    if fmt == "png":  # image topics: one PNG per frame
+        from twin.analysis.export_images import export_images
+
+        return export_images(bag, topics, out_dir)
     if fmt == "parquet":
         try:
             import pyarrow.parquet  # noqa: F401

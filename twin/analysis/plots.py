@@ -243,3 +243,19 @@ def series_plot(
     axes[0].set_title(title, fontsize=10)
     fig.tight_layout()
     return _png(fig)
+
+
+def frames_sheet(frames: Sequence[tuple[str, NDArray[np.generic]]], title: str) -> bytes:
+    """Camera frames side by side (up to four per row), each titled with its label."""
+    n = max(1, len(frames))
+    cols = min(4, n)
+    rows = -(-n // cols)
+    fig = Figure(figsize=(3.2 * cols, 2.6 * rows + 0.4))
+    for i, (label, image) in enumerate(frames):
+        ax = fig.add_subplot(rows, cols, i + 1)
+        ax.imshow(image, cmap="gray" if image.ndim == 2 else None)
+        ax.set_title(label, fontsize=8)
+        ax.set_axis_off()
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return _png(fig)

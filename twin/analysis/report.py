@@ -260,6 +260,35 @@ def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str,
         t_s = data_t_s(data, rec_ns)
         make = functools.partial(plots.series_plot, t_s, values, ts.columns, ts.panels, f"{title}: {topic}")
         _plot(report, name, render, make)
+    # Camera (a bag with images only): the first frame, the frame at each goal's end, the last frame.
+    _camera_section(report, data, render, title)
+
+
+_IMAGE_TOPICS = ("/camera/image_raw", "/camera/image_raw/compressed")
+
+
+def _camera_section(report: Report, data: BagData, render: bool, title: str) -> None:
+    topic = next((t for t in _IMAGE_TOPICS if data.has(t)), None)
+    if topic is None:  # most robots have no camera: no section rather than a missing one
+        return
+    msgtype = next(t.msgtype for t in data.info.topics if t.name == topic)
+    health = data.health[topic]
+    picks = [("first", health.first_ns)]
+    tl = report.timeline
+    if tl is not None:
+        picks += [
+            (f"goal {n} end: {g['name']} ({g['result']})", data.start_ns + round(g["end_s"] * 1e9))
+            for n, g in enumerate(tl["goals"], start=1)
+            if g["end_s"] is not None
+        ]
+    picks.append(("last", health.last_ns))
+
+    def sheet() -> bytes:
+        from twin.analysis.export_images import pick_frames
+
+        return plots.frames_sheet(pick_frames(report.bag, topic, msgtype, picks), f"{title}: {topic}")
+
+    _plot(report, "camera", render, sheet)
 
 
 def data_t_s(data: BagData, t_ns: NDArray[np.int64]) -> F64:

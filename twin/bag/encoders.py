@@ -24,8 +24,11 @@ from twin.core.errors import BagError
 
 __all__ = [
     "BehaviorTreeLogEncoder",
+    "CameraInfoEncoder",
     "ClockEncoder",
+    "CompressedImageEncoder",
     "ContactEncoder",
+    "ImageEncoder",
     "ImuEncoder",
     "JointStateEncoder",
     "LogEncoder",
@@ -36,6 +39,7 @@ __all__ = [
     "OdometryEncoder",
     "ParticleCloudEncoder",
     "PathEncoder",
+    "PointCloud2Encoder",
     "PoseStampedEncoder",
     "PoseWithCovarianceStampedEncoder",
     "ScanEncoder",
@@ -472,6 +476,158 @@ class ScanEncoder:
         return b"".join(
             (self._prefix_pack(ENCAPSULATION, sec, nanosec), self._body, ranges, self._intensity_count, values)
         )
+
+
+class ImageEncoder:
+    """`sensor_msgs/msg/Image` of a fixed size and encoding (a camera's frames)."""
+
+    msgtype: ClassVar[str] = "sensor_msgs/msg/Image"
+
+    def __init__(self, frame_id: str, *, width: int, height: int, encoding: str) -> None:
+        """Precompute everything but the stamp and the pixels.
+
+        Args:
+            frame_id: The optical frame the image is in.
+            width: Pixels per row.
+            height: Rows.
+            encoding: `rgb8`, `mono8` or `32FC1` (the bytes per pixel follow from it).
+        """
+        channels = {"rgb8": 3, "bgr8": 3, "mono8": 1, "32FC1": 4}
+        if encoding not in channels:
+            msg = f"ImageEncoder: encoding {encoding!r} is not one of {', '.join(channels)}"
+            raise BagError(msg)
+        self.size = width * height * channels[encoding]
+        w = CdrWriter()
+        w.string(frame_id)
+        w.pack("I", height, width)
+        w.string(encoding)
+        w.pack("B", 0)  # is_bigendian: little-endian float depth, as gazebo_ros publishes it
+        w.pack("I", width * channels[encoding], self.size)
+        self._body = w.getvalue()[len(ENCAPSULATION) :]
+        self._prefix_pack = struct.Struct("<4siI").pack
+
+    def encode(self, stamp_ns: int, pixels: NDArray[np.uint8] | NDArray[np.float32]) -> bytes:
+        """Encode one frame; `pixels` is C-contiguous (height, width[, channels]) of the encoding's type."""
+        data = pixels.tobytes()
+        if len(data) != self.size:
+            msg = f"ImageEncoder for {self.size} bytes got {len(data)}"
+            raise BagError(msg)
+        sec, nanosec = divmod(stamp_ns, _NS)
+        # The frame id string starts right after the 8-byte stamp: every later alignment is fixed.
+        return b"".join((self._prefix_pack(ENCAPSULATION, sec, nanosec), self._body, data))
+
+
+class CompressedImageEncoder:
+    """`sensor_msgs/msg/CompressedImage` (image_transport's compressed plugin: `format` names the encodings)."""
+
+    msgtype: ClassVar[str] = "sensor_msgs/msg/CompressedImage"
+
+    def __init__(self, frame_id: str, *, format: str) -> None:
+        """Precompute the frame id and format.
+
+        Args:
+            frame_id: The optical frame.
+            format: e.g. `rgb8; jpeg compressed bgr8`, as image_transport's compressed plugin writes it.
+        """
+        w = CdrWriter()
+        w.string(frame_id)
+        w.string(format)
+        body = w.getvalue()[len(ENCAPSULATION) :]
+        self._body = body + bytes((-(8 + len(body))) % 4)
+        self._prefix_pack = struct.Struct("<4siI").pack
+        self._count = struct.Struct("<I").pack
+
+    def encode(self, stamp_ns: int, data: bytes) -> bytes:
+        """Encode one compressed frame."""
+        sec, nanosec = divmod(stamp_ns, _NS)
+        return b"".join((self._prefix_pack(ENCAPSULATION, sec, nanosec), self._body, self._count(len(data)), data))
+
+
+class PointCloud2Encoder:
+    """`sensor_msgs/msg/PointCloud2` of a fixed layout (an organised cloud from a depth camera)."""
+
+    msgtype: ClassVar[str] = "sensor_msgs/msg/PointCloud2"
+
+    FLOAT32: ClassVar[int] = 7  # sensor_msgs/PointField.FLOAT32
+
+    def __init__(
+        self,
+        frame_id: str,
+        *,
+        width: int,
+        height: int,
+        fields: Sequence[tuple[str, int, int, int]],
+        point_step: int,
+        is_dense: bool = False,
+    ) -> None:
+        """Precompute everything but the stamp and the data.
+
+        Args:
+            frame_id: The frame of the points.
+            width: Points per row.
+            height: Rows (1 for an unorganised cloud).
+            fields: (name, offset, datatype, count) per field.
+            point_step: Bytes per point.
+            is_dense: True when no point is invalid.
+        """
+        self.size = width * height * point_step
+        w = CdrWriter()
+        w.string(frame_id)
+        w.pack("I", height, width)
+        w.count(len(fields))
+        for name, offset, datatype, count in fields:
+            w.string(name)
+            w.pack("I", offset)
+            w.pack("B", datatype)
+            w.pack("I", count)
+        w.pack("?", False)
+        w.pack("I", point_step, point_step * width, self.size)
+        self._body = w.getvalue()[len(ENCAPSULATION) :]
+        self._dense = b"\x01" if is_dense else b"\x00"
+        self._prefix_pack = struct.Struct("<4siI").pack
+
+    def encode(self, stamp_ns: int, data: bytes) -> bytes:
+        """Encode one cloud; `data` is `width * height * point_step` bytes."""
+        if len(data) != self.size:
+            msg = f"PointCloud2Encoder for {self.size} bytes got {len(data)}"
+            raise BagError(msg)
+        sec, nanosec = divmod(stamp_ns, _NS)
+        return b"".join((self._prefix_pack(ENCAPSULATION, sec, nanosec), self._body, data, self._dense))
+
+
+class CameraInfoEncoder:
+    """`sensor_msgs/msg/CameraInfo` of a pinhole camera without distortion (as gazebo_ros_camera fills it)."""
+
+    msgtype: ClassVar[str] = "sensor_msgs/msg/CameraInfo"
+
+    def __init__(self, frame_id: str, *, width: int, height: int, K: Sequence[float], P: Sequence[float]) -> None:
+        """Precompute the whole message but its stamp.
+
+        Args:
+            frame_id: The optical frame.
+            width: Image width, pixels.
+            height: Image height, pixels.
+            K: The 3x3 camera matrix, row-major.
+            P: The 3x4 projection matrix, row-major.
+        """
+        w = CdrWriter()
+        w.string(frame_id)
+        w.pack("I", height, width)
+        w.string("plumb_bob")
+        w.count(5)
+        w.pack("d", 0.0, 0.0, 0.0, 0.0, 0.0)
+        w.pack("d", *_fixed_f64(K, 9, "K"))
+        w.pack("d", 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+        w.pack("d", *_fixed_f64(P, 12, "P"))
+        w.pack("I", 0, 0, 0, 0, 0, 0)  # binning x, y; roi x_offset, y_offset, height, width
+        w.pack("?", False)  # roi.do_rectify
+        self._body = w.getvalue()[len(ENCAPSULATION) :]
+        self._prefix_pack = struct.Struct("<4siI").pack
+
+    def encode(self, stamp_ns: int) -> bytes:
+        """Encode the camera info at a stamp."""
+        sec, nanosec = divmod(stamp_ns, _NS)
+        return self._prefix_pack(ENCAPSULATION, sec, nanosec) + self._body
 
 
 class StringEncoder:

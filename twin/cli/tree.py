@@ -162,6 +162,7 @@ def _add_nodes_option(parser: argparse.ArgumentParser) -> None:
 
 
 def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] = ()) -> BehaviorTreeFactory:
+    from twin.bt.status import NodeKind
     from twin.bt.validate import declare_node_models
     from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes
     from twin.nav.bt_navigator.factory import nav2_factory
@@ -170,6 +171,8 @@ def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] =
     register_mission_nodes(
         factory, navigator=ScriptedNavigator(polls_to_arrive=polls_to_arrive), rng=random.Random(seed)
     )
+    # No camera here: the demos' vision node is declared (no ports), so `log` scripts it like a leaf.
+    factory.declare_node_type("LookForObject", NodeKind.ACTION, description="the behaviour demos' vision node")
     factory.load_plugins()
     for palette in nodes:
         declare_node_models(factory, palette)

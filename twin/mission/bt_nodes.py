@@ -141,8 +141,13 @@ class SetLocations(SyncActionNode):
         names = list(locations)
         self._rng.shuffle(names)
         self.set_output("num_locs", len(names))
-        self.set_output("loc_names", deque(names))
-        self.set_output("loc_poses", dict(locations))
+        # The behaviour demos' vision trees give only num_locs: their node writes the queue and the
+        # poses to the blackboard's `loc_names` and `loc_poses` itself, and so does this one then.
+        for port, value in (("loc_names", deque(names)), ("loc_poses", dict(locations))):
+            if port in self.config.output_ports:
+                self.set_output(port, value)
+            else:
+                self.blackboard.set(port, value)
         return NodeStatus.SUCCESS
 
 
@@ -159,12 +164,20 @@ class GetLocationFromQueue(SyncActionNode):
 
     def tick(self) -> NodeStatus:
         """Pop one name; FAILURE when the queue is empty."""
-        queue = deque(self.get_input("loc_names"))
+        remapped = "loc_names" in self.config.output_ports  # else the blackboard's, as the demos' trees use it
+        if remapped:
+            queue = deque(self.get_input("loc_names"))
+        else:
+            entry = self.blackboard.get_entry("loc_names")
+            queue = deque(entry.value) if entry is not None and entry.value is not None else deque()
         if not queue:
             return NodeStatus.FAILURE
         target = queue.popleft()
         self.set_output("target_location", target)
-        self.set_output("loc_names", queue)
+        if remapped:
+            self.set_output("loc_names", queue)
+        else:
+            self.blackboard.set("loc_names", queue)
         _log.info("%s: targeting location %s", self.full_path, target)
         return NodeStatus.SUCCESS
 

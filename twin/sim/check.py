@@ -117,6 +117,20 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
     _check_files(scenario, path)
     _check_blocks(scenario, path)
     _check_lidar_of_robot(scenario, path)
+    _check_camera_of_robot(scenario, path)
+
+
+def _check_camera_of_robot(scenario: Scenario, path: Path) -> None:
+    """An enabled camera needs a camera sensor in the robot's SDF (and a rate)."""
+    if not scenario.sensors.camera.enabled:
+        return
+    from twin.sim.camera import camera_spec
+    from twin.sim.robot_group import scenario_robot
+
+    try:
+        camera_spec(scenario_robot(scenario), scenario.sensors.camera)
+    except TwinError as err:
+        raise err.with_context(before=f"{path}: ") from None
 
 
 def _check_blocks(scenario: Scenario, path: Path) -> None:
@@ -267,10 +281,12 @@ def _load_tree(mission: BehaviorTreeMission) -> None:
     import random
 
     from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes
+    from twin.mission.look_for_object import ImageSlot, register_vision_nodes
     from twin.nav.bt_navigator.factory import nav2_factory
 
     factory = nav2_factory()
     register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
+    register_vision_nodes(factory, slot=ImageSlot(), target_color=mission.target_color)
     factory.load_plugins()
     factory.create_tree_from_file(mission.tree, main_tree=mission.main_tree, clock=lambda: 0)
 

@@ -18,6 +18,7 @@ from twin.bt import NodeStatus
 from twin.bt.log import StatusChange, StatusChangeBuffer
 from twin.core.clock import s_to_ns
 from twin.mission.bt_nodes import LOCATION_FILE_KEY, register_mission_nodes
+from twin.mission.look_for_object import ImageSlot, register_vision_nodes
 from twin.mission.path_follower import PathFollower
 from twin.sim.replay import load_commands
 from twin.sim.scenario import BehaviorTreeMission, CmdVelScriptMission, ReplayMission, WaypointsMission
@@ -189,6 +190,9 @@ class TreeMission:
 
         factory = nav2_factory()
         register_mission_nodes(factory, navigator=navigator, rng=random.Random(seed))
+        self.images = ImageSlot()
+        """Where `LookForObject` finds the camera (filled in when the scenario's camera is on)."""
+        register_vision_nodes(factory, slot=self.images, target_color=spec.target_color)
         factory.load_plugins()
         self.tree = factory.create_tree_from_file(spec.tree, main_tree=spec.main_tree, clock=clock)
         if spec.locations is not None:

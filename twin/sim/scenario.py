@@ -110,11 +110,34 @@ class ImuSection:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class CameraSection:
+    """The robot SDF's camera; off unless enabled (each frame costs milliseconds). Null keeps the SDF's value."""
+
+    enabled: bool = False
+    width: int | None = None
+    height: int | None = None
+    rate_hz: float | None = None
+    depth: bool = False  # also /camera/depth/image_raw (a depth sensor in the SDF publishes it anyway)
+    noise: bool = True  # the SDF's <noise>; false draws clean images
+    compressed: bool = False  # also <image_topic>/compressed (JPEG, as image_transport's compressed plugin)
+
+    def __post_init__(self) -> None:
+        for key, side in (("width", self.width), ("height", self.height)):
+            if side is not None and not 1 <= side <= 8192:
+                msg = f"{key} must be from 1 to 8192 pixels, got {side}"
+                raise ValueError(msg)
+        if self.rate_hz is not None and not (self.rate_hz > 0.0 and math.isfinite(self.rate_hz)):
+            msg = f"rate_hz must be a positive number, got {self.rate_hz}"
+            raise ValueError(msg)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class SensorsSection:
     """Sensor and publication rates."""
 
     lidar: LidarSection = field(default_factory=LidarSection)
     imu: ImuSection = field(default_factory=ImuSection)
+    camera: CameraSection = field(default_factory=CameraSection)
     ground_truth: RateSection = field(default_factory=lambda: RateSection(rate_hz=30.0))
     # gazebo_ros_init publishes /clock at its `publish_rate`, 10 Hz by default (throttled on real time:
     # 10 per simulated second when Gazebo runs at real time, as the Humble TB3 bag records, 282 in 29.8 s)
@@ -239,6 +262,7 @@ class BehaviorTreeMission:
     locations: Path | None = None  # set as `location_file` on the blackboard
     tick_rate_hz: float = 2.0  # the thesis's 500 ms timer
     controller_rate_hz: float = 10.0  # TB3 Nav2 controller_frequency
+    target_color: Literal["red", "green", "blue"] = "blue"  # LookForObject's (the demos' node parameter)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

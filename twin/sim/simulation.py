@@ -31,6 +31,7 @@ from twin.node import Node
 from twin.robot.drivetrain import Drivetrain
 from twin.robot.fmu_drivetrain import FmuDrivetrain
 from twin.robot.nodes import ClockNode
+from twin.sim.camera import build_camera
 from twin.sim.executor import Executor, RecordFilter, Sink
 from twin.sim.launch import load_nodes
 from twin.sim.obstacles import scenario_obstacles
@@ -138,6 +139,25 @@ class Simulation(Closing):
                 exclude=selection.exclude,
                 exclude_regex=selection.exclude_regex,
             )
+            # The robot's camera: it renders only while something takes its images (the recorder, a
+            # user's node, the mission's LookForObject), so it joins after the user's nodes are known.
+            camera = build_camera(
+                scenario.sensors.camera,
+                group.robot,
+                world,
+                self.drive.chassis_state,
+                obstacles=self.obstacles,
+                rng=self._rng.stream("camera"),
+                recorded=lambda topic: (
+                    keep.takes(topic) or any(s.topic == topic for n in user_nodes for s in n.subscriptions)
+                ),
+            )
+            if camera is not None:
+                from twin.sim.mission import TreeMission
+
+                user_nodes = [*user_nodes, camera.node]
+                if isinstance(self.mission, TreeMission):
+                    self.mission.images.source = camera.feed
             # Wire the graph once without sinks: a node that cannot join (a duplicate name, a topic of
             # another type) is refused before a bag folder exists.
             scratch = Executor(self.step_ns)

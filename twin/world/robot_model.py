@@ -43,6 +43,7 @@ from twin.world.types import (
 )
 
 __all__ = [
+    "CameraSpec",
     "DiffDriveSpec",
     "FrameSpec",
     "ImuSpec",
@@ -56,6 +57,10 @@ __all__ = [
 ]
 
 _LIDAR_TYPES = ("ray", "gpu_ray", "lidar", "gpu_lidar")
+_CAMERA_TYPES = ("camera", "depth")
+# Gazebo's image formats the twin draws, and the sensor_msgs/Image encoding of each.
+_IMAGE_FORMATS = {"R8G8B8": "rgb8", "RGB_INT8": "rgb8", "L8": "mono8", "L_INT8": "mono8"}
+_MAX_IMAGE_SIDE = 8192
 _DIFF_DRIVE_PLUGINS = (
     "libgazebo_ros_diff_drive.so",
     "gz-sim-diff-drive-system",
@@ -140,6 +145,40 @@ class ImuSpec:
     linear_acceleration_noise: tuple[NoiseSpec, NoiseSpec, NoiseSpec] = (NoiseSpec(), NoiseSpec(), NoiseSpec())
 
 
+@dataclass(frozen=True, kw_only=True, slots=True, eq=False)
+class CameraSpec:
+    """A camera as Gazebo Classic's camera (or depth) sensor and gazebo_ros_camera publish it.
+
+    `T_base_sensor` is the sensor frame (x forward, y left, z up: where Gazebo's camera looks along
+    +x) in the robot's base frame; images are published in `frame_id` (the plugin's `frame_name`,
+    conventionally the optical frame). Topics are absolute, namespace and remappings applied.
+    """
+
+    name: str = "camera"
+    sensor_type: str = "camera"
+    rate_hz: float = 30.0
+    width: int = 320
+    height: int = 240
+    encoding: str = "rgb8"
+    hfov_rad: float = 1.047
+    near_m: float = 0.1
+    far_m: float = 100.0
+    noise_mean: float = 0.0
+    noise_std: float = 0.0
+    frame_id: str = "camera_link"
+    image_topic: str = "/camera/image_raw"
+    info_topic: str = "/camera/camera_info"
+    depth_topic: str = "/camera/depth/image_raw"
+    points_topic: str = "/camera/points"
+    T_base_sensor: Mat4 = field(default_factory=lambda: frozen_matrix(np.eye(4)))
+    where: str = ""
+
+    @property
+    def depth(self) -> bool:
+        """True for a depth camera (it publishes a depth image beside the colour one)."""
+        return self.sensor_type == "depth"
+
+
 @dataclass(frozen=True, kw_only=True, slots=True)
 class DiffDriveSpec:
     """The differential drive: wheel joints, geometry and the plugin's limits and frames."""
@@ -218,6 +257,8 @@ class RobotModelSpec:
     """Pose of the SDF model frame in the base frame (to place the model's links and visuals)."""
     source: Path | None = None
     warnings: tuple[str, ...] = ()
+    cameras: tuple[CameraSpec, ...] = ()
+    """Camera and depth sensors, in the SDF's order."""
 
     @property
     def mass_kg(self) -> float:
@@ -342,6 +383,97 @@ def _imu(sensor: Sensor, link: Link, T_base_model: Mat4) -> ImuSpec:
         mount=pose_from_matrix(mount),
         angular_velocity_noise=(gyro[0], gyro[1], gyro[2]),
         linear_acceleration_noise=(accel[0], accel[1], accel[2]),
+    )
+
+
+def _camera_topics(element: XmlNode, camera_name: str) -> dict[str, str]:
+    """gazebo_ros_camera's topics: `<camera_name>/image_raw` etc. in the plugin's namespace, remapped."""
+    suffixes = {"image": "image_raw", "info": "camera_info", "depth": "depth/image_raw", "points": "points"}
+    plugin = next((p for p in element.findall("plugin") if "camera" in (p.get("filename") or "")), None)
+    name = camera_name
+    namespace = ""
+    remaps: dict[str, str] = {}
+    if plugin is not None:
+        name = plugin.text_at("camera_name") or plugin.text_at("cameraName") or camera_name
+        ros = plugin.find("ros")
+        if ros is not None:
+            namespace = (ros.text_at("namespace") or "").strip().strip("/")
+            for remap in ros.findall("remapping"):
+                if ":=" in remap.text:
+                    source, target = (part.strip() for part in remap.text.split(":=", 1))
+                    remaps[source.removeprefix("~/").lstrip("/")] = target
+    topics = {}
+    for key, suffix in suffixes.items():
+        topic = f"{name}/{suffix}"
+        topic = remaps.get(topic, remaps.get(suffix, topic))
+        if not topic.startswith("/"):
+            topic = f"/{namespace}/{topic}" if namespace else f"/{topic}"
+        topics[key] = topic
+    return topics
+
+
+def _camera(sensor: Sensor, link: Link, T_base_model: Mat4) -> CameraSpec:
+    """Read a `<sensor type="camera">` or `type="depth"` as Gazebo Classic does.
+
+    Raises:
+        WorldError: An image format the twin does not draw, a size that is not 1 to 8192 pixels, a
+            horizontal_fov outside (0, pi), or clip planes with near not below far; one line naming
+            the element.
+    """
+    element = sensor.element
+    assert element is not None
+    body = element.find("camera")
+    if body is None:
+        msg = f"{sensor.where}: sensor {sensor.name!r} of type {sensor.type!r} has no <camera> element; add one"
+        raise WorldError(msg)
+    where = body.where
+    fmt = (body.text_at("image/format") or "R8G8B8").strip()
+    if fmt not in _IMAGE_FORMATS:
+        msg = f"{where}: camera {sensor.name!r}: image format {fmt!r} is not supported; use R8G8B8 (rgb8) or L8 (mono8)"
+        raise WorldError(msg)
+    width = body.float_at("image/width", 320)
+    height = body.float_at("image/height", 240)
+    for label, side in (("width", width), ("height", height)):
+        if not (side == int(side) and 1 <= side <= _MAX_IMAGE_SIDE):
+            msg = (
+                f"{where}: camera {sensor.name!r}: image {label} {side:g} must be a whole number "
+                f"from 1 to {_MAX_IMAGE_SIDE}"
+            )
+            raise WorldError(msg)
+    hfov = body.float_at("horizontal_fov", 1.047)
+    if not 0.0 < hfov < math.pi:
+        msg = f"{where}: camera {sensor.name!r}: horizontal_fov {hfov:g} rad must be between 0 and pi"
+        raise WorldError(msg)
+    near = body.float_at("clip/near", 0.1)
+    far = body.float_at("clip/far", 100.0)
+    if not 0.0 < near < far:
+        msg = f"{where}: camera {sensor.name!r}: clip near {near:g} m must be above 0 and below far {far:g} m"
+        raise WorldError(msg)
+    noise = _noise(body.find("noise"))
+    if noise.type not in ("none", "gaussian"):
+        msg = f"{where}: camera {sensor.name!r}: noise type {noise.type!r} is not supported; use gaussian or none"
+        raise WorldError(msg)
+    topics = _camera_topics(element, sensor.name)
+    T = T_base_model @ np.asarray(link.T_model) @ np.asarray(sensor.T_link)
+    return CameraSpec(
+        name=sensor.name,
+        sensor_type=sensor.type,
+        rate_hz=sensor.update_rate_hz,
+        width=int(width),
+        height=int(height),
+        encoding=_IMAGE_FORMATS[fmt],
+        hfov_rad=hfov,
+        near_m=near,
+        far_m=far,
+        noise_mean=noise.mean if noise.type == "gaussian" else 0.0,
+        noise_std=noise.stddev if noise.type == "gaussian" else 0.0,
+        frame_id=_frame_id(element, link.name),
+        image_topic=topics["image"],
+        info_topic=topics["info"],
+        depth_topic=topics["depth"],
+        points_topic=topics["points"],
+        T_base_sensor=frozen_matrix(T),
+        where=sensor.where,
     )
 
 
@@ -480,9 +612,12 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
 
     lidar: LidarSpec | None = None
     imu: ImuSpec | None = None
+    cameras: list[CameraSpec] = []
     for link in links.values():
         for sensor in link.sensors:
-            if sensor.type in _LIDAR_TYPES and lidar is None:
+            if sensor.type in _CAMERA_TYPES:
+                cameras.append(_camera(sensor, link, T_base_model))
+            elif sensor.type in _LIDAR_TYPES and lidar is None:
                 lidar = _lidar(sensor, link, T_base_model)
             elif sensor.type == "imu" and imu is None:
                 imu = _imu(sensor, link, T_base_model)
@@ -512,6 +647,7 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
         T_base_model=frozen_matrix(T_base_model),
         source=model.source,
         warnings=tuple(warnings),
+        cameras=tuple(cameras),
     )
 
 

@@ -64,6 +64,28 @@ def _physics(world: XmlNode) -> Physics:
     )
 
 
+def _vector3(node: XmlNode, tag: str, default: tuple[float, float, float]) -> tuple[float, float, float]:
+    child = node.find(tag)
+    if child is None or not child.text:
+        return default
+    x, y, z = child.as_floats(3)
+    return (x, y, z)
+
+
+def _rgba(
+    node: XmlNode | None, tag: str, default: tuple[float, float, float, float]
+) -> tuple[float, float, float, float]:
+    """A colour element (`r g b [a]`), or `default` where it is absent."""
+    child = node.find(tag) if node is not None else None
+    if child is None or not child.text:
+        return default
+    values = child.as_floats()
+    if len(values) not in (3, 4):
+        msg = f"{child.where}: <{tag}> needs 3 or 4 numbers (r g b [a]), got {len(values)}"
+        raise WorldError(msg)
+    return (values[0], values[1], values[2], values[3] if len(values) == 4 else 1.0)
+
+
 def _world_from_node(loader: SdfReader, world_node: XmlNode, version: tuple[int, int], path: Path) -> World:
     raw_models: list[RawModel] = []
     lights: list[Light] = []
@@ -88,6 +110,8 @@ def _world_from_node(loader: SdfReader, world_node: XmlNode, version: tuple[int,
                     name=child.get("name") or "",
                     type=child.get("type") or "",
                     T_world=frozen_matrix(parse_pose(child.find("pose"))),
+                    direction=_vector3(child, "direction", (0.0, 0.0, -1.0)),
+                    diffuse_rgba=_rgba(child, "diffuse", (1.0, 1.0, 1.0, 1.0)),
                 )
             )
         elif tag == "state":
@@ -136,6 +160,8 @@ def _world_from_node(loader: SdfReader, world_node: XmlNode, version: tuple[int,
         lights=tuple(lights),
         plugins=tuple(plugins),
         physics=_physics(world_node),
+        ambient_rgba=_rgba(world_node.find("scene"), "ambient", (0.4, 0.4, 0.4, 1.0)),
+        background_rgba=_rgba(world_node.find("scene"), "background", (0.7, 0.7, 0.7, 1.0)),
         unknown=tuple(loader.unknown),
         warnings=tuple(loader.warnings),
         source=path,

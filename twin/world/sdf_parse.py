@@ -40,7 +40,15 @@ from twin.world.types import (
     Sphere,
 )
 
-__all__ = ["UNSUPPORTED_WORLD", "MissingIncludes", "RawModel", "SdfReader", "material_color", "second_model_message"]
+__all__ = [
+    "GAZEBO_MATERIALS",
+    "UNSUPPORTED_WORLD",
+    "MissingIncludes",
+    "RawModel",
+    "SdfReader",
+    "material_color",
+    "second_model_message",
+]
 
 MissingIncludes = Literal["error", "warn"]
 """What a `model://` include that is not on the model path does: fail, or warn and skip it."""
@@ -549,8 +557,29 @@ def _polyline(nodes: list[XmlNode]) -> Polyline:
     return Polyline(polygons=tuple(polygons), height_m=height)
 
 
+# Gazebo Classic's named materials (media/materials/scripts/gazebo.material): their diffuse colour;
+# a textured one (Gazebo/Wood) as its texture's mean colour.
+GAZEBO_MATERIALS: dict[str, tuple[float, float, float, float]] = {
+    "Gazebo/White": (1.0, 1.0, 1.0, 1.0),
+    "Gazebo/Grey": (0.7, 0.7, 0.7, 1.0),
+    "Gazebo/Gray": (0.7, 0.7, 0.7, 1.0),
+    "Gazebo/DarkGrey": (0.175, 0.175, 0.175, 1.0),
+    "Gazebo/Black": (0.0, 0.0, 0.0, 1.0),
+    "Gazebo/FlatBlack": (0.1, 0.1, 0.1, 1.0),
+    "Gazebo/Red": (1.0, 0.0, 0.0, 1.0),
+    "Gazebo/Green": (0.0, 1.0, 0.0, 1.0),
+    "Gazebo/Blue": (0.0, 0.0, 1.0, 1.0),
+    "Gazebo/Yellow": (1.0, 1.0, 0.0, 1.0),
+    "Gazebo/Orange": (1.0, 0.5088, 0.0468, 1.0),
+    "Gazebo/Purple": (1.0, 0.0, 1.0, 1.0),
+    "Gazebo/Turquoise": (0.0, 1.0, 1.0, 1.0),
+    "Gazebo/Indigo": (0.33, 0.0, 0.5, 1.0),
+    "Gazebo/Wood": (0.55, 0.38, 0.22, 1.0),
+}
+
+
 def material_color(node: XmlNode) -> tuple[float, float, float, float] | None:
-    """A visual's diffuse (else ambient) colour as RGBA, or None."""
+    """A visual's diffuse (else ambient) colour as RGBA, else its Gazebo script material's, or None."""
     material = node.find("material")
     if material is None:
         return None
@@ -562,6 +591,9 @@ def material_color(node: XmlNode) -> tuple[float, float, float, float] | None:
                 return (values[0], values[1], values[2], values[3])
             if len(values) == 3:
                 return (values[0], values[1], values[2], 1.0)
+    script = material.text_at("script/name")
+    if script:
+        return GAZEBO_MATERIALS.get(script.strip())
     return None
 
 

@@ -322,11 +322,13 @@ class Physics:
 
 @dataclass(frozen=True, kw_only=True, slots=True, eq=False)
 class Light:
-    """A light (kept for completeness; the twin renders nothing)."""
+    """A light: the camera renderer shades with directional lights (`direction` in the light's frame)."""
 
     name: str
     type: str
     T_world: Mat4 = field(default_factory=lambda: _IDENTITY)
+    direction: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    diffuse_rgba: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True, eq=False)
@@ -343,6 +345,10 @@ class World:
     lights: tuple[Light, ...] = ()
     plugins: tuple[Plugin, ...] = ()
     physics: Physics = field(default_factory=Physics)
+    ambient_rgba: tuple[float, float, float, float] = (0.4, 0.4, 0.4, 1.0)
+    """`<scene><ambient>` (Gazebo Classic's default when absent)."""
+    background_rgba: tuple[float, float, float, float] = (0.7, 0.7, 0.7, 1.0)
+    """`<scene><background>` (Gazebo Classic's default when absent)."""
     unknown: tuple[XmlNode, ...] = ()
     warnings: tuple[str, ...] = ()
     source: Path | None = None

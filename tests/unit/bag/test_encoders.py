@@ -450,3 +450,86 @@ def test_marker_array(t: int, frame: str, markers: list[Any]) -> None:
         + [_marker(t, frame, i, k, 0, p, s, c, text) for i, k, p, s, c, text in markers]
     )
     assert E.MarkerArrayEncoder(frame).encode(t, markers) == ser(expected)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    t=stamps,
+    frame=frames,
+    w=st.integers(1, 7),
+    h=st.integers(1, 5),
+    encoding=st.sampled_from(["rgb8", "mono8", "32FC1"]),
+)
+def test_image(t: int, frame: str, w: int, h: int, encoding: str) -> None:
+    rng = np.random.default_rng(w * 10 + h)
+    if encoding == "32FC1":
+        pixels: Any = rng.uniform(0.0, 5.0, (h, w)).astype(np.float32)
+        pixels[0, 0] = np.inf
+        data = np.frombuffer(pixels.tobytes(), dtype=np.uint8)
+        step = 4 * w
+    else:
+        channels = 3 if encoding == "rgb8" else 1
+        pixels = rng.integers(0, 256, (h, w, channels), dtype=np.uint8)
+        data = pixels.reshape(-1)
+        step = channels * w
+    expected = T["sensor_msgs/msg/Image"](
+        header=header(t, frame), height=h, width=w, encoding=encoding, is_bigendian=0, step=step, data=data
+    )
+    assert E.ImageEncoder(frame, width=w, height=h, encoding=encoding).encode(t, pixels) == ser(expected)
+
+
+def test_image_of_the_wrong_size_is_refused() -> None:
+    with pytest.raises(BagError, match="12 bytes got 6"):
+        E.ImageEncoder("cam", width=2, height=2, encoding="rgb8").encode(0, np.zeros(6, np.uint8))
+
+
+@settings(max_examples=40, deadline=None)
+@given(t=stamps, frame=frames, w=st.integers(1, 4000), h=st.integers(1, 4000), f=st.floats(1.0, 5000.0))
+def test_camera_info(t: int, frame: str, w: int, h: int, f: float) -> None:
+    K = (f, 0.0, (w + 1) / 2, 0.0, f, (h + 1) / 2, 0.0, 0.0, 1.0)
+    P = (f, 0.0, (w + 1) / 2, 0.0, 0.0, f, (h + 1) / 2, 0.0, 0.0, 0.0, 1.0, 0.0)
+    roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    expected = T["sensor_msgs/msg/CameraInfo"](
+        header=header(t, frame),
+        height=h,
+        width=w,
+        distortion_model="plumb_bob",
+        d=np.zeros(5),
+        k=np.array(K),
+        r=np.eye(3).reshape(-1),
+        p=np.array(P),
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+    )
+    assert E.CameraInfoEncoder(frame, width=w, height=h, K=K, P=P).encode(t) == ser(expected)
+
+
+@settings(max_examples=40, deadline=None)
+@given(t=stamps, frame=frames, fmt=st.text(max_size=30), data=st.binary(max_size=40))
+def test_compressed_image(t: int, frame: str, fmt: str, data: bytes) -> None:
+    expected = T["sensor_msgs/msg/CompressedImage"](
+        header=header(t, frame), format=fmt, data=np.frombuffer(data, dtype=np.uint8)
+    )
+    assert E.CompressedImageEncoder(frame, format=fmt).encode(t, data) == ser(expected)
+
+
+@settings(max_examples=30, deadline=None)
+@given(t=stamps, frame=frames, w=st.integers(1, 5), h=st.integers(1, 4), dense=st.booleans())
+def test_point_cloud2(t: int, frame: str, w: int, h: int, dense: bool) -> None:
+    fields = [("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("rgb", 16, 7, 1)]
+    data = np.random.default_rng(w * h).integers(0, 256, w * h * 32, dtype=np.uint8)
+    point_fields = [T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=c) for n, o, d, c in fields]
+    expected = T["sensor_msgs/msg/PointCloud2"](
+        header=header(t, frame),
+        height=h,
+        width=w,
+        fields=point_fields,
+        is_bigendian=False,
+        point_step=32,
+        row_step=32 * w,
+        data=data,
+        is_dense=dense,
+    )
+    enc = E.PointCloud2Encoder(frame, width=w, height=h, fields=fields, point_step=32, is_dense=dense)
+    assert enc.encode(t, data.tobytes()) == ser(expected)

@@ -10,6 +10,7 @@ import pytest
 from twin.bt import BehaviorTreeFactory
 from twin.bt.validate import validate_file, validate_text
 from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes
+from twin.mission.look_for_object import ImageSlot, register_vision_nodes
 from twin.nav.bt_navigator.factory import nav2_factory
 
 TREES = Path(__file__).resolve().parents[3] / "trees"
@@ -19,6 +20,7 @@ TREES = Path(__file__).resolve().parents[3] / "trees"
 def factory() -> BehaviorTreeFactory:
     factory = nav2_factory()
     register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
+    register_vision_nodes(factory, slot=ImageSlot())  # the behaviour demos' LookForObject, as a run registers it
     return factory
 
 
@@ -89,11 +91,12 @@ def test_v3_files_are_valid_with_v3_names(factory: BehaviorTreeFactory) -> None:
 
 
 def test_types_declared_in_the_tree_nodes_model_count_as_known(factory: BehaviorTreeFactory) -> None:
-    model = '<TreeNodesModel><Action ID="LookForObject"><input_port name="color"/></Action></TreeNodesModel>'
-    report = validate_text(doc('<LookForObject color="blue"/>', extra=model), factory, source="t.xml")
+    # A node type the factory does not have (LookForObject, used here before, is registered now).
+    model = '<TreeNodesModel><Action ID="FindCharger"><input_port name="color"/></Action></TreeNodesModel>'
+    report = validate_text(doc('<FindCharger color="blue"/>', extra=model), factory, source="t.xml")
     assert report.ok, report.problems
-    assert report.declared_only == ("LookForObject",)
-    bad = validate_text(doc('<LookForObject colour="blue"/>', extra=model), factory, source="t.xml")
+    assert report.declared_only == ("FindCharger",)
+    bad = validate_text(doc('<FindCharger colour="blue"/>', extra=model), factory, source="t.xml")
     assert any("unknown port 'colour'" in p for p in bad.problems)
 
 

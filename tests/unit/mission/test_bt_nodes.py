@@ -84,7 +84,7 @@ def test_the_queue_tree_visits_every_location_in_a_seeded_order_then_fails_by_de
 
 
 def test_the_retry_tree_stops_at_the_first_reachable_location() -> None:
-    tree, navigator, clock = mission("tree_queue.xml", failing=[0])
+    tree, navigator, clock = mission("queue_first_reachable.xml", failing=[0])
     assert run(tree, clock)[-1] is NodeStatus.SUCCESS
     assert len(navigator.goals) == 2
 
