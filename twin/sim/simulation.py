@@ -280,6 +280,15 @@ class Simulation(Closing):
             scratch = Executor(self.step_ns)
             for node in [RosoutBridge(), *self._builtin_nodes(), *user_nodes]:
                 scratch.add_node(node)
+            # -- ROS 2 bridge (lane L_ros2) -------------------------------------------------------------
+            # A sink that also takes topics from a ROS 2 domain (twin.ros2.Ros2Bridge) adds the node that
+            # publishes them into the run, last, typed by the graph just wired (docs/ros2.md).
+            for sink in sinks:
+                inbound = getattr(sink, "inbound_node", None)
+                node_in = inbound(scratch.topics) if inbound is not None else None
+                if node_in is not None:
+                    user_nodes.append(node_in)
+            # -- end ROS 2 bridge ------------------------------------------------------------------------
             if bag_path is not None:
                 self.recorder = Recorder(
                     bag_path, storage=scenario.recording.storage, distro=scenario.recording.distro, write_log=write_log
@@ -465,7 +474,9 @@ class Simulation(Closing):
         # localises yet) and its description; the wheels' transforms on every joint state.
         nav = self.navigation
         localizes = nav is not None and nav.localizes
-        static = [] if localizes else [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
+        # ROS 2 bridge (lane L_ros2): as a simulator (ros2.role), the external stack's AMCL owns map -> odom.
+        external = sc.ros2.enabled and sc.ros2.role == "simulator"
+        static = [] if localizes or external else [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
         static += [(parent, child, tf_pose(T)) for parent, child, T in static_frames(robot)]  # casters, optical frames
         nodes.append(RobotStatePublisher(urdf_from_robot(robot), static, self._wheels))
         chassis_now = self.drive.chassis_state
