@@ -22,6 +22,7 @@
 #include <fastdds/dds/topic/TypeSupport.hpp>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -79,15 +80,22 @@ static Stamp read_header(Cdr& cdr) {
     return h;
 }
 
+// A number as JSON (Python's reader): Infinity, -Infinity and NaN for the non-finite (a lidar's "no return").
+static std::string number(double v, bool single) {
+    if (std::isnan(v)) return "NaN";
+    if (std::isinf(v)) return v > 0 ? "Infinity" : "-Infinity";
+    char num[64];
+    std::snprintf(num, sizeof num, single ? "%.9g" : "%.17g", v);
+    return num;
+}
+
 static std::string decode(const std::string& topic, Raw& raw) {
     FastBuffer buffer(reinterpret_cast<char*>(raw.bytes.data()), raw.bytes.size());
     Cdr cdr(buffer, Cdr::DEFAULT_ENDIAN, Cdr::DDS_CDR);
     cdr.read_encapsulation();
-    char num[64];
     std::string out = "{\"topic\": \"" + topic + "\"";
     auto add = [&](const char* key, double v, bool single) {
-        std::snprintf(num, sizeof num, single ? "%.9g" : "%.17g", v);
-        out += std::string(", \"") + key + "\": " + num;
+        out += std::string(", \"") + key + "\": " + number(v, single);
     };
     if (topic == "/clock") {
         int32_t sec;
@@ -106,10 +114,7 @@ static std::string decode(const std::string& topic, Raw& raw) {
         add("angle_max", f[1], true);
         add("range_max", f[6], true);
         out += ", \"ranges\": [";
-        for (size_t i = 0; i < ranges.size(); ++i) {
-            std::snprintf(num, sizeof num, "%s%.9g", i ? ", " : "", ranges[i]);
-            out += num;
-        }
+        for (size_t i = 0; i < ranges.size(); ++i) out += (i ? ", " : "") + number(ranges[i], true);
         out += "]";
     } else if (topic == "/odom") {
         Stamp h = read_header(cdr);
