@@ -108,6 +108,19 @@ def test_a_late_joiner_on_the_domain_gets_the_latched_tf_static_and_clock_and_an
     assert json.loads(other.read_text()) == {"clock": [], "tf_static_children": []}
 
 
+@needs_namespace
+def test_dds_unable_to_start_is_one_line_naming_why_exit_2_and_no_bag(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    result = in_namespace(twin_command("--ros2", "--ros2-interface", "nosuch0", "--duration", "1", "--out", str(bag)))
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert lines == [
+        "twin: error: ros2: DDS cannot start on domain 0, interface 'nosuch0': "
+        "nosuch0: does not match an available interface; check ros2.interface (ip link) and the domain id"
+    ]
+    assert not bag.exists()
+
+
 @pytest.fixture(scope="module")
 def fastdds_peer(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The Fast DDS C++ peer, built with g++ against Debian's libfastrtps-dev."""

@@ -15,8 +15,12 @@ and discovery by unicast to 127.0.0.1 (`cyclone_config`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
-from collections.abc import Mapping, Sequence
+import os
+import sys
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any, Protocol
 from xml.sax.saxutils import quoteattr
 
@@ -32,6 +36,23 @@ _log = logging.getLogger(__name__)
 #: How often (per sim second) the run takes what arrived from the domain: a command waits at most 10 ms.
 INBOUND_RATE_HZ = 100.0
 _TAKE_MAX = 64  # samples taken per topic per poll
+
+
+@contextlib.contextmanager
+def _c_stderr() -> Iterator[list[str]]:
+    """Capture what C code writes to file descriptor 2 meanwhile: the list holds it once the block ends."""
+    said: list[str] = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            said.append(sink.read().decode("utf-8", "replace"))
 
 
 class BridgeSettings(Protocol):
@@ -155,26 +176,34 @@ class Ros2Bridge:
         except ImportError as err:
             msg = f"--ros2 needs Cyclone DDS's Python binding ({err}); install it: pip install cyclonedds"
             raise ConfigError(msg) from None
-        from twin.bag.typesys import TypeRegistry
-
         self.section = section
         self.injecting = False
-        self._types = TypeRegistry()
         self._made: dict[str, Any] = {}
         self._topics: dict[str, Any] = {}
         self._writers: list[Any] = []
         self._readers: list[Any] = []
         self._in_only: set[str] = set()
         self.config = cyclone_config(section.domain_id, section.interface)
-        try:
-            self._domain = Domain(section.domain_id, self.config)
-            self._participant = DomainParticipant(section.domain_id)
-        except DDSException as err:
+        with _c_stderr() as said:  # Cyclone writes its reasons to the C stderr: made part of our one line
+            try:
+                self._domain = Domain(section.domain_id, self.config)
+                self._participant = DomainParticipant(section.domain_id)
+                failure = None
+            except DDSException as err:
+                failure = str(err)
+        # Cyclone's lines: a time stamp, the domain in brackets, the thread's name, the reason:
+        # `1795769004.59 [0] twin: nosuch0: does not match an available interface.`
+        lines = "".join(said).splitlines()
+        said_now = [line.split("]", 1)[-1].strip().split(" ", 1)[-1].rstrip(".") for line in lines if line.strip()]
+        reason = " ".join(said_now)
+        if failure is not None:
             msg = (
-                f"ros2: DDS cannot start on domain {section.domain_id}, interface {section.interface!r}: {err}; "
-                "check ros2.interface (ip link) and that the domain id is free"
+                f"ros2: DDS cannot start on domain {section.domain_id}, interface {section.interface!r}: "
+                f"{reason or failure}; check ros2.interface (ip link) and the domain id"
             )
-            raise ConfigError(msg) from None
+            raise ConfigError(msg)
+        if reason:
+            _log.warning("ros2: Cyclone DDS: %s", reason)
         from cyclonedds._clayer import ddspy_write
 
         self._write = ddspy_write
@@ -227,10 +256,13 @@ class Ros2Bridge:
         from cyclonedds.topic import Topic as DdsTopic
 
         if name not in self._topics:
-            if not self._types.knows(msgtype):
+            from twin.msgs import typestore  # the store the run serialises with: it knows every type published
+
+            store = typestore()
+            if msgtype not in store.fielddefs:
                 msg = f"ros2: {name}: the type {msgtype} has no definition to describe it on DDS"
                 raise ConfigError(msg)
-            dds_type = struct_type(msgtype, self._types.store, self._made)
+            dds_type = struct_type(msgtype, store, self._made)
             self._topics[name] = DdsTopic(self._participant, dds_topic_name(name), dds_type)
         return self._topics[name]
 
