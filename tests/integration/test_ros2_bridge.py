@@ -144,10 +144,14 @@ def test_a_fast_dds_peer_reads_scan_odom_tf_clock_as_the_bag_holds_them_and_its_
 ) -> None:
     bag, heard_path = tmp_path / "bag", tmp_path / "peer.jsonl"
     vx = 0.1
+    err = tmp_path / "twin.err"
+    # As with Gazebo and Nav2: the twin first, the peer once the twin is on the domain (found by unicast).
     script = (
-        f"{fastdds_peer} 0 {heard_path} {vx} 0.0 180 &\n"
-        f"{twin_command('--ros2', '--ros2-role', 'simulator', '--duration', '10', '--out', str(bag))}\n"
-        "code=$?; wait; exit $code\n"
+        f"{twin_command('--ros2', '--ros2-role', 'simulator', '--duration', '12', '--out', str(bag))} 2> {err} &\n"
+        "pid=$!; i=0\n"
+        f'until grep -q "ROS 2 domain" {err} || [ $i -ge 1200 ]; do sleep 0.1; i=$((i+1)); done\n'
+        f"{fastdds_peer} 0 {heard_path} {vx} 0.0 180\n"
+        f"wait $pid; code=$?; cat {err} >&2; exit $code\n"
     )
     result = in_namespace(script)
     assert result.returncode == 0, result.stderr

@@ -97,7 +97,9 @@ def cyclone_config(domain_id: int, interface: str = "lo") -> str:
     discovery = "<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
     if interface == "lo":
         general += "<AllowMulticast>false</AllowMulticast>"
-        discovery += '<Peers><Peer address="127.0.0.1"/></Peers>'
+        # No multicast: participants on 127.0.0.1 are found by unicast announcements to each participant
+        # index's port, every second, so a node started after the twin is found within one (default 30 s).
+        discovery += '<Peers><Peer address="127.0.0.1"/></Peers><SPDPInterval>1s</SPDPInterval>'
     return (
         f'<CycloneDDS><Domain Id="{domain_id}"><General>{general}</General>'
         f"<Discovery>{discovery}</Discovery></Domain></CycloneDDS>"

@@ -34,6 +34,8 @@ def test_by_default_dds_is_told_loopback_alone_multicast_off_and_unicast_peers_o
     assert [i.get("name") for i in interfaces] == ["lo"]
     assert root.findtext("./Domain/General/AllowMulticast") == "false"
     assert [p.get("address") for p in root.findall("./Domain/Discovery/Peers/Peer")] == ["127.0.0.1"]
+    # Without multicast a node started later is found by the twin's unicast announcements: every second.
+    assert root.findtext("./Domain/Discovery/SPDPInterval") == "1s"
 
 
 def test_another_interface_is_used_only_when_named() -> None:
