@@ -6,13 +6,14 @@ Nothing here starts DDS (tests/integration/test_ros2_bridge.py does, inside a ne
 from __future__ import annotations
 
 import dataclasses
+import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import run_twin
+from tests.conftest import REPO, run_twin
 from twin.core.errors import ConfigError
 from twin.ros2 import Ros2Bridge, cyclone_config, dds_topic_name, dds_type_name
 from twin.ros2.dds_types import struct_type
@@ -131,3 +132,12 @@ def test_without_the_binding_ros2_is_one_line_naming_the_package_to_install(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pip install cyclonedds" in err[0], err
     assert not out.exists()
+
+
+def test_a_run_without_ros2_never_loads_dds() -> None:
+    code = (
+        "import sys, twin.ros2, twin.cli.simulate, twin.sim.simulation\n"
+        "assert not [m for m in sys.modules if m.startswith('cyclonedds')], sorted(sys.modules)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False, cwd=REPO)
+    assert result.returncode == 0, result.stderr
