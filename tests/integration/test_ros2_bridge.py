@@ -199,3 +199,22 @@ def test_a_fast_dds_peer_reads_scan_odom_tf_clock_as_the_bag_holds_them_and_its_
     assert all(c.linear.x == vx and c.angular.z == 0.0 for c in commands)
     truth = [m.pose.pose.position.x for _, m in recorded["/ground_truth/odom"]]
     assert truth[-1] - truth[0] > 0.2, f"the robot moved {truth[-1] - truth[0]:.3f} m"
+
+
+@needs_namespace
+def test_only_the_topics_of_ros2_publish_get_a_writer_and_a_topic_taken_in_alone_gets_none() -> None:
+    code = """
+from types import SimpleNamespace
+from twin.ros2 import Ros2Bridge
+from twin.sim.scenario import Ros2Section
+
+with Ros2Bridge(Ros2Section(enabled=True, publish=("/scan", "/cmd_vel"))) as bridge:
+    graph = {"/cmd_vel": SimpleNamespace(msgtype="geometry_msgs/msg/Twist", publishers=[])}
+    assert bridge.inbound_node(graph) is not None  # /cmd_vel taken in; /initialpose unused: skipped
+    assert bridge.add_topic("/odom", "nav_msgs/msg/Odometry") is None  # not in ros2.publish
+    assert bridge.add_topic("/cmd_vel", "geometry_msgs/msg/Twist") is None  # only ever comes in
+    assert bridge.add_topic("/scan", "sensor_msgs/msg/LaserScan") is not None
+print("ok")
+"""
+    result = in_namespace(f"{shlex.join([sys.executable, '-c', code])}")
+    assert result.returncode == 0 and result.stdout.strip() == "ok", result.stderr
