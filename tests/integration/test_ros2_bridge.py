@@ -163,7 +163,15 @@ def test_a_fast_dds_peer_reads_scan_odom_tf_clock_as_the_bag_holds_them_and_its_
             sent = doc["sent_cmd_vel"]
         else:
             heard.setdefault(doc["topic"], []).append(doc)
-    recorded = bag_messages(bag, {"/scan", "/odom", "/clock", "/tf", "/cmd_vel", "/ground_truth/odom"})
+    recorded = bag_messages(bag, {"/scan", "/odom", "/clock", "/tf", "/tf_static", "/cmd_vel", "/ground_truth/odom"})
+
+    # As a simulator the run has Gazebo's part alone: no map, no AMCL (no map -> odom), no Nav2, no mission.
+    with AnyReader([bag]) as reader:
+        topics = {c.topic for c in reader.connections}
+    assert {"/scan", "/odom", "/tf", "/tf_static", "/clock", "/robot_description", "/joint_states"} <= topics
+    assert not topics & {"/map", "/amcl_pose", "/plan", "/initialpose", "/behavior_tree_log"}, sorted(topics)
+    static_children = {t.child_frame_id for _, m in recorded["/tf_static"] for t in m.transforms}
+    assert "odom" not in static_children and "base_link" in static_children
 
     # /scan: every message the peer decoded is the bag's message of that stamp, range for range.
     scans = {stamp_ns(m.header.stamp.sec, m.header.stamp.nanosec): m for _, m in recorded["/scan"]}
