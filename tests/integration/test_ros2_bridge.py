@@ -84,13 +84,13 @@ def stamp_ns(sec: int, nanosec: int) -> int:
 
 
 @needs_namespace
-def test_a_late_joiner_on_the_domain_gets_the_latched_tf_static_and_clock_and_another_domain_gets_nothing(
+def test_a_late_joiner_gets_the_latched_tf_static_and_clock_its_initialpose_comes_in_once_and_another_domain_nothing(
     tmp_path: Path,
 ) -> None:
     bag, same, other = tmp_path / "bag", tmp_path / "domain5.json", tmp_path / "domain6.json"
     script = (
         f"{twin_command('--ros2', '--domain-id', '5', '--duration', '5', '--out', str(bag))} &\n"
-        f"(sleep 3; {sys.executable} {LISTENER} 5 {same} 120) &\n"
+        f"(sleep 3; {sys.executable} {LISTENER} 5 {same} 120 1.5 0.5) &\n"
         f"{sys.executable} {LISTENER} 6 {other} 15\n"
         "wait\n"
     )
@@ -98,14 +98,19 @@ def test_a_late_joiner_on_the_domain_gets_the_latched_tf_static_and_clock_and_an
     assert result.returncode == 0, result.stderr
     assert "ROS 2 domain 5 (loopback only)" in result.stderr
     heard = json.loads(same.read_text())
-    recorded = bag_messages(bag, {"/clock", "/tf_static"})
+    recorded = bag_messages(bag, {"/clock", "/tf_static", "/initialpose"})
     # /tf_static was published once at t = 0, before the listener joined: transient local brings it.
     static_children = [t.child_frame_id for _, m in recorded["/tf_static"] for t in m.transforms]
     assert heard["tf_static_children"] == static_children and "base_link" in static_children
     bag_clock = {stamp_ns(m.clock.sec, m.clock.nanosec) for _, m in recorded["/clock"]}
     got_clock = [stamp_ns(s, n) for s, n in heard["clock"]]
     assert got_clock and set(got_clock) <= bag_clock and got_clock == sorted(got_clock)
-    assert json.loads(other.read_text()) == {"clock": [], "tf_static_children": []}
+    # Its /initialpose came in and is recorded after the twin's own (the thesis's, at the spawn pose);
+    # the twin took it in without sending it back out.
+    poses = [(m.header.frame_id, m.pose.pose.position.x, m.pose.pose.position.y) for _, m in recorded["/initialpose"]]
+    assert poses == [("map", 0.0, 0.0), ("map", 1.5, 0.5)]
+    assert [1.5, 0.5] not in heard["initialpose"]  # (the twin's own, at 0.1 s, may be heard or not)
+    assert json.loads(other.read_text()) == {"clock": [], "tf_static_children": [], "initialpose": []}
 
 
 @needs_namespace
