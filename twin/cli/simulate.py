@@ -38,6 +38,7 @@ examples:
   twin simulate --live                            watch it in Foxglove (ws://127.0.0.1:8765), in real time
   twin simulate --live --speed 5 --port 9000      five times faster, on another port
   twin simulate --from-bag bags/run1 --out /tmp/rerun   re-run the scenario, seed and duration a bag recorded
+  twin simulate --ros2 --ros2-role simulator      Gazebo's part on ROS 2 domain 0 (loopback), for your Nav2
 
 The run ends when the mission ends, at --duration (or the scenario's max_duration_s), on
 Ctrl-C / SIGTERM, or when the watchdog finds a step that has not returned for --watchdog-s wall
@@ -112,7 +113,26 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         type=speed_arg,
         metavar="X",
         help="sim seconds per wall second: 1 real time, 5 five times faster, max as fast as possible "
-        "(default: max, or 1 with --live)",
+        "(default: max, or 1 with --live or --ros2)",
+    )
+    ros2 = parser.add_argument_group("ROS 2 (docs/ros2.md)")
+    ros2.add_argument(
+        "--ros2",
+        action="store_true",
+        help="join a ROS 2 domain over DDS: topics out as rt/<topic>, /cmd_vel and /initialpose in (real time)",
+    )
+    ros2.add_argument("--domain-id", type=int, default=None, metavar="N", help="ROS_DOMAIN_ID, 0 to 232 (default 0)")
+    ros2.add_argument(
+        "--ros2-role",
+        choices=("full", "simulator"),
+        default=None,
+        help="full: the twin's own stack runs too; simulator: Gazebo's part alone, for an external Nav2",
+    )
+    ros2.add_argument(
+        "--ros2-interface",
+        default=None,
+        metavar="NAME",
+        help="network interface DDS uses (default lo: loopback only; any other reaches the network)",
     )
     parser.set_defaults(func=_simulate)
 
@@ -269,7 +289,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _simulate_checked(args: argparse.Namespace) -> int:
     from twin.sim.check import check_scenario
-    from twin.sim.scenario import default_scenario_path
+    from twin.sim.scenario import default_scenario_path, for_ros2_role
     from twin.sim.scenario_file import load_scenario
 
     _check_options(args)
@@ -295,22 +315,68 @@ def _simulate_checked(args: argparse.Namespace) -> int:
         recording["distro"] = args.distro
     if recording:
         changes["recording"] = dataclasses.replace(scenario.recording, **recording)
+    ros2 = _ros2_section(args, scenario)
+    if ros2 is not None:
+        changes["ros2"] = ros2
     scenario = dataclasses.replace(scenario, **changes)
     check_scenario(scenario, path)
+    scenario = for_ros2_role(scenario)
     bag_path = _bag_path(scenario, args.out)
 
     flag = _StopFlag()
-    with _live_view(args, flag) as sinks:
-        return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks, provenance=provenance)
+    with _live_view(args, flag, ros2=scenario.ros2.enabled) as sinks, _ros2_bridge(scenario) as bridge:
+        return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks + bridge, provenance=provenance)
+
+
+_ROS2_FLAGS = {
+    "domain_id": ("--domain-id", "domain_id"),
+    "role": ("--ros2-role", "ros2_role"),
+    "interface": ("--ros2-interface", "ros2_interface"),
+}  # section key: (flag, argparse dest)
+
+
+def _ros2_section(args: argparse.Namespace, scenario: Scenario) -> Any:
+    """The scenario's `ros2:` section with `--ros2`, `--domain-id`, `--ros2-role`, `--ros2-interface` over it."""
+    given = {key: getattr(args, dest) for key, (_, dest) in _ROS2_FLAGS.items() if getattr(args, dest) is not None}
+    if given and not (args.ros2 or scenario.ros2.enabled):
+        msg = f"{', '.join(_ROS2_FLAGS[k][0] for k in given)}: configure(s) the ROS 2 bridge; add --ros2"
+        raise ConfigError(msg)
+    if not (args.ros2 or given):
+        return None
+    try:
+        return dataclasses.replace(scenario.ros2, enabled=True, **given)
+    except ValueError as err:
+        key = next((k for k in given if str(err).startswith(k)), "domain_id")
+        msg = f"{_ROS2_FLAGS[key][0]}: {err}"
+        raise ConfigError(msg) from None
 
 
 @contextmanager
-def _live_view(args: argparse.Namespace, flag: _StopFlag) -> Iterator[list[Sink]]:
-    """The live server and the pacer `--live`, `--speed` ask for, as sinks after the recorder."""
+def _ros2_bridge(scenario: Scenario) -> Iterator[list[Sink]]:
+    """The ROS 2 participant `--ros2` (or `ros2.enabled`) asks for, as a sink after the others."""
+    if not scenario.ros2.enabled:
+        yield []
+        return
+    from twin.ros2 import Ros2Bridge
+
+    section = scenario.ros2
+    with Ros2Bridge(section) as bridge:
+        where = "loopback only" if section.interface == "lo" else f"interface {section.interface}"
+        print(
+            f"twin: ROS 2 domain {section.domain_id} ({where}), role {section.role}: topics as rt/<topic>; "
+            f"taking {', '.join(section.subscribe) or 'nothing'}",
+            file=sys.stderr,
+        )
+        yield [bridge]
+
+
+@contextmanager
+def _live_view(args: argparse.Namespace, flag: _StopFlag, *, ros2: bool = False) -> Iterator[list[Sink]]:
+    """The live server and pacer `--live`, `--speed` (and `--ros2`: real time) ask for, as sinks after the recorder."""
     if not args.live and (args.host is not None or args.port is not None):
         msg = "--host and --port serve the live view; add --live"
         raise ConfigError(msg)
-    speed = args.speed if args.speed is not None else (1.0 if args.live else math.inf)
+    speed = args.speed if args.speed is not None else (1.0 if args.live or ros2 else math.inf)
     if not args.live and speed == math.inf:
         yield []
         return

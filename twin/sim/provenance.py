@@ -20,7 +20,7 @@ from typing import Any
 import yaml
 
 from twin import __version__
-from twin.sim.scenario import Scenario
+from twin.sim.scenario import Ros2Section, Scenario
 
 __all__ = ["fmu_record", "run_provenance", "scenario_yaml"]
 
@@ -42,7 +42,10 @@ def _plain(value: Any) -> Any:
 def scenario_yaml(scenario: Scenario) -> str:
     """The scenario as YAML with every key: `load_scenario` of it gives an equal scenario."""
     dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)  # libyaml's emitter when built: 10x faster
-    text: str = yaml.dump(_plain(scenario), Dumper=dumper, sort_keys=False, allow_unicode=True)
+    plain = _plain(scenario)
+    if scenario.ros2 == Ros2Section():  # a run off ROS 2 records what it did before the bridge existed
+        del plain["ros2"]
+    text: str = yaml.dump(plain, Dumper=dumper, sort_keys=False, allow_unicode=True)
     return text
 
 

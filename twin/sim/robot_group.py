@@ -415,7 +415,9 @@ class RobotGroup:
         # localises yet) and its description; the wheels' transforms on every joint state.
         nav = self.navigation
         localizes = nav is not None and nav.localizes
-        static = [] if localizes else [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
+        # As a ROS 2 simulator (ros2.role) the external stack's AMCL owns map -> odom.
+        external = self.scenario.ros2.enabled and self.scenario.ros2.role == "simulator"
+        static = [] if localizes or external else [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
         static += [(parent, child, tf_pose(T)) for parent, child, T in static_frames(robot)]  # casters, optical frames
         nodes.append(RobotStatePublisher(urdf_from_robot(robot), static, self.wheels))
 

@@ -7,6 +7,7 @@ the working directory, like a shell's output path.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import re
@@ -25,9 +26,11 @@ from twin.world.obstacles import ObstacleSpec
 __all__ = [
     "NodeSpec",
     "ReplayMission",
+    "Ros2Section",
     "Scenario",
     "default_scenario_path",
     "fmu_fallback",
+    "for_ros2_role",
     "runs_amcl",
     "runs_nav2",
 ]
@@ -395,6 +398,46 @@ class BlocksSection:
             raise ValueError(msg)
 
 
+#: The ROS 2 domain ids a participant may join (the range ROS 2 allows on Linux: ports stay below 32768).
+ROS2_DOMAIN_IDS = range(233)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Ros2Section:
+    """The run as a participant of a ROS 2 domain (`twin.ros2`, docs/ros2.md); off unless enabled or `--ros2`.
+
+    `role: simulator` is Gazebo's part alone (world, robot, sensors, drive, TF, /clock): the twin runs
+    none of its own localization, navigation or mission, so a ROS 2 stack drives the robot.
+    """
+
+    enabled: bool = False
+    domain_id: int = 0
+    role: Literal["full", "simulator"] = "full"
+    publish: tuple[str, ...] | None = None  # null: every topic the run publishes
+    subscribe: tuple[str, ...] = ("/cmd_vel", "/initialpose")  # taken from the domain into the run
+    interface: str = "lo"  # loopback only; any other interface reaches the network
+
+    def __post_init__(self) -> None:
+        if self.domain_id not in ROS2_DOMAIN_IDS:
+            msg = f"domain_id must be a whole number from 0 to 232, got {self.domain_id}"
+            raise ValueError(msg)
+        for key in ("publish", "subscribe"):
+            for name in getattr(self, key) or ():
+                if not _is_ros_topic_name(name):
+                    msg = f"{key}: {name!r} is not an absolute ROS 2 topic name (e.g. /scan, /robot1/cmd_vel)"
+                    raise ValueError(msg)
+        if not re.fullmatch(r"[A-Za-z0-9_.:-]{1,64}", self.interface):
+            msg = f"interface must name a network interface (lo, eth0) or an address, got {self.interface!r}"
+            raise ValueError(msg)
+
+
+def _is_ros_topic_name(name: str) -> bool:
+    """Whether `name` is an absolute ROS 2 topic name: `/`-separated tokens of letters, digits and `_`."""
+    if not name.startswith("/") or name.endswith("/"):
+        return False
+    return all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", part) and "__" not in part for part in name[1:].split("/"))
+
+
 @dataclass(frozen=True, kw_only=True, slots=True)
 class Scenario:
     """One run: world, robot, sensors, drive, mission, recording, seed and maximum duration."""
@@ -417,12 +460,26 @@ class Scenario:
     navigation: NavigationSection = field(default_factory=NavigationSection)
     obstacles: tuple[ObstacleSpec, ...] = ()  # boxes and cylinders that appear, vanish and walk (docs/obstacles.md)
     blocks: BlocksSection = field(default_factory=BlocksSection)
+    ros2: Ros2Section = field(default_factory=Ros2Section)  # the run on a ROS 2 domain (docs/ros2.md)
     seed: int = 0
     max_duration_s: float = 600.0
     # A user node's NaN or infinity in a field the twin's nodes read (`/cmd_vel`, `/initialpose`...):
     # drop (refused, warned once, counted in the summary) or error (the run ends, exit 8).
     non_finite_messages: Literal["drop", "error"] = "drop"
     source_path: Path | None = None  # the scenario file (set by the loader; user modules are found beside it)
+
+
+def for_ros2_role(scenario: Scenario) -> Scenario:
+    """The scenario a `ros2.role` runs: `full` as it is; `simulator` Gazebo's part alone.
+
+    As a simulator the run keeps the world, robot, sensors, drive, odometry, TF, robot_state_publisher
+    and /clock, and drops its mission, AMCL and Nav2 (and so its map and map→odom): an external
+    stack brings its own and drives the robot on /cmd_vel.
+    """
+    if not scenario.ros2.enabled or scenario.ros2.role == "full":
+        return scenario
+    localization = dataclasses.replace(scenario.localization, type="none", initial_pose=None)
+    return dataclasses.replace(scenario, mission=NoMission(), localization=localization)
 
 
 def default_scenario_path() -> Path:

@@ -163,6 +163,13 @@ class Simulation(Closing):
             scratch = Executor(self.step_ns)
             for node in [RosoutBridge(), *self._launch_nodes(), *user_nodes]:
                 scratch.add_node(node)
+            # A sink that also takes topics from a ROS 2 domain (twin.ros2.Ros2Bridge) adds the node that
+            # publishes them into the run, last, typed by the graph just wired (docs/ros2.md).
+            for sink in sinks:
+                inbound = getattr(sink, "inbound_node", None)
+                node_in = inbound(scratch.topics) if inbound is not None else None
+                if node_in is not None:
+                    user_nodes.append(node_in)
             if bag_path is not None:
                 self.recorder = Recorder(
                     bag_path, storage=scenario.recording.storage, distro=scenario.recording.distro, write_log=write_log

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from twin.mission.bt_nodes import load_locations
 
 from twin.bt import BehaviorTreeFactory, ManualClock, NodeStatus
+from twin.mission.bt_nodes import load_locations
 from twin.mission.look_for_object import HSV_THRESHOLDS, ImageSlot, find_blobs, register_vision_nodes
 from twin.sim.obstacles import BLOCK_COLORS
 from twin.world import load_robot, load_world
