@@ -264,3 +264,26 @@ def test_reading_a_damaged_bag_is_one_line_never_an_internal_error(
             if code:
                 assert_one_line_error(err)
         assert (bag / source.name).read_bytes() == flipped
+
+
+def test_a_channel_whose_topic_name_is_not_text_is_read_around(
+    runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A flipped byte in a channel record's topic name (not UTF-8) is a damaged record, never exit 70."""
+    bag = tmp_path / "bag"
+    shutil.copytree(runs["mcap"], bag)
+    (path,) = bag.glob("*.mcap")
+    data = bytearray(path.read_bytes())
+    pos = 8  # past the magic: records are op (1 byte) and length (8 bytes, little-endian)
+    while data[pos] != 0x04:  # the first channel record: id (u16), schema id (u16), topic (u32 length + bytes)
+        pos += 9 + int.from_bytes(data[pos + 1 : pos + 9], "little")
+    data[pos + 9 + 8] = 0x9B  # the topic's first byte: not a UTF-8 start byte
+    path.write_bytes(bytes(data))
+    for argv in (
+        ["analyze", str(bag), "--out", str(tmp_path / "analysis"), "--no-plots"],
+        ["bag", "export", str(bag), "--topics", "/odom", "--out", str(tmp_path / "export")],
+    ):
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code in (0, 5), f"{argv}: {err}"
+        assert "Traceback" not in err and "internal error" not in err, err

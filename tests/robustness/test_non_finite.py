@@ -140,6 +140,7 @@ def test_a_non_finite_initial_pose_never_reaches_amcl(tmp_path: Path, capsys: py
         tmp_path,
         """\
         mission: {type: none}
+        localization: {type: amcl}
         drive: {type: kinematic}
         nodes: [{plugin: bad_nodes:NanPose}]
         """,
@@ -180,4 +181,6 @@ def test_a_replayed_bags_non_finite_commands_are_skipped(
     replay = mission.BagReplay(ReplayMission(bag=tmp_path / "bag"))
     assert "2 of 4 commands on /cmd_vel hold NaN or infinity (the first at 0.100 s: nan, 0.0): skipped" in caplog.text
     times_ns = (0, 150_000_000, 250_000_000, 350_000_000)
-    assert [replay.command(t, 0.0, 0.0, 0.0) for t in times_ns] == [(0.1, 0.0), (0.1, 0.0), (0.2, 0.1), (0.2, 0.1)]
+    # Each finite command is sent once, when due; a skipped one sends nothing, so the drive holds the one before.
+    assert [replay.command(t, 0.0, 0.0, 0.0) for t in times_ns] == [(0.1, 0.0), None, (0.2, 0.1), None]
+    assert [replay.command_in_force(t) for t in times_ns] == [(0.1, 0.0), (0.1, 0.0), (0.2, 0.1), (0.2, 0.1)]

@@ -70,7 +70,14 @@ def read_raw(
             if name not in names:
                 msg = f"{bag}: no topic {name!r}; it has {', '.join(sorted(names)) or 'no topics'}"
                 raise BagError(msg)
-        yield from fast.messages()
+        try:
+            yield from fast.messages()
+        except BagError:
+            raise
+        except Exception as err:  # a damaged chunk: a flipped length, compression name or channel record
+            what = f"{type(err).__name__}: {err}".splitlines()[0]
+            msg = f"{bag}: cannot read the bag ({what}); its storage is damaged: run `twin bag recover {bag}`"
+            raise BagError(msg) from None
         return
     for m in read_messages(bag, topics, decode=False):
         yield m.topic, m.t_ns, m.msg
@@ -108,8 +115,8 @@ class _McapChunks:
                     elif op in (OP_DATA_END, OP_FOOTER):
                         return True
                     pos += 9 + length
-        except OSError:
-            return False
+        except (OSError, UnicodeDecodeError, struct.error):
+            return False  # unreadable or damaged: the general reader, which skips damaged records, takes it
         return False  # no DataEnd: an unfinished file
 
     def _channel(self, body: bytes | memoryview) -> None:
