@@ -32,6 +32,7 @@ from twin.robot.drivetrain import Drivetrain
 from twin.robot.fmu_drivetrain import FmuDrivetrain
 from twin.robot.nodes import ClockNode
 from twin.sim.executor import Executor, RecordFilter, Sink
+from twin.sim.fleet import AllDone, Fleet
 from twin.sim.launch import load_nodes
 from twin.sim.obstacles import scenario_obstacles
 from twin.sim.provenance import fmu_record, run_provenance
@@ -116,15 +117,32 @@ class Simulation(Closing):
         for warning in world.warnings:
             _log.warning("%s", warning)
         # One group per robot (one robot, no namespace: the thesis's system, topic for topic).
-        group = RobotGroup.load(scenario)
-        self.groups = [group]
-        exclude = tuple(g.robot.name for g in self.groups)
+        self.groups = [RobotGroup.load(sc, namespace=ns) for ns, sc in scenario.robot_scenarios()]
+        exclude = tuple(dict.fromkeys(g.robot.name for g in self.groups))
         scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)
-        body = group.spawn(scene)
-        self.obstacles = self._make_obstacles(body)
+        bodies = [g.spawn(scene) for g in self.groups]
+        self.fleet = Fleet(self.groups) if len(self.groups) > 1 else None
+        if self.fleet is not None:
+            self.fleet.check_spawn()
+        self.obstacles = self._make_obstacles(bodies[0])
         self.recorder: Recorder | None = None
         self.executor = Executor(self.step_ns, profile=profile, non_finite=scenario.non_finite_messages)
-        group.build(scene, obstacles=self.obstacles, rng=self._rng, step_ns=self.step_ns, now=self._now)
+        built: list[RobotGroup] = []
+        try:  # a group that fails releases its own drive; the ones built before it are released here
+            for g in self.groups:
+                g.build(
+                    scene,
+                    obstacles=self.obstacles,
+                    rng=self._rng.under(g.namespace),
+                    step_ns=self.step_ns,
+                    now=self._now,
+                    fleet=self.fleet,
+                )
+                built.append(g)
+        except BaseException:
+            for g in built:
+                g.close()
+            raise
         try:  # from here on, a failure must release the drives (FMU instances) the groups hold
             user_nodes = load_nodes(scenario)
             self._run_to_limit = duration_s is not None
@@ -158,8 +176,11 @@ class Simulation(Closing):
                 unused = node.undeclared_overrides()
                 if unused:
                     _log.warning("node %s never declares parameter(s) %s", node.get_name(), ", ".join(unused))
-            drive_node = group.drive_node
-            self.executor.set_physics(drive_node.advance, drive_node.after_advance, pending=group.tracker)
+            if self.fleet is None:
+                drive_node = self.groups[0].drive_node
+                self.executor.set_physics(drive_node.advance, drive_node.after_advance, pending=drive_node.tracker)
+            else:
+                self.executor.set_physics(self.fleet.advance, self.fleet.after_advance, pending=self.fleet)
         except BaseException:
             try:
                 for g in self.groups:
@@ -208,6 +229,12 @@ class Simulation(Closing):
         specs = scenario_obstacles(self.scenario, self._rng.stream("blocks"))
         if not specs:
             return None
+        if len(self.groups) > 1:
+            msg = (
+                "obstacles and blocks are not yet supported with several robots (robots:); "
+                "remove them, or run one robot"
+            )
+            raise ConfigError(msg)
         period_ns = self.step_ns * max(1, round(_OBSTACLE_PERIOD_NS / self.step_ns))
         field = ObstacleField(specs, body, update_period_ns=period_ns)
         pose = self.scenario.robot.initial_pose
@@ -264,6 +291,12 @@ class Simulation(Closing):
             if self.recorder is not None:
                 self.recorder.close()
 
+    def _mission_result(self) -> str:
+        """The mission's result; for a fleet each robot's, as `robot1: success, robot2: failure`."""
+        if self.fleet is None:
+            return self.mission.result if self.mission is not None else "none"
+        return ", ".join(f"{g.namespace}: {g.mission.result if g.mission is not None else 'none'}" for g in self.groups)
+
     # -- the loop --------------------------------------------------------------------------------
 
     def run(
@@ -289,8 +322,11 @@ class Simulation(Closing):
             self.robot.name,
             self.scenario.seed,
         )
-        mission = self.groups[0].mission_node
-        done = None if mission is None or self._run_to_limit else self.mission  # its `done` ends the run
+        missions = [g.mission for g in self.groups if g.mission_node is not None and g.mission is not None]
+        mission = missions[0] if missions else None
+        done: Any = None
+        if missions and not self._run_to_limit:  # its `done` ends the run (every robot's, for a fleet)
+            done = mission if len(missions) == 1 else AllDone(missions)
         resume_collection()  # `twin simulate` built all this without the cyclic collector: freeze it, resume
         if self.recorder is not None:
             # Start the recorder's wall-clock flush interval with the loop, not when the recorder was made:
@@ -322,7 +358,7 @@ class Simulation(Closing):
             topics={name: t.count for name, t in self.executor.topics.items() if t.publishers},
             contacts=self.contacts,
             ended_by=ended_by,
-            mission_result=self.mission.result if self.mission is not None else "none",
+            mission_result=self._mission_result(),
             seed=self.scenario.seed,
             breakdown_s=breakdown,
             drive=self.drive.label,
