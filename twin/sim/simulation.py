@@ -78,6 +78,7 @@ class RunSummary:
     drive_notes: str = ""  # e.g. commands clamped to the motors' reach ('' when none)
     localization: dict[str, Any] = field(default_factory=dict)  # AMCL vs the true pose ({} without AMCL)
     refused_messages: dict[str, int] = field(default_factory=dict)  # topic -> non-finite messages from users' nodes
+    robots: dict[str, str] = field(default_factory=dict)  # a fleet's robots: namespace -> its mission's result
 
 
 class Simulation(Closing):
@@ -291,11 +292,34 @@ class Simulation(Closing):
             if self.recorder is not None:
                 self.recorder.close()
 
+    def _robot_results(self) -> dict[str, str]:
+        """Each robot's mission result by namespace ({} for one robot)."""
+        if self.fleet is None:
+            return {}
+        return {g.namespace: g.mission.result if g.mission is not None else "none" for g in self.groups}
+
     def _mission_result(self) -> str:
-        """The mission's result; for a fleet each robot's, as `robot1: success, robot2: failure`."""
+        """The mission's result; a fleet's is FAILURE when any robot's is, else every robot's when they agree."""
         if self.fleet is None:
             return self.mission.result if self.mission is not None else "none"
-        return ", ".join(f"{g.namespace}: {g.mission.result if g.mission is not None else 'none'}" for g in self.groups)
+        results = set(self._robot_results().values())
+        if "FAILURE" in results:
+            return "FAILURE"
+        return results.pop() if len(results) == 1 else "running"
+
+    @property
+    def failure(self) -> str:
+        """Why the mission failed ('' unless it did): a fleet's names each robot that failed and its goal."""
+        if self.fleet is None:
+            if self.mission is None or self.mission.result != "FAILURE":
+                return ""
+            return getattr(self.mission, "failure", "") or "the mission returned FAILURE"
+        reasons = [
+            f"{g.namespace}: {getattr(g.mission, 'failure', '') or 'the mission returned FAILURE'}"
+            for g in self.groups
+            if g.mission is not None and g.mission.result == "FAILURE"
+        ]
+        return "; ".join(reasons)
 
     # -- the loop --------------------------------------------------------------------------------
 
@@ -365,4 +389,5 @@ class Simulation(Closing):
             drive_notes=self.drive.saturation.describe() if isinstance(self.drive, FmuDrivetrain) else "",
             localization=self.navigation.log.summary() if self.navigation is not None else {},
             refused_messages=dict(self.executor.refused),
+            robots=self._robot_results(),
         )
