@@ -185,3 +185,48 @@ def test_the_shipped_two_robot_scenario_loads_with_opposite_tours() -> None:
     assert (ns1, ns2) == ("robot1", "robot2")
     assert one.mission != two.mission  # the second robot reads the locations in the opposite order
     assert one.robot.model == two.robot.model == "turtlebot3_waffle"
+
+
+EMPTY_WORLD = REPO.parent / "shared" / "fixtures" / "gazebo_classic" / "worlds" / "empty_world.world"
+
+HEAD_ON = f"""
+name: head_on
+world: {{sdf: {EMPTY_WORLD}}}
+localization: {{type: none}}
+drive: {{type: kinematic}}
+mission:
+  type: cmd_vel_script
+  rate_hz: 10
+  segments: [{{duration_s: 8.0, linear_mps: 0.15}}]
+robots:
+  - {{name: robot1, robot: {{initial_pose: {{x_m: 0.0, y_m: 0.0, yaw_rad: 0.0}}}}}}
+  - {{name: robot2, robot: {{initial_pose: {{x_m: 1.2, y_m: 0.0, yaw_rad: 3.141592653589793}}}}}}
+"""
+
+
+def test_robots_driving_head_on_collide_and_the_contact_names_both(tmp_path: Path) -> None:
+    scenario = tmp_path / "head_on.yaml"
+    scenario.write_text(HEAD_ON)
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["contacts"] >= 1
+    contacts: dict[str, list[Any]] = {}
+    truth: dict[str, list[tuple[int, Any]]] = {}
+    with AnyReader([bag]) as reader:
+        for con, t_ns, raw in reader.messages():
+            if con.topic.endswith("/contacts"):
+                contacts.setdefault(con.topic, []).append(reader.deserialize(raw, con.msgtype))
+            elif con.topic.endswith("/ground_truth/odom"):
+                truth.setdefault(con.topic, []).append((t_ns, reader.deserialize(raw, con.msgtype)))
+    first = contacts["/robot1/contacts"][0]
+    fields = {name: getattr(first, name) for name in first.__dataclass_fields__}
+    text = " ".join(str(v) for v in fields.values())
+    assert "robot2::" in text and "turtlebot3_waffle::" in text, fields  # the other robot's link, and its own
+    # They stopped against each other: a Waffle's base reaches 0.069 m ahead of its origin (its box,
+    # 0.266 m long, centred 0.064 m behind it), so face to face their origins stop about 0.138 m apart.
+    gaps = []
+    for (_, a), (_, b) in zip(truth["/robot1/ground_truth/odom"], truth["/robot2/ground_truth/odom"], strict=False):
+        pa, pb = a.pose.pose.position, b.pose.pose.position
+        gaps.append(math.hypot(pa.x - pb.x, pa.y - pb.y))
+    assert 0.135 < min(gaps) < 0.2, min(gaps)
