@@ -143,6 +143,8 @@ class FleetMonitor:
         self.fleet = fleet
         self.index = index
         self.others = tuple(j for j in range(len(fleet.groups)) if j != index)
+        # Per other robot: (this robot's pose, the other's pose, their exact distance there).
+        self._exact: dict[int, tuple[tuple[float, float, float], tuple[float, float, float], float]] = {}
 
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose: the world's first, else the other robots' (empty when free)."""
@@ -177,22 +179,43 @@ class FleetMonitor:
         """Return how far the robot may move from this pose touching neither the world nor another robot.
 
         Sound for one chunk of steps: the others stand still while this robot moves (`Fleet.advance`).
+        Near another robot the exact distance (FCL) is measured once and then bounded by how far
+        either robot moved since (as `CollisionMonitor` does for the world), asked again only when
+        that bound is used up.
         """
         free = self.inner.free_m(x_m, y_m, yaw_rad)
         if free <= 0.0:
             return 0.0
-        fleet, body = self.fleet, self.fleet.body(self.index)
+        fleet, body, exact = self.fleet, self.fleet.body(self.index), self._exact
         for j in self.others:
             other, where = fleet.body(j), fleet.pose(j)
             gap = math.hypot(where[0] - x_m, where[1] - y_m) - body.radius_m - other.radius_m
-            if gap <= _MARGIN_M:
-                gap = body.distance_to((x_m, y_m, yaw_rad), other, where) - _TOLERANCE_M
-            else:
+            if gap > _MARGIN_M:
                 gap -= _MARGIN_M
+            else:
+                known = exact.get(j)
+                bound = -1.0
+                if known is not None:
+                    mine, theirs, distance = known
+                    bound = distance - _moved(mine, x_m, y_m, yaw_rad, body.radius_m)
+                    bound -= _moved(theirs, *where, other.radius_m)
+                if bound > _MARGIN_M:
+                    gap = bound - _MARGIN_M
+                elif known is not None and known[0] == (x_m, y_m, yaw_rad) and known[1] == where:
+                    gap = known[2] - _TOLERANCE_M  # neither moved (stalled against each other)
+                else:
+                    distance = body.distance_to((x_m, y_m, yaw_rad), other, where)
+                    exact[j] = ((x_m, y_m, yaw_rad), where, distance)
+                    gap = distance - _TOLERANCE_M
             free = min(free, gap)
             if free <= 0.0:
                 return 0.0
         return free
+
+
+def _moved(anchor: tuple[float, float, float], x_m: float, y_m: float, yaw_rad: float, radius_m: float) -> float:
+    """How far any point of a body of `radius_m` may have moved from `anchor` to this pose, at most, m."""
+    return math.hypot(x_m - anchor[0], y_m - anchor[1]) + radius_m * abs(math.remainder(yaw_rad - anchor[2], math.tau))
 
 
 class FleetView:

@@ -608,8 +608,12 @@ class RobotBody:
             self._bound_geometry, fcl.Transform(np.eye(3), np.array([0.0, 0.0, (z_lo + z_hi) / 2]))
         )
         self._bound_z = (z_lo + z_hi) / 2
+        self._placed_at: tuple[float, float, float] | None = None
 
     def _place(self, x: float, y: float, yaw: float) -> None:
+        if (x, y, yaw) == self._placed_at:  # e.g. a robot stalled against another: asked again at one pose
+            return
+        self._placed_at = (x, y, yaw)
         c, s = math.cos(yaw), math.sin(yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         offset = np.array([x, y, 0.0])
@@ -637,6 +641,8 @@ class RobotBody:
             segments: list[tuple[float, float, float, float]] = []
             circles: list[tuple[float, float, float]] = []
             for part in self._parts:
+                if not part.bounds[0, 2] - 1e-9 <= key <= part.bounds[1, 2] + 1e-9:
+                    continue  # below or above the plane (a wheel under a lidar): nothing to cut
                 segs, circs = _section(part, key)
                 segments += segs
                 circles += circs
