@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import zlib
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -304,7 +305,7 @@ class RobotGroup:
             nav = self.navigation
             assert nav is not None and nav.navigates  # a tree mission always has Nav2's stack (or refused)
             navigator = Nav2Navigator(lambda: nav.navigator)
-            return mission.TreeMission(spec, navigator, clock=self._now, seed=self.scenario.seed)
+            return mission.TreeMission(spec, navigator, clock=self._now, seed=self._tree_seed())
         if isinstance(spec, CmdVelScriptMission):
             return mission.CmdVelScript(spec)
         if isinstance(spec, ReplayMission):
@@ -315,6 +316,13 @@ class RobotGroup:
             start_moving(self.drive, *replay.commands.start_velocity)
             return replay
         return mission.WaypointFollower(spec)
+
+    def _tree_seed(self) -> int:
+        """The seed of the tree's own random draws: the scenario's, and for a namespaced robot its own."""
+        seed = self.scenario.seed
+        if not self.namespace:
+            return seed  # one robot: as before groups existed
+        return seed + (zlib.crc32(self.namespace.encode("utf-8")) << 64)
 
     def _wheel_frames(self) -> list[WheelFrame]:
         """(joint, parent, child, T_parent, axis) of the left and right wheel joints, in that order."""
