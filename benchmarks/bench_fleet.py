@@ -33,11 +33,11 @@ from twin.sim.simulation import Simulation
 
 REPO = Path(__file__).resolve().parent.parent
 
-# Free spawn poses (x, y, yaw), the scenario's own first: the TurtleBot3 world's west and east ends,
-# the house's middle.
+# Free spawn poses (x, y, yaw), the scenario's own first: the TurtleBot3 world's west and east ends;
+# in the house its middle and two of the thesis's locations.
 SPAWNS = {
     "turtlebot3_world": [(-2.0, -0.5, 0.0), (2.0, 0.5, 3.1416), (-2.0, 0.5, 0.0), (2.0, -0.5, 3.1416)],
-    "house": [(0.0, 0.0, 0.0), (1.5, -0.2, 0.0), (-1.0, 1.5, 0.0), (3.0, 1.5, 0.0)],
+    "house": [(0.0, 0.0, 0.0), (1.5, -0.2, 0.0), (4.0, 0.5, 1.571), (2.75, 2.5, -1.571)],
 }
 
 

@@ -230,3 +230,14 @@ def test_robots_driving_head_on_collide_and_the_contact_names_both(tmp_path: Pat
         pa, pb = a.pose.pose.position, b.pose.pose.position
         gaps.append(math.hypot(pa.x - pb.x, pa.y - pb.y))
     assert 0.135 < min(gaps) < 0.2, min(gaps)
+
+
+def test_a_robot_spawned_in_a_wall_is_named_by_its_entry(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nrobots: [{name: a}, {name: b, robot: {initial_pose: {x_m: -1.0, y_m: 1.5}}}]\n")
+    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert (
+        len(lines) == 1 and "robots[1].robot.initial_pose: (-1.0, 1.5, 0.0) puts turtlebot3_waffle inside" in lines[0]
+    )

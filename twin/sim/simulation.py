@@ -42,7 +42,7 @@ from twin.sim.rosout import RosoutBridge
 from twin.sim.scenario import Scenario
 from twin.world import RobotModelSpec, build_scene, load_world
 from twin.world.obstacles import ObstacleField
-from twin.world.scene import RobotBody
+from twin.world.scene import RobotBody, Scene
 
 if TYPE_CHECKING:
     from twin.robot.lidar import Lidar
@@ -121,7 +121,7 @@ class Simulation(Closing):
         self.groups = [RobotGroup.load(sc, namespace=ns) for ns, sc in scenario.robot_scenarios()]
         exclude = tuple(dict.fromkeys(g.robot.name for g in self.groups))
         scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)
-        bodies = [g.spawn(scene) for g in self.groups]
+        bodies = [self._spawn(i, g, scene) for i, g in enumerate(self.groups)]
         self.fleet = Fleet(self.groups) if len(self.groups) > 1 else None
         if self.fleet is not None:
             self.fleet.check_spawn()
@@ -190,6 +190,16 @@ class Simulation(Closing):
                 if self.recorder is not None:
                     self.recorder.close()
             raise
+
+    def _spawn(self, index: int, group: RobotGroup, scene: Scene) -> RobotBody:
+        """Spawn one group's robot; a fleet's error names its entry (`robots[1].robot.initial_pose: ...`)."""
+        try:
+            return group.spawn(scene)
+        except ConfigError as err:
+            if not group.namespace:
+                raise
+            msg = f"robots[{index}].{err}"
+            raise ConfigError(msg) from None
 
     def _now(self) -> int:
         return self.executor.now_ns
