@@ -241,3 +241,25 @@ def test_a_robot_spawned_in_a_wall_is_named_by_its_entry(tmp_path: Path) -> None
     assert (
         len(lines) == 1 and "robots[1].robot.initial_pose: (-1.0, 1.5, 0.0) puts turtlebot3_waffle inside" in lines[0]
     )
+
+
+def test_a_robot_whose_mission_fails_is_named_and_the_run_exits_1(tmp_path: Path) -> None:
+    (tmp_path / "fail.xml").write_text(
+        '<root BTCPP_format="4" main_tree_to_execute="MainTree">\n'
+        '  <BehaviorTree ID="MainTree"><AlwaysFailure name="give_up"/></BehaviorTree>\n</root>\n'
+    )
+    (tmp_path / "tree.xml").write_text(TREE)
+    (tmp_path / "goal.yaml").write_text("goal: [-1.0, -0.5, -2.25]\n")
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(
+        f"name: one_fails\nmax_duration_s: 120\nmission: {{tree: {tmp_path / 'tree.xml'}, locations: {tmp_path / 'goal.yaml'}}}\n"
+        "robots:\n  - {name: robot1}\n"
+        f"  - {{name: robot2, robot: {{initial_pose: {{x_m: 1.5, y_m: -0.2}}}}, mission: {{tree: {tmp_path / 'fail.xml'}}}}}\n"
+    )
+    result = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"), "--json")
+    assert result.returncode == 1, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["robots"] == {"robot1": "SUCCESS", "robot2": "FAILURE"}  # robot1 went on to its goal
+    assert summary["mission_result"] == "FAILURE"
+    assert summary["mission_failure"].startswith("robot2: ")
+    assert "robot1" not in summary["mission_failure"]
