@@ -263,3 +263,17 @@ def test_a_robot_whose_mission_fails_is_named_and_the_run_exits_1(tmp_path: Path
     assert summary["mission_result"] == "FAILURE"
     assert summary["mission_failure"].startswith("robot2: ")
     assert "robot1" not in summary["mission_failure"]
+
+
+def test_a_fleet_run_by_a_relative_path_reruns_from_its_bag(tmp_path: Path) -> None:
+    first, again = tmp_path / "first", tmp_path / "again"
+    ran = run_twin("simulate", "scenarios/house_two_waffles.yaml", "--duration", "2", "--out", str(first), cwd=REPO)
+    assert ran.returncode == 0, ran.stderr
+    rerun = run_twin("simulate", "--from-bag", str(first), "--out", str(again), cwd=tmp_path)
+    assert rerun.returncode == 0, rerun.stderr
+    counts = []
+    for bag in (first, again):
+        with AnyReader([bag]) as reader:
+            counts.append({c.topic: c.msgcount for c in reader.connections})
+    assert counts[0] == counts[1]
+    assert "/robot2/scan" in counts[0]
