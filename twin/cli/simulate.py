@@ -224,6 +224,8 @@ def _refused(summary: RunSummary) -> str:
 
 
 def _result(summary: RunSummary) -> str:
+    if summary.robots:  # a fleet: each robot's
+        return " (" + ", ".join(f"{ns} {result}" for ns, result in summary.robots.items()) + ")"
     return f" (tree {summary.mission_result})" if summary.mission_result in ("SUCCESS", "FAILURE") else ""
 
 
@@ -462,9 +464,7 @@ def _run(
         guard.done.set()
     if provenance is not None and summary.bag_path is not None:
         _check_fmus(provenance, summary.bag_path)
-    failure = ""
-    if summary.mission_result == "FAILURE":
-        failure = getattr(simulation.mission, "failure", "") or "the mission returned FAILURE"
+    failure = simulation.failure if summary.mission_result == "FAILURE" else ""
     if args.json:
         doc = {**dataclasses.asdict(summary), "bag_path": str(summary.bag_path), "mission_failure": failure}
         print(json.dumps(doc, indent=2))

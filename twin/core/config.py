@@ -31,7 +31,16 @@ from twin.core.files import read_input
 from twin.core.numbers import number_problem
 from twin.core.yaml_numbers import compose
 
-__all__ = ["ConfigNode", "build", "load_config", "load_yaml", "location", "read_text_file", "suggest"]
+__all__ = [
+    "ConfigNode",
+    "build",
+    "load_config",
+    "load_yaml",
+    "location",
+    "merge",
+    "read_text_file",
+    "suggest",
+]
 
 T = TypeVar("T")
 
@@ -147,6 +156,11 @@ def _merge(base: yaml.Node, over: yaml.Node) -> yaml.Node:
     out = yaml.MappingNode(over.tag, merged)
     out.start_mark, out.end_mark = over.start_mark, over.end_mark
     return out
+
+
+def merge(base: yaml.Node, over: yaml.Node) -> yaml.Node:
+    """Lay `over` on `base` as `load_config` lays a file on its defaults (see the module docstring)."""
+    return _merge(base, over)
 
 
 def load_config(cls: type[T], path: Path, *, defaults: Path | None = None) -> T:

@@ -23,12 +23,12 @@ every scan draws exactly `count` samples, so the stream does not depend on what 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from twin.world.obstacles import ObstacleField
+from twin.world.obstacles import ObstacleCaster
 from twin.world.robot_model import LidarSpec, RobotModelSpec
 from twin.world.scene import RayCaster, Scene, mask_ranges
 
@@ -48,6 +48,14 @@ class ScanGeometry(NamedTuple):
     num_ranges: int
 
 
+class ObstacleSource(Protocol):
+    """What moves in the world besides its fixed geometry, as a lidar sees it (an `ObstacleField`, other robots)."""
+
+    def caster(self, height_m: float) -> ObstacleCaster | None:
+        """A ray caster over what stands at `height_m` now (None: nothing reaches it)."""
+        ...
+
+
 class Lidar:
     """Produces scans for a robot pose from a `LidarSpec` and the scene's ray caster.
 
@@ -65,7 +73,7 @@ class Lidar:
         caster: RayCaster,
         rng: np.random.Generator | None = None,
         *,
-        obstacles: ObstacleField | None = None,
+        obstacles: ObstacleSource | None = None,
     ) -> None:
         if spec.samples < 1 or spec.count < 1:
             msg = f"lidar {spec.name!r}: samples and samples x resolution must be at least 1"
@@ -114,7 +122,7 @@ class Lidar:
         rng: np.random.Generator | None = None,
         *,
         spec: LidarSpec | None = None,
-        obstacles: ObstacleField | None = None,
+        obstacles: ObstacleSource | None = None,
     ) -> Lidar:
         """Return the robot's lidar in a scene, seeing `obstacles` too (`spec` overrides the robot's).
 

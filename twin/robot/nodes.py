@@ -26,7 +26,7 @@ import functools
 import logging
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -51,8 +51,8 @@ from twin.robot.drivetrain import Drivetrain, WheelState
 from twin.robot.encoders import EncoderModel
 from twin.robot.imu import ImuModel
 from twin.robot.lidar import Lidar
-from twin.world.obstacles import ObstacleField, ObstacleMonitor
-from twin.world.scene import CollisionMonitor, Contact
+from twin.world.obstacles import ObstacleField
+from twin.world.scene import Contact
 
 __all__ = [
     "ClockNode",
@@ -81,6 +81,14 @@ _ODOM_COV = (1e-5, 1e-5, 1e12, 1e12, 1e12, 1e-3)  # gazebo_ros_diff_drive's cova
 Pose7 = tuple[float, float, float, float, float, float, float]
 
 
+class ContactMonitor(Protocol):
+    """The robot's contact check: the contacts at a pose (`CollisionMonitor`, `ObstacleMonitor`, a fleet's)."""
+
+    def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
+        """Return the contacts at this pose (empty when free)."""
+        ...
+
+
 class ContactTracker:
     """The robot's contact sensor: asks the world whether a pose touches it, and remembers the episode.
 
@@ -89,7 +97,7 @@ class ContactTracker:
     episode's beginning and end on `/contacts`.
     """
 
-    def __init__(self, monitor: CollisionMonitor | ObstacleMonitor) -> None:
+    def __init__(self, monitor: ContactMonitor) -> None:
         self.monitor = monitor
         self.contact: tuple[Contact, ...] = ()
         self.in_contact = False  # a contact episode is open

@@ -1,9 +1,9 @@
 """What a run records about itself so that its bag can be traced and re-run (`twin simulate --from-bag`).
 
 `run_provenance` gives the values `Recorder.add_provenance` writes (see `twin.bag.provenance`): the
-twin version, the seed, the duration limit, the resolved scenario as YAML (every path absolute, every
-default filled in: it loads back to the same scenario), and every FMU the drive loaded with its file
-name, SHA-256, model name and GUID / instantiation token.
+twin version, the seed, the duration limit, the resolved scenario as YAML (every path absolute, also
+for a scenario run by a relative path; every default filled in: it loads back to the same scenario),
+and every FMU the drive loaded with its file name, SHA-256, model name and GUID / instantiation token.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def _plain(value: Any) -> Any:
     if isinstance(value, (dict, types.MappingProxyType)):
         return {str(k): _plain(v) for k, v in value.items()}
     if isinstance(value, Path):
-        return str(value)
+        return str(value.absolute())  # a scenario run by a relative path: its files, from anywhere
     if isinstance(value, enum.Enum):
         return value.value
     return value

@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import zlib
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -40,7 +41,7 @@ from twin.robot.fmu_drive import FmuDrive
 from twin.robot.fmu_drivetrain import FmuDrivetrain
 from twin.robot.imu import ImuModel, imu_model_spec
 from twin.robot.kinematic import KinematicDrivetrain, KinematicParams
-from twin.robot.lidar import Lidar
+from twin.robot.lidar import Lidar, ObstacleSource
 from twin.robot.nodes import (
     ContactTracker,
     DiffDriveNode,
@@ -53,6 +54,7 @@ from twin.robot.nodes import (
     RobotStatePublisher,
     tf_pose,
 )
+from twin.sim.fleet import Fleet, FleetMonitor, FleetView
 from twin.sim.rng import RngStreams
 from twin.sim.scenario import (
     BehaviorTreeMission,
@@ -233,6 +235,7 @@ class RobotGroup:
         rng: RngStreams,
         step_ns: int,
         now: Callable[[], int],
+        fleet: Fleet | None = None,
     ) -> None:
         """Build what the robot's nodes simulate; on failure the drive it made is closed again.
 
@@ -242,6 +245,8 @@ class RobotGroup:
             rng: The run's seeded streams.
             step_ns: The physics step.
             now: The executor's clock (ns).
+            fleet: The run's robots when there are several (this group among them): the robot
+                collides with the others and its lidar sees them.
 
         Raises:
             TwinError: Any section that cannot be honoured.
@@ -250,15 +255,18 @@ class RobotGroup:
         self.obstacles = obstacles
         self.step_ns = step_ns
         self._now = now
-        contact: CollisionMonitor | ObstacleMonitor = self.monitor
+        contact: CollisionMonitor | ObstacleMonitor | FleetMonitor = self.monitor
         if obstacles is not None:
             contact = ObstacleMonitor(self.monitor, obstacles)
+        seen: ObstacleSource | None = obstacles
+        if fleet is not None:
+            index = fleet.groups.index(self)
+            contact = FleetMonitor(contact, fleet, index)
+            seen = FleetView(fleet, index)
         self.tracker = ContactTracker(contact)
         robot = self.robot
         self.lidar = (
-            Lidar.from_robot(robot, scene, rng.stream("lidar"), obstacles=obstacles)
-            if robot.lidar is not None
-            else None
+            Lidar.from_robot(robot, scene, rng.stream("lidar"), obstacles=seen) if robot.lidar is not None else None
         )
         self.drive = self._make_drive(self.body.radius_m, contact)
         try:  # from here on, a failure must release the drive (FMU instances) it leaves behind
@@ -297,7 +305,7 @@ class RobotGroup:
             nav = self.navigation
             assert nav is not None and nav.navigates  # a tree mission always has Nav2's stack (or refused)
             navigator = Nav2Navigator(lambda: nav.navigator)
-            return mission.TreeMission(spec, navigator, clock=self._now, seed=self.scenario.seed)
+            return mission.TreeMission(spec, navigator, clock=self._now, seed=self._tree_seed())
         if isinstance(spec, CmdVelScriptMission):
             return mission.CmdVelScript(spec)
         if isinstance(spec, ReplayMission):
@@ -308,6 +316,13 @@ class RobotGroup:
             start_moving(self.drive, *replay.commands.start_velocity)
             return replay
         return mission.WaypointFollower(spec)
+
+    def _tree_seed(self) -> int:
+        """The seed of the tree's own random draws: the scenario's, and for a namespaced robot its own."""
+        seed = self.scenario.seed
+        if not self.namespace:
+            return seed  # one robot: as before groups existed
+        return seed + (zlib.crc32(self.namespace.encode("utf-8")) << 64)
 
     def _wheel_frames(self) -> list[WheelFrame]:
         """(joint, parent, child, T_parent, axis) of the left and right wheel joints, in that order."""
@@ -357,7 +372,9 @@ class RobotGroup:
         )
         return encoders, ekf
 
-    def _make_drive(self, bounding_radius_m: float, monitor: CollisionMonitor | ObstacleMonitor) -> Drivetrain:
+    def _make_drive(
+        self, bounding_radius_m: float, monitor: CollisionMonitor | ObstacleMonitor | FleetMonitor
+    ) -> Drivetrain:
         sc, robot = self.scenario, self.robot
         assert robot.drive is not None
         pose = (sc.robot.initial_pose.x_m, sc.robot.initial_pose.y_m, sc.robot.initial_pose.yaw_rad)

@@ -24,8 +24,10 @@ from twin.robot.fmu_drive import FmuDrive
 from twin.world.obstacles import ObstacleSpec
 
 __all__ = [
+    "ROBOT_SECTIONS",
     "NodeSpec",
     "ReplayMission",
+    "RobotEntry",
     "Ros2Section",
     "Scenario",
     "default_scenario_path",
@@ -438,9 +440,67 @@ def _is_ros_topic_name(name: str) -> bool:
     return all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", part) and "__" not in part for part in name[1:].split("/"))
 
 
+#: The sections of a scenario that belong to one robot: a `robots:` entry may set each of them.
+ROBOT_SECTIONS = (
+    "robot",
+    "drive",
+    "sensors",
+    "odometry",
+    "estimation",
+    "localization",
+    "navigation",
+    "mission",
+    "disturbances",
+)
+
+_ROS_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RobotEntry:
+    """One robot of a fleet (`robots:`): its name, its namespace, and its sections.
+
+    The loader lays the entry's sections over the scenario's top-level ones (`ROBOT_SECTIONS`), so
+    each holds the robot's whole section here.
+    """
+
+    name: str
+    namespace: str | None = None  # null: the name
+    robot: RobotSection
+    mission: BehaviorTreeMission | CmdVelScriptMission | WaypointsMission | ReplayMission | NoMission
+    sensors: SensorsSection = field(default_factory=SensorsSection)
+    drive: KinematicDrive | FmuDrive = field(default_factory=lambda: FmuDrive(fmu="auto", profile="velocity-servo"))
+    odometry: Literal["ekf", "ground_truth"] = "ekf"
+    estimation: EstimationSection = field(default_factory=EstimationSection)
+    disturbances: Disturbances = field(default_factory=Disturbances)
+    localization: LocalizationSection = field(default_factory=LocalizationSection)
+    navigation: NavigationSection = field(default_factory=NavigationSection)
+
+    def __post_init__(self) -> None:
+        if not _ROS_TOKEN.match(self.name):
+            msg = f"name {self.name!r} must be letters, digits and _ (not starting with a digit)"
+            raise ValueError(msg)
+        ns = self.ns
+        if not all(_ROS_TOKEN.match(token) for token in ns.split("/")):
+            msg = (
+                f"namespace {self.namespace!r} is not a ROS namespace: tokens of letters, digits and _ "
+                "(not starting with a digit) joined by /"
+            )
+            raise ValueError(msg)
+
+    @property
+    def ns(self) -> str:
+        """The namespace without its leading and trailing `/` (the name when none is given)."""
+        return (self.namespace if self.namespace is not None else self.name).strip("/")
+
+
 @dataclass(frozen=True, kw_only=True, slots=True)
 class Scenario:
-    """One run: world, robot, sensors, drive, mission, recording, seed and maximum duration."""
+    """One run: world, robot, sensors, drive, mission, recording, seed and maximum duration.
+
+    `robots:` makes a fleet: each entry is one robot under its namespace (`RobotEntry`); without it
+    the top-level sections are the one robot's, with no namespace.
+    """
 
     name: str
     world: WorldSection
@@ -467,6 +527,30 @@ class Scenario:
     # drop (refused, warned once, counted in the summary) or error (the run ends, exit 8).
     non_finite_messages: Literal["drop", "error"] = "drop"
     source_path: Path | None = None  # the scenario file (set by the loader; user modules are found beside it)
+    robots: tuple[RobotEntry, ...] = ()  # a fleet, each under its namespace; empty: the one robot above
+
+    def __post_init__(self) -> None:
+        for key, attr in (("name", "name"), ("namespace", "ns")):
+            seen: dict[str, int] = {}
+            for i, entry in enumerate(self.robots):
+                value = getattr(entry, attr)
+                if value in seen:
+                    msg = f"robots[{seen[value]}] and robots[{i}] have the same {key} {value!r}; give each its own"
+                    raise ValueError(msg)
+                seen[value] = i
+
+    def robot_scenarios(self) -> list[tuple[str, Scenario]]:
+        """Each robot's (namespace, its view of the scenario: its sections at the top level, no `robots`).
+
+        Without `robots:` the one robot, namespace `""`.
+        """
+        if not self.robots:
+            return [("", self)]
+        out = []
+        for entry in self.robots:
+            sections = {name: getattr(entry, name) for name in ROBOT_SECTIONS}
+            out.append((entry.ns, dataclasses.replace(self, robots=(), **sections)))
+        return out
 
 
 def for_ros2_role(scenario: Scenario) -> Scenario:

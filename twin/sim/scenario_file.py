@@ -7,27 +7,55 @@ from pathlib import Path
 
 import yaml
 
-from twin.core.config import load_config
+from twin.core.config import ConfigNode, build, load_yaml, merge
 from twin.sim.replay import with_replay_start
-from twin.sim.scenario import DEFAULTS_PATH, Scenario
+from twin.sim.scenario import DEFAULTS_PATH, ROBOT_SECTIONS, Scenario
 
-__all__ = ["load_scenario", "without_retired_keys"]
+__all__ = ["load_scenario", "with_fleet", "without_retired_keys"]
 
 
 def load_scenario(path: Path) -> Scenario:
     """Load a scenario file laid over the packaged defaults.
 
     A `type: replay` mission with `initial_pose: bag` sets `robot.initial_pose` to the bag's
-    first pose.
+    first pose. Each `robots:` entry's sections are laid over the top-level ones (`with_fleet`).
 
     Raises:
         ConfigError: Naming file, line and key, if the file is unreadable or any key is wrong.
         BagError: If a replay mission's bag is unreadable or lacks its command or pose topic.
     """
-    scenario = load_config(Scenario, path, defaults=DEFAULTS_PATH)
+    node = with_fleet(merge(load_yaml(DEFAULTS_PATH), load_yaml(path)))
+    scenario: Scenario = build(Scenario, node, key="")
     # A scenario recorded in a bag (`--from-bag`) keeps the file it came from, where its nodes' modules are.
     source = scenario.source_path or Path(path).resolve()
     return with_replay_start(dataclasses.replace(scenario, source_path=source))
+
+
+def with_fleet(node: ConfigNode) -> ConfigNode:
+    """The scenario's node with each `robots:` entry laid over the top-level robot sections.
+
+    A fleet of identical robots is then a list of names and poses; anything else about an entry
+    (not a mapping, an unknown key) is left for the builder to name.
+    """
+    if not isinstance(node, yaml.MappingNode):
+        return node
+    fleet = next((v for k, v in node.value if k.value == "robots"), None)
+    if not isinstance(fleet, yaml.SequenceNode):
+        return node
+    top = {k.value: (k, v) for k, v in node.value if k.value in ROBOT_SECTIONS}
+    entries = []
+    for entry in fleet.value:
+        if not isinstance(entry, yaml.MappingNode):
+            entries.append(entry)
+            continue
+        base = yaml.MappingNode("tag:yaml.org,2002:map", list(top.values()))
+        base.start_mark = base.end_mark = entry.start_mark
+        entries.append(merge(base, entry))
+    laid = yaml.SequenceNode(fleet.tag, entries)
+    laid.start_mark, laid.end_mark = fleet.start_mark, fleet.end_mark
+    out = yaml.MappingNode(node.tag, [(k, laid if k.value == "robots" else v) for k, v in node.value])
+    out.start_mark, out.end_mark = node.start_mark, node.end_mark
+    return out
 
 
 _RETIRED_TREE_MISSION_KEYS = ("follower", "planner", "progress")  # the grid stand-in's, retired with it

@@ -33,6 +33,7 @@ from twin.robot.fmu_drivetrain import FmuDrivetrain
 from twin.robot.nodes import ClockNode
 from twin.sim.camera import build_camera
 from twin.sim.executor import Executor, RecordFilter, Sink
+from twin.sim.fleet import AllDone, Fleet
 from twin.sim.launch import load_nodes
 from twin.sim.obstacles import scenario_obstacles
 from twin.sim.provenance import fmu_record, run_provenance
@@ -42,7 +43,7 @@ from twin.sim.rosout import RosoutBridge
 from twin.sim.scenario import Scenario
 from twin.world import RobotModelSpec, build_scene, load_world
 from twin.world.obstacles import ObstacleField
-from twin.world.scene import RobotBody
+from twin.world.scene import RobotBody, Scene
 
 if TYPE_CHECKING:
     from twin.robot.lidar import Lidar
@@ -78,6 +79,7 @@ class RunSummary:
     drive_notes: str = ""  # e.g. commands clamped to the motors' reach ('' when none)
     localization: dict[str, Any] = field(default_factory=dict)  # AMCL vs the true pose ({} without AMCL)
     refused_messages: dict[str, int] = field(default_factory=dict)  # topic -> non-finite messages from users' nodes
+    robots: dict[str, str] = field(default_factory=dict)  # a fleet's robots: namespace -> its mission's result
 
 
 class Simulation(Closing):
@@ -117,15 +119,32 @@ class Simulation(Closing):
         for warning in world.warnings:
             _log.warning("%s", warning)
         # One group per robot (one robot, no namespace: the thesis's system, topic for topic).
-        group = RobotGroup.load(scenario)
-        self.groups = [group]
-        exclude = tuple(g.robot.name for g in self.groups)
+        self.groups = [RobotGroup.load(sc, namespace=ns) for ns, sc in scenario.robot_scenarios()]
+        exclude = tuple(dict.fromkeys(g.robot.name for g in self.groups))
         scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)
-        body = group.spawn(scene)
-        self.obstacles = self._make_obstacles(body)
+        bodies = [self._spawn(i, g, scene) for i, g in enumerate(self.groups)]
+        self.fleet = Fleet(self.groups) if len(self.groups) > 1 else None
+        if self.fleet is not None:
+            self.fleet.check_spawn()
+        self.obstacles = self._make_obstacles(bodies[0])
         self.recorder: Recorder | None = None
         self.executor = Executor(self.step_ns, profile=profile, non_finite=scenario.non_finite_messages)
-        group.build(scene, obstacles=self.obstacles, rng=self._rng, step_ns=self.step_ns, now=self._now)
+        built: list[RobotGroup] = []
+        try:  # a group that fails releases its own drive; the ones built before it are released here
+            for g in self.groups:
+                g.build(
+                    scene,
+                    obstacles=self.obstacles,
+                    rng=self._rng.under(g.namespace),
+                    step_ns=self.step_ns,
+                    now=self._now,
+                    fleet=self.fleet,
+                )
+                built.append(g)
+        except BaseException:
+            for g in built:
+                g.close()
+            raise
         try:  # from here on, a failure must release the drives (FMU instances) the groups hold
             user_nodes = load_nodes(scenario)
             self._run_to_limit = duration_s is not None
@@ -141,9 +160,12 @@ class Simulation(Closing):
             )
             # The robot's camera: it renders only while something takes its images (the recorder, a
             # user's node, the mission's LookForObject), so it joins after the user's nodes are known.
+            if scenario.sensors.camera.enabled and len(self.groups) > 1:
+                msg = "sensors.camera: the camera renders for one robot; with robots: set enabled: false"
+                raise ConfigError(msg)
             camera = build_camera(
                 scenario.sensors.camera,
-                group.robot,
+                self.groups[0].robot,
                 world,
                 self.drive.chassis_state,
                 obstacles=self.obstacles,
@@ -185,8 +207,11 @@ class Simulation(Closing):
                 unused = node.undeclared_overrides()
                 if unused:
                     _log.warning("node %s never declares parameter(s) %s", node.get_name(), ", ".join(unused))
-            drive_node = group.drive_node
-            self.executor.set_physics(drive_node.advance, drive_node.after_advance, pending=group.tracker)
+            if self.fleet is None:
+                drive_node = self.groups[0].drive_node
+                self.executor.set_physics(drive_node.advance, drive_node.after_advance, pending=drive_node.tracker)
+            else:
+                self.executor.set_physics(self.fleet.advance, self.fleet.after_advance, pending=self.fleet)
         except BaseException:
             try:
                 for g in self.groups:
@@ -195,6 +220,16 @@ class Simulation(Closing):
                 if self.recorder is not None:
                     self.recorder.close()
             raise
+
+    def _spawn(self, index: int, group: RobotGroup, scene: Scene) -> RobotBody:
+        """Spawn one group's robot; a fleet's error names its entry (`robots[1].robot.initial_pose: ...`)."""
+        try:
+            return group.spawn(scene)
+        except ConfigError as err:
+            if not group.namespace:
+                raise
+            msg = f"robots[{index}].{err}"
+            raise ConfigError(msg) from None
 
     def _now(self) -> int:
         return self.executor.now_ns
@@ -235,6 +270,12 @@ class Simulation(Closing):
         specs = scenario_obstacles(self.scenario, self._rng.stream("blocks"))
         if not specs:
             return None
+        if len(self.groups) > 1:
+            msg = (
+                "obstacles and blocks are not yet supported with several robots (robots:); "
+                "remove them, or run one robot"
+            )
+            raise ConfigError(msg)
         period_ns = self.step_ns * max(1, round(_OBSTACLE_PERIOD_NS / self.step_ns))
         field = ObstacleField(specs, body, update_period_ns=period_ns)
         pose = self.scenario.robot.initial_pose
@@ -291,6 +332,35 @@ class Simulation(Closing):
             if self.recorder is not None:
                 self.recorder.close()
 
+    def _robot_results(self) -> dict[str, str]:
+        """Each robot's mission result by namespace ({} for one robot)."""
+        if self.fleet is None:
+            return {}
+        return {g.namespace: g.mission.result if g.mission is not None else "none" for g in self.groups}
+
+    def _mission_result(self) -> str:
+        """The mission's result; a fleet's is FAILURE when any robot's is, else every robot's when they agree."""
+        if self.fleet is None:
+            return self.mission.result if self.mission is not None else "none"
+        results = set(self._robot_results().values())
+        if "FAILURE" in results:
+            return "FAILURE"
+        return results.pop() if len(results) == 1 else "running"
+
+    @property
+    def failure(self) -> str:
+        """Why the mission failed ('' unless it did): a fleet's names each robot that failed and its goal."""
+        if self.fleet is None:
+            if self.mission is None or self.mission.result != "FAILURE":
+                return ""
+            return getattr(self.mission, "failure", "") or "the mission returned FAILURE"
+        reasons = [
+            f"{g.namespace}: {getattr(g.mission, 'failure', '') or 'the mission returned FAILURE'}"
+            for g in self.groups
+            if g.mission is not None and g.mission.result == "FAILURE"
+        ]
+        return "; ".join(reasons)
+
     # -- the loop --------------------------------------------------------------------------------
 
     def run(
@@ -316,8 +386,11 @@ class Simulation(Closing):
             self.robot.name,
             self.scenario.seed,
         )
-        mission = self.groups[0].mission_node
-        done = None if mission is None or self._run_to_limit else self.mission  # its `done` ends the run
+        missions = [g.mission for g in self.groups if g.mission_node is not None and g.mission is not None]
+        mission = missions[0] if missions else None
+        done: Any = None
+        if missions and not self._run_to_limit:  # its `done` ends the run (every robot's, for a fleet)
+            done = mission if len(missions) == 1 else AllDone(missions)
         resume_collection()  # `twin simulate` built all this without the cyclic collector: freeze it, resume
         if self.recorder is not None:
             # Start the recorder's wall-clock flush interval with the loop, not when the recorder was made:
@@ -349,11 +422,12 @@ class Simulation(Closing):
             topics={name: t.count for name, t in self.executor.topics.items() if t.publishers},
             contacts=self.contacts,
             ended_by=ended_by,
-            mission_result=self.mission.result if self.mission is not None else "none",
+            mission_result=self._mission_result(),
             seed=self.scenario.seed,
             breakdown_s=breakdown,
             drive=self.drive.label,
             drive_notes=self.drive.saturation.describe() if isinstance(self.drive, FmuDrivetrain) else "",
             localization=self.navigation.log.summary() if self.navigation is not None else {},
             refused_messages=dict(self.executor.refused),
+            robots=self._robot_results(),
         )

@@ -18,6 +18,7 @@ scenario's obstacles that appear, vanish and walk live beside the Scene (`twin.w
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Iterable, Iterator, Sequence
@@ -562,6 +563,8 @@ class RobotBody:
         self._local: list[Mat4] = []
         self._objects: list[fcl.CollisionObject] = []
         self._owner: dict[int, Collision] = {}
+        self._parts: list[_Obstacle] = []
+        self._sections: dict[float, tuple[F64, F64]] = {}
         radius = 0.0
         z_lo, z_hi = math.inf, -math.inf
         self.base_height_m = base_height_m
@@ -579,6 +582,17 @@ class RobotBody:
             self._local.append(T)
             self._objects.append(obj)
             self._owner[id(geometry)] = collision
+            # The shape in the base frame, for its section at a lidar's height (`section`).
+            placed = MeshArrays(pts, mesh.faces)
+            self._parts.append(
+                _Obstacle(
+                    collision=dataclasses.replace(collision, T_world=T),
+                    mesh=placed,
+                    bounds=placed.bounds(),
+                    fcl_object=obj,
+                    fcl_geometry=geometry,
+                )
+            )
         if not self._objects:
             msg = "the robot has no collision shapes to check against the world"
             raise WorldError(msg)
@@ -594,8 +608,12 @@ class RobotBody:
             self._bound_geometry, fcl.Transform(np.eye(3), np.array([0.0, 0.0, (z_lo + z_hi) / 2]))
         )
         self._bound_z = (z_lo + z_hi) / 2
+        self._placed_at: tuple[float, float, float] | None = None
 
     def _place(self, x: float, y: float, yaw: float) -> None:
+        if (x, y, yaw) == self._placed_at:  # e.g. a robot stalled against another: asked again at one pose
+            return
+        self._placed_at = (x, y, yaw)
         c, s = math.cos(yaw), math.sin(yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         offset = np.array([x, y, 0.0])
@@ -609,6 +627,81 @@ class RobotBody:
     def owner(self, geometry: object) -> Collision | None:
         """Return the robot collision an FCL geometry belongs to."""
         return self._owner.get(id(geometry))
+
+    def section(self, height_m: float) -> tuple[F64, F64]:
+        """Return where the plane at `height_m` above the floor cuts the robot's shapes, in its base frame.
+
+        Returns:
+            Segments (M, 4: x0, y0, x1, y1) and circles (K, 3: cx, cy, r), m; what another robot's
+            lidar at that height sees of this one.
+        """
+        key = round(float(height_m), 9)
+        cached = self._sections.get(key)
+        if cached is None:
+            segments: list[tuple[float, float, float, float]] = []
+            circles: list[tuple[float, float, float]] = []
+            for part in self._parts:
+                if not part.bounds[0, 2] - 1e-9 <= key <= part.bounds[1, 2] + 1e-9:
+                    continue  # below or above the plane (a wheel under a lidar): nothing to cut
+                segs, circs = _section(part, key)
+                segments += segs
+                circles += circs
+            cached = (
+                np.array(segments, dtype=np.float64).reshape(-1, 4),
+                np.array(circles, dtype=np.float64).reshape(-1, 3),
+            )
+            self._sections[key] = cached
+        return cached
+
+    def distance_to(
+        self, pose: tuple[float, float, float], other: RobotBody, other_pose: tuple[float, float, float]
+    ) -> float:
+        """Return the distance between this robot's shapes at `pose` and another's at `other_pose` (0: touching)."""
+        self._place(*pose)
+        other._place(*other_pose)
+        data = fcl.DistanceData()
+        self._manager.distance(other._manager, data, fcl.defaultDistanceCallback)
+        return max(0.0, float(data.result.min_distance))
+
+    def contacts_with(
+        self,
+        pose: tuple[float, float, float],
+        other: RobotBody,
+        other_pose: tuple[float, float, float],
+        *,
+        max_contacts: int = 8,
+    ) -> list[tuple[Collision, Collision, tuple[float, float, float], tuple[float, float, float], float]]:
+        """Return the contacts of this robot at `pose` with another at `other_pose`, deepest first.
+
+        Returns:
+            (own collision, other's collision, point, normal pointing from the other into this robot, depth m).
+        """
+        self._place(*pose)
+        other._place(*other_pose)
+        request = fcl.CollisionRequest(num_max_contacts=max_contacts, enable_contact=True)
+        data = fcl.CollisionData(request=request)
+        self._manager.collide(other._manager, data, fcl.defaultCollisionCallback)
+        out = []
+        for contact in data.result.contacts:
+            mine, theirs = self.owner(contact.o1), other.owner(contact.o2)
+            normal = -np.asarray(contact.normal, dtype=float)
+            if mine is None:
+                mine, theirs = self.owner(contact.o2), other.owner(contact.o1)
+                normal = -normal
+            if mine is None or theirs is None:
+                continue
+            point = (float(contact.pos[0]), float(contact.pos[1]), float(contact.pos[2]))
+            out.append(
+                (
+                    mine,
+                    theirs,
+                    point,
+                    (float(normal[0]), float(normal[1]), float(normal[2])),
+                    max(0.0, float(contact.penetration_depth)),
+                )
+            )
+        out.sort(key=lambda c: -c[4])
+        return out
 
 
 class Scene:

@@ -104,3 +104,48 @@ def test_a_bag_recorded_before_the_grid_was_retired_loads_without_its_grid_keys(
     cleaned.write_text(without_retired_keys(recorded))
     again = load_scenario(cleaned)
     assert dataclasses.replace(again, source_path=None) == dataclasses.replace(scenario, source_path=None)
+
+
+def test_a_robots_entry_is_laid_over_the_top_level_sections(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        "name: t\n"
+        "drive: {type: kinematic}\n"
+        "robots:\n"
+        "  - {name: robot1}\n"
+        "  - name: robot2\n"
+        "    namespace: /fleet/second\n"
+        "    robot: {initial_pose: {x_m: 1.5}}\n"
+        "    drive: {max_wheel_acceleration_mps2: 2.0}\n"
+    )
+    scenario = load_scenario(path)
+    (ns1, one), (ns2, two) = scenario.robot_scenarios()
+    assert (ns1, ns2) == ("robot1", "fleet/second")
+    assert one.robot.initial_pose.x_m == 0.0 and two.robot.initial_pose.x_m == 1.5
+    assert one.robot.model == two.robot.model == "turtlebot3_waffle"  # the top level's, kept under the entry's pose
+    assert one.drive.type == two.drive.type == "kinematic"
+    assert (one.drive.max_wheel_acceleration_mps2, two.drive.max_wheel_acceleration_mps2) == (1.0, 2.0)
+    assert one.robots == () and one.world == scenario.world  # a robot's view: its sections, the one world
+
+
+def test_without_robots_the_scenario_is_the_one_robot_without_a_namespace() -> None:
+    scenario = load_scenario(default_scenario_path())
+    assert scenario.robot_scenarios() == [("", scenario)]
+
+
+def test_a_recorded_fleet_scenario_loads_back_the_same(tmp_path: Path) -> None:
+    from twin.sim.provenance import scenario_yaml
+
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nrobots: [{name: a}, {name: b, robot: {initial_pose: {y_m: 1.0}}}]\n")
+    scenario = load_scenario(path)
+    again = tmp_path / "again.yaml"
+    again.write_text(scenario_yaml(scenario))
+    assert load_scenario(again).robots == scenario.robots
+
+
+def test_a_robots_entry_that_is_not_a_mapping_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nrobots: [robot1]\n")
+    with pytest.raises(ConfigError, match=rf"^{path}:2: robots\[0\]: expected a mapping"):
+        load_scenario(path)

@@ -1,0 +1,279 @@
+"""Two robots in one world (`robots:`), read back from the bag of a whole run (`twin simulate`).
+
+Two Waffles in the house, each with its own Nav2 stack and its own one-goal mission: both reach
+their goals, every robot topic is under the robot's namespace as nav2_bringup's multi-robot launch
+names them, each namespace's TF is one tree, and each robot's lidar sees the other's body where the
+ground truth puts it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+
+from tests.conftest import REPO, run_twin
+from twin.sim.robot_group import scenario_robot
+from twin.sim.scenario_file import load_scenario
+
+TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
+  <BehaviorTree ID="MainTree"><GoToPose name="go" loc="goal"/></BehaviorTree>
+</root>
+"""
+
+SCENARIO = """
+name: two_waffles
+max_duration_s: 120
+mission: {{tree: {tree}}}
+robots:
+  - name: robot1
+    robot: {{initial_pose: {{x_m: 0.0, y_m: 0.0, yaw_rad: 0.0}}}}
+    mission: {{locations: {goal1}}}
+  - name: robot2
+    robot: {{initial_pose: {{x_m: 1.5, y_m: -0.2, yaw_rad: 0.0}}}}
+    mission: {{locations: {goal2}}}
+"""
+
+# robot1 goes back to the thesis's location1, robot2 on to its location3: each its own way.
+GOALS = {"robot1": (-1.0, -0.5, -2.25), "robot2": (4.0, 0.5, 1.571)}
+
+
+@pytest.fixture(scope="module")
+def fleet_run(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[dict[str, Any], dict[str, list[tuple[int, Any]]], Path]:
+    tmp = tmp_path_factory.mktemp("fleet")
+    (tmp / "tree.xml").write_text(TREE)
+    files = {}
+    for name, (x, y, yaw) in GOALS.items():
+        files[name] = tmp / f"{name}_locations.yaml"
+        files[name].write_text(f"goal: [{x}, {y}, {yaw}]\n")
+    scenario = tmp / "two.yaml"
+    scenario.write_text(SCENARIO.format(tree=tmp / "tree.xml", goal1=files["robot1"], goal2=files["robot2"]))
+    bag = tmp / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    messages: dict[str, list[tuple[int, Any]]] = {}
+    with AnyReader([bag]) as reader:
+        for con, t_ns, raw in reader.messages():
+            if con.topic.endswith(("/scan", "/tf", "/tf_static", "/ground_truth/odom")):
+                messages.setdefault(con.topic, []).append((t_ns, reader.deserialize(raw, con.msgtype)))
+            else:
+                messages.setdefault(con.topic, []).append((t_ns, None))
+    return summary, messages, scenario
+
+
+def test_both_robots_reach_their_own_goals(fleet_run: tuple[dict[str, Any], Any, Path]) -> None:
+    summary, messages, _ = fleet_run
+    assert summary["robots"] == {"robot1": "SUCCESS", "robot2": "SUCCESS"}, summary
+    assert summary["mission_result"] == "SUCCESS"
+    assert summary["contacts"] == 0
+    for name, (x, y, _) in GOALS.items():
+        _, last = messages[f"/{name}/ground_truth/odom"][-1]
+        p = last.pose.pose.position
+        assert math.hypot(p.x - x, p.y - y) < 0.5, (name, p)
+
+
+def test_every_robot_topic_is_under_its_namespace(fleet_run: tuple[dict[str, Any], Any, Path]) -> None:
+    _, messages, _ = fleet_run
+    outside = {t for t in messages if not t.startswith(("/robot1/", "/robot2/"))}
+    assert outside == {"/clock", "/rosout"}
+    for name in GOALS:
+        for topic in ("scan", "cmd_vel", "odom", "tf", "tf_static", "amcl_pose", "plan", "map"):
+            assert f"/{name}/{topic}" in messages, (name, topic)
+    stamps = [t for t, _ in messages["/clock"]]
+    assert len(stamps) == len(set(stamps))  # one clock for the world, not one per robot
+
+
+def test_each_namespace_holds_one_tf_tree(fleet_run: tuple[dict[str, Any], Any, Path]) -> None:
+    _, messages, _ = fleet_run
+    for name in GOALS:
+        parent: dict[str, str] = {}
+        for topic in (f"/{name}/tf_static", f"/{name}/tf"):
+            for _, msg in messages[topic]:
+                for tf in msg.transforms:
+                    parent.setdefault(tf.child_frame_id, tf.header.frame_id)
+        assert parent["odom"] == "map" and parent["base_footprint"] == "odom"
+        roots = set()
+        for child in list(parent):
+            top = child
+            while top in parent:
+                top = parent[top]
+            roots.add(top)
+        assert roots == {"map"}, (name, parent)
+
+
+def _pose_at(messages: list[tuple[int, Any]], t_ns: int) -> tuple[float, float, float]:
+    stamps = [t for t, _ in messages]
+    i = int(np.argmin(np.abs(np.array(stamps) - t_ns)))
+    pose = messages[i][1].pose.pose
+    q = pose.orientation
+    return pose.position.x, pose.position.y, 2.0 * math.atan2(q.z, q.w)
+
+
+@pytest.mark.parametrize(("me", "other"), [("robot1", "robot2"), ("robot2", "robot1")])
+def test_each_lidar_sees_the_other_robot_where_it_truly_is(
+    fleet_run: tuple[dict[str, Any], Any, Path], me: str, other: str
+) -> None:
+    _, messages, scenario_path = fleet_run
+    robot = scenario_robot(load_scenario(scenario_path).robot_scenarios()[0][1])
+    lidar = robot.lidar
+    assert lidar is not None
+    # The other robot's lidar housing is what stands at lidar height (the Waffle's base is lower).
+    housing = next(c for c in robot.collisions if c.link.endswith("base_scan"))
+    hx, hr = float(housing.T_world[0, 3]), float(housing.geometry.radius_m)  # type: ignore[attr-defined]
+    t_ns, scan = messages[f"/{me}/scan"][0]  # both still at their spawn poses
+    mx, my, myaw = _pose_at(messages[f"/{me}/ground_truth/odom"], t_ns)
+    ox, oy, oyaw = _pose_at(messages[f"/{other}/ground_truth/odom"], t_ns)
+    sx, sy = mx + math.cos(myaw) * lidar.mount.x_m, my + math.sin(myaw) * lidar.mount.x_m
+    cx, cy = ox + math.cos(oyaw) * hx, oy + math.sin(oyaw) * hx
+    distance = math.hypot(cx - sx, cy - sy) - hr
+    bearing = math.remainder(math.atan2(cy - sy, cx - sx) - myaw, math.tau)
+    beam = round((bearing - scan.angle_min) / scan.angle_increment) % len(scan.ranges)
+    near = [float(scan.ranges[(beam + k) % len(scan.ranges)]) for k in (-1, 0, 1)]
+    assert min(abs(r - distance) for r in near) < 4 * max(lidar.noise_std_m, 0.005) + 0.01, (near, distance)
+
+
+def test_a_fleet_scenario_with_an_unknown_per_robot_key_is_refused(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nrobots:\n  - {name: a, robot: {initial_pos: {x_m: 1}}}\n")
+    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f"twin: error: {bad}:3: robots[0].robot.initial_pos: unknown key; did you mean 'initial_pose'?"
+    ]
+    assert not (tmp_path / "bag").exists()
+
+
+@pytest.mark.parametrize(
+    ("entries", "message"),
+    [
+        ("[{name: a}, {name: a}]", "robots[0] and robots[1] have the same name 'a'; give each its own"),
+        ("[{name: a}, {name: b, namespace: a}]", "robots[0] and robots[1] have the same namespace 'a'"),
+        ("[{name: a, namespace: 'x-y'}]", "namespace 'x-y' is not a ROS namespace"),
+    ],
+)
+def test_robot_names_and_namespaces_are_checked(tmp_path: Path, entries: str, message: str) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"name: x\nrobots: {entries}\n")
+    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], lines
+
+
+def test_robots_spawned_overlapping_are_refused(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nrobots:\n  - {name: a}\n  - {name: b, robot: {initial_pose: {x_m: 0.2, y_m: 0.0}}}\n")
+    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        "twin: error: robots[0] (a) and robots[1] (b) are spawned overlapping (0.200 m apart); "
+        "move one robot's initial_pose"
+    ]
+
+
+def test_the_shipped_two_robot_scenario_loads_with_opposite_tours() -> None:
+    scenario = load_scenario(REPO / "scenarios" / "house_two_waffles.yaml")
+    (ns1, one), (ns2, two) = scenario.robot_scenarios()
+    assert (ns1, ns2) == ("robot1", "robot2")
+    assert one.mission != two.mission  # the second robot reads the locations in the opposite order
+    assert one.robot.model == two.robot.model == "turtlebot3_waffle"
+
+
+EMPTY_WORLD = REPO.parent / "shared" / "fixtures" / "gazebo_classic" / "worlds" / "empty_world.world"
+
+HEAD_ON = f"""
+name: head_on
+world: {{sdf: {EMPTY_WORLD}}}
+localization: {{type: none}}
+drive: {{type: kinematic}}
+mission:
+  type: cmd_vel_script
+  rate_hz: 10
+  segments: [{{duration_s: 8.0, linear_mps: 0.15}}]
+robots:
+  - {{name: robot1, robot: {{initial_pose: {{x_m: 0.0, y_m: 0.0, yaw_rad: 0.0}}}}}}
+  - {{name: robot2, robot: {{initial_pose: {{x_m: 1.2, y_m: 0.0, yaw_rad: 3.141592653589793}}}}}}
+"""
+
+
+def test_robots_driving_head_on_collide_and_the_contact_names_both(tmp_path: Path) -> None:
+    scenario = tmp_path / "head_on.yaml"
+    scenario.write_text(HEAD_ON)
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["contacts"] >= 1
+    contacts: dict[str, list[Any]] = {}
+    truth: dict[str, list[tuple[int, Any]]] = {}
+    with AnyReader([bag]) as reader:
+        for con, t_ns, raw in reader.messages():
+            if con.topic.endswith("/contacts"):
+                contacts.setdefault(con.topic, []).append(reader.deserialize(raw, con.msgtype))
+            elif con.topic.endswith("/ground_truth/odom"):
+                truth.setdefault(con.topic, []).append((t_ns, reader.deserialize(raw, con.msgtype)))
+    first = contacts["/robot1/contacts"][0]
+    fields = {name: getattr(first, name) for name in first.__dataclass_fields__}
+    text = " ".join(str(v) for v in fields.values())
+    assert "robot2::" in text and "turtlebot3_waffle::" in text, fields  # the other robot's link, and its own
+    # They stopped against each other: a Waffle's base reaches 0.069 m ahead of its origin (its box,
+    # 0.266 m long, centred 0.064 m behind it), so face to face their origins stop about 0.138 m apart.
+    gaps = []
+    for (_, a), (_, b) in zip(truth["/robot1/ground_truth/odom"], truth["/robot2/ground_truth/odom"], strict=False):
+        pa, pb = a.pose.pose.position, b.pose.pose.position
+        gaps.append(math.hypot(pa.x - pb.x, pa.y - pb.y))
+    assert 0.135 < min(gaps) < 0.2, min(gaps)
+
+
+def test_a_robot_spawned_in_a_wall_is_named_by_its_entry(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nrobots: [{name: a}, {name: b, robot: {initial_pose: {x_m: -1.0, y_m: 1.5}}}]\n")
+    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert (
+        len(lines) == 1 and "robots[1].robot.initial_pose: (-1.0, 1.5, 0.0) puts turtlebot3_waffle inside" in lines[0]
+    )
+
+
+def test_a_robot_whose_mission_fails_is_named_and_the_run_exits_1(tmp_path: Path) -> None:
+    (tmp_path / "fail.xml").write_text(
+        '<root BTCPP_format="4" main_tree_to_execute="MainTree">\n'
+        '  <BehaviorTree ID="MainTree"><AlwaysFailure name="give_up"/></BehaviorTree>\n</root>\n'
+    )
+    (tmp_path / "tree.xml").write_text(TREE)
+    (tmp_path / "goal.yaml").write_text("goal: [-1.0, -0.5, -2.25]\n")
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(
+        f"name: one_fails\nmax_duration_s: 120\nmission: {{tree: {tmp_path / 'tree.xml'}, locations: {tmp_path / 'goal.yaml'}}}\n"
+        "robots:\n  - {name: robot1}\n"
+        f"  - {{name: robot2, robot: {{initial_pose: {{x_m: 1.5, y_m: -0.2}}}}, mission: {{tree: {tmp_path / 'fail.xml'}}}}}\n"
+    )
+    result = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"), "--json")
+    assert result.returncode == 1, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["robots"] == {"robot1": "SUCCESS", "robot2": "FAILURE"}  # robot1 went on to its goal
+    assert summary["mission_result"] == "FAILURE"
+    assert summary["mission_failure"].startswith("robot2: ")
+    assert "robot1" not in summary["mission_failure"]
+
+
+def test_a_fleet_run_by_a_relative_path_reruns_from_its_bag(tmp_path: Path) -> None:
+    first, again = tmp_path / "first", tmp_path / "again"
+    ran = run_twin("simulate", "scenarios/house_two_waffles.yaml", "--duration", "2", "--out", str(first), cwd=REPO)
+    assert ran.returncode == 0, ran.stderr
+    rerun = run_twin("simulate", "--from-bag", str(first), "--out", str(again), cwd=tmp_path)
+    assert rerun.returncode == 0, rerun.stderr
+    counts = []
+    for bag in (first, again):
+        with AnyReader([bag]) as reader:
+            counts.append({c.topic: c.msgcount for c in reader.connections})
+    assert counts[0] == counts[1]
+    assert "/robot2/scan" in counts[0]

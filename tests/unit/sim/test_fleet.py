@@ -1,0 +1,90 @@
+"""The fleet's contact check and lidar view: what one robot knows of the others, checked against FCL and by hand."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from twin.core.errors import ConfigError
+from twin.sim.fleet import Fleet, FleetMonitor, FleetView
+from twin.sim.robot_group import scenario_robot
+from twin.sim.scenario import default_scenario_path
+from twin.sim.scenario_file import load_scenario
+from twin.world.scene import Contact, RobotBody
+
+
+class _Still:
+    """A drive standing at a pose (what the fleet reads of it)."""
+
+    def __init__(self, x: float, y: float, yaw: float) -> None:
+        self.pose = (x, y, yaw)
+
+    def chassis_state(self) -> Any:
+        return SimpleNamespace(x_m=self.pose[0], y_m=self.pose[1], yaw_rad=self.pose[2])
+
+
+class _OpenWorld:
+    """No walls: nothing but the other robots limits the robot."""
+
+    def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
+        return ()
+
+    def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
+        return math.inf
+
+
+def _group(namespace: str, pose: tuple[float, float, float]) -> Any:
+    robot = scenario_robot(load_scenario(default_scenario_path()))
+    body = RobotBody(robot.collisions, base_height_m=robot.base_height_m)
+    return SimpleNamespace(namespace=namespace, body=body, drive=_Still(*pose), scenario=None, robot=robot)
+
+
+def test_the_free_distance_to_another_robot_never_exceeds_the_true_distance() -> None:
+    me, other = _group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (0.6, 0.1, 1.0))
+    fleet = Fleet([me, other])
+    monitor = FleetMonitor(_OpenWorld(), fleet, 0)
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        pose = (float(rng.uniform(-0.1, 0.5)), float(rng.uniform(-0.3, 0.4)), float(rng.uniform(-math.pi, math.pi)))
+        free = monitor.free_m(*pose)
+        true = me.body.distance_to(pose, other.body, other.drive.pose)
+        assert free <= true + 1e-9, (pose, free, true)
+        assert (monitor.check(*pose) != ()) == (true <= 1e-4), (pose, true)  # FCL's contact tolerance
+
+
+def test_a_contact_with_another_robot_names_its_namespace_and_link() -> None:
+    fleet = Fleet([_group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (0.13, 0.0, math.pi))])
+    contacts = FleetMonitor(_OpenWorld(), fleet, 0).check(0.0, 0.0, 0.0)
+    assert contacts
+    assert contacts[0].model == "robot2"
+    assert contacts[0].link == "robot2::turtlebot3_waffle::base_link"
+    assert contacts[0].robot_link == "turtlebot3_waffle::base_link"
+
+
+def test_robots_spawned_apart_pass_and_overlapping_ones_are_named() -> None:
+    Fleet([_group("a", (0.0, 0.0, 0.0)), _group("b", (1.0, 0.0, 0.0))]).check_spawn()
+    with pytest.raises(ConfigError, match=r"robots\[0\] \(a\) and robots\[1\] \(b\) are spawned overlapping"):
+        Fleet([_group("a", (0.0, 0.0, 0.0)), _group("b", (0.1, 0.0, 0.0))]).check_spawn()
+
+
+def test_the_lidar_view_holds_the_other_robots_lidar_housing_where_it_stands() -> None:
+    me, other = _group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (2.0, 1.0, math.pi / 2))
+    view = FleetView(Fleet([me, other]), 0)
+    height = me.robot.base_height_m + me.robot.lidar.mount.z_m
+    caster = view.caster(height)
+    assert caster is not None
+    segments, circles = caster.shapes
+    assert len(segments) == 0 and len(circles) == 1  # a Waffle's base is below its lidar: only the housing
+    cx, cy, r = circles[0]
+    # The housing stands 0.049 m behind the base frame's origin; turned by 90 degrees, that is -y.
+    assert (cx, cy, r) == pytest.approx((2.0, 1.0 - 0.049, 0.055), abs=1e-9)
+    # Nothing of the robots at 0.3 m: above every shape of a Waffle.
+    assert view.caster(0.3) is None
+    # The other robot moves: the view follows it.
+    other.drive.pose = (3.0, 1.0, math.pi / 2)
+    moved = view.caster(height)
+    assert moved is not None and moved.shapes[1][0][0] == pytest.approx(3.0)
