@@ -22,6 +22,7 @@ meets them, unknown everywhere else (outside the walls and inside solid objects)
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
@@ -102,18 +103,21 @@ def _read_image(path: Path, where: str) -> tuple[NDArray[np.float64], NDArray[np
         msg = f"{where}: map image {str(path)!r} not found; check 'image:' (relative to the YAML's folder)"
         raise ConfigError(msg)
     try:
-        with Image.open(path) as img:
-            img.load()
-            bands = img.getbands()
-            alpha = np.asarray(img.getchannel("A"), dtype=np.float64) if "A" in bands else None
-            if img.mode in ("1", "L", "P", "LA", "I", "I;16", "F"):
-                gray = img.convert("L") if img.mode in ("1", "P", "LA") else img
-                shade = np.asarray(gray, dtype=np.float64)
-                if img.mode.startswith("I") and shade.max(initial=0) > 255:
-                    shade = shade / 257.0
-            else:
-                rgb = np.asarray(img.convert("RGB"), dtype=np.float64)
-                shade = rgb.mean(axis=2)
+        # Its size was checked against memory before (check_map_image): PIL's own bomb warning is noise here.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as img:
+                img.load()
+                bands = img.getbands()
+                alpha = np.asarray(img.getchannel("A"), dtype=np.float64) if "A" in bands else None
+                if img.mode in ("1", "L", "P", "LA", "I", "I;16", "F"):
+                    gray = img.convert("L") if img.mode in ("1", "P", "LA") else img
+                    shade = np.asarray(gray, dtype=np.float64)
+                    if img.mode.startswith("I") and shade.max(initial=0) > 255:
+                        shade = shade / 257.0
+                else:
+                    rgb = np.asarray(img.convert("RGB"), dtype=np.float64)
+                    shade = rgb.mean(axis=2)
     except (OSError, UnidentifiedImageError, ValueError, SyntaxError, Image.DecompressionBombError) as err:
         msg = f"{where}: map image {str(path)!r} cannot be read ({err}); give a valid PGM or PNG"
         raise ConfigError(msg) from None
