@@ -5,9 +5,11 @@ Every process that starts DDS runs inside a network namespace of its own with on
 even if a configuration were wrong. Where the namespace cannot be made the tests are skipped,
 saying so (in CI, which installs what they need, they fail instead); they never run outside it.
 
-The C++ peer (tests/ros2/fastdds_peer.cpp) is built here with g++ against Debian's Fast DDS 2.9
-(`apt-get install g++ libfastrtps-dev libfastcdr-dev`), ROS 2 Humble's default middleware: an
-implementation independent of the twin's, speaking ROS 2's topic and type names.
+The C++ peer (tests/ros2/fastdds_peer.cpp) is built here with g++ against Debian's Fast DDS 2.9,
+ROS 2 Humble's default middleware: an implementation independent of the twin's, speaking ROS 2's
+topic and type names. Its message types are generated here by Fast DDS-Gen from ROS 2's message
+definitions in IDL (tests/ros2/idl/), registered under rmw_fastrtps's type names
+(`apt-get install g++ libfastrtps-dev libfastcdr-dev fastddsgen default-jre-headless`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from tests.conftest import REPO
 pytestmark = pytest.mark.slow
 
 PEER_SOURCE = REPO / "tests" / "ros2" / "fastdds_peer.cpp"
+PEER_IDL = REPO / "tests" / "ros2" / "idl"  # <package>/msg/<Message>.idl, as rosidl_adapter lays them out
 LISTENER = REPO / "tests" / "ros2" / "cyclone_listener.py"
 FASTDDS_HEADER = Path("/usr/include/fastdds/dds/domain/DomainParticipant.hpp")
 
@@ -129,18 +132,49 @@ def test_dds_unable_to_start_is_one_line_naming_why_exit_2_and_no_bag(tmp_path: 
     assert not bag.exists()
 
 
+def _generate_types(idl_files: list[Path], out: Path) -> list[Path]:
+    """C++ types for `idl_files` by fastddsgen, each package's into out/<package>/msg: its sources."""
+    sources: list[Path] = []
+    for package_dir in sorted({f.parent for f in idl_files}):
+        target = out / package_dir.relative_to(PEER_IDL)
+        target.mkdir(parents=True)
+        files = sorted(f for f in idl_files if f.parent == package_dir)
+        # -cs: ROS names a field after its type (`Pose pose`), which IDL's case-insensitive rule refuses;
+        # -typeros2: each type registers under rmw_fastrtps's name (sensor_msgs::msg::dds_::LaserScan_).
+        gen = subprocess.run(
+            ["fastddsgen", "-cs", "-typeros2", "-replace", "-I", str(PEER_IDL), "-d", str(target)]
+            + [str(f.relative_to(PEER_IDL)) for f in files],
+            cwd=PEER_IDL,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        assert gen.returncode == 0, gen.stdout + gen.stderr
+        # It also writes the files each one includes; only a package's own are compiled, once.
+        for f in files:
+            sources += [target / f"{f.stem}.cxx", target / f"{f.stem}PubSubTypes.cxx"]
+    return sources
+
+
 @pytest.fixture(scope="module")
 def fastdds_peer(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The Fast DDS C++ peer, built with g++ against Debian's libfastrtps-dev."""
+    """The Fast DDS C++ peer, on types fastddsgen generates from ROS 2's IDL, built against libfastrtps-dev."""
     compiler = shutil.which("g++")
-    if compiler is None or not FASTDDS_HEADER.is_file():
-        why = "the Fast DDS peer needs g++ and Fast DDS: apt-get install g++ libfastrtps-dev libfastcdr-dev"
+    if compiler is None or not FASTDDS_HEADER.is_file() or shutil.which("fastddsgen") is None:
+        why = (
+            "the Fast DDS peer needs g++, Fast DDS and Fast DDS-Gen: "
+            "apt-get install g++ libfastrtps-dev libfastcdr-dev fastddsgen default-jre-headless"
+        )
         if os.environ.get("CI"):  # .ci/run installs them: there the interop test must run
             pytest.fail(why)
         pytest.skip(why)
-    exe = tmp_path_factory.mktemp("fastdds") / "fastdds_peer"
+    build_dir = tmp_path_factory.mktemp("fastdds")
+    sources = _generate_types(sorted(PEER_IDL.rglob("*.idl")), build_dir / "types")
+    exe = build_dir / "fastdds_peer"
     build = subprocess.run(
-        [compiler, "-std=c++17", "-O1", "-o", str(exe), str(PEER_SOURCE), "-lfastrtps", "-lfastcdr"],
+        [compiler, "-std=c++17", "-O1", "-I", str(build_dir / "types"), "-o", str(exe), str(PEER_SOURCE)]
+        + [str(s) for s in sources]
+        + ["-lfastrtps", "-lfastcdr"],
         capture_output=True,
         text=True,
         check=False,
@@ -161,8 +195,9 @@ def test_a_fast_dds_peer_reads_scan_odom_tf_clock_as_the_bag_holds_them_and_its_
         f"{twin_command('--ros2', '--ros2-role', 'simulator', '--duration', '12', '--out', str(bag))} 2> {err} &\n"
         "pid=$!; i=0\n"
         f'until grep -q "ROS 2 domain" {err} || [ $i -ge 1200 ]; do sleep 0.1; i=$((i+1)); done\n'
-        f"{fastdds_peer} 0 {heard_path} {vx} 0.0 180\n"
-        f"wait $pid; code=$?; cat {err} >&2; exit $code\n"
+        f"{fastdds_peer} 0 {heard_path} {vx} 0.0 180; peer=$?\n"
+        f"wait $pid; code=$?; cat {err} >&2\n"
+        '[ $peer -eq 0 ] || { echo "fastdds_peer exited $peer" >&2; exit 1; }; exit $code\n'
     )
     result = in_namespace(script)
     assert result.returncode == 0, result.stderr
