@@ -285,3 +285,25 @@ def test_a_live_paced_run_records_the_same_messages_as_a_plain_one(tmp_path: Pat
             bags.append([(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()])
     assert len(bags[0]) > 1000
     assert bags[0] == bags[1]
+
+
+def test_a_live_search_run_shows_the_cameras_frames_as_the_bag_records_them(tmp_path: Path) -> None:
+    # Foxglove's Image panel on a live run: the camera's JPEG frames and camera_info reach the client
+    # with the bytes the bag records at the same times.
+    bag = tmp_path / "search"
+    scenario = str(REPO / "scenarios" / "house_search_queue.yaml")
+    proc, url = start_twin("simulate", scenario, "--live", "--speed", "4", "--duration", "3", "--out", str(bag))
+    topics = ["/camera/image_raw/compressed", "/camera/camera_info"]
+    seen = asyncio.run(watch(url, topics, timeout_s=120))
+    code, _, err = finish(proc)
+    assert code in (0, 1), err  # a 3 s run of the search ends by its duration
+    assert seen.channels["/camera/image_raw/compressed"]["schemaName"] == "sensor_msgs/msg/CompressedImage"
+    recorded = bag_messages(bag)
+    for topic in topics:
+        assert len(seen.messages[topic]) >= 10, topic  # 10 Hz for 3 s: all but the first moments
+        by_time = {t_ns: raw for t_ns, raw, _ in recorded[topic]}
+        for t_ns, payload in seen.messages[topic]:
+            assert by_time[t_ns] == payload, (topic, t_ns)
+    frame = seen.decode("/camera/image_raw/compressed", seen.messages["/camera/image_raw/compressed"][0][1])
+    assert frame.format.startswith("rgb8") or "jpeg" in frame.format
+    assert bytes(frame.data[:2]) == b"\xff\xd8"  # a JPEG's start-of-image marker
