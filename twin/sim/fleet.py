@@ -32,6 +32,8 @@ __all__ = ["AllDone", "Fleet", "FleetMonitor", "FleetView"]
 _MARGIN_M = 0.005
 # What an FCL distance between two robots' shapes may be off by, m (as for the world).
 _TOLERANCE_M = 1e-4
+# How many poses' contacts with the other robots (where they stand) a robot's check keeps.
+_RECENT_POSES = 8
 
 
 class _Monitor(Protocol):
@@ -77,6 +79,10 @@ class Fleet:
 
     def __init__(self, groups: Sequence[_Group]) -> None:
         self.groups = tuple(groups)
+        # While `advance` steps robot `_moving`, every other robot stands at its entry here (read
+        # once per chunk instead of from its drive at every contact check of the moving robot).
+        self._standing: list[tuple[float, float, float]] | None = None
+        self._moving = -1
 
     def body(self, i: int) -> RobotBody:
         """Robot `i`'s collision body."""
@@ -86,6 +92,9 @@ class Fleet:
 
     def pose(self, i: int) -> tuple[float, float, float]:
         """Robot `i`'s pose now (x, y, yaw), its spawn pose before its drive exists."""
+        standing = self._standing
+        if standing is not None and i != self._moving:
+            return standing[i]
         drive = self.groups[i].drive
         if drive is None:
             p = self.groups[i].scenario.robot.initial_pose
@@ -114,8 +123,16 @@ class Fleet:
 
     def advance(self, n_steps: int) -> None:
         """Step every robot's drive `n_steps` physics steps, one robot after the other."""
-        for g in self.groups:
-            g.drive_node.advance(n_steps)
+        standing = [self.pose(i) for i in range(len(self.groups))]
+        self._standing = standing
+        try:
+            for i, g in enumerate(self.groups):
+                self._moving = i
+                g.drive_node.advance(n_steps)
+                standing[i] = self.pose(i)
+        finally:
+            self._standing = None
+            self._moving = -1
 
     def after_advance(self, t_ns: int) -> None:
         """Let each robot with an open contact episode track it (report its end)."""
@@ -145,6 +162,12 @@ class FleetMonitor:
         self.others = tuple(j for j in range(len(fleet.groups)) if j != index)
         # Per other robot: (this robot's pose, the other's pose, their exact distance there).
         self._exact: dict[int, tuple[tuple[float, float, float], tuple[float, float, float], float]] = {}
+        # The checks against the other robots standing at `_wheres`: this robot's pose -> its contacts.
+        # A robot pressed against another is asked about the same few poses step after step (its
+        # motion is below a float's resolution, and `Chassis.update` asks about the refused step and
+        # the turn alone); the shapes are rigid, so the same poses give the same contacts.
+        self._wheres: tuple[tuple[float, float, float], ...] = ()
+        self._recent: dict[tuple[float, float, float], tuple[Contact, ...]] = {}
 
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose: the world's first, else the other robots' (empty when free)."""
@@ -153,9 +176,18 @@ class FleetMonitor:
             return contacts
         fleet, body = self.fleet, self.fleet.body(self.index)
         pose = (x_m, y_m, yaw_rad)
+        wheres = tuple(fleet.pose(j) for j in self.others)
+        recent = self._recent
+        if wheres != self._wheres:
+            self._wheres = wheres
+            recent.clear()
+        else:
+            known = recent.get(pose)
+            if known is not None:
+                return known
         found: list[Contact] = []
-        for j in self.others:
-            other, where = fleet.body(j), fleet.pose(j)
+        for j, where in zip(self.others, wheres, strict=True):
+            other = fleet.body(j)
             gap = math.hypot(where[0] - x_m, where[1] - y_m) - body.radius_m - other.radius_m
             if gap > _MARGIN_M:
                 continue
@@ -173,7 +205,11 @@ class FleetMonitor:
                     )
                 )
         found.sort(key=lambda c: -c.depth_m)
-        return tuple(found)
+        result = tuple(found)
+        if len(recent) >= _RECENT_POSES:
+            del recent[next(iter(recent))]  # the oldest
+        recent[pose] = result
+        return result
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor another robot.
