@@ -32,8 +32,10 @@ __all__ = ["AllDone", "Fleet", "FleetMonitor", "FleetView"]
 _MARGIN_M = 0.005
 # What an FCL distance between two robots' shapes may be off by, m (as for the world).
 _TOLERANCE_M = 1e-4
-# How many poses' contacts with the other robots (where they stand) a robot's check keeps.
+# How many pairs of poses' contacts a robot's check keeps per other robot.
 _RECENT_POSES = 8
+
+_Pose = tuple[float, float, float]
 
 
 class _Monitor(Protocol):
@@ -162,12 +164,12 @@ class FleetMonitor:
         self.others = tuple(j for j in range(len(fleet.groups)) if j != index)
         # Per other robot: (this robot's pose, the other's pose, their exact distance there).
         self._exact: dict[int, tuple[tuple[float, float, float], tuple[float, float, float], float]] = {}
-        # The checks against the other robots standing at `_wheres`: this robot's pose -> its contacts.
-        # A robot pressed against another is asked about the same few poses step after step (its
-        # motion is below a float's resolution, and `Chassis.update` asks about the refused step and
-        # the turn alone); the shapes are rigid, so the same poses give the same contacts.
-        self._wheres: tuple[tuple[float, float, float], ...] = ()
-        self._recent: dict[tuple[float, float, float], tuple[Contact, ...]] = {}
+        # Per other robot: (this robot's pose, the other's) -> their contacts, for the last few pairs
+        # of poses asked. A robot pressed against another is asked about the same few poses step
+        # after step (its motion is below a float's resolution, and `Chassis.update` asks about the
+        # refused step and the turn alone); the shapes are rigid, so the same poses give the same
+        # contacts, whatever the robots farther away do.
+        self._recent: dict[int, dict[tuple[_Pose, _Pose], tuple[Contact, ...]]] = {j: {} for j in self.others}
 
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose: the world's first, else the other robots' (empty when free)."""
@@ -176,24 +178,18 @@ class FleetMonitor:
             return contacts
         fleet, body = self.fleet, self.fleet.body(self.index)
         pose = (x_m, y_m, yaw_rad)
-        wheres = tuple(fleet.pose(j) for j in self.others)
-        recent = self._recent
-        if wheres != self._wheres:
-            self._wheres = wheres
-            recent.clear()
-        else:
-            known = recent.get(pose)
-            if known is not None:
-                return known
         found: list[Contact] = []
-        for j, where in zip(self.others, wheres, strict=True):
-            other = fleet.body(j)
+        for j in self.others:
+            other, where = fleet.body(j), fleet.pose(j)
             gap = math.hypot(where[0] - x_m, where[1] - y_m) - body.radius_m - other.radius_m
             if gap > _MARGIN_M:
                 continue
-            ns = fleet.groups[j].namespace
-            for mine, theirs, point, normal, depth in body.contacts_with(pose, other, where):
-                found.append(
+            recent = self._recent[j]
+            key = (pose, where)
+            pair = recent.get(key)
+            if pair is None:
+                ns = fleet.groups[j].namespace
+                pair = tuple(
                     Contact(
                         model=ns,
                         link=f"{ns}::{theirs.link}",
@@ -203,13 +199,14 @@ class FleetMonitor:
                         normal=normal,
                         depth_m=depth,
                     )
+                    for mine, theirs, point, normal, depth in body.contacts_with(pose, other, where)
                 )
+                if len(recent) >= _RECENT_POSES:
+                    del recent[next(iter(recent))]  # the oldest
+                recent[key] = pair
+            found += pair
         found.sort(key=lambda c: -c.depth_m)
-        result = tuple(found)
-        if len(recent) >= _RECENT_POSES:
-            del recent[next(iter(recent))]  # the oldest
-        recent[pose] = result
-        return result
+        return tuple(found)
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor another robot.
