@@ -7,7 +7,7 @@ added robot is the difference). Every robot runs the scenario's own mission and 
 its namespace; the bag is recorded, as a user's run records it. Speed is never asserted (this
 machine is shared and noisy): compare the ratios within one run.
 
-    python benchmarks/bench_fleet.py [--scenario scenarios/turtlebot3_world.yaml] [--robots 1 2 4] [--sim-s 60]
+    python benchmarks/bench_fleet.py [--scenario scenarios/turtlebot3_world.yaml] [--robots 1 2 4 8] [--sim-s 60]
 """
 
 from __future__ import annotations
@@ -33,10 +33,19 @@ from twin.sim.simulation import Simulation
 
 REPO = Path(__file__).resolve().parent.parent
 
-# Free spawn poses (x, y, yaw), the scenario's own first: the TurtleBot3 world's west and east ends;
-# in the house its middle and two of the thesis's locations.
+# Free spawn poses (x, y, yaw), the scenario's own first: the TurtleBot3 world's west and east ends
+# (then its south and north sides, for eight); in the house its middle and two of the thesis's locations.
 SPAWNS = {
-    "turtlebot3_world": [(-2.0, -0.5, 0.0), (2.0, 0.5, 3.1416), (-2.0, 0.5, 0.0), (2.0, -0.5, 3.1416)],
+    "turtlebot3_world": [
+        (-2.0, -0.5, 0.0),
+        (2.0, 0.5, 3.1416),
+        (-2.0, 0.5, 0.0),
+        (2.0, -0.5, 3.1416),
+        (-0.5, -1.8, 1.571),
+        (0.5, 1.8, -1.571),
+        (0.5, -1.8, 1.571),
+        (-0.5, 1.8, -1.571),
+    ],
     "house": [(0.0, 0.0, 0.0), (1.5, -0.2, 0.0), (4.0, 0.5, 1.571), (2.75, 2.5, -1.571)],
 }
 
@@ -101,7 +110,7 @@ def run_one(path: Path, n: int, sim_s: float) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", type=Path, default=REPO / "scenarios" / "turtlebot3_world.yaml")
-    parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 4])
+    parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 4, 8])
     parser.add_argument("--sim-s", type=float, default=60.0)
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child process: one fleet size
     args = parser.parse_args()

@@ -32,6 +32,10 @@ __all__ = ["AllDone", "Fleet", "FleetMonitor", "FleetView"]
 _MARGIN_M = 0.005
 # What an FCL distance between two robots' shapes may be off by, m (as for the world).
 _TOLERANCE_M = 1e-4
+# How many pairs of poses' contacts a robot's check keeps per other robot.
+_RECENT_POSES = 8
+
+_Pose = tuple[float, float, float]
 
 
 class _Monitor(Protocol):
@@ -77,6 +81,10 @@ class Fleet:
 
     def __init__(self, groups: Sequence[_Group]) -> None:
         self.groups = tuple(groups)
+        # While `advance` steps robot `_moving`, every other robot stands at its entry here (read
+        # once per chunk instead of from its drive at every contact check of the moving robot).
+        self._standing: list[tuple[float, float, float]] | None = None
+        self._moving = -1
 
     def body(self, i: int) -> RobotBody:
         """Robot `i`'s collision body."""
@@ -86,6 +94,9 @@ class Fleet:
 
     def pose(self, i: int) -> tuple[float, float, float]:
         """Robot `i`'s pose now (x, y, yaw), its spawn pose before its drive exists."""
+        standing = self._standing
+        if standing is not None and i != self._moving:
+            return standing[i]
         drive = self.groups[i].drive
         if drive is None:
             p = self.groups[i].scenario.robot.initial_pose
@@ -114,8 +125,16 @@ class Fleet:
 
     def advance(self, n_steps: int) -> None:
         """Step every robot's drive `n_steps` physics steps, one robot after the other."""
-        for g in self.groups:
-            g.drive_node.advance(n_steps)
+        standing = [self.pose(i) for i in range(len(self.groups))]
+        self._standing = standing
+        try:
+            for i, g in enumerate(self.groups):
+                self._moving = i
+                g.drive_node.advance(n_steps)
+                standing[i] = self.pose(i)
+        finally:
+            self._standing = None
+            self._moving = -1
 
     def after_advance(self, t_ns: int) -> None:
         """Let each robot with an open contact episode track it (report its end)."""
@@ -145,6 +164,12 @@ class FleetMonitor:
         self.others = tuple(j for j in range(len(fleet.groups)) if j != index)
         # Per other robot: (this robot's pose, the other's pose, their exact distance there).
         self._exact: dict[int, tuple[tuple[float, float, float], tuple[float, float, float], float]] = {}
+        # Per other robot: (this robot's pose, the other's) -> their contacts, for the last few pairs
+        # of poses asked. A robot pressed against another is asked about the same few poses step
+        # after step (its motion is below a float's resolution, and `Chassis.update` asks about the
+        # refused step and the turn alone); the shapes are rigid, so the same poses give the same
+        # contacts, whatever the robots farther away do.
+        self._recent: dict[int, dict[tuple[_Pose, _Pose], tuple[Contact, ...]]] = {j: {} for j in self.others}
 
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose: the world's first, else the other robots' (empty when free)."""
@@ -159,9 +184,12 @@ class FleetMonitor:
             gap = math.hypot(where[0] - x_m, where[1] - y_m) - body.radius_m - other.radius_m
             if gap > _MARGIN_M:
                 continue
-            ns = fleet.groups[j].namespace
-            for mine, theirs, point, normal, depth in body.contacts_with(pose, other, where):
-                found.append(
+            recent = self._recent[j]
+            key = (pose, where)
+            pair = recent.get(key)
+            if pair is None:
+                ns = fleet.groups[j].namespace
+                pair = tuple(
                     Contact(
                         model=ns,
                         link=f"{ns}::{theirs.link}",
@@ -171,7 +199,12 @@ class FleetMonitor:
                         normal=normal,
                         depth_m=depth,
                     )
+                    for mine, theirs, point, normal, depth in body.contacts_with(pose, other, where)
                 )
+                if len(recent) >= _RECENT_POSES:
+                    del recent[next(iter(recent))]  # the oldest
+                recent[key] = pair
+            found += pair
         found.sort(key=lambda c: -c.depth_m)
         return tuple(found)
 

@@ -88,3 +88,48 @@ def test_the_lidar_view_holds_the_other_robots_lidar_housing_where_it_stands() -
     other.drive.pose = (3.0, 1.0, math.pi / 2)
     moved = view.caster(height)
     assert moved is not None and moved.shapes[1][0][0] == pytest.approx(3.0)
+
+
+def test_a_pose_asked_again_is_answered_as_a_fresh_check_and_follows_the_other_robot() -> None:
+    # A robot pressed against another is asked about the same few poses step after step; the answer
+    # kept for a pose holds only while the other robot stands where it stood.
+    me, other = _group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (0.13, 0.0, math.pi))
+    fleet = Fleet([me, other])
+    monitor = FleetMonitor(_OpenWorld(), fleet, 0)
+    touching, apart = (0.0, 0.0, 0.0), (-0.3, 0.0, 0.0)
+    for _ in range(3):  # alternating, as `Chassis.update` asks about the step and the turn alone
+        assert monitor.check(*touching) == FleetMonitor(_OpenWorld(), fleet, 0).check(*touching) != ()
+        assert monitor.check(*apart) == ()
+    other.drive.pose = (1.0, 0.0, math.pi)  # the other robot drove away
+    assert monitor.check(*touching) == ()
+    other.drive.pose = (0.13, 0.0, math.pi)  # and came back
+    assert monitor.check(*touching) == FleetMonitor(_OpenWorld(), fleet, 0).check(*touching) != ()
+
+
+class _Mover:
+    """A robot's drive node that moves its drive 0.01 m per step and notes the fleet's poses as it moves."""
+
+    def __init__(self, fleet_of: list[Fleet], drive: _Still) -> None:
+        self.fleet_of, self.drive = fleet_of, drive
+        self.seen: list[tuple[tuple[float, float, float], ...]] = []
+
+    def advance(self, n_steps: int) -> None:
+        x, y, yaw = self.drive.pose
+        self.drive.pose = (x + 0.01 * n_steps, y, yaw)
+        fleet = self.fleet_of[0]
+        self.seen.append(tuple(fleet.pose(i) for i in range(len(fleet.groups))))
+
+
+def test_while_one_robot_advances_it_reads_itself_live_and_the_others_where_they_moved_to() -> None:
+    groups = [_group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (2.0, 0.0, 0.0))]
+    fleet_of: list[Fleet] = []
+    for g in groups:
+        g.drive_node = _Mover(fleet_of, g.drive)
+    fleet = Fleet(groups)
+    fleet_of.append(fleet)
+    fleet.advance(5)
+    # robot1 moved first: it sees itself moved and robot2 not yet; robot2 sees robot1 where it ended.
+    assert groups[0].drive_node.seen == [((0.05, 0.0, 0.0), (2.0, 0.0, 0.0))]
+    assert groups[1].drive_node.seen == [((0.05, 0.0, 0.0), (2.05, 0.0, 0.0))]
+    groups[1].drive.pose = (3.0, 0.0, 0.0)  # between advances every pose is read live
+    assert fleet.pose(1) == (3.0, 0.0, 0.0)
