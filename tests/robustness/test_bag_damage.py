@@ -287,3 +287,29 @@ def test_a_channel_whose_topic_name_is_not_text_is_read_around(
         err = capsys.readouterr().err
         assert code in (0, 5), f"{argv}: {err}"
         assert "Traceback" not in err and "internal error" not in err, err
+
+
+def test_a_record_length_beyond_the_file_is_a_damaged_bag_never_an_internal_error(
+    runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A flip in a summary record's length (1 TiB stated): rosbags would read that many bytes at once (MemoryError)."""
+    bag = tmp_path / "bag"
+    shutil.copytree(runs["mcap"], bag)
+    (path,) = bag.glob("*.mcap")
+    data = bytearray(path.read_bytes())
+    footer = len(data) - 8 - 29  # Footer: op (1), length (8), summary start (8), summary offset start (8), CRC (4)
+    assert data[footer] == 0x02
+    summary_start = int.from_bytes(data[footer + 9 : footer + 17], "little")
+    data[summary_start + 1 : summary_start + 9] = (1 << 40).to_bytes(8, "little")
+    path.write_bytes(bytes(data))
+    for argv in (
+        ["bag", "info", str(bag)],
+        ["analyze", str(bag), "--out", str(tmp_path / "analysis"), "--no-plots"],
+        ["bag", "export", str(bag), "--topics", "/odom", "--out", str(tmp_path / "export")],
+    ):
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code in (0, 5), f"{argv}: {err}"
+        assert "Traceback" not in err and "internal error" not in err, err
+        if code:
+            assert "larger than the file" in assert_one_line_error(err, contains="twin bag recover")

@@ -298,21 +298,38 @@ def _open_reader(bag: Path) -> Reader:
     try:
         reader = Reader(bag)
         reader.open()
-    except (FileNotFoundError, ReaderError, OSError, ValueError, KeyError, TypeError) as err:
+    except (
+        FileNotFoundError,
+        ReaderError,
+        OSError,
+        ValueError,
+        KeyError,
+        TypeError,
+        MemoryError,
+        OverflowError,
+        struct.error,
+    ) as err:
         # ValueError (UnicodeDecodeError among them), KeyError, TypeError: rosbags meets storage
-        # tables whose text is damaged (a QoS string without its fields, bytes that are not UTF-8)
+        # tables whose text is damaged (a QoS string without its fields, bytes that are not UTF-8);
+        # MemoryError, OverflowError: a damaged MCAP record length (rosbags reads that many bytes at once)
         meta = bag_metadata(bag)  # names a missing metadata.yaml or storage file, the usual causes
         if isinstance(err, FileNotFoundError):
             raise
-        if isinstance(err, (ValueError, KeyError, TypeError)):
+        if isinstance(err, (ValueError, KeyError, TypeError, MemoryError, OverflowError, struct.error)):
             msg = (
-                f"{bag}: cannot read the bag: its storage's tables do not parse "
-                f"({type(err).__name__}: {_one_line(err)}); they may be damaged: run `twin bag recover {bag}`"
+                f"{bag}: cannot read the bag: its storage's tables or records do not parse "
+                f"({_parse_failure(err)}); they may be damaged: run `twin bag recover {bag}`"
             )
         else:
             msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, meta)}"
         raise BagError(msg) from None
     return reader
+
+
+def _parse_failure(err: Exception) -> str:
+    if isinstance(err, (MemoryError, OverflowError)):  # rosbags reads a record's stated length at once
+        return "a record states a length larger than the file"
+    return f"{type(err).__name__}: {_one_line(err)}"
 
 
 def _killed_hint(bag: Path, meta: BagMetadata | None) -> str:
