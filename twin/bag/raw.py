@@ -21,6 +21,7 @@ import numpy as np
 from twin.bag.mcap_file import MAGIC, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_MESSAGE, _decompress
 from twin.bag.reader import _bag_dir, bag_metadata, read_messages, storage_paths
 from twin.core.errors import BagError
+from twin.core.numbers import INT64_MAX
 
 __all__ = ["raw_readable", "read_raw"]
 
@@ -170,6 +171,9 @@ class _McapChunks:
                 channels = self._channels
             pos = body + length
         times = np.fromiter((m[0] for m in found), dtype=np.uint64, count=len(found))
+        if len(times) and int(times.max()) > INT64_MAX:  # MCAP stores uint64; a ROS time is int64
+            msg = f"a message time past int64 ({int(times.max())} ns): a damaged record"
+            raise ValueError(msg)
         if len(times) > 1 and bool(np.any(times[1:] < times[:-1])):
             found = [found[i] for i in np.argsort(times, kind="stable").tolist()]
         for log_time, topic, start, end in found:

@@ -40,6 +40,7 @@ from twin.bag.qos import QosProfile
 from twin.bag.single_file import STORAGE_SUFFIXES, storage_file_metadata
 from twin.bag.typesys import MessageDefinition, TypeRegistry, message_type_name
 from twin.core.errors import BagError
+from twin.core.numbers import INT64_MAX
 
 __all__ = [
     "BagFile",
@@ -514,6 +515,10 @@ def read_messages(
             return
         store = registry.store
         for conn, t_ns, data in _storage_messages(reader, wanted, start_ns, stop_ns, zstd_messages=zstd_messages):
+            # a damaged storage: MCAP stores uint64 (a ROS time is int64); SQLite gives what a flipped page holds
+            if type(t_ns) is not int or t_ns > INT64_MAX or not isinstance(data, (bytes, memoryview)):
+                msg = f"a message on {conn.topic} has time {t_ns!r:.40} and data of type {type(data).__name__}"
+                raise ValueError(msg)
             if not decode:
                 yield BagMessage(conn.topic, conn.msgtype, t_ns, bytes(data))
                 continue
@@ -525,9 +530,19 @@ def read_messages(
     except ReaderError as err:
         msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, _metadata_or_none(bag))}"
         raise BagError(msg) from None
-    except (_SqliteError, MemoryError, struct.error, EOFError, OverflowError, ValueError, KeyError, IndexError) as err:
+    except (
+        _SqliteError,
+        MemoryError,
+        struct.error,
+        EOFError,
+        OverflowError,
+        ValueError,
+        KeyError,
+        IndexError,
+        TypeError,
+    ) as err:
         # rosbags meeting a damaged storage file: a page SQLite finds malformed, an MCAP length
-        # that runs past the file or asks for more memory than there is
+        # that runs past the file or asks for more memory than there is, a column of another type
         what = _one_line(err) if str(err).strip() else type(err).__name__
         msg = f"{bag}: cannot read the bag ({what}); its storage is damaged: run `twin bag recover {bag}`"
         raise BagError(msg) from None
