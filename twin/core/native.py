@@ -23,9 +23,7 @@ import functools
 import hashlib
 import logging
 import os
-import platform
 import shutil
-import subprocess
 import sys
 import tempfile
 from collections.abc import Sequence
@@ -104,7 +102,39 @@ def _require_compiler() -> str:
 
 @functools.lru_cache(maxsize=8)
 def compiler_version(path: str) -> str:
-    """Return the first line of `path --version` (`unknown` if it does not say)."""
+    """Return the first line of `path --version` (`unknown` if it does not say).
+
+    Kept in the cache folder, keyed by the compiler binary's resolved path, size and modification
+    time (an upgrade replaces the file), so a warm run starts no process to ask again.
+    """
+    real = os.path.realpath(path)
+    try:
+        st = os.stat(real)
+    except OSError:
+        return _ask_version(path)
+    key = f"{real}\t{st.st_size}\t{st.st_mtime_ns}"
+    record = cache_dir() / "compilers" / f"{hashlib.sha256(key.encode()).hexdigest()[:16]}.txt"
+    try:
+        stored_key, _, version = record.read_text(encoding="utf-8").partition("\n")
+        if stored_key == key and version:
+            return version
+    except (OSError, UnicodeDecodeError):
+        pass
+    version = _ask_version(path)
+    if version != "unknown":
+        try:
+            record.parent.mkdir(parents=True, exist_ok=True)
+            staged = record.with_name(f"{record.name}.{os.getpid()}.tmp")
+            staged.write_text(f"{key}\n{version}", encoding="utf-8")
+            os.replace(staged, record)  # whole or not at all, also with another process writing
+        except OSError as err:
+            _log.debug("cannot keep %s's version in %s (%s)", path, record, err.strerror)
+    return version
+
+
+def _ask_version(path: str) -> str:
+    import subprocess
+
     try:
         out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=30, check=False)
     except (OSError, subprocess.SubprocessError):
@@ -127,6 +157,8 @@ def compile_shared(
         NativeBuildError: If the compiler does not run, times out, or fails; the message is its
             first error line.
     """
+    import subprocess
+
     cmd = [compiler, *flags, *map(str, sources), "-o", str(output), *libraries]
     name = Path(compiler).name
     try:
@@ -145,9 +177,14 @@ def compile_shared(
     return result.stderr
 
 
+def _machine() -> str:
+    """The machine's architecture (`platform.machine()`, without importing `platform`)."""
+    return os.uname().machine if hasattr(os, "uname") else os.environ.get("PROCESSOR_ARCHITECTURE", "")
+
+
 def _digest(compiler: str, source: str | None, files: Sequence[Path], flags: Sequence[str]) -> str:
     h = hashlib.sha256()
-    for part in (_KEY_VERSION, compiler, compiler_version(compiler), sys.platform, platform.machine(), *flags):
+    for part in (_KEY_VERSION, compiler, compiler_version(compiler), sys.platform, _machine(), *flags):
         h.update(part.encode() + b"\0")
     if source is not None:
         h.update(b"<source>\0" + source.encode() + b"\0")

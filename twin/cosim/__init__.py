@@ -4,6 +4,7 @@ The project's FMUs are built from `fmus/`; any FMI 2.0/3.0 Co-Simulation FMU loa
 that imports fmpy.
 """
 
+import twin.cosim._fmpy_import  # noqa: F401  (first: fmpy imported without its `ldconfig -p` run)
 from twin.cosim.adapter import Stepper
 from twin.cosim.build import build_all, build_fmu, resolve_fmu
 from twin.cosim.contract import Binding, FmuMapping, Profile, RoleBinding, RoleMap, bind, check_contract, load_mapping

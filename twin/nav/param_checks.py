@@ -114,12 +114,20 @@ def _size(n: float) -> str:
     return f"{n / 1024:.3g} KiB"
 
 
-def _fits(where: str, what: str, n_bytes: float, fix: str) -> None:
+Where = str | Callable[[], str]
+"""A message's location, or what finds it: a params file's line is found (the file parsed again) only for a message."""
+
+
+def _text(where: Where) -> str:
+    return where if isinstance(where, str) else where()
+
+
+def _fits(where: Where, what: str, n_bytes: float, fix: str) -> None:
     budget = memory_budget_bytes()
     if n_bytes > budget:
         limit, source = _memory_limit_bytes()
         msg = (
-            f"{where}: {what} would take {_size(n_bytes)}, more than the {_size(budget)} the twin allows one "
+            f"{_text(where)}: {what} would take {_size(n_bytes)}, more than the {_size(budget)} the twin allows one "
             f"structure (half of this machine's {_size(limit)} {source}); {fix}"
         )
         raise ConfigError(msg)
@@ -242,9 +250,9 @@ def _dwb(r: ParamReader, name: str, controller_hz: float, strict: bool, cells: i
     lin = max(abs(min_vel_x), abs(max_vel_x), max_speed_xy)
     steps = max(lin * sim_time / lin_gran, abs(max_vel_theta) * sim_time / ang_gran) + 3
     samples = (max(vx, 2) + 2.0) * (max(vth, 2) + 2.0)
-    where = r.source.locate(r.node, p + ("vx_samples" if steps * _DWB_STEP_BYTES < samples * 8 else "sim_time"))
+    key = p + ("vx_samples" if steps * _DWB_STEP_BYTES < samples * 8 else "sim_time")
     _fits(
-        where,
+        functools.partial(r.source.locate, r.node, key),
         f"DWB's {vx} x {vth} velocity samples with trajectories of up to {steps:.3g} steps",
         samples * _DWB_SAMPLE_BYTES + steps * _DWB_STEP_BYTES + cells * 8.0,
         "lower vx_samples / vtheta_samples, or sim_time against linear_granularity and angular_granularity",
@@ -376,7 +384,7 @@ class _Grid(Protocol):
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class _Rates:
-    where: str
+    where: Where
     rate_hz: float
 
 
@@ -410,8 +418,9 @@ def check_nav2_inputs(
     if nav2:  # the costmaps first: DWB's check counts the local costmap's cells too
         for costmap in (params.global_costmap, params.local_costmap):
             node = next((n for n in params.read_keys if n.rsplit("/", 1)[-1] == costmap.name), costmap.name)
-            rates.append(_Rates(where=source.locate(node, "update_frequency"), rate_hz=costmap.update_frequency_hz))
-            rates.append(_Rates(where=source.locate(node, "publish_frequency"), rate_hz=costmap.publish_frequency_hz))
+            update, publish = costmap.update_frequency_hz, costmap.publish_frequency_hz
+            rates.append(_Rates(where=functools.partial(source.locate, node, "update_frequency"), rate_hz=update))
+            rates.append(_Rates(where=functools.partial(source.locate, node, "publish_frequency"), rate_hz=publish))
             _check_costmap_memory(params, source, node, occupancy, map_source)
     for short, check in _SERVERS.items():
         node = _server_node(params, short)
@@ -422,7 +431,7 @@ def check_nav2_inputs(
         if rate is not None and nav2:
             key = {"controller_server": "controller_frequency", "bt_navigator": "bt_loop_duration",
                    "velocity_smoother": "smoothing_frequency", "behavior_server": "cycle_frequency"}[short]  # fmt: skip
-            rates.append(_Rates(where=source.locate(node, key), rate_hz=rate))
+            rates.append(_Rates(where=functools.partial(source.locate, node, key), rate_hz=rate))
     _check_set_keys(params, source, known)
     if amcl:
         _check_amcl_memory(params, source, occupancy, map_source)
@@ -431,8 +440,8 @@ def check_nav2_inputs(
         for entry in rates:
             if entry.rate_hz > physics_hz * (1 + 1e-9):
                 msg = (
-                    f"{entry.where}: {entry.rate_hz:g} Hz is above the physics rate ({physics_hz:g} Hz, physics.step_s "
-                    f"{physics_step_s:g}); lower it or shorten physics.step_s"
+                    f"{_text(entry.where)}: {entry.rate_hz:g} Hz is above the physics rate ({physics_hz:g} Hz, "
+                    f"physics.step_s {physics_step_s:g}); lower it or shorten physics.step_s"
                 )
                 raise ConfigError(msg)
 
@@ -441,11 +450,13 @@ def _cells(width_m: float, height_m: float, resolution_m: float) -> int:
     return max(1, int(width_m / resolution_m)) * max(1, int(height_m / resolution_m))
 
 
-def _map_where(map_source: str | None, occupancy: _Grid, fallback: str) -> str:
+def _map_where(map_source: str | None, occupancy: _Grid, fallback: Where) -> Where:
     """Where a size that comes from the map's cells is blamed: the map's `resolution`, naming the parameter too."""
     if map_source is None:
         return fallback
-    return f"{map_source}: 'resolution' {occupancy.resolution_m:g} m (with {fallback.rsplit(': ', 1)[-1]})"
+    return lambda: (
+        f"{map_source}: 'resolution' {occupancy.resolution_m:g} m (with {_text(fallback).rsplit(': ', 1)[-1]})"
+    )
 
 
 def _check_costmap_memory(
@@ -458,7 +469,7 @@ def _check_costmap_memory(
     fix = "make width and height smaller or resolution coarser (TurtleBot3: 3 x 3 m at 0.05 m)"
     key = "resolution" if spec.resolution_m < 1e-3 else ("width" if spec.width_m >= spec.height_m else "height")
     _fits(
-        source.locate(node, key),
+        functools.partial(source.locate, node, key),
         f"{spec.name}'s grid of {cols} x {rows} cells at {spec.resolution_m:g} m",
         float(cols) * rows * per_cell,
         fix,
@@ -469,7 +480,7 @@ def _check_costmap_memory(
     if static and occupancy is not None:  # a static costmap takes the map's size and cells
         resolution = occupancy.resolution_m
         _fits(
-            map_source or source.locate(node, "plugins"),
+            map_source or functools.partial(source.locate, node, "plugins"),
             f"{spec.name}'s grid over the map's {occupancy.width} x {occupancy.height} cells",
             float(occupancy.width) * occupancy.height * (per_cell + _STATIC_CELL_BYTES),
             "use a smaller map (or a coarser one)",
@@ -477,7 +488,7 @@ def _check_costmap_memory(
     inflation = spec.inflation
     if inflation is not None and inflation.enabled:
         radius_cells = math.ceil(inflation.inflation_radius_m / resolution)
-        where = source.locate(node, f"{inflation.name}.inflation_radius")
+        where = functools.partial(source.locate, node, f"{inflation.name}.inflation_radius")
         _fits(
             _map_where(map_source, occupancy, where) if from_map and occupancy is not None else where,
             f"{spec.name}'s inflation table for {inflation.inflation_radius_m:g} m over {resolution:g} m cells "
@@ -493,7 +504,7 @@ def _check_amcl_memory(
     node = next((n for n in params.read_keys if n.rsplit("/", 1)[-1] == "amcl"), "amcl")
     a = params.amcl
     _fits(
-        source.locate(node, "max_particles"),
+        functools.partial(source.locate, node, "max_particles"),
         f"AMCL's set of {a.max_particles} particles",
         float(a.max_particles) * _PARTICLE_BYTES,
         "lower max_particles (TurtleBot3: 2000)",
@@ -502,7 +513,7 @@ def _check_amcl_memory(
         return
     radius = int(a.laser_likelihood_max_dist_m / occupancy.resolution_m)
     _fits(
-        _map_where(map_source, occupancy, source.locate(node, "laser_likelihood_max_dist")),
+        _map_where(map_source, occupancy, functools.partial(source.locate, node, "laser_likelihood_max_dist")),
         f"AMCL's likelihood field over the map's {occupancy.width} x {occupancy.height} cells of "
         f"{occupancy.resolution_m:g} m (distances up to {a.laser_likelihood_max_dist_m:g} m: {radius} cells)",
         float(occupancy.width) * occupancy.height * _FIELD_CELL_BYTES + (float(radius) + 2) ** 2 * 8,

@@ -120,3 +120,26 @@ def test_twin_no_native_disables_loading(
 
 def test_keep_gil_loads_a_pydll(cache: Path) -> None:
     assert isinstance(load_library(ADDER, keep_gil=True), ctypes.PyDLL)
+
+
+def test_the_compiler_version_is_asked_once_and_again_when_the_compiler_changes(
+    cache: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A warm run starts no `cc --version` (kept in the cache folder); a replaced compiler is asked again."""
+    compiler = tmp_path / "bin" / "mycc"
+    compiler.parent.mkdir()
+    compiler.write_text("#!/bin/sh\necho 'mycc 1.0'\n")
+    compiler.chmod(0o755)
+    asked: list[str] = []
+    ask = native._ask_version
+    monkeypatch.setattr(native, "_ask_version", lambda path: asked.append(path) or ask(path))
+    native.compiler_version.cache_clear()
+    assert native.compiler_version(str(compiler)) == "mycc 1.0"
+    native.compiler_version.cache_clear()  # as a new process would start
+    assert native.compiler_version(str(compiler)) == "mycc 1.0"
+    assert len(asked) == 1
+    compiler.write_text("#!/bin/sh\necho 'mycc 2.0 (upgraded)'\n")  # another size: another compiler
+    native.compiler_version.cache_clear()
+    assert native.compiler_version(str(compiler)) == "mycc 2.0 (upgraded)"
+    assert len(asked) == 2
+    native.compiler_version.cache_clear()
