@@ -50,6 +50,12 @@ _FIRST_STEP = """
 import sys, time
 from twin.core.gcpolicy import defer_collection
 defer_collection()  # as `twin simulate`'s entry point does (twin.cli.run); the loop turns collection back on
+try:
+    from twin.core import codecache
+except ImportError:  # a baseline from before the code cache
+    pass
+else:
+    codecache.enable()  # as the entry point does
 from pathlib import Path
 from twin.sim import default_scenario_path, load_scenario
 from twin.sim.simulation import Simulation

@@ -199,6 +199,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def run() -> None:
     """Console-script entry point."""
+    from twin.core import codecache
+
+    codecache.enable()  # dataclasses' methods compiled once, not on every run (see twin.core.codecache)
     argv = sys.argv[1:]
     if _named_command(argv) == "simulate":  # start-up without the cyclic collector (see twin.core.gcpolicy)
         from twin.core.gcpolicy import defer_collection, resume_collection
