@@ -14,6 +14,7 @@ import random
 import shutil
 import sqlite3
 from collections import Counter
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import pytest
@@ -267,56 +268,63 @@ def test_reading_a_damaged_bag_is_one_line_never_an_internal_error(
         assert (bag / source.name).read_bytes() == flipped
 
 
+def _copy(run: Path, tmp_path: Path) -> tuple[Path, Path]:
+    """A copy of a run's bag folder to damage, and its storage file."""
+    bag = tmp_path / "bag"
+    shutil.copytree(run, bag)
+    (path,) = (p for p in bag.iterdir() if p.suffix in (".mcap", ".db3"))
+    return bag, path
+
+
+def _read_with_commands(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], *, info: bool = False, topics: Sequence[str] = ()
+) -> Iterator[tuple[list[str], int, str]]:
+    """Each reading command on `bag` (`analyze`, `bag export` of `topics` or all, `bag info` if asked): argv, exit, stderr."""
+    names = list(topics) or [t.name for t in open_bag(bag).topics]
+    commands = [
+        ["analyze", str(bag), "--out", str(tmp_path / "analysis"), "--no-plots"],
+        ["bag", "export", str(bag), "--topics", *names, "--out", str(tmp_path / "export")],
+    ]
+    for argv in [["bag", "info", str(bag)]] * info + commands:
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and "internal error" not in err, f"{argv}: {err}"
+        yield argv, code, err
+
+
 def test_a_channel_whose_topic_name_is_not_text_is_read_around(
     runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A flipped byte in a channel record's topic name (not UTF-8) is a damaged record, never exit 70."""
-    bag = tmp_path / "bag"
-    shutil.copytree(runs["mcap"], bag)
-    (path,) = bag.glob("*.mcap")
+    bag, path = _copy(runs["mcap"], tmp_path)
     data = bytearray(path.read_bytes())
     pos = 8  # past the magic: records are op (1 byte) and length (8 bytes, little-endian)
     while data[pos] != 0x04:  # the first channel record: id (u16), schema id (u16), topic (u32 length + bytes)
         pos += 9 + int.from_bytes(data[pos + 1 : pos + 9], "little")
     data[pos + 9 + 8] = 0x9B  # the topic's first byte: not a UTF-8 start byte
     path.write_bytes(bytes(data))
-    for argv in (
-        ["analyze", str(bag), "--out", str(tmp_path / "analysis"), "--no-plots"],
-        ["bag", "export", str(bag), "--topics", "/odom", "--out", str(tmp_path / "export")],
-    ):
-        code = main(argv)
-        err = capsys.readouterr().err
+    for argv, code, err in _read_with_commands(bag, tmp_path, capsys, topics=["/odom"]):
         assert code in (0, 5), f"{argv}: {err}"
-        assert "Traceback" not in err and "internal error" not in err, err
 
 
 def test_a_record_length_beyond_the_file_is_a_damaged_bag_never_an_internal_error(
     runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A flip in a summary record's length (1 TiB stated): rosbags would read that many bytes at once (MemoryError)."""
-    bag = tmp_path / "bag"
-    shutil.copytree(runs["mcap"], bag)
-    (path,) = bag.glob("*.mcap")
+    bag, path = _copy(runs["mcap"], tmp_path)
     data = bytearray(path.read_bytes())
     footer = len(data) - 8 - 29  # Footer: op (1), length (8), summary start (8), summary offset start (8), CRC (4)
     assert data[footer] == 0x02
     summary_start = int.from_bytes(data[footer + 9 : footer + 17], "little")
     data[summary_start + 1 : summary_start + 9] = (1 << 40).to_bytes(8, "little")
     path.write_bytes(bytes(data))
-    for argv in (
-        ["bag", "info", str(bag)],
-        ["analyze", str(bag), "--out", str(tmp_path / "analysis"), "--no-plots"],
-        ["bag", "export", str(bag), "--topics", "/odom", "--out", str(tmp_path / "export")],
-    ):
-        code = main(argv)
-        err = capsys.readouterr().err
+    for argv, code, err in _read_with_commands(bag, tmp_path, capsys, info=True, topics=["/odom"]):
         assert code in (0, 5), f"{argv}: {err}"
-        assert "Traceback" not in err and "internal error" not in err, err
         if code:
             assert "larger than the file" in assert_one_line_error(err, contains="twin bag recover")
 
 
-def _mcap_first_message(data: bytes) -> int:
+def _mcap_first_message(data: bytes | bytearray) -> int:
     """The offset of the first Message record inside the first (uncompressed) Chunk of a twin MCAP file."""
     pos = 8
     while data[pos] != 0x06:  # Chunk
@@ -333,19 +341,11 @@ def test_a_message_time_past_int64_is_a_damaged_bag(
     runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """MCAP stores times as uint64, ROS as int64: a flipped top bit of a log time is damage, not exit 70."""
-    bag = tmp_path / "bag"
-    shutil.copytree(runs["mcap"], bag)
-    (path,) = bag.glob("*.mcap")
+    bag, path = _copy(runs["mcap"], tmp_path)
     data = bytearray(path.read_bytes())
     data[_mcap_first_message(data) + 9 + 6 + 7] ^= 0x80  # the log time's most significant byte
     path.write_bytes(bytes(data))
-    topics = [t.name for t in open_bag(bag).topics]
-    for argv in (
-        ["analyze", str(bag), "--out", str(tmp_path / "analysis"), "--no-plots"],
-        ["bag", "export", str(bag), "--topics", *topics, "--out", str(tmp_path / "export")],
-    ):
-        code = main(argv)
-        err = capsys.readouterr().err
+    for argv, code, err in _read_with_commands(bag, tmp_path, capsys):
         # rosbags takes the times from the MessageIndex records, which the flip left alone: it may read the bag
         assert code == 5 or (code == 0 and argv[0] == "bag"), f"{argv}: {err}"
         if code:
@@ -356,17 +356,9 @@ def test_a_sqlite3_timestamp_that_is_not_an_integer_is_a_damaged_bag(
     runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """SQLite keeps what a damaged page holds, of any type: a text timestamp is damage, not exit 70."""
-    bag = tmp_path / "bag"
-    shutil.copytree(runs["sqlite3"], bag)
-    (path,) = bag.glob("*.db3")
+    bag, path = _copy(runs["sqlite3"], tmp_path)
     with sqlite3.connect(path) as db:
         db.execute("UPDATE messages SET timestamp = '' WHERE id = (SELECT min(id) FROM messages)")
-    topics = [t.name for t in open_bag(bag).topics]
-    for argv in (
-        ["analyze", str(bag), "--out", str(tmp_path / "analysis"), "--no-plots"],
-        ["bag", "export", str(bag), "--topics", *topics, "--out", str(tmp_path / "export")],
-    ):
-        code = main(argv)
-        err = capsys.readouterr().err
+    for argv, code, err in _read_with_commands(bag, tmp_path, capsys):
         assert code == 5, f"{argv}: {err}"
         assert "has time ''" in assert_one_line_error(err, contains="twin bag recover"), err
