@@ -173,8 +173,8 @@ def robot_distance(tracks: Mapping[str, PoseTrack], start_ns: int, source: str =
 
 
 def _names_robot(event: ContactEvent, ns: str) -> bool:
-    """Whether a contact's other party is robot `ns` (the twin names it `<robot name>::<model>::<link>`)."""
-    return event.what.split("::", 1)[0] == ns.rsplit("/", 1)[-1]
+    """Whether a contact's other party is robot `ns` (the twin names it `<namespace>::<model>::<link>`)."""
+    return event.what.split("::", 1)[0].strip("/") == ns
 
 
 def robot_contacts(contacts: Mapping[str, list[ContactEvent] | None]) -> dict[str, dict[str, int]]:
