@@ -227,3 +227,30 @@ def test_replay_one_robot_of_a_fleet(fleet_bag: Path, tmp_path: Path, truth: dic
     assert first["t_s"] == 0.0 and first["error_m"] < 0.01
     assert result["position_error_max_m"] < 0.1
     assert _path_length(truth["gt"]["robot2"]) > 1.0  # robot2 moved: the small error says something
+
+
+def test_graph_groups_a_fleet_by_namespace() -> None:
+    scenario = str(REPO / "scenarios" / "house_two_waffles.yaml")
+    proc = run_twin("graph", scenario, "--measure-s", "1", "--json")
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(proc.stdout)
+    groups = {g["namespace"]: g for g in data["namespaces"]}
+    assert list(groups) == ["/robot1", "/robot2", ""]
+    for ns in ("/robot1", "/robot2"):
+        assert groups[ns]["nodes"] and all(n.startswith(ns + "/") for n in groups[ns]["nodes"])
+        assert f"{ns}/amcl" in groups[ns]["nodes"] and f"{ns}/scan" in groups[ns]["topics"]
+    assert set(groups[""]["topics"]) == {"/clock", "/rosout"}
+    # the groups split the graph: every node and topic in exactly one
+    assert sorted(n for g in groups.values() for n in g["nodes"]) == sorted(n["node"] for n in data["nodes"])
+    assert sorted(t for g in groups.values() for t in g["topics"]) == sorted(t["topic"] for t in data["topics"])
+    text = run_twin("graph", scenario, "--measure-s", "1").stdout
+    assert "namespace /robot1: " in text and "namespace /robot2: " in text
+    assert "outside the robots' namespaces: " in text
+    dot = run_twin("graph", scenario, "--measure-s", "1", "--dot").stdout
+    assert dot.count("subgraph cluster_") == 2 and 'label="/robot2";' in dot
+
+
+def test_graph_of_one_robot_has_no_groups() -> None:
+    proc = run_twin("graph", "--measure-s", "1", "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert "namespaces" not in json.loads(proc.stdout)
