@@ -32,13 +32,47 @@ def fleet_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return bag
 
 
+TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
+  <BehaviorTree ID="MainTree"><GoToPose name="go" loc="goal"/></BehaviorTree>
+</root>
+"""
+
+# Head on: each robot's goal is behind the other, 1.5 m apart; they meet in the middle and touch.
+HEAD_ON = """
+name: head_on
+max_duration_s: 12
+mission: {{tree: {tree}}}
+robots:
+  - name: robot1
+    robot: {{initial_pose: {{x_m: 0.0, y_m: 0.0, yaw_rad: 0.0}}}}
+    mission: {{locations: {goal1}}}
+  - name: robot2
+    robot: {{initial_pose: {{x_m: 1.5, y_m: 0.0, yaw_rad: 3.14159}}}}
+    mission: {{locations: {goal2}}}
+"""
+
+
 @pytest.fixture(scope="module")
-def truth(fleet_bag: Path) -> dict[str, Any]:
-    """What the bag holds, read with rosbags: ground truth per robot, tree-log goal results, contacts."""
+def head_on_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("head_on")
+    (tmp / "tree.xml").write_text(TREE)
+    (tmp / "g1.yaml").write_text("goal: [2.0, 0.0, 0.0]\n")
+    (tmp / "g2.yaml").write_text("goal: [-0.5, 0.0, 3.14]\n")
+    scenario = tmp / "head_on.yaml"
+    scenario.write_text(HEAD_ON.format(tree=tmp / "tree.xml", goal1=tmp / "g1.yaml", goal2=tmp / "g2.yaml"))
+    bag = tmp / "bag"
+    proc = run_twin("simulate", str(scenario), "--out", str(bag))
+    assert proc.returncode in (0, 1), proc.stderr  # 1: a mission failed (they may block each other)
+    return bag
+
+
+def _read_truth(bag: Path) -> dict[str, Any]:
+    """What a bag holds, read with rosbags: ground truth per robot, tree-log goal results, contacts."""
     gt: dict[str, dict[int, tuple[float, float, float]]] = {ns: {} for ns in ROBOTS}
     goals: dict[str, list[tuple[str, str]]] = {ns: [] for ns in ROBOTS}
     contacts = {ns: 0 for ns in ROBOTS}
-    with AnyReader([fleet_bag]) as reader:
+    touching: dict[str, list[tuple[int, str]]] = {ns: [] for ns in ROBOTS}  # (t ns, what) of each contact begun
+    with AnyReader([bag]) as reader:
         for con, _t, raw in reader.messages():
             ns = con.topic.split("/")[1]
             if con.topic.endswith("/ground_truth/odom"):
@@ -52,8 +86,16 @@ def truth(fleet_bag: Path) -> dict[str, Any]:
                     if e.node_name.startswith("go_to") and e.current_status in ("SUCCESS", "FAILURE"):
                         goals[ns].append((e.node_name, e.current_status))
             elif con.topic.endswith("/contacts"):
-                contacts[ns] += reader.deserialize(raw, con.msgtype).event == 1
-    return {"gt": gt, "goals": goals, "contacts": contacts}
+                msg = reader.deserialize(raw, con.msgtype)
+                if msg.event == 1:
+                    contacts[ns] += 1
+                    touching[ns].append((_t, msg.world_collision))
+    return {"gt": gt, "goals": goals, "contacts": contacts, "touching": touching}
+
+
+@pytest.fixture(scope="module")
+def truth(fleet_bag: Path) -> dict[str, Any]:
+    return _read_truth(fleet_bag)
 
 
 @pytest.fixture(scope="module")
@@ -254,3 +296,29 @@ def test_graph_of_one_robot_has_no_groups() -> None:
     proc = run_twin("graph", "--measure-s", "1", "--json")
     assert proc.returncode == 0, proc.stderr
     assert "namespaces" not in json.loads(proc.stdout)
+
+
+def test_head_on_contacts_and_closest_approach(head_on_bag: Path, tmp_path: Path) -> None:
+    truth = _read_truth(head_on_bag)
+    # the robots touched: each robot's own contacts name the other (robot2::turtlebot3_waffle::...)
+    between = {
+        t
+        for ns, other in (("robot1", "robot2"), ("robot2", "robot1"))
+        for t, what in truth["touching"][ns]
+        if what.startswith(f"{other}::")
+    }
+    assert between, truth["touching"]
+    proc = run_twin("analyze", str(head_on_bag), "--out", str(tmp_path / "r"), "--json", "--no-plots")
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    for ns in ROBOTS:
+        assert report["robots"][ns]["metrics"]["contacts"] == truth["contacts"][ns]
+    # one contact both robots report at one time counts once for each
+    assert report["robot_contacts"] == {"robot1": {"robot2": len(between)}, "robot2": {"robot1": len(between)}}
+    t_s, d = _distance(truth)
+    i = int(np.argmin(d))
+    dist = report["inter_robot_distance"]
+    assert dist["min_m"] == pytest.approx(float(d[i]), abs=1e-12)
+    assert dist["min_t_s"] == pytest.approx(float(t_s[i]), abs=1e-9)
+    assert dist["min_t_s"] > 1.0  # they closed in from 1.5 m: the minimum is not the start
+    assert dist["min_m"] < 1.0

@@ -178,22 +178,26 @@ def _names_robot(event: ContactEvent, ns: str) -> bool:
 
 
 def robot_contacts(contacts: Mapping[str, list[ContactEvent] | None]) -> dict[str, dict[str, int]]:
-    """Contacts between robots: for each robot, how many contacts name each other robot.
+    """Contacts between robots: for each robot, how many contacts it had with each other robot.
 
-    A contact counts for both robots it names, whichever robot's `/<ns>/contacts` reported it.
+    A contact is counted from either robot's `/<ns>/contacts` (the robot that moves into another
+    reports it, and the other may too): one beginning at one time between two robots counts once.
 
     Args:
         contacts: Each robot's own contact events (None: it has no contacts topic).
     """
-    out: dict[str, dict[str, int]] = {ns: {} for ns in contacts}
+    begins: dict[frozenset[str], set[float]] = {}
     for ns, events in contacts.items():
         for e in events or ():
             if not e.begin:
                 continue
             for other in contacts:
                 if other != ns and _names_robot(e, other):
-                    out[ns][other] = out[ns].get(other, 0) + 1
-                    out[other][ns] = out[other].get(ns, 0) + 1
+                    begins.setdefault(frozenset((ns, other)), set()).add(e.t_s)
+    out: dict[str, dict[str, int]] = {ns: {} for ns in contacts}
+    for pair, times in begins.items():
+        a, b = sorted(pair)
+        out[a][b] = out[b][a] = len(times)
     return out
 
 

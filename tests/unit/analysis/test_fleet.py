@@ -104,17 +104,26 @@ def test_no_distance_without_two_overlapping_tracks() -> None:
     assert robot_distance({"a": a, "b": _track("/b/odom", [0.5], [(0, 0)])}, 0) is None
 
 
-def _contact(what: str, begin: bool = True) -> ContactEvent:
-    return ContactEvent(t_s=1.0, begin=begin, x_m=0.0, y_m=0.0, what=what)
+def _contact(what: str, t_s: float = 1.0, begin: bool = True) -> ContactEvent:
+    return ContactEvent(t_s=t_s, begin=begin, x_m=0.0, y_m=0.0, what=what)
 
 
-def test_a_contact_counts_for_both_robots_it_names() -> None:
+def test_a_contact_both_robots_report_counts_once_for_each() -> None:
     contacts = {
-        "robot1": [_contact("robot2::turtlebot3_waffle::base_link"), _contact("robot2::x::y", begin=False)],
-        "robot2": [_contact("wall::link::collision")],
+        "robot1": [
+            _contact("robot2::turtlebot3_waffle::base_link"),
+            _contact("robot2::turtlebot3_waffle::base_link", begin=False),
+            _contact("robot2::turtlebot3_waffle::base_link", t_s=4.0),
+        ],
+        "robot2": [_contact("robot1::turtlebot3_waffle::base_link"), _contact("wall::link::collision", t_s=2.0)],
         "robot3": None,
     }
-    assert robot_contacts(contacts) == {"robot1": {"robot2": 1}, "robot2": {"robot1": 1}, "robot3": {}}
+    assert robot_contacts(contacts) == {"robot1": {"robot2": 2}, "robot2": {"robot1": 2}, "robot3": {}}
+
+
+def test_a_contact_names_a_nested_namespace_whole() -> None:
+    contacts = {"fleet/a": [_contact("fleet/b::m::l")], "fleet/b": [], "b": []}
+    assert robot_contacts(contacts) == {"fleet/a": {"fleet/b": 1}, "fleet/b": {"fleet/a": 1}, "b": {}}
 
 
 def test_a_one_robot_bag_gets_the_one_robot_report(gazebo_bag: Any, tmp_path: Any) -> None:
