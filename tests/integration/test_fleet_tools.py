@@ -322,3 +322,48 @@ def test_head_on_contacts_and_closest_approach(head_on_bag: Path, tmp_path: Path
     assert dist["min_t_s"] == pytest.approx(float(t_s[i]), abs=1e-9)
     assert dist["min_t_s"] > 1.0  # they closed in from 1.5 m: the minimum is not the start
     assert dist["min_m"] < 1.0
+
+
+def test_without_ground_truth_the_distance_comes_from_amcl(fleet_bag: Path, tmp_path: Path) -> None:
+    """A fleet's bag as a real multi-robot run records it: no ground truth, AMCL in the shared map frame."""
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+    bag = tmp_path / "no_truth"
+    amcl: dict[str, dict[int, tuple[float, float]]] = {ns: {} for ns in ROBOTS}
+    with (
+        Reader(fleet_bag) as reader,
+        AnyReader([fleet_bag]) as decoder,
+        Writer(bag, version=8, storage_plugin=StoragePlugin.MCAP) as writer,
+    ):
+        out = {}
+        for con in reader.connections:
+            if con.topic.endswith("/ground_truth/odom"):
+                continue
+            out[con.id] = writer.add_connection(
+                con.topic, con.msgtype, msgdef=con.msgdef.data, rihs01=con.digest, serialization_format="cdr"
+            )
+        kept = [c for c in reader.connections if c.id in out]
+        for con, t_ns, raw in reader.messages(connections=kept):
+            writer.write(out[con.id], t_ns, raw)
+            if con.topic.endswith("/amcl_pose"):
+                msg = decoder.deserialize(raw, con.msgtype)
+                stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                amcl[con.topic.split("/")[1]][stamp] = (msg.pose.pose.position.x, msg.pose.pose.position.y)
+    proc = run_twin("analyze", str(bag), "--out", str(tmp_path / "r"), "--json", "--no-plots")
+    assert proc.returncode == 0, proc.stderr
+    dist = json.loads(proc.stdout)["inter_robot_distance"]
+    assert dist["source"] == "AMCL estimates in the map frame"
+    assert dist["topics"] == ["/robot1/amcl_pose", "/robot2/amcl_pose"]
+    # recomputed: both estimates interpolated at every stamp of either, over the span both cover
+    tracks = {
+        ns: (np.array(sorted(a), dtype=np.float64), np.array([a[s] for s in sorted(a)])) for ns, a in amcl.items()
+    }
+    lo = max(t[0] for t, _ in tracks.values())
+    hi = min(t[-1] for t, _ in tracks.values())
+    at = np.unique(np.concatenate([t for t, _ in tracks.values()]))
+    at = at[(at >= lo) & (at <= hi)]
+    xy = {ns: np.stack([np.interp(at, t, p[:, 0]), np.interp(at, t, p[:, 1])], 1) for ns, (t, p) in tracks.items()}
+    d = np.hypot(*(xy["robot1"] - xy["robot2"]).T)
+    assert dist["samples"] == len(at)
+    assert dist["min_m"] == pytest.approx(float(d.min()), abs=1e-9)
+    assert dist["min_t_s"] == pytest.approx(float(at[int(np.argmin(d))]) * 1e-9, abs=1e-9)
