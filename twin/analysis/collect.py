@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from twin.analysis import _cdr
 from twin.analysis.series import TopicSeries, series_kind
-from twin.bag import BagInfo, open_bag, read_messages, read_raw
+from twin.bag import BagInfo, TopicInfo, open_bag, read_messages, read_raw
 from twin.bag.raw import raw_readable
 from twin.bag.reader import undecodable
 from twin.bag.typesys import message_type_name
@@ -38,6 +38,8 @@ __all__ = [
     "TopicHealth",
     "best_pose",
     "collect",
+    "namespace_view",
+    "robot_namespaces",
     "scan_points",
 ]
 
@@ -409,6 +411,55 @@ def _pose_topics(types: dict[str, str], extra: Iterable[str]) -> list[str]:
     return out
 
 
+#: Topics besides the odometry that show a namespace holds a robot (one of them is enough).
+_ROBOT_SIBLINGS = ("/cmd_vel", "/scan", "/tf", "/amcl_pose", "/joint_states", "/imu", "/robot_description")
+
+
+def robot_namespaces(info: BagInfo) -> list[str]:
+    """The namespaces of the robots in a bag (`robot1`, `fleet/robot2`), sorted; empty for a single robot.
+
+    A namespace holds a robot when it has an Odometry topic `<ns>/odom` or `<ns>/ground_truth/odom`
+    and one more of a robot's topics (`<ns>/cmd_vel`, `<ns>/scan`, `<ns>/tf`...): nav2_bringup's
+    multi-robot naming. A lone `/wheel/odom` is not a robot.
+    """
+    names = {t.name for t in info.topics}
+    found: set[str] = set()
+    for t in info.topics:
+        if message_type_name(t.msgtype) != "nav_msgs/msg/Odometry":
+            continue
+        for tail in ("/ground_truth/odom", "/odom"):
+            if t.name.endswith(tail):
+                prefix = t.name[: -len(tail)]
+                break
+        else:
+            continue
+        if not prefix.strip("/") or prefix.endswith("/ground_truth"):
+            continue
+        if any(prefix + s in names for s in _ROBOT_SIBLINGS):
+            found.add(prefix.strip("/"))
+    return sorted(found)
+
+
+def namespace_view(info: BagInfo, namespace: str | None) -> dict[str, TopicInfo]:
+    """The bag's topics as one robot's pass reads them: `{name read as: topic}`.
+
+    With no namespace, every topic under its own name. With one, the robot's topics under
+    `/<namespace>/` stand for their names without it (`/robot1/odom` as `/odom`), and the topics
+    outside every robot's namespace (`/clock`, `/rosout`) are kept as they are; other robots'
+    topics are left out.
+    """
+    if not namespace:
+        return {t.name: t for t in info.topics}
+    ns = namespace.strip("/")
+    prefix = f"/{ns}/"
+    others = tuple(f"/{o}/" for o in robot_namespaces(info) if o != ns)
+    view = {"/" + t.name[len(prefix) :]: t for t in info.topics if t.name.startswith(prefix)}
+    for t in info.topics:
+        if not t.name.startswith(prefix) and not t.name.startswith(others) and t.name not in view:
+            view[t.name] = t
+    return view
+
+
 def _is_twin_bag(bag: Path) -> bool:
     from twin.bag import read_provenance
     from twin.core.errors import BagError
@@ -429,6 +480,7 @@ def collect(
     progress: Callable[[float], None] | None = None,
     pose_topics: Iterable[str] = (),
     series: bool = False,
+    namespace: str | None = None,
 ) -> BagData:
     """Read the bag once (twice with `decoded`) and keep the series analysis uses.
 
@@ -443,6 +495,11 @@ def collect(
             every topic of a pose type); `data.poses` holds them most trusted first.
         series: Also keep samples of every topic of a standard type the other series leave out
             (IMU, joint states, battery, GNSS, other Twist and LaserScan topics) in `data.series`.
+        namespace: Read one robot of a fleet's bag: its topics under `/<namespace>/` stand for the
+            usual names (`/robot1/odom` is read as `/odom`: `data.poses`, `data.health` and the
+            other fields are keyed by those), plus the bag's topics outside every robot's namespace
+            (`/clock`); tracks and topic health keep the bag's own names. `topics` and
+            `pose_topics` are then given without the namespace.
 
     Raises:
         BagError: If the folder is not a readable bag; a truncated storage file says to run
@@ -456,9 +513,11 @@ def collect(
     info = open_bag(bag)
     data = BagData(info=info, start_ns=info.start_ns, twin_bag=_is_twin_bag(bag))
     nominal = EXPECTED_RATE_HZ if data.twin_bag else {}
-    names = {t.name for t in info.topics}
-    by_name = {t.name: t for t in info.topics}
-    types = {t.name: message_type_name(t.msgtype) for t in info.topics}  # full names, as the fast readers know them
+    # the topics as this pass names them: a robot's own without its namespace (see namespace_view)
+    by_name = namespace_view(info, namespace)
+    names = set(by_name)
+    by_real = {ti.name: ti for ti in by_name.values()}
+    types = {n: message_type_name(t.msgtype) for n, t in by_name.items()}  # full names, as the fast readers know them
     pose_list = _pose_topics(types, pose_topics)
     wanted = None
     if topics is not None:
@@ -467,17 +526,17 @@ def collect(
         if pose_topics or any(t in asked for t in POSE_TOPICS):
             # a caller asking for the usual pose topics gets whatever the bag carries poses on
             wanted += [t for t in pose_list if t not in wanted]
-    for ti in info.topics:
-        if wanted is None or ti.name in wanted:
-            data.health[ti.name] = TopicHealth(
+    for name, ti in by_name.items():
+        if wanted is None or name in wanted:
+            data.health[name] = TopicHealth(
                 topic=ti.name,
                 msgtype=ti.msgtype,
                 decodable=ti.decodable,
-                expected_rate_hz=nominal.get(ti.name),
+                expected_rate_hz=nominal.get(name),
             )
     pose_fns = {t: fn for t in pose_list if (fn := _cdr.pose_reader(types[t])) is not None}
     for t in pose_fns:
-        data.poses[t] = PoseTrack(t, types[t])
+        data.poses[t] = PoseTrack(by_name[t].name, types[t])
     twist_fn = _cdr.twist_reader(types[CMD_TOPIC]) if CMD_TOPIC in by_name else None
     if twist_fn is not None:
         data.cmd = (array("d"), array("d"), array("d"))
@@ -488,10 +547,12 @@ def collect(
     clock_ok = "/clock" in by_name and types["/clock"] == "rosgraph_msgs/msg/Clock"
     if clock_ok:
         data.clock = (array("q"), array("q"))
-    for h in data.health.values():
-        h.stamp_kind = _cdr.stamp_kind(types[h.topic])
+    for name, h in data.health.items():
+        h.stamp_kind = _cdr.stamp_kind(types[name])
 
-    read_topics = None if wanted is None else wanted
+    read_topics = None if wanted is None else [by_name[t].name for t in wanted]
+    if read_topics is None and namespace:
+        read_topics = [ti.name for ti in by_name.values()]
     if read_topics is not None and not read_topics:
         return data
     span = max(info.duration_ns, 1)
@@ -517,10 +578,11 @@ def collect(
                 if rare is not None:
                     handlers[name] = rare
     if series:
-        _add_series(data, handlers, types, wanted)
+        _add_series(data, handlers, by_name, types, wanted)
     health_of = data.health if health else {}
+    # keyed by the bag's own topic names, as the reader yields them
     route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]] = {
-        name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
+        by_name[name].name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
     }
     block = _BLOCK
     for topic, t_ns, raw in read_raw(bag, read_topics):
@@ -548,7 +610,7 @@ def collect(
             try:
                 handler(t_ns, buf)
             except (IndexError, ValueError, TypeError, struct.error) as err:
-                raise undecodable(bag, buf, err, topic=topic, t_ns=t_ns, msgtype=by_name[topic].msgtype) from None
+                raise undecodable(bag, buf, err, topic=topic, t_ns=t_ns, msgtype=by_real[topic].msgtype) from None
         if progress is not None and t_ns >= next_report:
             progress((t_ns - info.start_ns) / span)
             next_report = t_ns + span // 50
@@ -558,17 +620,21 @@ def collect(
 
 
 def _add_series(
-    data: BagData, handlers: dict[str, Callable[[int, bytes], None]], types: dict[str, str], wanted: list[str] | None
+    data: BagData,
+    handlers: dict[str, Callable[[int, bytes], None]],
+    by_name: dict[str, TopicInfo],
+    types: dict[str, str],
+    wanted: list[str] | None,
 ) -> None:
     store = _cdr.type_store()
-    for ti in data.info.topics:
-        kind = series_kind(types[ti.name])
-        if kind is None or ti.name in handlers or not ti.decodable or (wanted is not None and ti.name not in wanted):
+    for name, ti in by_name.items():
+        kind = series_kind(types[name])
+        if kind is None or name in handlers or not ti.decodable or (wanted is not None and name not in wanted):
             continue
-        if types[ti.name] not in store.fielddefs:
+        if types[name] not in store.fielddefs:
             continue
-        ts = data.series[ti.name] = TopicSeries.for_topic(ti.name, kind, ti.message_count)
-        handlers[ti.name] = _series_handler(ts, store, types[ti.name])
+        ts = data.series[name] = TopicSeries.for_topic(ti.name, kind, ti.message_count)  # its title: the bag's name
+        handlers[name] = _series_handler(ts, store, types[name])
 
 
 def _series_handler(ts: TopicSeries, store: Any, msgtype: str) -> Callable[[int, bytes], None]:

@@ -160,6 +160,12 @@ def _pick_topics(a: BagData, b: BagData, topics: tuple[str, ...] | None) -> tupl
     raise BagError(msg)
 
 
+def _local(topic: str, namespace: str | None) -> str:
+    """A topic as a robot's pass reads it: without the robot's namespace."""
+    prefix = f"/{namespace.strip('/')}/" if namespace else ""
+    return "/" + topic[len(prefix) :] if prefix and topic.startswith(prefix) else topic
+
+
 def _relative(track: PoseTrack, origin_ns: int | None = None) -> tuple[F64, F64]:
     """The track's stamps in s from `origin_ns` (default: its own first stamp), in time order."""
     stamps = track.stamp_ns
@@ -184,17 +190,23 @@ def compare_bags(
     align: bool = False,
     rpe_interval_s: float = 1.0,
     same_clock: bool | None = None,
+    namespaces: tuple[str | None, str | None] = (None, None),
 ) -> Comparison:
     """Compare bag B against bag A (see the module docstring).
 
     `same_clock`: match the poses on their stamps as they are (True), or each from its track's first
     pose (False); None (the default) chooses True when A and B are the same bag.
+    `namespaces`: the robot of each bag to compare (a fleet's bag), None for a one-robot bag; its
+    topics are then read without the namespace (`topics` may be given either way).
 
     Raises:
         BagError: If a bag is unreadable, or they have no common pose topic (or a given one).
     """
-    data_a = collect(a, decoded=False, pose_topics=topics[:1] if topics else ())
-    data_b = collect(b, decoded=False, pose_topics=topics[-1:] if topics else ())
+    ns_a, ns_b = namespaces
+    if topics:  # one topic stands for both bags' (each without its namespace)
+        topics = (_local(topics[0], ns_a), _local(topics[-1], ns_b))
+    data_a = collect(a, decoded=False, pose_topics=topics[:1] if topics else (), namespace=ns_a)
+    data_b = collect(b, decoded=False, pose_topics=topics[-1:] if topics else (), namespace=ns_b)
     ta, tb = _pick_topics(data_a, data_b, topics)
     if same_clock is None:
         same_clock = _same_bag(a, b)
@@ -240,8 +252,8 @@ def compare_bags(
     return Comparison(
         bag_a=str(a),
         bag_b=str(b),
-        topic_a=ta,
-        topic_b=tb,
+        topic_a=data_a.poses[ta].topic,  # the bag's own name (a fleet robot's under its namespace)
+        topic_b=data_b.poses[tb].topic,
         aligned=align,
         t_s=t,
         xy_a=xy_a,

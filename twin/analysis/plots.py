@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 __all__ = [
     "MapLayers",
     "clearance_plot",
+    "distance_plot",
     "localization_plot",
     "map_plot",
     "overlay_plot",
@@ -173,6 +174,30 @@ def clearance_plot(t_s: F64, min_range_m: F64, title: str) -> bytes:
         ax.plot(t[i], r[i], "v", color="red", ms=8, label=f"min {r[i]:.3f} m at {t[i]:.1f} s")
         ax.legend(loc="upper right", fontsize=8)
     ax.set_ylabel("min lidar range (m)")
+    ax.set_xlabel("time from bag start (s)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def distance_plot(t_s: F64, pairs: Mapping[str, F64], title: str, ylabel: str) -> bytes:
+    """The distance between robots over time: one line per pair, the smallest marked."""
+    fig = Figure(figsize=(8, 3))
+    ax = fig.add_subplot()
+    best: tuple[float, float, str] | None = None
+    for label, d in pairs.items():
+        t, dd = _thin(t_s, d)
+        ax.plot(t, dd, lw=1.0, label=label)
+        if len(d):
+            i = int(np.argmin(d))
+            if best is None or float(d[i]) < best[0]:
+                best = (float(d[i]), float(t_s[i]), label)
+    if best is not None:
+        ax.plot(best[1], best[0], "v", color="red", ms=8, label=f"min {best[0]:.3f} m at {best[1]:.1f} s ({best[2]})")
+    if pairs:
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_ylabel(ylabel)
     ax.set_xlabel("time from bag start (s)")
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)

@@ -52,12 +52,15 @@ class Report:
     health: list[dict[str, Any]]
     sections: list[Section]
     pngs: dict[str, bytes] = field(default_factory=dict)
+    namespace: str | None = None  # the robot of a fleet's bag this report is about (None: the bag's one robot)
 
     def to_dict(self) -> dict[str, Any]:
         """The report as JSON-ready values (plots by file name)."""
+        robot = {} if self.namespace is None else {"namespace": self.namespace}
         return {
             "twin_version": __version__,
             "bag": str(self.bag),
+            **robot,
             "summary": self.summary,
             "metrics": self.metrics.to_dict(),
             "mission": self.timeline,
@@ -105,6 +108,7 @@ def analyze(
     world_name: str = "",
     plots_enabled: bool = True,
     progress: Callable[[float], None] | None = None,
+    namespace: str | None = None,
 ) -> Report:
     """Read the bag and compute its report (metrics, mission timeline, topic health, plots).
 
@@ -115,12 +119,26 @@ def analyze(
         world_name: Named on the map when `walls` are given.
         plots_enabled: Render the PNGs (the slow part on long bags).
         progress: Called with the fraction of the bag read.
+        namespace: Report on this robot of a fleet's bag (its topics under `/<namespace>/`).
 
     Raises:
         BagError: If it is not a readable bag.
     """
     bag = Path(path)
-    data = collect(bag, scan_points=walls is None, progress=progress, series=True)
+    data = collect(bag, scan_points=walls is None, progress=progress, series=True, namespace=namespace)
+    return build_report(bag, data, walls=walls, world_name=world_name, plots_enabled=plots_enabled, namespace=namespace)
+
+
+def build_report(
+    bag: Path,
+    data: BagData,
+    *,
+    walls: F64 | None = None,
+    world_name: str = "",
+    plots_enabled: bool = True,
+    namespace: str | None = None,
+) -> Report:
+    """The report of what `collect` kept of `bag` (see `analyze`; `namespace` as `data` was read)."""
     metrics = compute_metrics(data)
     info = data.info
     timeline = bag_timeline(data)
@@ -142,6 +160,7 @@ def analyze(
         timeline=None if timeline is None else _timeline_dict(timeline),
         health=health,
         sections=[],
+        namespace=namespace.strip("/") if namespace else None,
     )
     _sections(report, data, walls, world_name, plots_enabled)
     return report
@@ -165,7 +184,7 @@ _POSE_TYPES = "Odometry, PoseStamped or PoseWithCovarianceStamped"
 
 
 def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str, render: bool) -> None:
-    title = report.bag.name
+    title = report.bag.name if report.namespace is None else f"{report.bag.name} /{report.namespace}"
     add = report.sections.append
     tracks = {t: track.values[:, :2] for t, track in data.poses.items() if len(track)}
 
@@ -258,7 +277,7 @@ def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str,
             continue
         name = ts.kind.name + topic.replace("/", "_")
         t_s = data_t_s(data, rec_ns)
-        make = functools.partial(plots.series_plot, t_s, values, ts.columns, ts.panels, f"{title}: {topic}")
+        make = functools.partial(plots.series_plot, t_s, values, ts.columns, ts.panels, f"{title}: {ts.topic}")
         _plot(report, name, render, make)
     # Camera (a bag with images only): the first frame, the frame at each goal's end, the last frame.
     _camera_section(report, data, render, title)
@@ -271,8 +290,9 @@ def _camera_section(report: Report, data: BagData, render: bool, title: str) -> 
     topic = next((t for t in _IMAGE_TOPICS if data.has(t)), None)
     if topic is None:  # most robots have no camera: no section rather than a missing one
         return
-    msgtype = next(t.msgtype for t in data.info.topics if t.name == topic)
     health = data.health[topic]
+    msgtype = health.msgtype
+    bag_topic = health.topic  # the bag's own name (a fleet robot's is under its namespace)
     picks = [("first", health.first_ns)]
     tl = report.timeline
     if tl is not None:
@@ -286,7 +306,7 @@ def _camera_section(report: Report, data: BagData, render: bool, title: str) -> 
     def sheet() -> bytes:
         from twin.analysis.export_images import pick_frames
 
-        return plots.frames_sheet(pick_frames(report.bag, topic, msgtype, picks), f"{title}: {topic}")
+        return plots.frames_sheet(pick_frames(report.bag, bag_topic, msgtype, picks), f"{title}: {bag_topic}")
 
     _plot(report, "camera", render, sheet)
 
@@ -385,17 +405,36 @@ def _expected(h: dict[str, Any]) -> str:
     return "n/a" if steady is None else f"{steady:.1f} (steady)"
 
 
-def _markdown(report: Report) -> str:
-    d = report.to_dict()
-    s = d["summary"]
-    m = d["metrics"]
-    out = [
-        f"# Bag report: {report.bag.name}",
-        "",
+def bag_line(report: Report) -> str:
+    """The report's first line under its title: the bag, its storage, start, length and size."""
+    s = report.summary
+    return (
         f"`{report.bag}`: {s['storage']}, metadata v{s['metadata_version']}, {s['ros_distro'] or 'distro unknown'}, "
-        f"started {s['start_utc']}, {s['duration_s']:.2f} s, {s['messages']} messages on {s['topics']} topics.",
-        "",
-        "## Metrics",
+        f"started {s['start_utc']}, {s['duration_s']:.2f} s, {s['messages']} messages on {s['topics']} topics."
+    )
+
+
+def _markdown(report: Report) -> str:
+    title = f"# Bag report: {report.bag.name}"
+    if report.namespace:
+        title += f", robot /{report.namespace}"
+    out = [title, "", bag_line(report), "", *robot_markdown(report, 2)]
+    out += ["", f"_Written by twin {__version__} `twin analyze`._", ""]
+    return "\n".join(out)
+
+
+def robot_markdown(report: Report, level: int) -> list[str]:
+    """One robot's part of a report as Markdown lines: metrics, mission, plots, topic health.
+
+    Args:
+        report: The robot's report.
+        level: The heading level of its parts (2 in a one-robot report).
+    """
+    d = report.to_dict()
+    m = d["metrics"]
+    h2, h3 = "#" * level, "#" * (level + 1)
+    out = [
+        f"{h2} Metrics",
         "",
         "| metric | value |",
         "|---|---|",
@@ -403,7 +442,7 @@ def _markdown(report: Report) -> str:
     out += [f"| {label.strip()} | {_fmt(m[key], unit, digits)} |" for key, label, unit, digits in _METRIC_ROWS]
     if m["notes"]:
         out += ["", *[f"- {n}" for n in m["notes"]]]
-    out += ["", "## Mission", ""]
+    out += ["", f"{h2} Mission", ""]
     tl = d["mission"]
     if tl is None:
         out.append("No mission timeline: it needs `/behavior_tree_log` (nav2_msgs/BehaviorTreeLog).")
@@ -420,14 +459,14 @@ def _markdown(report: Report) -> str:
         ]
         out += ["", f"Recoveries: {len(tl['recoveries'])}"]
         out += [f"- {r['t_s']:.2f} s: {r['name']}" for r in tl["recoveries"]]
-    out += ["", "## Plots", ""]
+    out += ["", f"{h2} Plots", ""]
     for sec in report.sections:
         if sec.available and sec.plot:
-            out += [f"### {sec.name}", "", f"![{sec.name}]({sec.plot})", ""]
+            out += [f"{h3} {sec.name}", "", f"![{sec.name}]({sec.plot})", ""]
         elif not sec.available:
-            out += [f"### {sec.name}", "", f"Not drawn: needs {sec.needs}.", ""]
+            out += [f"{h3} {sec.name}", "", f"Not drawn: needs {sec.needs}.", ""]
     out += [
-        "## Topic health",
+        f"{h2} Topic health",
         "",
         "| topic | type | count | rate (Hz) | expected | jitter (ms) | gaps > 3 periods | max interval (s) "
         "| stamps backwards | record − stamp (s) | skew spread (ms) | flags |",
@@ -442,12 +481,15 @@ def _markdown(report: Report) -> str:
             f"{_fmt(h['stamp_offset_mean_s'], '', 3)} | "
             f"{_fmt(h['stamp_skew_spread_ms'], '', 2)} | {'; '.join(_health_flags(h))} |"
         )
-    out += ["", f"_Written by twin {__version__} `twin analyze`._", ""]
-    return "\n".join(out)
+    return out
 
 
 def _html(report: Report, markdown: str) -> str:
-    """A self-contained page: the Markdown's content as HTML, the plots inline as base64 PNGs."""
+    return markdown_html(markdown, report.pngs, f"Bag report: {report.bag.name}")
+
+
+def markdown_html(markdown: str, pngs: dict[str, bytes], title: str) -> str:
+    """A self-contained page: the Markdown's content as HTML, the plots (`pngs`) inline as base64 PNGs."""
     body: list[str] = []
     in_table = False
     for line in markdown.splitlines():
@@ -467,7 +509,7 @@ def _html(report: Report, markdown: str) -> str:
             in_table = False
         if line.startswith("![") and "](" in line:
             name = line[line.index("](") + 2 : -1]
-            png = report.pngs.get(name)
+            png = pngs.get(name)
             if png is not None:
                 b64 = base64.b64encode(png).decode("ascii")
                 body.append(f'<img alt="{html.escape(name)}" src="data:image/png;base64,{b64}">')
@@ -489,7 +531,7 @@ def _html(report: Report, markdown: str) -> str:
         "table{border-collapse:collapse;font-size:0.85em;margin:0.5em 0}"
         "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}th{background:#eee}img{max-width:100%}"
     )
-    title = html.escape(f"Bag report: {report.bag.name}")
+    title = html.escape(title)
     return (
         f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
         f"<style>{style}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"

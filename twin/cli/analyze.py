@@ -37,6 +37,8 @@ examples:
   twin analyze ../shared/fixtures/bags/tb3_waffle_gazebo_humble
   twin analyze bags/run1 --out /tmp/run1_report         report.md, report.html, report.json, PNGs
   twin analyze bags/run1 --json | jq .metrics.path_length_m
+  twin analyze bags/fleet                  a fleet's bag: one section per robot, distance between them
+  twin analyze bags/fleet --namespace robot2                     one robot of a fleet's bag
   twin analyze ../shared/fixtures/bags/tb3_waffle_gazebo_humble \\
       --world ../shared/fixtures/gazebo_classic/worlds/turtlebot3_world.world \\
       --model-path ../shared/fixtures/gazebo_classic/models     the world's walls on the map
@@ -45,8 +47,11 @@ examples:
 Reads any rosbag2 bag (MCAP or sqlite3, metadata 4 to 9, any distro) in one streaming pass. A
 section whose topics the bag lacks says what it needs; the rest still runs. The report (default
 folder: bags/<BAG name>_report) holds report.md, report.json, report.html (self-contained,
-plots inline) and the PNG plots. Exit codes: 0 done, 5 unreadable bag (a truncated one: run
-`twin bag recover`).
+plots inline) and the PNG plots. A fleet's bag (robots found by namespace: /<ns>/odom or
+/<ns>/ground_truth/odom with the robot's other topics) gets one section per robot, each read from
+its own topics, and the smallest distance between robots over time (from ground truth, else AMCL
+in the map frame). Exit codes: 0 done, 2 a --namespace the bag has no robot under, 5 unreadable
+bag (a truncated one: run `twin bag recover`).
 """
 
 _COMPARE_EPILOG = """\
@@ -54,14 +59,17 @@ examples:
   twin analyze compare bags/replay ../shared/fixtures/bags/tb3_waffle_gazebo_humble
   twin analyze compare bags/fmu_run bags/kinematic_run --topic /ground_truth/odom --align
   twin analyze compare A B --max-position-error 0.05 && echo "within 5 cm"
+  twin analyze compare bags/fleet bags/fleet --namespace robot1 robot2     two robots of one fleet's bag
 
 Poses of the chosen topic in each bag (default: /ground_truth/odom, else /odom, the first both
 have; or --topic for both, --topic A_TOPIC B_TOPIC for each) are matched in time from each bag's
 first pose (sim time from the header stamps; two topics of one bag, or --same-clock, on the stamps
 as they are), then compared: position and yaw error over time, ATE
 (RMS position error, optionally after a Umeyama rigid alignment with --align) and RPE over 1 s.
-Exit codes: 0 done (and within --max-position-error), 1 over the threshold, 5 unreadable bags or
-no common pose topic.
+A fleet's bag (robots under namespaces: /robot1/odom...) needs --namespace NS: that robot's
+topics are read as a one-robot bag's (--topic with or without the namespace). Exit codes: 0 done
+(and within --max-position-error), 1 over the threshold, 2 a fleet's bag without --namespace (or
+one it lacks), 5 unreadable bags or no common pose topic.
 """
 
 
@@ -87,6 +95,12 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         "--model-path", type=Path, action="append", default=[], metavar="DIR", help="where model:// URIs resolve"
     )
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots (faster)")
+    parser.add_argument(
+        "--namespace",
+        nargs="+",
+        metavar="NS",
+        help="a fleet's bag: only the robot under /NS/ (compare: in each fleet bag, or one NS per bag)",
+    )
     cmp = parser.add_argument_group("compare A B")
     cmp.add_argument("--topic", nargs="+", metavar="TOPIC", help="pose topic in both bags (or one per bag)")
     cmp.add_argument("--align", action="store_true", help="Umeyama-align B's trajectory to A's before the ATE")
@@ -130,10 +144,20 @@ def _analyze(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    from twin.analysis.fleet import bag_robots, check_namespace
     from twin.analysis.report import analyze, summary_lines, write_report
+    from twin.core.errors import ConfigError
 
     bag = Path(args.bag)
+    if args.namespace is not None and len(args.namespace) > 1:
+        msg = f"--namespace takes one robot for analyze, got {len(args.namespace)}; analyze one at a time"
+        raise ConfigError(msg)
+    info, namespaces = bag_robots(bag)
+    namespace = None if args.namespace is None else check_namespace(info, args.namespace[0])
     walls = _walls(args)
+    out = args.out if args.out is not None else Path("bags") / f"{bag.resolve().name}_report"
+    if namespaces and namespace is None:
+        return _analyze_fleet(args, bag, walls, out)
     with _Fraction(f"reading {bag}", enabled=not args.quiet) as bar:
         report = analyze(
             bag,
@@ -141,8 +165,8 @@ def _analyze(args: argparse.Namespace) -> int:
             world_name=args.world.name if args.world else "",
             plots_enabled=not args.no_plots,
             progress=bar.update,
+            namespace=namespace,
         )
-    out = args.out if args.out is not None else Path("bags") / f"{bag.resolve().name}_report"
     files = _writing(out, lambda: write_report(report, out))
     if args.json:
         print(json.dumps({**report.to_dict(), "files": [str(f) for f in files]}, indent=2))
@@ -150,6 +174,59 @@ def _analyze(args: argparse.Namespace) -> int:
         print("\n".join(summary_lines(report)))
         print(f"report: {out / 'report.html'} (and report.md, report.json, {len(report.pngs)} plots)")
     return 0
+
+
+def _analyze_fleet(args: argparse.Namespace, bag: Path, walls: Any, out: Path) -> int:
+    """A fleet's bag: one section per robot and the distance between them."""
+    from twin.analysis.fleet import analyze_fleet, fleet_summary_lines, write_fleet_report
+
+    with _Fraction(f"reading {bag}", enabled=not args.quiet) as bar:
+        report = analyze_fleet(
+            bag,
+            walls=walls,
+            world_name=args.world.name if args.world else "",
+            plots_enabled=not args.no_plots,
+            progress=bar.update,
+        )
+    files = _writing(out, lambda: write_fleet_report(report, out))
+    if args.json:
+        print(json.dumps({**report.to_dict(), "files": [str(f) for f in files]}, indent=2))
+    else:
+        print("\n".join(fleet_summary_lines(report)))
+        n = sum(1 for f in files if f.suffix == ".png")
+        print(f"report: {out / 'report.html'} (and report.md, report.json, {n} plots)")
+    return 0
+
+
+def _compare_namespaces(a: Path, b: Path, given: list[str] | None) -> tuple[str | None, str | None]:
+    """The robot to compare in each bag: --namespace's in a fleet's bag, none in a one-robot bag.
+
+    One NS applies to each fleet bag; two apply to A and B in turn. A fleet's bag without one is
+    refused, naming its robots: comparing whichever robot came first would be a silent guess.
+    """
+    from twin.analysis.fleet import bag_robots, check_namespace
+    from twin.core.errors import ConfigError
+
+    if given is not None and len(given) > 2:
+        msg = f"--namespace takes one robot (each fleet bag) or two (A's, B's), got {len(given)}"
+        raise ConfigError(msg)
+    out: list[str | None] = []
+    fleets = 0
+    for k, bag in enumerate((a, b)):
+        info, robots = bag_robots(bag)
+        fleets += bool(robots)
+        ns = None if given is None else given[k] if len(given) == 2 else given[0]
+        if robots and ns is None:
+            msg = f"{bag} holds {len(robots)} robots ({', '.join(robots)}): choose one with --namespace NS"
+            raise ConfigError(msg)
+        if ns is not None and (robots or (given is not None and len(given) == 2)):
+            out.append(check_namespace(info, ns))
+        else:
+            out.append(None)
+    if given is not None and not fleets:
+        msg = f"--namespace {' '.join(given)}: neither {a} nor {b} holds namespaced robots; leave it out"
+        raise ConfigError(msg)
+    return out[0], out[1]
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -164,7 +241,10 @@ def _compare(args: argparse.Namespace) -> int:
     if topics is not None and len(topics) > 2:
         msg = f"--topic takes one topic (both bags) or two (A's, B's), got {len(topics)}"
         raise BagError(msg)
-    result = compare_bags(a, b, topics=topics, align=args.align, same_clock=True if args.same_clock else None)
+    namespaces = _compare_namespaces(a, b, args.namespace)
+    result = compare_bags(
+        a, b, topics=topics, align=args.align, same_clock=True if args.same_clock else None, namespaces=namespaces
+    )
     out = args.out
     if out is not None:
         walls = _walls(args)

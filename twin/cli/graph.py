@@ -15,6 +15,10 @@ examples:
   twin graph examples/nodes/wall_follower.yaml a user's node driving the robot
   twin graph --json                            the same as JSON, for scripts
   twin graph --dot > graph.dot && dot -Tpng graph.dot -o graph.png   (Graphviz draws it)
+  twin graph scenarios/house_two_waffles.yaml  a fleet: nodes and topics grouped by robot namespace
+
+A fleet's graph (`robots:`) is grouped by robot namespace (/robot1, /robot2, then what is under
+none: /clock, /rosout): blocks in the text, `namespaces` in --json, clusters in --dot.
 """
 
 
@@ -108,7 +112,28 @@ def graph_data(
         raise guard.error() from None
     finally:
         guard.done.set()
-    return _describe(scenario.name, sim, measure_s)
+    data = _describe(scenario.name, sim, measure_s)
+    namespaces = [ns for ns, _ in scenario.robot_scenarios() if ns]
+    if namespaces:  # a fleet: its nodes and topics grouped by robot (a one-robot graph stays as it was)
+        data["namespaces"] = _groups(data, namespaces)
+    return data
+
+
+def _group_of(name: str, namespaces: list[str]) -> str:
+    """The robot namespace (`/robot1`) a node or topic name is under, or "" when under none."""
+    return next((f"/{ns}" for ns in namespaces if name.startswith(f"/{ns}/")), "")
+
+
+def _groups(data: dict[str, Any], namespaces: list[str]) -> list[dict[str, Any]]:
+    """Each robot namespace's nodes and topics, then those under none (namespace "")."""
+    groups: dict[str, dict[str, Any]] = {
+        g: {"namespace": g, "nodes": [], "topics": []} for g in [f"/{ns}" for ns in namespaces] + [""]
+    }
+    for node in data["nodes"]:
+        groups[_group_of(node["node"], namespaces)]["nodes"].append(node["node"])
+    for topic in data["topics"]:
+        groups[_group_of(topic["topic"], namespaces)]["topics"].append(topic["topic"])
+    return list(groups.values())
 
 
 def _describe(scenario_name: str, sim: Any, measure_s: float) -> dict[str, Any]:
@@ -132,11 +157,24 @@ def _describe(scenario_name: str, sim: Any, measure_s: float) -> dict[str, Any]:
 
 def _dot(data: dict[str, Any]) -> str:
     lines = [f'digraph "{data["scenario"]}" {{', "  rankdir=LR;", "  node [fontname=Helvetica];"]
-    for node in data["nodes"]:
-        lines.append(f'  "{node["node"]}" [shape=box, style=rounded];')
+    nodes = {node["node"]: f'"{node["node"]}" [shape=box, style=rounded];' for node in data["nodes"]}
+    topics = {}
     for topic in data["topics"]:
+        name = topic["topic"]
         rate = f"\\n{topic['rate_hz']:g} Hz" if topic["rate_hz"] else ""
-        lines.append(f'  "{topic["topic"]}" [shape=ellipse, label="{topic["topic"]}\\n{topic["type"]}{rate}"];')
+        topics[name] = f'"{name}" [shape=ellipse, label="{name}\\n{topic["type"]}{rate}"];'
+    if "namespaces" in data:  # a fleet: one cluster per robot namespace, as rqt_graph groups them
+        for k, group in enumerate(data["namespaces"]):
+            if not group["namespace"]:
+                continue
+            lines += [f"  subgraph cluster_{k} {{", f'    label="{group["namespace"]}";']
+            lines += [f"    {nodes.pop(n)}" for n in group["nodes"]]
+            lines += [f"    {topics.pop(t)}" for t in group["topics"]]
+            lines.append("  }")
+    lines += [f"  {n}" for n in nodes.values()]
+    for topic in data["topics"]:
+        if topic["topic"] in topics:
+            lines.append(f"  {topics[topic['topic']]}")
         for pub in topic["publishers"]:
             lines.append(f'  "{pub}" -> "{topic["topic"]}";')
         for sub in topic["subscribers"]:
@@ -147,27 +185,54 @@ def _dot(data: dict[str, Any]) -> str:
 
 def _text(data: dict[str, Any]) -> str:
     out = [f"scenario {data['scenario']}: {len(data['nodes'])} nodes, {len(data['topics'])} topics"]
+    if "namespaces" in data:
+        return "\n".join(out + _grouped_text(data))
     out.append("")
     out.append("nodes:")
     for node in data["nodes"]:
-        out.append(f"  {node['node']}  ({node['class']})")
-        for pub in node["publishes"]:
-            out.append(f"    publishes  {pub['topic']} [{pub['type']}]")
-        for sub in node["subscribes"]:
-            out.append(f"    subscribes {sub['topic']} [{sub['type']}]")
-        rates = [f"{r:g} Hz" if r else "once" for r in node["timers_hz"]]
-        if rates:
-            out.append(f"    timers     {', '.join(rates)}")
+        out += _node_lines(node, "  ")
     out.append("")
     out.append(f"topics (rates over {data['measured_s']:g} simulated s):")
     width = max((len(t["topic"]) for t in data["topics"]), default=10)
     for topic in data["topics"]:
-        rate = "latched" if topic["latched"] else f"{topic['rate_hz']:g} Hz" if topic["rate_hz"] is not None else "-"
-        out.append(
-            f"  {topic['topic']:<{width}}  {topic['type']:<36} {rate:>9}  "
-            f"pub: {', '.join(topic['publishers']) or '-'}; sub: {', '.join(topic['subscribers']) or '-'}"
-        )
+        out.append(_topic_line(topic, width, "  "))
     return "\n".join(out)
+
+
+def _grouped_text(data: dict[str, Any]) -> list[str]:
+    """A fleet's graph, one block per robot namespace, then what is under none."""
+    nodes = {n["node"]: n for n in data["nodes"]}
+    topics = {t["topic"]: t for t in data["topics"]}
+    width = max((len(t) for t in topics), default=10)
+    out: list[str] = []
+    for group in data["namespaces"]:
+        title = f"namespace {group['namespace']}" if group["namespace"] else "outside the robots' namespaces"
+        out += ["", f"{title}: {len(group['nodes'])} nodes, {len(group['topics'])} topics", "  nodes:"]
+        for name in group["nodes"]:
+            out += _node_lines(nodes[name], "    ")
+        out.append(f"  topics (rates over {data['measured_s']:g} simulated s):")
+        out += [_topic_line(topics[t], width, "    ") for t in group["topics"]]
+    return out
+
+
+def _node_lines(node: dict[str, Any], indent: str) -> list[str]:
+    out = [f"{indent}{node['node']}  ({node['class']})"]
+    for pub in node["publishes"]:
+        out.append(f"{indent}  publishes  {pub['topic']} [{pub['type']}]")
+    for sub in node["subscribes"]:
+        out.append(f"{indent}  subscribes {sub['topic']} [{sub['type']}]")
+    rates = [f"{r:g} Hz" if r else "once" for r in node["timers_hz"]]
+    if rates:
+        out.append(f"{indent}  timers     {', '.join(rates)}")
+    return out
+
+
+def _topic_line(topic: dict[str, Any], width: int, indent: str) -> str:
+    rate = "latched" if topic["latched"] else f"{topic['rate_hz']:g} Hz" if topic["rate_hz"] is not None else "-"
+    return (
+        f"{indent}{topic['topic']:<{width}}  {topic['type']:<36} {rate:>9}  "
+        f"pub: {', '.join(topic['publishers']) or '-'}; sub: {', '.join(topic['subscribers']) or '-'}"
+    )
 
 
 def _graph(args: argparse.Namespace) -> int:

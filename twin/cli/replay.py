@@ -13,13 +13,16 @@ examples:
       --world ../shared/fixtures/gazebo_classic/worlds/turtlebot3_world.world \\
       --model-path ../shared/fixtures/gazebo_classic/models --out /tmp/replay
   twin replay BAG --world W --model-path M --drive fmu      the FMU drivetrain instead of ideal wheels
+  twin replay bags/fleet --world sdf/worlds/turtlebot3_house.world --namespace robot2   one robot of a fleet
 
 Writes into --out (default: bags/<BAG name>_replay): scenario.yaml (the replay as a scenario
 `twin simulate` runs again), bag/ (the twin's run) and the comparison of the twin's
 /ground_truth/odom against the bag's pose topic: comparison.json, overlay.png,
 compare_error.png. The robot is the one the bag's /robot_description names, found on --model-path
 or among the project's models, else the model whose wheels (joint names, separation, radius)
-match the URDF's; a bag that matches none is refused: choose with --robot. --drive fmu runs that
+match the URDF's; a bag that matches none is refused: choose with --robot. A fleet's bag (robots
+under namespaces) needs --namespace NS: that robot's /NS/cmd_vel, /NS/ground_truth/odom (else
+/NS/odom) and /NS/robot_description are used; --topic and --pose-topic may be given without /NS. --drive fmu runs that
 robot's own motors as `twin simulate` does (fmu: auto, velocity-servo). Exit codes: 0 done (and
 within --max-position-error), 1 over it, 2 scenario error (or no robot matches the bag), 3 world
 error, 4 FMU error, 5 bag error (e.g. no /cmd_vel to replay).
@@ -57,6 +60,11 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--pose-topic", metavar="TOPIC", help="the bag's pose topic (default: /ground_truth/odom, else /odom)"
     )
+    parser.add_argument(
+        "--namespace",
+        metavar="NS",
+        help="a fleet's bag: replay the robot under /NS/ (its cmd_vel, poses and robot_description)",
+    )
     parser.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: bags/<BAG name>_replay)")
     parser.add_argument(
         "--max-position-error", type=float, metavar="M", help="exit 1 if the final or max error exceeds M"
@@ -67,6 +75,50 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
 def _yaml_path(p: Path) -> str:
     return json.dumps(str(p.resolve()))
+
+
+def _in_namespace(topic: str, namespace: str) -> str:
+    prefix = f"/{namespace}/"
+    return topic if topic.startswith(prefix) else prefix + topic.lstrip("/")
+
+
+def _robot_topics(
+    bag: Path, topic: str, pose_topic: str | None, namespace: str | None
+) -> tuple[str, str | None, str | None]:
+    """The command and pose topics to replay, and the robot's namespace (None: a one-robot bag).
+
+    Raises:
+        ConfigError: If a fleet's bag comes without --namespace (its robots named), or with one it lacks.
+    """
+    from twin.analysis.fleet import bag_robots, check_namespace
+    from twin.core.errors import ConfigError
+
+    info, robots = bag_robots(bag)
+    if namespace is None:
+        if robots:
+            msg = f"{bag} holds {len(robots)} robots ({', '.join(robots)}): choose one with --namespace NS"
+            raise ConfigError(msg)
+        return topic, pose_topic, None
+    ns = check_namespace(info, namespace)
+    names = {t.name for t in info.topics}
+    if pose_topic is not None:
+        pose_topic = _in_namespace(pose_topic, ns)
+    else:  # the replay's own default (ground truth, else odometry), in the robot's namespace
+        pose_topic = next((f"/{ns}{t}" for t in ("/ground_truth/odom", "/odom") if f"/{ns}{t}" in names), None)
+    return _in_namespace(topic, ns), pose_topic, ns
+
+
+def _fleet_robot(bag: Path, namespace: str, model_path: list[Path]) -> Any:
+    """The model of a fleet robot, from its `/<namespace>/robot_description`."""
+    from twin.bag import read_messages
+    from twin.core.errors import ConfigError
+    from twin.sim.bag_robot import robot_from_urdf
+
+    topic = f"/{namespace}/robot_description"
+    for m in read_messages(bag, [topic]):
+        return robot_from_urdf(str(m.msg.data), model_path, where=f"{bag} {topic}")
+    msg = f"{bag}: no {topic} says which robot /{namespace} is; choose a model with --robot"
+    raise ConfigError(msg)
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -87,9 +139,13 @@ def _replay(args: argparse.Namespace) -> int:
     except OSError as err:
         msg = f"{out}: cannot create the output folder ({err.strerror or err}); choose another --out"
         raise ConfigError(msg) from None
-    check_bag(ReplayMission(bag=bag, topic=args.topic))  # no commands to replay is said before the robot
+    topic, pose_topic_arg, namespace = _robot_topics(bag, args.topic, args.pose_topic, args.namespace)
+    check_bag(ReplayMission(bag=bag, topic=topic))  # no commands to replay is said before the robot
     if args.robot:
         robot, robot_reason = args.robot, "--robot"
+    elif namespace is not None:
+        chosen = _fleet_robot(bag, namespace, args.model_path)
+        robot, robot_reason = chosen.model, chosen.reason
     else:
         from twin.sim.bag_robot import robot_from_bag
 
@@ -97,7 +153,7 @@ def _replay(args: argparse.Namespace) -> int:
         robot, robot_reason = chosen.model, chosen.reason
     drive = "{type: kinematic}" if args.drive == "kinematic" else _FMU_DRIVE
     model_path = "[" + ", ".join(_yaml_path(p) for p in args.model_path) + "]"
-    pose_topic = json.dumps(args.pose_topic) if args.pose_topic else "null"
+    pose_topic = json.dumps(pose_topic_arg) if pose_topic_arg else "null"
     scenario_file = out / "scenario.yaml"
     scenario_file.write_text(
         f"# Written by `twin replay`: {bag} replayed in {args.world.name}.\n"
@@ -105,7 +161,7 @@ def _replay(args: argparse.Namespace) -> int:
         f"world: {{sdf: {_yaml_path(args.world)}, model_path: {model_path}}}\n"
         f"robot: {{model: {json.dumps(robot)}}}\n"
         f"drive: {drive}\n"
-        f"mission: {{type: replay, bag: {_yaml_path(bag)}, topic: {json.dumps(args.topic)}, "
+        f"mission: {{type: replay, bag: {_yaml_path(bag)}, topic: {json.dumps(topic)}, "
         f"pose_topic: {pose_topic}}}\n"
     )
     scenario = load_scenario(scenario_file)
@@ -117,7 +173,7 @@ def _replay(args: argparse.Namespace) -> int:
     with Simulation(scenario, bag_path=run_bag) as sim:
         summary = sim.run()
         source_topic = sim.mission.commands.pose_topic  # type: ignore[union-attr]
-    result = compare_bags(bag, run_bag, topics=(source_topic, "/ground_truth/odom"))
+    result = compare_bags(bag, run_bag, topics=(source_topic, "/ground_truth/odom"), namespaces=(namespace, None))
     walls = world_walls(args.world, args.model_path)
     write_comparison(result, out, walls=walls)
     over = args.max_position_error is not None and result.max_position_error_m > args.max_position_error

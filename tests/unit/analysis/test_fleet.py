@@ -1,0 +1,135 @@
+"""A fleet's bag in the analysis: robots found by namespace, one robot's view, distance and contacts between robots."""
+
+from __future__ import annotations
+
+import json
+import math
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+from tests.conftest import run_twin
+from twin.analysis.collect import ContactEvent, PoseTrack, namespace_view, robot_namespaces
+from twin.analysis.fleet import robot_contacts, robot_distance
+
+ODOM = "nav_msgs/msg/Odometry"
+
+
+def _info(*topics: tuple[str, str]) -> Any:
+    return SimpleNamespace(topics=tuple(SimpleNamespace(name=n, msgtype=t) for n, t in topics))
+
+
+def _fleet_info() -> Any:
+    return _info(
+        ("/robot1/odom", ODOM),
+        ("/robot1/ground_truth/odom", ODOM),
+        ("/robot1/scan", "sensor_msgs/msg/LaserScan"),
+        ("/robot2/odom", ODOM),
+        ("/robot2/cmd_vel", "geometry_msgs/msg/Twist"),
+        ("/clock", "rosgraph_msgs/msg/Clock"),
+        ("/rosout", "rcl_interfaces/msg/Log"),
+    )
+
+
+def test_namespaces_are_the_prefixes_of_robot_odometry() -> None:
+    assert robot_namespaces(_fleet_info()) == ["robot1", "robot2"]
+
+
+def test_nested_namespaces_are_found_whole() -> None:
+    info = _info(("/fleet/a/ground_truth/odom", ODOM), ("/fleet/a/tf", "tf2_msgs/msg/TFMessage"))
+    assert robot_namespaces(info) == ["fleet/a"]
+
+
+def test_a_one_robot_bag_has_no_namespaces() -> None:
+    # a real robot's /wheel/odom beside its /odom is one robot's odometry source, not a second robot
+    info = _info(("/odom", ODOM), ("/wheel/odom", ODOM), ("/ground_truth/odom", ODOM), ("/cmd_vel", "x/msg/Twist"))
+    assert robot_namespaces(info) == []
+
+
+def test_a_robot_view_reads_its_topics_without_the_namespace() -> None:
+    view = namespace_view(_fleet_info(), "robot1")
+    assert {k: v.name for k, v in view.items()} == {
+        "/odom": "/robot1/odom",
+        "/ground_truth/odom": "/robot1/ground_truth/odom",
+        "/scan": "/robot1/scan",
+        "/clock": "/clock",
+        "/rosout": "/rosout",
+    }
+    assert set(namespace_view(_fleet_info(), "/robot2/")) == {"/odom", "/cmd_vel", "/clock", "/rosout"}
+    assert set(namespace_view(_fleet_info(), None)) == {t.name for t in _fleet_info().topics}
+
+
+def _track(topic: str, stamps_s: list[float], xy: list[tuple[float, float]]) -> PoseTrack:
+    track = PoseTrack(topic, ODOM)
+    for t, (x, y) in zip(stamps_s, xy, strict=True):
+        ns = round(t * 1e9)
+        track.add(ns, (ns, x, y, 0.0, 0.0, 0.0))
+    return track
+
+
+def test_distance_interpolates_each_robot_at_every_stamp_both_cover() -> None:
+    a = _track("/a/ground_truth/odom", [0.0, 1.0, 2.0, 3.0], [(0, 0), (1, 0), (2, 0), (3, 0)])
+    b = _track("/b/ground_truth/odom", [0.5, 2.5], [(0.5, 4.0), (2.5, 0.0)])  # moves from y 4 to y 0
+    dist = robot_distance({"a": a, "b": b}, 0, "ground truth")
+    assert dist is not None
+    assert dist.t_s.tolist() == [0.5, 1.0, 2.0, 2.5]  # the union of stamps, inside both spans
+    # at 1.0 s: a at (1, 0), b a quarter of the way: (1, 3); at 2.5 s a at (2.5, 0), b at (2.5, 0)
+    assert dist.pairs["a", "b"].tolist() == pytest.approx([4.0, 3.0, 1.0, 0.0])
+    assert dist.minimum() == (pytest.approx(0.0), 2.5, ("a", "b"))
+    assert dist.topics == ("/a/ground_truth/odom", "/b/ground_truth/odom")
+
+
+def test_distance_of_three_robots_is_the_closest_pair_at_each_time() -> None:
+    t = [0.0, 1.0]
+    tracks = {
+        "r1": _track("/r1/odom", t, [(0, 0), (0, 0)]),
+        "r2": _track("/r2/odom", t, [(5, 0), (1, 0)]),
+        "r3": _track("/r3/odom", t, [(0, 2), (0, 9)]),
+    }
+    dist = robot_distance(tracks, 0)
+    assert dist is not None
+    assert dist.distance_m.tolist() == pytest.approx([2.0, 1.0])
+    d, when, pair = dist.minimum()
+    assert (d, when, pair) == (pytest.approx(1.0), 1.0, ("r1", "r2"))
+    assert dist.pair_minimum(("r1", "r3")) == (pytest.approx(2.0), 0.0)
+    assert math.isclose(dist.to_dict()["min_m"], 1.0)
+
+
+def test_no_distance_without_two_overlapping_tracks() -> None:
+    a = _track("/a/odom", [0.0, 1.0], [(0, 0), (1, 0)])
+    b = _track("/b/odom", [2.0, 3.0], [(0, 0), (1, 0)])
+    assert robot_distance({"a": a, "b": b}, 0) is None
+    assert robot_distance({"a": a}, 0) is None
+    assert robot_distance({"a": a, "b": _track("/b/odom", [0.5], [(0, 0)])}, 0) is None
+
+
+def _contact(what: str, t_s: float = 1.0, begin: bool = True) -> ContactEvent:
+    return ContactEvent(t_s=t_s, begin=begin, x_m=0.0, y_m=0.0, what=what)
+
+
+def test_a_contact_both_robots_report_counts_once_for_each() -> None:
+    contacts = {
+        "robot1": [
+            _contact("robot2::turtlebot3_waffle::base_link"),
+            _contact("robot2::turtlebot3_waffle::base_link", begin=False),
+            _contact("robot2::turtlebot3_waffle::base_link", t_s=4.0),
+        ],
+        "robot2": [_contact("robot1::turtlebot3_waffle::base_link"), _contact("wall::link::collision", t_s=2.0)],
+        "robot3": None,
+    }
+    assert robot_contacts(contacts) == {"robot1": {"robot2": 2}, "robot2": {"robot1": 2}, "robot3": {}}
+
+
+def test_a_contact_names_a_nested_namespace_whole() -> None:
+    contacts = {"fleet/a": [_contact("fleet/b::m::l")], "fleet/b": [], "b": []}
+    assert robot_contacts(contacts) == {"fleet/a": {"fleet/b": 1}, "fleet/b": {"fleet/a": 1}, "b": {}}
+
+
+def test_a_one_robot_bag_gets_the_one_robot_report(gazebo_bag: Any, tmp_path: Any) -> None:
+    proc = run_twin("analyze", str(gazebo_bag), "--out", str(tmp_path / "r"), "--json", "--no-plots")
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    keys = {"twin_version", "bag", "summary", "metrics", "mission", "topic_health", "sections", "files"}
+    assert set(report) == keys  # no namespace, no robots: the report it always was
+    assert (tmp_path / "r" / "report.md").read_text().startswith(f"# Bag report: {gazebo_bag.name}\n")
