@@ -149,3 +149,24 @@ def test_sweep_help_names_files_that_exist() -> None:
 
     assert (REPO / "scenarios/sweeps/default_50_seeds.yaml").is_file()
     assert (REPO / "scenarios/sweeps/robots.yaml").is_file()
+
+
+def test_a_fleet_sweep_puts_each_robot_where_its_indexed_key_says(tmp_path: Path) -> None:
+    """`robots[1].robot.initial_pose.x_m` moves robot2 only: its first ground-truth pose in each run's bag."""
+    fleet = Path(__file__).resolve().parents[2] / "scenarios" / "house_two_waffles.yaml"
+    sweep = tmp_path / "fleet.yaml"
+    sweep.write_text(
+        f"scenario: {fleet}\nvary:\n  max_duration_s: [1]\n  robots[1].robot.initial_pose.x_m: [1.4, 1.7]\n",
+        encoding="utf-8",
+    )
+    result = run_twin("sweep", str(sweep), "--workers", "1", "--out", str(tmp_path / "out"))
+    assert "2 runs" in result.stdout, result.stderr
+    rows = read_table(tmp_path / "out")
+    for row in rows:
+        starts = {}
+        for ns in ("robot1", "robot2"):
+            first = next(iter(read_messages(row["bag_path"], [f"/{ns}/ground_truth/odom"])))
+            starts[ns] = (first.msg.pose.pose.position.x, first.msg.pose.pose.position.y)
+        assert starts["robot2"] == pytest.approx((float(row["robots[1].robot.initial_pose.x_m"]), -0.2), abs=1e-6)
+        assert starts["robot1"] == pytest.approx((0.0, 0.0), abs=1e-6)
+    assert sorted(float(r["robots[1].robot.initial_pose.x_m"]) for r in rows) == [1.4, 1.7]

@@ -8,6 +8,7 @@ vary:                                    # dotted scenario keys: a grid, or zip:
 zip: false
 random:                                  # seeded draws per run
   robot.initial_pose.x_m: {uniform: [-0.2, 0.2]}
+  robots[1].robot.initial_pose.y_m: {uniform: [-0.3, 0.3]}   # a fleet's robot: its index in robots:
 random_seed: 0                           # seeds the draws (default 0)
 timeout_s: 120                           # per run, wall clock
 ```
@@ -26,6 +27,7 @@ import json
 import math
 import os
 import random
+import re
 import types
 import typing
 from collections.abc import Mapping, Sequence
@@ -111,6 +113,7 @@ def load_sweep(path: Path) -> SweepSpec:
     base_dir = path.resolve().parent  # the sweep file's paths are relative to it
     scenario = _path(base_dir, nodes["scenario"], raw["scenario"])
     _check_scenario(scenario, nodes["scenario"])
+    base = _absolute_scenario(scenario)
     vary_raw = raw.get("vary") or {}
     if not isinstance(vary_raw, dict):
         _fail(nodes["vary"], "vary", "expected a mapping of dotted scenario keys to lists of values")
@@ -124,14 +127,14 @@ def load_sweep(path: Path) -> SweepSpec:
         where = _value_node(nodes["vary"], key)
         if not isinstance(values, list) or not values:
             _fail(where, f"vary.{key}", "expected a non-empty list of values")
-        kind = _schema_type(str(key), where, "vary")
+        kind = _schema_type(str(key), where, "vary", base)
         vary.append((str(key), tuple(_fix_paths(v, kind, base_dir) for v in values)))
     if zip_flag and len({len(v) for _, v in vary}) > 1:
         lengths = ", ".join(f"{k}: {len(v)}" for k, v in vary)
         _fail(
             nodes["vary"], "vary", f"zip: true pairs the lists, but their lengths differ ({lengths}); make them equal"
         )
-    draws = _draws(raw.get("random") or {}, nodes.get("random"))
+    draws = _draws(raw.get("random") or {}, nodes.get("random"), base)
     seeds = _seeds(raw, nodes)
     combos = len(vary[0][1]) if zip_flag and vary else math.prod(len(v) for _, v in vary)
     if combos * len(seeds) > MAX_RUNS:
@@ -257,7 +260,7 @@ def _seeds(raw: dict[str, Any], nodes: dict[str, yaml.Node]) -> tuple[int | None
     return (None,)  # one run per combination, with the scenario's own seed
 
 
-def _draws(raw: Any, node: yaml.Node | None) -> tuple[Draw, ...]:
+def _draws(raw: Any, node: yaml.Node | None, base: Mapping[str, Any]) -> tuple[Draw, ...]:
     if not raw:
         return ()
     assert node is not None
@@ -266,7 +269,7 @@ def _draws(raw: Any, node: yaml.Node | None) -> tuple[Draw, ...]:
     draws = []
     for key, how in raw.items():
         where = _value_node(node, key)
-        _schema_type(str(key), where, "random")
+        _schema_type(str(key), where, "random", base)
         if not isinstance(how, dict) or len(how) != 1:
             _fail(where, f"random.{key}", "expected one of {uniform: [lo, hi]}, {normal: [mean, std]}, {choice: [..]}")
         ((kind, args),) = how.items()
@@ -317,17 +320,50 @@ def _fields(tp: Any) -> dict[str, Any] | None:
     return out
 
 
-def _schema_type(dotted: str, node: yaml.Node, section: str) -> Any:
-    """Return the type the scenario declares for a dotted key, or fail naming the nearest valid key."""
+_PART = re.compile(r"([^.\[\]]+)(?:\[(\d+)\])?\Z")
+
+
+def _parts(dotted: str) -> list[tuple[str, int | None]]:
+    """`robots[1].robot.initial_pose.x_m` as `[("robots", 1), ("robot", None), ...]`; None if it does not parse."""
+    out: list[tuple[str, int | None]] = []
+    for part in dotted.split("."):
+        m = _PART.match(part)
+        if m is None:
+            return []
+        out.append((m.group(1), None if m.group(2) is None else int(m.group(2))))
+    return out
+
+
+def _entries(tp: Any) -> Any:
+    """The entry type of a list of sections (`tuple[RobotEntry, ...]`), or None."""
+    for m in _members(tp):
+        args = typing.get_args(m)
+        if typing.get_origin(m) in (tuple, list, Sequence) and args and _fields(args[0]) is not None:
+            return args[0]
+    return None
+
+
+def _schema_type(dotted: str, node: yaml.Node, section: str, base: Mapping[str, Any]) -> Any:
+    """Return the type the scenario declares for a dotted key, or fail naming the nearest valid key.
+
+    A list of sections (a fleet's `robots:`) is entered by index, `robots[1].robot.initial_pose.x_m`,
+    and the index must name an entry of the base scenario `base`.
+    """
     from twin.sim.scenario import Scenario
 
+    parts = _parts(dotted)
+    if not parts:
+        msg = f"{location(node)}: {section}.{dotted}: not a dotted key (name.name or name[index].name)"
+        raise ConfigError(msg)
     tp: Any = Scenario
     walked: list[str] = []
-    for part in dotted.split("."):
+    value: Any = base  # the base scenario's value along the key, while it has one
+    for part, index in parts:
         mappings = [m for m in _members(tp) if typing.get_origin(m) in (dict, Mapping)]
-        if mappings:  # a free mapping (e.g. an FMU's start values): any key
+        if mappings and index is None:  # a free mapping (e.g. an FMU's start values): any key
             tp = typing.get_args(mappings[0])[1] if typing.get_args(mappings[0]) else Any
             walked.append(part)
+            value = value.get(part) if isinstance(value, Mapping) else None
             continue
         fields = _fields(tp)
         where = ".".join(walked) or "the scenario"
@@ -339,7 +375,22 @@ def _schema_type(dotted: str, node: yaml.Node, section: str) -> Any:
             msg = f"{location(node)}: {section}.{dotted}: {where} has no key {part!r}{hint}"
             raise ConfigError(msg)
         tp = fields[part]
-        walked.append(part)
+        value = value.get(part) if isinstance(value, Mapping) else None
+        entry = _entries(tp)
+        if index is None and entry is not None:
+            msg = f"{location(node)}: {section}.{dotted}: {part} is a list; name one entry, e.g. {part}[0]"
+            raise ConfigError(msg)
+        if index is not None:
+            if entry is None:
+                msg = f"{location(node)}: {section}.{dotted}: {part} is not a list; write {part} without [{index}]"
+                raise ConfigError(msg)
+            count = len(value) if isinstance(value, list) else 0
+            if index >= count:
+                have = f"{part}[0] to {part}[{count - 1}]" if count else f"no {part}"
+                msg = f"{location(node)}: {section}.{dotted}: the base scenario has {have}; vary one it has"
+                raise ConfigError(msg)
+            tp, value = entry, value[index]
+        walked.append(part if index is None else f"{part}[{index}]")
     return tp
 
 
@@ -383,11 +434,13 @@ def _absolute_scenario(path: Path) -> dict[str, Any]:
 def _with_values(base: dict[str, Any], values: Sequence[tuple[str, Any]]) -> dict[str, Any]:
     out = json.loads(json.dumps(base))  # a deep copy of plain YAML data
     for dotted, value in values:
-        *parents, last = dotted.split(".")
+        *parents, (last, _) = _parts(dotted)
         section = out
-        for part in parents:
+        for part, index in parents:
             child = section.get(part)
-            if not isinstance(child, dict):
+            if index is not None:  # checked against the base scenario when the sweep was loaded
+                child = child[index]
+            elif not isinstance(child, dict):
                 child = section[part] = {}
             section = child
         section[last] = value

@@ -78,6 +78,59 @@ def test_random_draws_are_seeded_within_bounds_and_repeat(tmp_path: Path) -> Non
     assert [r.values for r in other] != [r.values for r in first]
 
 
+FLEET = REPO / "scenarios" / "house_two_waffles.yaml"
+
+
+def _fleet_sweep(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "fleet_sweep.yaml"
+    path.write_text(f"scenario: {FLEET}\n{text}", encoding="utf-8")
+    return path
+
+
+def test_a_fleet_robot_is_varied_by_its_index_and_keeps_its_other_keys(tmp_path: Path) -> None:
+    text = (
+        "runs: 3\nvary:\n  robots[1].robot.initial_pose.x_m: [1.4, 1.6]\n"
+        "random:\n  robots[0].robot.initial_pose.yaw_rad: {uniform: [-0.1, 0.1]}\n"
+    )
+    runs = expand_runs(load_sweep(_fleet_sweep(tmp_path, text)))
+    assert len(runs) == 2 * 3
+    for run in runs:
+        values = dict(run.values)
+        robot1, robot2 = yaml.safe_load(run.scenario_yaml)["robots"]
+        assert robot2["name"] == "robot2" and robot2["mission"]["locations"].endswith("_reversed.yaml")
+        assert robot2["robot"]["initial_pose"] == {"x_m": values["robots[1].robot.initial_pose.x_m"], "y_m": -0.2,
+                                                    "yaw_rad": 0.0}  # fmt: skip
+        assert robot1["robot"]["initial_pose"]["yaw_rad"] == values["robots[0].robot.initial_pose.yaw_rad"]
+        assert -0.1 <= robot1["robot"]["initial_pose"]["yaw_rad"] <= 0.1
+        assert robot1["robot"]["initial_pose"]["x_m"] == 0.0
+    assert {dict(r.values)["robots[1].robot.initial_pose.x_m"] for r in runs} == {1.4, 1.6}
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (
+            "vary:\n  robots[2].robot.model: [turtlebot3_burger]\n",
+            "vary.robots[2].robot.model: the base scenario has robots[0] to robots[1]; vary one it has",
+        ),
+        ("vary:\n  robots.robot.model: [a]\n", "robots is a list; name one entry, e.g. robots[0]"),
+        ("vary:\n  robots[0].robto.model: [a]\n", "robots[0] has no key 'robto'; did you mean 'robot'?"),
+        ("vary:\n  robot[0].model: [a]\n", "robot is not a list; write robot without [0]"),
+        ("vary:\n  robots[x].name: [a]\n", "not a dotted key"),
+    ],
+)
+def test_bad_fleet_keys_fail_in_one_line(tmp_path: Path, text: str, expected: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        load_sweep(_fleet_sweep(tmp_path, text))
+    assert expected in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_a_robot_index_needs_a_fleet_in_the_base_scenario(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="the base scenario has no robots; vary one it has"):
+        load_sweep(_sweep(tmp_path, "vary:\n  robots[0].robot.model: [turtlebot3_burger]\n"))
+
+
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
