@@ -39,6 +39,7 @@ _COMMAND_MODULES: tuple[str, ...] = (
     "map",
     "fmu",
     "tree",
+    "nav",
     "bag",
     "ekf",
     "analyze",

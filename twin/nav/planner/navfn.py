@@ -162,13 +162,13 @@ class NavfnPlanner:
         if start[0] == goal[0] and start[1] == goal[1]:
             return self._unique_pose(costmap, start, goal)
         ny, nx = costmap.cost.shape
-        s_node = self._node(costmap, start[0], start[1])
+        s_node = self.world_to_node(costmap, start[0], start[1])
         if s_node is None:
             return PlanFailure(
                 reason=PlanFailureReason.START_OUTSIDE_MAP,
                 message=f"start ({start[0]:.2f}, {start[1]:.2f}) is outside the costmap",
             )
-        g_node = self._node(costmap, goal[0], goal[1])
+        g_node = self.world_to_node(costmap, goal[0], goal[1])
         if g_node is None:
             return PlanFailure(
                 reason=PlanFailureReason.GOAL_OUTSIDE_MAP,
@@ -186,7 +186,7 @@ class NavfnPlanner:
                 reason=PlanFailureReason.NO_VALID_PATH,
                 message=f"no path to ({goal[0]:.2f}, {goal[1]:.2f}) within {self.params.tolerance_m} m",
             )
-        e_node = self._node(costmap, end[0], end[1])
+        e_node = self.world_to_node(costmap, end[0], end[1])
         assert e_node is not None  # the scan only keeps points whose node has a potential
         end_cell = e_node[1] * nx + e_node[0]
         trace = self._trace(pot, nx=nx, ny=ny, start=end_cell, goal=source, max_cycles=4 * max(nx, ny))
@@ -226,7 +226,7 @@ class NavfnPlanner:
         return Plan(frame_id=costmap.frame_id, poses=np.array([[start[0], start[1], goal[2]]]))
 
     @staticmethod
-    def _node(costmap: CostGrid, x_m: float, y_m: float) -> tuple[int, int] | None:
+    def world_to_node(costmap: CostGrid, x_m: float, y_m: float) -> tuple[int, int] | None:
         """NavfnPlanner::worldToMap: the nearest node, halves rounded away from zero; None off the map."""
         if x_m < costmap.origin_x_m or y_m < costmap.origin_y_m:
             return None
@@ -241,7 +241,7 @@ class NavfnPlanner:
         nx = costmap.cols
 
         def potential_at(x_m: float, y_m: float) -> float:
-            node = self._node(costmap, x_m, y_m)
+            node = self.world_to_node(costmap, x_m, y_m)
             return POT_HIGH if node is None else float(pot[node[1] * nx + node[0]])
 
         if potential_at(goal[0], goal[1]) < POT_HIGH:

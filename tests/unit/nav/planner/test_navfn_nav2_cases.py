@@ -8,48 +8,20 @@ C kernel and the Python fallback are held to it.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 
-from tests.unit.nav.costmaps import grid
-from twin.nav.planner.navfn import (
-    NavfnParams,
-    NavfnPlanner,
-    Plan,
-    PlanFailure,
-    PlanFailureReason,
-    navfn_costs,
-)
+from twin.nav.conformance import check_case, load_case
 
 CASES = Path(__file__).with_name("navfn_cases")
 FILES = sorted(CASES.glob("*.npz"))
 
-REASONS = {
-    "fail lethal_start": PlanFailureReason.START_IN_LETHAL,
-    "fail start_off_map": PlanFailureReason.START_OUTSIDE_MAP,
-    "fail goal_off_map": PlanFailureReason.GOAL_OUTSIDE_MAP,
-    "fail no_potential_within_tolerance": PlanFailureReason.NO_VALID_PATH,
-    "fail trace": PlanFailureReason.NO_VALID_PATH,
-}
-
-
-def _load(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    with np.load(path, allow_pickle=False) as data:
-        arrays = {k: data[k] for k in data.files}
-    return json.loads(str(arrays.pop("meta"))), arrays
-
-
-def _sha(a: np.ndarray) -> str:
-    return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
-
 
 def test_the_recorded_set_covers_the_issue() -> None:
-    metas = [_load(f)[0] for f in FILES]
+    metas = [load_case(f)[0] for f in FILES]
     groups = {m["group"] for m in metas}
     assert {"synthetic", "random", "house_mission", "house_pairs", "tb3_world_mission"} <= groups
     assert sum(m["group"].startswith("house") for m in metas) >= 200
@@ -69,39 +41,22 @@ def test_the_recorded_set_covers_the_issue() -> None:
 @pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
 @pytest.mark.parametrize("case", FILES, ids=[f.stem for f in FILES])
 def test_navfn_equals_nav2(case: Path, native: bool) -> None:
-    meta, arrays = _load(case)
-    planner = NavfnPlanner(
-        NavfnParams(tolerance_m=meta["tolerance"], use_astar=meta["use_astar"], allow_unknown=meta["allow_unknown"]),
-        native=native,
-    )
-    assert planner.native is native
-    costmap = grid(arrays["cost"], resolution_m=meta["resolution"], origin_m=tuple(meta["origin"]))
-    result = planner.make_plan(costmap, tuple(meta["start"]), tuple(meta["goal"]))
+    result = check_case(case, native=native)
+    assert result.component == "navfn" and result.native is native
+    assert result.equal, "; ".join(result.differences)
 
-    if meta["navfn_ran"]:
-        pot = planner.potential
-        assert pot.dtype == np.float32 and pot.shape == arrays["cost"].shape
-        if "potential" in arrays:
-            differ = np.flatnonzero(pot.ravel() != arrays["potential"].ravel())
-            assert differ.size == 0, f"{differ.size} potentials differ, first at cell {differ[:1]}"
-        else:
-            got = pot.ravel()[arrays["potential_index"]]
-            np.testing.assert_array_equal(got, arrays["potential_sample"])
-            assert _sha(pot.astype("<f4")) == meta["potential_sha256"]
-        node = planner._node(costmap, meta["start"][0], meta["start"][1])
-        assert node is not None
-        cleared = arrays["cost"].copy()
-        cleared[node[1], node[0]] = 0
-        mapped = navfn_costs(cleared, allow_unknown=meta["allow_unknown"])
-        if "navfn_cost" in arrays:
-            np.testing.assert_array_equal(mapped, arrays["navfn_cost"])
-        else:
-            assert _sha(mapped) == meta["navfn_cost_sha256"]
 
-    if meta["status"] == "ok":
-        assert isinstance(result, Plan), result
-        np.testing.assert_array_equal(result.poses[:, :2], arrays["path"])
-        assert result.poses[-1, 2] == meta["goal"][2]
-    else:
-        assert isinstance(result, PlanFailure), f"Nav2: {meta['status']}, twin: a plan of {len(result.poses)} poses"
-        assert result.reason is REASONS[meta["status"]]
+def test_a_difference_is_named_with_its_first_cell(tmp_path: Path) -> None:
+    """The checker is not blind: a case whose recorded potential or path is moved is reported, naming where."""
+    source = next(f for f in FILES if "potential" in load_case(f)[1] and load_case(f)[0]["status"] == "ok")
+    meta, arrays = load_case(source)
+    arrays["potential"] = arrays["potential"].copy()
+    reached = np.flatnonzero(arrays["potential"].ravel() < 1e10)
+    arrays["potential"].ravel()[reached[len(reached) // 2]] += 1.0
+    arrays["path"] = arrays["path"] + np.array([0.0, 1e-9])
+    changed = tmp_path / source.name
+    np.savez(changed, meta=json.dumps(meta), **arrays)
+    result = check_case(changed, native=False)
+    assert not result.equal
+    assert result.differences[0].startswith("potential: 1 cells differ, first at (")
+    assert any(d.startswith("path: ") for d in result.differences)
