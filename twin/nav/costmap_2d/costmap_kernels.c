@@ -150,19 +150,20 @@ int twin_inflate(const unsigned char *pre, long p0, long q0, long pr, long pc, l
     if (radius <= 0 || w1 <= w0 || v1 <= v0) return 0;
     long e0 = w0 - radius < 0 ? 0 : w0 - radius, e1 = w1 + radius > rows ? rows : w1 + radius;
     long f0 = v0 - radius < 0 ? 0 : v0 - radius, f1 = v1 + radius > cols ? cols : v1 + radius;
-    /* every cell a source of E reaches lies within `radius` of E: the search box S */
-    long s0 = e0 - radius < 0 ? 0 : e0 - radius, s1 = e1 + radius > rows ? rows : e1 + radius;
-    long t0 = f0 - radius < 0 ? 0 : f0 - radius, t1 = f1 + radius > cols ? cols : f1 + radius;
-    long sr = s1 - s0, sc = t1 - t0, r2 = radius * radius, width = radius + 1;
+    /* The search stays in E. A cell is queued from a neighbour settled strictly nearer the same
+       source, one step further from it along x or y: the chain from a source to a cell it settles
+       runs monotonically away from the source, inside the box of the two. For a cell of W and a
+       source of E that box lies in E, and so does every chain that decides which source settles a
+       cell of E first. What Nav2 settles outside E never reaches W. */
+    long s0 = e0, t0 = f0, sr = e1 - e0, sc = f1 - f0, r2 = radius * radius, width = radius + 1;
     long seeds = 0;
     for (long r = e0; r < e1; ++r) {
         const unsigned char *row = pre + (r - p0) * pc + (f0 - q0);
         for (long c = 0; c < f1 - f0; ++c) seeds += (row[c] == 254) | (around_unknown & (row[c] == 255));
     }
     if (seeds == 0) return 0;
-    /* queued[cell]: the smallest squared distance the cell waits at (r2 + 1: none), -1 once settled.
-       A cell is queued at most once per strictly smaller distance, and each settled cell queues at
-       most four entries: the pool holds seeds + 4 |S|. */
+    /* queued[cell of E]: the smallest squared distance the cell waits at (r2 + 1: none), -1 once
+       settled. Each settled cell queues at most four entries: the pool holds seeds + 4 |E|. */
     long capacity = seeds + 4 * sr * sc;
     int *queued = malloc(sizeof(int) * (size_t)(sr * sc));
     twin_wave_entry *pool = malloc(sizeof(twin_wave_entry) * (size_t)capacity);
@@ -202,7 +203,7 @@ int twin_inflate(const unsigned char *pre, long p0, long q0, long pr, long pc, l
             long nx[4] = {mx - 1, mx, mx + 1, mx}, ny[4] = {my, my - 1, my, my + 1};
             for (int n = 0; n < 4; ++n) {
                 long x = nx[n], y = ny[n];
-                if (x < 0 || y < 0 || x >= cols || y >= rows) continue;
+                if (x < f0 || y < e0 || x >= f1 || y >= e1) continue;
                 long ddx = x - sx, ddy = y - sy, d2 = ddx * ddx + ddy * ddy;
                 if (d2 > r2 || d2 < b) continue;   /* beyond the radius, or into a bin already passed */
                 int *nstate = queued + (y - s0) * sc + (x - t0);

@@ -277,7 +277,9 @@ def _inflate_py(
         ny = (y[:, None] + step_y[None, :]).ravel()
         nsx, nsy = np.repeat(sx, 4), np.repeat(sy, 4)
         nd2 = (nx - nsx) ** 2 + (ny - nsy) ** 2
-        keep = (nx >= 0) & (ny >= 0) & (nx < cols) & (ny < rows) & (nd2 <= r2) & (nd2 > d2)  # below: a passed queue
+        # within E (see twin_inflate: nothing settled outside it reaches the window) and the radius;
+        # not below this distance (Nav2 would queue it where its loop has passed)
+        keep = (nx >= f0) & (ny >= e0) & (nx < f1) & (ny < e1) & (nd2 <= r2) & (nd2 > d2)
         keep[keep] = ~settled[ny[keep] * cols + nx[keep]]
         nx, ny, nsx, nsy, nd2 = nx[keep], ny[keep], nsx[keep], nsy[keep], nd2[keep]
         if not len(nd2):
