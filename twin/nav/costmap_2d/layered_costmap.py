@@ -189,8 +189,13 @@ def inflate(
         table: `inflation_cost_table` for that radius.
         inflate_unknown: An unknown cell takes any positive cost (else only 253 and 254).
         inflate_around_unknown: Unknown cells are sources too.
-        native: Use the C kernel when it can be built (else the Python loop; the same cells).
+        native: Use the C kernel when it can be built (else the numpy path; the same cells).
+
+    Raises:
+        ValueError: `master` is not a C-contiguous uint8 grid.
     """
+    if master.dtype != np.uint8 or master.ndim != 2 or not master.flags.c_contiguous:
+        raise ValueError("inflate: the master grid must be a C-contiguous 2-D uint8 array")
     rows, cols = master.shape
     r0, r1, c0, c1 = (int(v) for v in window)
     r0, r1, c0, c1 = max(0, r0), min(rows, r1), max(0, c0), min(cols, c1)

@@ -137,3 +137,10 @@ def test_a_static_costmap_inflates_as_nav2(case: Path, native: bool) -> None:
     costmap.update(0.0, 0.0, 0.0)
     differing = int((costmap.grid.cost != expected).sum())
     assert differing == 0
+
+
+def test_inflate_refuses_a_grid_it_cannot_write_in_place() -> None:
+    table = inflation_cost_table(resolution_m=0.05, inscribed_radius_m=0.1, cost_scaling_factor=3.0, radius_cells=2)
+    grid = np.zeros((6, 8), dtype=np.uint8)
+    with pytest.raises(ValueError, match="C-contiguous"):
+        inflate(grid.T, window=(0, 8, 0, 6), radius_cells=2, table=table)
