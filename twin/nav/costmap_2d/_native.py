@@ -15,7 +15,7 @@ from pathlib import Path
 
 from twin.core.native import CLibrary, load_library
 
-# -O3 lets the compiler vectorise the inflation's row minimum; no contraction into fused multiply-adds, so the kernels
+# -O3; no contraction into fused multiply-adds, so the kernels
 # round every product and sum as the numpy paths do.
 _FLAGS = ("-O3", "-ffp-contract=off", "-shared", "-fPIC")
 
@@ -41,6 +41,11 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_costmap_compose.argtypes = [
         ptr, ctypes.c_ubyte, ptr, long_, long_, long_, long_, long_, long_, long_, long_, long_, long_, long_,
         ctypes.c_int, long_, ptr, ctypes.c_int, ctypes.c_int, ptr,
+    ]  # fmt: skip
+    lib.twin_inflate.restype = ctypes.c_int
+    lib.twin_inflate.argtypes = [
+        ptr, long_, long_, long_, long_, long_, long_, long_, long_, long_, long_, long_, ptr,
+        ctypes.c_int, ctypes.c_int, ptr,
     ]  # fmt: skip
     lib.twin_scan_update.restype = ctypes.c_int
     lib.twin_scan_update.argtypes = [

@@ -123,82 +123,120 @@ int twin_scan_update(unsigned char *cost, long rows, long cols, double gx, doubl
     return 0;
 }
 
-/* The inflation of twin_costmap_compose with squared distances of type T (`far`: no seed in reach).
-   Loops are written without data-dependent branches, so the compiler can vectorise them. */
-#define TWIN_INFLATE(T, far_value)                                                                   \
-    do {                                                                                             \
-        const T far = far_value;                                                                     \
-        T *gt = (T *)g, *bt = (T *)best;                                                             \
-        for (long r = 0; r < er; ++r) {                                                              \
-            const unsigned char *row = pre + r * ec;                                                 \
-            long last = -(radius + 1);                                                               \
-            for (long c = 0; c < ec; ++c) { /* distance to the nearest seed at or left of c */       \
-                last = seed(row[c], around_unknown) ? c : last;                                      \
-                span[c] = c - last;                                                                  \
-            }                                                                                        \
-            last = ec + radius + 1;                                                                  \
-            for (long c = ec - 1; c >= 0; --c) { /* or right of it */                                \
-                last = seed(row[c], around_unknown) ? c : last;                                      \
-                long d = last - c;                                                                   \
-                span[c] = d < span[c] ? d : span[c];                                                 \
-            }                                                                                        \
-            T *gr = gt + r * wc;                                                                     \
-            const long *sp = span + (v0 - f0);                                                       \
-            for (long x = 0; x < wc; ++x) gr[x] = sp[x] <= radius ? (T)(sp[x] * sp[x]) : far;        \
-        }                                                                                            \
-        for (long r = w0; r < w1; ++r) {                                                             \
-            for (long x = 0; x < wc; ++x) bt[x] = far;                                               \
-            long lo = r - radius < e0 ? e0 : r - radius, hi = r + radius >= e1 ? e1 - 1 : r + radius; \
-            for (long q = lo; q <= hi; ++q) {                                                        \
-                T add = (T)((q - r) * (q - r));                                                      \
-                const T *gq = gt + (q - e0) * wc;                                                    \
-                for (long x = 0; x < wc; ++x) {                                                      \
-                    T v = (T)(gq[x] + add);                                                          \
-                    bt[x] = v < bt[x] ? v : bt[x];                                                   \
-                }                                                                                    \
-            }                                                                                        \
-            const unsigned char *prow = pre + (r - e0) * ec + (v0 - f0);                             \
-            unsigned char *out = master + r * cols + v0;                                             \
-            for (long x = 0; x < wc; ++x) costs[x] = table[bt[x] <= r2 ? bt[x] : r2 + 1];            \
-            for (long x = 0; x < wc; ++x) {                                                          \
-                unsigned char cost = costs[x], old = prow[x];                                        \
-                unsigned char raised = cost > old ? cost : old;                                      \
-                unsigned char unknown = (inflate_unknown ? cost > 0 : cost >= 253) ? cost : old;     \
-                out[x] = old == 255 ? unknown : raised;                                              \
-            }                                                                                        \
-        }                                                                                            \
-    } while (0)
+/* One entry of the inflation's wavefront: a cell and the obstacle it came from (grid coordinates),
+   and the next entry of its queue. */
+typedef struct { int x, y, sx, sy, next; } twin_wave_entry;
 
-static inline int seed(unsigned char v, int around_unknown) {
-    return (v == 254) | (around_unknown & (v == 255));
+/* Nav2's InflationLayer::updateCosts over the window W = rows [w0, w1) x cols [v0, v1) of a rows x cols
+   grid whose values before inflation, `pre`, are given over a box P = rows [p0, p0 + pr) x cols
+   [q0, q0 + pc) holding W grown by `radius` cells (clipped to the grid).
+   The wavefront as Nav2 runs it: every cell of W grown by `radius` (clipped) that is 254, or 255 with
+   `around_unknown`, is its own source, queued in row-major order at distance 0; queues are taken by
+   increasing squared distance, each first-in first-out; a cell is settled the first time it is taken
+   and gets the cost of the distance to the obstacle it was queued from (table[|dx| * (radius + 1) +
+   |dy|], dx along columns); then its four neighbours (left, down, right, up) not yet settled are queued
+   with that same obstacle when within `radius` of it. An entry whose squared distance is below the
+   queue being taken is lost (Nav2 appends it to a bin its loop has passed). A settled cell of W is
+   written to master: an unknown (255) one takes the cost only when it is >= 253 (> 0 with
+   `inflate_unknown`), any other cell the larger of the two.
+   Nav2 queues a cell once per neighbour that reaches it; here an entry is not queued when the cell
+   already waits in a queue at the same or a smaller distance: that earlier entry is taken first and
+   settles the cell, so the later one would only be skipped (same cells, same order, fewer entries).
+   Returns -1 when memory runs out. */
+int twin_inflate(const unsigned char *pre, long p0, long q0, long pr, long pc, long rows, long cols,
+                 long w0, long w1, long v0, long v1, long radius, const unsigned char *table,
+                 int inflate_unknown, int around_unknown, unsigned char *master) {
+    (void)pr;
+    if (radius <= 0 || w1 <= w0 || v1 <= v0) return 0;
+    long e0 = w0 - radius < 0 ? 0 : w0 - radius, e1 = w1 + radius > rows ? rows : w1 + radius;
+    long f0 = v0 - radius < 0 ? 0 : v0 - radius, f1 = v1 + radius > cols ? cols : v1 + radius;
+    /* The search stays in E. A cell is queued from a neighbour settled strictly nearer the same
+       source, one step further from it along x or y: the chain from a source to a cell it settles
+       runs monotonically away from the source, inside the box of the two. For a cell of W and a
+       source of E that box lies in E, and so does every chain that decides which source settles a
+       cell of E first. What Nav2 settles outside E never reaches W. */
+    long s0 = e0, t0 = f0, sr = e1 - e0, sc = f1 - f0, r2 = radius * radius, width = radius + 1;
+    long seeds = 0;
+    for (long r = e0; r < e1; ++r) {
+        const unsigned char *row = pre + (r - p0) * pc + (f0 - q0);
+        for (long c = 0; c < f1 - f0; ++c) seeds += (row[c] == 254) | (around_unknown & (row[c] == 255));
+    }
+    if (seeds == 0) return 0;
+    /* queued[cell of E]: the smallest squared distance the cell waits at (r2 + 1: none), -1 once
+       settled. Each settled cell queues at most four entries: the pool holds seeds + 4 |E|. */
+    long capacity = seeds + 4 * sr * sc;
+    int *queued = malloc(sizeof(int) * (size_t)(sr * sc));
+    twin_wave_entry *pool = malloc(sizeof(twin_wave_entry) * (size_t)capacity);
+    int *head = malloc(sizeof(int) * (size_t)(2 * (r2 + 1)));
+    if (!queued || !pool || !head) { free(queued); free(pool); free(head); return -1; }
+    for (long i = 0; i < sr * sc; ++i) queued[i] = (int)(r2 + 1);
+    int *tail = head + r2 + 1;
+    for (long b = 0; b <= r2; ++b) head[b] = tail[b] = -1;
+    long used = 0;
+    for (long r = e0; r < e1; ++r) {
+        const unsigned char *row = pre + (r - p0) * pc + (f0 - q0);
+        for (long c = f0; c < f1; ++c) {
+            unsigned char v = row[c - f0];
+            if (!((v == 254) | (around_unknown & (v == 255)))) continue;
+            twin_wave_entry *e = pool + used;
+            e->x = (int)c; e->y = (int)r; e->sx = (int)c; e->sy = (int)r; e->next = -1;
+            queued[(r - s0) * sc + (c - t0)] = 0;
+            if (tail[0] < 0) head[0] = (int)used; else pool[tail[0]].next = (int)used;
+            tail[0] = (int)used++;
+        }
+    }
+    for (long b = 0; b <= r2; ++b) {
+        for (int k = head[b]; k >= 0; k = pool[k].next) {
+            long mx = pool[k].x, my = pool[k].y, sx = pool[k].sx, sy = pool[k].sy;
+            int *state = queued + (my - s0) * sc + (mx - t0);
+            if (*state < 0) continue;
+            *state = -1;
+            if (my >= w0 && my < w1 && mx >= v0 && mx < v1) {
+                long dx = mx > sx ? mx - sx : sx - mx, dy = my > sy ? my - sy : sy - my;
+                unsigned char cost = table[dx * width + dy];
+                unsigned char old = pre[(my - p0) * pc + (mx - q0)];
+                unsigned char *out = master + my * cols + mx;
+                if (old == 255 && (inflate_unknown ? cost > 0 : cost >= 253)) *out = cost;
+                else *out = cost > old ? cost : old;
+            }
+            /* the neighbours in Nav2's order: left, down, right, up */
+            long nx[4] = {mx - 1, mx, mx + 1, mx}, ny[4] = {my, my - 1, my, my + 1};
+            for (int n = 0; n < 4; ++n) {
+                long x = nx[n], y = ny[n];
+                if (x < f0 || y < e0 || x >= f1 || y >= e1) continue;
+                long ddx = x - sx, ddy = y - sy, d2 = ddx * ddx + ddy * ddy;
+                if (d2 > r2 || d2 < b) continue;   /* beyond the radius, or into a bin already passed */
+                int *nstate = queued + (y - s0) * sc + (x - t0);
+                if (d2 >= *nstate) continue;       /* settled (-1), or waiting at this distance or less */
+                *nstate = (int)d2;
+                twin_wave_entry *e = pool + used;
+                e->x = (int)x; e->y = (int)y; e->sx = (int)sx; e->sy = (int)sy; e->next = -1;
+                if (tail[d2] < 0) head[d2] = (int)used; else pool[tail[d2]].next = (int)used;
+                tail[d2] = (int)used++;
+            }
+        }
+    }
+    free(queued); free(pool); free(head);
+    return 0;
 }
 
 /* One costmap update's master cells over the window W = rows [w0, w1) x cols [v0, v1) of a
    rows x cols grid, from the cells of E = rows [e0, e1) x cols [f0, f1) (W grown by the inflation
-   radius, so that every obstacle reaching W lies in E):
+   radius, clipped to the grid):
    - layers: `base` (the static layer; NULL: every cell `fill`) overlaid by each obstacle layer,
      whose known cells (not 255) replace an unknown master cell or raise a lower one;
-   - inflation (when `inflate`): d2, the squared distance in cells from a cell of W to the nearest
-     seed of E (a cell of 254, or also 255 with `around_unknown`), exact: per row the distance to the
-     nearest seed in that row, then the minimum over rows within `radius` of (row distance^2 +
-     row offset^2); the cost is table[d2] for d2 <= radius^2 (table holds radius^2 + 2 values, the
-     last 0), else 0; an unknown cell takes it only when it is >= 253 (> 0 with
-     `inflate_unknown`), any other cell the larger of the two.
+   - inflation (when `inflate`): twin_inflate over W with those cells (table: (radius + 1)^2 costs by
+     |dx|, |dy|).
    master is written in W only. Returns -1 when memory runs out. */
 int twin_costmap_compose(const unsigned char *base, unsigned char fill, const unsigned char *const *layers,
                          long n_layers, long rows, long cols, long w0, long w1, long v0, long v1,
                          long e0, long e1, long f0, long f1, int inflate, long radius,
                          const unsigned char *table, int inflate_unknown, int around_unknown,
                          unsigned char *master) {
-    (void)rows;
-    long er = e1 - e0, ec = f1 - f0, wc = v1 - v0;
-    if (er <= 0 || ec <= 0 || wc <= 0 || w1 <= w0) return 0;
-    unsigned char *pre = malloc((size_t)(er * ec) + (size_t)wc);
-    void *g = inflate ? malloc(sizeof(int) * (size_t)(er * wc)) : NULL;
-    void *best = inflate ? malloc(sizeof(int) * (size_t)wc) : NULL;
-    long *span = inflate ? malloc(sizeof(long) * (size_t)ec) : NULL;
-    if (!pre || (inflate && (!g || !best || !span))) { free(pre); free(g); free(best); free(span); return -1; }
-    unsigned char *costs = pre + er * ec;
+    long er = e1 - e0, ec = f1 - f0;
+    if (er <= 0 || ec <= 0 || v1 <= v0 || w1 <= w0) return 0;
+    unsigned char *pre = malloc((size_t)(er * ec));
+    if (!pre) return -1;
     for (long r = 0; r < er; ++r) {
         unsigned char *row = pre + r * ec;
         if (base) {
@@ -215,22 +253,14 @@ int twin_costmap_compose(const unsigned char *base, unsigned char fill, const un
             }
         }
     }
-    if (!inflate) {
-        for (long r = w0; r < w1; ++r)
-            for (long c = v0; c < v1; ++c) master[r * cols + c] = pre[(r - e0) * ec + (c - f0)];
-        free(pre);
-        return 0;
-    }
-    /* squared distances as 16-bit integers (the vector minimum takes 8 at a time), or as 32-bit ones
-       for radii over 127 cells; `far` (no seed within the radius) plus any row offset stays in range */
-    long r2 = radius * radius;
-    if (radius <= 127) {
-        TWIN_INFLATE(short, (short)(32767 - r2));
-    } else {
-        TWIN_INFLATE(int, (int)(2147483647L - r2));
-    }
-    free(pre); free(g); free(best); free(span);
-    return 0;
+    for (long r = w0; r < w1; ++r)
+        for (long c = v0; c < v1; ++c) master[r * cols + c] = pre[(r - e0) * ec + (c - f0)];
+    int status = 0;
+    if (inflate)
+        status = twin_inflate(pre, e0, f0, er, ec, rows, cols, w0, w1, v0, v1, radius, table, inflate_unknown,
+                              around_unknown, master);
+    free(pre);
+    return status;
 }
 
 /* Set the cells whose centres lie inside a polygon (even-odd) to `value`; bounds grow as in raytrace.
@@ -299,7 +329,8 @@ int twin_fill_footprint(unsigned char *cost, long rows, long cols, double ox, do
 /* One whole costmap update for the common case, in one call: a single obstacle layer fed a single
    LaserScan source that both clears and marks (twin_scan_update), then its footprint cleared
    (twin_fill_footprint), then the master composed (twin_costmap_compose) over everything when
-   `full`, else over the cells written grown by `pad` (twice: the window, then its obstacles).
+   `full`, else over the cells written grown by `pad` (the window), whose inflation sources lie within
+   `radius` of it.
    d: gx, gy, res, range_min, range_max, sx, sy, c, s, ray_max_cells, ray_min_cells, mark_max_m,
       mark_min_m, robot x, robot y, robot cos, robot sin;
    k: rows, cols, ranges, footprint points, fill, full, inflate, radius, inflate_unknown,
@@ -321,11 +352,12 @@ int twin_costmap_scan_update(unsigned char *layer, const unsigned char *base, un
     if (k[5]) { r0 = 0; r1 = rows; c0 = 0; c1 = cols; }
     else if (bounds[1] < 0) return 0;
     else { r0 = bounds[0]; r1 = bounds[1] + 1; c0 = bounds[2]; c1 = bounds[3] + 1; }
-    long pad = k[10];
+    long pad = k[10], reach = k[7];
     long w0 = r0 - pad < 0 ? 0 : r0 - pad, w1 = r1 + pad > rows ? rows : r1 + pad;
     long v0 = c0 - pad < 0 ? 0 : c0 - pad, v1 = c1 + pad > cols ? cols : c1 + pad;
-    long e0 = w0 - pad < 0 ? 0 : w0 - pad, e1 = w1 + pad > rows ? rows : w1 + pad;
-    long f0 = v0 - pad < 0 ? 0 : v0 - pad, f1 = v1 + pad > cols ? cols : v1 + pad;
+    if (!k[6]) reach = 0;
+    long e0 = w0 - reach < 0 ? 0 : w0 - reach, e1 = w1 + reach > rows ? rows : w1 + reach;
+    long f0 = v0 - reach < 0 ? 0 : v0 - reach, f1 = v1 + reach > cols ? cols : v1 + reach;
     const unsigned char *layers[1] = {layer};
     return twin_costmap_compose(base, (unsigned char)k[4], layers, 1, rows, cols, w0, w1, v0, v1, e0, e1, f0, f1,
                                 (int)k[6], k[7], table, (int)k[8], (int)k[9], master);

@@ -14,12 +14,16 @@ One `Costmap` is one costmap node (`global_costmap` or `local_costmap`); `update
   robot's footprint is cleared. LaserScan ranges that are inf or outside [range_min, range_max)
   give no point (`inf_is_valid` false). The layer merges into the master by maximum, skipping its
   own unknown cells and overriding the master's unknown.
-- **Inflation layer**: every LETHAL cell spreads cost to cells within `inflation_radius`
-  (`ceil(inflation_radius / resolution)` cells): distance 0 is 254, distance <= inscribed radius
-  253, else `int(252 * exp(-cost_scaling_factor * (d - inscribed_radius)))`, merged by maximum
-  (an unknown master cell takes only 253 or more). Distances are exact Euclidean distances between
-  cell centres. The inscribed radius is that of the padded footprint: `footprint` if given, else
-  Nav2's 16-point circle of `robot_radius`, each point pushed out by `footprint_padding` along x and y.
+- **Inflation layer**: `InflationLayer::updateCosts`'s wavefront (`inflate`). Every LETHAL cell (and
+  NO_INFORMATION with `inflate_around_unknown`) of the update window grown by the radius
+  (`ceil(inflation_radius / resolution)` cells) is a source; cells are settled by increasing squared
+  distance to the source they were reached from through 4-neighbours, which is not always the
+  nearest obstacle. A cell's cost for distance d cells (`hypot`): 254 at 0, 253 while
+  `d * resolution <= inscribed_radius`, else `int(252 * exp(-cost_scaling_factor * (d * resolution -
+  inscribed_radius)))`; merged by maximum (an unknown master cell takes only 253 or more, or any
+  positive cost with `inflate_unknown`). The inscribed radius is that of the padded footprint:
+  `footprint` if given, else Nav2's 16-point circle of `robot_radius`, each point pushed out by
+  `footprint_padding` along x and y.
 - **Rolling window** (local costmap): the grid is recentred on the robot before each update,
   its origin moving in whole cells; cells that come into view start at the default value.
 
@@ -50,7 +54,7 @@ from twin.nav.costmap_2d.footprint import footprint_radii
 from twin.nav.map_server.map_io import OccupancyMap
 from twin.nav.params import CostmapParams, ObservationSource
 
-__all__ = ["Costmap", "Observation", "inflation_costs", "scan_observation"]
+__all__ = ["Costmap", "Observation", "inflate", "inflation_cost_table", "scan_observation"]
 
 U8 = NDArray[np.uint8]
 F64 = NDArray[np.float64]
@@ -140,24 +144,157 @@ def _beam_directions(angle_min_rad: float, angle_increment_rad: float, count: in
     return np.cos(angle), np.sin(angle)
 
 
-def inflation_costs(
-    distance_cells: F64,
-    *,
-    resolution_m: float,
-    inscribed_radius_m: float,
-    cost_scaling_factor: float,
-    radius_cells: int,
+def inflation_cost_table(
+    *, resolution_m: float, inscribed_radius_m: float, cost_scaling_factor: float, radius_cells: int
 ) -> U8:
-    """Nav2's InflationLayer::computeCost for distances in cells (0 beyond `radius_cells`)."""
-    d = np.asarray(distance_cells, dtype=np.float64)
-    metres = d * resolution_m
-    with np.errstate(over="ignore"):
-        factor = np.exp(-cost_scaling_factor * (metres - inscribed_radius_m))
-    cost = np.floor((INSCRIBED_INFLATED_OBSTACLE - 1) * factor).astype(np.int64)
-    cost = np.where(metres <= inscribed_radius_m, INSCRIBED_INFLATED_OBSTACLE, cost)
-    cost = np.where(d == 0.0, LETHAL_OBSTACLE, cost)
-    cost = np.where(d > radius_cells, 0, cost)
-    return cost.astype(np.uint8)
+    """InflationLayer's cached costs: entry [|dx|, |dy|] (cells, dx along x) for 0 <= dx, dy <= `radius_cells`.
+
+    As `computeCaches` fills them: the distance is libm's `hypot(dx, dy)` (numpy's hypot calls it; a
+    square root of dx^2 + dy^2 differs from it in the last bit for some cells), the factor libm's
+    `exp` (`math.exp`), the product with 252 truncated as the cast to unsigned char does.
+    """
+    n = radius_cells + 1
+    ij = np.arange(n, dtype=np.float64)
+    distance = np.hypot(ij[:, None], ij[None, :])
+    table = np.empty((n, n), dtype=np.uint8)
+    for index, value in np.ndenumerate(distance):
+        d = float(value)
+        if d == 0.0:
+            cost = LETHAL_OBSTACLE
+        elif d * resolution_m <= inscribed_radius_m:
+            cost = INSCRIBED_INFLATED_OBSTACLE
+        else:
+            factor = math.exp(-1.0 * cost_scaling_factor * (d * resolution_m - inscribed_radius_m))
+            cost = int((INSCRIBED_INFLATED_OBSTACLE - 1) * factor)
+        table[index] = cost
+    return table
+
+
+def inflate(
+    master: U8,
+    *,
+    window: tuple[int, int, int, int],
+    radius_cells: int,
+    table: U8,
+    inflate_unknown: bool = False,
+    inflate_around_unknown: bool = False,
+    native: bool = True,
+) -> None:
+    """Run InflationLayer::updateCosts on a master grid in place, writing only inside `window`.
+
+    Args:
+        master: The master grid (rows, cols), uint8, C-contiguous; its costs before inflation.
+        window: (row min, row max, col min, col max), maxima exclusive: Nav2's (min_j, max_j, min_i, max_i).
+        radius_cells: `cell_inflation_radius_`; 0 inflates nothing.
+        table: `inflation_cost_table` for that radius.
+        inflate_unknown: An unknown cell takes any positive cost (else only 253 and 254).
+        inflate_around_unknown: Unknown cells are sources too.
+        native: Use the C kernel when it can be built (else the numpy path; the same cells).
+
+    Raises:
+        ValueError: `master` is not a C-contiguous uint8 grid.
+    """
+    if master.dtype != np.uint8 or master.ndim != 2 or not master.flags.c_contiguous:
+        raise ValueError("inflate: the master grid must be a C-contiguous 2-D uint8 array")
+    rows, cols = master.shape
+    r0, r1, c0, c1 = (int(v) for v in window)
+    r0, r1, c0, c1 = max(0, r0), min(rows, r1), max(0, c0), min(cols, c1)
+    if radius_cells <= 0 or r1 <= r0 or c1 <= c0:
+        return
+    pre = master.copy()
+    lib = load_kernel() if native else None
+    if lib is not None:
+        status = lib.twin_inflate(
+            pre.ctypes.data, 0, 0, rows, cols, rows, cols, r0, r1, c0, c1, radius_cells,
+            np.ascontiguousarray(table, dtype=np.uint8).ctypes.data, int(inflate_unknown),
+            int(inflate_around_unknown), master.ctypes.data,
+        )  # fmt: skip
+        if status != 0:
+            raise MemoryError("costmap inflation: out of memory")
+        return
+    _inflate_py(
+        pre, pre_origin=(0, 0), window=(r0, r1, c0, c1), radius=radius_cells, table=table,
+        inflate_unknown=inflate_unknown, around_unknown=inflate_around_unknown, master=master,
+    )  # fmt: skip
+
+
+def _inflate_py(
+    pre: U8,
+    *,
+    pre_origin: tuple[int, int],
+    window: tuple[int, int, int, int],
+    radius: int,
+    table: U8,
+    inflate_unknown: bool,
+    around_unknown: bool,
+    master: U8,
+) -> None:
+    """The numpy path of `twin_inflate` (costmap_kernels.c): the same wavefront, one distance at a time.
+
+    `pre` holds the costs before inflation over a box from `pre_origin` (row, col) that covers the
+    window grown by `radius`; `master` is the whole grid, written inside the window.
+
+    Nav2 takes its queues entry by entry; here a queue is taken whole. That settles the same cells
+    from the same sources in the same order: a step to a 4-neighbour changes the squared distance to
+    the source by an odd number, so no entry joins the queue being taken; within it the first entry
+    of a cell not yet settled wins, as it would one by one; and an entry queued for a cell that is
+    settled by the time its queue comes would only be skipped.
+    """
+    rows, cols = master.shape
+    p0, q0 = pre_origin
+    w0, w1, v0, v1 = window
+    e0, e1, f0, f1 = max(0, w0 - radius), min(rows, w1 + radius), max(0, v0 - radius), min(cols, v1 + radius)
+    box = pre[e0 - p0 : e1 - p0, f0 - q0 : f1 - q0]
+    is_source = box == LETHAL_OBSTACLE
+    if around_unknown:
+        is_source |= box == NO_INFORMATION
+    y, x = np.nonzero(is_source)  # row-major: Nav2's seeding order
+    if not len(y):
+        return
+    r2 = radius * radius
+    # queues[d2]: chunks of entries (x, y, source x, source y) in the order Nav2 appends them
+    queues: list[list[tuple[NDArray[np.int64], ...]]] = [[] for _ in range(r2 + 1)]
+    x, y = (x + f0).astype(np.int64), (y + e0).astype(np.int64)
+    queues[0].append((x, y, x, y))
+    settled = np.zeros(rows * cols, dtype=bool)
+    out = master.reshape(-1)
+    step_x, step_y = np.array([-1, 0, 1, 0]), np.array([0, -1, 0, 1])  # left, down, right, up
+    for d2 in range(r2 + 1):
+        if not queues[d2]:
+            continue
+        x, y, sx, sy = (np.concatenate(parts) for parts in zip(*queues[d2], strict=True))
+        queues[d2] = []
+        cell = y * cols + x
+        fresh = ~settled[cell]
+        x, y, sx, sy, cell = x[fresh], y[fresh], sx[fresh], sy[fresh], cell[fresh]
+        first = np.sort(np.unique(cell, return_index=True)[1])  # a cell's first entry settles it
+        x, y, sx, sy, cell = x[first], y[first], sx[first], sy[first], cell[first]
+        settled[cell] = True
+        inside = (y >= w0) & (y < w1) & (x >= v0) & (x < v1)
+        if inside.any():
+            c, xi, yi = cell[inside], x[inside], y[inside]
+            cost = table[np.abs(xi - sx[inside]), np.abs(yi - sy[inside])]
+            old = pre[yi - p0, xi - q0]
+            take = (cost > FREE_SPACE) if inflate_unknown else (cost >= INSCRIBED_INFLATED_OBSTACLE)
+            out[c] = np.where((old == NO_INFORMATION) & take, cost, np.maximum(old, cost))
+        # each settled cell queues its neighbours in Nav2's order, with its source, when within the radius
+        nx = (x[:, None] + step_x[None, :]).ravel()
+        ny = (y[:, None] + step_y[None, :]).ravel()
+        nsx, nsy = np.repeat(sx, 4), np.repeat(sy, 4)
+        nd2 = (nx - nsx) ** 2 + (ny - nsy) ** 2
+        # within E (see twin_inflate: nothing settled outside it reaches the window) and the radius;
+        # not below this distance (Nav2 would queue it where its loop has passed)
+        keep = (nx >= f0) & (ny >= e0) & (nx < f1) & (ny < e1) & (nd2 <= r2) & (nd2 > d2)
+        keep[keep] = ~settled[ny[keep] * cols + nx[keep]]
+        nx, ny, nsx, nsy, nd2 = nx[keep], ny[keep], nsx[keep], nsy[keep], nd2[keep]
+        if not len(nd2):
+            continue
+        order = np.argsort(nd2, kind="stable")
+        nx, ny, nsx, nsy, nd2 = nx[order], ny[order], nsx[order], nsy[order], nd2[order]
+        values, starts = np.unique(nd2, return_index=True)
+        ends = [*starts[1:].tolist(), len(nd2)]
+        for value, a, b in zip(values.tolist(), starts.tolist(), ends, strict=True):
+            queues[value].append((nx[a:b], ny[a:b], nsx[a:b], nsy[a:b]))
 
 
 class _ObstacleLayer:
@@ -525,10 +662,11 @@ class Costmap:
         r0, r1, c0, c1 = bounds
         rows, cols = self.grid.cost.shape
         pad = self._radius_cells + 1 if self._inflate else 0
+        reach = self._radius_cells if self._inflate else 0
         # the window whose costs may change: the changed cells grown by the inflation radius
         w0, w1, v0, v1 = max(0, r0 - pad), min(rows, r1 + pad), max(0, c0 - pad), min(cols, c1 + pad)
-        # the obstacles that reach into that window lie within another inflation radius of it
-        e0, e1, f0, f1 = max(0, w0 - pad), min(rows, w1 + pad), max(0, v0 - pad), min(cols, v1 + pad)
+        # the sources of the inflation: as InflationLayer::updateCosts, the window grown by the radius
+        e0, e1, f0, f1 = max(0, w0 - reach), min(rows, w1 + reach), max(0, v0 - reach), min(cols, v1 + reach)
         infl = self.params.inflation if self._inflate else None
         if self._lib is not None:
             base, pointers, table_address, master_address = self._addresses()
@@ -541,20 +679,14 @@ class Costmap:
             if status != 0:
                 raise MemoryError("costmap update: out of memory")
             return
-        master = self._layers(e0, e1, f0, f1)
-        if infl is not None:
-            seeds = master == LETHAL_OBSTACLE
-            if infl.inflate_around_unknown:
-                seeds |= master == NO_INFORMATION
-            if seeds.any():
-                from scipy import ndimage  # the numpy path only: scipy is slow to import
-
-                distance = np.asarray(ndimage.distance_transform_edt(~seeds), dtype=np.float64)
-                cost = self._costs(distance)
-                unknown = master == NO_INFORMATION
-                take = (cost > FREE_SPACE) if infl.inflate_unknown else (cost >= INSCRIBED_INFLATED_OBSTACLE)
-                master = np.where(unknown, np.where(take, cost, master), np.maximum(master, cost)).astype(np.uint8)
-        self.grid.cost[w0:w1, v0:v1] = master[w0 - e0 : w1 - e0, v0 - f0 : v1 - f0]
+        pre = self._layers(e0, e1, f0, f1)
+        self.grid.cost[w0:w1, v0:v1] = pre[w0 - e0 : w1 - e0, v0 - f0 : v1 - f0]
+        if infl is not None and self._radius_cells > 0:
+            _inflate_py(
+                pre, pre_origin=(e0, f0), window=(w0, w1, v0, v1), radius=self._radius_cells,
+                table=self._cost_table(), inflate_unknown=infl.inflate_unknown,
+                around_unknown=infl.inflate_around_unknown, master=self.grid.cost,
+            )  # fmt: skip
 
     def _addresses(self) -> _Addresses:
         """Addresses for the C kernel: static layer (or None), obstacle layers, cost table, master (cached)."""
@@ -578,23 +710,19 @@ class Costmap:
         p = self.params
         return self._static is not None and p.static_layer is not None and not p.rolling_window
 
-    def _costs(self, distance_cells: F64) -> U8:
+    def _cost_table(self) -> U8:
+        """InflationLayer's cost cache for the current radius and resolution (`inflation_cost_table`)."""
         infl = self.params.inflation
         assert infl is not None
-        return inflation_costs(
-            distance_cells,
-            resolution_m=self.grid.resolution_m,
-            inscribed_radius_m=self.inscribed_radius_m,
-            cost_scaling_factor=infl.cost_scaling_factor,
-            radius_cells=self._radius_cells,
-        )
-
-    def _cost_table(self) -> U8:
-        """The inflation cost for every squared cell distance 0..R^2, then 0 (beyond the radius)."""
         key = (self._radius_cells, self.grid.resolution_m)
         if self._table_cache is None or self._table_cache[0] != key:
-            d2 = np.arange(self._radius_cells**2 + 2, dtype=np.float64)
-            self._table_cache = (key, np.ascontiguousarray(self._costs(np.sqrt(d2))))
+            table = inflation_cost_table(
+                resolution_m=self.grid.resolution_m,
+                inscribed_radius_m=self.inscribed_radius_m,
+                cost_scaling_factor=infl.cost_scaling_factor,
+                radius_cells=self._radius_cells,
+            )
+            self._table_cache = (key, np.ascontiguousarray(table))
         return self._table_cache[1]
 
     def _layers(self, r0: int, r1: int, c0: int, c1: int) -> U8:
