@@ -9,7 +9,10 @@ from pathlib import Path
 from typing import Any
 
 _REPO = Path(__file__).resolve().parents[2]
-_RECORDED = (_REPO / "tests" / "unit" / "nav" / "planner" / "navfn_cases",)
+_RECORDED = (
+    _REPO / "tests" / "unit" / "nav" / "planner" / "navfn_cases",
+    _REPO / "tests" / "unit" / "nav" / "costmap_2d" / "inflation_cases",
+)
 """The recorded sets a checkout holds, replayed when no CASE is named."""
 
 _EPILOG = """\
@@ -21,8 +24,9 @@ examples:
 Each case (.npz) holds the inputs, Nav2 Humble's answer and the Nav2 commit it came from (each
 set's README says how it was recorded). A case passes when the twin's part gives the same answer
 in everything the case records, bit for bit where Nav2 computes in float32 (NavFn: found or failed
-and why, its cost array, its potential, every path point). Components: navfn. Exit status: 0 every
-case equal, 1 a case differs (its first difference is printed), 2 a file is not a case.
+and why, its cost array, its potential, every path point; inflation: every cell of the master grid
+after one update). Components: navfn, inflation. Exit status: 0 every case equal, 1 a case differs
+(its first difference is printed), 2 a file is not a case.
 """
 
 

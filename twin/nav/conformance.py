@@ -10,6 +10,8 @@ saying how Nav2's answers were recorded).
 Components:
 - `navfn`: the NavFn planner (`twin.nav.planner.navfn`): found or failed and why, NavFn's cost
   array, its float32 potential and every path point, bit for bit.
+- `inflation`: the inflation layer (`twin.nav.costmap_2d`): one `updateCosts` over a window of a
+  master grid, every cell equal.
 """
 
 from __future__ import annotations
@@ -79,10 +81,12 @@ def load_case(path: Path) -> tuple[dict[str, Any], dict[str, NDArray[Any]]]:
 
 
 def component_of(meta: Mapping[str, Any]) -> str | None:
-    """The component a case is for: its `component` field, or NavFn for the first recorded set (no field)."""
+    """The component a case is for: its `component` field, or the set's for the first two recorded sets (no field)."""
     named = meta.get("component")
     if isinstance(named, str):
         return named
+    if "cell_inflation_radius" in meta and "window" in meta:
+        return "inflation"  # the inflation set names no component either
     return "navfn" if "use_astar" in meta and "status" in meta else None
 
 
@@ -170,7 +174,13 @@ def check_navfn(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[s
     return out
 
 
-COMPONENTS: dict[str, Checker] = {"navfn": check_navfn}
+def _check_inflation(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    from twin.nav.costmap_2d.conformance_check import check_inflation
+
+    return check_inflation(meta, arrays, native)
+
+
+COMPONENTS: dict[str, Checker] = {"navfn": check_navfn, "inflation": _check_inflation}
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 

@@ -13,13 +13,15 @@ from twin.cli import main
 from twin.nav.conformance import load_case
 
 NAVFN = Path(__file__).resolve().parent / "planner" / "navfn_cases"
+INFLATION = Path(__file__).resolve().parent / "costmap_2d" / "inflation_cases"
 
 
 def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["nav", "conformance"]) == 0
     out = capsys.readouterr()
-    count = len(list(NAVFN.glob("*.npz")))
-    assert f"navfn (compiled kernels): {count} of {count} cases equal Nav2's answer" in out.err
+    for component, folder in (("navfn", NAVFN), ("inflation", INFLATION)):
+        count = len(list(folder.glob("*.npz")))
+        assert f"{component} (compiled kernels): {count} of {count} cases equal Nav2's answer" in out.err
     assert "DIFFERS" not in out.out
 
 
@@ -67,4 +69,4 @@ def test_a_case_for_a_component_the_twin_does_not_check_is_refused(
 ) -> None:
     np.savez(tmp_path / "amcl.npz", meta=json.dumps({"component": "amcl_motion_model"}))
     assert main(["nav", "conformance", str(tmp_path / "amcl.npz")]) == 2
-    assert "a case for amcl_motion_model; the twin checks navfn" in capsys.readouterr().err
+    assert "a case for amcl_motion_model; the twin checks inflation, navfn" in capsys.readouterr().err

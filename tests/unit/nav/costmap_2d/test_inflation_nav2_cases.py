@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from twin.nav.costmap_2d._native import load_kernel
+from twin.nav.conformance import check_case
 from twin.nav.costmap_2d.costmap_2d import LETHAL_OBSTACLE, NO_INFORMATION
 from twin.nav.costmap_2d.layered_costmap import Costmap, inflate, inflation_cost_table
 from twin.nav.map_server.map_io import OccupancyMap
@@ -65,34 +65,9 @@ def test_the_cell_radius_is_nav2s() -> None:
 @pytest.mark.parametrize("native", NATIVE)
 @pytest.mark.parametrize("case", FILES, ids=[f.stem for f in FILES])
 def test_inflation_equals_nav2(case: Path, native: bool) -> None:
-    if native and load_kernel() is None:
-        pytest.fail("the C kernel could not be built")
-    meta, master, expected = _load(case)
-    radius = _radius_cells(meta)
-    table = inflation_cost_table(
-        resolution_m=meta["resolution"],
-        inscribed_radius_m=meta["inscribed_radius"],
-        cost_scaling_factor=meta["cost_scaling_factor"],
-        radius_cells=radius,
-    )
-    w = meta["window"]
-    grid = master.copy()
-    inflate(
-        grid,
-        window=(w["min_j"], w["max_j"], w["min_i"], w["max_i"]),
-        radius_cells=radius,
-        table=table,
-        inflate_unknown=meta["inflate_unknown"],
-        inflate_around_unknown=meta["inflate_around_unknown"],
-        native=native,
-    )
-    differing = np.argwhere(grid != expected)
-    first = tuple(int(v) for v in differing[0]) if len(differing) else None
-    assert len(differing) == 0, (
-        f"{len(differing)} cells differ, first (row, col) {first}: twin {grid[first]} vs Nav2 {expected[first]}"
-        if first is not None
-        else ""
-    )
+    result = check_case(case, native=native)
+    assert result.component == "inflation"
+    assert result.equal, "; ".join(result.differences)
 
 
 def _full_window_static_cases() -> list[Path]:
