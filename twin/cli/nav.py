@@ -9,7 +9,10 @@ from pathlib import Path
 from typing import Any
 
 _REPO = Path(__file__).resolve().parents[2]
-_RECORDED = (_REPO / "tests" / "unit" / "nav" / "planner" / "navfn_cases",)
+_RECORDED = (
+    _REPO / "tests" / "unit" / "nav" / "planner" / "navfn_cases",
+    _REPO / "tests" / "unit" / "nav" / "velocity_smoother" / "smoother_cases",
+)
 """The recorded sets a checkout holds, replayed when no CASE is named."""
 
 _EPILOG = """\

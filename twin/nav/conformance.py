@@ -10,6 +10,7 @@ saying how Nav2's answers were recorded).
 Components:
 - `navfn`: the NavFn planner (`twin.nav.planner.navfn`): found or failed and why, NavFn's cost
   array, its float32 potential and every path point, bit for bit.
+- `velocity_smoother` (`twin.nav.velocity_smoother`): on which timer ticks it publishes, and what, bit for bit.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.core.errors import ConfigError
+from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
 
 __all__ = ["COMPONENTS", "CaseResult", "case_files", "check_case", "component_of", "load_case"]
 
@@ -170,7 +172,10 @@ def check_navfn(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[s
     return out
 
 
-COMPONENTS: dict[str, Checker] = {"navfn": check_navfn}
+COMPONENTS: dict[str, Checker] = {
+    "navfn": check_navfn,
+    "velocity_smoother": check_velocity_smoother,
+}
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 
