@@ -167,7 +167,7 @@ def main() -> None:
     def smoother_second() -> None:
         for k in range(20):
             if k % 2 == 0:
-                smoother.command(0.2, 0.3, t_ns[0])
+                smoother.command((0.2, 0.0, 0.3), t_ns[0])
             smoother.step(t_ns[0])
             t_ns[0] += 50_000_000
 

@@ -12,6 +12,7 @@ _REPO = Path(__file__).resolve().parents[2]
 _RECORDED = (
     _REPO / "tests" / "unit" / "nav" / "planner" / "navfn_cases",
     _REPO / "tests" / "unit" / "nav" / "costmap_2d" / "inflation_cases",
+    _REPO / "tests" / "unit" / "nav" / "velocity_smoother" / "smoother_cases",
 )
 """The recorded sets a checkout holds, replayed when no CASE is named."""
 
@@ -66,7 +67,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
 def _conformance(args: argparse.Namespace) -> int:
     from twin.core.errors import ConfigError
-    from twin.nav.conformance import case_files, check_case
+    from twin.nav.conformance import WITH_C_KERNEL, case_files, check_case
 
     if args.cases:
         paths = list(args.cases)
@@ -95,7 +96,7 @@ def _conformance(args: argparse.Namespace) -> int:
             if not r.equal:
                 print(f"DIFFERS {r.component} {r.name} ({r.path}): {r.differences[0]}")
         sys.stdout.flush()
-        how = "Python path" if args.python else "compiled kernels"
         for component, (equal, total) in sorted(counts.items()):
+            how = "compiled kernel" if native and component in WITH_C_KERNEL else "Python path"
             print(f"{component} ({how}): {equal} of {total} cases equal Nav2's answer", file=sys.stderr)
     return 0 if all(r.equal for r in results) else 1

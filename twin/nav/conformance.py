@@ -12,6 +12,7 @@ Components:
   array, its float32 potential and every path point, bit for bit.
 - `inflation`: the inflation layer (`twin.nav.costmap_2d`): one `updateCosts` over a window of a
   master grid, every cell equal.
+- `velocity_smoother` (`twin.nav.velocity_smoother`): on which timer ticks it publishes, and what, bit for bit.
 """
 
 from __future__ import annotations
@@ -28,8 +29,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.core.errors import ConfigError
+from twin.nav.costmap_2d.conformance_check import check_inflation
+from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
 
-__all__ = ["COMPONENTS", "CaseResult", "case_files", "check_case", "component_of", "load_case"]
+__all__ = ["COMPONENTS", "WITH_C_KERNEL", "CaseResult", "case_files", "check_case", "component_of", "load_case"]
 
 Arrays = Mapping[str, NDArray[Any]]
 Checker = Callable[[Mapping[str, Any], Arrays, bool], list[str]]
@@ -174,14 +177,15 @@ def check_navfn(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[s
     return out
 
 
-def _check_inflation(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
-    from twin.nav.costmap_2d.conformance_check import check_inflation
-
-    return check_inflation(meta, arrays, native)
-
-
-COMPONENTS: dict[str, Checker] = {"navfn": check_navfn, "inflation": _check_inflation}
+COMPONENTS: dict[str, Checker] = {
+    "navfn": check_navfn,
+    "inflation": check_inflation,
+    "velocity_smoother": check_velocity_smoother,
+}
 """Each component's checker: (meta, arrays, native) -> differences."""
+
+WITH_C_KERNEL = frozenset({"navfn", "inflation"})
+"""The components whose twin part has a C kernel beside its Python path (the others are Python only)."""
 
 
 def check_case(path: Path, *, native: bool = True) -> CaseResult:

@@ -332,6 +332,7 @@ def _velocity_smoother(r: ParamReader) -> float:
     _triple(r, "deadband_velocity", (0.0, 0.0, 0.0), sign=1)
     r.number("velocity_timeout", 1.0, low=0.0, high=_D, unit="s")
     r.text("feedback", "OPEN_LOOP")
+    r.number("odom_duration", 0.1, low=0.0, high=_D, unit="s")
     r.flag("scale_velocities", False)
     return hz
 

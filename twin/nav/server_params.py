@@ -19,7 +19,7 @@ from twin.nav.controller.checkers import SimpleGoalChecker
 from twin.nav.controller.controller_server import controller_for_plugin
 from twin.nav.params import Nav2Params
 from twin.nav.planner.navfn import NavfnParams
-from twin.nav.velocity_smoother.velocity_smoother import SmootherParams
+from twin.nav.velocity_smoother.velocity_smoother import Feedback, SmootherParams
 
 __all__ = ["Nav2Config", "nav2_config"]
 
@@ -72,14 +72,16 @@ def _sub(section: Mapping[str, Any], prefix: str) -> dict[str, object]:
     return {k[len(prefix) + 1 :]: v for k, v in section.items() if k.startswith(prefix + ".")}
 
 
-def _triple(section: Mapping[str, Any], key: str, default: tuple[float, float], where: str) -> tuple[float, float]:
+def _triple(
+    section: Mapping[str, Any], key: str, default: tuple[float, float, float], where: str
+) -> tuple[float, float, float]:
     value = section.get(key)
     if value is None:
         return default
     if not isinstance(value, list) or len(value) != 3 or not all(isinstance(v, int | float) for v in value):
         msg = f"{where}.{key}: expected [x, y, theta], got {value!r}; fix the params file"
         raise ConfigError(msg)
-    return (float(value[0]), float(value[2]))
+    return (float(value[0]), float(value[1]), float(value[2]))
 
 
 def nav2_config(params: Nav2Params) -> Nav2Config:
@@ -143,12 +145,15 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     used["bt_navigator"] = ["bt_loop_duration", "global_frame", "robot_base_frame", "odom_topic"]
     vs = params.node("velocity_smoother")
     vwhere = f"{src}: velocity_smoother"
-    if str(vs.get("feedback", "OPEN_LOOP")) != "OPEN_LOOP":
-        msg = f"{vwhere}.feedback: only OPEN_LOOP (Nav2's default) is implemented, got {vs['feedback']!r}"
+    feedback = vs.get("feedback", "OPEN_LOOP")
+    if feedback not in ("OPEN_LOOP", "CLOSED_LOOP"):
+        msg = f"{vwhere}.feedback: expected OPEN_LOOP or CLOSED_LOOP (as Nav2), got {feedback!r}"
         raise ConfigError(msg)
     defaults = SmootherParams()
     smoother = SmootherParams(
         smoothing_frequency_hz=_num(vs, "smoothing_frequency", defaults.smoothing_frequency_hz, vwhere),
+        feedback=Feedback(feedback),
+        odom_duration_s=_num(vs, "odom_duration", defaults.odom_duration_s, vwhere),
         max_velocity=_triple(vs, "max_velocity", defaults.max_velocity, vwhere),
         min_velocity=_triple(vs, "min_velocity", defaults.min_velocity, vwhere),
         max_accel=_triple(vs, "max_accel", defaults.max_accel, vwhere),
@@ -159,7 +164,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     )
     used["velocity_smoother"] = [
         "smoothing_frequency", "max_velocity", "min_velocity", "max_accel", "max_decel",
-        "deadband_velocity", "velocity_timeout", "feedback", "scale_velocities",
+        "deadband_velocity", "velocity_timeout", "feedback", "scale_velocities", "odom_duration",
     ]  # fmt: skip
     bs = params.node("behavior_server")
     bwhere = f"{src}: behavior_server"

@@ -14,14 +14,19 @@ from twin.nav.conformance import load_case
 
 NAVFN = Path(__file__).resolve().parent / "planner" / "navfn_cases"
 INFLATION = Path(__file__).resolve().parent / "costmap_2d" / "inflation_cases"
+SMOOTHER = Path(__file__).resolve().parent / "velocity_smoother" / "smoother_cases"
 
 
 def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["nav", "conformance"]) == 0
     out = capsys.readouterr()
-    for component, folder in (("navfn", NAVFN), ("inflation", INFLATION)):
+    for component, folder, how in (
+        ("navfn", NAVFN, "compiled kernel"),
+        ("inflation", INFLATION, "compiled kernel"),
+        ("velocity_smoother", SMOOTHER, "Python path"),  # it has no C kernel
+    ):
         count = len(list(folder.glob("*.npz")))
-        assert f"{component} (compiled kernels): {count} of {count} cases equal Nav2's answer" in out.err
+        assert f"{component} ({how}): {count} of {count} cases equal Nav2's answer" in out.err
     assert "DIFFERS" not in out.out
 
 
@@ -69,4 +74,6 @@ def test_a_case_for_a_component_the_twin_does_not_check_is_refused(
 ) -> None:
     np.savez(tmp_path / "amcl.npz", meta=json.dumps({"component": "amcl_motion_model"}))
     assert main(["nav", "conformance", str(tmp_path / "amcl.npz")]) == 2
-    assert "a case for amcl_motion_model; the twin checks inflation, navfn" in capsys.readouterr().err
+    assert (
+        "a case for amcl_motion_model; the twin checks inflation, navfn, velocity_smoother" in capsys.readouterr().err
+    )

@@ -14,6 +14,7 @@ from twin.nav.frames import Frames, compose, invert
 from twin.nav.params import default_params_path, load_nav2_params
 from twin.nav.server_params import nav2_config
 from twin.nav.smoother.simple_smoother import smooth_path
+from twin.nav.velocity_smoother.velocity_smoother import Feedback
 
 
 def test_costmap_translation_is_nav2s_table() -> None:
@@ -53,14 +54,24 @@ def test_tb3_params_give_nav2s_server_values() -> None:
     assert (cfg.planner.tolerance_m, cfg.planner.use_astar, cfg.planner.allow_unknown) == (0.5, False, True)
     assert cfg.bt_loop_duration_s == pytest.approx(0.01)
     # no velocity_smoother or behavior_server section in TB3's file: Humble's code defaults
-    assert cfg.smoother.smoothing_frequency_hz == 20.0 and cfg.smoother.max_velocity == (0.5, 2.5)
+    assert cfg.smoother.smoothing_frequency_hz == 20.0 and cfg.smoother.max_velocity == (0.5, 0.0, 2.5)
     assert cfg.behaviors.cycle_frequency_hz == 10.0
 
 
 def test_nav2s_own_params_file_reads_its_smoother_limits(fixtures: Path) -> None:
     cfg = nav2_config(load_nav2_params(fixtures / "nav2" / "nav2_humble" / "nav2_params.yaml"))
     assert cfg.controller_frequency_hz == 20.0
-    assert cfg.smoother.max_velocity == (0.26, 1.0)
+    assert cfg.smoother.max_velocity == (0.26, 0.0, 1.0)
+    assert cfg.smoother.feedback is Feedback.OPEN_LOOP and cfg.smoother.odom_duration_s == 0.1
+
+
+def test_the_smoother_runs_closed_loop_and_refuses_other_feedback() -> None:
+    overrides = {"velocity_smoother.feedback": "CLOSED_LOOP", "velocity_smoother.odom_duration": 0.3}
+    cfg = nav2_config(load_nav2_params(default_params_path("burger"), overrides=overrides))
+    assert cfg.smoother.feedback is Feedback.CLOSED_LOOP and cfg.smoother.odom_duration_s == 0.3
+    bad = load_nav2_params(default_params_path("burger"), overrides={"velocity_smoother.feedback": "OPENLOOP"})
+    with pytest.raises(ConfigError, match="feedback: expected OPEN_LOOP or CLOSED_LOOP"):
+        nav2_config(bad)
 
 
 def test_an_unknown_controller_or_planner_plugin_is_a_config_error(tmp_path: Path) -> None:

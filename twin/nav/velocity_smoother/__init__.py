@@ -1,1 +1,1 @@
-"""nav2_velocity_smoother: `VelocitySmoother` (open loop) and `VelocitySmootherNode`."""
+"""nav2_velocity_smoother: `VelocitySmoother` (open and closed loop) and `VelocitySmootherNode`."""

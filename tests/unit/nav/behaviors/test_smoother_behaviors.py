@@ -15,46 +15,46 @@ MS = 1_000_000
 
 def test_smoother_limits_acceleration_per_20hz_cycle() -> None:
     smoother = VelocitySmoother()
-    smoother.command(0.22, 1.0, 0)
+    smoother.command((0.22, 0.0, 1.0), 0)
     out = [smoother.step(k * 50 * MS) for k in range(1, 6)]
-    assert out[0] == pytest.approx((0.125, 0.16))  # 2.5 / 20 and 3.2 / 20
-    assert out[1] == pytest.approx((0.22, 0.32))
-    assert out[4] == pytest.approx((0.22, 0.8))
+    assert out[0] == pytest.approx((0.125, 0.0, 0.16))  # 2.5 / 20 and 3.2 / 20
+    assert out[1] == pytest.approx((0.22, 0.0, 0.32))
+    assert out[4] == pytest.approx((0.22, 0.0, 0.8))
 
 
 def test_smoother_clamps_to_code_default_limits_and_deadband() -> None:
-    smoother = VelocitySmoother(SmootherParams(deadband_velocity=(0.05, 0.0)))
-    smoother.command(0.9, 0.0, 0)
+    smoother = VelocitySmoother(SmootherParams(deadband_velocity=(0.05, 0.0, 0.0)))
+    smoother.command((0.9, 0.0, 0.0), 0)
     for k in range(1, 20):
         out = smoother.step(k * 50 * MS)
-    assert out == pytest.approx((0.5, 0.0))
-    smoother.command(0.04, 0.0, 1000 * MS)
-    assert smoother.step(1050 * MS) == pytest.approx((0.375, 0.0))  # decelerating towards 0.04
+    assert out == pytest.approx((0.5, 0.0, 0.0))
+    smoother.command((0.04, 0.0, 0.0), 1000 * MS)
+    assert smoother.step(1050 * MS) == pytest.approx((0.375, 0.0, 0.0))  # decelerating towards 0.04
     for k in range(22, 26):
         out = smoother.step(k * 50 * MS)
     # Nav2 zeroes what it publishes inside the deadband, and smooths on from the value before
-    assert out == (0.0, 0.0)
-    smoother.command(0.2, 0.0, 1300 * MS)
-    assert smoother.step(1350 * MS) == pytest.approx((0.04 + 0.125, 0.0))
+    assert out == (0.0, 0.0, 0.0)
+    smoother.command((0.2, 0.0, 0.0), 1300 * MS)
+    assert smoother.step(1350 * MS) == pytest.approx((0.04 + 0.125, 0.0, 0.0))
 
 
 def test_smoother_scale_velocities_keeps_the_command_direction() -> None:
     plain, scaled = VelocitySmoother(), VelocitySmoother(SmootherParams(scale_velocities=True))
     for smoother in (plain, scaled):
-        smoother.command(0.22, 0.1, 0)
-    assert plain.step(50 * MS) == pytest.approx((0.125, 0.1))  # each component on its own
-    vx, wz = scaled.step(50 * MS)  # both scaled by the linear axis' limit: 0.125 / 0.22 of the way
+        smoother.command((0.22, 0.0, 0.1), 0)
+    assert plain.step(50 * MS) == pytest.approx((0.125, 0.0, 0.1))  # each component on its own
+    vx, _, wz = scaled.step(50 * MS)  # both scaled by the linear axis' limit: 0.125 / 0.22 of the way
     assert vx == pytest.approx(0.125) and wz == pytest.approx(0.1 * 0.125 / 0.22)
 
 
 def test_smoother_ramps_down_after_the_timeout_then_stops_publishing() -> None:
     smoother = VelocitySmoother()
     assert smoother.step(0) is None  # nothing received yet
-    smoother.command(0.2, 0.0, 0)
+    smoother.command((0.2, 0.0, 0.0), 0)
     for k in range(1, 21):
         smoother.step(k * 50 * MS)  # 1.0 s, still within the timeout
-    assert smoother.step(1050 * MS) == pytest.approx((0.075, 0.0))
-    assert smoother.step(1100 * MS) == pytest.approx((0.0, 0.0))
+    assert smoother.step(1050 * MS) == pytest.approx((0.075, 0.0, 0.0))
+    assert smoother.step(1100 * MS) == pytest.approx((0.0, 0.0, 0.0))
     assert smoother.step(1150 * MS) is None
 
 
