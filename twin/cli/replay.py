@@ -13,7 +13,7 @@ examples:
       --world ../shared/fixtures/gazebo_classic/worlds/turtlebot3_world.world \\
       --model-path ../shared/fixtures/gazebo_classic/models --out /tmp/replay
   twin replay BAG --world W --model-path M --drive fmu      the FMU drivetrain instead of ideal wheels
-  twin replay bags/fleet --world sdf/worlds/turtlebot3_house.world --namespace robot2   one robot of a fleet
+  twin replay bags/fleet --world sdf/worlds/house.sdf --namespace robot2   one robot of a fleet
 
 Writes into --out (default: bags/<BAG name>_replay): scenario.yaml (the replay as a scenario
 `twin simulate` runs again), bag/ (the twin's run) and the comparison of the twin's
