@@ -29,13 +29,17 @@ LikelihoodFieldModel), vectorised over particles and beams:
 - **map -> odom** is the estimate composed with the inverse of the odometry pose of the scan that
   produced it; Nav2 re-sends it on every scan stamped scan time + transform_tolerance.
 
-Random numbers come from the `numpy.random.Generator` passed in (seeded by the caller).
+Random numbers come from the draw source passed in: a `numpy.random.Generator` seeded by the
+caller, or anything with its `standard_normal`, `random`, `integers` and `uniform` (a test replays
+recorded draws through one). The motion model takes one (n, 3) block of standard normal draws per
+update, in Nav2's order: per particle, rot1, trans, rot2.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,11 +50,31 @@ from twin.nav.frames import LaserGeometry
 from twin.nav.map_server.map_io import OccupancyMap
 from twin.nav.params import AmclParams
 
-__all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField", "nav2_distances"]
+__all__ = ["Amcl", "AmclEstimate", "DrawSource", "LaserGeometry", "LikelihoodField", "nav2_distances"]
 
 F64 = NDArray[np.float64]
 
 _BIN_SIZE = np.array([0.5, 0.5, math.radians(10.0)])  # pf_kdtree's histogram: x m, y m, yaw rad
+
+
+class DrawSource(Protocol):
+    """Where the filter's random numbers come from: `numpy.random.Generator`'s methods the filter calls."""
+
+    def standard_normal(self, size: Any) -> Any:
+        """Standard normal draws of the given shape."""
+        ...
+
+    def random(self, size: Any) -> Any:
+        """Uniform draws in [0, 1) of the given shape."""
+        ...
+
+    def integers(self, low: Any, high: Any, size: Any) -> Any:
+        """Integers in [low, high)."""
+        ...
+
+    def uniform(self, low: Any, high: Any, size: Any) -> Any:
+        """Uniform draws in [low, high)."""
+        ...
 
 
 def _angle_diff(a: float, b: float) -> float:
@@ -223,7 +247,8 @@ class Amcl:
         params: The `amcl` node's parameters.
         occupancy: The map it localises against (`/map`).
         laser: The scan's geometry and the laser's mount in the base frame.
-        rng: The filter's random numbers (seed it from the scenario seed).
+        rng: The filter's random numbers: a `numpy.random.Generator` seeded from the scenario seed, or
+            any `DrawSource` (a test replays recorded draws through one).
         native: Use the C kernel for the laser model when it can be built (else numpy).
     """
 
@@ -232,7 +257,7 @@ class Amcl:
         params: AmclParams,
         occupancy: OccupancyMap,
         laser: LaserGeometry,
-        rng: np.random.Generator,
+        rng: DrawSource,
         *,
         native: bool = True,
     ) -> None:
