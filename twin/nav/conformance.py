@@ -10,6 +10,11 @@ saying how Nav2's answers were recorded).
 Components:
 - `navfn`: the NavFn planner (`twin.nav.planner.navfn`): found or failed and why, NavFn's cost
   array, its float32 potential and every path point, bit for bit.
+- `amcl_motion_model`: AMCL's differential motion model (`twin.nav.amcl.filter.odometry_update`)
+  given the normal draws Nav2 consumed: every particle pose, bit for bit (the numpy path within
+  1e-12; `twin.nav.amcl.conformance_check`).
+- `amcl_likelihood_field`: AMCL's likelihood-field distances and each particle's weight before
+  normalisation, bit for bit.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.core.errors import ConfigError
+from twin.nav.amcl.conformance_check import check_amcl_likelihood_field, check_amcl_motion_model
 
 __all__ = ["COMPONENTS", "CaseResult", "case_files", "check_case", "component_of", "load_case"]
 
@@ -170,7 +176,11 @@ def check_navfn(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[s
     return out
 
 
-COMPONENTS: dict[str, Checker] = {"navfn": check_navfn}
+COMPONENTS: dict[str, Checker] = {
+    "navfn": check_navfn,
+    "amcl_motion_model": check_amcl_motion_model,
+    "amcl_likelihood_field": check_amcl_likelihood_field,
+}
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 

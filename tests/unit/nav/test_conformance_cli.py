@@ -65,6 +65,8 @@ def test_a_file_that_is_not_a_case_is_one_line_and_exit_2(
 def test_a_case_for_a_component_the_twin_does_not_check_is_refused(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    np.savez(tmp_path / "amcl.npz", meta=json.dumps({"component": "amcl_motion_model"}))
-    assert main(["nav", "conformance", str(tmp_path / "amcl.npz")]) == 2
-    assert "a case for amcl_motion_model; the twin checks navfn" in capsys.readouterr().err
+    np.savez(tmp_path / "dwb.npz", meta=json.dumps({"component": "dwb_critics"}))
+    assert main(["nav", "conformance", str(tmp_path / "dwb.npz")]) == 2
+    assert "a case for dwb_critics; the twin checks amcl_likelihood_field, amcl_motion_model, navfn" in (
+        capsys.readouterr().err
+    )

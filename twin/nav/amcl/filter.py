@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,7 +50,18 @@ from twin.nav.frames import LaserGeometry
 from twin.nav.map_server.map_io import OccupancyMap
 from twin.nav.params import AmclParams
 
-__all__ = ["Amcl", "AmclEstimate", "DrawSource", "LaserGeometry", "LikelihoodField", "nav2_distances"]
+__all__ = [
+    "Amcl",
+    "AmclEstimate",
+    "Beams",
+    "DrawSource",
+    "LaserGeometry",
+    "LikelihoodField",
+    "beam_endpoints",
+    "laser_likelihood",
+    "nav2_distances",
+    "odometry_update",
+]
 
 F64 = NDArray[np.float64]
 
@@ -85,6 +96,70 @@ def _angle_diff(a: float, b: float) -> float:
     if d1 > 0.0:
         d2 *= -1.0
     return d1 if abs(d1) < abs(d2) else d2
+
+
+def _angle_diffs(a: float, b: F64) -> F64:
+    """`_angle_diff(a, b)` for each b."""
+    d1 = math.atan2(math.sin(a), math.cos(a)) - np.arctan2(np.sin(b), np.cos(b))
+    d2 = 2.0 * math.pi - np.abs(d1)
+    d2 = np.where(d1 > 0.0, -d2, d2)
+    return np.where(np.abs(d1) < np.abs(d2), d1, d2)
+
+
+def odometry_update(
+    poses: F64,
+    pose: tuple[float, float, float],
+    delta: tuple[float, float, float],
+    alphas: tuple[float, float, float, float],
+    draws: DrawSource,
+    *,
+    native: bool = True,
+) -> F64:
+    """Move every particle by the odometry change as Nav2's DifferentialMotionModel::odometryUpdate does.
+
+    The change is split into rotate, translate, rotate (no first rotation below 1 cm of travel); each
+    particle's rotations are `angle_diff(rot, sd * z)` (folded into [-pi, pi], so a sampled rotation
+    near +-pi can come out a turn lower or higher) and its translation `trans - sd * z`, z the standard
+    normal draws (one (n, 3) block from `draws`: per particle rot1, trans, rot2). Products and sums
+    are taken in Nav2's order.
+
+    Args:
+        poses: (n, 3) particles (x m, y m, yaw rad), updated in place.
+        pose: The odometry pose now (odom frame).
+        delta: Its change since the last update: (dx, dy, angle_diff(yaw, old yaw)).
+        alphas: alpha1..alpha4.
+        draws: The random numbers.
+        native: Use the C kernel when it can be built.
+
+    Returns:
+        `poses`, moved (a new contiguous array when `poses` was not one).
+    """
+    a1, a2, a3, a4 = alphas
+    dx, dy, dyaw = delta
+    old_yaw = pose[2] - dyaw  # pf_vector_sub(pose, delta)
+    trans = math.sqrt(dx * dx + dy * dy)
+    rot1 = 0.0 if math.sqrt(dy * dy + dx * dx) < 0.01 else _angle_diff(math.atan2(dy, dx), old_yaw)
+    rot2 = _angle_diff(dyaw, rot1)
+    n1 = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, math.pi)))
+    n2 = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, math.pi)))
+    sd_rot1 = math.sqrt(a1 * n1 * n1 + a2 * trans * trans)
+    sd_trans = math.sqrt(a3 * trans * trans + a4 * n1 * n1 + a4 * n2 * n2)
+    sd_rot2 = math.sqrt(a1 * n2 * n2 + a2 * trans * trans)
+    n = len(poses)
+    noise = np.ascontiguousarray(draws.standard_normal((n, 3)), dtype=np.float64)
+    lib = load_kernel() if native else None
+    if lib is not None:
+        out = np.ascontiguousarray(poses, dtype=np.float64)
+        lib.twin_amcl_motion(out.ctypes.data, n, noise.ctypes.data, rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2)
+        return out
+    rot1_hat = _angle_diffs(rot1, sd_rot1 * noise[:, 0])
+    trans_hat = trans - sd_trans * noise[:, 1]
+    rot2_hat = _angle_diffs(rot2, sd_rot2 * noise[:, 2])
+    heading = poses[:, 2] + rot1_hat
+    poses[:, 0] += trans_hat * np.cos(heading)
+    poses[:, 1] += trans_hat * np.sin(heading)
+    poses[:, 2] += rot1_hat + rot2_hat
+    return poses
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -227,17 +302,139 @@ class LikelihoodField:
         self.origin_x_m = occupancy.origin_x_m
         self.origin_y_m = occupancy.origin_y_m
         self.free_cells = np.argwhere(occupancy.data == 0)  # (row, col) for uniform pose draws
-        self._cubes: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
+        self._pz: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
 
-    def cubes(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
-        """Return (pz^3 per map cell, pz^3 of an endpoint off the map), pz as the likelihood-field model's."""
+    def pz(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
+        """Return (pz per map cell, pz of an endpoint off the map) as the likelihood-field model computes them.
+
+        `pz = z_hit exp(-(z z) / (2 sigma sigma)) + z_rand (1 / range_max)`, z the cell's distance,
+        with libm's exp (`math.exp`) over the few distinct distances, so each value is Nav2's to the bit.
+        """
         key = (z_hit, z_rand, sigma_hit_m, range_max_m)
-        if key not in self._cubes:
-            denominator = 2.0 * sigma_hit_m**2
-            pz = z_hit * np.exp(-(self.distance_m**2) / denominator) + z_rand / range_max_m
-            off = z_hit * math.exp(-(self.max_dist_m**2) / denominator) + z_rand / range_max_m
-            self._cubes[key] = (np.ascontiguousarray(pz**3), off**3)
-        return self._cubes[key]
+        if key not in self._pz:
+            denominator = 2 * sigma_hit_m * sigma_hit_m
+            rand = z_rand * (1.0 / range_max_m)
+            values, index = np.unique(self.distance_m, return_inverse=True)
+            table = np.array([z_hit * math.exp(-(z * z) / denominator) + rand for z in values.tolist()])
+            off = z_hit * math.exp(-(self.max_dist_m * self.max_dist_m) / denominator) + rand
+            self._pz[key] = (np.ascontiguousarray(table[index.reshape(self.distance_m.shape)]), off)
+        return self._pz[key]
+
+
+class Beams(NamedTuple):
+    """The beams the likelihood-field model uses: endpoints in the base frame, and each beam's reading."""
+
+    x_m: F64
+    y_m: F64
+    range_m: F64
+    bearing_rad: F64
+    laser_xy_m: tuple[float, float]
+
+
+def beam_endpoints(
+    ranges_m: F64, bearings_rad: F64, laser_xy_m: tuple[float, float], range_max_m: float, max_beams: int
+) -> Beams:
+    """The beams the likelihood-field model uses, with their endpoints in the base frame (x, y; m).
+
+    Every `(n - 1) // (max_beams - 1)`-th beam (at least every one) from the first; readings at or
+    beyond `range_max_m`, and NaN, are skipped (LikelihoodFieldModel::sensorFunction).
+
+    Args:
+        ranges_m: The scan's ranges as amcl_node hands them over (those at or below range_min
+            already set to range_max).
+        bearings_rad: Each beam's angle in the base frame.
+        laser_xy_m: The laser's position in the base frame (Nav2 keeps its yaw in the bearings).
+        range_max_m: The laser's range_max (capped by `laser_max_range`).
+        max_beams: `max_beams` (at least 2; Nav2 does not weigh with fewer).
+    """
+    count = len(ranges_m)
+    step = max(1, (count - 1) // (max_beams - 1)) if max_beams > 1 else max(1, count)
+    index = np.arange(0, count, step)
+    r = ranges_m[index]
+    keep = (r < range_max_m) & ~np.isnan(r)
+    r, angle = r[keep], bearings_rad[index][keep]
+    x: F64 = laser_xy_m[0] + r * np.cos(angle)
+    y: F64 = laser_xy_m[1] + r * np.sin(angle)
+    return Beams(x, y, np.ascontiguousarray(r), np.ascontiguousarray(angle), laser_xy_m)
+
+
+def laser_likelihood(
+    poses: F64, beams: Beams, field: LikelihoodField, pz: tuple[F64, float], *, native: bool = True
+) -> F64:
+    """Each particle's likelihood-field factor `1 + pz^3 + ...` over the beams (its weight is multiplied by it).
+
+    As LikelihoodFieldModel::sensorFunction: each cube is `pz * pz * pz`, added to 1 beam by beam.
+    The endpoint's cell is found from the particle's grid position and the endpoint in the base frame
+    (cheaper than Nav2's per-beam sin and cos); where that lands within 1e-6 of a cell edge, where the
+    two ways of computing it could round to different cells, the cell is taken Nav2's way (`_nav2_cells`).
+
+    Args:
+        poses: (n, 3) particles (x m, y m, yaw rad) in the map frame.
+        beams: The beams used, from `beam_endpoints`.
+        field: The map's likelihood field.
+        pz: pz per map cell and pz of an endpoint off the map (`field.pz`).
+        native: Use the C kernel when it can be built.
+    """
+    table, off_map = pz
+    n = len(poses)
+    if not len(beams.x_m):
+        return np.ones(n)
+    inv_res = 1.0 / field.resolution_m
+    ex = np.ascontiguousarray(beams.x_m * inv_res)  # each beam's endpoint in the base frame, in cells
+    ey = np.ascontiguousarray(beams.y_m * inv_res)
+    rows, cols = table.shape
+    lx, ly = beams.laser_xy_m
+    lib = load_kernel() if native else None
+    if lib is not None:
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        out = np.empty(n)
+        status = lib.twin_amcl_likelihood(
+            poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
+            ex.ctypes.data, ey.ctypes.data, beams.range_m.ctypes.data, beams.bearing_rad.ctypes.data, len(ex),
+            lx, ly, field.resolution_m, table.ctypes.data, rows, cols, off_map, out.ctypes.data,
+        )  # fmt: skip
+        if status != 0:
+            raise MemoryError("amcl likelihood: out of memory")
+        return out
+    # grid coordinates of each particle (AMCL rounds: +0.5 then floor), its heading
+    gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
+    gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    fc = gx[:, None] + c[:, None] * ex - s[:, None] * ey
+    fr = gy[:, None] + s[:, None] * ex + c[:, None] * ey
+    col, row = np.floor(fc), np.floor(fr)
+    edge = (fc - col < 1e-6) | (fc - col > 1.0 - 1e-6) | (fr - row < 1e-6) | (fr - row > 1.0 - 1e-6)
+    col_i, row_i = col.astype(np.intp), row.astype(np.intp)
+    if edge.any():
+        j, i = np.nonzero(edge)
+        col_i[j, i], row_i[j, i] = _nav2_cells(poses[j], beams, i, field, (rows, cols))
+    inside = (col_i >= 0) & (col_i < cols) & (row_i >= 0) & (row_i < rows)
+    values = np.where(inside, table[np.clip(row_i, 0, rows - 1), np.clip(col_i, 0, cols - 1)], off_map)
+    likelihood: F64 = np.ones(n)
+    for v in values.T:  # beam by beam, as Nav2 adds them
+        likelihood += v * v * v
+    return likelihood
+
+
+def _nav2_cells(
+    poses: F64, beams: Beams, index: NDArray[np.intp], field: LikelihoodField, shape: tuple[int, int]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The map cells of beams `index` from particles `poses` computed as Nav2 does (see the C kernel's nav2_cell)."""
+    rows, cols = shape
+    lx, ly = beams.laser_xy_m
+    scale = field.resolution_m
+    yaw = poses[:, 2]
+    px = poses[:, 0] + lx * np.cos(yaw) - ly * np.sin(yaw)
+    py = poses[:, 1] + lx * np.sin(yaw) + ly * np.cos(yaw)
+    lyaw = np.arctan2(np.sin(yaw + 0.0), np.cos(yaw + 0.0))
+    r, b = beams.range_m[index], beams.bearing_rad[index]
+    hx = px + r * np.cos(lyaw + b)
+    hy = py + r * np.sin(lyaw + b)
+    cx = field.origin_x_m + (cols // 2) * scale
+    cy = field.origin_y_m + (rows // 2) * scale
+    col = np.floor((hx - cx) / scale + 0.5) + cols // 2
+    row = np.floor((hy - cy) / scale + 0.5) + rows // 2
+    return col.astype(np.intp), row.astype(np.intp)
 
 
 class Amcl:
@@ -272,7 +469,7 @@ class Amcl:
             range_max = min(range_max, params.laser_max_range_m)
         self._range_max = range_max
         self._range_min = max(laser.range_min_m, params.laser_min_range_m)
-        self._cubes, self._off_map = self.field.cubes(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
+        self._pz = self.field.pz(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
         # KLD-sampling's particle bound for k occupied bins, k = 0 .. max_particles (one table, both paths)
         self._kld_limits = np.ascontiguousarray(self._kld_limit(np.arange(params.max_particles + 1)))
         self.poses: F64 = np.zeros((0, 3))
@@ -346,7 +543,7 @@ class Amcl:
             dx, dy, dyaw = x - rx, y - ry, _angle_diff(yaw, ryaw)
             if not (abs(dx) > p.update_min_d_m or abs(dy) > p.update_min_d_m or abs(dyaw) > p.update_min_a_rad):
                 return None
-            self._motion(dx, dy, dyaw, ryaw)
+            self._motion((x, y, yaw), (dx, dy, dyaw))
         if p.max_beams >= 2:  # Nav2's likelihood model refuses fewer than two beams (no weighting)
             self._sensor(np.asarray(ranges, dtype=np.float64))
         self._odom_ref = (x, y, yaw)
@@ -367,79 +564,20 @@ class Amcl:
 
     # --- the filter ---------------------------------------------------------------------------
 
-    def _motion(self, dx: float, dy: float, dyaw: float, old_yaw: float) -> None:
+    def _motion(self, pose: tuple[float, float, float], delta: tuple[float, float, float]) -> None:
         p = self.params
-        trans = math.hypot(dx, dy)
-        rot1 = 0.0 if trans < 0.01 else _angle_diff(math.atan2(dy, dx), old_yaw)
-        rot2 = _angle_diff(dyaw, rot1)
-        rot1_noise = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, math.pi)))
-        rot2_noise = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, math.pi)))
-        n = len(self.poses)
-        noise = self._rng.standard_normal((n, 3))
-        sd_rot1 = math.sqrt(p.alpha1 * rot1_noise**2 + p.alpha2 * trans**2)
-        sd_trans = math.sqrt(p.alpha3 * trans**2 + p.alpha4 * rot1_noise**2 + p.alpha4 * rot2_noise**2)
-        sd_rot2 = math.sqrt(p.alpha1 * rot2_noise**2 + p.alpha2 * trans**2)
-        if self._lib is not None:
-            poses = np.ascontiguousarray(self.poses)
-            self._lib.twin_amcl_motion(
-                poses.ctypes.data, n, noise.ctypes.data, rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2
-            )
-            self.poses = poses
-            return
-        rot1_hat = rot1 - noise[:, 0] * sd_rot1
-        trans_hat = trans - noise[:, 1] * sd_trans
-        rot2_hat = rot2 - noise[:, 2] * sd_rot2
-        heading = self.poses[:, 2] + rot1_hat
-        self.poses[:, 0] += trans_hat * np.cos(heading)
-        self.poses[:, 1] += trans_hat * np.sin(heading)
-        self.poses[:, 2] += rot1_hat + rot2_hat
-
-    def _beams(self, ranges: F64) -> tuple[F64, F64]:
-        """Return the used beams' endpoints in the base frame (bx, by)."""
-        p, laser = self.params, self.laser
-        count = len(ranges)
-        step = max(1, (count - 1) // (p.max_beams - 1)) if p.max_beams > 1 else max(1, count)
-        index = np.arange(0, count, step)
-        r = ranges[index].copy()
-        r[r <= self._range_min] = self._range_max
-        keep = (r < self._range_max) & ~np.isnan(r)
-        r, index = r[keep], index[keep]
-        angle = laser.mount_yaw_rad + laser.angle_min_rad + index * laser.angle_increment_rad
-        return laser.mount_x_m + r * np.cos(angle), laser.mount_y_m + r * np.sin(angle)
+        alphas = (p.alpha1, p.alpha2, p.alpha3, p.alpha4)
+        self.poses = odometry_update(self.poses, pose, delta, alphas, self._rng, native=self._lib is not None)
 
     def _sensor(self, ranges: F64) -> None:
-        bx, by = self._beams(ranges)
-        poses = self.poses
-        n = len(poses)
-        if len(bx):
-            field = self.field
-            inv_res = 1.0 / field.resolution_m
-            ex, ey = bx * inv_res, by * inv_res  # each beam's endpoint in the base frame, in cells
-            cubes = self._cubes
-            rows, cols = cubes.shape
-            if self._lib is not None:
-                poses = np.ascontiguousarray(poses)
-                self.poses = poses
-                likelihood = np.empty(n)
-                status = self._lib.twin_amcl_likelihood(
-                    poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
-                    ex.ctypes.data, ey.ctypes.data, len(ex),
-                    cubes.ctypes.data, rows, cols, self._off_map, likelihood.ctypes.data,
-                )  # fmt: skip
-                if status != 0:
-                    raise MemoryError("amcl likelihood: out of memory")
-            else:
-                # grid coordinates of each particle (AMCL rounds: +0.5 then floor), its heading
-                gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
-                gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
-                c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-                col = np.floor(gx[:, None] + c[:, None] * ex - s[:, None] * ey).astype(np.intp)
-                row = np.floor(gy[:, None] + s[:, None] * ex + c[:, None] * ey).astype(np.intp)
-                inside = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
-                values = cubes[np.clip(row, 0, rows - 1), np.clip(col, 0, cols - 1)]
-                likelihood = 1.0 + np.where(inside, values, self._off_map).sum(axis=1)
-        else:
-            likelihood = np.ones(n)
+        laser = self.laser
+        r: F64 = ranges.copy()
+        r[r <= self._range_min] = self._range_max  # as amcl_node fills LaserData
+        bearings: F64 = (
+            laser.mount_yaw_rad + laser.angle_min_rad + np.arange(len(r), dtype=np.float64) * laser.angle_increment_rad
+        )
+        beams = beam_endpoints(r, bearings, (laser.mount_x_m, laser.mount_y_m), self._range_max, self.params.max_beams)
+        likelihood = laser_likelihood(self.poses, beams, self.field, self._pz, native=self._lib is not None)
         weights = self.weights * likelihood
         total = float(weights.sum())
         p = self.params
