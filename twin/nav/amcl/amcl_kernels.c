@@ -67,9 +67,9 @@ int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, doub
     return 0;
 }
 
-/* Nav2's angleutils::angle_diff: a - b, both first folded by atan2(sin, cos), then the shorter way round. */
-static double angle_diff(double a, double b) {
-    a = atan2(sin(a), cos(a));
+/* Nav2's angleutils::angle_diff(a, b) given a already folded (atan2(sin a, cos a), which does not
+   change per particle): b folded the same way, then a - b the shorter way round. */
+static double angle_diff_folded(double a, double b) {
     b = atan2(sin(b), cos(b));
     double d1 = a - b;
     double d2 = 2 * M_PI - fabs(d1);
@@ -82,10 +82,11 @@ static double angle_diff(double a, double b) {
    the translation trans - sd z, applied to each pose as Nav2 applies them; headings are not folded. */
 void twin_amcl_motion(double *poses, long n, const double *noise, double rot1, double trans, double rot2,
                       double sd_rot1, double sd_trans, double sd_rot2) {
+    double a1 = atan2(sin(rot1), cos(rot1)), a2 = atan2(sin(rot2), cos(rot2));
     for (long j = 0; j < n; ++j) {
-        double r1 = angle_diff(rot1, sd_rot1 * noise[3 * j]);
+        double r1 = angle_diff_folded(a1, sd_rot1 * noise[3 * j]);
         double t = trans - sd_trans * noise[3 * j + 1];
-        double r2 = angle_diff(rot2, sd_rot2 * noise[3 * j + 2]);
+        double r2 = angle_diff_folded(a2, sd_rot2 * noise[3 * j + 2]);
         poses[3 * j] += t * cos(poses[3 * j + 2] + r1);
         poses[3 * j + 1] += t * sin(poses[3 * j + 2] + r1);
         poses[3 * j + 2] += r1 + r2;

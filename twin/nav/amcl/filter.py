@@ -410,9 +410,11 @@ def laser_likelihood(
         col_i[j, i], row_i[j, i] = _nav2_cells(poses[j], beams, i, field, (rows, cols))
     inside = (col_i >= 0) & (col_i < cols) & (row_i >= 0) & (row_i < rows)
     values = np.where(inside, table[np.clip(row_i, 0, rows - 1), np.clip(col_i, 0, cols - 1)], off_map)
-    likelihood: F64 = np.ones(n)
-    for v in values.T:  # beam by beam, as Nav2 adds them
-        likelihood += v * v * v
+    terms = np.empty((n, len(ex) + 1))
+    terms[:, 0] = 1.0
+    np.multiply(values * values, values, out=terms[:, 1:])
+    # cumsum adds left to right (np.sum would pair them up): 1 + pz^3 + ... beam by beam, as Nav2 adds them
+    likelihood: F64 = np.cumsum(terms, axis=1)[:, -1]
     return likelihood
 
 
