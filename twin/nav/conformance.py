@@ -15,6 +15,7 @@ Components:
   1e-12; `twin.nav.amcl.conformance_check`).
 - `amcl_likelihood_field`: AMCL's likelihood-field distances and each particle's weight before
   normalisation, bit for bit.
+- `amcl_resample`: AMCL's KLD resampling given Nav2's uniform draws: how many samples, and each one.
 """
 
 from __future__ import annotations
@@ -31,7 +32,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.core.errors import ConfigError
-from twin.nav.amcl.conformance_check import check_amcl_likelihood_field, check_amcl_motion_model
+from twin.nav.amcl.conformance_check import (
+    check_amcl_likelihood_field,
+    check_amcl_motion_model,
+    check_amcl_resample,
+)
 
 __all__ = ["COMPONENTS", "CaseResult", "case_files", "check_case", "component_of", "load_case"]
 
@@ -180,6 +185,7 @@ COMPONENTS: dict[str, Checker] = {
     "navfn": check_navfn,
     "amcl_motion_model": check_amcl_motion_model,
     "amcl_likelihood_field": check_amcl_likelihood_field,
+    "amcl_resample": check_amcl_resample,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 

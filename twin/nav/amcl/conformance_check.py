@@ -1,6 +1,6 @@
 """AMCL's parts replayed on cases recorded from Nav2 Humble's nav2_amcl (`twin nav conformance`).
 
-Two components, each a checker `(meta, arrays, native) -> differences` (empty: equal), registered in
+Three components, each a checker `(meta, arrays, native) -> differences` (empty: equal), registered in
 `twin.nav.conformance.COMPONENTS`:
 
 - `amcl_motion_model`: `odometry_update` on the case's particles, odometry pose and change, alphas
@@ -14,6 +14,11 @@ Two components, each a checker `(meta, arrays, native) -> differences` (empty: e
   cubes are `pz * pz * pz` added to 1 beam by beam, and the cell of an endpoint within 1e-6 of a
   cell edge is computed with Nav2's own arithmetic (elsewhere the cheaper lookup lands in the same
   cell).
+- `amcl_resample`: `kld_resample` (pf_update_resample without recovery: w_diff is 0 in every case, as
+  with TurtleBot3's recovery alphas of 0) on the case's particles and weights, given the uniforms
+  Nav2's `drand48` returned. Nav2 draws two per sample, the first deciding on a random pose, the
+  second the pick; the twin is given the second ones (and more after them, so a twin that drew past
+  Nav2's stop would show). Equal means the same number of samples and each sample's pose bitwise.
 """
 
 from __future__ import annotations
@@ -26,10 +31,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.nav.amcl._native import load_kernel
-from twin.nav.amcl.filter import LikelihoodField, beam_endpoints, laser_likelihood, odometry_update
+from twin.nav.amcl.filter import (
+    LikelihoodField,
+    beam_endpoints,
+    kld_limits,
+    kld_resample,
+    laser_likelihood,
+    odometry_update,
+)
 from twin.nav.map_server.map_io import OccupancyMap
 
-__all__ = ["RecordedDraws", "check_amcl_likelihood_field", "check_amcl_motion_model"]
+__all__ = ["RecordedDraws", "check_amcl_likelihood_field", "check_amcl_motion_model", "check_amcl_resample"]
 
 Arrays = Mapping[str, NDArray[Any]]
 
@@ -150,3 +162,24 @@ def check_amcl_likelihood_field(meta: Mapping[str, Any], arrays: Arrays, native:
             f"weights: {int(bad.sum())} of {len(want)} particles differ, first {i}: twin {got[i]!r}, Nav2 {want[i]!r}"
         )
     return out
+
+
+def check_amcl_resample(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    """The ways the twin's KLD resampling differs from Nav2's on one case (`amcl_cases/README.md`)."""
+    if missing := _native_missing(native):
+        return missing
+    if meta["w_slow"] > 0.0 and 1.0 - meta["w_fast"] / meta["w_slow"] > 0.0:
+        return ["a case with recovery draws (w_diff > 0): the twin checks resampling without them"]
+    m = int(meta["max_particles"])
+    picks = np.full(m, 0.5)  # past Nav2's stop: a twin drawing on would take these
+    recorded = arrays["uniforms"][1::2][:m]
+    picks[: len(recorded)] = recorded
+    limits = kld_limits(int(meta["min_particles"]), m, float(meta["pf_err"]), float(meta["pf_z"]))
+    got = kld_resample(arrays["poses"], arrays["weights"], picks, limits, native=native)
+    want = arrays["poses_after"]
+    if got.shape != want.shape:
+        return [f"samples: the twin kept {len(got)}, Nav2 {len(want)}"]
+    bad = got != want
+    if bad.any():
+        return [_first_particle(got, want, bad, "samples")]
+    return []

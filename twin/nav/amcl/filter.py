@@ -58,6 +58,8 @@ __all__ = [
     "LaserGeometry",
     "LikelihoodField",
     "beam_endpoints",
+    "kld_limits",
+    "kld_resample",
     "laser_likelihood",
     "nav2_distances",
     "odometry_update",
@@ -439,6 +441,81 @@ def _nav2_cells(
     return col.astype(np.intp), row.astype(np.intp)
 
 
+def kld_limits(min_particles: int, max_particles: int, pf_err: float, pf_z: float) -> F64:
+    """KLD-sampling's particle bound for k = 0 .. max_particles occupied bins, as pf_resample_limit computes it.
+
+    `ceil((k - 1) / (2 pf_err) * x * x * x)` with `x = 1 - b + sqrt(b) pf_z`, `b = 2 / (9 (k - 1))`,
+    in Nav2's order of operations, within [min_particles, max_particles]; max_particles for k <= 1.
+    """
+    k = np.arange(max_particles + 1)
+    kk = np.maximum(k - 1, 1).astype(np.float64)
+    b = 2 / (9 * kk)
+    x = 1 - b + np.sqrt(2 / (9 * kk)) * pf_z
+    n = np.ceil(kk / (2 * pf_err) * x * x * x)
+    n = np.clip(n, min_particles, max_particles)
+    return np.ascontiguousarray(np.where(k <= 1, float(max_particles), n))
+
+
+def _kld_count(bins: NDArray[np.int64], limits: F64, lib: Any) -> int:
+    """How many of the drawn particles KLD-sampling keeps: the first n with n > limit(bins among them)."""
+    m = len(bins)
+    if lib is not None:
+        bins = np.ascontiguousarray(bins, dtype=np.int64)
+        n = int(lib.twin_kld_count(bins.ctypes.data, m, limits.ctypes.data))
+        if n < 0:
+            raise MemoryError("amcl resampling: out of memory")
+        return n
+    _, first = np.unique(_bin_keys(bins), return_index=True)
+    is_first = np.zeros(m, dtype=bool)
+    is_first[first] = True
+    leaves = np.cumsum(is_first)
+    stop = np.nonzero(np.arange(1, m + 1) > limits[leaves])[0]
+    return int(stop[0]) + 1 if len(stop) else m
+
+
+def kld_resample(poses: F64, weights: F64, picks: F64, limits: F64, *, native: bool = True) -> F64:
+    """Draw a new particle set as Nav2's pf_update_resample does without recovery draws.
+
+    Sample j is the particle i with `c[i] <= picks[j] < c[i + 1]`, c the running sum of the weights
+    from 0 in particle order (not renormalised; a draw at or past the last sum takes the last particle,
+    where Nav2 reads past its set); each sample is counted into its (0.5 m, 0.5 m, 10 degree) bin and
+    drawing stops at the first count above `limits[bins]`, or at `len(picks)`.
+
+    Nav2 draws two uniforms per sample, the first to decide on a random pose (never, without
+    recovery), the second the pick: `picks` are the second ones.
+
+    Args:
+        poses: (n, 3) particles.
+        weights: Their normalised weights.
+        picks: Uniform draws in [0, 1), one per sample at most (max_particles).
+        limits: `kld_limits(...)`.
+        native: Use the C kernel when it can be built.
+
+    Returns:
+        The drawn particles (count, 3).
+    """
+    cumulative = np.ascontiguousarray(np.cumsum(weights))
+    picks = np.ascontiguousarray(picks, dtype=np.float64)
+    m = len(picks)
+    lib = load_kernel() if native else None
+    if lib is not None:  # draw, histogram and stop in one pass
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        out = np.empty((m, 3))
+        n = int(
+            lib.twin_pf_resample(
+                poses.ctypes.data, len(poses), cumulative.ctypes.data, picks.ctypes.data, m,
+                _BIN_SIZE.ctypes.data, limits.ctypes.data, out.ctypes.data,
+            )
+        )  # fmt: skip
+        if n < 0:
+            raise MemoryError("amcl resampling: out of memory")
+        return out[:n]
+    pick = np.minimum(np.searchsorted(cumulative, picks, side="right"), len(cumulative) - 1)
+    new = poses[pick]
+    keys: NDArray[np.int64] = np.floor(new / _BIN_SIZE).astype(np.int64)
+    return new[: _kld_count(keys, limits, None)]
+
+
 class Amcl:
     """Nav2's AMCL filter: set an initial pose, then feed every scan with the odometry pose at its time.
 
@@ -473,7 +550,7 @@ class Amcl:
         self._range_min = max(laser.range_min_m, params.laser_min_range_m)
         self._pz = self.field.pz(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
         # KLD-sampling's particle bound for k occupied bins, k = 0 .. max_particles (one table, both paths)
-        self._kld_limits = np.ascontiguousarray(self._kld_limit(np.arange(params.max_particles + 1)))
+        self._kld_limits = kld_limits(params.min_particles, params.max_particles, params.pf_err, params.pf_z)
         self.poses: F64 = np.zeros((0, 3))
         self.weights: F64 = np.zeros(0)
         self._w_slow = 0.0
@@ -581,7 +658,7 @@ class Amcl:
         beams = beam_endpoints(r, bearings, (laser.mount_x_m, laser.mount_y_m), self._range_max, self.params.max_beams)
         likelihood = laser_likelihood(self.poses, beams, self.field, self._pz, native=self._lib is not None)
         weights = self.weights * likelihood
-        total = float(weights.sum())
+        total = float(np.cumsum(weights)[-1]) if len(weights) else 0.0  # summed in particle order, as Nav2
         p = self.params
         if total > 0.0 and math.isfinite(total):
             self.weights = weights / total
@@ -600,15 +677,6 @@ class Amcl:
         keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
         return keys
 
-    def _kld_limit(self, k: NDArray[np.int64]) -> NDArray[np.float64]:
-        p = self.params
-        kk = np.maximum(k - 1, 1).astype(np.float64)
-        b = 2.0 / (9.0 * kk)
-        x = 1.0 - b + np.sqrt(b) * p.pf_z
-        n = np.ceil(kk / (2.0 * p.pf_err) * x**3)
-        n = np.clip(n, p.min_particles, p.max_particles)
-        return np.where(k <= 1, float(p.max_particles), n)
-
     def _resample(self) -> None:
         p = self.params
         rng = self._rng
@@ -616,23 +684,14 @@ class Amcl:
         w_diff = 0.0
         if self._w_slow > 0.0:
             w_diff = max(0.0, 1.0 - self._w_fast / self._w_slow)
-        cumulative = np.cumsum(self.weights)
-        cumulative /= cumulative[-1]
         draws = rng.random(m)
         recovering = w_diff > 0.0 and len(self.field.free_cells) > 0
-        if self._lib is not None and not recovering:  # draw, histogram and stop in one pass
-            out = np.empty((m, 3))
-            n = int(
-                self._lib.twin_pf_resample(
-                    self.poses.ctypes.data, len(self.poses), cumulative.ctypes.data, draws.ctypes.data, m,
-                    _BIN_SIZE.ctypes.data, self._kld_limits.ctypes.data, out.ctypes.data,
-                )
-            )  # fmt: skip
-            if n < 0:
-                raise MemoryError("amcl resampling: out of memory")
-            self.poses = out[:n]
+        if not recovering:
+            self.poses = kld_resample(self.poses, self.weights, draws, self._kld_limits, native=self._lib is not None)
+            n = len(self.poses)
             self.weights = np.full(n, 1.0 / n)
             return
+        cumulative = np.cumsum(self.weights)  # Nav2's c[i + 1] = c[i] + w[i], not renormalised
         pick = np.minimum(np.searchsorted(cumulative, draws, side="right"), len(cumulative) - 1)
         new = self.poses[pick]
         if recovering:
@@ -651,18 +710,7 @@ class Amcl:
 
     def _kld_count(self, bins: NDArray[np.int64]) -> int:
         """How many of the drawn particles KLD-sampling keeps: the first n with n > limit(bins among them)."""
-        m = len(bins)
-        if self._lib is not None:
-            n = int(self._lib.twin_kld_count(bins.ctypes.data, m, self._kld_limits.ctypes.data))
-            if n < 0:
-                raise MemoryError("amcl resampling: out of memory")
-            return n
-        _, first = np.unique(_bin_keys(bins), return_index=True)
-        is_first = np.zeros(m, dtype=bool)
-        is_first[first] = True
-        leaves = np.cumsum(is_first)
-        stop = np.nonzero(np.arange(1, m + 1) > self._kld_limits[leaves])[0]
-        return int(stop[0]) + 1 if len(stop) else m
+        return _kld_count(bins, self._kld_limits, self._lib)
 
     def _clusters(self, bins: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]:
         """Each particle's cluster (bins that touch, 26-neighbourhood), numbered from 1 in raster order of the bins."""

@@ -2,8 +2,8 @@
 
 The motion model is given the standard normal draws Nav2's `pf_ran_gaussian` consumed; equal means
 bitwise for the C kernel, within 1e-12 m / rad for the numpy path (numpy's own sin, cos and atan2).
-The likelihood field's distances and each particle's weight before normalisation are bitwise equal
-on both paths (`twin.nav.amcl.conformance_check`).
+The likelihood field's distances and each particle's weight before normalisation, and KLD resampling's
+samples given Nav2's uniform draws, are bitwise equal on both paths (`twin.nav.amcl.conformance_check`).
 """
 
 from __future__ import annotations
@@ -34,6 +34,10 @@ def test_the_recorded_set_covers_the_issue() -> None:
     assert {"backward", "pure_rotation", "near_zero_translation", "turn_near_pi"} <= {m["group"] for m in motion}
     groups = {m["group"] for m in likelihood}
     assert {"house_tb3_params", "tb3_world_tb3_params", "house_varied_params", "house_cell_edges"} <= groups
+    resample = [m for m in metas if m["component"] == "amcl_resample"]
+    assert len(resample) >= 40 and {"tight", "spread", "multimodal", "one_heavy", "boundary"} <= {
+        m["group"] for m in resample
+    }
     assert {m["nav2_commit"] for m in metas} == {"3c3db59d6969d8ecee8e68468693d006397f4a0c"}
     assert {m["oracle"] for m in metas} == {"compiled"}
 
@@ -66,6 +70,9 @@ def test_a_moved_particle_or_weight_is_named(tmp_path: Path, native: bool) -> No
     middle = arrays["weights_after"].ravel()[len(arrays["weights_after"]) // 2]
     result = check_case(_changed(tmp_path, weighed, "weights_after", float(np.spacing(middle))), native=native)
     assert not result.equal and "weights: 1 of" in result.differences[0]
+    drawn = next(f for f in FILES if f.name.startswith("resample_"))
+    result = check_case(_changed(tmp_path, drawn, "poses_after", 1e-9), native=native)
+    assert not result.equal and "samples" in result.differences[0]
 
 
 @pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
