@@ -10,10 +10,10 @@ Three components, each a checker `(meta, arrays, native) -> differences` (empty:
   a last bit differently from libm's (it differs by up to 2e-14 on the recorded cases).
 - `amcl_likelihood_field`: the map's distances (`nav2_distances`, bitwise against the SHA-256 of
   Nav2's `occ_dist`) and each particle's weight after `LikelihoodFieldModel::sensorFunction`,
-  before normalisation, bitwise on both paths: pz per cell is Nav2's formula with libm's exp, the
-  cubes are `pz * pz * pz` added to 1 beam by beam, and the cell of an endpoint within 1e-6 of a
-  cell edge is computed with Nav2's own arithmetic (elsewhere the cheaper lookup lands in the same
-  cell).
+  before normalisation, and their total (what the weights are divided by), bitwise on both paths:
+  pz per cell is Nav2's formula with libm's exp, the cubes are `pz * pz * pz` added to 1 beam by
+  beam, the total is summed in particle order, and the cell of an endpoint within 1e-6 of a cell
+  edge is computed with Nav2's own arithmetic (elsewhere the cheaper lookup lands in the same cell).
 - `amcl_resample`: `kld_resample` (pf_update_resample without recovery: w_diff is 0 in every case, as
   with TurtleBot3's recovery alphas of 0) on the case's particles and weights, given the uniforms
   Nav2's `drand48` returned. Nav2 draws two per sample, the first deciding on a random pose, the
@@ -38,6 +38,7 @@ from twin.nav.amcl.filter import (
     kld_resample,
     laser_likelihood,
     odometry_update,
+    weight_total,
 )
 from twin.nav.map_server.map_io import OccupancyMap
 
@@ -161,6 +162,8 @@ def check_amcl_likelihood_field(meta: Mapping[str, Any], arrays: Arrays, native:
         out.append(
             f"weights: {int(bad.sum())} of {len(want)} particles differ, first {i}: twin {got[i]!r}, Nav2 {want[i]!r}"
         )
+    elif meta["updated"] and (total := weight_total(got)) != meta["total_weight"]:
+        out.append(f"total weight (pf_update_sensor divides by it): twin {total!r}, Nav2 {meta['total_weight']!r}")
     return out
 
 

@@ -63,6 +63,7 @@ __all__ = [
     "laser_likelihood",
     "nav2_distances",
     "odometry_update",
+    "weight_total",
 ]
 
 F64 = NDArray[np.float64]
@@ -441,6 +442,11 @@ def _nav2_cells(
     return col.astype(np.intp), row.astype(np.intp)
 
 
+def weight_total(weights: F64) -> float:
+    """The particles' total weight as the likelihood-field model sums it: in particle order (not pairwise)."""
+    return float(np.cumsum(weights)[-1]) if len(weights) else 0.0
+
+
 def kld_limits(min_particles: int, max_particles: int, pf_err: float, pf_z: float) -> F64:
     """KLD-sampling's particle bound for k = 0 .. max_particles occupied bins, as pf_resample_limit computes it.
 
@@ -658,7 +664,7 @@ class Amcl:
         beams = beam_endpoints(r, bearings, (laser.mount_x_m, laser.mount_y_m), self._range_max, self.params.max_beams)
         likelihood = laser_likelihood(self.poses, beams, self.field, self._pz, native=self._lib is not None)
         weights = self.weights * likelihood
-        total = float(np.cumsum(weights)[-1]) if len(weights) else 0.0  # summed in particle order, as Nav2
+        total = weight_total(weights)
         p = self.params
         if total > 0.0 and math.isfinite(total):
             self.weights = weights / total
