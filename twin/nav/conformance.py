@@ -16,6 +16,7 @@ Components:
 - `amcl_likelihood_field`: AMCL's likelihood-field distances and each particle's weight before
   normalisation, bit for bit.
 - `amcl_resample`: AMCL's KLD resampling given Nav2's uniform draws: how many samples, and each one.
+- `amcl_estimate`: the pose AMCL publishes (the heaviest cluster's mean) and the covariance it carries.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from numpy.typing import NDArray
 
 from twin.core.errors import ConfigError
 from twin.nav.amcl.conformance_check import (
+    check_amcl_estimate,
     check_amcl_likelihood_field,
     check_amcl_motion_model,
     check_amcl_resample,
@@ -186,6 +188,7 @@ COMPONENTS: dict[str, Checker] = {
     "amcl_motion_model": check_amcl_motion_model,
     "amcl_likelihood_field": check_amcl_likelihood_field,
     "amcl_resample": check_amcl_resample,
+    "amcl_estimate": check_amcl_estimate,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 

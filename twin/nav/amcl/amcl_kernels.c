@@ -252,10 +252,12 @@ long twin_pf_resample(const double *poses, long n, const double *cumulative, con
     return kept;
 }
 
-/* AMCL's estimate from clustered particles (label from twin_pf_clusters, 1..count): the heaviest
-   cluster's weighted mean (x, y, and yaw as atan2 of the weighted sines and cosines; the first
-   cluster of the largest weight), then the whole set's weighted x, y covariance and circular
-   yaw variance -2 ln R. Sums run in particle order. out: x, y, yaw, var x, var y, cov xy, var yaw.
+/* AMCL's estimate from clustered particles (label from twin_pf_clusters, 1..count), as pf_cluster_stats
+   and amcl_node give it: the heaviest cluster's weighted mean (x, y, and yaw as atan2 of the weighted
+   sines and cosines; the first cluster of the largest weight), then the whole set's weighted x, y
+   covariance (sum w x x / sum w - mean x mean x, ...) and yaw variance -2 ln sqrt(C^2 + S^2), C and S
+   the weighted sums of cosines and sines (not divided by the total weight, as Nav2). Sums run in
+   particle order. out: x, y, yaw, var x, var y, cov xy (sum (w x) y), var yaw, cov yx (sum (w y) x).
    Returns -1 when memory runs out. */
 int twin_pf_estimate(const double *poses, const double *w, long n, const long *label, long count, double *out) {
     double *cw = calloc((size_t)(count + 1), sizeof(double));
@@ -264,13 +266,13 @@ int twin_pf_estimate(const double *poses, const double *w, long n, const long *l
     long best = 0;
     for (long c = 1; c <= count; ++c) if (cw[c] > cw[best]) best = c;
     double tw = 0.0, tx = 0.0, ty = 0.0, tc = 0.0, ts = 0.0;
-    double sw = 0.0, sx = 0.0, sy = 0.0, sxx = 0.0, syy = 0.0, sxy = 0.0, sc = 0.0, ss = 0.0;
+    double sw = 0.0, sx = 0.0, sy = 0.0, sxx = 0.0, syy = 0.0, sxy = 0.0, syx = 0.0, sc = 0.0, ss = 0.0;
     for (long i = 0; i < n; ++i) {
         double x = poses[3 * i], y = poses[3 * i + 1], c = cos(poses[3 * i + 2]), s = sin(poses[3 * i + 2]);
         double wi = w[i];
         if (label[i] == best) { tw += wi; tx += wi * x; ty += wi * y; tc += wi * c; ts += wi * s; }
         sw += wi; sx += wi * x; sy += wi * y; sxx += wi * x * x; syy += wi * y * y; sxy += wi * x * y;
-        sc += wi * c; ss += wi * s;
+        syx += wi * y * x; sc += wi * c; ss += wi * s;
     }
     free(cw);
     out[0] = tx / tw;
@@ -280,8 +282,8 @@ int twin_pf_estimate(const double *poses, const double *w, long n, const long *l
     out[3] = sxx / sw - mx * mx;
     out[4] = syy / sw - my * my;
     out[5] = sxy / sw - mx * my;
-    double r = hypot(sc / sw, ss / sw);
-    out[6] = -2.0 * log(r > 1e-300 ? r : 1e-300);
+    out[6] = -2 * log(sqrt(sc * sc + ss * ss));
+    out[7] = syx / sw - my * mx;
     return 0;
 }
 

@@ -1,6 +1,6 @@
 """AMCL's parts replayed on cases recorded from Nav2 Humble's nav2_amcl (`twin nav conformance`).
 
-Three components, each a checker `(meta, arrays, native) -> differences` (empty: equal), registered in
+Four components, each a checker `(meta, arrays, native) -> differences` (empty: equal), registered in
 `twin.nav.conformance.COMPONENTS`:
 
 - `amcl_motion_model`: `odometry_update` on the case's particles, odometry pose and change, alphas
@@ -19,6 +19,9 @@ Three components, each a checker `(meta, arrays, native) -> differences` (empty:
   Nav2's `drand48` returned. Nav2 draws two per sample, the first deciding on a random pose, the
   second the pick; the twin is given the second ones (and more after them, so a twin that drew past
   Nav2's stop would show). Equal means the same number of samples and each sample's pose bitwise.
+- `amcl_estimate`: `cluster_estimate` on a particle set: the published cluster's mean (x, y, yaw)
+  and the set's covariance (xx, xy, yx, yy, yaw) as `amcl_pose` carries them. The C kernel bitwise;
+  the numpy path within 1e-12 (numpy's sin and cos).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from twin.nav.amcl._native import load_kernel
 from twin.nav.amcl.filter import (
     LikelihoodField,
     beam_endpoints,
+    cluster_estimate,
     kld_limits,
     kld_resample,
     laser_likelihood,
@@ -42,7 +46,13 @@ from twin.nav.amcl.filter import (
 )
 from twin.nav.map_server.map_io import OccupancyMap
 
-__all__ = ["RecordedDraws", "check_amcl_likelihood_field", "check_amcl_motion_model", "check_amcl_resample"]
+__all__ = [
+    "RecordedDraws",
+    "check_amcl_estimate",
+    "check_amcl_likelihood_field",
+    "check_amcl_motion_model",
+    "check_amcl_resample",
+]
 
 Arrays = Mapping[str, NDArray[Any]]
 
@@ -186,3 +196,20 @@ def check_amcl_resample(meta: Mapping[str, Any], arrays: Arrays, native: bool) -
     if bad.any():
         return [_first_particle(got, want, bad, "samples")]
     return []
+
+
+def check_amcl_estimate(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    """The ways the twin's published pose and covariance differ from Nav2's on one case (`amcl_cases/README.md`)."""
+    if missing := _native_missing(native):
+        return missing
+    mean, cov = cluster_estimate(arrays["poses"], arrays["weights"], native=native)
+    tolerance = 0.0 if native else MOTION_TOLERANCE_PYTHON
+    out: list[str] = []
+    for name, got, want in zip(("x", "y", "yaw"), mean, meta["mean"], strict=True):
+        if not abs(got - want) <= tolerance:
+            out.append(f"published {name}: twin {got!r}, Nav2 {want!r} (cluster {meta['published_cluster']})")
+    want_cov = meta["covariance"]
+    for name, got in (("xx", cov[0, 0]), ("xy", cov[0, 1]), ("yx", cov[1, 0]), ("yy", cov[1, 1]), ("yaw", cov[2, 2])):
+        if not abs(float(got) - want_cov[name]) <= tolerance * max(1.0, abs(want_cov[name])):
+            out.append(f"covariance {name}: twin {float(got)!r}, Nav2 {want_cov[name]!r}")
+    return out

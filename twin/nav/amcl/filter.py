@@ -58,6 +58,7 @@ __all__ = [
     "LaserGeometry",
     "LikelihoodField",
     "beam_endpoints",
+    "cluster_estimate",
     "kld_limits",
     "kld_resample",
     "laser_likelihood",
@@ -522,6 +523,82 @@ def kld_resample(poses: F64, weights: F64, picks: F64, limits: F64, *, native: b
     return new[: _kld_count(keys, limits, None)]
 
 
+def _clusters(bins: NDArray[np.int64], lib: Any) -> tuple[NDArray[np.int64], int]:
+    """Each particle's cluster (bins that touch, 26-neighbourhood), numbered from 1 in raster order of the bins."""
+    if lib is not None:
+        bins = np.ascontiguousarray(bins, dtype=np.int64)
+        labels = np.empty(len(bins), dtype=np.int64)
+        count = int(lib.twin_pf_clusters(bins.ctypes.data, len(bins), labels.ctypes.data))
+        if count < 0:
+            raise MemoryError("amcl clustering: out of memory")
+        return labels, count
+    from scipy import ndimage  # the numpy path only: scipy is slow to import
+
+    lo = bins.min(axis=0)
+    shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
+    grid = np.zeros(shape, dtype=bool)
+    local = bins - lo
+    grid[local[:, 0], local[:, 1], local[:, 2]] = True
+    labels, count = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
+    return np.asarray(labels[local[:, 0], local[:, 1], local[:, 2]], dtype=np.int64), int(count)
+
+
+def _running(values: F64) -> float:
+    """A sum taken in order (Nav2 adds sample by sample; numpy's sum pairs them up)."""
+    return float(np.cumsum(values)[-1]) if len(values) else 0.0
+
+
+def cluster_estimate(poses: F64, weights: F64, *, native: bool = True) -> tuple[tuple[float, float, float], F64]:
+    """The pose AMCL publishes and the covariance `amcl_pose` carries, as pf_cluster_stats and amcl_node give them.
+
+    Particles are clustered by touching (0.5 m, 0.5 m, 10 degree) bins; the pose is the weighted mean
+    of the heaviest cluster (yaw the atan2 of its weighted sines and cosines); the covariance is the
+    whole set's: x, y from the weighted second moments, yaw `-2 ln sqrt(C^2 + S^2)` of the weighted
+    sums of cosines and sines. Sums run in particle order, as Nav2's.
+
+    Args:
+        poses: (n, 3) particles.
+        weights: Their (normalised) weights.
+        native: Use the C kernel when it can be built.
+
+    Returns:
+        ((x, y, yaw) of the published cluster, the 3x3 covariance: [0, 1] = sum (w x) y based,
+        [1, 0] = sum (w y) x based, as Nav2 keeps both).
+    """
+    lib = load_kernel() if native else None
+    poses = np.ascontiguousarray(poses, dtype=np.float64)
+    w = np.ascontiguousarray(weights, dtype=np.float64)
+    keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
+    cluster, count = _clusters(keys, lib)
+    cov = np.zeros((3, 3))
+    if lib is not None:
+        out = np.empty(8)
+        if lib.twin_pf_estimate(poses.ctypes.data, w.ctypes.data, len(w), cluster.ctypes.data, count, out.ctypes.data):
+            raise MemoryError("amcl estimate: out of memory")
+        cov[0, 0], cov[1, 1], cov[0, 1], cov[2, 2], cov[1, 0] = out[3], out[4], out[5], out[6], out[7]
+        return (float(out[0]), float(out[1]), float(out[2])), cov
+    x, y = poses[:, 0], poses[:, 1]
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    cw = np.array([_running(w[cluster == label]) for label in range(count + 1)])
+    mask = cluster == int(np.argmax(cw))
+    wc = w[mask]
+    total = _running(wc)
+    mean = (
+        _running(wc * x[mask]) / total,
+        _running(wc * y[mask]) / total,
+        math.atan2(_running(wc * s[mask]), _running(wc * c[mask])),
+    )
+    wt = _running(w)
+    sx, sy = _running(w * x) / wt, _running(w * y) / wt
+    cov[0, 0] = _running(w * x * x) / wt - sx * sx
+    cov[1, 1] = _running(w * y * y) / wt - sy * sy
+    cov[0, 1] = _running(w * x * y) / wt - sx * sy
+    cov[1, 0] = _running(w * y * x) / wt - sy * sx
+    sc, ss = _running(w * c), _running(w * s)
+    cov[2, 2] = -2 * math.log(math.sqrt(sc * sc + ss * ss))
+    return mean, cov
+
+
 class Amcl:
     """Nav2's AMCL filter: set an initial pose, then feed every scan with the odometry pose at its time.
 
@@ -719,52 +796,12 @@ class Amcl:
         return _kld_count(bins, self._kld_limits, self._lib)
 
     def _clusters(self, bins: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]:
-        """Each particle's cluster (bins that touch, 26-neighbourhood), numbered from 1 in raster order of the bins."""
-        if self._lib is not None:
-            labels = np.empty(len(bins), dtype=np.int64)
-            count = int(self._lib.twin_pf_clusters(bins.ctypes.data, len(bins), labels.ctypes.data))
-            if count < 0:
-                raise MemoryError("amcl clustering: out of memory")
-            return labels, count
-        from scipy import ndimage  # the numpy path only: scipy is slow to import
-
-        lo = bins.min(axis=0)
-        shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
-        grid = np.zeros(shape, dtype=bool)
-        local = bins - lo
-        grid[local[:, 0], local[:, 1], local[:, 2]] = True
-        labels, count = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
-        return np.asarray(labels[local[:, 0], local[:, 1], local[:, 2]], dtype=np.int64), int(count)
+        """Each particle's cluster (bins that touch), numbered from 1 in raster order of the bins."""
+        return _clusters(bins, self._lib)
 
     def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
-        poses, w = self.poses, self.weights
-        cluster, count = self._clusters(self._bins(poses))
-        cov = np.zeros((3, 3))
-        if self._lib is not None:
-            out = np.empty(7)
-            if self._lib.twin_pf_estimate(
-                poses.ctypes.data, w.ctypes.data, len(w), cluster.ctypes.data, count, out.ctypes.data
-            ):
-                raise MemoryError("amcl estimate: out of memory")
-            mx, my, myaw = float(out[0]), float(out[1]), float(out[2])
-            cov[0, 0], cov[1, 1], cov[0, 1], cov[2, 2] = out[3], out[4], out[5], out[6]
-            cov[1, 0] = cov[0, 1]
-        else:
-            cw = np.bincount(cluster, weights=w, minlength=count + 1)
-            mask = cluster == int(np.argmax(cw))
-            wc = w[mask]
-            total = float(wc.sum())
-            mx = float((wc * poses[mask, 0]).sum() / total)
-            my = float((wc * poses[mask, 1]).sum() / total)
-            myaw = math.atan2(float((wc * np.sin(poses[mask, 2])).sum()), float((wc * np.cos(poses[mask, 2])).sum()))
-            # The whole set's covariance, as amcl_pose carries it.
-            wt = float(w.sum())
-            sx, sy = float((w * poses[:, 0]).sum() / wt), float((w * poses[:, 1]).sum() / wt)
-            cov[0, 0] = float((w * poses[:, 0] ** 2).sum() / wt) - sx * sx
-            cov[1, 1] = float((w * poses[:, 1] ** 2).sum() / wt) - sy * sy
-            cov[0, 1] = cov[1, 0] = float((w * poses[:, 0] * poses[:, 1]).sum() / wt) - sx * sy
-            mc, ms = float((w * np.cos(poses[:, 2])).sum() / wt), float((w * np.sin(poses[:, 2])).sum() / wt)
-            cov[2, 2] = -2.0 * math.log(max(math.hypot(mc, ms), 1e-300))
+        poses = self.poses
+        (mx, my, myaw), cov = cluster_estimate(poses, self.weights, native=self._lib is not None)
         ox, oy, oyaw = odom_pose
         # map->odom = map->base * (odom->base)^-1
         tyaw = myaw - oyaw

@@ -3,7 +3,8 @@
 The motion model is given the standard normal draws Nav2's `pf_ran_gaussian` consumed; equal means
 bitwise for the C kernel, within 1e-12 m / rad for the numpy path (numpy's own sin, cos and atan2).
 The likelihood field's distances and each particle's weight before normalisation, and KLD resampling's
-samples given Nav2's uniform draws, are bitwise equal on both paths (`twin.nav.amcl.conformance_check`).
+samples given Nav2's uniform draws, are bitwise equal on both paths; the published pose and covariance
+bitwise for the C kernel, within 1e-12 for numpy (`twin.nav.amcl.conformance_check`).
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ def test_the_recorded_set_covers_the_issue() -> None:
     assert len(resample) >= 40 and {"tight", "spread", "multimodal", "one_heavy", "boundary"} <= {
         m["group"] for m in resample
     }
+    estimate = [m for m in metas if m["component"] == "amcl_estimate"]
+    assert len(estimate) >= 30 and {"two_modes", "four_modes", "seam", "unfolded"} <= {m["group"] for m in estimate}
     assert {m["nav2_commit"] for m in metas} == {"3c3db59d6969d8ecee8e68468693d006397f4a0c"}
     assert {m["oracle"] for m in metas} == {"compiled"}
 
@@ -73,6 +76,13 @@ def test_a_moved_particle_or_weight_is_named(tmp_path: Path, native: bool) -> No
     drawn = next(f for f in FILES if f.name.startswith("resample_"))
     result = check_case(_changed(tmp_path, drawn, "poses_after", 1e-9), native=native)
     assert not result.equal and "samples" in result.differences[0]
+    published = next(f for f in FILES if f.name.startswith("estimate_"))
+    meta, arrays = load_case(published)
+    meta["covariance"]["yx"] = float(np.nextafter(meta["covariance"]["yx"], np.inf))
+    moved = tmp_path / published.name
+    np.savez(moved, meta=json.dumps(meta), **arrays)
+    result = check_case(moved, native=True)
+    assert not result.equal and "covariance yx" in result.differences[0]
 
 
 @pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
