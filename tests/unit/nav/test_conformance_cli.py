@@ -67,6 +67,7 @@ def test_a_case_for_a_component_the_twin_does_not_check_is_refused(
 ) -> None:
     np.savez(tmp_path / "dwb.npz", meta=json.dumps({"component": "dwb_critics"}))
     assert main(["nav", "conformance", str(tmp_path / "dwb.npz")]) == 2
-    assert "a case for dwb_critics; the twin checks amcl_estimate, amcl_likelihood_field, amcl_motion_model, amcl_resample, navfn" in (
-        capsys.readouterr().err
+    assert (
+        "a case for dwb_critics; the twin checks amcl_estimate, amcl_likelihood_field, amcl_motion_model, amcl_resample, navfn"
+        in (capsys.readouterr().err)
     )
