@@ -13,6 +13,13 @@ Components:
 - `inflation`: the inflation layer (`twin.nav.costmap_2d`): one `updateCosts` over a window of a
   master grid, every cell equal.
 - `velocity_smoother` (`twin.nav.velocity_smoother`): on which timer ticks it publishes, and what, bit for bit.
+- `amcl_motion_model`: AMCL's differential motion model (`twin.nav.amcl.filter.odometry_update`)
+  given the normal draws Nav2 consumed: every particle pose, bit for bit (the numpy path within
+  1e-12; `twin.nav.amcl.conformance_check`).
+- `amcl_likelihood_field`: AMCL's likelihood-field distances and each particle's weight before
+  normalisation, bit for bit.
+- `amcl_resample`: AMCL's KLD resampling given Nav2's uniform draws: how many samples, and each one.
+- `amcl_estimate`: the pose AMCL publishes (the heaviest cluster's mean) and the covariance it carries.
 """
 
 from __future__ import annotations
@@ -29,6 +36,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.core.errors import ConfigError
+from twin.nav.amcl.conformance_check import (
+    check_amcl_estimate,
+    check_amcl_likelihood_field,
+    check_amcl_motion_model,
+    check_amcl_resample,
+)
 from twin.nav.costmap_2d.conformance_check import check_inflation
 from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
 
@@ -181,10 +194,16 @@ COMPONENTS: dict[str, Checker] = {
     "navfn": check_navfn,
     "inflation": check_inflation,
     "velocity_smoother": check_velocity_smoother,
+    "amcl_motion_model": check_amcl_motion_model,
+    "amcl_likelihood_field": check_amcl_likelihood_field,
+    "amcl_resample": check_amcl_resample,
+    "amcl_estimate": check_amcl_estimate,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 
-WITH_C_KERNEL = frozenset({"navfn", "inflation"})
+WITH_C_KERNEL = frozenset(
+    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate"}
+)
 """The components whose twin part has a C kernel beside its Python path (the others are Python only)."""
 
 

@@ -15,6 +15,7 @@ from twin.nav.conformance import load_case
 NAVFN = Path(__file__).resolve().parent / "planner" / "navfn_cases"
 INFLATION = Path(__file__).resolve().parent / "costmap_2d" / "inflation_cases"
 SMOOTHER = Path(__file__).resolve().parent / "velocity_smoother" / "smoother_cases"
+AMCL = Path(__file__).resolve().parent / "amcl" / "amcl_cases"
 
 
 def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) -> None:
@@ -27,6 +28,11 @@ def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) ->
     ):
         count = len(list(folder.glob("*.npz")))
         assert f"{component} ({how}): {count} of {count} cases equal Nav2's answer" in out.err
+    amcl = [load_case(p)[0]["component"] for p in AMCL.glob("*.npz")]
+    assert set(amcl) == {"amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate"}
+    for component in set(amcl):
+        count = amcl.count(component)
+        assert f"{component} (compiled kernel): {count} of {count} cases equal Nav2's answer" in out.err
     assert "DIFFERS" not in out.out
 
 
@@ -72,8 +78,9 @@ def test_a_file_that_is_not_a_case_is_one_line_and_exit_2(
 def test_a_case_for_a_component_the_twin_does_not_check_is_refused(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    np.savez(tmp_path / "amcl.npz", meta=json.dumps({"component": "amcl_motion_model"}))
-    assert main(["nav", "conformance", str(tmp_path / "amcl.npz")]) == 2
+    np.savez(tmp_path / "dwb.npz", meta=json.dumps({"component": "dwb_critics"}))
+    assert main(["nav", "conformance", str(tmp_path / "dwb.npz")]) == 2
     assert (
-        "a case for amcl_motion_model; the twin checks inflation, navfn, velocity_smoother" in capsys.readouterr().err
+        "a case for dwb_critics; the twin checks amcl_estimate, amcl_likelihood_field, amcl_motion_model, "
+        "amcl_resample, inflation, navfn, velocity_smoother" in capsys.readouterr().err
     )

@@ -30,7 +30,26 @@ def load_kernel() -> ctypes.CDLL | None:
         return None
     ptr, long_, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
     lib.twin_amcl_likelihood.restype = ctypes.c_int
-    lib.twin_amcl_likelihood.argtypes = [ptr, long_, dbl, dbl, dbl, ptr, ptr, long_, ptr, long_, long_, dbl, ptr]
+    lib.twin_amcl_likelihood.argtypes = [
+        ptr,
+        long_,
+        dbl,
+        dbl,
+        dbl,
+        ptr,
+        ptr,
+        ptr,
+        ptr,
+        long_,
+        dbl,
+        dbl,
+        dbl,
+        ptr,
+        long_,
+        long_,
+        dbl,
+        ptr,
+    ]
     lib.twin_amcl_motion.restype = None
     lib.twin_amcl_motion.argtypes = [ptr, long_, ptr, dbl, dbl, dbl, dbl, dbl, dbl]
     lib.twin_amcl_distances.restype = ctypes.c_int

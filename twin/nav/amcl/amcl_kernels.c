@@ -4,16 +4,40 @@
 #include <math.h>
 #include <stdlib.h>
 
-/* AMCL likelihood field: out[j] = 1 + sum_i pz3[row, col] over the beams' endpoints, in beam order.
-   Particle j at poses[j] = (x, y, yaw) has the grid position gx = (x - ox) * inv_res + 0.5 (likewise
-   gy) and heading cos, sin; beam i's endpoint in the base frame in cells is (ex, ey). The endpoint's
-   cell is (floor(gx + c ex - s ey), floor(gy + s ex + c ey)), AMCL's rounding lookup; off the map it
-   weighs `off_value`. Beam by beam over all particles: one beam's endpoints from a cluster of
-   particles fall in a few neighbouring cells, which keeps the lookups in cache. Returns -1 when
-   memory runs out. */
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+/* Nav2's map lookup for one beam of one particle, as LikelihoodFieldModel::sensorFunction does it: the
+   laser's pose in the map (pf_vector_coord_add of the laser's (lx, ly, 0) onto the particle), the
+   endpoint lp + range (cos, sin)(lp yaw + bearing), and MAP_GXWX / MAP_GYWY with the map's origin at
+   its centre cell (amcl_node's convertMap): floor((x - centre) / scale + 0.5) + size / 2. */
+static void nav2_cell(const double *pose, double lx, double ly, double range, double bearing, double ox, double oy,
+                      double scale, long rows, long cols, long *col, long *row) {
+    double px = pose[0] + lx * cos(pose[2]) - ly * sin(pose[2]);
+    double py = pose[1] + lx * sin(pose[2]) + ly * cos(pose[2]);
+    double yaw = pose[2] + 0.0;
+    yaw = atan2(sin(yaw), cos(yaw));
+    double hx = px + range * cos(yaw + bearing), hy = py + range * sin(yaw + bearing);
+    double cx = ox + (double)(cols / 2) * scale, cy = oy + (double)(rows / 2) * scale;
+    *col = (long)(floor((hx - cx) / scale + 0.5) + (double)(cols / 2));
+    *row = (long)(floor((hy - cy) / scale + 0.5) + (double)(rows / 2));
+}
+
+/* AMCL likelihood field: out[j] = 1 + pz^3 + pz^3 + ... over the beams' endpoints, in beam order and
+   each cube taken as pz * pz * pz, as Nav2 adds them. Particle j at poses[j] = (x, y, yaw) has the
+   grid position gx = (x - ox) * inv_res + 0.5 (likewise gy) and heading cos, sin; beam i's endpoint
+   in the base frame in cells is (ex, ey). The endpoint's cell is (floor(gx + c ex - s ey), floor(gy +
+   s ex + c ey)), AMCL's rounding lookup; this differs from Nav2's arithmetic (nav2_cell) only in the
+   last bits, so where it lands within 1e-6 of a cell edge the cell is taken Nav2's way from the beam's
+   range and bearing and the laser's (lx, ly). Off the map a beam weighs `off_pz`. Beam by beam over
+   all particles: one beam's endpoints from a cluster of particles fall in a few neighbouring cells,
+   which keeps the lookups in cache. Returns -1 when memory runs out. */
 int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, double inv_res,
-                         const double *ex, const double *ey, long nb,
-                         const double *pz3, long rows, long cols, double off_value, double *out) {
+                         const double *ex, const double *ey, const double *range, const double *bearing, long nb,
+                         double lx, double ly, double scale,
+                         const double *pz, long rows, long cols, double off_pz, double *out) {
+    const double edge = 1e-6;
     double *buf = malloc(4 * sizeof(double) * (size_t)(n > 0 ? n : 1));
     if (!buf) return -1;
     double *gx = buf, *gy = buf + n, *c = buf + 2 * n, *s = buf + 3 * n;
@@ -22,7 +46,7 @@ int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, doub
         gy[j] = (poses[3 * j + 1] - oy) * inv_res + 0.5;
         c[j] = cos(poses[3 * j + 2]);
         s[j] = sin(poses[3 * j + 2]);
-        out[j] = 0.0;
+        out[j] = 1.0;
     }
     for (long i = 0; i < nb; ++i) {
         double bx = ex[i], by = ey[i];
@@ -32,26 +56,39 @@ int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, doub
             long col = (long)fc, row = (long)fr;   /* floor without a libm call: truncate, step down below 0 */
             col -= (double)col > fc;
             row -= (double)row > fr;
-            out[j] += (col >= 0 && col < cols && row >= 0 && row < rows) ? pz3[row * cols + col] : off_value;
+            double dc = fc - (double)col, dr = fr - (double)row;
+            if (dc < edge || dc > 1.0 - edge || dr < edge || dr > 1.0 - edge)
+                nav2_cell(poses + 3 * j, lx, ly, range[i], bearing[i], ox, oy, scale, rows, cols, &col, &row);
+            double v = (col >= 0 && col < cols && row >= 0 && row < rows) ? pz[row * cols + col] : off_pz;
+            out[j] += v * v * v;
         }
     }
-    for (long j = 0; j < n; ++j) out[j] += 1.0;
     free(buf);
     return 0;
 }
 
+/* Nav2's angleutils::angle_diff(a, b) given a already folded (atan2(sin a, cos a), which does not
+   change per particle): b folded the same way, then a - b the shorter way round. */
+static double angle_diff_folded(double a, double b) {
+    b = atan2(sin(b), cos(b));
+    double d1 = a - b;
+    double d2 = 2 * M_PI - fabs(d1);
+    if (d1 > 0) d2 *= -1.0;
+    return fabs(d1) < fabs(d2) ? d1 : d2;
+}
+
 /* The differential motion model's sampling (DifferentialMotionModel::odometryUpdate) given the
-   standard normal draws (3 per particle): rot1 - n0 sd_rot1, trans - n1 sd_trans, rot2 - n2 sd_rot2
-   applied to each pose; headings are not folded. */
+   standard normal draws (3 per particle): the rotations angle_diff(rot, sd z) (folded into [-pi, pi]),
+   the translation trans - sd z, applied to each pose as Nav2 applies them; headings are not folded. */
 void twin_amcl_motion(double *poses, long n, const double *noise, double rot1, double trans, double rot2,
                       double sd_rot1, double sd_trans, double sd_rot2) {
+    double a1 = atan2(sin(rot1), cos(rot1)), a2 = atan2(sin(rot2), cos(rot2));
     for (long j = 0; j < n; ++j) {
-        double r1 = rot1 - noise[3 * j] * sd_rot1;
-        double t = trans - noise[3 * j + 1] * sd_trans;
-        double r2 = rot2 - noise[3 * j + 2] * sd_rot2;
-        double heading = poses[3 * j + 2] + r1;
-        poses[3 * j] += t * cos(heading);
-        poses[3 * j + 1] += t * sin(heading);
+        double r1 = angle_diff_folded(a1, sd_rot1 * noise[3 * j]);
+        double t = trans - sd_trans * noise[3 * j + 1];
+        double r2 = angle_diff_folded(a2, sd_rot2 * noise[3 * j + 2]);
+        poses[3 * j] += t * cos(poses[3 * j + 2] + r1);
+        poses[3 * j + 1] += t * sin(poses[3 * j + 2] + r1);
         poses[3 * j + 2] += r1 + r2;
     }
 }
@@ -215,10 +252,12 @@ long twin_pf_resample(const double *poses, long n, const double *cumulative, con
     return kept;
 }
 
-/* AMCL's estimate from clustered particles (label from twin_pf_clusters, 1..count): the heaviest
-   cluster's weighted mean (x, y, and yaw as atan2 of the weighted sines and cosines; the first
-   cluster of the largest weight), then the whole set's weighted x, y covariance and circular
-   yaw variance -2 ln R. Sums run in particle order. out: x, y, yaw, var x, var y, cov xy, var yaw.
+/* AMCL's estimate from clustered particles (label from twin_pf_clusters, 1..count), as pf_cluster_stats
+   and amcl_node give it: the heaviest cluster's weighted mean (x, y, and yaw as atan2 of the weighted
+   sines and cosines; the first cluster of the largest weight), then the whole set's weighted x, y
+   covariance (sum w x x / sum w - mean x mean x, ...) and yaw variance -2 ln sqrt(C^2 + S^2), C and S
+   the weighted sums of cosines and sines (not divided by the total weight, as Nav2). Sums run in
+   particle order. out: x, y, yaw, var x, var y, cov xy (sum (w x) y), var yaw, cov yx (sum (w y) x).
    Returns -1 when memory runs out. */
 int twin_pf_estimate(const double *poses, const double *w, long n, const long *label, long count, double *out) {
     double *cw = calloc((size_t)(count + 1), sizeof(double));
@@ -227,13 +266,13 @@ int twin_pf_estimate(const double *poses, const double *w, long n, const long *l
     long best = 0;
     for (long c = 1; c <= count; ++c) if (cw[c] > cw[best]) best = c;
     double tw = 0.0, tx = 0.0, ty = 0.0, tc = 0.0, ts = 0.0;
-    double sw = 0.0, sx = 0.0, sy = 0.0, sxx = 0.0, syy = 0.0, sxy = 0.0, sc = 0.0, ss = 0.0;
+    double sw = 0.0, sx = 0.0, sy = 0.0, sxx = 0.0, syy = 0.0, sxy = 0.0, syx = 0.0, sc = 0.0, ss = 0.0;
     for (long i = 0; i < n; ++i) {
         double x = poses[3 * i], y = poses[3 * i + 1], c = cos(poses[3 * i + 2]), s = sin(poses[3 * i + 2]);
         double wi = w[i];
         if (label[i] == best) { tw += wi; tx += wi * x; ty += wi * y; tc += wi * c; ts += wi * s; }
         sw += wi; sx += wi * x; sy += wi * y; sxx += wi * x * x; syy += wi * y * y; sxy += wi * x * y;
-        sc += wi * c; ss += wi * s;
+        syx += wi * y * x; sc += wi * c; ss += wi * s;
     }
     free(cw);
     out[0] = tx / tw;
@@ -243,8 +282,8 @@ int twin_pf_estimate(const double *poses, const double *w, long n, const long *l
     out[3] = sxx / sw - mx * mx;
     out[4] = syy / sw - my * my;
     out[5] = sxy / sw - mx * my;
-    double r = hypot(sc / sw, ss / sw);
-    out[6] = -2.0 * log(r > 1e-300 ? r : 1e-300);
+    out[6] = -2 * log(sqrt(sc * sc + ss * ss));
+    out[7] = syx / sw - my * mx;
     return 0;
 }
 

@@ -29,13 +29,17 @@ LikelihoodFieldModel), vectorised over particles and beams:
 - **map -> odom** is the estimate composed with the inverse of the odometry pose of the scan that
   produced it; Nav2 re-sends it on every scan stamped scan time + transform_tolerance.
 
-Random numbers come from the `numpy.random.Generator` passed in (seeded by the caller).
+Random numbers come from the draw source passed in: a `numpy.random.Generator` seeded by the
+caller, or anything with its `standard_normal`, `random`, `integers` and `uniform` (a test replays
+recorded draws through one). The motion model takes one (n, 3) block of standard normal draws per
+update, in Nav2's order: per particle, rot1, trans, rot2.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,11 +50,46 @@ from twin.nav.frames import LaserGeometry
 from twin.nav.map_server.map_io import OccupancyMap
 from twin.nav.params import AmclParams
 
-__all__ = ["Amcl", "AmclEstimate", "LaserGeometry", "LikelihoodField", "nav2_distances"]
+__all__ = [
+    "Amcl",
+    "AmclEstimate",
+    "Beams",
+    "DrawSource",
+    "LaserGeometry",
+    "LikelihoodField",
+    "beam_endpoints",
+    "cluster_estimate",
+    "kld_limits",
+    "kld_resample",
+    "laser_likelihood",
+    "nav2_distances",
+    "odometry_update",
+    "weight_total",
+]
 
 F64 = NDArray[np.float64]
 
 _BIN_SIZE = np.array([0.5, 0.5, math.radians(10.0)])  # pf_kdtree's histogram: x m, y m, yaw rad
+
+
+class DrawSource(Protocol):
+    """Where the filter's random numbers come from: `numpy.random.Generator`'s methods the filter calls."""
+
+    def standard_normal(self, size: Any) -> Any:
+        """Standard normal draws of the given shape."""
+        ...
+
+    def random(self, size: Any) -> Any:
+        """Uniform draws in [0, 1) of the given shape."""
+        ...
+
+    def integers(self, low: Any, high: Any, size: Any) -> Any:
+        """Integers in [low, high)."""
+        ...
+
+    def uniform(self, low: Any, high: Any, size: Any) -> Any:
+        """Uniform draws in [low, high)."""
+        ...
 
 
 def _angle_diff(a: float, b: float) -> float:
@@ -61,6 +100,70 @@ def _angle_diff(a: float, b: float) -> float:
     if d1 > 0.0:
         d2 *= -1.0
     return d1 if abs(d1) < abs(d2) else d2
+
+
+def _angle_diffs(a: float, b: F64) -> F64:
+    """`_angle_diff(a, b)` for each b."""
+    d1 = math.atan2(math.sin(a), math.cos(a)) - np.arctan2(np.sin(b), np.cos(b))
+    d2 = 2.0 * math.pi - np.abs(d1)
+    d2 = np.where(d1 > 0.0, -d2, d2)
+    return np.where(np.abs(d1) < np.abs(d2), d1, d2)
+
+
+def odometry_update(
+    poses: F64,
+    pose: tuple[float, float, float],
+    delta: tuple[float, float, float],
+    alphas: tuple[float, float, float, float],
+    draws: DrawSource,
+    *,
+    native: bool = True,
+) -> F64:
+    """Move every particle by the odometry change as Nav2's DifferentialMotionModel::odometryUpdate does.
+
+    The change is split into rotate, translate, rotate (no first rotation below 1 cm of travel); each
+    particle's rotations are `angle_diff(rot, sd * z)` (folded into [-pi, pi], so a sampled rotation
+    near +-pi can come out a turn lower or higher) and its translation `trans - sd * z`, z the standard
+    normal draws (one (n, 3) block from `draws`: per particle rot1, trans, rot2). Products and sums
+    are taken in Nav2's order.
+
+    Args:
+        poses: (n, 3) particles (x m, y m, yaw rad), updated in place.
+        pose: The odometry pose now (odom frame).
+        delta: Its change since the last update: (dx, dy, angle_diff(yaw, old yaw)).
+        alphas: alpha1..alpha4.
+        draws: The random numbers.
+        native: Use the C kernel when it can be built.
+
+    Returns:
+        `poses`, moved (a new contiguous array when `poses` was not one).
+    """
+    a1, a2, a3, a4 = alphas
+    dx, dy, dyaw = delta
+    old_yaw = pose[2] - dyaw  # pf_vector_sub(pose, delta)
+    trans = math.sqrt(dx * dx + dy * dy)
+    rot1 = 0.0 if math.sqrt(dy * dy + dx * dx) < 0.01 else _angle_diff(math.atan2(dy, dx), old_yaw)
+    rot2 = _angle_diff(dyaw, rot1)
+    n1 = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, math.pi)))
+    n2 = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, math.pi)))
+    sd_rot1 = math.sqrt(a1 * n1 * n1 + a2 * trans * trans)
+    sd_trans = math.sqrt(a3 * trans * trans + a4 * n1 * n1 + a4 * n2 * n2)
+    sd_rot2 = math.sqrt(a1 * n2 * n2 + a2 * trans * trans)
+    n = len(poses)
+    noise = np.ascontiguousarray(draws.standard_normal((n, 3)), dtype=np.float64)
+    lib = load_kernel() if native else None
+    if lib is not None:
+        out = np.ascontiguousarray(poses, dtype=np.float64)
+        lib.twin_amcl_motion(out.ctypes.data, n, noise.ctypes.data, rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2)
+        return out
+    rot1_hat = _angle_diffs(rot1, sd_rot1 * noise[:, 0])
+    trans_hat = trans - sd_trans * noise[:, 1]
+    rot2_hat = _angle_diffs(rot2, sd_rot2 * noise[:, 2])
+    heading = poses[:, 2] + rot1_hat
+    poses[:, 0] += trans_hat * np.cos(heading)
+    poses[:, 1] += trans_hat * np.sin(heading)
+    poses[:, 2] += rot1_hat + rot2_hat
+    return poses
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -203,17 +306,297 @@ class LikelihoodField:
         self.origin_x_m = occupancy.origin_x_m
         self.origin_y_m = occupancy.origin_y_m
         self.free_cells = np.argwhere(occupancy.data == 0)  # (row, col) for uniform pose draws
-        self._cubes: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
+        self._pz: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
 
-    def cubes(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
-        """Return (pz^3 per map cell, pz^3 of an endpoint off the map), pz as the likelihood-field model's."""
+    def pz(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
+        """Return (pz per map cell, pz of an endpoint off the map) as the likelihood-field model computes them.
+
+        `pz = z_hit exp(-(z z) / (2 sigma sigma)) + z_rand (1 / range_max)`, z the cell's distance,
+        with libm's exp (`math.exp`) over the few distinct distances, so each value is Nav2's to the bit.
+        """
         key = (z_hit, z_rand, sigma_hit_m, range_max_m)
-        if key not in self._cubes:
-            denominator = 2.0 * sigma_hit_m**2
-            pz = z_hit * np.exp(-(self.distance_m**2) / denominator) + z_rand / range_max_m
-            off = z_hit * math.exp(-(self.max_dist_m**2) / denominator) + z_rand / range_max_m
-            self._cubes[key] = (np.ascontiguousarray(pz**3), off**3)
-        return self._cubes[key]
+        if key not in self._pz:
+            denominator = 2 * sigma_hit_m * sigma_hit_m
+            rand = z_rand * (1.0 / range_max_m)
+            values, index = np.unique(self.distance_m, return_inverse=True)
+            table = np.array([z_hit * math.exp(-(z * z) / denominator) + rand for z in values.tolist()])
+            off = z_hit * math.exp(-(self.max_dist_m * self.max_dist_m) / denominator) + rand
+            self._pz[key] = (np.ascontiguousarray(table[index.reshape(self.distance_m.shape)]), off)
+        return self._pz[key]
+
+
+class Beams(NamedTuple):
+    """The beams the likelihood-field model uses: endpoints in the base frame, and each beam's reading."""
+
+    x_m: F64
+    y_m: F64
+    range_m: F64
+    bearing_rad: F64
+    laser_xy_m: tuple[float, float]
+
+
+def beam_endpoints(
+    ranges_m: F64, bearings_rad: F64, laser_xy_m: tuple[float, float], range_max_m: float, max_beams: int
+) -> Beams:
+    """The beams the likelihood-field model uses, with their endpoints in the base frame (x, y; m).
+
+    Every `(n - 1) // (max_beams - 1)`-th beam (at least every one) from the first; readings at or
+    beyond `range_max_m`, and NaN, are skipped (LikelihoodFieldModel::sensorFunction).
+
+    Args:
+        ranges_m: The scan's ranges as amcl_node hands them over (those at or below range_min
+            already set to range_max).
+        bearings_rad: Each beam's angle in the base frame.
+        laser_xy_m: The laser's position in the base frame (Nav2 keeps its yaw in the bearings).
+        range_max_m: The laser's range_max (capped by `laser_max_range`).
+        max_beams: `max_beams` (at least 2; Nav2 does not weigh with fewer).
+    """
+    count = len(ranges_m)
+    step = max(1, (count - 1) // (max_beams - 1)) if max_beams > 1 else max(1, count)
+    index = np.arange(0, count, step)
+    r = ranges_m[index]
+    keep = (r < range_max_m) & ~np.isnan(r)
+    r, angle = r[keep], bearings_rad[index][keep]
+    x: F64 = laser_xy_m[0] + r * np.cos(angle)
+    y: F64 = laser_xy_m[1] + r * np.sin(angle)
+    return Beams(x, y, np.ascontiguousarray(r), np.ascontiguousarray(angle), laser_xy_m)
+
+
+def laser_likelihood(
+    poses: F64, beams: Beams, field: LikelihoodField, pz: tuple[F64, float], *, native: bool = True
+) -> F64:
+    """Each particle's likelihood-field factor `1 + pz^3 + ...` over the beams (its weight is multiplied by it).
+
+    As LikelihoodFieldModel::sensorFunction: each cube is `pz * pz * pz`, added to 1 beam by beam.
+    The endpoint's cell is found from the particle's grid position and the endpoint in the base frame
+    (cheaper than Nav2's per-beam sin and cos); where that lands within 1e-6 of a cell edge, where the
+    two ways of computing it could round to different cells, the cell is taken Nav2's way (`_nav2_cells`).
+
+    Args:
+        poses: (n, 3) particles (x m, y m, yaw rad) in the map frame.
+        beams: The beams used, from `beam_endpoints`.
+        field: The map's likelihood field.
+        pz: pz per map cell and pz of an endpoint off the map (`field.pz`).
+        native: Use the C kernel when it can be built.
+    """
+    table, off_map = pz
+    n = len(poses)
+    if not len(beams.x_m):
+        return np.ones(n)
+    inv_res = 1.0 / field.resolution_m
+    ex = np.ascontiguousarray(beams.x_m * inv_res)  # each beam's endpoint in the base frame, in cells
+    ey = np.ascontiguousarray(beams.y_m * inv_res)
+    rows, cols = table.shape
+    lx, ly = beams.laser_xy_m
+    lib = load_kernel() if native else None
+    if lib is not None:
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        out = np.empty(n)
+        status = lib.twin_amcl_likelihood(
+            poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
+            ex.ctypes.data, ey.ctypes.data, beams.range_m.ctypes.data, beams.bearing_rad.ctypes.data, len(ex),
+            lx, ly, field.resolution_m, table.ctypes.data, rows, cols, off_map, out.ctypes.data,
+        )  # fmt: skip
+        if status != 0:
+            raise MemoryError("amcl likelihood: out of memory")
+        return out
+    # grid coordinates of each particle (AMCL rounds: +0.5 then floor), its heading
+    gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
+    gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    fc = gx[:, None] + c[:, None] * ex - s[:, None] * ey
+    fr = gy[:, None] + s[:, None] * ex + c[:, None] * ey
+    col, row = np.floor(fc), np.floor(fr)
+    edge = (fc - col < 1e-6) | (fc - col > 1.0 - 1e-6) | (fr - row < 1e-6) | (fr - row > 1.0 - 1e-6)
+    col_i, row_i = col.astype(np.intp), row.astype(np.intp)
+    if edge.any():
+        j, i = np.nonzero(edge)
+        col_i[j, i], row_i[j, i] = _nav2_cells(poses[j], beams, i, field, (rows, cols))
+    inside = (col_i >= 0) & (col_i < cols) & (row_i >= 0) & (row_i < rows)
+    values = np.where(inside, table[np.clip(row_i, 0, rows - 1), np.clip(col_i, 0, cols - 1)], off_map)
+    terms = np.empty((n, len(ex) + 1))
+    terms[:, 0] = 1.0
+    np.multiply(values * values, values, out=terms[:, 1:])
+    # cumsum adds left to right (np.sum would pair them up): 1 + pz^3 + ... beam by beam, as Nav2 adds them
+    likelihood: F64 = np.cumsum(terms, axis=1)[:, -1]
+    return likelihood
+
+
+def _nav2_cells(
+    poses: F64, beams: Beams, index: NDArray[np.intp], field: LikelihoodField, shape: tuple[int, int]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The map cells of beams `index` from particles `poses` computed as Nav2 does (see the C kernel's nav2_cell)."""
+    rows, cols = shape
+    lx, ly = beams.laser_xy_m
+    scale = field.resolution_m
+    yaw = poses[:, 2]
+    px = poses[:, 0] + lx * np.cos(yaw) - ly * np.sin(yaw)
+    py = poses[:, 1] + lx * np.sin(yaw) + ly * np.cos(yaw)
+    lyaw = np.arctan2(np.sin(yaw + 0.0), np.cos(yaw + 0.0))
+    r, b = beams.range_m[index], beams.bearing_rad[index]
+    hx = px + r * np.cos(lyaw + b)
+    hy = py + r * np.sin(lyaw + b)
+    cx = field.origin_x_m + (cols // 2) * scale
+    cy = field.origin_y_m + (rows // 2) * scale
+    col = np.floor((hx - cx) / scale + 0.5) + cols // 2
+    row = np.floor((hy - cy) / scale + 0.5) + rows // 2
+    return col.astype(np.intp), row.astype(np.intp)
+
+
+def weight_total(weights: F64) -> float:
+    """The particles' total weight as the likelihood-field model sums it: in particle order (not pairwise)."""
+    return float(np.cumsum(weights)[-1]) if len(weights) else 0.0
+
+
+def kld_limits(min_particles: int, max_particles: int, pf_err: float, pf_z: float) -> F64:
+    """KLD-sampling's particle bound for k = 0 .. max_particles occupied bins, as pf_resample_limit computes it.
+
+    `ceil((k - 1) / (2 pf_err) * x * x * x)` with `x = 1 - b + sqrt(b) pf_z`, `b = 2 / (9 (k - 1))`,
+    in Nav2's order of operations, within [min_particles, max_particles]; max_particles for k <= 1.
+    """
+    k = np.arange(max_particles + 1)
+    kk = np.maximum(k - 1, 1).astype(np.float64)
+    b = 2 / (9 * kk)
+    x = 1 - b + np.sqrt(2 / (9 * kk)) * pf_z
+    n = np.ceil(kk / (2 * pf_err) * x * x * x)
+    n = np.clip(n, min_particles, max_particles)
+    return np.ascontiguousarray(np.where(k <= 1, float(max_particles), n))
+
+
+def _kld_count(bins: NDArray[np.int64], limits: F64, lib: Any) -> int:
+    """How many of the drawn particles KLD-sampling keeps: the first n with n > limit(bins among them)."""
+    m = len(bins)
+    if lib is not None:
+        bins = np.ascontiguousarray(bins, dtype=np.int64)
+        n = int(lib.twin_kld_count(bins.ctypes.data, m, limits.ctypes.data))
+        if n < 0:
+            raise MemoryError("amcl resampling: out of memory")
+        return n
+    _, first = np.unique(_bin_keys(bins), return_index=True)
+    is_first = np.zeros(m, dtype=bool)
+    is_first[first] = True
+    leaves = np.cumsum(is_first)
+    stop = np.nonzero(np.arange(1, m + 1) > limits[leaves])[0]
+    return int(stop[0]) + 1 if len(stop) else m
+
+
+def kld_resample(poses: F64, weights: F64, picks: F64, limits: F64, *, native: bool = True) -> F64:
+    """Draw a new particle set as Nav2's pf_update_resample does without recovery draws.
+
+    Sample j is the particle i with `c[i] <= picks[j] < c[i + 1]`, c the running sum of the weights
+    from 0 in particle order (not renormalised; a draw at or past the last sum takes the last particle,
+    where Nav2 reads past its set); each sample is counted into its (0.5 m, 0.5 m, 10 degree) bin and
+    drawing stops at the first count above `limits[bins]`, or at `len(picks)`.
+
+    Nav2 draws two uniforms per sample, the first to decide on a random pose (never, without
+    recovery), the second the pick: `picks` are the second ones.
+
+    Args:
+        poses: (n, 3) particles.
+        weights: Their normalised weights.
+        picks: Uniform draws in [0, 1), one per sample at most (max_particles).
+        limits: `kld_limits(...)`.
+        native: Use the C kernel when it can be built.
+
+    Returns:
+        The drawn particles (count, 3).
+    """
+    cumulative = np.ascontiguousarray(np.cumsum(weights))
+    picks = np.ascontiguousarray(picks, dtype=np.float64)
+    m = len(picks)
+    lib = load_kernel() if native else None
+    if lib is not None:  # draw, histogram and stop in one pass
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        out = np.empty((m, 3))
+        n = int(
+            lib.twin_pf_resample(
+                poses.ctypes.data, len(poses), cumulative.ctypes.data, picks.ctypes.data, m,
+                _BIN_SIZE.ctypes.data, limits.ctypes.data, out.ctypes.data,
+            )
+        )  # fmt: skip
+        if n < 0:
+            raise MemoryError("amcl resampling: out of memory")
+        return out[:n]
+    pick = np.minimum(np.searchsorted(cumulative, picks, side="right"), len(cumulative) - 1)
+    new = poses[pick]
+    keys: NDArray[np.int64] = np.floor(new / _BIN_SIZE).astype(np.int64)
+    return new[: _kld_count(keys, limits, None)]
+
+
+def _clusters(bins: NDArray[np.int64], lib: Any) -> tuple[NDArray[np.int64], int]:
+    """Each particle's cluster (bins that touch, 26-neighbourhood), numbered from 1 in raster order of the bins."""
+    if lib is not None:
+        bins = np.ascontiguousarray(bins, dtype=np.int64)
+        labels = np.empty(len(bins), dtype=np.int64)
+        count = int(lib.twin_pf_clusters(bins.ctypes.data, len(bins), labels.ctypes.data))
+        if count < 0:
+            raise MemoryError("amcl clustering: out of memory")
+        return labels, count
+    from scipy import ndimage  # the numpy path only: scipy is slow to import
+
+    lo = bins.min(axis=0)
+    shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
+    grid = np.zeros(shape, dtype=bool)
+    local = bins - lo
+    grid[local[:, 0], local[:, 1], local[:, 2]] = True
+    labels, count = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
+    return np.asarray(labels[local[:, 0], local[:, 1], local[:, 2]], dtype=np.int64), int(count)
+
+
+def _running(values: F64) -> float:
+    """A sum taken in order (Nav2 adds sample by sample; numpy's sum pairs them up)."""
+    return float(np.cumsum(values)[-1]) if len(values) else 0.0
+
+
+def cluster_estimate(poses: F64, weights: F64, *, native: bool = True) -> tuple[tuple[float, float, float], F64]:
+    """The pose AMCL publishes and the covariance `amcl_pose` carries, as pf_cluster_stats and amcl_node give them.
+
+    Particles are clustered by touching (0.5 m, 0.5 m, 10 degree) bins; the pose is the weighted mean
+    of the heaviest cluster (yaw the atan2 of its weighted sines and cosines); the covariance is the
+    whole set's: x, y from the weighted second moments, yaw `-2 ln sqrt(C^2 + S^2)` of the weighted
+    sums of cosines and sines. Sums run in particle order, as Nav2's.
+
+    Args:
+        poses: (n, 3) particles.
+        weights: Their (normalised) weights.
+        native: Use the C kernel when it can be built.
+
+    Returns:
+        ((x, y, yaw) of the published cluster, the 3x3 covariance: [0, 1] = sum (w x) y based,
+        [1, 0] = sum (w y) x based, as Nav2 keeps both).
+    """
+    lib = load_kernel() if native else None
+    poses = np.ascontiguousarray(poses, dtype=np.float64)
+    w = np.ascontiguousarray(weights, dtype=np.float64)
+    keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
+    cluster, count = _clusters(keys, lib)
+    cov = np.zeros((3, 3))
+    if lib is not None:
+        out = np.empty(8)
+        if lib.twin_pf_estimate(poses.ctypes.data, w.ctypes.data, len(w), cluster.ctypes.data, count, out.ctypes.data):
+            raise MemoryError("amcl estimate: out of memory")
+        cov[0, 0], cov[1, 1], cov[0, 1], cov[2, 2], cov[1, 0] = out[3], out[4], out[5], out[6], out[7]
+        return (float(out[0]), float(out[1]), float(out[2])), cov
+    x, y = poses[:, 0], poses[:, 1]
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    cw = np.array([_running(w[cluster == label]) for label in range(count + 1)])
+    mask = cluster == int(np.argmax(cw))
+    wc = w[mask]
+    total = _running(wc)
+    mean = (
+        _running(wc * x[mask]) / total,
+        _running(wc * y[mask]) / total,
+        math.atan2(_running(wc * s[mask]), _running(wc * c[mask])),
+    )
+    wt = _running(w)
+    sx, sy = _running(w * x) / wt, _running(w * y) / wt
+    cov[0, 0] = _running(w * x * x) / wt - sx * sx
+    cov[1, 1] = _running(w * y * y) / wt - sy * sy
+    cov[0, 1] = _running(w * x * y) / wt - sx * sy
+    cov[1, 0] = _running(w * y * x) / wt - sy * sx
+    sc, ss = _running(w * c), _running(w * s)
+    cov[2, 2] = -2 * math.log(math.sqrt(sc * sc + ss * ss))
+    return mean, cov
 
 
 class Amcl:
@@ -223,7 +606,8 @@ class Amcl:
         params: The `amcl` node's parameters.
         occupancy: The map it localises against (`/map`).
         laser: The scan's geometry and the laser's mount in the base frame.
-        rng: The filter's random numbers (seed it from the scenario seed).
+        rng: The filter's random numbers: a `numpy.random.Generator` seeded from the scenario seed, or
+            any `DrawSource` (a test replays recorded draws through one).
         native: Use the C kernel for the laser model when it can be built (else numpy).
     """
 
@@ -232,7 +616,7 @@ class Amcl:
         params: AmclParams,
         occupancy: OccupancyMap,
         laser: LaserGeometry,
-        rng: np.random.Generator,
+        rng: DrawSource,
         *,
         native: bool = True,
     ) -> None:
@@ -247,9 +631,9 @@ class Amcl:
             range_max = min(range_max, params.laser_max_range_m)
         self._range_max = range_max
         self._range_min = max(laser.range_min_m, params.laser_min_range_m)
-        self._cubes, self._off_map = self.field.cubes(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
+        self._pz = self.field.pz(params.z_hit, params.z_rand, params.sigma_hit_m, range_max)
         # KLD-sampling's particle bound for k occupied bins, k = 0 .. max_particles (one table, both paths)
-        self._kld_limits = np.ascontiguousarray(self._kld_limit(np.arange(params.max_particles + 1)))
+        self._kld_limits = kld_limits(params.min_particles, params.max_particles, params.pf_err, params.pf_z)
         self.poses: F64 = np.zeros((0, 3))
         self.weights: F64 = np.zeros(0)
         self._w_slow = 0.0
@@ -321,7 +705,7 @@ class Amcl:
             dx, dy, dyaw = x - rx, y - ry, _angle_diff(yaw, ryaw)
             if not (abs(dx) > p.update_min_d_m or abs(dy) > p.update_min_d_m or abs(dyaw) > p.update_min_a_rad):
                 return None
-            self._motion(dx, dy, dyaw, ryaw)
+            self._motion((x, y, yaw), (dx, dy, dyaw))
         if p.max_beams >= 2:  # Nav2's likelihood model refuses fewer than two beams (no weighting)
             self._sensor(np.asarray(ranges, dtype=np.float64))
         self._odom_ref = (x, y, yaw)
@@ -342,81 +726,22 @@ class Amcl:
 
     # --- the filter ---------------------------------------------------------------------------
 
-    def _motion(self, dx: float, dy: float, dyaw: float, old_yaw: float) -> None:
+    def _motion(self, pose: tuple[float, float, float], delta: tuple[float, float, float]) -> None:
         p = self.params
-        trans = math.hypot(dx, dy)
-        rot1 = 0.0 if trans < 0.01 else _angle_diff(math.atan2(dy, dx), old_yaw)
-        rot2 = _angle_diff(dyaw, rot1)
-        rot1_noise = min(abs(_angle_diff(rot1, 0.0)), abs(_angle_diff(rot1, math.pi)))
-        rot2_noise = min(abs(_angle_diff(rot2, 0.0)), abs(_angle_diff(rot2, math.pi)))
-        n = len(self.poses)
-        noise = self._rng.standard_normal((n, 3))
-        sd_rot1 = math.sqrt(p.alpha1 * rot1_noise**2 + p.alpha2 * trans**2)
-        sd_trans = math.sqrt(p.alpha3 * trans**2 + p.alpha4 * rot1_noise**2 + p.alpha4 * rot2_noise**2)
-        sd_rot2 = math.sqrt(p.alpha1 * rot2_noise**2 + p.alpha2 * trans**2)
-        if self._lib is not None:
-            poses = np.ascontiguousarray(self.poses)
-            self._lib.twin_amcl_motion(
-                poses.ctypes.data, n, noise.ctypes.data, rot1, trans, rot2, sd_rot1, sd_trans, sd_rot2
-            )
-            self.poses = poses
-            return
-        rot1_hat = rot1 - noise[:, 0] * sd_rot1
-        trans_hat = trans - noise[:, 1] * sd_trans
-        rot2_hat = rot2 - noise[:, 2] * sd_rot2
-        heading = self.poses[:, 2] + rot1_hat
-        self.poses[:, 0] += trans_hat * np.cos(heading)
-        self.poses[:, 1] += trans_hat * np.sin(heading)
-        self.poses[:, 2] += rot1_hat + rot2_hat
-
-    def _beams(self, ranges: F64) -> tuple[F64, F64]:
-        """Return the used beams' endpoints in the base frame (bx, by)."""
-        p, laser = self.params, self.laser
-        count = len(ranges)
-        step = max(1, (count - 1) // (p.max_beams - 1)) if p.max_beams > 1 else max(1, count)
-        index = np.arange(0, count, step)
-        r = ranges[index].copy()
-        r[r <= self._range_min] = self._range_max
-        keep = (r < self._range_max) & ~np.isnan(r)
-        r, index = r[keep], index[keep]
-        angle = laser.mount_yaw_rad + laser.angle_min_rad + index * laser.angle_increment_rad
-        return laser.mount_x_m + r * np.cos(angle), laser.mount_y_m + r * np.sin(angle)
+        alphas = (p.alpha1, p.alpha2, p.alpha3, p.alpha4)
+        self.poses = odometry_update(self.poses, pose, delta, alphas, self._rng, native=self._lib is not None)
 
     def _sensor(self, ranges: F64) -> None:
-        bx, by = self._beams(ranges)
-        poses = self.poses
-        n = len(poses)
-        if len(bx):
-            field = self.field
-            inv_res = 1.0 / field.resolution_m
-            ex, ey = bx * inv_res, by * inv_res  # each beam's endpoint in the base frame, in cells
-            cubes = self._cubes
-            rows, cols = cubes.shape
-            if self._lib is not None:
-                poses = np.ascontiguousarray(poses)
-                self.poses = poses
-                likelihood = np.empty(n)
-                status = self._lib.twin_amcl_likelihood(
-                    poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
-                    ex.ctypes.data, ey.ctypes.data, len(ex),
-                    cubes.ctypes.data, rows, cols, self._off_map, likelihood.ctypes.data,
-                )  # fmt: skip
-                if status != 0:
-                    raise MemoryError("amcl likelihood: out of memory")
-            else:
-                # grid coordinates of each particle (AMCL rounds: +0.5 then floor), its heading
-                gx = (poses[:, 0] - field.origin_x_m) * inv_res + 0.5
-                gy = (poses[:, 1] - field.origin_y_m) * inv_res + 0.5
-                c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-                col = np.floor(gx[:, None] + c[:, None] * ex - s[:, None] * ey).astype(np.intp)
-                row = np.floor(gy[:, None] + s[:, None] * ex + c[:, None] * ey).astype(np.intp)
-                inside = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
-                values = cubes[np.clip(row, 0, rows - 1), np.clip(col, 0, cols - 1)]
-                likelihood = 1.0 + np.where(inside, values, self._off_map).sum(axis=1)
-        else:
-            likelihood = np.ones(n)
+        laser = self.laser
+        r: F64 = ranges.copy()
+        r[r <= self._range_min] = self._range_max  # as amcl_node fills LaserData
+        bearings: F64 = (
+            laser.mount_yaw_rad + laser.angle_min_rad + np.arange(len(r), dtype=np.float64) * laser.angle_increment_rad
+        )
+        beams = beam_endpoints(r, bearings, (laser.mount_x_m, laser.mount_y_m), self._range_max, self.params.max_beams)
+        likelihood = laser_likelihood(self.poses, beams, self.field, self._pz, native=self._lib is not None)
         weights = self.weights * likelihood
-        total = float(weights.sum())
+        total = weight_total(weights)
         p = self.params
         if total > 0.0 and math.isfinite(total):
             self.weights = weights / total
@@ -435,15 +760,6 @@ class Amcl:
         keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
         return keys
 
-    def _kld_limit(self, k: NDArray[np.int64]) -> NDArray[np.float64]:
-        p = self.params
-        kk = np.maximum(k - 1, 1).astype(np.float64)
-        b = 2.0 / (9.0 * kk)
-        x = 1.0 - b + np.sqrt(b) * p.pf_z
-        n = np.ceil(kk / (2.0 * p.pf_err) * x**3)
-        n = np.clip(n, p.min_particles, p.max_particles)
-        return np.where(k <= 1, float(p.max_particles), n)
-
     def _resample(self) -> None:
         p = self.params
         rng = self._rng
@@ -451,23 +767,14 @@ class Amcl:
         w_diff = 0.0
         if self._w_slow > 0.0:
             w_diff = max(0.0, 1.0 - self._w_fast / self._w_slow)
-        cumulative = np.cumsum(self.weights)
-        cumulative /= cumulative[-1]
         draws = rng.random(m)
         recovering = w_diff > 0.0 and len(self.field.free_cells) > 0
-        if self._lib is not None and not recovering:  # draw, histogram and stop in one pass
-            out = np.empty((m, 3))
-            n = int(
-                self._lib.twin_pf_resample(
-                    self.poses.ctypes.data, len(self.poses), cumulative.ctypes.data, draws.ctypes.data, m,
-                    _BIN_SIZE.ctypes.data, self._kld_limits.ctypes.data, out.ctypes.data,
-                )
-            )  # fmt: skip
-            if n < 0:
-                raise MemoryError("amcl resampling: out of memory")
-            self.poses = out[:n]
+        if not recovering:
+            self.poses = kld_resample(self.poses, self.weights, draws, self._kld_limits, native=self._lib is not None)
+            n = len(self.poses)
             self.weights = np.full(n, 1.0 / n)
             return
+        cumulative = np.cumsum(self.weights)  # Nav2's c[i + 1] = c[i] + w[i], not renormalised
         pick = np.minimum(np.searchsorted(cumulative, draws, side="right"), len(cumulative) - 1)
         new = self.poses[pick]
         if recovering:
@@ -486,66 +793,15 @@ class Amcl:
 
     def _kld_count(self, bins: NDArray[np.int64]) -> int:
         """How many of the drawn particles KLD-sampling keeps: the first n with n > limit(bins among them)."""
-        m = len(bins)
-        if self._lib is not None:
-            n = int(self._lib.twin_kld_count(bins.ctypes.data, m, self._kld_limits.ctypes.data))
-            if n < 0:
-                raise MemoryError("amcl resampling: out of memory")
-            return n
-        _, first = np.unique(_bin_keys(bins), return_index=True)
-        is_first = np.zeros(m, dtype=bool)
-        is_first[first] = True
-        leaves = np.cumsum(is_first)
-        stop = np.nonzero(np.arange(1, m + 1) > self._kld_limits[leaves])[0]
-        return int(stop[0]) + 1 if len(stop) else m
+        return _kld_count(bins, self._kld_limits, self._lib)
 
     def _clusters(self, bins: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]:
-        """Each particle's cluster (bins that touch, 26-neighbourhood), numbered from 1 in raster order of the bins."""
-        if self._lib is not None:
-            labels = np.empty(len(bins), dtype=np.int64)
-            count = int(self._lib.twin_pf_clusters(bins.ctypes.data, len(bins), labels.ctypes.data))
-            if count < 0:
-                raise MemoryError("amcl clustering: out of memory")
-            return labels, count
-        from scipy import ndimage  # the numpy path only: scipy is slow to import
-
-        lo = bins.min(axis=0)
-        shape = tuple(int(v) for v in bins.max(axis=0) - lo + 1)
-        grid = np.zeros(shape, dtype=bool)
-        local = bins - lo
-        grid[local[:, 0], local[:, 1], local[:, 2]] = True
-        labels, count = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
-        return np.asarray(labels[local[:, 0], local[:, 1], local[:, 2]], dtype=np.int64), int(count)
+        """Each particle's cluster (bins that touch), numbered from 1 in raster order of the bins."""
+        return _clusters(bins, self._lib)
 
     def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
-        poses, w = self.poses, self.weights
-        cluster, count = self._clusters(self._bins(poses))
-        cov = np.zeros((3, 3))
-        if self._lib is not None:
-            out = np.empty(7)
-            if self._lib.twin_pf_estimate(
-                poses.ctypes.data, w.ctypes.data, len(w), cluster.ctypes.data, count, out.ctypes.data
-            ):
-                raise MemoryError("amcl estimate: out of memory")
-            mx, my, myaw = float(out[0]), float(out[1]), float(out[2])
-            cov[0, 0], cov[1, 1], cov[0, 1], cov[2, 2] = out[3], out[4], out[5], out[6]
-            cov[1, 0] = cov[0, 1]
-        else:
-            cw = np.bincount(cluster, weights=w, minlength=count + 1)
-            mask = cluster == int(np.argmax(cw))
-            wc = w[mask]
-            total = float(wc.sum())
-            mx = float((wc * poses[mask, 0]).sum() / total)
-            my = float((wc * poses[mask, 1]).sum() / total)
-            myaw = math.atan2(float((wc * np.sin(poses[mask, 2])).sum()), float((wc * np.cos(poses[mask, 2])).sum()))
-            # The whole set's covariance, as amcl_pose carries it.
-            wt = float(w.sum())
-            sx, sy = float((w * poses[:, 0]).sum() / wt), float((w * poses[:, 1]).sum() / wt)
-            cov[0, 0] = float((w * poses[:, 0] ** 2).sum() / wt) - sx * sx
-            cov[1, 1] = float((w * poses[:, 1] ** 2).sum() / wt) - sy * sy
-            cov[0, 1] = cov[1, 0] = float((w * poses[:, 0] * poses[:, 1]).sum() / wt) - sx * sy
-            mc, ms = float((w * np.cos(poses[:, 2])).sum() / wt), float((w * np.sin(poses[:, 2])).sum() / wt)
-            cov[2, 2] = -2.0 * math.log(max(math.hypot(mc, ms), 1e-300))
+        poses = self.poses
+        (mx, my, myaw), cov = cluster_estimate(poses, self.weights, native=self._lib is not None)
         ox, oy, oyaw = odom_pose
         # map->odom = map->base * (odom->base)^-1
         tyaw = myaw - oyaw

@@ -1,0 +1,215 @@
+"""AMCL's parts replayed on cases recorded from Nav2 Humble's nav2_amcl (`twin nav conformance`).
+
+Four components, each a checker `(meta, arrays, native) -> differences` (empty: equal), registered in
+`twin.nav.conformance.COMPONENTS`:
+
+- `amcl_motion_model`: `odometry_update` on the case's particles, odometry pose and change, alphas
+  and the standard normal draws Nav2's `pf_ran_gaussian` consumed (per particle rot1, trans, rot2).
+  The C kernel must be bitwise equal: it does Nav2's operations in Nav2's order with the same libm.
+  The numpy path is held to 1e-12 m / rad per coordinate: numpy's own sin, cos and atan2 may round
+  a last bit differently from libm's (it differs by up to 2e-14 on the recorded cases).
+- `amcl_likelihood_field`: the map's distances (`nav2_distances`, bitwise against the SHA-256 of
+  Nav2's `occ_dist`) and each particle's weight after `LikelihoodFieldModel::sensorFunction`,
+  before normalisation, and their total (what the weights are divided by), bitwise on both paths:
+  pz per cell is Nav2's formula with libm's exp, the cubes are `pz * pz * pz` added to 1 beam by
+  beam, the total is summed in particle order, and the cell of an endpoint within 1e-6 of a cell
+  edge is computed with Nav2's own arithmetic (elsewhere the cheaper lookup lands in the same cell).
+- `amcl_resample`: `kld_resample` (pf_update_resample without recovery: w_diff is 0 in every case, as
+  with TurtleBot3's recovery alphas of 0) on the case's particles and weights, given the uniforms
+  Nav2's `drand48` returned. Nav2 draws two per sample, the first deciding on a random pose, the
+  second the pick; the twin is given the second ones (and more after them, so a twin that drew past
+  Nav2's stop would show). Equal means the same number of samples and each sample's pose bitwise.
+- `amcl_estimate`: `cluster_estimate` on a particle set: the published cluster's mean (x, y, yaw)
+  and the set's covariance (xx, xy, yx, yy, yaw) as `amcl_pose` carries them. The C kernel bitwise;
+  the numpy path within 1e-12 (numpy's sin and cos).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from twin.nav.amcl._native import load_kernel
+from twin.nav.amcl.filter import (
+    LikelihoodField,
+    beam_endpoints,
+    cluster_estimate,
+    kld_limits,
+    kld_resample,
+    laser_likelihood,
+    odometry_update,
+    weight_total,
+)
+from twin.nav.map_server.map_io import OccupancyMap
+
+__all__ = [
+    "RecordedDraws",
+    "check_amcl_estimate",
+    "check_amcl_likelihood_field",
+    "check_amcl_motion_model",
+    "check_amcl_resample",
+]
+
+Arrays = Mapping[str, NDArray[Any]]
+
+MOTION_TOLERANCE_PYTHON = 1e-12
+"""Largest difference (m, rad) in a particle coordinate after the numpy path's motion model (C: none)."""
+
+
+class RecordedDraws:
+    """A draw source replaying recorded numbers: standard normals in order, uniforms in order.
+
+    Raises `ValueError` when asked for more than was recorded, or for draws it does not hold.
+    """
+
+    def __init__(self, normals: NDArray[np.float64] | None = None, uniforms: NDArray[np.float64] | None = None):
+        self._normals = np.zeros(0) if normals is None else np.asarray(normals, dtype=np.float64).ravel()
+        self._uniforms = np.zeros(0) if uniforms is None else np.asarray(uniforms, dtype=np.float64).ravel()
+        self.normals_used = 0
+        self.uniforms_used = 0
+
+    def standard_normal(self, size: Any) -> NDArray[np.float64]:
+        """The next recorded standard normals, in the shape asked."""
+        n = int(np.prod(size))
+        if self.normals_used + n > len(self._normals):
+            msg = f"asked for {n} normal draws, {len(self._normals) - self.normals_used} recorded ones left"
+            raise ValueError(msg)
+        out = self._normals[self.normals_used : self.normals_used + n].reshape(size)
+        self.normals_used += n
+        return out
+
+    def random(self, size: Any) -> NDArray[np.float64]:
+        """The next recorded uniforms in [0, 1), in the shape asked."""
+        n = int(np.prod(size))
+        if self.uniforms_used + n > len(self._uniforms):
+            msg = f"asked for {n} uniform draws, {len(self._uniforms) - self.uniforms_used} recorded ones left"
+            raise ValueError(msg)
+        out = self._uniforms[self.uniforms_used : self.uniforms_used + n].reshape(size)
+        self.uniforms_used += n
+        return out
+
+    def integers(self, low: Any, high: Any, size: Any) -> NDArray[np.int64]:
+        """Not recorded: the cases replay no uniform pose draws."""
+        raise ValueError("no recorded integer draws")
+
+    def uniform(self, low: Any, high: Any, size: Any) -> NDArray[np.float64]:
+        """Not recorded: the cases replay no uniform pose draws."""
+        raise ValueError("no recorded uniform pose draws")
+
+
+def _native_missing(native: bool) -> list[str]:
+    if native and load_kernel() is None:
+        return ["the C kernel is not available (no C compiler?): only the Python path can be checked"]
+    return []
+
+
+def _first_particle(got: NDArray[np.float64], want: NDArray[np.float64], bad: NDArray[np.bool_], what: str) -> str:
+    rows = np.flatnonzero(bad.reshape(len(want), -1).any(axis=1))
+    i = int(rows[0])
+    first = f"first {i}: twin {got[i].tolist()!r}, Nav2 {want[i].tolist()!r}"
+    return f"{what}: {len(rows)} of {len(want)} particles differ, {first}"
+
+
+def check_amcl_motion_model(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    """The ways the twin's differential motion model differs from Nav2's on one case (`amcl_cases/README.md`)."""
+    if missing := _native_missing(native):
+        return missing
+    draws = RecordedDraws(normals=arrays["normals"])
+    pose = tuple(float(v) for v in meta["pose"])
+    delta = tuple(float(v) for v in meta["delta"])
+    alphas = tuple(float(v) for v in meta["alphas"][:4])
+    got = odometry_update(arrays["poses"].copy(), pose, delta, alphas, draws, native=native)  # type: ignore[arg-type]
+    want = arrays["poses_after"]
+    out: list[str] = []
+    if draws.normals_used != meta["draws_used"]:
+        out.append(f"the twin used {draws.normals_used} normal draws, Nav2 {meta['draws_used']}")
+    if got.shape != want.shape:
+        return [*out, f"poses: shape {got.shape}, Nav2 {want.shape}"]
+    tolerance = 0.0 if native else MOTION_TOLERANCE_PYTHON
+    bad = ~(np.abs(got - want) <= tolerance)
+    if bad.any():
+        out.append(_first_particle(got, want, bad, f"poses (beyond {tolerance:g})"))
+    return out
+
+
+def check_amcl_likelihood_field(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    """The ways the twin's likelihood-field model differs from Nav2's on one case (`amcl_cases/README.md`)."""
+    if missing := _native_missing(native):
+        return missing
+    occupancy = OccupancyMap(
+        resolution_m=float(meta["resolution"]),
+        origin_x_m=float(meta["origin"][0]),
+        origin_y_m=float(meta["origin"][1]),
+        data=arrays["map"].astype(np.int8),
+    )
+    field = LikelihoodField(occupancy, float(meta["laser_likelihood_max_dist"]), native=native)
+    out: list[str] = []
+    digest = hashlib.sha256(np.ascontiguousarray(field.distance_m, dtype="<f8").tobytes()).hexdigest()
+    if digest != meta["occ_dist_sha256"]:
+        out.append("the likelihood field's distances differ from Nav2's occ_dist (their SHA-256)")
+    range_max = float(meta["range_max"])
+    pz = field.pz(float(meta["z_hit"]), float(meta["z_rand"]), float(meta["sigma_hit"]), range_max)
+    max_beams = int(meta["max_beams"])
+    weights = arrays["weights"]
+    want = arrays["weights_after"]
+    if max_beams < 2:  # Nav2 refuses to weigh (sensorUpdate returns false): weights unchanged
+        got = weights.copy()
+        if meta["updated"]:
+            out.append("Nav2 weighed the particles with fewer than two beams; the twin does not")
+    else:
+        laser = meta["laser_pose"]
+        beams = beam_endpoints(arrays["ranges"], arrays["bearings"], (laser[0], laser[1]), range_max, max_beams)
+        if laser[2] != 0.0:
+            return [*out, "a laser pose with a yaw (Nav2 sets it to 0 and turns the bearings instead)"]
+        got = weights * laser_likelihood(arrays["poses"], beams, field, pz, native=native)
+    bad = got != want
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        out.append(
+            f"weights: {int(bad.sum())} of {len(want)} particles differ, first {i}: twin {got[i]!r}, Nav2 {want[i]!r}"
+        )
+    elif meta["updated"] and (total := weight_total(got)) != meta["total_weight"]:
+        out.append(f"total weight (pf_update_sensor divides by it): twin {total!r}, Nav2 {meta['total_weight']!r}")
+    return out
+
+
+def check_amcl_resample(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    """The ways the twin's KLD resampling differs from Nav2's on one case (`amcl_cases/README.md`)."""
+    if missing := _native_missing(native):
+        return missing
+    if meta["w_slow"] > 0.0 and 1.0 - meta["w_fast"] / meta["w_slow"] > 0.0:
+        return ["a case with recovery draws (w_diff > 0): the twin checks resampling without them"]
+    m = int(meta["max_particles"])
+    picks = np.full(m, 0.5)  # past Nav2's stop: a twin drawing on would take these
+    recorded = arrays["uniforms"][1::2][:m]
+    picks[: len(recorded)] = recorded
+    limits = kld_limits(int(meta["min_particles"]), m, float(meta["pf_err"]), float(meta["pf_z"]))
+    got = kld_resample(arrays["poses"], arrays["weights"], picks, limits, native=native)
+    want = arrays["poses_after"]
+    if got.shape != want.shape:
+        return [f"samples: the twin kept {len(got)}, Nav2 {len(want)}"]
+    bad = got != want
+    if bad.any():
+        return [_first_particle(got, want, bad, "samples")]
+    return []
+
+
+def check_amcl_estimate(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    """The ways the twin's published pose and covariance differ from Nav2's on one case (`amcl_cases/README.md`)."""
+    if missing := _native_missing(native):
+        return missing
+    mean, cov = cluster_estimate(arrays["poses"], arrays["weights"], native=native)
+    tolerance = 0.0 if native else MOTION_TOLERANCE_PYTHON
+    out: list[str] = []
+    for name, got, want in zip(("x", "y", "yaw"), mean, meta["mean"], strict=True):
+        if not abs(got - want) <= tolerance:
+            out.append(f"published {name}: twin {got!r}, Nav2 {want!r} (cluster {meta['published_cluster']})")
+    want_cov = meta["covariance"]
+    for name, got in (("xx", cov[0, 0]), ("xy", cov[0, 1]), ("yx", cov[1, 0]), ("yy", cov[1, 1]), ("yaw", cov[2, 2])):
+        if not abs(float(got) - want_cov[name]) <= tolerance * max(1.0, abs(want_cov[name])):
+            out.append(f"covariance {name}: twin {float(got)!r}, Nav2 {want_cov[name]!r}")
+    return out
