@@ -11,7 +11,6 @@ robots give in the one map frame (their odometry is each in its own odom frame, 
 from __future__ import annotations
 
 import dataclasses
-import datetime as dt
 import itertools
 import json
 import os
@@ -26,7 +25,7 @@ from numpy.typing import NDArray
 from twin import __version__
 from twin.analysis import plots
 from twin.analysis.collect import ContactEvent, PoseTrack, collect, robot_namespaces
-from twin.analysis.report import Report, bag_line, build_report, markdown_html, robot_markdown
+from twin.analysis.report import Report, bag_line, bag_summary, build_report, markdown_html, robot_markdown
 from twin.bag import BagInfo, open_bag, read_messages
 from twin.bag.raw import raw_readable
 from twin.core.errors import ConfigError
@@ -267,16 +266,7 @@ def analyze_fleet(
             track = data.poses.get(topic)
             if track is not None and len(track):
                 positions[topic][ns] = track
-    summary = {
-        "storage": info.storage,
-        "metadata_version": info.version,
-        "ros_distro": info.ros_distro or None,
-        "start_utc": dt.datetime.fromtimestamp(info.start_ns / 1e9, tz=dt.UTC).isoformat(),
-        "duration_s": info.duration_ns * 1e-9,
-        "messages": info.message_count,
-        "topics": len(info.topics),
-        "size_bytes": info.size_bytes,
-    }
+    summary = bag_summary(info)
     distance = None
     needs = ""
     if len(namespaces) < 2:

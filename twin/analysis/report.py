@@ -25,6 +25,7 @@ from twin import __version__
 from twin.analysis import plots
 from twin.analysis.collect import POSE_TOPICS, BagData, collect, scan_points
 from twin.analysis.metrics import RunMetrics, bag_timeline, compute_metrics, localization_error
+from twin.bag import BagInfo
 
 __all__ = ["Report", "analyze", "world_walls", "write_report"]
 
@@ -129,6 +130,20 @@ def analyze(
     return build_report(bag, data, walls=walls, world_name=world_name, plots_enabled=plots_enabled, namespace=namespace)
 
 
+def bag_summary(info: BagInfo) -> dict[str, Any]:
+    """The report's `bag` entry: storage, metadata version, distro, start, duration, counts and size."""
+    return {
+        "storage": info.storage,
+        "metadata_version": info.version,
+        "ros_distro": info.ros_distro or None,
+        "start_utc": dt.datetime.fromtimestamp(info.start_ns / 1e9, tz=dt.UTC).isoformat(),
+        "duration_s": info.duration_ns * 1e-9,
+        "messages": info.message_count,
+        "topics": len(info.topics),
+        "size_bytes": info.size_bytes,
+    }
+
+
 def build_report(
     bag: Path,
     data: BagData,
@@ -142,16 +157,7 @@ def build_report(
     metrics = compute_metrics(data)
     info = data.info
     timeline = bag_timeline(data)
-    summary = {
-        "storage": info.storage,
-        "metadata_version": info.version,
-        "ros_distro": info.ros_distro or None,
-        "start_utc": dt.datetime.fromtimestamp(info.start_ns / 1e9, tz=dt.UTC).isoformat(),
-        "duration_s": info.duration_ns * 1e-9,
-        "messages": info.message_count,
-        "topics": len(info.topics),
-        "size_bytes": info.size_bytes,
-    }
+    summary = bag_summary(info)
     health = [h.to_dict() for h in sorted(data.health.values(), key=lambda h: h.topic)]
     report = Report(
         bag=bag,
