@@ -37,6 +37,7 @@ from typing import Any, Literal
 
 import yaml
 
+from twin.core.code_identity import code_digest
 from twin.core.config import load_yaml, location, suggest
 from twin.core.errors import ConfigError
 from twin.core.numbers import number_problem
@@ -176,7 +177,8 @@ def expand_runs(spec: SweepSpec) -> list[RunSpec]:
     """Return the sweep's runs in a fixed order: every combination of the varied values, then every seed.
 
     The random draws of a run depend only on `random_seed`, the combination, the seed and the key,
-    so the same sweep file gives the same runs.
+    so the same sweep file gives the same runs. A run's `key` also covers the twin's code
+    (`code_digest`): after a code change a finished run is run again, not read back.
     """
     base = _absolute_scenario(spec.scenario)
     keys = [k for k, _ in spec.vary]
@@ -193,7 +195,9 @@ def expand_runs(spec: SweepSpec) -> list[RunSpec]:
             scenario = _with_values(base, values)
             text = yaml.safe_dump(scenario, sort_keys=False)
             index = len(runs)
-            digest = json.dumps({"scenario": text, "seed": seed, "timeout_s": spec.timeout_s}, sort_keys=True)
+            digest = json.dumps(
+                {"scenario": text, "seed": seed, "timeout_s": spec.timeout_s, "code": code_digest()}, sort_keys=True
+            )
             runs.append(
                 RunSpec(
                     index=index,

@@ -182,3 +182,37 @@ def test_wilson_interval_matches_published_values(successes: int, runs: int, low
     got = wilson_interval(successes, runs)
     assert math.isclose(got[0], low, abs_tol=6e-5)
     assert math.isclose(got[1], high, abs_tol=6e-5)
+
+
+def test_a_run_key_covers_the_code_so_a_changed_twin_runs_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A sweep re-run into its folder reuses finished runs by key: the key changes with the twin's code."""
+    import twin.sweep.spec as spec_module
+
+    text = "runs: 2\nvary:\n  max_duration_s: [5]\n"
+    first = [r.key for r in expand_runs(load_sweep(_sweep(tmp_path, text)))]
+    assert first == [r.key for r in expand_runs(load_sweep(_sweep(tmp_path, text)))]
+    monkeypatch.setattr(spec_module, "code_digest", lambda: "another-build")
+    changed = [r.key for r in expand_runs(load_sweep(_sweep(tmp_path, text)))]
+    assert not set(changed) & set(first)
+
+
+def test_the_code_digest_follows_the_sources(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from twin.core import code_identity
+
+    package = tmp_path / "twin"
+    (package / "nav").mkdir(parents=True)
+    (package / "nav" / "kernel.c").write_text("int f(void) { return 1; }\n")
+    (package / "notes.txt").write_text("not a source")
+    monkeypatch.setattr(code_identity, "_PACKAGE", package)
+    monkeypatch.setattr(code_identity, "_FMUS", tmp_path / "fmus")
+    digests = []
+    for change in (None, ("notes.txt", "edited"), ("nav/kernel.c", "int f(void) { return 2; }\n")):
+        if change is not None:
+            (package / change[0]).write_text(change[1])
+        code_identity.code_digest.cache_clear()
+        digests.append(code_identity.code_digest())
+    code_identity.code_digest.cache_clear()
+    assert digests[0] == digests[1]  # a file that is not a source does not count
+    assert digests[2] != digests[0]  # a changed C source does
