@@ -55,7 +55,7 @@ try:
 except ImportError:  # a baseline from before the code cache
     pass
 else:
-    codecache.enable()  # as the entry point does
+    codecache.enable("simulate")  # as the entry point does for `twin simulate`
 from pathlib import Path
 from twin.sim import default_scenario_path, load_scenario
 from twin.sim.simulation import Simulation

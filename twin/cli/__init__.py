@@ -202,8 +202,8 @@ def run() -> None:
     """Console-script entry point."""
     from twin.core import codecache
 
-    codecache.enable()  # dataclasses' methods compiled once, not on every run (see twin.core.codecache)
     argv = sys.argv[1:]
+    codecache.enable(_named_command(argv) or "twin")  # dataclasses' methods compiled once (twin.core.codecache)
     if _named_command(argv) == "simulate":  # start-up without the cyclic collector (see twin.core.gcpolicy)
         from twin.core.gcpolicy import defer_collection, resume_collection
 

@@ -12,7 +12,8 @@ run or a killed one never leaves a partial file). Each method is still made by e
 with the same globals and locals as before, so the classes are the same; only the compiling is
 skipped.
 
-The table is per interpreter (its file name carries the bytecode magic number), holds exact source
+There is a table per command (`simulate`, `analyze`...) and per interpreter (its file name carries
+the bytecode magic number); it holds exact source
 text as keys (so it can never return another method's code), is ignored when it does not load, and
 is left alone past `_MAX_ENTRIES`. Only the `twin` command enables it (as it defers the garbage
 collector: `twin.core.gcpolicy`); a library user's process is left as it is. `TWIN_NO_CODE_CACHE=1`
@@ -85,21 +86,29 @@ class _Table:
 _enabled: list[_Table] = []  # the table, while `enable` has given dataclasses its exec
 
 
-def table_path() -> Path:
-    """The table's file: in the cache folder, per interpreter (bytecode magic number)."""
+def table_path(command: str = "twin") -> Path:
+    """The table's file: in the cache folder, per command and per interpreter (bytecode magic number).
+
+    One table per command keeps each small: a run loads only the methods of the classes its own
+    command defines (a union of every command's would cost `twin simulate` ~5 ms more to load).
+    """
     from twin.core.native import cache_dir
 
     tag = f"{sys.implementation.cache_tag}-{importlib.util.MAGIC_NUMBER.hex()}"
-    return cache_dir() / "pycode" / f"dataclasses-{tag}.marshal"
+    name = "".join(c if c.isalnum() or c in "-_" else "_" for c in command) or "twin"
+    return cache_dir() / "pycode" / f"dataclasses-{name}-{tag}.marshal"
 
 
-def enable() -> None:
-    """Give `dataclasses` the caching `exec` (see the module's text); nothing if it is off or already on."""
+def enable(command: str = "twin") -> None:
+    """Give `dataclasses` the caching `exec` (see the module's text); nothing if it is off or already on.
+
+    `command` names the table (the `twin` command's subcommand: `simulate`, `analyze`...).
+    """
     if _enabled or os.environ.get("TWIN_NO_CODE_CACHE", "") not in ("", "0"):
         return
     if sys.implementation.name != "cpython" or "exec" in vars(dataclasses):
         return  # another interpreter, or someone else's exec there already: leave it
-    table = _Table(table_path())
+    table = _Table(table_path(command))
 
     def exec_cached(source: Any, globs: Any = None, locs: Any = None, /) -> None:
         if type(source) is str:

@@ -121,3 +121,21 @@ def test_the_twin_command_enables_it_and_a_library_import_does_not(tmp_path: Pat
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=False)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split()[-2:] == ["False", "True"]
+
+
+def test_each_command_keeps_its_own_table(tmp_path: Path) -> None:
+    """`twin simulate` loads only the methods its own classes need, not every command's."""
+    cache = tmp_path / "cache"
+    env = {k: v for k, v in os.environ.items() if k != "TWIN_NO_CODE_CACHE"}
+    env.update(TWIN_CACHE_DIR=str(cache), PYTHONPATH=str(REPO))
+    code = (
+        "import sys\nfrom twin.core import codecache\ncodecache.enable(sys.argv[1])\n"
+        "from dataclasses import dataclass\n@dataclass(frozen=True)\nclass Only:\n    x: int = 0\n"
+    )
+    for command in ("simulate", "analyze"):
+        out = subprocess.run(
+            [sys.executable, "-c", code, command], env=env, capture_output=True, text=True, check=False
+        )
+        assert out.returncode == 0, out.stderr
+    names = sorted(p.name.split("-")[1] for p in (cache / "pycode").glob("dataclasses-*.marshal"))
+    assert names == ["analyze", "simulate"]
