@@ -264,11 +264,12 @@ _RPP_NUMBERS = (
     "rotate_to_heading_angular_vel", "min_approach_linear_velocity", "approach_velocity_scaling_dist",
     "regulated_linear_scaling_min_radius", "regulated_linear_scaling_min_speed", "rotate_to_heading_min_angle",
     "max_angular_accel", "cost_scaling_dist", "cost_scaling_gain", "max_allowed_time_to_collision_up_to_carrot",
-    "max_angular_vel",
+    "inflation_cost_scaling_factor", "max_robot_pose_search_dist", "transform_tolerance",
 )  # fmt: skip
 _RPP_FLAGS = (
     "use_velocity_scaled_lookahead_dist", "use_regulated_linear_velocity_scaling",
     "use_cost_regulated_linear_velocity_scaling", "use_rotate_to_heading", "use_collision_detection",
+    "allow_reversing", "use_interpolation",
 )  # fmt: skip
 
 
