@@ -58,6 +58,13 @@ def _flag(section: Mapping[str, Any], key: str, default: bool, where: str) -> bo
     return value
 
 
+def _drive_limits(section: Mapping[str, Any], behavior: str, where: str) -> tuple[float, float, float]:
+    """DriveOnHeading's / BackUp's `<behavior>.acceleration_limit`, `.deceleration_limit`, `.minimum_speed` (0 each)."""
+    keys = ("acceleration_limit", "deceleration_limit", "minimum_speed")
+    accel, decel, minimum = (_num(section, f"{behavior}.{k}", 0.0, where) for k in keys)
+    return accel, decel, minimum
+
+
 def _names(section: Mapping[str, Any], key: str, default: Sequence[str], where: str) -> tuple[str, ...]:
     value = section.get(key, list(default))
     if isinstance(value, str):
@@ -175,9 +182,13 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         max_rotational_vel=_num(bs, "max_rotational_vel", bd.max_rotational_vel, bwhere),
         min_rotational_vel=_num(bs, "min_rotational_vel", bd.min_rotational_vel, bwhere),
         rotational_acc_lim=_num(bs, "rotational_acc_lim", bd.rotational_acc_lim, bwhere),
+        backup_limits=_drive_limits(bs, "backup", bwhere),
+        drive_on_heading_limits=_drive_limits(bs, "drive_on_heading", bwhere),
     )
     used["behavior_server"] = [
         "cycle_frequency", "simulate_ahead_time", "max_rotational_vel", "min_rotational_vel", "rotational_acc_lim",
+        *(f"{b}.{k}" for b in ("backup", "drive_on_heading")
+          for k in ("acceleration_limit", "deceleration_limit", "minimum_speed")),
     ]  # fmt: skip
     return Nav2Config(
         controller_frequency_hz=frequency,

@@ -77,10 +77,14 @@ class BehaviorServer:
         # the behaviours check the local costmap's footprint, as behavior_server reads it from that costmap
         params = dataclasses.replace(self.params, footprint=tuple(self.local_costmap.footprint))
         behavior = make_behavior(goal.server, params)
-        behavior.start(request, self.frames.odom_pose, t_ns)
-        self._goal, self._impl = goal, behavior
         self.recoveries += 1
         _log.info("Running %s", goal.server)
+        refusal = behavior.start(request, self.frames.odom_pose, t_ns)
+        if refusal:  # Nav2's onRun refused it: "Initial checks failed", the goal is aborted at once
+            _log.warning("Initial checks failed for %s: %s", goal.server, refusal)
+            self._finish(goal, ActionState.FAILED, reason=refusal)
+            return
+        self._goal, self._impl = goal, behavior
 
     def cancel(self, goal: ActionGoal) -> None:
         """Forget `goal` if it is the running one."""
