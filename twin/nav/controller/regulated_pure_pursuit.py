@@ -47,7 +47,8 @@ from numpy.typing import NDArray
 
 from twin.core.errors import ConfigError
 from twin.nav.costmap_2d.costmap_2d import FREE_SPACE, LETHAL_OBSTACLE, NO_INFORMATION, CostGrid
-from twin.nav.costmap_2d.footprint import footprint_cost
+from twin.nav.costmap_2d.footprint import footprint_cost, footprint_radii
+from twin.nav.params import CostmapParams
 
 __all__ = ["NoValidCommand", "RppController", "RppCycle", "RppParams", "in_collision"]
 
@@ -68,13 +69,9 @@ class NoValidCommand(RuntimeError):
     """RPP found a collision ahead or has no plan near the robot (Nav2's PlannerException)."""
 
 
-#: The TB3 16-point circle of 0.22 m, padded by 0.01 m along x and y, as the local costmap makes it.
-_TB3_FOOTPRINT = tuple(
-    (
-        (math.cos(i * 2.0 * math.pi / 16) * 0.22) + math.copysign(0.01, math.cos(i * 2.0 * math.pi / 16)),
-        (math.sin(i * 2.0 * math.pi / 16) * 0.22) + math.copysign(0.01, math.sin(i * 2.0 * math.pi / 16)),
-    )
-    for i in range(16)
+#: Until the controller server hands over the costmap's: TurtleBot3's local costmap (a 0.22 m radius, padded).
+_TB3_INSCRIBED, _TB3_CIRCUMSCRIBED, _TB3_FOOTPRINT = footprint_radii(
+    CostmapParams(name="local_costmap", robot_radius_m=0.22)
 )
 
 
@@ -203,8 +200,8 @@ class RppController:
         #: The goal checker's xy tolerance (Nav2: 0.25 before the first update).
         self.goal_dist_tol_m = 0.25
         self.footprint: tuple[tuple[float, float], ...] = _TB3_FOOTPRINT
-        self.inscribed_radius_m = 0.22
-        self.circumscribed_radius_m = 0.23
+        self.inscribed_radius_m = _TB3_INSCRIBED
+        self.circumscribed_radius_m = _TB3_CIRCUMSCRIBED
         self.track_unknown = False
         #: The poses projected for the collision check in the last cycle (costmap frame).
         self.local_plan: NDArray[np.float64] = np.zeros((0, 3))
