@@ -16,7 +16,8 @@ from typing import Any
 from twin.core.errors import ConfigError
 from twin.nav.behaviors.timed_behavior import BehaviorParams
 from twin.nav.controller.checkers import SimpleGoalChecker
-from twin.nav.controller.controller_server import controller_for_plugin
+from twin.nav.controller.controller_server import CONTROLLER_PLUGINS, controller_for_plugin
+from twin.nav.controller.regulated_pure_pursuit import NAV2_PARAMETERS as RPP_PARAMETERS
 from twin.nav.params import Nav2Params
 from twin.nav.planner.navfn import NavfnParams
 from twin.nav.velocity_smoother.velocity_smoother import Feedback, SmootherParams
@@ -111,7 +112,8 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         # refuses unknown plugins, critics and bad values now, before the run
         controller_for_plugin(plugin, section, where=f"{where}.{name}", controller_frequency_hz=frequency)
         controllers[name] = (plugin, section)
-        cu.extend(f"{name}.{k}" for k in section)
+        # RPP reads only the keys Humble's RPP declares; the others are named in the unused-parameters warning
+        cu.extend(f"{name}.{k}" for k in section if plugin != CONTROLLER_PLUGINS[1] or k in RPP_PARAMETERS)
     checker_names = _names(cs, "goal_checker_plugins", (), where) or (
         str(cs.get("goal_checker_plugin", "goal_checker")),
     )

@@ -36,7 +36,6 @@ Held to Nav2 Humble's code by recorded cases (`tests/unit/nav/controller/rpp_cas
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -50,9 +49,7 @@ from twin.nav.costmap_2d.costmap_2d import FREE_SPACE, LETHAL_OBSTACLE, NO_INFOR
 from twin.nav.costmap_2d.footprint import footprint_cost, footprint_radii
 from twin.nav.params import CostmapParams
 
-__all__ = ["NoValidCommand", "RppController", "RppCycle", "RppParams", "in_collision"]
-
-_log = logging.getLogger(__name__)
+__all__ = ["NAV2_PARAMETERS", "NoValidCommand", "RppController", "RppCycle", "RppParams", "in_collision"]
 
 _INSCRIBED_INFLATED_OBSTACLE = 253
 
@@ -113,39 +110,28 @@ class RppParams:
     ) -> RppParams:
         """Build from the plugin's params-file section (Nav2's names), Nav2 Humble's code defaults for the rest.
 
-        Nav2 ignores keys it does not declare; so does the twin, with a warning naming them (a typo
-        would otherwise go unseen).
+        Keys Humble's RPP does not declare (not in `NAV2_PARAMETERS`) are ignored, as Nav2 ignores
+        them; the params file's one warning about unused parameters names them (`nav2_config`).
 
         Raises:
             ConfigError: A value of the wrong type (one line naming `where.key`).
         """
         names = {f.name: f for f in fields(cls)}
         out: dict[str, object] = {"controller_frequency_hz": float(controller_frequency_hz)}
-        unknown: list[str] = []
         for key, value in section.items():
-            if key == "plugin":
+            if key not in NAV2_PARAMETERS or key == "plugin":
                 continue
-            name = _RENAMES.get(key, key)
-            field = names.get(name)
-            if field is None or name == "controller_frequency_hz":
-                unknown.append(key)
-                continue
+            field = names[_RENAMES.get(key, key)]
             if field.type in ("bool",):
                 if not isinstance(value, bool):
                     msg = f"{where}.{key}: expected true or false, got {value!r}; fix the params file"
                     raise ConfigError(msg)
-                out[name] = value
+                out[field.name] = value
             else:
                 if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
                     msg = f"{where}.{key}: expected a number, got {value!r}; fix the params file"
                     raise ConfigError(msg)
-                out[name] = float(value)
-        if unknown:
-            _log.warning(
-                "%s: Nav2 Humble's RegulatedPurePursuitController has no parameter %s; ignored as Nav2 ignores it",
-                where,
-                ", ".join(sorted(unknown)),
-            )
+                out[field.name] = float(value)
         return cls(**out)  # type: ignore[arg-type]
 
 
@@ -163,6 +149,13 @@ _RENAMES = {
     "max_robot_pose_search_dist": "max_robot_pose_search_dist_m",
 }
 """Nav2's parameter names that carry a unit suffix in the twin."""
+
+NAV2_PARAMETERS = frozenset(
+    {"plugin"}
+    | {next((k for k, v in _RENAMES.items() if v == f.name), f.name) for f in fields(RppParams)}
+    - {"controller_frequency_hz"}
+)
+"""The keys Humble's RPP declares under its plugin name (`configure`), and `plugin`."""
 
 
 class RppCycle(NamedTuple):

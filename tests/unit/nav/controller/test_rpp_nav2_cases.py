@@ -8,7 +8,6 @@ The tests below the replay pin what the twin's RPP did differently before it was
 
 from __future__ import annotations
 
-import logging
 import math
 from pathlib import Path
 
@@ -21,6 +20,8 @@ from twin.nav.conformance import check_case, load_case
 from twin.nav.controller.checkers import SimpleGoalChecker
 from twin.nav.controller.controller_server import FollowPathTask
 from twin.nav.controller.regulated_pure_pursuit import NoValidCommand, RppController, RppParams
+from twin.nav.params import load_nav2_params
+from twin.nav.server_params import nav2_config
 
 CASES = Path(__file__).with_name("rpp_cases")
 FILES = sorted(CASES.glob("*.npz"))
@@ -101,7 +102,7 @@ def test_the_robot_off_the_costmap_is_an_error_not_a_free_cell() -> None:
         controller.compute_velocity((-0.5, 0.0, 0.0), (0.0, 0.0), costmap)
 
 
-def test_from_nav2_reads_humbles_names_and_defaults(caplog: pytest.LogCaptureFixture) -> None:
+def test_from_nav2_reads_humbles_names_and_defaults() -> None:
     assert RppParams.from_nav2({}) == RppParams()
     assert RppParams().desired_linear_vel == 0.5 and RppParams().rotate_to_heading_angular_vel == 1.8
     section = {
@@ -117,13 +118,24 @@ def test_from_nav2_reads_humbles_names_and_defaults(caplog: pytest.LogCaptureFix
     assert params.desired_linear_vel == 0.22 and params.inflation_cost_scaling_factor == 10.0
     assert params.max_robot_pose_search_dist_m == 2.0 and not params.use_interpolation and params.allow_reversing
     assert params.controller_frequency_hz == 10.0
-    with caplog.at_level(logging.WARNING):
-        params = RppParams.from_nav2(
-            {"max_angular_vel": 1.0, "lookahead_distance": 0.4}, where="params.yaml: FollowPath"
-        )
-    assert params == RppParams()
-    assert "params.yaml: FollowPath: Nav2 Humble's RegulatedPurePursuitController has no parameter " in caplog.text
-    assert "lookahead_distance, max_angular_vel" in caplog.text
+    assert RppParams.from_nav2({"max_angular_vel": 1.0, "lookahead_distance": 0.4}) == RppParams()  # as Nav2
+
+
+def test_a_params_file_names_the_keys_humbles_rpp_does_not_read(fixtures: Path) -> None:
+    # Nav2 ignores them silently; the twin's one unused-parameters line names them (a typo, a DWB key left over)
+    overrides = {
+        "controller_server.FollowPath.plugin": "nav2_regulated_pure_pursuit_controller::RegulatedPurePursuitController",
+        "controller_server.FollowPath.desired_linear_vel": 0.22,
+        "controller_server.FollowPath.lookahead_distance": 0.4,
+    }
+    params = load_nav2_params(fixtures / "nav2" / "nav2_humble" / "nav2_params.yaml", overrides=overrides)
+    config = nav2_config(params)
+    warning = params.warning(config.used) or ""
+    assert "controller_server.FollowPath.lookahead_distance" in warning
+    assert "controller_server.FollowPath.max_vel_x" in warning  # DWB's, in Nav2's file, unread by RPP
+    assert "controller_server.FollowPath.desired_linear_vel" not in warning
+    _, section = config.controllers["FollowPath"]
+    assert RppParams.from_nav2(section).desired_linear_vel == 0.22
 
 
 @pytest.mark.parametrize(("key", "value"), [("desired_linear_vel", "fast"), ("use_interpolation", 1)])
