@@ -110,3 +110,29 @@ def test_backup_limits_come_from_the_behaviour_server_section(fixtures: Path) ->
     backup = make_behavior("backup", behaviors)
     backup.start({"target_x": 0.5, "speed": 0.2, "time_allowance": 10.0}, (0.0, 0.0, 0.0), 0)
     assert backup.step(0, (0.0, 0.0, 0.0), _open()).cmd == (-0.05, 0.0)  # type: ignore[arg-type]  # 0.5 / 10 Hz
+
+
+@pytest.mark.parametrize("server", ["spin", "wait"])
+def test_a_canceled_behaviour_stops_the_robot_once(server: str) -> None:
+    # TimedBehavior::execute: a cancel request calls stopRobot (a zero twist on cmd_vel), Wait's too
+    from twin.nav.behaviors.behavior_server import BehaviorServer
+
+    class _Frames:
+        odom_pose = (0.0, 0.0, 0.0)
+
+    class _Costmap:
+        footprint = BehaviorParams().footprint
+        grid = _open()
+
+    behaviors = BehaviorServer(
+        BehaviorParams(),
+        _Frames(),  # type: ignore[arg-type]
+        _Costmap(),  # type: ignore[arg-type]
+        finish=lambda goal, state, reason="": None,
+    )
+    goal = ActionGoal(server=server, request={"target_yaw": 1.57, "time_s": 5.0, "time_allowance": 10.0})
+    behaviors.start(goal, 0)
+    assert behaviors.cycle(S // 10) == ((0.0, 1.0) if server == "spin" else None)
+    behaviors.cancel(goal)
+    assert behaviors.cycle(2 * S // 10) == (0.0, 0.0)
+    assert behaviors.cycle(3 * S // 10) is None
