@@ -344,6 +344,10 @@ def _behavior_server(r: ParamReader) -> float:
     r.number("max_rotational_vel", 1.0, low=0.0, high=_D, unit="rad/s")
     r.number("min_rotational_vel", 0.4, low=0.0, high=_D, unit="rad/s")
     r.number("rotational_acc_lim", 3.2, low=0.0, high=_D, unit="rad/s^2")
+    for name in ("backup", "drive_on_heading"):  # Humble flips limits given with the wrong sign
+        r.number(f"{name}.acceleration_limit", 0.0, low=-_D, high=_D, unit="m/s^2")
+        r.number(f"{name}.deceleration_limit", 0.0, low=-_D, high=_D, unit="m/s^2")
+        r.number(f"{name}.minimum_speed", 0.0, low=0.0, high=_D, unit="m/s")
     if not isinstance(r, _Collector) and hz * ahead > _LOOKAHEAD_STEPS:
         raise r.fail(
             "simulate_ahead_time",
