@@ -20,6 +20,12 @@ Components:
   normalisation, bit for bit.
 - `amcl_resample`: AMCL's KLD resampling given Nav2's uniform draws: how many samples, and each one.
 - `amcl_estimate`: the pose AMCL publishes (the heaviest cluster's mean) and the covariance it carries.
+- `rpp`: Regulated Pure Pursuit (`twin.nav.controller.regulated_pure_pursuit`) over a sequence of
+  cycles: statuses, the plan's pruning, the branch, lookahead, carrot, curvature and command within
+  1e-9 (`twin.nav.controller.rpp_conformance_check`).
+- `behavior`: Spin, BackUp, DriveOnHeading (`twin.nav.behaviors`): acceptance, each cycle's status
+  and command, bit for bit; `behavior_collision`: the behaviours' and RPP's footprint collision checks
+  (`twin.nav.behaviors.conformance_check`).
 """
 
 from __future__ import annotations
@@ -42,6 +48,8 @@ from twin.nav.amcl.conformance_check import (
     check_amcl_motion_model,
     check_amcl_resample,
 )
+from twin.nav.behaviors.conformance_check import check_behavior, check_behavior_collision
+from twin.nav.controller.rpp_conformance_check import check_rpp
 from twin.nav.costmap_2d.conformance_check import check_inflation
 from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
 
@@ -198,6 +206,9 @@ COMPONENTS: dict[str, Checker] = {
     "amcl_likelihood_field": check_amcl_likelihood_field,
     "amcl_resample": check_amcl_resample,
     "amcl_estimate": check_amcl_estimate,
+    "rpp": check_rpp,
+    "behavior": check_behavior,
+    "behavior_collision": check_behavior_collision,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 

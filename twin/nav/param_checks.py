@@ -264,11 +264,12 @@ _RPP_NUMBERS = (
     "rotate_to_heading_angular_vel", "min_approach_linear_velocity", "approach_velocity_scaling_dist",
     "regulated_linear_scaling_min_radius", "regulated_linear_scaling_min_speed", "rotate_to_heading_min_angle",
     "max_angular_accel", "cost_scaling_dist", "cost_scaling_gain", "max_allowed_time_to_collision_up_to_carrot",
-    "max_angular_vel",
+    "inflation_cost_scaling_factor", "max_robot_pose_search_dist", "transform_tolerance",
 )  # fmt: skip
 _RPP_FLAGS = (
     "use_velocity_scaled_lookahead_dist", "use_regulated_linear_velocity_scaling",
     "use_cost_regulated_linear_velocity_scaling", "use_rotate_to_heading", "use_collision_detection",
+    "allow_reversing", "use_interpolation",
 )  # fmt: skip
 
 
@@ -343,6 +344,10 @@ def _behavior_server(r: ParamReader) -> float:
     r.number("max_rotational_vel", 1.0, low=0.0, high=_D, unit="rad/s")
     r.number("min_rotational_vel", 0.4, low=0.0, high=_D, unit="rad/s")
     r.number("rotational_acc_lim", 3.2, low=0.0, high=_D, unit="rad/s^2")
+    for name in ("backup", "drive_on_heading"):  # Humble flips limits given with the wrong sign
+        r.number(f"{name}.acceleration_limit", 0.0, low=-_D, high=_D, unit="m/s^2")
+        r.number(f"{name}.deceleration_limit", 0.0, low=-_D, high=_D, unit="m/s^2")
+        r.number(f"{name}.minimum_speed", 0.0, low=0.0, high=_D, unit="m/s")
     if not isinstance(r, _Collector) and hz * ahead > _LOOKAHEAD_STEPS:
         raise r.fail(
             "simulate_ahead_time",

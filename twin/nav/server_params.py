@@ -16,7 +16,8 @@ from typing import Any
 from twin.core.errors import ConfigError
 from twin.nav.behaviors.timed_behavior import BehaviorParams
 from twin.nav.controller.checkers import SimpleGoalChecker
-from twin.nav.controller.controller_server import controller_for_plugin
+from twin.nav.controller.controller_server import CONTROLLER_PLUGINS, controller_for_plugin
+from twin.nav.controller.regulated_pure_pursuit import NAV2_PARAMETERS as RPP_PARAMETERS
 from twin.nav.params import Nav2Params
 from twin.nav.planner.navfn import NavfnParams
 from twin.nav.velocity_smoother.velocity_smoother import Feedback, SmootherParams
@@ -56,6 +57,13 @@ def _flag(section: Mapping[str, Any], key: str, default: bool, where: str) -> bo
         msg = f"{where}.{key}: expected true or false, got {value!r}; fix the params file"
         raise ConfigError(msg)
     return value
+
+
+def _drive_limits(section: Mapping[str, Any], behavior: str, where: str) -> tuple[float, float, float]:
+    """DriveOnHeading's / BackUp's `<behavior>.acceleration_limit`, `.deceleration_limit`, `.minimum_speed` (0 each)."""
+    keys = ("acceleration_limit", "deceleration_limit", "minimum_speed")
+    accel, decel, minimum = (_num(section, f"{behavior}.{k}", 0.0, where) for k in keys)
+    return accel, decel, minimum
 
 
 def _names(section: Mapping[str, Any], key: str, default: Sequence[str], where: str) -> tuple[str, ...]:
@@ -104,7 +112,8 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         # refuses unknown plugins, critics and bad values now, before the run
         controller_for_plugin(plugin, section, where=f"{where}.{name}", controller_frequency_hz=frequency)
         controllers[name] = (plugin, section)
-        cu.extend(f"{name}.{k}" for k in section)
+        # RPP reads only the keys Humble's RPP declares; the others are named in the unused-parameters warning
+        cu.extend(f"{name}.{k}" for k in section if plugin != CONTROLLER_PLUGINS[1] or k in RPP_PARAMETERS)
     checker_names = _names(cs, "goal_checker_plugins", (), where) or (
         str(cs.get("goal_checker_plugin", "goal_checker")),
     )
@@ -175,9 +184,13 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         max_rotational_vel=_num(bs, "max_rotational_vel", bd.max_rotational_vel, bwhere),
         min_rotational_vel=_num(bs, "min_rotational_vel", bd.min_rotational_vel, bwhere),
         rotational_acc_lim=_num(bs, "rotational_acc_lim", bd.rotational_acc_lim, bwhere),
+        backup_limits=_drive_limits(bs, "backup", bwhere),
+        drive_on_heading_limits=_drive_limits(bs, "drive_on_heading", bwhere),
     )
     used["behavior_server"] = [
         "cycle_frequency", "simulate_ahead_time", "max_rotational_vel", "min_rotational_vel", "rotational_acc_lim",
+        *(f"{b}.{k}" for b in ("backup", "drive_on_heading")
+          for k in ("acceleration_limit", "deceleration_limit", "minimum_speed")),
     ]  # fmt: skip
     return Nav2Config(
         controller_frequency_hz=frequency,

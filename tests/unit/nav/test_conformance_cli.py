@@ -16,6 +16,8 @@ NAVFN = Path(__file__).resolve().parent / "planner" / "navfn_cases"
 INFLATION = Path(__file__).resolve().parent / "costmap_2d" / "inflation_cases"
 SMOOTHER = Path(__file__).resolve().parent / "velocity_smoother" / "smoother_cases"
 AMCL = Path(__file__).resolve().parent / "amcl" / "amcl_cases"
+RPP = Path(__file__).resolve().parent / "controller" / "rpp_cases"
+BEHAVIORS = Path(__file__).resolve().parent / "behaviors" / "behavior_cases"
 
 
 def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) -> None:
@@ -25,6 +27,7 @@ def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) ->
         ("navfn", NAVFN, "compiled kernel"),
         ("inflation", INFLATION, "compiled kernel"),
         ("velocity_smoother", SMOOTHER, "Python path"),  # it has no C kernel
+        ("rpp", RPP, "Python path"),
     ):
         count = len(list(folder.glob("*.npz")))
         assert f"{component} ({how}): {count} of {count} cases equal Nav2's answer" in out.err
@@ -33,6 +36,10 @@ def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) ->
     for component in set(amcl):
         count = amcl.count(component)
         assert f"{component} (compiled kernel): {count} of {count} cases equal Nav2's answer" in out.err
+    behaviors = [load_case(p)[0]["component"] for p in BEHAVIORS.glob("*.npz")]
+    for component in ("behavior", "behavior_collision"):
+        count = behaviors.count(component)
+        assert f"{component} (Python path): {count} of {count} cases equal Nav2's answer" in out.err
     assert "DIFFERS" not in out.out
 
 
@@ -82,5 +89,6 @@ def test_a_case_for_a_component_the_twin_does_not_check_is_refused(
     assert main(["nav", "conformance", str(tmp_path / "dwb.npz")]) == 2
     assert (
         "a case for dwb_critics; the twin checks amcl_estimate, amcl_likelihood_field, amcl_motion_model, "
-        "amcl_resample, inflation, navfn, velocity_smoother" in capsys.readouterr().err
+        "amcl_resample, behavior, behavior_collision, inflation, navfn, rpp, velocity_smoother"
+        in capsys.readouterr().err
     )

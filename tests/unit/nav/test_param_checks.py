@@ -111,3 +111,18 @@ def test_image_size_comes_from_the_header(head: bytes, tmp_path: Path) -> None:
     path.write_bytes(head + b"\x00" * 16)
     with pytest.raises(ConfigError, match="40000 x 40000 pixels"):
         check_map_image(path, "m.yaml")
+
+
+def test_backup_and_drive_on_heading_limits_are_read_and_checked(tmp_path: Path) -> None:
+    # Humble's DriveOnHeading / BackUp read <behaviour>.acceleration_limit, .deceleration_limit, .minimum_speed
+    params = load_nav2_params(
+        default_params_path("waffle"), overrides={"behavior_server.backup.deceleration_limit": -2.5}
+    )
+    check_nav2_inputs(params)
+    path = tmp_path / "p.yaml"
+    path.write_text(
+        "controller_server:\n  ros__parameters:\n    FollowPath:\n      critics: [BaseObstacle]\n"
+        "behavior_server:\n  ros__parameters:\n    drive_on_heading:\n      minimum_speed: -0.1\n"
+    )
+    with pytest.raises(ConfigError, match=r"p\.yaml:8: behavior_server\.drive_on_heading\.minimum_speed: must be"):
+        check_nav2_inputs(load_nav2_params(path))

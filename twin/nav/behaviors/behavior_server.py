@@ -61,6 +61,7 @@ class BehaviorServer:
         self._finish = finish
         self._goal: ActionGoal | None = None
         self._impl: Spin | DriveOnHeading | Wait | None = None
+        self._stop = False
         #: Behaviour goals started so far (Nav2's feedback counts them as recoveries).
         self.recoveries = 0
 
@@ -76,21 +77,30 @@ class BehaviorServer:
             request["time_s"] = request.get("wait_duration", 1.0)
         # the behaviours check the local costmap's footprint, as behavior_server reads it from that costmap
         params = dataclasses.replace(self.params, footprint=tuple(self.local_costmap.footprint))
+        self._stop = False
         behavior = make_behavior(goal.server, params)
-        behavior.start(request, self.frames.odom_pose, t_ns)
-        self._goal, self._impl = goal, behavior
         self.recoveries += 1
         _log.info("Running %s", goal.server)
+        refusal = behavior.start(request, self.frames.odom_pose, t_ns)
+        if refusal:  # Nav2's onRun refused it: "Initial checks failed", the goal is aborted at once
+            _log.warning("Initial checks failed for %s: %s", goal.server, refusal)
+            self._finish(goal, ActionState.FAILED, reason=refusal)
+            return
+        self._goal, self._impl = goal, behavior
 
     def cancel(self, goal: ActionGoal) -> None:
-        """Forget `goal` if it is the running one."""
+        """Stop `goal` if it is the running one: the next cycle publishes a zero command (TimedBehavior's stopRobot)."""
         if goal is self._goal:
             self._goal = None
+            self._stop = True
 
     def cycle(self, t_ns: int) -> tuple[float, float] | None:
         """One behavior_server cycle: the command for `/cmd_vel` (None when idle or waiting)."""
         goal, impl = self._goal, self._impl
         if goal is None or impl is None:
+            if self._stop:  # a canceled behaviour, Wait too, stops the robot
+                self._stop = False
+                return (0.0, 0.0)
             return None
         step = impl.step(t_ns, self.frames.odom_pose, self.local_costmap.grid)
         if step.status is BehaviorStatus.RUNNING:

@@ -17,12 +17,13 @@ Pose = tuple[float, float, float]
 class Spin(TimedBehavior):
     """Turn in place by `target_yaw` rad (sign gives the direction)."""
 
-    def start(self, request: Mapping[str, Any], pose: Pose, t_ns: int) -> None:
+    def start(self, request: Mapping[str, Any], pose: Pose, t_ns: int) -> str:
         """Begin a spin."""
         super().start(request, pose, t_ns)
         self._target = float(request["target_yaw"])
         self._relative = 0.0
         self._prev_yaw = pose[2]
+        return ""
 
     def step(self, t_ns: int, pose: Pose, costmap: CostGrid) -> BehaviorStep:
         """One cycle."""

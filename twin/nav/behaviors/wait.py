@@ -16,10 +16,11 @@ Pose = tuple[float, float, float]
 class Wait(TimedBehavior):
     """Publish nothing for `time_s` seconds, then succeed."""
 
-    def start(self, request: Mapping[str, Any], pose: Pose, t_ns: int) -> None:
+    def start(self, request: Mapping[str, Any], pose: Pose, t_ns: int) -> str:
         """Begin waiting."""
-        super().start({"time_allowance": 1e9}, pose, t_ns)
+        super().start({"time_allowance": 0.0}, pose, t_ns)
         self._duration_ns = round(float(request["time_s"]) * 1e9)
+        return ""
 
     def step(self, t_ns: int, pose: Pose, costmap: CostGrid) -> BehaviorStep:
         """One cycle."""

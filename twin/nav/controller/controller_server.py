@@ -147,6 +147,8 @@ class FollowPathTask:
         costmap frame.
         """
         goal = self._goal
+        if hasattr(self.controller, "goal_dist_tol_m"):  # RPP reads the goal checker's tolerance each cycle
+            self.controller.goal_dist_tol_m = self.goal_checker.xy_goal_tolerance_m
         if plan_to_costmap is not None:
             if hasattr(self.controller, "plan_to_costmap"):
                 self.controller.plan_to_costmap = plan_to_costmap
@@ -206,7 +208,8 @@ def controller_for_plugin(
     if plugin == CONTROLLER_PLUGINS[1]:
         from twin.nav.controller.regulated_pure_pursuit import RppController, RppParams
 
-        return RppController(RppParams.from_nav2(dict(section)))
+        rpp = RppParams.from_nav2(section, controller_frequency_hz=controller_frequency_hz, where=where)
+        return RppController(rpp)
     msg = f"{where}.plugin: unknown controller plugin {plugin!r}; the twin has {', '.join(CONTROLLER_PLUGINS)}"
     raise ConfigError(msg)
 
@@ -256,6 +259,14 @@ class ControllerServer:
                 controller_frequency_hz=controller_frequency_hz,
             )
             self.controllers[name] = controller
+            use_costmap = getattr(controller, "use_costmap", None)
+            if use_costmap is not None:  # RPP checks the costmap's padded footprint and reads its radii
+                use_costmap(
+                    local_costmap.footprint,
+                    local_costmap.inscribed_radius_m,
+                    local_costmap.circumscribed_radius_m,
+                    local_costmap.params.track_unknown_space,
+                )
             checker = next(iter(goal_checkers.values()), SimpleGoalChecker())
             progress = SimpleProgressChecker(
                 required_movement_radius_m=progress_radius_m,

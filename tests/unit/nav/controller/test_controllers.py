@@ -10,10 +10,17 @@ from twin.core.errors import ConfigError
 from twin.nav.controller.checkers import SimpleGoalChecker, SimpleProgressChecker
 from twin.nav.controller.controller_server import FollowPathTask, FollowStatus, controller_for_plugin
 from twin.nav.controller.dwb.local_planner import DwbController, DwbParams
-from twin.nav.controller.regulated_pure_pursuit import RppController
+from twin.nav.controller.regulated_pure_pursuit import RppController, RppParams
 from twin.nav.params import load_nav2_params
 
 PERIOD_NS = 100_000_000  # 10 Hz
+
+
+def _tb3_rpp() -> RppController:
+    """RPP at TurtleBot3's speeds on this file's 10 Hz loop (Nav2's code defaults drive at 0.5 m/s)."""
+    return RppController(
+        RppParams(desired_linear_vel=0.22, rotate_to_heading_angular_vel=1.0, controller_frequency_hz=10)
+    )
 
 
 def _straight() -> np.ndarray:
@@ -54,7 +61,7 @@ def _empty():  # type: ignore[no-untyped-def]
 
 
 @pytest.mark.parametrize("plan_name", ["straight", "curve"])
-@pytest.mark.parametrize("make", [DwbController, RppController], ids=["dwb", "rpp"])
+@pytest.mark.parametrize("make", [DwbController, _tb3_rpp], ids=["dwb", "rpp"])
 def test_follows_a_path_within_tb3_limits_and_stops_at_the_goal(plan_name: str, make) -> None:  # type: ignore[no-untyped-def]
     plan = _straight() if plan_name == "straight" else _curve()
     start = (float(plan[0, 0]), float(plan[0, 1]), float(math.atan2(plan[1, 1] - plan[0, 1], plan[1, 0] - plan[0, 0])))
@@ -87,7 +94,7 @@ def test_dwb_trajectories_ramp_under_the_acceleration_limits() -> None:
     assert turn == pytest.approx(np.minimum(wz, 3.2 * t))
 
 
-@pytest.mark.parametrize("make", [DwbController, RppController], ids=["dwb", "rpp"])
+@pytest.mark.parametrize("make", [DwbController, _tb3_rpp], ids=["dwb", "rpp"])
 def test_refuses_to_drive_into_a_lethal_cell(make) -> None:  # type: ignore[no-untyped-def]
     occupied = np.zeros((120, 120), dtype=bool)
     occupied[:, 60:62] = True  # a wall across the path at x = 3 m
