@@ -492,12 +492,10 @@ static int poses_legal(const Heading *h, const double *par, const double *st, co
     return 1;
 }
 
-/* angles::shortest_angular_distance */
+/* angles::shortest_angular_distance (angles 1.15, Humble): normalize_angle(to - from) */
 static double shortest_angle(double from, double to) {
-    const double two_pi = 2.0 * M_PI;
-    double a = fmod(fmod(to - from, two_pi) + two_pi, two_pi);
-    if (a > M_PI) a -= two_pi;
-    return a;
+    double r = fmod((to - from) + M_PI, 2.0 * M_PI);
+    return r <= 0.0 ? r + M_PI : r - M_PI;
 }
 
 static int has_critic(const double *par, int code, double *scale) {
