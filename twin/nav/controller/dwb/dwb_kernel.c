@@ -8,19 +8,18 @@
    lowest total among the legal ones. Python keeps the critics' state between cycles (local_planner.py, critics.py)
    and has a numpy implementation of the same cycle for machines without a C compiler.
 
-   Where this differs from a literal transcription, it gives the same answers faster:
-   - headings advance by rotating (cos, sin) by each step's angle instead of calling cos/sin of the
-     accumulated heading, and the samples of one theta velocity share their headings; once a
-     sample's x velocity holds, its positions follow from running sums of the headings (the poses
-     agree with step-by-step integration to ~1e-15 m);
+   Where this differs from a literal transcription, it gives the same answers, bit for bit, faster:
+   - the samples of one theta velocity share their headings (the heading, its cos and sin after each
+     step do not depend on the x velocity); positions are integrated step by step as Nav2 does;
    - every sample is scored from its end pose first; the poses in between (off the costmap, or on a
      lethal, inscribed or unknown cell, make a trajectory illegal) are checked only for the samples
      that would win, best first, until one is legal: that is the sample Humble keeps. Poses closer to
      a checked one than any illegal cell (a chessboard distance map around the robot) are not looked
      up: they cannot be illegal;
    - PathDist's Manhattan distance map comes from a two-pass distance transform, which equals the
-     breadth-first propagation Humble runs (4-neighbour, unobstructed grid); GoalDist and GoalAlign
-     seed one cell, so their distance is |dx| + |dy|. */
+     propagation Humble runs (costmap_queue, 4-neighbour, unobstructed grid); GoalDist and GoalAlign
+     seed one cell, so their distance is |dx| + |dy|.
+   `tests/unit/nav/controller/dwb_cases` holds it to Nav2's own code. */
 
 #include <math.h>
 #include <stdlib.h>
@@ -193,18 +192,6 @@ static long time_steps(const double *par, double vx, double vth) {
     return n < 1 ? 1 : n;
 }
 
-/* sin and cos of a small angle (|a| <= 0.2, a Taylor polynomial exact to double precision), else libm. */
-static void small_sincos(double a, double *s, double *c) {
-    if (fabs(a) > 0.2) {
-        *s = sin(a);
-        *c = cos(a);
-        return;
-    }
-    double a2 = a * a;
-    *s = a * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0 * (1.0 - a2 / 110.0)))));
-    *c = 1.0 - a2 / 2.0 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0 * (1.0 - a2 / 132.0)))));
-}
-
 /* The plan's poses at the costmap's resolution (nav_2d_utils::adjustPlanResolution), visited one by
    one as the map-grid critics' prepare() visits them. */
 typedef struct {
@@ -337,24 +324,16 @@ static long rollout(const double *par, const double *st, double cmd_x, double cm
     double dt = par[P_SIM_TIME] / (double)n;
     int limited = par[P_LIMITED] != 0.0;
     double x = st[S_X], y = st[S_Y], th = st[S_YAW];
-    double c = cos(th), s = sin(th);
     double v = st[S_VX], w = st[S_VTH];
-    double w_rot = NAN, ca = 1.0, sa = 0.0;
     long k_out = 0;
     for (long k = 0; k <= n; ++k) {
-        if (k > 0) {
+        if (k > 0) { /* computeNewVelocity, then computeNewPosition from the heading before the step */
             v = limited ? cmd_x : project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, cmd_x);
             w = limited ? cmd_th : project_velocity(w, par[P_ACC_TH], par[P_DEC_TH], dt, cmd_th);
+            double c = cos(th), s = sin(th);
             x = x + (v * c) * dt;
             y = y + (v * s) * dt;
             th = th + w * dt;
-            if (w != w_rot) {
-                w_rot = w;
-                small_sincos(w * dt, &sa, &ca);
-            }
-            double c2 = c * ca - s * sa;
-            s = s * ca + c * sa;
-            c = c2;
         }
         if (k_out < cap) {
             traj[3 * k_out] = x;
@@ -373,70 +352,45 @@ static long rollout(const double *par, const double *st, double cmd_x, double cm
 }
 
 /* The headings of every trajectory turning towards one theta sample in n steps: they do not depend on
-   the x sample, so the x samples of a theta sample share them. c[k], s[k], th[k] after step k;
-   C[k], S[k] the sums of c[0..k-1], s[0..k-1] (positions in closed form once the x velocity holds). */
+   the x sample, so the x samples of a theta sample share them. th[k] after step k (th + w * dt, w
+   ramping as computeNewVelocity ramps it), c[k] and s[k] its cos and sin (libm, as Nav2 calls them). */
 typedef struct {
     long n;
     double dt, w;
-    double *c, *s, *th, *C, *S;
+    double *c, *s, *th;
 } Heading;
 
 static void heading_table(Heading *h, const double *par, const double *st, double cmd_th, long n) {
     double dt = par[P_SIM_TIME] / (double)n;
     int limited = par[P_LIMITED] != 0.0;
-    double w = st[S_VTH], th = st[S_YAW], c = cos(th), s = sin(th);
-    double w_rot = NAN, ca = 1.0, sa = 0.0;
+    double w = st[S_VTH], th = st[S_YAW];
     h->n = n;
     h->dt = dt;
     h->w = cmd_th;
-    h->c[0] = c;
-    h->s[0] = s;
     h->th[0] = th;
-    h->C[0] = 0.0;
-    h->S[0] = 0.0;
+    h->c[0] = cos(th);
+    h->s[0] = sin(th);
     for (long k = 1; k <= n; ++k) {
         w = limited ? cmd_th : project_velocity(w, par[P_ACC_TH], par[P_DEC_TH], dt, cmd_th);
         th = th + w * dt;
-        if (w != w_rot) {
-            w_rot = w;
-            small_sincos(w * dt, &sa, &ca);
-        }
-        double c2 = c * ca - s * sa;
-        s = s * ca + c * sa;
-        c = c2;
-        h->C[k] = h->C[k - 1] + h->c[k - 1];
-        h->S[k] = h->S[k - 1] + h->s[k - 1];
-        h->c[k] = c;
-        h->s[k] = s;
         h->th[k] = th;
+        h->c[k] = cos(th);
+        h->s[k] = sin(th);
     }
 }
 
-/* Steps while the x velocity ramps towards the sample (none with LimitedAccelGenerator: it is the
-   sample from the first step); after them the poses follow in closed form. Returns that step count and
-   the pose after it. */
-static long ramp(const Heading *h, const double *par, const double *st, double vx, double *xr, double *yr) {
-    long k = 0;
-    double dt = h->dt, x = st[S_X], y = st[S_Y], v = st[S_VX];
-    if (par[P_LIMITED] == 0.0) {
-        while (k < h->n && v != vx) {
-            k++;
-            v = project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, vx);
-            x = x + (v * h->c[k - 1]) * dt;
-            y = y + (v * h->s[k - 1]) * dt;
-        }
-    }
-    *xr = x;
-    *yr = y;
-    return k;
-}
-
+/* The end pose of one x sample, step by step as StandardTrajectoryGenerator integrates it. */
 static void end_pose(const Heading *h, const double *par, const double *st, double vx, End *e) {
-    double xr, yr;
-    long r = ramp(h, par, st, vx, &xr, &yr), n = h->n;
-    double step = vx * h->dt;
-    e->x = xr + step * (h->C[n] - h->C[r]);
-    e->y = yr + step * (h->S[n] - h->S[r]);
+    long n = h->n;
+    double dt = h->dt, x = st[S_X], y = st[S_Y], v = st[S_VX];
+    int limited = par[P_LIMITED] != 0.0;
+    for (long k = 1; k <= n; ++k) {
+        v = limited ? vx : project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, vx);
+        x = x + (v * h->c[k - 1]) * dt;
+        y = y + (v * h->s[k - 1]) * dt;
+    }
+    e->x = x;
+    e->y = y;
     e->th = h->th[n];
     e->c = h->c[n];
     e->s = h->s[n];
@@ -455,39 +409,22 @@ static int check_pose(const Grid *g, const Clearance *clear, int checks, double 
     return 1;
 }
 
-/* Every pose of one sample's trajectory on the costmap (and, CHECK_COST, on a cell below 253); poses
-   closer to a checked one than any illegal cell are not looked up, they cannot be illegal. */
+/* Every pose of one sample's trajectory on the costmap (and, CHECK_COST, on a cell below 253); the
+   poses are integrated step by step as for the end pose, but poses closer to a checked one than any
+   illegal cell are not looked up: they cannot be illegal. */
 static int poses_legal(const Heading *h, const double *par, const double *st, const Grid *g, const Clearance *clear,
                        int checks, double vx) {
-    long n = h->n, k = 0;
+    long n = h->n;
     double dt = h->dt, x = st[S_X], y = st[S_Y], v = st[S_VX];
+    int limited = par[P_LIMITED] != 0.0;
     double budget = 0.0; /* distance left before a pose must be checked */
     if (!check_pose(g, clear, checks, x, y, &budget)) return 0;
-    if (par[P_LIMITED] == 0.0) {
-        while (k < n && v != vx) {
-            k++;
-            v = project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, vx);
-            x = x + (v * h->c[k - 1]) * dt;
-            y = y + (v * h->s[k - 1]) * dt;
-            budget -= fabs(v) * dt;
-            if ((budget <= 0.0 || k == n) && !check_pose(g, clear, checks, x, y, &budget)) return 0;
-        }
-    }
-    long r = k;
-    double xr = x, yr = y, step = vx * dt, len = fabs(step);
-    while (k < n) {
-        long j;
-        if (len == 0.0) j = n;
-        else if (budget <= 0.0) j = k + 1;
-        else {
-            double m = ceil(budget / len);
-            j = m >= (double)(n - k) ? n : k + (long)m;
-            if (j <= k) j = k + 1;
-        }
-        x = xr + step * (h->C[j] - h->C[r]);
-        y = yr + step * (h->S[j] - h->S[r]);
-        if (!check_pose(g, clear, checks, x, y, &budget)) return 0;
-        k = j;
+    for (long k = 1; k <= n; ++k) {
+        v = limited ? vx : project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, vx);
+        x = x + (v * h->c[k - 1]) * dt;
+        y = y + (v * h->s[k - 1]) * dt;
+        budget -= fabs(v) * dt;
+        if ((budget <= 0.0 || k == n) && !check_pose(g, clear, checks, x, y, &budget)) return 0;
     }
     return 1;
 }
@@ -567,7 +504,7 @@ int twin_dwb_cycle(const double *par, double *st, const double *plan, long n_pla
     double vmax = fmax(fabs(par[P_MIN_VX]), fabs(par[P_MAX_VX]));
     long max_steps = (long)ceil(fmax(vmax * par[P_SIM_TIME] / par[P_LIN_GRAN],
                                      fabs(par[P_MAX_VTH]) * par[P_SIM_TIME] / par[P_ANG_GRAN])) + 2;
-    double *dbl = malloc(sizeof(double) * (size_t)(2 * m + 3 * cap + 5 * (max_steps + 1)));
+    double *dbl = malloc(sizeof(double) * (size_t)(2 * m + 3 * cap + 3 * (max_steps + 1)));
     int *ints = malloc(sizeof(int) * (size_t)(2 * cells + 2 * cap + (long)nt + 4));
     long *order = malloc(sizeof(long) * (size_t)cap);
     unsigned char *state = malloc((size_t)cap);
@@ -581,7 +518,7 @@ int twin_dwb_cycle(const double *par, double *st, const double *plan, long n_pla
     double *xs = dbl, *ys = dbl + m, *cmd = dbl + 2 * m, *totals = dbl + 2 * m + 2 * cap;
     double *tab = dbl + 2 * m + 3 * cap;
     long stride = max_steps + 1;
-    Heading h = {-1, 0.0, 0.0, tab, tab + stride, tab + 2 * stride, tab + 3 * stride, tab + 4 * stride};
+    Heading h = {-1, 0.0, 0.0, tab, tab + stride, tab + 2 * stride};
     int *path_map = ints, *th_index = ints + 2 * cells, *first = th_index + cap;
     Clearance clear = {ints + cells, 0, 0, 0, 0};
     for (long i = 0; i < m; ++i) {
