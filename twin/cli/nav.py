@@ -14,6 +14,7 @@ _RECORDED = (
     _REPO / "tests" / "unit" / "nav" / "costmap_2d" / "inflation_cases",
     _REPO / "tests" / "unit" / "nav" / "velocity_smoother" / "smoother_cases",
     _REPO / "tests" / "unit" / "nav" / "amcl" / "amcl_cases",
+    _REPO / "tests" / "unit" / "nav" / "controller" / "dwb_cases",
 )
 """The recorded sets a checkout holds, replayed when no CASE is named."""
 

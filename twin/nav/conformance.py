@@ -20,6 +20,9 @@ Components:
   normalisation, bit for bit.
 - `amcl_resample`: AMCL's KLD resampling given Nav2's uniform draws: how many samples, and each one.
 - `amcl_estimate`: the pose AMCL publishes (the heaviest cluster's mean) and the covariance it carries.
+- `dwb`: one DWB controller cycle (`twin.nav.controller.dwb`): the plan's cut, the velocity samples,
+  each trajectory's poses, each critic's raw score and which critic rejects a sample, the totals,
+  bit for bit, and the command chosen (`twin.nav.controller.dwb.conformance_check`).
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ from twin.nav.amcl.conformance_check import (
     check_amcl_motion_model,
     check_amcl_resample,
 )
+from twin.nav.controller.dwb.conformance_check import check_dwb
 from twin.nav.costmap_2d.conformance_check import check_inflation
 from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
 
@@ -198,11 +202,12 @@ COMPONENTS: dict[str, Checker] = {
     "amcl_likelihood_field": check_amcl_likelihood_field,
     "amcl_resample": check_amcl_resample,
     "amcl_estimate": check_amcl_estimate,
+    "dwb": check_dwb,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 WITH_C_KERNEL = frozenset(
-    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate"}
+    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate", "dwb"}
 )
 """The components whose twin part has a C kernel beside its Python path (the others are Python only)."""
 
