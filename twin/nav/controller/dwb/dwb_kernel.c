@@ -383,11 +383,16 @@ static void heading_table(Heading *h, const double *par, const double *st, doubl
 static void end_pose(const Heading *h, const double *par, const double *st, double vx, End *e) {
     long n = h->n;
     double dt = h->dt, x = st[S_X], y = st[S_Y], v = st[S_VX];
-    int limited = par[P_LIMITED] != 0.0;
-    for (long k = 1; k <= n; ++k) {
-        v = limited ? vx : project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, vx);
+    long k = 1;
+    if (par[P_LIMITED] != 0.0) v = vx;
+    for (; k <= n && v != vx; ++k) { /* the ramp; then the velocity holds at the sample */
+        v = project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, vx);
         x = x + (v * h->c[k - 1]) * dt;
         y = y + (v * h->s[k - 1]) * dt;
+    }
+    for (; k <= n; ++k) {
+        x = x + (vx * h->c[k - 1]) * dt;
+        y = y + (vx * h->s[k - 1]) * dt;
     }
     e->x = x;
     e->y = y;
