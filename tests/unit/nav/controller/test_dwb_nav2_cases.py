@@ -28,13 +28,19 @@ def test_the_recorded_set_covers_the_issue() -> None:
     assert len({m["nav2_commit"] for m in metas}) == 1
     groups = {m["group"] for m in metas}
     assert {"mission", "mission_state", "rotate_to_goal", "goal_close", "obstacles", "corridor", "velocity"} <= groups
-    assert {"oscillation", "plan", "params"} <= groups
+    assert {"oscillation", "plan", "params", "limited_accel"} <= groups
     assert sum(m["group"].startswith("mission") for m in metas) >= 100
     assert {m["status"] for m in metas} == {"ok", "no_legal", "empty_plan", "empty_transformed"}
     assert sum("poses" in load_case(f)[1] for f in FILES) >= 3
-    # the critics' state is exercised: RotateToGoal's latches and each of Oscillation's flags
+    # the critics' state is exercised: RotateToGoal's latches and each of Oscillation's flags and signs
     states = np.array([load_case(f)[1]["state"] for f in FILES])
-    assert states.any(axis=0).all()
+    assert states[:, :6].any(axis=0).all()
+    assert {-1, 1} <= set(states[:, 6:].ravel().tolist())
+    # Oscillation's debrief both sets flags and clears them (the robot moved or turned since the flip)
+    cases = (load_case(f)[1] for f in FILES)
+    after = [(a["state"][2:6], a["oscillation_after"]) for a in cases if "oscillation_after" in a]
+    assert any(not s.any() and o.any() for s, o in after)
+    assert any(s.any() and not o.any() for s, o in after)
 
 
 @pytest.mark.parametrize("native", [True, False], ids=["c", "numpy"])

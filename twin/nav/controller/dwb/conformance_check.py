@@ -2,11 +2,12 @@
 
 A case (`tests/unit/nav/controller/dwb_cases/README.md`) is one controller cycle's inputs — the local
 costmap, the global plan (already in the costmap's frame), the robot's pose and odometry velocity, the
-critics' state (RotateToGoal's latches, Oscillation's flags) and the FollowPath parameters — and what
+critics' state (RotateToGoal's latches, Oscillation's flags, trends and the pose of the last flip) and
+the FollowPath parameters — and what
 Nav2's code made of them: where transformGlobalPlan cut the plan, the goal, each critic's scale, every
 velocity sample in the iterator's order with its trajectory's pose count and end pose (all poses in a
 few cases), each critic's raw score until the first that rejects it, which one that was, the total,
-and the sample Nav2 chose (or none legal).
+the sample Nav2 chose (or none legal), and Oscillation's flags after the cycle's debrief.
 
 The twin's numpy cycle (`DwbController.evaluate`) is compared sample by sample, bit for bit; the
 cycle that runs in missions (the C kernel with `native`, else numpy) must choose the same command with
@@ -50,15 +51,31 @@ def _first(got: NDArray[Any], want: NDArray[Any], what: str) -> str:
 
 def controller_for_case(meta: Mapping[str, Any], arrays: Mapping[str, NDArray[Any]], native: bool) -> DwbController:
     """A DWB controller with the case's parameters, plan and critic state (before its cycle)."""
-    params = DwbParams.from_nav2(dict(meta["params"]), controller_frequency_hz=10.0, where="case params")
+    section = dict(meta["params"])
+    frequency = float(section.pop("controller_frequency", 10.0))  # controller_server's (TB3: 10 Hz)
+    params = DwbParams.from_nav2(section, controller_frequency_hz=frequency, where="case params")
     dwb = DwbController(params, native=native)
     dwb.set_plan(arrays["plan"])
-    in_window, rotating, x_pos, x_neg, th_pos, th_neg = (bool(v) for v in arrays["state"])
+    in_window, rotating, x_pos, x_neg, th_pos, th_neg = (bool(v) for v in arrays["state"][:6])
+    x_sign, th_sign = (int(v) for v in arrays["state"][6:8])
     cr = dwb._critics
     cr.in_window, cr.rotating = in_window, rotating
-    cr.x = CommandTrend(positive_only=x_pos, negative_only=x_neg)
-    cr.theta = CommandTrend(positive_only=th_pos, negative_only=th_neg)
+    cr.x = CommandTrend(sign=x_sign, positive_only=x_pos, negative_only=x_neg)
+    cr.theta = CommandTrend(sign=th_sign, positive_only=th_pos, negative_only=th_neg)
+    cr.stationary = _pose(arrays["stationary"])
     return dwb
+
+
+def _oscillation_after(dwb: DwbController, arrays: Mapping[str, NDArray[Any]], path: str) -> list[str]:
+    """Oscillation's flags after the cycle's debrief against Nav2's (x +only, x -only, theta +only, -only)."""
+    if "oscillation_after" not in arrays:
+        return []
+    cr = dwb._critics
+    got = [cr.x.positive_only, cr.x.negative_only, cr.theta.positive_only, cr.theta.negative_only]
+    want = [bool(v) for v in arrays["oscillation_after"]]
+    if got != want:
+        return [f"Oscillation's flags after the debrief ({path}): twin {got}, Nav2 {want}"]
+    return []
 
 
 def _costmap(arrays: Mapping[str, NDArray[Any]]) -> CostGrid:
@@ -154,7 +171,7 @@ def check_dwb(meta: Mapping[str, Any], arrays: Mapping[str, NDArray[Any]], nativ
         got = _STATUS.get(str(err), "no_legal" if str(err).startswith("No valid trajectories") else str(err))
         if got != status:
             out.append(f"Nav2: {status}; the twin's {path}: {err}")
-        return out
+        return out + _oscillation_after(dwb, arrays, path)
     if status != "ok":
         return [*out, f"Nav2: {status}; the twin's {path} chose {cmd}"]
     want = arrays["samples"][meta["best"]]
@@ -172,4 +189,4 @@ def check_dwb(meta: Mapping[str, Any], arrays: Mapping[str, NDArray[Any]], nativ
         out.append(f"the chosen trajectory ({path}): {len(local)} poses, Nav2 {int(arrays['n_poses'][best])}")
     elif d := _first(local[-1], arrays["end_poses"][best], f"the chosen trajectory's end ({path})"):
         out.append(d)
-    return out
+    return out + _oscillation_after(dwb, arrays, path)
