@@ -76,3 +76,36 @@ def test_local_plan_is_nav2s_trajectory_bit_for_bit(native: bool) -> None:
     want = arrays["poses"][best, : arrays["n_poses"][best]]
     assert dwb.local_plan.shape == want.shape
     assert np.array_equal(dwb.local_plan.view(np.uint64), want.view(np.uint64))
+
+
+def test_the_kernels_fast_table_never_changes_an_answer() -> None:
+    """The C kernel places samples with rotated headings and closed-form sums, and recomputes Nav2's exact
+    doubles only for points near a cell edge: on poses on cell edges (straight along them, and not) and
+    random ones, it chooses what the exact numpy cycle (held to Nav2 above) chooses, with its total."""
+    rng = np.random.default_rng(7)
+    for name in ("mission_s1_0240", "corridor_20cm", "obstacle_lethal_35cm", "plan_uturn_v0.1"):
+        meta, arrays = load_case(CASES / f"{name}.npz")
+        costmap = _costmap(arrays)
+        x0, y0, yaw0 = (float(v) for v in arrays["pose"])
+        res = costmap.resolution_m
+        edge_x = costmap.origin_x_m + round((x0 - costmap.origin_x_m) / res) * res
+        edge_y = costmap.origin_y_m + round((y0 - costmap.origin_y_m) / res) * res
+        poses = [(edge_x, edge_y, yaw) for yaw in (0.0, math.pi / 2, math.pi, -math.pi / 2, yaw0)]
+        poses += [
+            (x0 + rng.uniform(-0.1, 0.1), y0 + rng.uniform(-0.1, 0.1), yaw0 + rng.uniform(-1, 1)) for _ in range(12)
+        ]
+        for pose in poses:
+            velocity = (float(rng.uniform(0.0, 0.22)), float(rng.uniform(-1.0, 1.0)))
+            exact = controller_for_case(meta, arrays, native=False)
+            ev = exact.evaluate(pose, velocity, costmap)
+            legal = ev.legal
+            kernel = controller_for_case(meta, arrays, native=True)
+            if not legal.any():
+                with pytest.raises(RuntimeError):
+                    kernel.compute_velocity(pose, velocity, costmap)
+                continue
+            best = int(np.argmin(np.where(legal, ev.total, np.inf)))
+            assert kernel.compute_velocity(pose, velocity, costmap) == tuple(ev.trajectories.velocity[best])
+            assert kernel._out[3] == ev.total[best]
+            steps = int(ev.trajectories.steps[best])
+            assert np.array_equal(kernel.local_plan[: steps + 1], ev.trajectories.poses[best, : steps + 1])
