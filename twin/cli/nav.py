@@ -16,6 +16,7 @@ _RECORDED = (
     _REPO / "tests" / "unit" / "nav" / "amcl" / "amcl_cases",
     _REPO / "tests" / "unit" / "nav" / "controller" / "rpp_cases",
     _REPO / "tests" / "unit" / "nav" / "behaviors" / "behavior_cases",
+    _REPO / "tests" / "unit" / "nav" / "controller" / "dwb_cases",
 )
 """The recorded sets a checkout holds, replayed when no CASE is named."""
 

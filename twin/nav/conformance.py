@@ -26,6 +26,9 @@ Components:
 - `behavior`: Spin, BackUp, DriveOnHeading (`twin.nav.behaviors`): acceptance, each cycle's status
   and command, bit for bit; `behavior_collision`: the behaviours' and RPP's footprint collision checks
   (`twin.nav.behaviors.conformance_check`).
+- `dwb`: one DWB controller cycle (`twin.nav.controller.dwb`): the plan's cut, the velocity samples,
+  each trajectory's poses, each critic's raw score and which critic rejects a sample, the totals,
+  bit for bit, and the command chosen (`twin.nav.controller.dwb.conformance_check`).
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from twin.nav.amcl.conformance_check import (
 )
 from twin.nav.behaviors.conformance_check import check_behavior, check_behavior_collision
 from twin.nav.controller.rpp_conformance_check import check_rpp
+from twin.nav.controller.dwb.conformance_check import check_dwb
 from twin.nav.costmap_2d.conformance_check import check_inflation
 from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
 
@@ -209,11 +213,12 @@ COMPONENTS: dict[str, Checker] = {
     "rpp": check_rpp,
     "behavior": check_behavior,
     "behavior_collision": check_behavior_collision,
+    "dwb": check_dwb,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 WITH_C_KERNEL = frozenset(
-    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate"}
+    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate", "dwb"}
 )
 """The components whose twin part has a C kernel beside its Python path (the others are Python only)."""
 

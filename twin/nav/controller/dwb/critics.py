@@ -156,7 +156,10 @@ def trajectory_cells(
 
 
 def shortest_angle(from_rad: F64, to_rad: float) -> F64:
-    """angles::shortest_angular_distance."""
-    two_pi = 2.0 * math.pi
-    a = np.fmod(np.fmod(to_rad - from_rad, two_pi) + two_pi, two_pi)
-    return np.asarray(np.where(a > math.pi, a - two_pi, a))
+    """angles::shortest_angular_distance as Humble's angles 1.15 computes it: normalize_angle(to - from).
+
+    That is fmod(a + pi, 2 pi), then minus pi (plus pi when not positive); the older double-fmod form
+    rounds differently in the last bits.
+    """
+    r = np.fmod((to_rad - from_rad) + math.pi, 2.0 * math.pi)
+    return np.asarray(np.where(r <= 0.0, r + math.pi, r - math.pi))

@@ -8,19 +8,23 @@
    lowest total among the legal ones. Python keeps the critics' state between cycles (local_planner.py, critics.py)
    and has a numpy implementation of the same cycle for machines without a C compiler.
 
-   Where this differs from a literal transcription, it gives the same answers faster:
-   - headings advance by rotating (cos, sin) by each step's angle instead of calling cos/sin of the
-     accumulated heading, and the samples of one theta velocity share their headings; once a
-     sample's x velocity holds, its positions follow from running sums of the headings (the poses
-     agree with step-by-step integration to ~1e-15 m);
+   Where this differs from a literal transcription, it gives the same answers, bit for bit, faster:
+   - the samples of one theta velocity share their headings (the heading after each step does not
+     depend on the x velocity);
+   - every sample is first placed with a fast table of headings (their cos and sin by rotation, the
+     positions in closed form: within ~1e-13 m of Nav2's step-by-step doubles); only a point that falls
+     within 1e-7 cell of a cell edge, where that could change the cell looked up, is recomputed exactly
+     as Nav2 integrates it (libm's cos and sin of each step's heading, x + (v cos th) dt step by step).
+     The chosen trajectory (`/local_plan`) is always integrated exactly;
    - every sample is scored from its end pose first; the poses in between (off the costmap, or on a
      lethal, inscribed or unknown cell, make a trajectory illegal) are checked only for the samples
      that would win, best first, until one is legal: that is the sample Humble keeps. Poses closer to
      a checked one than any illegal cell (a chessboard distance map around the robot) are not looked
      up: they cannot be illegal;
    - PathDist's Manhattan distance map comes from a two-pass distance transform, which equals the
-     breadth-first propagation Humble runs (4-neighbour, unobstructed grid); GoalDist and GoalAlign
-     seed one cell, so their distance is |dx| + |dy|. */
+     propagation Humble runs (costmap_queue, 4-neighbour, unobstructed grid); GoalDist and GoalAlign
+     seed one cell, so their distance is |dx| + |dy|.
+   `tests/unit/nav/controller/dwb_cases` holds it to Nav2's own code. */
 
 #include <math.h>
 #include <stdlib.h>
@@ -193,18 +197,6 @@ static long time_steps(const double *par, double vx, double vth) {
     return n < 1 ? 1 : n;
 }
 
-/* sin and cos of a small angle (|a| <= 0.2, a Taylor polynomial exact to double precision), else libm. */
-static void small_sincos(double a, double *s, double *c) {
-    if (fabs(a) > 0.2) {
-        *s = sin(a);
-        *c = cos(a);
-        return;
-    }
-    double a2 = a * a;
-    *s = a * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0 * (1.0 - a2 / 110.0)))));
-    *c = 1.0 - a2 / 2.0 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0 * (1.0 - a2 / 132.0)))));
-}
-
 /* The plan's poses at the costmap's resolution (nav_2d_utils::adjustPlanResolution), visited one by
    one as the map-grid critics' prepare() visits them. */
 typedef struct {
@@ -337,24 +329,16 @@ static long rollout(const double *par, const double *st, double cmd_x, double cm
     double dt = par[P_SIM_TIME] / (double)n;
     int limited = par[P_LIMITED] != 0.0;
     double x = st[S_X], y = st[S_Y], th = st[S_YAW];
-    double c = cos(th), s = sin(th);
     double v = st[S_VX], w = st[S_VTH];
-    double w_rot = NAN, ca = 1.0, sa = 0.0;
     long k_out = 0;
     for (long k = 0; k <= n; ++k) {
-        if (k > 0) {
+        if (k > 0) { /* computeNewVelocity, then computeNewPosition from the heading before the step */
             v = limited ? cmd_x : project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, cmd_x);
             w = limited ? cmd_th : project_velocity(w, par[P_ACC_TH], par[P_DEC_TH], dt, cmd_th);
+            double c = cos(th), s = sin(th);
             x = x + (v * c) * dt;
             y = y + (v * s) * dt;
             th = th + w * dt;
-            if (w != w_rot) {
-                w_rot = w;
-                small_sincos(w * dt, &sa, &ca);
-            }
-            double c2 = c * ca - s * sa;
-            s = s * ca + c * sa;
-            c = c2;
         }
         if (k_out < cap) {
             traj[3 * k_out] = x;
@@ -373,15 +357,49 @@ static long rollout(const double *par, const double *st, double cmd_x, double cm
 }
 
 /* The headings of every trajectory turning towards one theta sample in n steps: they do not depend on
-   the x sample, so the x samples of a theta sample share them. c[k], s[k], th[k] after step k;
-   C[k], S[k] the sums of c[0..k-1], s[0..k-1] (positions in closed form once the x velocity holds). */
+   the x sample, so the x samples of a theta sample share them. th[k] after step k (th + w * dt, w
+   ramping as computeNewVelocity ramps it: exact in both tables). In the exact table c[k] and s[k] are
+   libm's cos and sin of th[k], as Nav2 calls them; in the fast table they come from rotating (cos, sin)
+   by each step's angle (within ~1e-14 of libm's), with C[k], S[k] the sums of c[0..k-1], s[0..k-1]
+   (positions in closed form once the x velocity holds). */
 typedef struct {
     long n;
     double dt, w;
     double *c, *s, *th, *C, *S;
 } Heading;
 
-static void heading_table(Heading *h, const double *par, const double *st, double cmd_th, long n) {
+static void heading_exact(Heading *h, const double *par, const double *st, double cmd_th, long n) {
+    double dt = par[P_SIM_TIME] / (double)n;
+    int limited = par[P_LIMITED] != 0.0;
+    double w = st[S_VTH], th = st[S_YAW];
+    h->n = n;
+    h->dt = dt;
+    h->w = cmd_th;
+    h->th[0] = th;
+    h->c[0] = cos(th);
+    h->s[0] = sin(th);
+    for (long k = 1; k <= n; ++k) {
+        w = limited ? cmd_th : project_velocity(w, par[P_ACC_TH], par[P_DEC_TH], dt, cmd_th);
+        th = th + w * dt;
+        h->th[k] = th;
+        h->c[k] = cos(th);
+        h->s[k] = sin(th);
+    }
+}
+
+/* sin and cos of a small angle (|a| <= 0.2, a Taylor polynomial exact to double precision), else libm. */
+static void small_sincos(double a, double *s, double *c) {
+    if (fabs(a) > 0.2) {
+        *s = sin(a);
+        *c = cos(a);
+        return;
+    }
+    double a2 = a * a;
+    *s = a * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0 * (1.0 - a2 / 110.0)))));
+    *c = 1.0 - a2 / 2.0 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0 * (1.0 - a2 / 132.0)))));
+}
+
+static void heading_fast(Heading *h, const double *par, const double *st, double cmd_th, long n) {
     double dt = par[P_SIM_TIME] / (double)n;
     int limited = par[P_LIMITED] != 0.0;
     double w = st[S_VTH], th = st[S_YAW], c = cos(th), s = sin(th);
@@ -413,8 +431,7 @@ static void heading_table(Heading *h, const double *par, const double *st, doubl
 }
 
 /* Steps while the x velocity ramps towards the sample (none with LimitedAccelGenerator: it is the
-   sample from the first step); after them the poses follow in closed form. Returns that step count and
-   the pose after it. */
+   sample from the first step); returns that step count and the pose after it. */
 static long ramp(const Heading *h, const double *par, const double *st, double vx, double *xr, double *yr) {
     long k = 0;
     double dt = h->dt, x = st[S_X], y = st[S_Y], v = st[S_VX];
@@ -431,7 +448,8 @@ static long ramp(const Heading *h, const double *par, const double *st, double v
     return k;
 }
 
-static void end_pose(const Heading *h, const double *par, const double *st, double vx, End *e) {
+/* The end pose of one x sample from the fast table (closed form after the ramp; within ~1e-13 m). */
+static void end_pose_fast(const Heading *h, const double *par, const double *st, double vx, End *e) {
     double xr, yr;
     long r = ramp(h, par, st, vx, &xr, &yr), n = h->n;
     double step = vx * h->dt;
@@ -440,6 +458,36 @@ static void end_pose(const Heading *h, const double *par, const double *st, doub
     e->th = h->th[n];
     e->c = h->c[n];
     e->s = h->s[n];
+}
+
+/* The end pose of one x sample, step by step as StandardTrajectoryGenerator integrates it (exact table). */
+static void end_pose_exact(const Heading *h, const double *par, const double *st, double vx, End *e) {
+    long n = h->n;
+    double dt = h->dt, x = st[S_X], y = st[S_Y], v = st[S_VX];
+    long k = 1;
+    if (par[P_LIMITED] != 0.0) v = vx;
+    for (; k <= n && v != vx; ++k) { /* the ramp; then the velocity holds at the sample */
+        v = project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, vx);
+        x = x + (v * h->c[k - 1]) * dt;
+        y = y + (v * h->s[k - 1]) * dt;
+    }
+    for (; k <= n; ++k) {
+        x = x + (vx * h->c[k - 1]) * dt;
+        y = y + (vx * h->s[k - 1]) * dt;
+    }
+    e->x = x;
+    e->y = y;
+    e->th = h->th[n];
+    e->c = h->c[n];
+    e->s = h->s[n];
+}
+
+/* True when a point lies within 1e-7 cell of a cell edge (or the costmap's): there a fast-table
+   position (within ~1e-12 cell of the exact one) might fall in another cell than Nav2's. */
+static int near_edge(const Grid *g, double wx, double wy) {
+    double fx = (wx - g->ox) / g->res, fy = (wy - g->oy) / g->res;
+    double rx = fx - floor(fx), ry = fy - floor(fy);
+    return rx < 1e-7 || rx > 1.0 - 1e-7 || ry < 1e-7 || ry > 1.0 - 1e-7;
 }
 
 /* Check a pose; on success set *safe to the distance within which no other pose needs checking. */
@@ -455,13 +503,33 @@ static int check_pose(const Grid *g, const Clearance *clear, int checks, double 
     return 1;
 }
 
-/* Every pose of one sample's trajectory on the costmap (and, CHECK_COST, on a cell below 253); poses
-   closer to a checked one than any illegal cell are not looked up, they cannot be illegal. */
-static int poses_legal(const Heading *h, const double *par, const double *st, const Grid *g, const Clearance *clear,
-                       int checks, double vx) {
+/* Every pose of one sample's trajectory on the costmap (and, CHECK_COST, on a cell below 253), from
+   the exact table, step by step as for the end pose; poses closer to a checked one than any illegal
+   cell are not looked up: they cannot be illegal. */
+static int poses_legal_exact(const Heading *h, const double *par, const double *st, const Grid *g,
+                             const Clearance *clear, int checks, double vx) {
+    long n = h->n;
+    double dt = h->dt, x = st[S_X], y = st[S_Y], v = st[S_VX];
+    int limited = par[P_LIMITED] != 0.0;
+    double budget = 0.0; /* distance left before a pose must be checked */
+    if (!check_pose(g, clear, checks, x, y, &budget)) return 0;
+    for (long k = 1; k <= n; ++k) {
+        v = limited ? vx : project_velocity(v, par[P_ACC_X], par[P_DEC_X], dt, vx);
+        x = x + (v * h->c[k - 1]) * dt;
+        y = y + (v * h->s[k - 1]) * dt;
+        budget -= fabs(v) * dt;
+        if ((budget <= 0.0 || k == n) && !check_pose(g, clear, checks, x, y, &budget)) return 0;
+    }
+    return 1;
+}
+
+/* The same from the fast table, in closed form once the velocity holds: 1 legal, 0 illegal, -1 when a
+   checked pose lies on a cell edge (then only the exact table decides). */
+static int poses_legal_fast(const Heading *h, const double *par, const double *st, const Grid *g,
+                            const Clearance *clear, int checks, double vx) {
     long n = h->n, k = 0;
     double dt = h->dt, x = st[S_X], y = st[S_Y], v = st[S_VX];
-    double budget = 0.0; /* distance left before a pose must be checked */
+    double budget = 0.0;
     if (!check_pose(g, clear, checks, x, y, &budget)) return 0;
     if (par[P_LIMITED] == 0.0) {
         while (k < n && v != vx) {
@@ -470,7 +538,10 @@ static int poses_legal(const Heading *h, const double *par, const double *st, co
             x = x + (v * h->c[k - 1]) * dt;
             y = y + (v * h->s[k - 1]) * dt;
             budget -= fabs(v) * dt;
-            if ((budget <= 0.0 || k == n) && !check_pose(g, clear, checks, x, y, &budget)) return 0;
+            if (budget <= 0.0 || k == n) {
+                if (near_edge(g, x, y)) return -1;
+                if (!check_pose(g, clear, checks, x, y, &budget)) return 0;
+            }
         }
     }
     long r = k;
@@ -486,18 +557,27 @@ static int poses_legal(const Heading *h, const double *par, const double *st, co
         }
         x = xr + step * (h->C[j] - h->C[r]);
         y = yr + step * (h->S[j] - h->S[r]);
+        if (near_edge(g, x, y)) return -1;
         if (!check_pose(g, clear, checks, x, y, &budget)) return 0;
         k = j;
     }
     return 1;
 }
 
-/* angles::shortest_angular_distance */
+/* One sample's legality: the fast table, and the exact one where the fast one cannot tell. */
+static int poses_legal(Heading *h, Heading *hx, const double *par, const double *st, const Grid *g,
+                       const Clearance *clear, int checks, double vx, double vth, long steps) {
+    if (h->n != steps || h->w != vth) heading_fast(h, par, st, vth, steps);
+    int r = poses_legal_fast(h, par, st, g, clear, checks, vx);
+    if (r >= 0) return r;
+    if (hx->n != steps || hx->w != vth) heading_exact(hx, par, st, vth, steps);
+    return poses_legal_exact(hx, par, st, g, clear, checks, vx);
+}
+
+/* angles::shortest_angular_distance (angles 1.15, Humble): normalize_angle(to - from) */
 static double shortest_angle(double from, double to) {
-    const double two_pi = 2.0 * M_PI;
-    double a = fmod(fmod(to - from, two_pi) + two_pi, two_pi);
-    if (a > M_PI) a -= two_pi;
-    return a;
+    double r = fmod((to - from) + M_PI, 2.0 * M_PI);
+    return r <= 0.0 ? r + M_PI : r - M_PI;
 }
 
 static int has_critic(const double *par, int code, double *scale) {
@@ -569,7 +649,7 @@ int twin_dwb_cycle(const double *par, double *st, const double *plan, long n_pla
     double vmax = fmax(fabs(par[P_MIN_VX]), fabs(par[P_MAX_VX]));
     long max_steps = (long)ceil(fmax(vmax * par[P_SIM_TIME] / par[P_LIN_GRAN],
                                      fabs(par[P_MAX_VTH]) * par[P_SIM_TIME] / par[P_ANG_GRAN])) + 2;
-    double *dbl = malloc(sizeof(double) * (size_t)(2 * m + 3 * cap + 5 * (max_steps + 1)));
+    double *dbl = malloc(sizeof(double) * (size_t)(2 * m + 3 * cap + 8 * (max_steps + 1)));
     int *ints = malloc(sizeof(int) * (size_t)(2 * cells + 2 * cap + (long)nt + 4));
     long *order = malloc(sizeof(long) * (size_t)cap);
     unsigned char *state = malloc((size_t)cap);
@@ -584,6 +664,7 @@ int twin_dwb_cycle(const double *par, double *st, const double *plan, long n_pla
     double *tab = dbl + 2 * m + 3 * cap;
     long stride = max_steps + 1;
     Heading h = {-1, 0.0, 0.0, tab, tab + stride, tab + 2 * stride, tab + 3 * stride, tab + 4 * stride};
+    Heading hx = {-1, 0.0, 0.0, tab + 5 * stride, tab + 6 * stride, tab + 7 * stride, NULL, NULL};
     int *path_map = ints, *th_index = ints + 2 * cells, *first = th_index + cap;
     Clearance clear = {ints + cells, 0, 0, 0, 0};
     for (long i = 0; i < m; ++i) {
@@ -690,9 +771,15 @@ int twin_dwb_cycle(const double *par, double *st, const double *plan, long n_pla
         }
         long steps = time_steps(par, vx, vth);
         if (steps > max_steps) steps = max_steps;
-        if (h.n != steps || h.w != vth) heading_table(&h, par, st, vth, steps);
+        if (h.n != steps || h.w != vth) heading_fast(&h, par, st, vth, steps);
         End e;
-        end_pose(&h, par, st, vx, &e);
+        end_pose_fast(&h, par, st, vx, &e);
+        if (near_edge(&g, e.x, e.y) || (use_galign && near_edge(&g, e.x + fpd_goal * e.c, e.y + fpd_goal * e.s)) ||
+            (use_palign && near_edge(&g, e.x + fpd_path * e.c, e.y + fpd_path * e.s))) {
+            /* a looked-up point on a cell edge: Nav2's exact doubles decide its cell */
+            if (hx.n != steps || hx.w != vth) heading_exact(&hx, par, st, vth, steps);
+            end_pose_exact(&hx, par, st, vx, &e);
+        }
         long emx = 0, emy = 0;
         int end_on = world_to_map(&g, e.x, e.y, &emx, &emy);
         int end_cost = end_on ? cost[emy * cols + emx] : 255;
@@ -754,16 +841,14 @@ int twin_dwb_cycle(const double *par, double *st, const double *plan, long n_pla
                 double vx = cmd[2 * i], vth = cmd[2 * i + 1];
                 long steps = time_steps(par, vx, vth);
                 if (steps > max_steps) steps = max_steps;
-                if (h.n != steps || h.w != vth) heading_table(&h, par, st, vth, steps);
-                state[i] = poses_legal(&h, par, st, &g, &clear, checks, vx) ? LEGAL : 0;
+                state[i] = poses_legal(&h, &hx, par, st, &g, &clear, checks, vx, vth, steps) ? LEGAL : 0;
             }
             continue;
         }
         double vx = cmd[2 * cand], vth = cmd[2 * cand + 1];
         long steps = time_steps(par, vx, vth);
         if (steps > max_steps) steps = max_steps;
-        if (h.n != steps || h.w != vth) heading_table(&h, par, st, vth, steps);
-        if (poses_legal(&h, par, st, &g, &clear, checks, vx)) {
+        if (poses_legal(&h, &hx, par, st, &g, &clear, checks, vx, vth, steps)) {
             state[cand] = LEGAL;
             best = cand;
             break;

@@ -45,6 +45,7 @@ import ctypes
 import functools
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +64,7 @@ from twin.nav.controller.dwb.dwb_params import CRITICS, INVALID_COST, MAP_GRID_C
 from twin.nav.controller.dwb.trajectory_generator import Trajectories, generate_trajectories, velocity_samples
 from twin.nav.costmap_2d.costmap_2d import CostGrid
 
-__all__ = ["DwbController", "DwbParams", "NoValidTrajectory"]
+__all__ = ["DwbController", "DwbParams", "Evaluation", "NoValidTrajectory"]
 
 F64 = NDArray[np.float64]
 Pose = tuple[float, float, float]
@@ -226,11 +227,19 @@ class DwbController:
 
     # -- numpy (the reference) ----------------------------------------------------------------------
 
-    def _compute_numpy(self, pose: Pose, velocity: tuple[float, float], costmap: CostGrid) -> tuple[float, float]:
+    def evaluate(self, pose: Pose, velocity: tuple[float, float], costmap: CostGrid) -> Evaluation:
+        """The numpy cycle's prepare and scoring, every sample kept (`_compute_numpy` chooses from it).
+
+        Runs transformGlobalPlan (pruning the plan as the cycle does) and the critics' prepare (RotateToGoal
+        latches); the samples' per-critic raw scores and which critic makes each illegal, in the critics' order.
+
+        Raises:
+            NoValidTrajectory: The plan is empty, or no pose of it is near the robot.
+        """
         p, cr = self.params, self._critics
         if len(self._plan) == 0:
             raise NoValidTrajectory("Received plan with zero length")
-        local, begin = _transform_global_plan(self._plan, pose, self.plan_to_costmap, p, costmap)
+        local, begin, end_index = _transform_global_plan(self._plan, pose, self.plan_to_costmap, p, costmap)
         if p.prune_plan and begin > 0:
             self.set_plan_keeping_critics(self._plan[begin:])
         if len(local) == 0:
@@ -240,13 +249,13 @@ class DwbController:
         end = self._plan[-1]
         goal = (tx + c * end[0] - s * end[1], ty + s * end[0] + c * end[1], float(end[2]) + tyaw)
         # prepare
-        dxy_sq = (pose[0] - goal[0]) ** 2 + (pose[1] - goal[1]) ** 2
-        cur_sq = velocity[0] ** 2
-        cr.in_window = cr.in_window or dxy_sq <= p.xy_goal_tolerance_m**2
-        cr.rotating = cr.rotating or (cr.in_window and cur_sq <= p.trans_stopped_velocity**2)
+        dxy_sq = (pose[0] - goal[0]) * (pose[0] - goal[0]) + (pose[1] - goal[1]) * (pose[1] - goal[1])
+        cur_sq = velocity[0] * velocity[0]
+        cr.in_window = cr.in_window or dxy_sq <= p.xy_goal_tolerance_m * p.xy_goal_tolerance_m
+        cr.rotating = cr.rotating or (cr.in_window and cur_sq <= p.trans_stopped_velocity * p.trans_stopped_velocity)
         active = [name for name in p.critics if p.scale(name) != 0.0]
         fpd_path, fpd_goal = p.path_align_forward_point_distance_m, p.goal_align_forward_point_distance_m
-        if "PathAlign" in active and dxy_sq <= fpd_path**2:
+        if "PathAlign" in active and dxy_sq <= fpd_path * fpd_path:
             active.remove("PathAlign")
         unreachable = float(costmap.rows * costmap.cols + 1)
         maps: dict[str, F64 | None] = {}
@@ -264,20 +273,33 @@ class DwbController:
             seeds = walk_plan(shifted, costmap, last_only=True)
             maps["align"] = manhattan_distances(costmap, seeds) if seeds else None
         commands = velocity_samples(p, velocity)
+        traj = generate_trajectories(p, commands, pose, velocity)
+        raw, illegal = self._score(
+            traj, active=active, maps=maps, goal=goal, cur_sq=cur_sq, costmap=costmap, unreachable=unreachable
+        )
+        unit = 0.5 * costmap.resolution_m
+        scales = np.array(
+            [
+                0.0 if name not in active else p.scale(name) * unit if name in MAP_GRID_CRITICS else p.scale(name)
+                for name in p.critics
+            ]
+        )
+        return Evaluation(
+            begin=begin, end=begin + end_index, goal=goal, trajectories=traj, critics=p.critics, scales=scales,
+            raw=raw, illegal=illegal,
+        )  # fmt: skip
+
+    def _compute_numpy(self, pose: Pose, velocity: tuple[float, float], costmap: CostGrid) -> tuple[float, float]:
+        p, cr = self.params, self._critics
+        ev = self.evaluate(pose, velocity, costmap)
+        commands = ev.trajectories.velocity
         n = len(commands)
-        if ("PathDist" in active and maps["path"] is None) or ("GoalDist" in active and maps["goal"] is None):
-            legal = np.zeros(n, dtype=bool)
-            total = np.zeros(n)
-        else:
-            traj = generate_trajectories(p, commands, pose, velocity)
-            total, legal = self._score(
-                traj, active=active, maps=maps, goal=goal, cur_sq=cur_sq, costmap=costmap, unreachable=unreachable
-            )
+        legal = ev.legal
         if not legal.any():
             cr.debrief((0.0, 0.0), pose, p)
             self.local_plan = np.zeros((0, 3))
             raise NoValidTrajectory(f"No valid trajectories out of {n}!")
-        best = int(np.argmin(np.where(legal, total, np.inf)))
+        best = int(np.argmin(np.where(legal, ev.total, np.inf)))
         one = generate_trajectories(p, commands[best : best + 1], pose, velocity)
         poses = one.poses[0, : int(one.steps[0]) + 1]
         if p.include_last_point:
@@ -298,9 +320,12 @@ class DwbController:
         costmap: CostGrid,
         unreachable: float,
     ) -> tuple[F64, NDArray[np.bool_]]:
+        """Each configured critic's raw score (NaN when it does not score) and illegal flags, per sample."""
         p, cr = self.params, self._critics
         cmd = traj.velocity
         n = len(cmd)
+        raw = np.full((n, len(p.critics)), np.nan)
+        illegal = np.zeros((n, len(p.critics)), dtype=bool)
         k = np.arange(traj.poses.shape[1])
         live = k[None, :] <= traj.steps[:, None]
         row, col, inside = trajectory_cells(costmap, traj.poses[..., 0], traj.poses[..., 1])
@@ -308,43 +333,87 @@ class DwbController:
         cost = np.where(inside, costmap.cost[np.clip(row, 0, costmap.rows - 1), np.clip(col, 0, costmap.cols - 1)], 255)
         ends = traj.poses[np.arange(n), traj.steps]
         end_cost = cost[np.arange(n), traj.steps].astype(np.float64)
-        legal = np.ones(n, dtype=bool)
-        total = np.zeros(n)
-        if any(c in active for c in ("BaseObstacle", "PathDist", "GoalDist")):
-            legal &= on_grid
-        if "BaseObstacle" in active:
-            legal &= np.where(live, cost < INVALID_COST, True).all(axis=1)
-        if "Oscillation" in active:
-            legal &= ~(cr.x.oscillating(cmd[:, 0]) | cr.theta.oscillating(cmd[:, 1]))
-        speed_sq = cmd[:, 0] ** 2
-        if "RotateToGoal" in active and cr.in_window:
-            legal &= (speed_sq < cur_sq) if not cr.rotating else (np.abs(cmd[:, 0]) == 0.0)
-        unit = 0.5 * costmap.resolution_m
-        for name in active:
-            scale = p.scale(name)
+        speed_sq = cmd[:, 0] * cmd[:, 0]
+        for j, name in enumerate(p.critics):
+            if name not in active:
+                continue
             if name == "RotateToGoal":
-                if cr.in_window:
-                    rot = np.abs(shortest_angle(ends[:, 2], goal[2]))
-                    total += scale * (rot if cr.rotating else speed_sq * p.rotate_to_goal_slowing_factor + rot)
+                if not cr.in_window:
+                    raw[:, j] = 0.0
+                    continue
+                rot = np.abs(shortest_angle(ends[:, 2], goal[2]))
+                if cr.rotating:
+                    illegal[:, j] = np.abs(cmd[:, 0]) > 0.0
+                    raw[:, j] = rot
+                else:
+                    illegal[:, j] = speed_sq >= cur_sq
+                    raw[:, j] = speed_sq * p.rotate_to_goal_slowing_factor + rot
+            elif name == "Oscillation":
+                illegal[:, j] = cr.x.oscillating(cmd[:, 0]) | cr.theta.oscillating(cmd[:, 1])
+                raw[:, j] = 0.0
             elif name == "BaseObstacle":
-                total += scale * end_cost
-            elif name in MAP_GRID_CRITICS:
+                illegal[:, j] = ~on_grid | ~np.where(live, cost < INVALID_COST, True).all(axis=1)
+                raw[:, j] = end_cost
+            else:
                 fpd = {
                     "GoalAlign": p.goal_align_forward_point_distance_m,
                     "PathAlign": p.path_align_forward_point_distance_m,
                 }.get(name, 0.0)
                 grid = maps["align" if name == "GoalAlign" else "goal" if name == "GoalDist" else "path"]
-                px = ends[:, 0] + fpd * np.cos(ends[:, 2])
-                py = ends[:, 1] + fpd * np.sin(ends[:, 2])
-                r, c, ins = trajectory_cells(costmap, px, py)
-                legal &= ins
+                if fpd:
+                    px = ends[:, 0] + fpd * np.cos(ends[:, 2])
+                    py = ends[:, 1] + fpd * np.sin(ends[:, 2])
+                    r, c, ins = trajectory_cells(costmap, px, py)
+                    illegal[:, j] = ~ins
+                else:  # every pose on the costmap and reachable
+                    r, c, ins = trajectory_cells(costmap, ends[:, 0], ends[:, 1])
+                    illegal[:, j] = ~on_grid | (grid is None)
                 values = (
                     np.full(n, unreachable)
                     if grid is None
                     else grid[np.clip(r, 0, costmap.rows - 1), np.clip(c, 0, costmap.cols - 1)]
                 )
-                total += scale * unit * np.where(ins, values, 0.0)
-        return total, legal
+                raw[:, j] = np.where(ins, values, 0.0)
+        return raw, illegal
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Evaluation:
+    """One cycle's samples scored by every critic (the numpy cycle, before the choice).
+
+    `raw[s, k]` is critic k's raw score of sample s (NaN: the critic does not score this cycle, its scale
+    being 0), `illegal[s, k]` whether critic k rejects it; `scales[k]` the factor DWB multiplies the raw
+    score by (the map-grid critics' per half cell). Nav2 stops at the first critic, in order, that rejects.
+    """
+
+    begin: int
+    end: int
+    goal: Pose
+    trajectories: Trajectories
+    critics: tuple[str, ...]
+    scales: F64
+    raw: F64
+    illegal: NDArray[np.bool_]
+
+    @property
+    def legal(self) -> NDArray[np.bool_]:
+        """The samples no critic rejects."""
+        return np.asarray(~self.illegal.any(axis=1))
+
+    @property
+    def thrower(self) -> NDArray[np.int64]:
+        """The first critic (its index) rejecting each sample; -1 for the legal ones."""
+        first = np.argmax(self.illegal, axis=1)
+        return np.where(self.illegal.any(axis=1), first, -1).astype(np.int64)
+
+    @property
+    def total(self) -> F64:
+        """Each sample's total, the critics' scaled scores summed in their order (legal samples)."""
+        total = np.zeros(len(self.raw))
+        for k in range(self.raw.shape[1]):
+            if self.scales[k] != 0.0:
+                total = total + np.where(np.isnan(self.raw[:, k]), 0.0, self.raw[:, k]) * self.scales[k]
+        return total
 
 
 # --- the numpy cycle's parts --------------------------------------------------------------------
@@ -352,8 +421,8 @@ class DwbController:
 
 def _transform_global_plan(
     plan: F64, pose: Pose, plan_to_costmap: Pose, p: DwbParams, costmap: CostGrid
-) -> tuple[F64, int]:
-    """DWB's transformGlobalPlan: the plan's poses passed on (costmap frame) and the index of the first."""
+) -> tuple[F64, int, int]:
+    """DWB's transformGlobalPlan: the plan's poses passed on (costmap frame), the index of the first, how many."""
     tx, ty, tyaw = plan_to_costmap
     c, s = math.cos(tyaw), math.sin(tyaw)
     rx = c * (pose[0] - tx) + s * (pose[1] - ty)
@@ -376,4 +445,4 @@ def _transform_global_plan(
     local[:, 0] = tx + c * part[:, 0] - s * part[:, 1]
     local[:, 1] = ty + s * part[:, 0] + c * part[:, 1]
     local[:, 2] = part[:, 2] + tyaw
-    return local, begin
+    return local, begin, end - begin
