@@ -43,6 +43,8 @@ class _Monitor(Protocol):
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float: ...
 
+    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool: ...
+
 
 class _Group(Protocol):
     """What the fleet reads of a robot group (`twin.sim.robot_group.RobotGroup`)."""
@@ -170,17 +172,22 @@ class FleetMonitor:
         # refused step and the turn alone); the shapes are rigid, so the same poses give the same
         # contacts, whatever the robots farther away do.
         self._recent: dict[int, dict[tuple[_Pose, _Pose], tuple[Contact, ...]]] = {j: {} for j in self.others}
+        # The last check, when it found its pose free: that pose and where the others stood.
+        self._last_free: tuple[_Pose, tuple[_Pose, ...]] | None = None
 
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose: the world's first, else the other robots' (empty when free)."""
         contacts = self.inner.check(x_m, y_m, yaw_rad)
         if contacts:
+            self._last_free = None
             return contacts
         fleet, body = self.fleet, self.fleet.body(self.index)
         pose = (x_m, y_m, yaw_rad)
         found: list[Contact] = []
+        wheres: list[_Pose] = []
         for j in self.others:
             other, where = fleet.body(j), fleet.pose(j)
+            wheres.append(where)
             gap = math.hypot(where[0] - x_m, where[1] - y_m) - body.radius_m - other.radius_m
             if gap > _MARGIN_M:
                 continue
@@ -205,8 +212,31 @@ class FleetMonitor:
                     del recent[next(iter(recent))]  # the oldest
                 recent[key] = pair
             found += pair
+        self._last_free = None if found else (pose, tuple(wheres))
         found.sort(key=lambda c: -c.depth_m)
         return tuple(found)
+
+    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        """Whether the last check was at this pose and found it free, and would find it free again now.
+
+        It would when the world's check repeats its answer (`inner.repeats_free`) and every other
+        robot either stands where it stood then, or was and is too far from the pose to be asked
+        about: the check's answer is a function of the pose and where the robots near it stand.
+        """
+        last = self._last_free
+        if last is None or last[0] != (x_m, y_m, yaw_rad) or not self.inner.repeats_free(x_m, y_m, yaw_rad):
+            return False
+        fleet, radius = self.fleet, self.fleet.body(self.index).radius_m
+        for j, then in zip(self.others, last[1], strict=True):
+            now = fleet.pose(j)
+            if now == then:
+                continue
+            theirs = fleet.body(j).radius_m  # the gaps as `check` computes them, so "far" is bit for bit its own
+            if math.hypot(then[0] - x_m, then[1] - y_m) - radius - theirs <= _MARGIN_M:
+                return False
+            if math.hypot(now[0] - x_m, now[1] - y_m) - radius - theirs <= _MARGIN_M:
+                return False
+        return True
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor another robot.
