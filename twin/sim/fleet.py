@@ -156,9 +156,10 @@ class Fleet:
             for i, g in enumerate(self.groups):
                 self._moving = i
                 g.drive_node.advance(n_steps)
-                before, now = standing[i], self.pose(i)
-                if now != before:
-                    self.travel_nm += _nm(_moved(before, *now, radii[i]))
+                s = g.drive.chassis_state()
+                now = (s[0], s[1], s[2])
+                if now != standing[i]:
+                    self.travel_nm += _nm(_moved(standing[i], *now, radii[i]))
                     standing[i] = now
         finally:
             self._standing = None
@@ -290,15 +291,20 @@ class FleetMonitor:
         radius = fleet.radii[self.index]
         far = self._far
         if far is not None:
-            anchor, travel_nm, far_gap, near = far
-            bound = far_gap - _moved(anchor, x_m, y_m, yaw_rad, radius) - (fleet.travel_nm - travel_nm) * 1e-9
-            updates: dict[int, tuple[_Pose, _Pose, float]] = {}
-            free = self._free_among(near, inner, x_m, y_m, yaw_rad, measured=updates)
-            if bound - _ROUNDING_M - _MARGIN_M > max(free, 0.0):
-                # Every far robot's gap exceeds `bound`: none can lower the answer or stop the look
-                # early, so it is what looking at every robot in turn gives.
-                self._exact.update(updates)
-                return free if free > 0.0 else 0.0
+            (ax, ay, ayaw), travel_nm, far_gap, near = far
+            moved = math.hypot(x_m - ax, y_m - ay) + radius * abs(math.remainder(yaw_rad - ayaw, math.tau))
+            bound = far_gap - moved - (fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M - _MARGIN_M
+            # When every far robot's gap exceeds `bound`, none can lower the answer or stop the look
+            # early: it is what looking at every robot in turn gives.
+            if not near:
+                if bound > inner:
+                    return inner
+            else:
+                updates: dict[int, tuple[_Pose, _Pose, float]] = {}
+                free = self._free_among(near, inner, x_m, y_m, yaw_rad, measured=updates)
+                if bound > max(free, 0.0):
+                    self._exact.update(updates)
+                    return free if free > 0.0 else 0.0
         radii, near_list, far_gap = fleet.radii, [], math.inf
         for j in self.others:
             where = self._where(j)
@@ -394,16 +400,21 @@ class FleetView:
             c, s = math.cos(yaw), math.sin(yaw)
             rot = np.array([[c, s], [-s, c]])  # row vectors: p @ rot is R p
             if len(segs):
-                a = segs[:, 0:2] @ rot + (x, y)
-                b = segs[:, 2:4] @ rot + (x, y)
-                segments.append(np.hstack([a, b]))
+                placed = np.empty_like(segs)
+                placed[:, 0:2] = segs[:, 0:2] @ rot + (x, y)
+                placed[:, 2:4] = segs[:, 2:4] @ rot + (x, y)
+                segments.append(placed)
             if len(circs):
-                centres = circs[:, 0:2] @ rot + (x, y)
-                circles.append(np.hstack([centres, circs[:, 2:3]]))
+                placed = np.empty_like(circs)
+                placed[:, 0:2] = circs[:, 0:2] @ rot + (x, y)
+                placed[:, 2] = circs[:, 2]
+                circles.append(placed)
         caster = None
         if segments or circles:
-            seg_rows = [(float(r[0]), float(r[1]), float(r[2]), float(r[3])) for arr in segments for r in arr]
-            circ_rows = [(float(r[0]), float(r[1]), float(r[2])) for arr in circles for r in arr]
-            caster = ObstacleCaster(seg_rows, circ_rows, key)
+            caster = ObstacleCaster(
+                np.concatenate(segments) if segments else np.empty((0, 4)),
+                np.concatenate(circles) if circles else np.empty((0, 3)),
+                key,
+            )
         self._cache[key] = (poses, caster)
         return caster

@@ -273,8 +273,8 @@ class ObstacleCaster:
 
     def __init__(
         self,
-        segments: Sequence[tuple[float, float, float, float]],
-        circles: Sequence[tuple[float, float, float]],
+        segments: Sequence[tuple[float, float, float, float]] | F64,
+        circles: Sequence[tuple[float, float, float]] | F64,
         height_m: float,
     ) -> None:
         self.height_m = height_m

@@ -599,6 +599,9 @@ class RobotBody:
         self.radius_m = radius
         """Largest horizontal distance of any collision point from the base frame's z axis."""
         self.z_range_m = (z_lo, z_hi)
+        # Every shape's rotation and translation in the base frame, stacked: `_place` turns them all at once.
+        self._rotations = np.array([T[:3, :3] for T in self._local])
+        self._translations = np.array([T[:3, 3:4] for T in self._local])
         self._manager = fcl.DynamicAABBTreeCollisionManager()
         self._manager.registerObjects(self._objects)
         self._manager.setup()
@@ -616,9 +619,10 @@ class RobotBody:
         self._placed_at = (x, y, yaw)
         c, s = math.cos(yaw), math.sin(yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        offset = np.array([x, y, 0.0])
-        for obj, T in zip(self._objects, self._local, strict=True):
-            obj.setTransform(fcl.Transform(rot @ T[:3, :3], rot @ T[:3, 3] + offset))
+        rotations = rot @ self._rotations  # each shape's rot @ R, as one product
+        translations = (rot @ self._translations)[:, :, 0] + np.array([x, y, 0.0])
+        for obj, r, t in zip(self._objects, rotations, translations, strict=True):
+            obj.setTransform(fcl.Transform(r, t))
         self._manager.update()
 
     def _place_bound(self, x: float, y: float) -> None:

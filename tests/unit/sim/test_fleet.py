@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from twin.core.errors import ConfigError
+from twin.robot.chassis import ChassisState
 from twin.sim.fleet import Fleet, FleetMonitor, FleetView
 from twin.sim.robot_group import scenario_robot
 from twin.sim.scenario import default_scenario_path
@@ -23,8 +24,8 @@ class _Still:
     def __init__(self, x: float, y: float, yaw: float) -> None:
         self.pose = (x, y, yaw)
 
-    def chassis_state(self) -> Any:
-        return SimpleNamespace(x_m=self.pose[0], y_m=self.pose[1], yaw_rad=self.pose[2])
+    def chassis_state(self) -> ChassisState:
+        return ChassisState(*self.pose, 0.0, 0.0, 0.0, 0.0, 0.0, False)
 
 
 class _OpenWorld:
