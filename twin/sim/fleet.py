@@ -44,6 +44,8 @@ _RECENT_POSES = 8
 _NEAR_M = 0.3
 # Kept back from a bound made of several measured distances, for their rounding, m.
 _ROUNDING_M = 1e-9
+# Two robots measured touching stay "no free motion" until they moved this much together since, m.
+_STILL_TOUCHING_M = 1e-3
 
 _Pose = tuple[float, float, float]
 
@@ -350,6 +352,11 @@ class FleetMonitor:
                     gap = bound - _MARGIN_M
                 elif known is not None and known[0] == (x_m, y_m, yaw_rad) and known[1] == where:
                     gap = known[2] - _TOLERANCE_M  # neither moved (stalled against each other)
+                elif known is not None and known[2] <= _TOLERANCE_M and known[2] - bound < _STILL_TOUCHING_M:
+                    # Measured touching, and moved less than a millimetre since (one sliding along
+                    # the other): no free motion, without FCL. The drive checks each step; a new
+                    # measurement after the millimetre lets it back into the compiled loop.
+                    gap = 0.0
                 else:
                     distance = body.distance_to((x_m, y_m, yaw_rad), other, where)
                     measured[j] = ((x_m, y_m, yaw_rad), where, distance)
