@@ -46,6 +46,10 @@ _NEAR_M = 0.3
 _ROUNDING_M = 1e-9
 # Two robots measured touching stay "no free motion" until they moved this much together since, m.
 _STILL_TOUCHING_M = 1e-3
+# A robot's free distance, once measured, is answered from its bound (less its own motion and the
+# fleet's odometer since) while that stays above this: far more than any robot moves between two
+# events, so the drive's compiled loop runs as far as with the measured value, m.
+_KEEP_M = 0.02
 
 _Pose = tuple[float, float, float]
 
@@ -210,6 +214,12 @@ class FleetMonitor:
         self._far: tuple[_Pose, int, float, tuple[int, ...]] | None = None
         self.near_m = _NEAR_M
         """The gap within which `free_m` measures another robot at every call (inf: every robot)."""
+        # The last measured free distance: the pose and odometer then, and the distance. Used only
+        # when the world (`inner`) does not move (`static`); moving obstacles need a new look.
+        self._measured: tuple[_Pose, int, float] | None = None
+        self._static = bool(getattr(inner, "static", False))
+        self.keep_m = _KEEP_M
+        """`free_m` answers from its last measurement while that bound stays above this (inf: never)."""
 
     def _where(self, j: int) -> _Pose:
         standing = self.fleet._standing  # the fleet's own reading of who stands where
@@ -284,13 +294,31 @@ class FleetMonitor:
         either robot moved since (as `CollisionMonitor` does for the world), asked again only when
         that bound is used up. The robots farther than `_NEAR_M` at the last full look are bounded
         by the fleet's odometer, and looked at again only when that bound could decide the answer:
-        the answer is the same as measuring every robot, at the cost of the near ones.
+        the measurement is the same as measuring every robot, at the cost of the near ones. In a
+        world that does not move, a measurement then answers (less this robot's motion and the
+        fleet's odometer since) while it stays above `keep_m`, far more than a robot moves between
+        two events: the compiled loop runs the same steps as with a new measurement.
         """
+        fleet = self.fleet
+        radius = fleet.radii[self.index]
+        measured = self._measured
+        if measured is not None:
+            (mx, my, myaw), travel_nm, value = measured
+            moved = math.hypot(x_m - mx, y_m - my) + radius * abs(math.remainder(yaw_rad - myaw, math.tau))
+            bound = value - moved - (fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M
+            if bound > self.keep_m:
+                return bound
+        free = self._measure(x_m, y_m, yaw_rad, radius)
+        keep = self._static and 2.0 * self.keep_m < free < math.inf
+        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm, free) if keep else None
+        return free
+
+    def _measure(self, x_m: float, y_m: float, yaw_rad: float, radius: float) -> float:
+        """`free_m` measured: the world's free distance, the near robots' and a bound on the far ones'."""
         inner = self.inner.free_m(x_m, y_m, yaw_rad)
         if inner <= 0.0:
             return 0.0
         fleet = self.fleet
-        radius = fleet.radii[self.index]
         far = self._far
         if far is not None:
             (ax, ay, ayaw), travel_nm, far_gap, near = far

@@ -873,6 +873,8 @@ class CollisionMonitor:
 
     RECENT_POSES = 8
     """How many queried poses' answers are kept."""
+    static = True
+    """The scene it checks against does not move (a free distance, less the robot's motion, stays true)."""
 
     def __init__(self, scene: Scene, body: RobotBody, *, margin_m: float = 0.005) -> None:
         self.scene = scene

@@ -31,6 +31,8 @@ class _Still:
 class _OpenWorld:
     """No walls: nothing but the other robots limits the robot."""
 
+    static = True
+
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         return ()
 
@@ -172,9 +174,10 @@ def test_the_free_distance_among_many_robots_is_what_measuring_every_robot_gives
         groups.append(g)
     fleet = Fleet(groups)
     mine, every = FleetMonitor(_OpenWorld(), fleet, 0), FleetMonitor(_OpenWorld(), fleet, 0)
-    every.near_m = math.inf
+    mine.keep_m = every.keep_m = every.near_m = math.inf  # measured at every call
+    kept = FleetMonitor(_OpenWorld(), fleet, 0)  # and answered from the last measurement while it holds
     me = groups[0].drive
-    answers = []
+    answers, bounds = [], []
     for step in range(400):
         fleet.advance(1)
         x, y, yaw = me.pose
@@ -182,7 +185,11 @@ def test_the_free_distance_among_many_robots_is_what_measuring_every_robot_gives
         answer = mine.free_m(*me.pose)
         assert answer == every.free_m(*me.pose), step
         answers.append(answer)
+        bounds.append(kept.free_m(*me.pose))
+        true = min(groups[0].body.distance_to(me.pose, g.body, g.drive.pose) for g in groups[1:])
+        assert bounds[-1] <= true, step  # never more than the robots truly leave free
     assert min(answers) < 0.05 < max(answers)  # others came near and went away
+    assert sum(b != a for a, b in zip(answers, bounds, strict=True)) > 50  # often answered from the bound
 
 
 class _Mover:
