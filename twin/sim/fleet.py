@@ -152,21 +152,25 @@ class Fleet:
 
     def advance(self, n_steps: int) -> None:
         """Step every robot's drive `n_steps` physics steps, one robot after the other."""
-        standing = [self.pose(i) for i in range(len(self.groups))]
+        groups = self.groups
+        standing: list[_Pose] = [g.drive.chassis_state()[:3] for g in groups]  # (x, y, yaw) of each
         radii = self.radii
         last = self._last
         if last is not None and last != standing:  # moved between advances (by hand): on the odometer too
             self.travel_nm += sum(_nm(_moved(a, *b, r)) for a, b, r in zip(last, standing, radii, strict=True))
         self._standing = standing
+        hypot, remainder, tau, ceil = math.hypot, math.remainder, math.tau, math.ceil
         try:
-            for i, g in enumerate(self.groups):
+            for i, g in enumerate(groups):
                 self._moving = i
                 g.drive_node.advance(n_steps)
-                s = g.drive.chassis_state()
-                now = (s[0], s[1], s[2])
-                if now != standing[i]:
-                    self.travel_nm += _nm(_moved(standing[i], *now, radii[i]))
-                    standing[i] = now
+                x, y, yaw = g.drive.chassis_state()[:3]
+                bx, by, byaw = standing[i]
+                if x != bx or y != by or yaw != byaw:
+                    standing[i] = (x, y, yaw)
+                    # _nm(_moved(...)), inline: this runs for every robot at every event
+                    moved = hypot(x - bx, y - by) + radii[i] * abs(remainder(yaw - byaw, tau))
+                    self.travel_nm += ceil(moved * 1e9) + 1
         finally:
             self._standing = None
             self._moving = -1
