@@ -11,6 +11,11 @@ A `Fleet` holds the robot groups of a run with more than one robot (`robots:` in
 - `FleetView` is what one robot's lidar sees besides the world: the section of every other robot's
   shapes at the lidar's height, where that robot is at the time of the scan.
 
+What one robot's drive asks of the others each step stays about as cheap with eight robots as with
+two: the fleet keeps an odometer (`Fleet.travel`, every robot's motion summed), so a robot's free
+distance and its `repeats_free` look at the robots near it and bound the far ones by how far
+anything moved since they were last measured, instead of measuring every robot at every step.
+
 Nothing here coordinates the robots: each learns of the others from its own sensors only.
 """
 
@@ -34,6 +39,17 @@ _MARGIN_M = 0.005
 _TOLERANCE_M = 1e-4
 # How many pairs of poses' contacts a robot's check keeps per other robot.
 _RECENT_POSES = 8
+# A robot's free distance measures the others within this gap (bounding circles) at every call, and
+# bounds the farther ones by the fleet's odometer, m.
+_NEAR_M = 0.3
+# Kept back from a bound made of several measured distances, for their rounding, m.
+_ROUNDING_M = 1e-9
+# Two robots measured touching stay "no free motion" until they moved this much together since, m.
+_STILL_TOUCHING_M = 1e-3
+# A robot's free distance, once measured, is answered from its bound (less its own motion and the
+# fleet's odometer since) while that stays above this: far more than any robot moves between two
+# events, so the drive's compiled loop runs as far as with the measured value, m.
+_KEEP_M = 0.02
 
 _Pose = tuple[float, float, float]
 
@@ -42,6 +58,8 @@ class _Monitor(Protocol):
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]: ...
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float: ...
+
+    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool: ...
 
 
 class _Group(Protocol):
@@ -81,16 +99,25 @@ class Fleet:
 
     def __init__(self, groups: Sequence[_Group]) -> None:
         self.groups = tuple(groups)
+        bodies = tuple(g.body for g in self.groups)
+        assert all(b is not None for b in bodies), "spawn every robot before making its fleet"
+        self.bodies: tuple[RobotBody, ...] = bodies  # type: ignore[assignment]
+        self.radii = tuple(b.radius_m for b in self.bodies)
         # While `advance` steps robot `_moving`, every other robot stands at its entry here (read
         # once per chunk instead of from its drive at every contact check of the moving robot).
         self._standing: list[tuple[float, float, float]] | None = None
         self._moving = -1
+        self._last: list[tuple[float, float, float]] | None = None  # every pose when `advance` last ended
+        self.travel_nm = 0
+        """The fleet's odometer: every robot's motion summed (translation + radius x rotation), nm.
+
+        Any robot's centre moved at most the odometer's increase since a moment: a distance
+        measured then, less that increase, bounds the distance now. Whole nanometres, each motion
+        rounded up, so the sum has no rounding of its own however long the run."""
 
     def body(self, i: int) -> RobotBody:
         """Robot `i`'s collision body."""
-        body = self.groups[i].body
-        assert body is not None
-        return body
+        return self.bodies[i]
 
     def pose(self, i: int) -> tuple[float, float, float]:
         """Robot `i`'s pose now (x, y, yaw), its spawn pose before its drive exists."""
@@ -125,16 +152,29 @@ class Fleet:
 
     def advance(self, n_steps: int) -> None:
         """Step every robot's drive `n_steps` physics steps, one robot after the other."""
-        standing = [self.pose(i) for i in range(len(self.groups))]
+        groups = self.groups
+        standing: list[_Pose] = [g.drive.chassis_state()[:3] for g in groups]  # (x, y, yaw) of each
+        radii = self.radii
+        last = self._last
+        if last is not None and last != standing:  # moved between advances (by hand): on the odometer too
+            self.travel_nm += sum(_nm(_moved(a, *b, r)) for a, b, r in zip(last, standing, radii, strict=True))
         self._standing = standing
+        hypot, remainder, tau, ceil = math.hypot, math.remainder, math.tau, math.ceil
         try:
-            for i, g in enumerate(self.groups):
+            for i, g in enumerate(groups):
                 self._moving = i
                 g.drive_node.advance(n_steps)
-                standing[i] = self.pose(i)
+                x, y, yaw = g.drive.chassis_state()[:3]
+                bx, by, byaw = standing[i]
+                if x != bx or y != by or yaw != byaw:
+                    standing[i] = (x, y, yaw)
+                    # _nm(_moved(...)), inline: this runs for every robot at every event
+                    moved = hypot(x - bx, y - by) + radii[i] * abs(remainder(yaw - byaw, tau))
+                    self.travel_nm += ceil(moved * 1e9) + 1
         finally:
             self._standing = None
             self._moving = -1
+            self._last = standing
 
     def after_advance(self, t_ns: int) -> None:
         """Let each robot with an open contact episode track it (report its end)."""
@@ -170,20 +210,44 @@ class FleetMonitor:
         # refused step and the turn alone); the shapes are rigid, so the same poses give the same
         # contacts, whatever the robots farther away do.
         self._recent: dict[int, dict[tuple[_Pose, _Pose], tuple[Contact, ...]]] = {j: {} for j in self.others}
+        # The last check, when it found its pose free: that pose, the odometer then, the smallest gap
+        # of the robots it did not ask about (inf: none), and the ones it asked about with their poses.
+        self._last_free: tuple[_Pose, int, float, tuple[tuple[int, _Pose], ...]] | None = None
+        # For `free_m`: the pose and odometer of its last full look, the smallest gap of the robots
+        # farther than _NEAR_M then (inf: none), and the nearer ones (in index order).
+        self._far: tuple[_Pose, int, float, tuple[int, ...]] | None = None
+        self.near_m = _NEAR_M
+        """The gap within which `free_m` measures another robot at every call (inf: every robot)."""
+        # The last measured free distance: the pose and odometer then, and the distance. Used only
+        # when the world (`inner`) does not move (`static`); moving obstacles need a new look.
+        self._measured: tuple[_Pose, int, float] | None = None
+        self._static = bool(getattr(inner, "static", False))
+        self.keep_m = _KEEP_M
+        """`free_m` answers from its last measurement while that bound stays above this (inf: never)."""
+
+    def _where(self, j: int) -> _Pose:
+        standing = self.fleet._standing  # the fleet's own reading of who stands where
+        return standing[j] if standing is not None and j != self.fleet._moving else self.fleet.pose(j)
 
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose: the world's first, else the other robots' (empty when free)."""
         contacts = self.inner.check(x_m, y_m, yaw_rad)
         if contacts:
+            self._last_free = None
             return contacts
         fleet, body = self.fleet, self.fleet.body(self.index)
+        radius, radii = body.radius_m, fleet.radii
         pose = (x_m, y_m, yaw_rad)
         found: list[Contact] = []
+        asked: list[tuple[int, _Pose]] = []
+        far = math.inf
         for j in self.others:
-            other, where = fleet.body(j), fleet.pose(j)
-            gap = math.hypot(where[0] - x_m, where[1] - y_m) - body.radius_m - other.radius_m
+            where = self._where(j)
+            gap = math.hypot(where[0] - x_m, where[1] - y_m) - radius - radii[j]
             if gap > _MARGIN_M:
+                far = min(far, gap)
                 continue
+            asked.append((j, where))
             recent = self._recent[j]
             key = (pose, where)
             pair = recent.get(key)
@@ -199,14 +263,32 @@ class FleetMonitor:
                         normal=normal,
                         depth_m=depth,
                     )
-                    for mine, theirs, point, normal, depth in body.contacts_with(pose, other, where)
+                    for mine, theirs, point, normal, depth in body.contacts_with(pose, fleet.body(j), where)
                 )
                 if len(recent) >= _RECENT_POSES:
                     del recent[next(iter(recent))]  # the oldest
                 recent[key] = pair
             found += pair
+        self._last_free = None if found else (pose, fleet.travel_nm, far, tuple(asked))
         found.sort(key=lambda c: -c.depth_m)
         return tuple(found)
+
+    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        """Whether the last check was at this pose and found it free, and would find it free again now.
+
+        It would when the world's check repeats its answer (`inner.repeats_free`), the robots it
+        asked about stand where they stood, and the others are still too far to be asked about:
+        the check's answer is a function of the pose and where the robots near it stand. "Still
+        too far" is the nearest one's gap then less the fleet's odometer since (any robot moved
+        less), so nothing here loops over the whole fleet.
+        """
+        last = self._last_free
+        if last is None or last[0] != (x_m, y_m, yaw_rad) or not self.inner.repeats_free(x_m, y_m, yaw_rad):
+            return False
+        _, travel_nm, far, asked = last
+        if far - (self.fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M <= _MARGIN_M:
+            return False
+        return all(self._where(j) == where for j, where in asked)
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor another robot.
@@ -214,36 +296,112 @@ class FleetMonitor:
         Sound for one chunk of steps: the others stand still while this robot moves (`Fleet.advance`).
         Near another robot the exact distance (FCL) is measured once and then bounded by how far
         either robot moved since (as `CollisionMonitor` does for the world), asked again only when
-        that bound is used up.
+        that bound is used up. The robots farther than `_NEAR_M` at the last full look are bounded
+        by the fleet's odometer, and looked at again only when that bound could decide the answer:
+        the measurement is the same as measuring every robot, at the cost of the near ones. In a
+        world that does not move, a measurement then answers (less this robot's motion and the
+        fleet's odometer since) while it stays above `keep_m`, far more than a robot moves between
+        two events: the compiled loop runs the same steps as with a new measurement.
         """
-        free = self.inner.free_m(x_m, y_m, yaw_rad)
-        if free <= 0.0:
+        fleet = self.fleet
+        radius = fleet.radii[self.index]
+        measured = self._measured
+        if measured is not None:
+            (mx, my, myaw), travel_nm, value = measured
+            moved = math.hypot(x_m - mx, y_m - my) + radius * abs(math.remainder(yaw_rad - myaw, math.tau))
+            bound = value - moved - (fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M
+            if bound > self.keep_m:
+                return bound
+        free = self._measure(x_m, y_m, yaw_rad, radius)
+        keep = self._static and 2.0 * self.keep_m < free < math.inf
+        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm, free) if keep else None
+        return free
+
+    def _measure(self, x_m: float, y_m: float, yaw_rad: float, radius: float) -> float:
+        """`free_m` measured: the world's free distance, the near robots' and a bound on the far ones'."""
+        inner = self.inner.free_m(x_m, y_m, yaw_rad)
+        if inner <= 0.0:
             return 0.0
-        fleet, body, exact = self.fleet, self.fleet.body(self.index), self._exact
+        fleet = self.fleet
+        far = self._far
+        if far is not None:
+            (ax, ay, ayaw), travel_nm, far_gap, near = far
+            moved = math.hypot(x_m - ax, y_m - ay) + radius * abs(math.remainder(yaw_rad - ayaw, math.tau))
+            bound = far_gap - moved - (fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M - _MARGIN_M
+            # When every far robot's gap exceeds `bound`, none can lower the answer or stop the look
+            # early: it is what looking at every robot in turn gives.
+            if not near:
+                if bound > inner:
+                    return inner
+            else:
+                updates: dict[int, tuple[_Pose, _Pose, float]] = {}
+                free = self._free_among(near, inner, x_m, y_m, yaw_rad, measured=updates)
+                if bound > max(free, 0.0):
+                    self._exact.update(updates)
+                    return free if free > 0.0 else 0.0
+        radii, near_list, far_gap = fleet.radii, [], math.inf
         for j in self.others:
-            other, where = fleet.body(j), fleet.pose(j)
-            gap = math.hypot(where[0] - x_m, where[1] - y_m) - body.radius_m - other.radius_m
+            where = self._where(j)
+            gap = math.hypot(where[0] - x_m, where[1] - y_m) - radius - radii[j]
+            if gap > self.near_m:
+                far_gap = min(far_gap, gap)
+            else:
+                near_list.append(j)
+        self._far = ((x_m, y_m, yaw_rad), fleet.travel_nm, far_gap, tuple(near_list))
+        free = self._free_among(self.others, inner, x_m, y_m, yaw_rad, measured=self._exact)
+        return free if free > 0.0 else 0.0
+
+    def _free_among(
+        self,
+        robots: Sequence[int],
+        free: float,
+        x_m: float,
+        y_m: float,
+        yaw_rad: float,
+        *,
+        measured: dict[int, tuple[_Pose, _Pose, float]],
+    ) -> float:
+        """`free` lowered to each of `robots`' gaps in turn (their order), stopping at 0 or below.
+
+        The exact distances it measures go into `measured` (the monitor's own, or a draft).
+        """
+        fleet, body, exact = self.fleet, self.fleet.body(self.index), self._exact
+        radius, radii = body.radius_m, fleet.radii
+        for j in robots:
+            where = self._where(j)
+            gap = math.hypot(where[0] - x_m, where[1] - y_m) - radius - radii[j]
             if gap > _MARGIN_M:
                 gap -= _MARGIN_M
             else:
+                other = fleet.body(j)
                 known = exact.get(j)
                 bound = -1.0
                 if known is not None:
                     mine, theirs, distance = known
-                    bound = distance - _moved(mine, x_m, y_m, yaw_rad, body.radius_m)
-                    bound -= _moved(theirs, *where, other.radius_m)
+                    bound = distance - _moved(mine, x_m, y_m, yaw_rad, radius)
+                    bound -= _moved(theirs, *where, radii[j])
                 if bound > _MARGIN_M:
                     gap = bound - _MARGIN_M
                 elif known is not None and known[0] == (x_m, y_m, yaw_rad) and known[1] == where:
                     gap = known[2] - _TOLERANCE_M  # neither moved (stalled against each other)
+                elif known is not None and known[2] <= _TOLERANCE_M and known[2] - bound < _STILL_TOUCHING_M:
+                    # Measured touching, and moved less than a millimetre since (one sliding along
+                    # the other): no free motion, without FCL. The drive checks each step; a new
+                    # measurement after the millimetre lets it back into the compiled loop.
+                    gap = 0.0
                 else:
                     distance = body.distance_to((x_m, y_m, yaw_rad), other, where)
-                    exact[j] = ((x_m, y_m, yaw_rad), where, distance)
+                    measured[j] = ((x_m, y_m, yaw_rad), where, distance)
                     gap = distance - _TOLERANCE_M
             free = min(free, gap)
             if free <= 0.0:
-                return 0.0
+                return free
         return free
+
+
+def _nm(distance_m: float) -> int:
+    """A distance in whole nanometres, rounded up (and one more, for the product's own rounding)."""
+    return math.ceil(distance_m * 1e9) + 1
 
 
 def _moved(anchor: tuple[float, float, float], x_m: float, y_m: float, yaw_rad: float, radius_m: float) -> float:
@@ -281,16 +439,21 @@ class FleetView:
             c, s = math.cos(yaw), math.sin(yaw)
             rot = np.array([[c, s], [-s, c]])  # row vectors: p @ rot is R p
             if len(segs):
-                a = segs[:, 0:2] @ rot + (x, y)
-                b = segs[:, 2:4] @ rot + (x, y)
-                segments.append(np.hstack([a, b]))
+                placed = np.empty_like(segs)
+                placed[:, 0:2] = segs[:, 0:2] @ rot + (x, y)
+                placed[:, 2:4] = segs[:, 2:4] @ rot + (x, y)
+                segments.append(placed)
             if len(circs):
-                centres = circs[:, 0:2] @ rot + (x, y)
-                circles.append(np.hstack([centres, circs[:, 2:3]]))
+                placed = np.empty_like(circs)
+                placed[:, 0:2] = circs[:, 0:2] @ rot + (x, y)
+                placed[:, 2] = circs[:, 2]
+                circles.append(placed)
         caster = None
         if segments or circles:
-            seg_rows = [(float(r[0]), float(r[1]), float(r[2]), float(r[3])) for arr in segments for r in arr]
-            circ_rows = [(float(r[0]), float(r[1]), float(r[2])) for arr in circles for r in arr]
-            caster = ObstacleCaster(seg_rows, circ_rows, key)
+            caster = ObstacleCaster(
+                np.concatenate(segments) if segments else np.empty((0, 4)),
+                np.concatenate(circles) if circles else np.empty((0, 3)),
+                key,
+            )
         self._cache[key] = (poses, caster)
         return caster

@@ -599,6 +599,9 @@ class RobotBody:
         self.radius_m = radius
         """Largest horizontal distance of any collision point from the base frame's z axis."""
         self.z_range_m = (z_lo, z_hi)
+        # Every shape's rotation and translation in the base frame, stacked: `_place` turns them all at once.
+        self._rotations = np.array([T[:3, :3] for T in self._local])
+        self._translations = np.array([T[:3, 3:4] for T in self._local])
         self._manager = fcl.DynamicAABBTreeCollisionManager()
         self._manager.registerObjects(self._objects)
         self._manager.setup()
@@ -616,9 +619,10 @@ class RobotBody:
         self._placed_at = (x, y, yaw)
         c, s = math.cos(yaw), math.sin(yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        offset = np.array([x, y, 0.0])
-        for obj, T in zip(self._objects, self._local, strict=True):
-            obj.setTransform(fcl.Transform(rot @ T[:3, :3], rot @ T[:3, 3] + offset))
+        rotations = rot @ self._rotations  # each shape's rot @ R, as one product
+        translations = (rot @ self._translations)[:, :, 0] + np.array([x, y, 0.0])
+        for obj, r, t in zip(self._objects, rotations, translations, strict=True):
+            obj.setTransform(fcl.Transform(r, t))
         self._manager.update()
 
     def _place_bound(self, x: float, y: float) -> None:
@@ -862,10 +866,15 @@ class CollisionMonitor:
     stays where it was and tries the same step again). The scene does not move, so the answers of
     the last few queried poses are kept and a pose asked again is answered from them: the same
     contacts and the same free distance as a new query, without FCL.
+
+    After a check found a pose free, a check at that same pose answers free again, leaving the
+    monitor as it was (`repeats_free`): a drive creeping in place needs no new check.
     """
 
     RECENT_POSES = 8
     """How many queried poses' answers are kept."""
+    static = True
+    """The scene it checks against does not move (a free distance, less the robot's motion, stays true)."""
 
     def __init__(self, scene: Scene, body: RobotBody, *, margin_m: float = 0.005) -> None:
         self.scene = scene
@@ -880,6 +889,7 @@ class CollisionMonitor:
         """How many FCL queries were made (for benchmarks)."""
         self.repeats = 0
         """How many checks were answered from the poses asked before."""
+        self._last_free: tuple[float, float, float] | None = None  # the last check's pose, if it was free
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may still move from this pose with no contact possible (0 if unknown)."""
@@ -890,21 +900,32 @@ class CollisionMonitor:
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose (empty tuple when free)."""
         moved = math.hypot(x_m - self._x, y_m - self._y) + self.body.radius_m * abs(yaw_rad - self._yaw)
-        if moved < self._free_m:
-            return ()
         pose = (x_m, y_m, yaw_rad)
+        if moved < self._free_m:
+            self._last_free = pose
+            return ()
         known = self._recent.get(pose)
         if known is not None:
             self.repeats += 1
             self._x, self._y, self._yaw = pose
             contacts, self._free_m = known
-            return contacts
-        contacts = self._query(x_m, y_m, yaw_rad)
-        recent = self._recent
-        if len(recent) >= self.RECENT_POSES:
-            del recent[next(iter(recent))]  # the oldest
-        recent[pose] = (contacts, self._free_m)
+        else:
+            contacts = self._query(x_m, y_m, yaw_rad)
+            recent = self._recent
+            if len(recent) >= self.RECENT_POSES:
+                del recent[next(iter(recent))]  # the oldest
+            recent[pose] = (contacts, self._free_m)
+        self._last_free = None if contacts else pose
         return contacts
+
+    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        """Whether the last check was at this pose and found it free (a check there now would too).
+
+        A free answer leaves a positive free distance anchored within reach of the pose (or the
+        anchor as it was, the pose inside its free distance), so asking again answers free, with
+        no FCL query and nothing changed; the scene does not move.
+        """
+        return self._last_free == (x_m, y_m, yaw_rad)
 
     def _query(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Ask FCL about this pose; set the free distance from it."""

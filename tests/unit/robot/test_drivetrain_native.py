@@ -4,6 +4,7 @@ contacts, where the compiled loop hands the steps near the world to the Python p
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from collections.abc import Callable, Sequence
@@ -243,3 +244,53 @@ def test_native_readers_return_what_the_loop_structure_holds(profile: str, fmu: 
             assert dt.chassis_state() == FmuDrivetrain.chassis_state(dt)
             assert repr(dt.wheel_state()) == repr(FmuDrivetrain.wheel_state(dt))  # repr: NaN where there is none
         assert dt.chassis_state().x_m != 0.0
+
+
+class LastCheck:
+    """A static world's contact check that knows its last answer (`CollisionMonitor.repeats_free`'s contract)."""
+
+    def __init__(self, contact: Callable[[float, float, float], bool]) -> None:
+        self.contact = contact
+        self.calls = 0
+        self.last_free: tuple[float, float, float] | None = None
+
+    def __call__(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        self.calls += 1
+        hit = self.contact(x_m, y_m, yaw_rad)
+        self.last_free = None if hit else (x_m, y_m, yaw_rad)
+        return hit
+
+    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        return self.last_free == (x_m, y_m, yaw_rad)
+
+
+@pytest.mark.parametrize("profile,fmu", [("voltage", "xm430_w210"), ("velocity-servo", "xm430_w210_servo")])
+def test_a_drive_creeping_in_place_at_a_free_pose_stays_in_the_compiled_loop(profile: str, fmu: str) -> None:
+    # Driven into a wall at x = 1.05 with a turn far below the yaw's float resolution: the wall blocks
+    # the forward motion and the turn goes on at ~1e-14 rad/s, leaving the pose where it is, step
+    # after step. The Python path checks each of those steps; the compiled loop, told the pose was
+    # checked free, takes them without a check, along the same trajectory.
+    script = ((0.15, 1e-14, 600), (0.15, 1e-14, 1500), (-0.1, 0.0, 300))
+    drive = FmuDrive(fmu=f"builtin:{fmu}", profile=profile)  # type: ignore[arg-type]
+    runs = {}
+    for api, vouch in (("native", True), ("native", False), ("lowlevel", False)):
+        check = LastCheck(lambda x, y, yaw: x > 1.05)
+        with FmuDrivetrain(
+            FmuDrive(**{**_fields(drive), "api": api}),  # type: ignore[arg-type]
+            WAFFLE,
+            step_ns=MS,
+            pose=(1.0, 2.0, 0.3),
+            contact=check,
+            free_distance=lambda x, y, yaw: max(0.0, 1.05 - 1e-3 - x),  # none left within 1 mm of the wall
+            repeats_free=check.repeats_free if vouch else None,
+            bounding_radius_m=0.2,
+        ) as dt:
+            runs[api, vouch] = (_drive_script(dt, script), check.calls)
+    (fast, fast_calls), (native, native_calls), (python, _) = runs.values()
+    assert_same(fast, python)
+    assert_same(native, python)
+    blocked = [record[9] for record in python]
+    assert sum(blocked) > 100 and not blocked[-1]  # pressed against the wall, then backed off
+    creeping = [now for before, now in itertools.pairwise(python) if now[9] and now[5] and now[1:4] == before[1:4]]
+    assert len(creeping) > 100  # turning (yaw rate not 0) with the pose unchanged
+    assert fast_calls < native_calls / 10  # the approach and the backing off only

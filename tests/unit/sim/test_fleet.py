@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from twin.core.errors import ConfigError
+from twin.robot.chassis import ChassisState
 from twin.sim.fleet import Fleet, FleetMonitor, FleetView
 from twin.sim.robot_group import scenario_robot
 from twin.sim.scenario import default_scenario_path
@@ -23,18 +24,23 @@ class _Still:
     def __init__(self, x: float, y: float, yaw: float) -> None:
         self.pose = (x, y, yaw)
 
-    def chassis_state(self) -> Any:
-        return SimpleNamespace(x_m=self.pose[0], y_m=self.pose[1], yaw_rad=self.pose[2])
+    def chassis_state(self) -> ChassisState:
+        return ChassisState(*self.pose, 0.0, 0.0, 0.0, 0.0, 0.0, False)
 
 
 class _OpenWorld:
     """No walls: nothing but the other robots limits the robot."""
+
+    static = True
 
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         return ()
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         return math.inf
+
+    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        return True
 
 
 def _group(namespace: str, pose: tuple[float, float, float]) -> Any:
@@ -104,6 +110,86 @@ def test_a_pose_asked_again_is_answered_as_a_fresh_check_and_follows_the_other_r
     assert monitor.check(*touching) == ()
     other.drive.pose = (0.13, 0.0, math.pi)  # and came back
     assert monitor.check(*touching) == FleetMonitor(_OpenWorld(), fleet, 0).check(*touching) != ()
+
+
+class _Idle:
+    """A drive node that does not move its robot (the test moves it by hand between advances)."""
+
+    def advance(self, n_steps: int) -> None:
+        pass
+
+
+def _moved_to(fleet: Fleet, group: Any, pose: tuple[float, float, float]) -> None:
+    """Move a robot by hand, and let the fleet see it (as a run's robots move: in its advance)."""
+    group.drive.pose = pose
+    fleet.advance(1)
+
+
+def test_a_free_pose_is_vouched_for_while_no_robot_near_it_moves() -> None:
+    # The drive takes the steps that leave it at the pose its last check found free without a new
+    # check, while that check would answer free again: the robots near the pose stand still.
+    me = _group("robot1", (0.0, 0.0, 0.0))
+    near, far = _group("robot2", (0.2, 0.0, math.pi)), _group("robot3", (2.0, 0.0, 0.0))
+    for g in (me, near, far):
+        g.drive_node = _Idle()
+    fleet = Fleet([me, near, far])
+    monitor = FleetMonitor(_OpenWorld(), fleet, 0)
+    pose = (0.0, 0.0, 0.0)
+    assert not monitor.repeats_free(*pose)  # nothing checked yet
+    assert monitor.check(*pose) == ()
+    assert monitor.repeats_free(*pose) and not monitor.repeats_free(0.0, 0.0, 1e-9)
+    _moved_to(fleet, far, (1.5, 1.0, 0.0))  # moved, but too far to be asked about
+    assert monitor.repeats_free(*pose)
+    _moved_to(fleet, near, (0.19, 0.0, math.pi))  # the robot near it moved: the answer may differ
+    assert not monitor.repeats_free(*pose)
+    assert monitor.check(*pose) == () and monitor.repeats_free(*pose)
+    _moved_to(fleet, far, (0.0, 0.25, -math.pi / 2))  # the far one came near
+    assert not monitor.repeats_free(*pose)
+    _moved_to(fleet, near, (0.13, 0.0, math.pi))
+    assert monitor.check(*pose) != () and not monitor.repeats_free(*pose)  # a contact is never vouched for
+    assert monitor.check(-0.5, 0.0, 0.0) == () and not monitor.repeats_free(*pose)  # the last check was elsewhere
+
+
+class _Walker:
+    """A drive node that walks its robot along a seeded random path (1 cm and a little turn per step)."""
+
+    def __init__(self, drive: _Still, seed: int) -> None:
+        self.drive, self.rng = drive, np.random.default_rng(seed)
+
+    def advance(self, n_steps: int) -> None:
+        x, y, yaw = self.drive.pose
+        yaw += float(self.rng.uniform(-0.3, 0.3))
+        self.drive.pose = (x + 0.01 * math.cos(yaw), y + 0.01 * math.sin(yaw), yaw)
+
+
+def test_the_free_distance_among_many_robots_is_what_measuring_every_robot_gives() -> None:
+    # Eight robots walking about a 1.5 m square: the robot's free distance looks at the near ones
+    # and bounds the far ones by the fleet's odometer; it must answer, call for call, what a
+    # monitor measuring every robot every time answers (the drive's budget, hence its path).
+    rng = np.random.default_rng(11)
+    groups = []
+    for k in range(8):
+        g = _group(f"robot{k + 1}", (0.5 * (k % 4) - 0.75, 0.6 * (k // 4) - 0.3, float(rng.uniform(-3, 3))))
+        g.drive_node = _Walker(g.drive, k) if k else _Idle()
+        groups.append(g)
+    fleet = Fleet(groups)
+    mine, every = FleetMonitor(_OpenWorld(), fleet, 0), FleetMonitor(_OpenWorld(), fleet, 0)
+    mine.keep_m = every.keep_m = every.near_m = math.inf  # measured at every call
+    kept = FleetMonitor(_OpenWorld(), fleet, 0)  # and answered from the last measurement while it holds
+    me = groups[0].drive
+    answers, bounds = [], []
+    for step in range(400):
+        fleet.advance(1)
+        x, y, yaw = me.pose
+        me.pose = (x + 0.002 * math.cos(step / 40), y + 0.002 * math.sin(step / 40), yaw + 0.01)
+        answer = mine.free_m(*me.pose)
+        assert answer == every.free_m(*me.pose), step
+        answers.append(answer)
+        bounds.append(kept.free_m(*me.pose))
+        true = min(groups[0].body.distance_to(me.pose, g.body, g.drive.pose) for g in groups[1:])
+        assert bounds[-1] <= true, step  # never more than the robots truly leave free
+    assert min(answers) < 0.05 < max(answers)  # others came near and went away
+    assert sum(b != a for a, b in zip(answers, bounds, strict=True)) > 50  # often answered from the bound
 
 
 class _Mover:
