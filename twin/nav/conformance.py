@@ -20,6 +20,10 @@ Components:
   normalisation, bit for bit.
 - `amcl_resample`: AMCL's KLD resampling given Nav2's uniform draws: how many samples, and each one.
 - `amcl_estimate`: the pose AMCL publishes (the heaviest cluster's mean) and the covariance it carries.
+- `costmap_static`, `costmap_publish`, `costmap_footprint`, `costmap_layer` (`twin.nav.costmap_2d`): the
+  static layer's costs from an OccupancyGrid, the published 0..100 values, the footprint's cost at poses
+  (FootprintCollisionChecker), and an obstacle or voxel layer's cells (and voxel columns) after update
+  cycles of clearing, marking, footprint clearing and rolling; every cell and value equal.
 """
 
 from __future__ import annotations
@@ -42,7 +46,13 @@ from twin.nav.amcl.conformance_check import (
     check_amcl_motion_model,
     check_amcl_resample,
 )
-from twin.nav.costmap_2d.conformance_check import check_inflation
+from twin.nav.costmap_2d.conformance_check import (
+    check_footprint,
+    check_inflation,
+    check_layer,
+    check_publish,
+    check_static,
+)
 from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
 
 __all__ = ["COMPONENTS", "WITH_C_KERNEL", "CaseResult", "case_files", "check_case", "component_of", "load_case"]
@@ -198,11 +208,16 @@ COMPONENTS: dict[str, Checker] = {
     "amcl_likelihood_field": check_amcl_likelihood_field,
     "amcl_resample": check_amcl_resample,
     "amcl_estimate": check_amcl_estimate,
+    "costmap_static": check_static,
+    "costmap_publish": check_publish,
+    "costmap_footprint": check_footprint,
+    "costmap_layer": check_layer,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 WITH_C_KERNEL = frozenset(
     {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate"}
+    | {"costmap_footprint", "costmap_layer"}
 )
 """The components whose twin part has a C kernel beside its Python path (the others are Python only)."""
 

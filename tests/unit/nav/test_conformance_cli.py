@@ -82,5 +82,6 @@ def test_a_case_for_a_component_the_twin_does_not_check_is_refused(
     assert main(["nav", "conformance", str(tmp_path / "dwb.npz")]) == 2
     assert (
         "a case for dwb_critics; the twin checks amcl_estimate, amcl_likelihood_field, amcl_motion_model, "
-        "amcl_resample, inflation, navfn, velocity_smoother" in capsys.readouterr().err
+        "amcl_resample, costmap_footprint, costmap_layer, costmap_publish, costmap_static, inflation, navfn, "
+        "velocity_smoother" in capsys.readouterr().err
     )
