@@ -58,6 +58,8 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_fill_footprint.argtypes = [
         ptr, long_, long_, dbl, dbl, dbl, ptr, long_, dbl, dbl, dbl, dbl, ctypes.c_ubyte, ptr,
     ]  # fmt: skip
+    lib.twin_costmap_scan_update.restype = ctypes.c_int
+    lib.twin_costmap_scan_update.argtypes = [ptr, ptr, long_, *[ptr] * 13]
     lib.twin_footprint_cost.restype = ctypes.c_int
     lib.twin_footprint_cost.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, ptr, long_, dbl, dbl, dbl]
     return lib

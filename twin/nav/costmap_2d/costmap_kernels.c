@@ -114,6 +114,10 @@ void twin_obstacle_update(unsigned char *cost, long rows, long cols, double gx, 
 }
 
 static inline int twin_bits_below(unsigned int n, unsigned int threshold) {  /* VoxelGrid::bitsBelowThreshold */
+    /* n holds 16 bits here: the thresholds TB3 uses (0 and 15) need no count */
+    if (threshold == 0) return n == 0;
+    if (threshold >= 16) return 1;
+    if (threshold == 15) return n != 0xffffu;
     return (unsigned int)__builtin_popcount(n) <= threshold;
 }
 
@@ -574,4 +578,39 @@ int twin_footprint_cost(const unsigned char *cost, long rows, long cols, double 
         if (worst == LETHAL) return LETHAL;
     }
     return worst;
+}
+
+/* One whole costmap update in one call, for the common case: every obstacle/voxel layer fed one LaserScan
+   source that clears and marks (TB3's costmaps). For each layer l: twin_scan_update with its own
+   doubles ld + 18 l and longs lk + 6 l (see twin_scan_update), then its footprint cleared when
+   fp_clear[l] (twin_fill_footprint at the robot pose d: x, y, cos, sin); then the master composed
+   (twin_costmap_compose) over everything when `full`, else over the cells written grown by `pad`.
+   k: rows, cols, footprint points, fill, full, inflate, radius, inflate_unknown, around_unknown, pad.
+   bounds (4) receives the cells written. Returns -1 when memory runs out. */
+int twin_costmap_scan_update(unsigned char *const *layers, unsigned int *const *voxels, long n_layers,
+                             const long *fp_clear, const double *ld, const long *lk, const unsigned char *base,
+                             unsigned char *master, const unsigned char *table, const double *ranges,
+                             const double *cos_a, const double *sin_a, const double *footprint, const double *d,
+                             const long *k, long *bounds) {
+    long rows = k[0], cols = k[1];
+    bounds[0] = rows; bounds[1] = -1; bounds[2] = cols; bounds[3] = -1;
+    for (long l = 0; l < n_layers; ++l) {
+        const double *g = ld + 18 * l;
+        if (twin_scan_update(layers[l], voxels[l], rows, cols, g, lk + 6 * l, ranges, cos_a, sin_a, bounds)) return -1;
+        if (fp_clear[l] && k[2] > 0 &&
+            twin_fill_footprint(layers[l], rows, cols, g[0], g[1], g[2], footprint, k[2], d[0], d[1], d[2], d[3], 0,
+                                bounds))
+            return -1;
+    }
+    long r0, r1, c0, c1;
+    if (k[4]) { r0 = 0; r1 = rows; c0 = 0; c1 = cols; }
+    else if (bounds[1] < 0) return 0;
+    else { r0 = bounds[0]; r1 = bounds[1] + 1; c0 = bounds[2]; c1 = bounds[3] + 1; }
+    long pad = k[9], reach = k[5] ? k[6] : 0;
+    long w0 = r0 - pad < 0 ? 0 : r0 - pad, w1 = r1 + pad > rows ? rows : r1 + pad;
+    long v0 = c0 - pad < 0 ? 0 : c0 - pad, v1 = c1 + pad > cols ? cols : c1 + pad;
+    long e0 = w0 - reach < 0 ? 0 : w0 - reach, e1 = w1 + reach > rows ? rows : w1 + reach;
+    long f0 = v0 - reach < 0 ? 0 : v0 - reach, f1 = v1 + reach > cols ? cols : v1 + reach;
+    return twin_costmap_compose(base, (unsigned char)k[3], (const unsigned char *const *)layers, n_layers, rows, cols,
+                                w0, w1, v0, v1, e0, e1, f0, f1, (int)k[5], k[6], table, (int)k[7], (int)k[8], master);
 }

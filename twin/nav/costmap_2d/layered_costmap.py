@@ -62,6 +62,10 @@ F64 = NDArray[np.float64]
 _NO_TABLE: U8 = np.zeros(2, dtype=np.uint8)  # the C kernel's table argument when nothing inflates
 # the C kernel's addresses: static layer (or None), obstacle layers, cost table, master
 _Addresses = tuple[int | None, "ctypes.Array[ctypes.c_void_p]", int, int]
+# what Costmap._one_call passes per layer: doubles, longs, grid and voxel addresses, footprint clearing
+_OneCall = tuple[
+    F64, NDArray[np.int64], "ctypes.Array[ctypes.c_void_p]", "ctypes.Array[ctypes.c_void_p]", NDArray[np.int64]
+]
 _NO_CELLS: tuple[NDArray[np.intp], NDArray[np.intp]] = (np.zeros(0, np.intp), np.zeros(0, np.intp))
 
 
@@ -394,6 +398,8 @@ class Costmap:
         self._bounds_address = self._bounds.ctypes.data
         self._address_cache: tuple[tuple[U8 | None, ...], _Addresses] | None = None
         self._doubles = np.zeros(18)
+        self._longs10 = np.zeros(10, dtype=np.int64)
+        self._one_call_plan: tuple[tuple[str | None, float], _OneCall | None] | None = None
         self._longs = np.zeros(6, dtype=np.int64)
         self._doubles_address, self._longs_address = self._doubles.ctypes.data, self._longs.ctypes.data
         self._default = NO_INFORMATION if params.track_unknown_space else FREE_SPACE
@@ -445,6 +451,7 @@ class Costmap:
                 layer.cost = np.full(shape, layer.default, dtype=np.uint8)
                 if layer.voxels is not None:
                     layer.voxels = np.full(shape, _FRESH_COLUMN, dtype=np.uint32)
+            self._one_call_plan = None  # it holds the old grids' addresses
             self._radius_cells = (
                 math.ceil(p.inflation.inflation_radius_m / occupancy.resolution_m) if p.inflation is not None else 0
             )
@@ -458,6 +465,8 @@ class Costmap:
         """Run one update cycle with the robot's pose and the observations since the last one (costmap frame)."""
         if self.params.rolling_window:
             self._roll(robot_x_m, robot_y_m)
+        if len(observations) == 1 and self._one_call(robot_x_m, robot_y_m, robot_yaw_rad, observations[0]):
+            return
         bounds = self._apply_observations(robot_x_m, robot_y_m, robot_yaw_rad, observations)
         rows, cols = self.grid.cost.shape
         if self._full_update or self.params.rolling_window:
@@ -547,6 +556,72 @@ class Costmap:
             if layer.voxels is not None:
                 _shift(layer.voxels, cy, cx, _FRESH_COLUMN)
         # the master needs no shift: a rolling window's update recomposes all of it
+
+    def _one_call(self, x: float, y: float, yaw: float, obs: Observation) -> bool:
+        """Run `update` in one C call (twin_costmap_scan_update); False when it needs the general path.
+
+        It applies when every layer takes the scan through one source that clears and marks (TB3's costmaps).
+        """
+        scan = obs.scan
+        if self._lib is None or scan is None or not self._obstacles:
+            return False
+        plan = self._one_call_plan
+        if plan is None or plan[0] != (obs.source, self.grid.resolution_m):
+            plan = self._one_call_plan = self._plan_one_call(obs.source)
+        if plan[1] is None:
+            return False
+        layer_d, layer_k, pointers, voxel_pointers, fp_clear = plan[1]
+        g = self.grid
+        layer_d[:, :10] = (
+            g.origin_x_m, g.origin_y_m, g.resolution_m, scan.range_min_m, scan.range_max_m,
+            obs.origin_x_m, obs.origin_y_m, obs.origin_z_m, scan.cos_yaw, scan.sin_yaw,
+        )  # fmt: skip
+        layer_k[:, 0] = len(scan.ranges)
+        rows, cols = g.cost.shape
+        base, _, table, master = self._addresses()
+        full = self._full_update or self.params.rolling_window
+        self._full_update = False
+        infl = self.params.inflation if self._inflate else None
+        self._doubles[:4] = (x, y, math.cos(yaw), math.sin(yaw))
+        self._longs10[:] = (
+            rows, cols, len(self._footprint_xy), self._default, int(full), int(infl is not None), self._radius_cells,
+            int(infl is not None and infl.inflate_unknown), int(infl is not None and infl.inflate_around_unknown),
+            self._radius_cells + 1 if infl is not None else 0,
+        )  # fmt: skip
+        status = self._lib.twin_costmap_scan_update(
+            pointers, voxel_pointers, len(self._obstacles), fp_clear.ctypes.data, layer_d.ctypes.data,
+            layer_k.ctypes.data, base, master, table, scan.ranges.ctypes.data, scan.cos_a.ctypes.data,
+            scan.sin_a.ctypes.data, self._footprint_address, self._doubles_address, self._longs10.ctypes.data,
+            self._bounds_address,
+        )  # fmt: skip
+        if status != 0:
+            raise MemoryError("costmap update: out of memory")
+        return True
+
+    def _plan_one_call(self, source_name: str | None) -> tuple[tuple[str | None, float], _OneCall | None]:
+        """What `_one_call` passes for each layer (its constants filled once), or None when it does not apply."""
+        key = (source_name, self.grid.resolution_m)
+        n = len(self._obstacles)
+        layer_d, layer_k = np.zeros((n, 18)), np.zeros((n, 6), dtype=np.int64)
+        for i, layer in enumerate(self._obstacles):
+            taking = [s for s in layer.sources if source_name in (None, s.name)]
+            if len(taking) != 1 or not (taking[0].clearing and taking[0].marking):
+                return key, None
+            source, lp = taking[0], layer.params
+            voxel = layer.voxels is not None
+            layer_d[i, 10:] = (
+                self._cells(source.raytrace_max_range_m), self._cells(source.raytrace_min_range_m),
+                source.obstacle_max_range_m if voxel else self._cells(source.obstacle_max_range_m),
+                source.obstacle_min_range_m if voxel else self._cells(source.obstacle_min_range_m),
+                lp.min_obstacle_height_m, lp.max_obstacle_height_m, lp.origin_z_m, lp.z_resolution_m,
+            )  # fmt: skip
+            layer_k[i] = (0, 1, 1, *layer.voxel_longs.tolist())
+        pointers = (ctypes.c_void_p * n)(*[layer.cost.ctypes.data for layer in self._obstacles])
+        voxel_pointers = (ctypes.c_void_p * n)(
+            *[None if layer.voxels is None else layer.voxels.ctypes.data for layer in self._obstacles]
+        )
+        fp_clear = np.array([int(layer.footprint_clearing) for layer in self._obstacles], dtype=np.int64)
+        return key, (layer_d, layer_k, pointers, voxel_pointers, fp_clear)
 
     def _apply_observations(
         self, x: float, y: float, yaw: float, observations: Sequence[Observation]
