@@ -1,4 +1,4 @@
-"""Nav2's layered costmap (nav2_costmap_2d, Humble): static, obstacle and inflation layers on a `CostGrid`.
+"""Nav2's layered costmap (nav2_costmap_2d, Humble): static, obstacle, voxel and inflation layers on a `CostGrid`.
 
 One `Costmap` is one costmap node (`global_costmap` or `local_costmap`); `update` is one
 `updateMap` cycle, called at `update_frequency`. What each layer does, as Nav2 does it:
@@ -7,13 +7,25 @@ One `Costmap` is one costmap node (`global_costmap` or `local_costmap`); `update
   unknown (-1) is NO_INFORMATION when `track_unknown_space` (else free), a value at or above
   `lethal_cost_threshold` (100) is LETHAL, anything else FREE (trinary). A non-rolling costmap
   takes the map's size and origin; the static layer overwrites the master grid.
-- **Obstacle layer** (and VoxelLayer, which a planar lidar makes a 2D obstacle layer): for each
-  observation, first clearing (Bresenham ray tracing from the sensor cell towards every endpoint,
-  clipped to the grid and to `raytrace_max_range`, setting FREE), then marking (endpoints closer
-  than `obstacle_max_range` and not closer than `obstacle_min_range` become LETHAL), then the
-  robot's footprint is cleared. LaserScan ranges that are inf or outside [range_min, range_max)
+- **Obstacle layer** (`ObstacleLayer::updateBounds`): for each observation, first clearing
+  (`raytraceFreespace`: nothing with the sensor off the grid; each point clipped to the grid, a ray
+  whose clipped end is still off it skipped; Bresenham from the sensor's cell, at most
+  `cellDistance(raytrace_max_range)` cells, setting FREE), then marking (with the sensor on the grid,
+  a point within the layer's `min/max_obstacle_height` whose cell lies within
+  `cellDistance(obstacle_max_range)` whole cells of the sensor's, `(unsigned) hypot`, and not below
+  `cellDistance(obstacle_min_range)`, becomes LETHAL), then the robot's footprint is cleared as
+  `setConvexPolygonCost` fills it. LaserScan ranges that are inf or outside [range_min, range_max)
   give no point (`inf_is_valid` false). The layer merges into the master by maximum, skipping its
   own unknown cells and overriding the master's unknown.
+- **Voxel layer** (`VoxelLayer`, nav2_voxel_grid's uint32 columns: bit z and bit z + 16 of a voxel,
+  both set marked, one unknown, none free; fresh columns all unknown): clearing pulls each point 2
+  cells towards the sensor, clips it to the grid ((n - 0.5) cells, as `getSizeInMetersX`) and
+  clears the voxels of a 3-D Bresenham from the sensor's fractional voxel, setting a cell FREE when
+  its column's marked bits are within `mark_threshold` and its unknown bits within
+  `unknown_threshold` + 16 - `z_voxels` (else unknown); marking takes points under
+  `max_obstacle_height` closer than `obstacle_max_range` in metres (3-D) and sets LETHAL when the
+  column's marked bits exceed `mark_threshold`. TB3's params run it beside an obstacle layer on the
+  same scan; both are kept.
 - **Inflation layer**: `InflationLayer::updateCosts`'s wavefront (`inflate`). Every LETHAL cell (and
   NO_INFORMATION with `inflate_around_unknown`) of the update window grown by the radius
   (`ceil(inflation_radius / resolution)` cells) is a source; cells are settled by increasing squared
@@ -24,8 +36,9 @@ One `Costmap` is one costmap node (`global_costmap` or `local_costmap`); `update
   positive cost with `inflate_unknown`). The inscribed radius is that of the padded footprint:
   `footprint` if given, else Nav2's 16-point circle of `robot_radius`, each point pushed out by
   `footprint_padding` along x and y.
-- **Rolling window** (local costmap): the grid is recentred on the robot before each update,
-  its origin moving in whole cells; cells that come into view start at the default value.
+- **Rolling window** (local costmap): before each update the origin moves by the whole cells
+  (truncated) from it to `robot - getSizeInMetersX() / 2`, where a grid of n cells measures
+  (n - 0.5) cells; cells that come into view start at the default value (voxel columns unknown).
 
 `clear_entirely`, `clear_around_robot` and `clear_except_region` are the ClearCostmap services.
 The grid's Nav2 0..100 publication values come from `CostGrid.occupancy_values()`.
