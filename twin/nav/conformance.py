@@ -29,6 +29,10 @@ Components:
 - `dwb`: one DWB controller cycle (`twin.nav.controller.dwb`): the plan's cut, the velocity samples,
   each trajectory's poses, each critic's raw score and which critic rejects a sample, the totals,
   bit for bit, and the command chosen (`twin.nav.controller.dwb.conformance_check`).
+- `costmap_static`, `costmap_publish`, `costmap_footprint`, `costmap_layer` (`twin.nav.costmap_2d`): the
+  static layer's costs from an OccupancyGrid, the published 0..100 values, the footprint's cost at poses
+  (FootprintCollisionChecker), and an obstacle or voxel layer's cells (and voxel columns) after update
+  cycles of clearing, marking, footprint clearing and rolling; every cell and value equal.
 """
 
 from __future__ import annotations
@@ -52,9 +56,15 @@ from twin.nav.amcl.conformance_check import (
     check_amcl_resample,
 )
 from twin.nav.behaviors.conformance_check import check_behavior, check_behavior_collision
-from twin.nav.controller.rpp_conformance_check import check_rpp
 from twin.nav.controller.dwb.conformance_check import check_dwb
-from twin.nav.costmap_2d.conformance_check import check_inflation
+from twin.nav.controller.rpp_conformance_check import check_rpp
+from twin.nav.costmap_2d.conformance_check import (
+    check_footprint,
+    check_inflation,
+    check_layer,
+    check_publish,
+    check_static,
+)
 from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
 
 __all__ = ["COMPONENTS", "WITH_C_KERNEL", "CaseResult", "case_files", "check_case", "component_of", "load_case"]
@@ -214,11 +224,16 @@ COMPONENTS: dict[str, Checker] = {
     "behavior": check_behavior,
     "behavior_collision": check_behavior_collision,
     "dwb": check_dwb,
+    "costmap_static": check_static,
+    "costmap_publish": check_publish,
+    "costmap_footprint": check_footprint,
+    "costmap_layer": check_layer,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 WITH_C_KERNEL = frozenset(
     {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate", "dwb"}
+    | {"costmap_footprint", "costmap_layer"}
 )
 """The components whose twin part has a C kernel beside its Python path (the others are Python only)."""
 

@@ -52,6 +52,7 @@ class LaserGeometry:
     range_max_m: float
     mount_x_m: float = 0.0
     mount_y_m: float = 0.0
+    mount_z_m: float = 0.0
     mount_yaw_rad: float = 0.0
 
     @classmethod
@@ -66,6 +67,7 @@ class LaserGeometry:
             range_max_m=spec.range_max_m,
             mount_x_m=mount.x_m,
             mount_y_m=mount.y_m,
+            mount_z_m=mount.z_m,
             mount_yaw_rad=mount.yaw_rad,
         )
 

@@ -143,14 +143,25 @@ class ObservationSource:
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class ObstacleLayerParams:
-    """An ObstacleLayer or VoxelLayer (the twin's lidar is planar, so a voxel layer acts as an obstacle layer)."""
+    """An ObstacleLayer or VoxelLayer; the z_* fields and thresholds are the VoxelLayer's (Nav2's defaults)."""
 
     name: str
     plugin: str
     enabled: bool = True
     footprint_clearing_enabled: bool = True
+    min_obstacle_height_m: float = 0.0
     max_obstacle_height_m: float = 2.0
+    origin_z_m: float = 0.0
+    z_resolution_m: float = 0.2
+    z_voxels: int = 10
+    unknown_threshold: int = 15
+    mark_threshold: int = 0
     sources: tuple[ObservationSource, ...] = ()
+
+    @property
+    def voxel(self) -> bool:
+        """True for a VoxelLayer."""
+        return self.plugin.rsplit("::", 1)[-1].rsplit("/", 1)[-1] == "VoxelLayer"
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -624,9 +635,17 @@ def _costmap(r: ParamReader, name: str) -> CostmapParams:
                     plugin=plugin,
                     enabled=r.flag(f"{layer}.enabled", True),
                     footprint_clearing_enabled=r.flag(f"{layer}.footprint_clearing_enabled", True),
+                    min_obstacle_height_m=r.number(
+                        f"{layer}.min_obstacle_height", 0.0, low=-MAX_DISTANCE_M, high=MAX_DISTANCE_M, unit="m"
+                    ),
                     max_obstacle_height_m=r.number(
                         f"{layer}.max_obstacle_height", 2.0, low=-MAX_DISTANCE_M, high=MAX_DISTANCE_M, unit="m"
                     ),
+                    origin_z_m=r.number(f"{layer}.origin_z", 0.0, low=-MAX_DISTANCE_M, high=MAX_DISTANCE_M, unit="m"),
+                    z_resolution_m=r.number(f"{layer}.z_resolution", 0.2, above=0.0, high=MAX_DISTANCE_M, unit="m"),
+                    z_voxels=r.integer(f"{layer}.z_voxels", 10, low=1, high=16),
+                    unknown_threshold=r.integer(f"{layer}.unknown_threshold", 15, low=0, high=16),
+                    mark_threshold=r.integer(f"{layer}.mark_threshold", 0, low=0, high=16),
                     sources=tuple(_source(r, layer, s) for s in sources),
                 )
             )

@@ -35,7 +35,12 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_obstacle_update.restype = None
     lib.twin_obstacle_update.argtypes = [
         ptr, long_, long_, dbl, dbl, dbl, dbl, dbl, ptr, long_, ctypes.c_int, ctypes.c_int,
-        dbl, dbl, dbl, dbl, ptr,
+        dbl, dbl, dbl, dbl, dbl, dbl, ptr,
+    ]  # fmt: skip
+    lib.twin_voxel_update.restype = None
+    lib.twin_voxel_update.argtypes = [
+        ptr, ptr, long_, long_, dbl, dbl, dbl, dbl, dbl, dbl, ptr, long_, ctypes.c_int, ctypes.c_int,
+        dbl, dbl, dbl, dbl, ptr, ptr, ptr,
     ]  # fmt: skip
     lib.twin_costmap_compose.restype = ctypes.c_int
     lib.twin_costmap_compose.argtypes = [
@@ -48,18 +53,13 @@ def load_kernel() -> ctypes.CDLL | None:
         ctypes.c_int, ctypes.c_int, ptr,
     ]  # fmt: skip
     lib.twin_scan_update.restype = ctypes.c_int
-    lib.twin_scan_update.argtypes = [
-        ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ptr, ptr, dbl, dbl, dbl, dbl, dbl, dbl,
-        ctypes.c_int, ctypes.c_int, dbl, dbl, dbl, dbl, ptr,
-    ]  # fmt: skip
+    lib.twin_scan_update.argtypes = [ptr, ptr, long_, long_, ptr, ptr, ptr, ptr, ptr, ptr]
     lib.twin_fill_footprint.restype = ctypes.c_int
     lib.twin_fill_footprint.argtypes = [
         ptr, long_, long_, dbl, dbl, dbl, ptr, long_, dbl, dbl, dbl, dbl, ctypes.c_ubyte, ptr,
     ]  # fmt: skip
     lib.twin_costmap_scan_update.restype = ctypes.c_int
-    lib.twin_costmap_scan_update.argtypes = [ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr, ptr]
+    lib.twin_costmap_scan_update.argtypes = [ptr, ptr, long_, *[ptr] * 13]
     lib.twin_footprint_cost.restype = ctypes.c_int
     lib.twin_footprint_cost.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, ptr, long_, dbl, dbl, dbl]
-    lib.twin_fill_polygon.restype = ctypes.c_int
-    lib.twin_fill_polygon.argtypes = [ptr, long_, long_, dbl, dbl, dbl, ptr, long_, ctypes.c_ubyte, ptr]
     return lib

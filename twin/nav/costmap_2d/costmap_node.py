@@ -80,6 +80,7 @@ class CostmapNode(Node):
                         range_max_m=laser.range_max_m,
                         sensor_x_m=sx,
                         sensor_y_m=sy,
+                        sensor_z_m=laser.mount_z_m,
                         sensor_yaw_rad=syaw,
                     )
                 )

@@ -10,6 +10,7 @@ kernels are built (`costmap_kernels.c`), else in Python (`footprint_cost_py`, th
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from typing import Any
 
@@ -114,7 +115,7 @@ def footprint_cost_py(costmap: CostGrid, footprint: tuple[tuple[float, float], .
     c, s = math.cos(pose[2]), math.sin(pose[2])
     cells = []
     for px, py in footprint:
-        wx, wy = pose[0] + c * px - s * py, pose[1] + s * px + c * py
+        wx, wy = pose[0] + (px * c - py * s), pose[1] + (px * s + py * c)  # footprintCostAtPose's rounding
         if wx < costmap.origin_x_m or wy < costmap.origin_y_m:
             return LETHAL_OBSTACLE
         mx = int((wx - costmap.origin_x_m) / costmap.resolution_m)
@@ -124,8 +125,9 @@ def footprint_cost_py(costmap: CostGrid, footprint: tuple[tuple[float, float], .
         cells.append((mx, my))
     worst = 0
     cost = costmap.cost
-    for i, (x0, y0) in enumerate(cells):
-        x1, y1 = cells[(i + 1) % len(cells)]
+    # edges 0-1, 1-2, ..., then the closing one walked from the first point to the last (as Nav2 walks it)
+    edges = [*itertools.pairwise(cells), (cells[0], cells[-1])]
+    for (x0, y0), (x1, y1) in edges:
         worst = max(worst, _line_cost(cost, x0, y0, x1, y1))
         if worst == LETHAL_OBSTACLE:
             break

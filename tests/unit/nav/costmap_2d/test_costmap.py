@@ -298,3 +298,49 @@ def test_the_c_kernel_and_numpy_compose_and_inflate_alike(
         assert np.array_equal(native.grid.cost, numpy_only.grid.cost)
     costs = set(np.unique(native.grid.cost).tolist())
     assert {0, 253, 254} <= costs and len(costs) > 10  # free, a gradient of inflated costs, lethal
+
+
+@pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
+def test_tb3s_voxel_layer_keeps_a_mark_its_shorter_rays_do_not_reach(native: bool) -> None:
+    """TB3 runs an obstacle layer and a voxel layer on the scan; the voxel layer stops clearing 2 cells short.
+
+    An obstacle seen at 1.0 m that moves 5 cm further away: the obstacle layer's ray clears its old
+    cell, the voxel layer's does not, and the master (their maximum) still holds it, as in Nav2.
+    """
+    _, local = _tb3()
+    assert [layer.voxel for layer in local.obstacle_layers] == [False, True]
+    costmap = Costmap(local, robot_xy_m=(0.0, 0.0), native=native)
+    (obstacle, _), (voxel, columns) = costmap.layer_grids
+    assert columns is not None and (columns == 0xFFFF).all()  # every voxel unknown to start
+
+    def scan_at(x_m: float) -> list[Observation]:
+        points = np.array([[x_m, 0.026, 0.132]])
+        return [Observation(origin_x_m=0.001, origin_y_m=0.026, origin_z_m=0.132, points_xy_m=points)]
+
+    costmap.update(0.0, 0.0, 0.0, scan_at(1.0))
+    old = costmap.grid.world_to_cell(1.0, 0.026)
+    assert old is not None and costmap.grid.cost[old] == LETHAL_OBSTACLE
+    costmap.update(0.0, 0.0, 0.0, scan_at(1.05))
+    assert obstacle[old] == 0 and voxel[old] == LETHAL_OBSTACLE
+    assert costmap.grid.cost[old] == LETHAL_OBSTACLE
+    costmap.update(0.0, 0.0, 0.0, scan_at(1.3))  # 6 cells further: now the voxel layer's ray clears it too
+    assert voxel[old] == 0 and costmap.grid.cost[old] < LETHAL_OBSTACLE
+
+
+def test_the_obstacle_layer_marks_by_whole_cells_as_nav2() -> None:
+    """Nav2 marks a point whose cell lies within cellDistance(obstacle_max_range) = 50 cells of the sensor's."""
+    _, local = _tb3()
+    params = dataclasses.replace(
+        local, rolling_window=False, width_m=8.0, height_m=8.0, origin_x_m=-4.0, origin_y_m=-4.0,
+        obstacle_layers=local.obstacle_layers[:1],
+    )  # fmt: skip
+    costmap = Costmap(params)
+    # the sensor in cell 80; 2.52 m on lies in cell 130 (50 cells on: marked, though past 2.5 m),
+    # 2.57 m on in cell 131 (51: not)
+    points = np.array([[0.001 + 2.52, 0.001, 0.132], [0.001, 0.001 + 2.57, 0.132]])
+    observation = Observation(origin_x_m=0.001, origin_y_m=0.001, origin_z_m=0.132, points_xy_m=points)
+    costmap.update_layers(0.0, 0.0, 0.0, [observation])
+    (cost, _), *_ = costmap.layer_grids
+    near, far = (costmap.grid.world_to_cell(float(x), float(y)) for x, y, _ in points)
+    assert near == (80, 130) and far == (131, 80)
+    assert cost[near] == LETHAL_OBSTACLE and cost[far] != LETHAL_OBSTACLE
