@@ -14,6 +14,7 @@ _RECORDED = (
     _REPO / "tests" / "unit" / "nav" / "costmap_2d" / "inflation_cases",
     _REPO / "tests" / "unit" / "nav" / "velocity_smoother" / "smoother_cases",
     _REPO / "tests" / "unit" / "nav" / "amcl" / "amcl_cases",
+    _REPO / "tests" / "unit" / "nav" / "amcl" / "amcl_run_cases",
 )
 """The recorded sets a checkout holds, replayed when no CASE is named."""
 
@@ -29,7 +30,7 @@ in everything the case records, bit for bit where Nav2 computes in float32 (NavF
 and why, its cost array, its potential, every path point; inflation: every cell of the master grid
 after one update; AMCL given Nav2's random draws: particles, weights, resampling, the published
 pose). Components: navfn, inflation, velocity_smoother, amcl_motion_model, amcl_likelihood_field,
-amcl_resample, amcl_estimate. Exit status: 0 every case equal, 1 a case differs
+amcl_resample, amcl_estimate, amcl_run. Exit status: 0 every case equal, 1 a case differs
 (its first difference is printed), 2 a file is not a case.
 """
 

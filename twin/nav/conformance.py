@@ -20,6 +20,9 @@ Components:
   normalisation, bit for bit.
 - `amcl_resample`: AMCL's KLD resampling given Nav2's uniform draws: how many samples, and each one.
 - `amcl_estimate`: the pose AMCL publishes (the heaviest cluster's mean) and the covariance it carries.
+- `amcl_run`: AMCL over a recorded run (the twin's default mission's scans and odometry, Nav2's draws):
+  at every filter update the particle set after the laser model and after resampling, and the published
+  pose and covariance, bit for bit (the numpy path within 1e-9).
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from twin.nav.amcl.conformance_check import (
     check_amcl_likelihood_field,
     check_amcl_motion_model,
     check_amcl_resample,
+    check_amcl_run,
 )
 from twin.nav.costmap_2d.conformance_check import check_inflation
 from twin.nav.velocity_smoother.conformance_check import check_velocity_smoother
@@ -198,11 +202,12 @@ COMPONENTS: dict[str, Checker] = {
     "amcl_likelihood_field": check_amcl_likelihood_field,
     "amcl_resample": check_amcl_resample,
     "amcl_estimate": check_amcl_estimate,
+    "amcl_run": check_amcl_run,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 WITH_C_KERNEL = frozenset(
-    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate"}
+    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate", "amcl_run"}
 )
 """The components whose twin part has a C kernel beside its Python path (the others are Python only)."""
 

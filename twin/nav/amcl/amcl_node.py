@@ -111,6 +111,7 @@ class AmclNode(Node):
                         )
                     )
                 )
+            if amcl.updated:  # Nav2 publishes the cloud on every filter update, the pose only when it resampled
                 poses, weights = amcl.poses.copy(), amcl.weights.copy()
                 cloud_pub.publish(Encoded((cloud_encode, (t_scan, poses, weights), (poses, weights))))
             map_odom = amcl.map_odom()

@@ -38,7 +38,7 @@ update, in Nav2's order: per particle, rot1, trans, rot2.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
@@ -57,6 +57,7 @@ __all__ = [
     "DrawSource",
     "LaserGeometry",
     "LikelihoodField",
+    "as_received",
     "beam_endpoints",
     "cluster_estimate",
     "kld_limits",
@@ -281,6 +282,18 @@ def _heap_pop(heap: list[_Cell]) -> None:
         hole = child - 1
     _sift_up(heap, hole, value)
     heap.pop()
+
+
+def as_received(occupancy: OccupancyMap) -> OccupancyMap:
+    """The map as AMCL receives it on `/map`: an OccupancyGrid, whose resolution is a float32.
+
+    Nav2's AMCL keeps that float32 as its map scale (`convertMap`): 0.05 m arrives as
+    0.05000000074505806 m, which moves the cell an endpoint falls in by up to a few 1e-8 m and the
+    likelihood field's distances in their last bits, and caps them at int(2.0 / scale) = 39 cells,
+    not 40 (`map_update_cspace`). The origin is a float64 in the message and stays as it is.
+    """
+    res = float(np.float32(occupancy.resolution_m))
+    return occupancy if res == occupancy.resolution_m else replace(occupancy, resolution_m=res)
 
 
 class LikelihoodField:
@@ -625,7 +638,7 @@ class Amcl:
         self.map = occupancy
         self.laser = laser
         self._rng = rng
-        self.field = LikelihoodField(occupancy, params.laser_likelihood_max_dist_m, native=native)
+        self.field = LikelihoodField(as_received(occupancy), params.laser_likelihood_max_dist_m, native=native)
         range_max = laser.range_max_m
         if params.laser_max_range_m > 0.0:
             range_max = min(range_max, params.laser_max_range_m)
@@ -642,7 +655,9 @@ class Amcl:
         self._pf_init = False  # the first scan after it was taken (odometry reference set)
         self._odom_ref = (0.0, 0.0, 0.0)
         self._resample_count = 0
+        self._stats: tuple[tuple[float, float, float], F64] = ((0.0, 0.0, 0.0), np.zeros((3, 3)))
         self.estimate: AmclEstimate | None = None
+        self.updated = False  # the last scan updated the filter
 
     # --- inputs -------------------------------------------------------------------------------
 
@@ -676,27 +691,41 @@ class Amcl:
             raise ConfigError(msg)
         n = self.params.max_particles
         draws = self._rng.standard_normal((n, 3)) * np.sqrt(np.maximum(values, 0.0))
-        poses = np.array([x_m, y_m, yaw_rad]) + draws @ vectors.T
-        self.poses = poses
+        self.set_particles(np.array([x_m, y_m, yaw_rad]) + draws @ vectors.T)
+
+    def set_particles(self, poses: F64) -> None:
+        """Start the filter from these particles (n, 3) of equal weight, as pf_init leaves it after drawing them.
+
+        The next scan only weighs them (no motion), as after an initial pose.
+        """
+        n = len(poses)
+        self.poses = np.array(poses, dtype=np.float64).reshape(n, 3)
         self.weights = np.full(n, 1.0 / n)
         self._w_slow = self._w_fast = 0.0
         self._initialised = True
         self._pf_init = False
         self._resample_count = 0
+        self._clusters_now()  # pf_init's cluster statistics
 
     def process_scan(self, odom_pose: tuple[float, float, float], ranges: NDArray[np.floating]) -> AmclEstimate | None:
         """Take one scan with the odometry pose (odom frame, base) at its stamp.
 
         Returns:
-            The new estimate when the filter updated (then `amcl_pose` and `particle_cloud` are
-            published), else None. Before an initial pose every scan is ignored. `map_odom()`
-            holds the transform to broadcast on every scan once an estimate exists.
+            The estimate AMCL publishes on `amcl_pose` with this scan, else None. As Nav2's
+            laserReceived, a pose is published when the filter resampled, and on the first update
+            after an initial pose (then from the clusters of the initial set unless it resampled):
+            with `resample_interval` above 1, updates in between publish none. `updated` tells
+            whether the filter updated with this scan (then `particle_cloud` is published). Before an
+            initial pose every scan is ignored. `map_odom()` holds the transform to broadcast on every
+            scan once an estimate exists.
         """
+        self.updated = False
         if not self._initialised:
             return None
         p = self.params
         x, y, yaw = odom_pose
-        if not self._pf_init:
+        first = not self._pf_init
+        if first:
             self._odom_ref = (x, y, yaw)
             self._pf_init = True
             self._resample_count = 0
@@ -709,9 +738,14 @@ class Amcl:
         if p.max_beams >= 2:  # Nav2's likelihood model refuses fewer than two beams (no weighting)
             self._sensor(np.asarray(ranges, dtype=np.float64))
         self._odom_ref = (x, y, yaw)
+        self.updated = True
         self._resample_count += 1
-        if self._resample_count % p.resample_interval == 0:
+        resampled = self._resample_count % p.resample_interval == 0
+        if resampled:
             self._resample()
+            self._clusters_now()
+        if not (resampled or first):
+            return None
         self.estimate = self._estimate(odom_pose)
         return self.estimate
 
@@ -799,9 +833,13 @@ class Amcl:
         """Each particle's cluster (bins that touch), numbered from 1 in raster order of the bins."""
         return _clusters(bins, self._lib)
 
+    def _clusters_now(self) -> None:
+        """pf_cluster_stats: the published cluster's mean and the set's covariance, kept until the next resampling."""
+        self._stats = cluster_estimate(self.poses, self.weights, native=self._lib is not None)
+
     def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
         poses = self.poses
-        (mx, my, myaw), cov = cluster_estimate(poses, self.weights, native=self._lib is not None)
+        (mx, my, myaw), cov = self._stats
         ox, oy, oyaw = odom_pose
         # map->odom = map->base * (odom->base)^-1
         tyaw = myaw - oyaw
