@@ -1,8 +1,12 @@
 /* nav2_amcl's hot loops in C (loaded by twin/nav/amcl/_native.py): the laser model, motion
    sampling, the likelihood field's distances, KLD-sampling, resampling, clusters and the estimate. */
 
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
@@ -24,23 +28,41 @@ static void nav2_cell(const double *pose, double lx, double ly, double range, do
     *row = (long)(floor((hy - cy) / scale + 0.5) + (double)(rows / 2));
 }
 
-/* AMCL likelihood field: out[j] = 1 + pz^3 + pz^3 + ... over the beams' endpoints, in beam order and
-   each cube taken as pz * pz * pz, as Nav2 adds them. Particle j at poses[j] = (x, y, yaw) has the
-   grid position gx = (x - ox) * inv_res + 0.5 (likewise gy) and heading cos, sin; beam i's endpoint
-   in the base frame in cells is (ex, ey). The endpoint's cell is (floor(gx + c ex - s ey), floor(gy +
-   s ex + c ey)), AMCL's rounding lookup; this differs from Nav2's arithmetic (nav2_cell) only in the
-   last bits, so where it lands within 1e-6 of a cell edge the cell is taken Nav2's way from the beam's
-   range and bearing and the laser's (lx, ly). Off the map a beam weighs `off_pz`. Beam by beam over
-   all particles: one beam's endpoints from a cluster of particles fall in a few neighbouring cells,
-   which keeps the lookups in cache. Returns -1 when memory runs out. */
+/* AMCL likelihood field: out[j] = 1 + pz^3 + pz^3 + ... over the beams' endpoints, in beam order, as Nav2
+   adds them; cube[k] is map cell k's pz * pz * pz (taken once per cell in that order, the same bits as per
+   beam), row-major, and cube[rows * cols] an endpoint's off the map. Particle j at poses[j] = (x, y, yaw) has
+   the grid position gx = (x - ox) * inv_res + 0.5 (likewise gy) and heading cos, sin; beam i's endpoint in
+   the base frame in cells is (ex, ey). The endpoint's cell is (floor(gx + c ex - s ey), floor(gy + s ex +
+   c ey)), AMCL's rounding lookup; this differs from Nav2's arithmetic (nav2_cell) only in the last bits, so
+   where it lands within 1e-6 of a cell edge the cell is taken Nav2's way from the beam's range and bearing
+   and the laser's (lx, ly). Beam by beam over all particles: one beam's endpoints from a cluster of
+   particles fall in a few neighbouring cells, which keeps the lookups in cache. With SSE2 (every x86-64)
+   each beam's cells are found two particles at a time (the same operations in the same order, so the same
+   bits), then looked up one by one. Returns -1 when memory runs out. */
+#define TWIN_EDGE 1e-6
+
+static long endpoint_cell(const double *pose, double gx, double gy, double c, double s, double bx, double by,
+                          double lx, double ly, double range, double bearing, double ox, double oy, double scale,
+                          long rows, long cols) {
+    double fc = gx + c * bx - s * by;
+    double fr = gy + s * bx + c * by;
+    long col = (long)fc, row = (long)fr;   /* floor without a libm call: truncate, step down below 0 */
+    col -= (double)col > fc;
+    row -= (double)row > fr;
+    double dc = fc - (double)col, dr = fr - (double)row;
+    if (dc < TWIN_EDGE || dc > 1.0 - TWIN_EDGE || dr < TWIN_EDGE || dr > 1.0 - TWIN_EDGE)
+        nav2_cell(pose, lx, ly, range, bearing, ox, oy, scale, rows, cols, &col, &row);
+    return (col >= 0 && col < cols && row >= 0 && row < rows) ? row * cols + col : rows * cols;
+}
+
 int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, double inv_res,
                          const double *ex, const double *ey, const double *range, const double *bearing, long nb,
-                         double lx, double ly, double scale,
-                         const double *pz, long rows, long cols, double off_pz, double *out) {
-    const double edge = 1e-6;
-    double *buf = malloc(4 * sizeof(double) * (size_t)(n > 0 ? n : 1));
-    if (!buf) return -1;
-    double *gx = buf, *gy = buf + n, *c = buf + 2 * n, *s = buf + 3 * n;
+                         double lx, double ly, double scale, const double *cube, long rows, long cols, double *out) {
+    long m = (n + 1) & ~1L;   /* padded to pairs */
+    double *buf = malloc(4 * sizeof(double) * (size_t)(m > 0 ? m : 2));
+    int *cell = malloc(sizeof(int) * (size_t)(m > 0 ? m : 2));
+    if (!buf || !cell) { free(buf); free(cell); return -1; }
+    double *gx = buf, *gy = buf + m, *c = buf + 2 * m, *s = buf + 3 * m;
     for (long j = 0; j < n; ++j) {
         gx[j] = (poses[3 * j] - ox) * inv_res + 0.5;
         gy[j] = (poses[3 * j + 1] - oy) * inv_res + 0.5;
@@ -48,22 +70,53 @@ int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, doub
         s[j] = sin(poses[3 * j + 2]);
         out[j] = 1.0;
     }
-    for (long i = 0; i < nb; ++i) {
-        double bx = ex[i], by = ey[i];
-        for (long j = 0; j < n; ++j) {
-            double fc = gx[j] + c[j] * bx - s[j] * by;
-            double fr = gy[j] + s[j] * bx + c[j] * by;
-            long col = (long)fc, row = (long)fr;   /* floor without a libm call: truncate, step down below 0 */
-            col -= (double)col > fc;
-            row -= (double)row > fr;
-            double dc = fc - (double)col, dr = fr - (double)row;
-            if (dc < edge || dc > 1.0 - edge || dr < edge || dr > 1.0 - edge)
-                nav2_cell(poses + 3 * j, lx, ly, range[i], bearing[i], ox, oy, scale, rows, cols, &col, &row);
-            double v = (col >= 0 && col < cols && row >= 0 && row < rows) ? pz[row * cols + col] : off_pz;
-            out[j] += v * v * v;
+    for (long j = n; j < m; ++j) { gx[j] = gy[j] = -1.0; c[j] = 1.0; s[j] = 0.0; }   /* the pad: off the map */
+#if defined(__SSE2__)
+    long off = rows * cols;
+    if (off < 1073741824L) {   /* cell numbers fit an int */
+        const __m128d big = _mm_set1_pd(1073741824.0), nbig = _mm_set1_pd(-1073741824.0);
+        const __m128d one = _mm_set1_pd(1.0), lo = _mm_set1_pd(TWIN_EDGE), hi = _mm_set1_pd(1.0 - TWIN_EDGE);
+        const __m128d zero = _mm_setzero_pd(), ncols = _mm_set1_pd((double)cols), nrows = _mm_set1_pd((double)rows);
+        const __m128d outside = _mm_set1_pd((double)off), near_edge = _mm_set1_pd(-1.0);
+        for (long i = 0; i < nb; ++i) {
+            const __m128d bx = _mm_set1_pd(ex[i]), by = _mm_set1_pd(ey[i]);
+            for (long j = 0; j < m; j += 2) {
+                __m128d cj = _mm_loadu_pd(c + j), sj = _mm_loadu_pd(s + j);
+                __m128d fc = _mm_sub_pd(_mm_add_pd(_mm_loadu_pd(gx + j), _mm_mul_pd(cj, bx)), _mm_mul_pd(sj, by));
+                __m128d fr = _mm_add_pd(_mm_add_pd(_mm_loadu_pd(gy + j), _mm_mul_pd(sj, bx)), _mm_mul_pd(cj, by));
+                /* far off any map (or NaN): clamped to 2^30 cells away, where an int still holds it */
+                fc = _mm_min_pd(_mm_max_pd(fc, nbig), big);
+                fr = _mm_min_pd(_mm_max_pd(fr, nbig), big);
+                __m128d tc = _mm_cvtepi32_pd(_mm_cvttpd_epi32(fc)), tr = _mm_cvtepi32_pd(_mm_cvttpd_epi32(fr));
+                tc = _mm_sub_pd(tc, _mm_and_pd(_mm_cmpgt_pd(tc, fc), one));   /* floor */
+                tr = _mm_sub_pd(tr, _mm_and_pd(_mm_cmpgt_pd(tr, fr), one));
+                __m128d dc = _mm_sub_pd(fc, tc), dr = _mm_sub_pd(fr, tr);
+                __m128d edge = _mm_or_pd(_mm_or_pd(_mm_cmplt_pd(dc, lo), _mm_cmpgt_pd(dc, hi)),
+                                         _mm_or_pd(_mm_cmplt_pd(dr, lo), _mm_cmpgt_pd(dr, hi)));
+                __m128d in = _mm_and_pd(_mm_and_pd(_mm_cmpge_pd(tc, zero), _mm_cmplt_pd(tc, ncols)),
+                                        _mm_and_pd(_mm_cmpge_pd(tr, zero), _mm_cmplt_pd(tr, nrows)));
+                __m128d k = _mm_add_pd(_mm_mul_pd(tr, ncols), tc);
+                k = _mm_or_pd(_mm_and_pd(in, k), _mm_andnot_pd(in, outside));
+                k = _mm_or_pd(_mm_andnot_pd(edge, k), _mm_and_pd(edge, near_edge));
+                _mm_storel_epi64((__m128i *)(cell + j), _mm_cvttpd_epi32(k));
+            }
+            for (long j = 0; j < n; ++j) {
+                long k = cell[j];
+                if (k < 0)   /* near a cell edge: Nav2's arithmetic decides */
+                    k = endpoint_cell(poses + 3 * j, gx[j], gy[j], c[j], s[j], ex[i], ey[i], lx, ly, range[i],
+                                      bearing[i], ox, oy, scale, rows, cols);
+                out[j] += cube[k];
+            }
         }
+        free(buf); free(cell);
+        return 0;
     }
-    free(buf);
+#endif
+    for (long i = 0; i < nb; ++i)
+        for (long j = 0; j < n; ++j)
+            out[j] += cube[endpoint_cell(poses + 3 * j, gx[j], gy[j], c[j], s[j], ex[i], ey[i], lx, ly, range[i],
+                                         bearing[i], ox, oy, scale, rows, cols)];
+    free(buf); free(cell);
     return 0;
 }
 
@@ -173,6 +226,21 @@ int twin_amcl_distances(const unsigned char *occupied, long width, long height, 
     return 0;
 }
 
+/* (long)floor(x) without a libm call (LONG_MIN where x is NaN or beyond a long, as the conversion gives). */
+static inline long floor_long(double x) {
+    long t = (long)x;
+    return (t != LONG_MIN && (double)t > x) ? t - 1 : t;
+}
+
+/* Each particle's (x, y, yaw) histogram bin as pf_kdtree keys it: floor(pose / bin_size), 3 per particle. */
+void twin_pf_keys(const double *poses, long n, const double *bin_size, long *keys) {
+    for (long i = 0; i < 3 * n; i += 3) {
+        keys[i] = floor_long(poses[i] / bin_size[0]);
+        keys[i + 1] = floor_long(poses[i + 1] / bin_size[1]);
+        keys[i + 2] = floor_long(poses[i + 2] / bin_size[2]);
+    }
+}
+
 /* KLD-sampling's stop (pf_update_resample): particles are taken in order, each counted into its
    (x, y, yaw) histogram bin (keys, 3 per particle); the count stops at the first n with
    n > limit[k], k the bins occupied by the first n. Returns n (m when it never stops), or -1 when
@@ -231,8 +299,8 @@ long twin_pf_resample(const double *poses, long n, const double *cumulative, con
         const double *p = poses + 3 * lo;
         double *o = out + 3 * j;
         o[0] = p[0]; o[1] = p[1]; o[2] = p[2];
-        long key0 = (long)floor(p[0] / bin_size[0]), key1 = (long)floor(p[1] / bin_size[1]);
-        long key2 = (long)floor(p[2] / bin_size[2]);
+        long key0 = floor_long(p[0] / bin_size[0]), key1 = floor_long(p[1] / bin_size[1]);
+        long key2 = floor_long(p[2] / bin_size[2]);
         unsigned long h = (unsigned long)key0 * 73856093UL ^ (unsigned long)key1 * 19349663UL
                           ^ (unsigned long)key2 * 83492791UL;
         long slot = (long)(h & (unsigned long)(size - 1));

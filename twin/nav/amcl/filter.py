@@ -57,6 +57,7 @@ __all__ = [
     "DrawSource",
     "LaserGeometry",
     "LikelihoodField",
+    "Pz",
     "as_received",
     "beam_endpoints",
     "cluster_estimate",
@@ -319,13 +320,14 @@ class LikelihoodField:
         self.origin_x_m = occupancy.origin_x_m
         self.origin_y_m = occupancy.origin_y_m
         self.free_cells = np.argwhere(occupancy.data == 0)  # (row, col) for uniform pose draws
-        self._pz: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
+        self._pz: dict[tuple[float, float, float, float], Pz] = {}
 
-    def pz(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
-        """Return (pz per map cell, pz of an endpoint off the map) as the likelihood-field model computes them.
+    def pz(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> Pz:
+        """Return pz per map cell and pz of an endpoint off the map as the likelihood-field model computes them.
 
         `pz = z_hit exp(-(z z) / (2 sigma sigma)) + z_rand (1 / range_max)`, z the cell's distance,
-        with libm's exp (`math.exp`) over the few distinct distances, so each value is Nav2's to the bit.
+        with libm's exp (`math.exp`) over the few distinct distances, so each value is Nav2's to the bit;
+        with each cell's `pz * pz * pz` (what a beam ending there adds, the same bits as taken per beam).
         """
         key = (z_hit, z_rand, sigma_hit_m, range_max_m)
         if key not in self._pz:
@@ -334,8 +336,21 @@ class LikelihoodField:
             values, index = np.unique(self.distance_m, return_inverse=True)
             table = np.array([z_hit * math.exp(-(z * z) / denominator) + rand for z in values.tolist()])
             off = z_hit * math.exp(-(self.max_dist_m * self.max_dist_m) / denominator) + rand
-            self._pz[key] = (np.ascontiguousarray(table[index.reshape(self.distance_m.shape)]), off)
+            per_cell = np.ascontiguousarray(table[index.reshape(self.distance_m.shape)])
+            cubes = np.ascontiguousarray(np.append((table * table * table)[index.ravel()], off * off * off))
+            self._pz[key] = Pz(per_cell, off, cubes)
         return self._pz[key]
+
+
+class Pz(NamedTuple):
+    """The likelihood field's pz for one set of model parameters."""
+
+    table: F64
+    """pz per map cell (rows, cols)."""
+    off_map: float
+    """pz of an endpoint off the map (at `laser_likelihood_max_dist`)."""
+    cubes: F64
+    """`pz * pz * pz` per cell, row-major, then the off-map one: rows * cols + 1 values (the C kernel's table)."""
 
 
 class Beams(NamedTuple):
@@ -375,9 +390,7 @@ def beam_endpoints(
     return Beams(x, y, np.ascontiguousarray(r), np.ascontiguousarray(angle), laser_xy_m)
 
 
-def laser_likelihood(
-    poses: F64, beams: Beams, field: LikelihoodField, pz: tuple[F64, float], *, native: bool = True
-) -> F64:
+def laser_likelihood(poses: F64, beams: Beams, field: LikelihoodField, pz: Pz, *, native: bool = True) -> F64:
     """Each particle's likelihood-field factor `1 + pz^3 + ...` over the beams (its weight is multiplied by it).
 
     As LikelihoodFieldModel::sensorFunction: each cube is `pz * pz * pz`, added to 1 beam by beam.
@@ -389,10 +402,10 @@ def laser_likelihood(
         poses: (n, 3) particles (x m, y m, yaw rad) in the map frame.
         beams: The beams used, from `beam_endpoints`.
         field: The map's likelihood field.
-        pz: pz per map cell and pz of an endpoint off the map (`field.pz`).
+        pz: The field's pz for the model's parameters (`field.pz`).
         native: Use the C kernel when it can be built.
     """
-    table, off_map = pz
+    table, off_map = pz.table, pz.off_map
     n = len(poses)
     if not len(beams.x_m):
         return np.ones(n)
@@ -408,7 +421,7 @@ def laser_likelihood(
         status = lib.twin_amcl_likelihood(
             poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
             ex.ctypes.data, ey.ctypes.data, beams.range_m.ctypes.data, beams.bearing_rad.ctypes.data, len(ex),
-            lx, ly, field.resolution_m, table.ctypes.data, rows, cols, off_map, out.ctypes.data,
+            lx, ly, field.resolution_m, pz.cubes.ctypes.data, rows, cols, out.ctypes.data,
         )  # fmt: skip
         if status != 0:
             raise MemoryError("amcl likelihood: out of memory")
@@ -581,7 +594,12 @@ def cluster_estimate(poses: F64, weights: F64, *, native: bool = True) -> tuple[
     lib = load_kernel() if native else None
     poses = np.ascontiguousarray(poses, dtype=np.float64)
     w = np.ascontiguousarray(weights, dtype=np.float64)
-    keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
+    keys: NDArray[np.int64]
+    if lib is not None:
+        keys = np.empty((len(poses), 3), dtype=np.int64)
+        lib.twin_pf_keys(poses.ctypes.data, len(poses), _BIN_SIZE.ctypes.data, keys.ctypes.data)
+    else:
+        keys = np.floor(poses / _BIN_SIZE).astype(np.int64)
     cluster, count = _clusters(keys, lib)
     cov = np.zeros((3, 3))
     if lib is not None:
