@@ -25,7 +25,10 @@ LikelihoodFieldModel), vectorised over particles and beams:
   [min_particles, max_particles]. `pf_z` is used as given (0.99), as Nav2 does.
 - **Estimate**: particles are clustered by connected histogram bins; the pose is the mean of the
   heaviest cluster (yaw a circular mean); the covariance is the whole set's (x, y block and
-  the circular variance `-2 ln R` of yaw), as `amcl_pose` carries them.
+  the circular variance `-2 ln R` of yaw), as `amcl_pose` carries them. As Nav2's
+  pf_cluster_stats, they are taken when the set is drawn (initial pose, resampling) and published
+  when the filter resampled or on the first update after an initial pose.
+- **The map** is taken as the OccupancyGrid carries it: its resolution a float32 (`as_received`).
 - **map -> odom** is the estimate composed with the inverse of the odometry pose of the scan that
   produced it; Nav2 re-sends it on every scan stamped scan time + transform_tolerance.
 
