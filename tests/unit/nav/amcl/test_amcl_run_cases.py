@@ -41,6 +41,8 @@ def test_the_recorded_runs_cover_the_issue() -> None:
     assert counts.max() == 2000 and counts.min() < 600  # KLD-sampling shrinks the set and lets it grow again
     other, arrays2 = load_case(INTERVAL_2)
     assert other["params"]["resample_interval"] == 2 and 0 < arrays2["published"].sum() < other["updates"]
+    world, arrays3 = load_case(CASES / "turtlebot3_world_seed0.npz")
+    assert world["updates"] >= 50 and (arrays3["map"] == -1).any()  # another world, a map with unknown cells
 
 
 @pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
