@@ -317,8 +317,8 @@ def check_amcl_run(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> lis
     The twin's `Amcl` is started from the recorded initial particles and fed every scan (odometry
     pose, ranges) with Nav2's draws; at each update (the same scans as Nav2's gating) the particle set
     and weights must equal Nav2's (bitwise for the C kernel: SHA-256 of every set, and the stored
-    sets; within 1e-9 m / rad for the numpy path, on the stored sets) and so must the published pose
-    and covariance. Stops at the first update that differs.
+    sets; within 1e-9 m / rad for the numpy path, on the stored sets), and so must `w_slow` and
+    `w_fast` and the published pose and covariance. Stops at the first update that differs.
     """
     if missing := _native_missing(native):
         return missing
@@ -349,6 +349,12 @@ def check_amcl_run(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> lis
             return [f"{where}, after the motion and laser models: {differ}"]
         if differ := _compare_set((amcl.poses, amcl.weights), arrays, i, stored=stored, key="set", tolerance=tolerance):
             return [f"{where}, after resampling: {differ}"]
+        for name, got, want in (
+            ("w_slow", amcl.w_slow, arrays["w_slow"][i]),
+            ("w_fast", amcl.w_fast, arrays["w_fast"][i]),
+        ):
+            if not abs(got - float(want)) <= tolerance * abs(float(want)):
+                return [f"{where}: {name} (the running average of the weights): twin {got!r}, Nav2 {float(want)!r}"]
         if estimate is None or not arrays["published"][i]:
             if estimate is not None or arrays["published"][i]:
                 who = "the twin" if estimate is not None else "Nav2"

@@ -771,6 +771,16 @@ class Amcl:
         return self.estimate
 
     @property
+    def w_slow(self) -> float:
+        """The slow running average of the weights' mean (pf's w_slow; 0 until the first weighing)."""
+        return self._w_slow
+
+    @property
+    def w_fast(self) -> float:
+        """The fast running average of the weights' mean (pf's w_fast)."""
+        return self._w_fast
+
+    @property
     def has_initial_pose(self) -> bool:
         """True once an initial pose was set (before it, scans are ignored)."""
         return self._initialised

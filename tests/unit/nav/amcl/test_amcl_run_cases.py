@@ -86,6 +86,17 @@ def test_the_checker_names_the_update_that_differs(tmp_path: Path, native: bool)
     assert "published y" in result.differences[0]
 
 
+def test_w_slow_is_held_to_nav2s(tmp_path: Path) -> None:
+    def moved(w_slow: np.ndarray) -> np.ndarray:
+        w_slow[3:] = np.nextafter(w_slow[3:], np.inf)
+        return w_slow
+
+    result = check_case(_changed(tmp_path, "w_slow", moved), native=True)
+    assert (
+        not result.equal and result.differences[0].startswith("update 3 (scan ") and "w_slow" in result.differences[0]
+    )
+
+
 def test_a_digest_that_differs_is_reported_between_the_stored_sets(tmp_path: Path) -> None:
     def other(digests: np.ndarray) -> np.ndarray:
         digests[55] = "0" * 64
