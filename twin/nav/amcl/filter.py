@@ -67,6 +67,7 @@ __all__ = [
     "kld_limits",
     "kld_resample",
     "laser_likelihood",
+    "nav2_bearings",
     "nav2_distances",
     "odometry_update",
     "weight_total",
@@ -286,6 +287,54 @@ def _heap_pop(heap: list[_Cell]) -> None:
         hole = child - 1
     _sift_up(heap, hole, value)
     heap.pop()
+
+
+def _rpy_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """tf2::Quaternion::setRPY: (x, y, z, w), its products in its order."""
+    cy, sy = math.cos(yaw * 0.5), math.sin(yaw * 0.5)
+    cp, sp = math.cos(pitch * 0.5), math.sin(pitch * 0.5)
+    cr, sr = math.cos(roll * 0.5), math.sin(roll * 0.5)
+    return (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )
+
+
+def _base_yaw(mount_yaw_rad: float, angle_rad: float) -> float:
+    """A scan angle's yaw in the base frame as amcl_node gets it: a quaternion about z, turned by the mount, getYaw."""
+    tx, ty, tz, tw = _rpy_quaternion(0.0, 0.0, mount_yaw_rad)
+    ax, ay, az, aw = _rpy_quaternion(0.0, 0.0, angle_rad)
+    x = tw * ax + tx * aw + ty * az - tz * ay
+    y = tw * ay + ty * aw + tz * ax - tx * az
+    z = tw * az + tz * aw + tx * ay - ty * ax
+    w = tw * aw - tx * ax - ty * ay - tz * az
+    sqx, sqy, sqz, sqw = x * x, y * y, z * z, w * w
+    sarg = -2.0 * (x * z - w * y) / (sqx + sqy + sqz + sqw)
+    if sarg <= -0.99999:
+        return -2.0 * math.atan2(y, x)
+    if sarg >= 0.99999:
+        return 2.0 * math.atan2(y, x)
+    return math.atan2(2.0 * (x * y + w * z), sqw + sqx - sqy - sqz)
+
+
+def nav2_bearings(laser: LaserGeometry, count: int) -> F64:
+    """Each beam's angle in the base frame as Nav2's amcl_node computes it (updateFilter).
+
+    The LaserScan carries `angle_min` and `angle_increment` as float32; AMCL turns `angle_min` and
+    `angle_min + angle_increment` (a float32 sum) into quaternions about z, into the base frame and
+    back to yaws (tf2), takes the increment as their difference wrapped by `fmod(d + 5 pi, 2 pi) - pi`,
+    and beam i's bearing as `angle_min + i * increment`. With the double increment instead, beam
+    359's bearing is 2e-7 rad off. The mount's rotation is taken as a yaw (`setRPY(0, 0, yaw)`,
+    the identity for TurtleBot3; a lidar mounted upside down has its angles mirrored in `laser`).
+    """
+    angle_min = np.float32(laser.angle_min_rad)
+    second = float(angle_min + np.float32(laser.angle_increment_rad))  # float + float in C++: a float
+    a_min = _base_yaw(laser.mount_yaw_rad, float(angle_min))
+    increment = _base_yaw(laser.mount_yaw_rad, second) - a_min
+    increment = math.fmod(increment + 5 * math.pi, 2 * math.pi) - math.pi
+    return a_min + np.arange(count, dtype=np.float64) * increment
 
 
 def as_received(occupancy: OccupancyMap) -> OccupancyMap:
@@ -679,6 +728,7 @@ class Amcl:
         self._stats: tuple[tuple[float, float, float], F64] = ((0.0, 0.0, 0.0), np.zeros((3, 3)))
         self.estimate: AmclEstimate | None = None
         self.updated = False  # the last scan updated the filter
+        self._bearings: F64 = np.zeros(0)  # each beam's angle in the base frame, as updateFilter computes it
 
     # --- inputs -------------------------------------------------------------------------------
 
@@ -800,9 +850,9 @@ class Amcl:
         laser = self.laser
         r: F64 = ranges.copy()
         r[r <= self._range_min] = self._range_max  # as amcl_node fills LaserData
-        bearings: F64 = (
-            laser.mount_yaw_rad + laser.angle_min_rad + np.arange(len(r), dtype=np.float64) * laser.angle_increment_rad
-        )
+        if len(self._bearings) != len(r):
+            self._bearings = nav2_bearings(laser, len(r))
+        bearings = self._bearings
         beams = beam_endpoints(r, bearings, (laser.mount_x_m, laser.mount_y_m), self._range_max, self.params.max_beams)
         likelihood = laser_likelihood(self.poses, beams, self.field, self._pz, native=self._lib is not None)
         weights = self.weights * likelihood

@@ -164,3 +164,25 @@ def test_set_particles_starts_the_filter_from_the_given_set() -> None:
     amcl.set_particles(poses)
     assert np.array_equal(amcl.poses, poses) and amcl.poses is not poses
     assert np.array_equal(amcl.weights, np.full(3, 1.0 / 3)) and amcl.has_initial_pose
+
+
+@pytest.mark.parametrize("case", FILES, ids=[f.stem for f in FILES])
+def test_the_bearings_are_nav2s(case: Path) -> None:
+    """Nav2's bearings (the scan's float32 angles through tf2's quaternions) equal the twin's bit for bit."""
+    meta, arrays = load_case(case)
+    laser = LaserGeometry(**meta["laser"])
+    bearings = amcl_filter.nav2_bearings(laser, len(arrays["bearings"]))
+    assert np.array_equal(bearings, arrays["bearings"])
+    plain = laser.angle_min_rad + np.arange(len(bearings)) * laser.angle_increment_rad  # the double increment
+    assert 1e-7 < np.abs(plain - bearings).max() < 1e-6
+
+
+def test_with_the_double_angle_increment_the_run_differs_at_its_second_update(monkeypatch: pytest.MonkeyPatch) -> None:
+    def plain(laser: LaserGeometry, count: int) -> np.ndarray:
+        return (
+            laser.mount_yaw_rad + laser.angle_min_rad + np.arange(count, dtype=np.float64) * laser.angle_increment_rad
+        )
+
+    monkeypatch.setattr(amcl_filter, "nav2_bearings", plain)
+    result = check_case(DEFAULT, native=True)
+    assert not result.equal and result.differences[0].startswith("update 1 (scan 4), after the motion and laser")
