@@ -21,6 +21,7 @@ _RECORDED = (
     _REPO / "tests" / "unit" / "nav" / "costmap_2d" / "costmap_publish_cases",
     _REPO / "tests" / "unit" / "nav" / "costmap_2d" / "costmap_footprint_cases",
     _REPO / "tests" / "unit" / "nav" / "costmap_2d" / "costmap_layer_cases",
+    _REPO / "tests" / "unit" / "nav" / "amcl" / "amcl_run_cases",
 )
 """The recorded sets a checkout holds, replayed when no CASE is named."""
 
@@ -35,9 +36,11 @@ set's README says how it was recorded). A case passes when the twin's part gives
 in everything the case records, bit for bit where Nav2 computes in float32 (NavFn: found or failed
 and why, its cost array, its potential, every path point; inflation: every cell of the master grid
 after one update; AMCL given Nav2's random draws: particles, weights, resampling, the published
-pose; costmap: static layer, published values, footprint cost, obstacle/voxel layer cells).
+pose; costmap: static layer, published values, footprint cost, obstacle/voxel layer cells; DWB:
+every sample's trajectory and critic scores; RPP and the behaviours: each cycle's command).
 Components: navfn, inflation, velocity_smoother, amcl_motion_model, amcl_likelihood_field,
-amcl_resample, amcl_estimate, costmap_static, costmap_publish, costmap_footprint, costmap_layer.
+amcl_resample, amcl_estimate, amcl_run, costmap_static, costmap_publish, costmap_footprint,
+costmap_layer, dwb, rpp, behavior, behavior_collision.
 Exit status: 0 every case equal, 1 a case differs (its first difference is printed), 2 a file is
 not a case.
 """

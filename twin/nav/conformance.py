@@ -33,6 +33,9 @@ Components:
   static layer's costs from an OccupancyGrid, the published 0..100 values, the footprint's cost at poses
   (FootprintCollisionChecker), and an obstacle or voxel layer's cells (and voxel columns) after update
   cycles of clearing, marking, footprint clearing and rolling; every cell and value equal.
+- `amcl_run`: AMCL over a recorded run (the twin's default mission's scans and odometry, Nav2's draws):
+  at every filter update the particle set after the laser model and after resampling, and the published
+  pose and covariance, bit for bit (the numpy path within 1e-9).
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ from twin.nav.amcl.conformance_check import (
     check_amcl_likelihood_field,
     check_amcl_motion_model,
     check_amcl_resample,
+    check_amcl_run,
 )
 from twin.nav.behaviors.conformance_check import check_behavior, check_behavior_collision
 from twin.nav.controller.dwb.conformance_check import check_dwb
@@ -228,12 +232,13 @@ COMPONENTS: dict[str, Checker] = {
     "costmap_publish": check_publish,
     "costmap_footprint": check_footprint,
     "costmap_layer": check_layer,
+    "amcl_run": check_amcl_run,
 }
 """Each component's checker: (meta, arrays, native) -> differences."""
 
 WITH_C_KERNEL = frozenset(
-    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate", "dwb"}
-    | {"costmap_footprint", "costmap_layer"}
+    {"navfn", "inflation", "amcl_motion_model", "amcl_likelihood_field", "amcl_resample", "amcl_estimate"}
+    | {"amcl_run", "dwb", "costmap_footprint", "costmap_layer"}
 )
 """The components whose twin part has a C kernel beside its Python path (the others are Python only)."""
 

@@ -18,6 +18,7 @@ SMOOTHER = Path(__file__).resolve().parent / "velocity_smoother" / "smoother_cas
 AMCL = Path(__file__).resolve().parent / "amcl" / "amcl_cases"
 RPP = Path(__file__).resolve().parent / "controller" / "rpp_cases"
 BEHAVIORS = Path(__file__).resolve().parent / "behaviors" / "behavior_cases"
+AMCL_RUN = Path(__file__).resolve().parent / "amcl" / "amcl_run_cases"
 
 
 def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) -> None:
@@ -41,6 +42,8 @@ def test_the_recorded_sets_all_equal_nav2(capsys: pytest.CaptureFixture[str]) ->
         count = behaviors.count(component)
         assert f"{component} (Python path): {count} of {count} cases equal Nav2's answer" in out.err
     assert "DIFFERS" not in out.out
+    runs = len(list(AMCL_RUN.glob("*.npz")))
+    assert runs >= 1 and f"amcl_run (compiled kernel): {runs} of {runs} cases equal Nav2's answer" in out.err
 
 
 def test_a_case_that_differs_is_named_with_its_first_difference_and_exit_1(
@@ -87,5 +90,6 @@ def test_a_case_for_a_component_the_twin_does_not_check_is_refused(
 ) -> None:
     np.savez(tmp_path / "dwb.npz", meta=json.dumps({"component": "dwb_critics"}))
     assert main(["nav", "conformance", str(tmp_path / "dwb.npz")]) == 2
-    checked = ", ".join(sorted(COMPONENTS))  # every component the twin holds to Nav2, named
-    assert f"a case for dwb_critics; the twin checks {checked}" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"a case for dwb_critics; the twin checks {', '.join(sorted(COMPONENTS))}" in err
+    assert "amcl_estimate, amcl_likelihood_field, amcl_motion_model, amcl_resample" in err

@@ -47,7 +47,6 @@ def load_kernel() -> ctypes.CDLL | None:
         ptr,
         long_,
         long_,
-        dbl,
         ptr,
     ]
     lib.twin_amcl_motion.restype = None
@@ -60,6 +59,8 @@ def load_kernel() -> ctypes.CDLL | None:
     lib.twin_pf_clusters.argtypes = [ptr, long_, ptr]
     lib.twin_pf_resample.restype = long_
     lib.twin_pf_resample.argtypes = [ptr, long_, ptr, ptr, long_, ptr, ptr, ptr]
+    lib.twin_pf_keys.restype = None
+    lib.twin_pf_keys.argtypes = [ptr, long_, ptr, ptr]
     lib.twin_pf_estimate.restype = ctypes.c_int
     lib.twin_pf_estimate.argtypes = [ptr, ptr, long_, ptr, long_, ptr]
     return lib

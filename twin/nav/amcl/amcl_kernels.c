@@ -1,8 +1,14 @@
 /* nav2_amcl's hot loops in C (loaded by twin/nav/amcl/_native.py): the laser model, motion
    sampling, the likelihood field's distances, KLD-sampling, resampling, clusters and the estimate. */
 
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#elif defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
@@ -24,23 +30,107 @@ static void nav2_cell(const double *pose, double lx, double ly, double range, do
     *row = (long)(floor((hy - cy) / scale + 0.5) + (double)(rows / 2));
 }
 
-/* AMCL likelihood field: out[j] = 1 + pz^3 + pz^3 + ... over the beams' endpoints, in beam order and
-   each cube taken as pz * pz * pz, as Nav2 adds them. Particle j at poses[j] = (x, y, yaw) has the
-   grid position gx = (x - ox) * inv_res + 0.5 (likewise gy) and heading cos, sin; beam i's endpoint
-   in the base frame in cells is (ex, ey). The endpoint's cell is (floor(gx + c ex - s ey), floor(gy +
-   s ex + c ey)), AMCL's rounding lookup; this differs from Nav2's arithmetic (nav2_cell) only in the
-   last bits, so where it lands within 1e-6 of a cell edge the cell is taken Nav2's way from the beam's
-   range and bearing and the laser's (lx, ly). Off the map a beam weighs `off_pz`. Beam by beam over
-   all particles: one beam's endpoints from a cluster of particles fall in a few neighbouring cells,
-   which keeps the lookups in cache. Returns -1 when memory runs out. */
+/* AMCL likelihood field: out[j] = 1 + pz^3 + pz^3 + ... over the beams' endpoints, in beam order, as Nav2
+   adds them; cube[k] is map cell k's pz * pz * pz (taken once per cell in that order, the same bits as per
+   beam), row-major, and cube[rows * cols] an endpoint's off the map. Particle j at poses[j] = (x, y, yaw) has
+   the grid position gx = (x - ox) * inv_res + 0.5 (likewise gy) and heading cos, sin; beam i's endpoint in
+   the base frame in cells is (ex, ey). The endpoint's cell is (floor(gx + c ex - s ey), floor(gy + s ex +
+   c ey)), AMCL's rounding lookup; this differs from Nav2's arithmetic (nav2_cell) only in the last bits, so
+   where it lands within 1e-6 of a cell edge the cell is taken Nav2's way from the beam's range and bearing
+   and the laser's (lx, ly). Beam by beam over all particles: one beam's endpoints from a cluster of
+   particles fall in a few neighbouring cells, which keeps the lookups in cache. On x86-64 each beam's cells
+   are found four particles at a time with AVX2 (two with SSE2 where the CPU lacks it; no fused
+   multiply-adds), the same operations in the same order, so the same bits, then looked up one by one.
+   Returns -1 when memory runs out. */
+#define TWIN_EDGE 1e-6
+
+static long endpoint_cell(const double *pose, double gx, double gy, double c, double s, double bx, double by,
+                          double lx, double ly, double range, double bearing, double ox, double oy, double scale,
+                          long rows, long cols) {
+    double fc = gx + c * bx - s * by;
+    double fr = gy + s * bx + c * by;
+    long col = (long)fc, row = (long)fr;   /* floor without a libm call: truncate, step down below 0 */
+    col -= (double)col > fc;
+    row -= (double)row > fr;
+    double dc = fc - (double)col, dr = fr - (double)row;
+    if (dc < TWIN_EDGE || dc > 1.0 - TWIN_EDGE || dr < TWIN_EDGE || dr > 1.0 - TWIN_EDGE)
+        nav2_cell(pose, lx, ly, range, bearing, ox, oy, scale, rows, cols, &col, &row);
+    return (col >= 0 && col < cols && row >= 0 && row < rows) ? row * cols + col : rows * cols;
+}
+
+#if defined(__SSE2__)
+/* Each particle's endpoint cell for one beam (bx, by in cells), m particles (a multiple of 4): cell[j] is
+   row * cols + col, rows * cols off the map, -1 within 1e-6 of a cell edge (or beyond an int, where
+   the conversion gives INT_MIN and the fraction is far outside [0, 1)): there the caller takes Nav2's
+   arithmetic. Two particles at a time; the AVX2 twin below four. The same operations in the same
+   order as endpoint_cell, so the same bits. */
+static void beam_cells_sse2(const double *gx, const double *gy, const double *c, const double *s, long m, double ex,
+                            double ey, long rows, long cols, int *cell) {
+    const __m128d one = _mm_set1_pd(1.0), lo = _mm_set1_pd(TWIN_EDGE), hi = _mm_set1_pd(1.0 - TWIN_EDGE);
+    const __m128d zero = _mm_setzero_pd(), ncols = _mm_set1_pd((double)cols), nrows = _mm_set1_pd((double)rows);
+    const __m128d outside = _mm_set1_pd((double)(rows * cols)), near_edge = _mm_set1_pd(-1.0);
+    const __m128d bx = _mm_set1_pd(ex), by = _mm_set1_pd(ey);
+    for (long j = 0; j < m; j += 2) {
+        __m128d cj = _mm_loadu_pd(c + j), sj = _mm_loadu_pd(s + j);
+        __m128d fc = _mm_sub_pd(_mm_add_pd(_mm_loadu_pd(gx + j), _mm_mul_pd(cj, bx)), _mm_mul_pd(sj, by));
+        __m128d fr = _mm_add_pd(_mm_add_pd(_mm_loadu_pd(gy + j), _mm_mul_pd(sj, bx)), _mm_mul_pd(cj, by));
+        __m128d tc = _mm_cvtepi32_pd(_mm_cvttpd_epi32(fc)), tr = _mm_cvtepi32_pd(_mm_cvttpd_epi32(fr));
+        tc = _mm_sub_pd(tc, _mm_and_pd(_mm_cmpgt_pd(tc, fc), one));   /* floor */
+        tr = _mm_sub_pd(tr, _mm_and_pd(_mm_cmpgt_pd(tr, fr), one));
+        __m128d dc = _mm_sub_pd(fc, tc), dr = _mm_sub_pd(fr, tr);
+        __m128d edge = _mm_or_pd(_mm_or_pd(_mm_cmplt_pd(dc, lo), _mm_cmpgt_pd(dc, hi)),
+                                 _mm_or_pd(_mm_cmplt_pd(dr, lo), _mm_cmpgt_pd(dr, hi)));
+        __m128d in = _mm_and_pd(_mm_and_pd(_mm_cmpge_pd(tc, zero), _mm_cmplt_pd(tc, ncols)),
+                                _mm_and_pd(_mm_cmpge_pd(tr, zero), _mm_cmplt_pd(tr, nrows)));
+        __m128d k = _mm_add_pd(_mm_mul_pd(tr, ncols), tc);
+        k = _mm_or_pd(_mm_and_pd(in, k), _mm_andnot_pd(in, outside));
+        k = _mm_or_pd(_mm_andnot_pd(edge, k), _mm_and_pd(edge, near_edge));
+        _mm_storel_epi64((__m128i *)(cell + j), _mm_cvttpd_epi32(k));
+    }
+}
+#endif
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define TWIN_AVX2 1
+__attribute__((target("avx2"))) static void beam_cells_avx2(const double *gx, const double *gy, const double *c,
+                                                           const double *s, long m, double ex, double ey, long rows,
+                                                           long cols, int *cell) {
+    const __m256d one = _mm256_set1_pd(1.0), lo = _mm256_set1_pd(TWIN_EDGE), hi = _mm256_set1_pd(1.0 - TWIN_EDGE);
+    const __m256d zero = _mm256_setzero_pd(), ncols = _mm256_set1_pd((double)cols);
+    const __m256d nrows = _mm256_set1_pd((double)rows);
+    const __m256d outside = _mm256_set1_pd((double)(rows * cols)), near_edge = _mm256_set1_pd(-1.0);
+    const __m256d bx = _mm256_set1_pd(ex), by = _mm256_set1_pd(ey);
+    for (long j = 0; j < m; j += 4) {
+        __m256d cj = _mm256_loadu_pd(c + j), sj = _mm256_loadu_pd(s + j);
+        __m256d fc = _mm256_sub_pd(_mm256_add_pd(_mm256_loadu_pd(gx + j), _mm256_mul_pd(cj, bx)),
+                                   _mm256_mul_pd(sj, by));
+        __m256d fr = _mm256_add_pd(_mm256_add_pd(_mm256_loadu_pd(gy + j), _mm256_mul_pd(sj, bx)),
+                                   _mm256_mul_pd(cj, by));
+        __m256d tc = _mm256_cvtepi32_pd(_mm256_cvttpd_epi32(fc)), tr = _mm256_cvtepi32_pd(_mm256_cvttpd_epi32(fr));
+        tc = _mm256_sub_pd(tc, _mm256_and_pd(_mm256_cmp_pd(tc, fc, _CMP_GT_OQ), one));   /* floor */
+        tr = _mm256_sub_pd(tr, _mm256_and_pd(_mm256_cmp_pd(tr, fr, _CMP_GT_OQ), one));
+        __m256d dc = _mm256_sub_pd(fc, tc), dr = _mm256_sub_pd(fr, tr);
+        __m256d edge = _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(dc, lo, _CMP_LT_OQ), _mm256_cmp_pd(dc, hi, _CMP_GT_OQ)),
+                                    _mm256_or_pd(_mm256_cmp_pd(dr, lo, _CMP_LT_OQ), _mm256_cmp_pd(dr, hi, _CMP_GT_OQ)));
+        __m256d in = _mm256_and_pd(
+            _mm256_and_pd(_mm256_cmp_pd(tc, zero, _CMP_GE_OQ), _mm256_cmp_pd(tc, ncols, _CMP_LT_OQ)),
+            _mm256_and_pd(_mm256_cmp_pd(tr, zero, _CMP_GE_OQ), _mm256_cmp_pd(tr, nrows, _CMP_LT_OQ)));
+        __m256d k = _mm256_add_pd(_mm256_mul_pd(tr, ncols), tc);
+        k = _mm256_blendv_pd(outside, k, in);
+        k = _mm256_blendv_pd(k, near_edge, edge);
+        _mm_storeu_si128((__m128i *)(cell + j), _mm256_cvttpd_epi32(k));
+    }
+}
+#endif
+
 int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, double inv_res,
                          const double *ex, const double *ey, const double *range, const double *bearing, long nb,
-                         double lx, double ly, double scale,
-                         const double *pz, long rows, long cols, double off_pz, double *out) {
-    const double edge = 1e-6;
-    double *buf = malloc(4 * sizeof(double) * (size_t)(n > 0 ? n : 1));
-    if (!buf) return -1;
-    double *gx = buf, *gy = buf + n, *c = buf + 2 * n, *s = buf + 3 * n;
+                         double lx, double ly, double scale, const double *cube, long rows, long cols, double *out) {
+    long m = (n + 3) & ~3L;   /* padded to fours */
+    double *buf = malloc(4 * sizeof(double) * (size_t)(m > 0 ? m : 4));
+    int *cell = malloc(sizeof(int) * (size_t)(m > 0 ? m : 4));
+    if (!buf || !cell) { free(buf); free(cell); return -1; }
+    double *gx = buf, *gy = buf + m, *c = buf + 2 * m, *s = buf + 3 * m;
     for (long j = 0; j < n; ++j) {
         gx[j] = (poses[3 * j] - ox) * inv_res + 0.5;
         gy[j] = (poses[3 * j + 1] - oy) * inv_res + 0.5;
@@ -48,22 +138,36 @@ int twin_amcl_likelihood(const double *poses, long n, double ox, double oy, doub
         s[j] = sin(poses[3 * j + 2]);
         out[j] = 1.0;
     }
-    for (long i = 0; i < nb; ++i) {
-        double bx = ex[i], by = ey[i];
-        for (long j = 0; j < n; ++j) {
-            double fc = gx[j] + c[j] * bx - s[j] * by;
-            double fr = gy[j] + s[j] * bx + c[j] * by;
-            long col = (long)fc, row = (long)fr;   /* floor without a libm call: truncate, step down below 0 */
-            col -= (double)col > fc;
-            row -= (double)row > fr;
-            double dc = fc - (double)col, dr = fr - (double)row;
-            if (dc < edge || dc > 1.0 - edge || dr < edge || dr > 1.0 - edge)
-                nav2_cell(poses + 3 * j, lx, ly, range[i], bearing[i], ox, oy, scale, rows, cols, &col, &row);
-            double v = (col >= 0 && col < cols && row >= 0 && row < rows) ? pz[row * cols + col] : off_pz;
-            out[j] += v * v * v;
+    for (long j = n; j < m; ++j) { gx[j] = gy[j] = -1.0; c[j] = 1.0; s[j] = 0.0; }   /* the pad (never read) */
+#if defined(__SSE2__)
+    if (rows * cols < 1073741824L) {   /* cell numbers fit an int */
+#if defined(TWIN_AVX2)
+        int avx2 = __builtin_cpu_supports("avx2");
+#endif
+        for (long i = 0; i < nb; ++i) {
+#if defined(TWIN_AVX2)
+            if (avx2)
+                beam_cells_avx2(gx, gy, c, s, m, ex[i], ey[i], rows, cols, cell);
+            else
+#endif
+                beam_cells_sse2(gx, gy, c, s, m, ex[i], ey[i], rows, cols, cell);
+            for (long j = 0; j < n; ++j) {
+                long k = cell[j];
+                if (k < 0)   /* near a cell edge: Nav2's arithmetic decides */
+                    k = endpoint_cell(poses + 3 * j, gx[j], gy[j], c[j], s[j], ex[i], ey[i], lx, ly, range[i],
+                                      bearing[i], ox, oy, scale, rows, cols);
+                out[j] += cube[k];
+            }
         }
+        free(buf); free(cell);
+        return 0;
     }
-    free(buf);
+#endif
+    for (long i = 0; i < nb; ++i)
+        for (long j = 0; j < n; ++j)
+            out[j] += cube[endpoint_cell(poses + 3 * j, gx[j], gy[j], c[j], s[j], ex[i], ey[i], lx, ly, range[i],
+                                         bearing[i], ox, oy, scale, rows, cols)];
+    free(buf); free(cell);
     return 0;
 }
 
@@ -173,6 +277,21 @@ int twin_amcl_distances(const unsigned char *occupied, long width, long height, 
     return 0;
 }
 
+/* (long)floor(x) without a libm call (LONG_MIN where x is NaN or beyond a long, as the conversion gives). */
+static inline long floor_long(double x) {
+    long t = (long)x;
+    return (t != LONG_MIN && (double)t > x) ? t - 1 : t;
+}
+
+/* Each particle's (x, y, yaw) histogram bin as pf_kdtree keys it: floor(pose / bin_size), 3 per particle. */
+void twin_pf_keys(const double *poses, long n, const double *bin_size, long *keys) {
+    for (long i = 0; i < 3 * n; i += 3) {
+        keys[i] = floor_long(poses[i] / bin_size[0]);
+        keys[i + 1] = floor_long(poses[i + 1] / bin_size[1]);
+        keys[i + 2] = floor_long(poses[i + 2] / bin_size[2]);
+    }
+}
+
 /* KLD-sampling's stop (pf_update_resample): particles are taken in order, each counted into its
    (x, y, yaw) histogram bin (keys, 3 per particle); the count stops at the first n with
    n > limit[k], k the bins occupied by the first n. Returns n (m when it never stops), or -1 when
@@ -231,8 +350,8 @@ long twin_pf_resample(const double *poses, long n, const double *cumulative, con
         const double *p = poses + 3 * lo;
         double *o = out + 3 * j;
         o[0] = p[0]; o[1] = p[1]; o[2] = p[2];
-        long key0 = (long)floor(p[0] / bin_size[0]), key1 = (long)floor(p[1] / bin_size[1]);
-        long key2 = (long)floor(p[2] / bin_size[2]);
+        long key0 = floor_long(p[0] / bin_size[0]), key1 = floor_long(p[1] / bin_size[1]);
+        long key2 = floor_long(p[2] / bin_size[2]);
         unsigned long h = (unsigned long)key0 * 73856093UL ^ (unsigned long)key1 * 19349663UL
                           ^ (unsigned long)key2 * 83492791UL;
         long slot = (long)(h & (unsigned long)(size - 1));

@@ -3,8 +3,8 @@
 - `InitialPoseNode` publishes one `/initialpose` at start (what the thesis's
   `set_init_amcl_pose.py` does), once AMCL subscribes.
 - `AmclNode` runs the particle filter on `/scan` with the odometry pose at the scan's stamp
-  (interpolated between the two `/odom` messages around it, as a tf2 lookup would), publishes
-  `/amcl_pose` and `/particle_cloud` when the filter updates, and map→odom on `/tf` on every scan,
+  (interpolated between the `/odom` messages around it, as tf2 would) and publishes `/particle_cloud`
+  per filter update, `/amcl_pose` when it resampled (and first), map→odom on `/tf` on every scan,
   stamped scan time + transform_tolerance (TB3_FACTS §4.8).
 """
 
@@ -111,6 +111,7 @@ class AmclNode(Node):
                         )
                     )
                 )
+            if amcl.updated:  # Nav2 publishes the cloud on every filter update, the pose only when it resampled
                 poses, weights = amcl.poses.copy(), amcl.weights.copy()
                 cloud_pub.publish(Encoded((cloud_encode, (t_scan, poses, weights), (poses, weights))))
             map_odom = amcl.map_odom()

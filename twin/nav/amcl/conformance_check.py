@@ -27,6 +27,7 @@ Four components, each a checker `(meta, arrays, native) -> differences` (empty: 
 from __future__ import annotations
 
 import hashlib
+import itertools
 from collections.abc import Mapping
 from typing import Any
 
@@ -35,6 +36,7 @@ from numpy.typing import NDArray
 
 from twin.nav.amcl._native import load_kernel
 from twin.nav.amcl.filter import (
+    Amcl,
     LikelihoodField,
     beam_endpoints,
     cluster_estimate,
@@ -44,20 +46,27 @@ from twin.nav.amcl.filter import (
     odometry_update,
     weight_total,
 )
+from twin.nav.frames import LaserGeometry
 from twin.nav.map_server.map_io import OccupancyMap
+from twin.nav.params import AmclParams
 
 __all__ = [
     "RecordedDraws",
+    "RunDraws",
     "check_amcl_estimate",
     "check_amcl_likelihood_field",
     "check_amcl_motion_model",
     "check_amcl_resample",
+    "check_amcl_run",
 ]
 
 Arrays = Mapping[str, NDArray[Any]]
 
 MOTION_TOLERANCE_PYTHON = 1e-12
 """Largest difference (m, rad) in a particle coordinate after the numpy path's motion model (C: none)."""
+
+RUN_TOLERANCE_PYTHON = 1e-9
+"""Largest difference (m, rad, weight) on a recorded run's stored particle sets for the numpy path (C: none)."""
 
 
 class RecordedDraws:
@@ -213,3 +222,154 @@ def check_amcl_estimate(meta: Mapping[str, Any], arrays: Arrays, native: bool) -
         if not abs(float(got) - want_cov[name]) <= tolerance * max(1.0, abs(want_cov[name])):
             out.append(f"covariance {name}: twin {float(got)!r}, Nav2 {want_cov[name]!r}")
     return out
+
+
+class RunDraws:
+    """The draws of a recorded run: standard normals in order; per resampling, Nav2's picks.
+
+    Nav2 draws two uniforms per resampled sample (the recovery test, then the pick) and stops at KLD's
+    bound; the twin asks for `max_particles` picks at once. Each `random` call gets the next resampling's
+    recorded picks and 0.5 after them, past Nav2's stop.
+    """
+
+    def __init__(self, normals: NDArray[Any], picks: NDArray[Any], per_update: NDArray[np.int64]) -> None:
+        self._normals = RecordedDraws(normals=np.asarray(normals, dtype=np.float64))
+        bounds = np.cumsum(np.concatenate([[0], per_update])).astype(np.int64)
+        u = np.asarray(picks, dtype=np.float64)
+        self._picks = [u[a:b] for a, b in itertools.pairwise(bounds) if b > a]  # resamplings only
+        self.resamplings = 0
+
+    @property
+    def normals_used(self) -> int:
+        """Standard normals handed out so far."""
+        return self._normals.normals_used
+
+    def standard_normal(self, size: Any) -> NDArray[np.float64]:
+        """The next recorded standard normals, in the shape asked."""
+        return self._normals.standard_normal(size)
+
+    def random(self, size: Any) -> NDArray[np.float64]:
+        """The next resampling's picks, then 0.5 up to `size`."""
+        if self.resamplings >= len(self._picks):
+            raise ValueError(f"asked for a resampling's draws, {len(self._picks)} recorded")
+        picks = self._picks[self.resamplings]
+        self.resamplings += 1
+        n = int(np.prod(size))
+        out = np.full(n, 0.5)
+        out[: min(n, len(picks))] = picks[:n]
+        return out.reshape(size)
+
+    def integers(self, low: Any, high: Any, size: Any) -> NDArray[np.int64]:
+        """Not recorded: the run has no recovery draws."""
+        raise ValueError("no recorded integer draws")
+
+    def uniform(self, low: Any, high: Any, size: Any) -> NDArray[np.float64]:
+        """Not recorded: the run has no recovery draws."""
+        raise ValueError("no recorded uniform pose draws")
+
+
+def _set_digest(poses: NDArray[np.float64], weights: NDArray[np.float64]) -> str:
+    rows = np.column_stack([poses, weights])
+    return hashlib.sha256(np.ascontiguousarray(rows, dtype="<f8").tobytes()).hexdigest()
+
+
+class _Watched(Amcl):
+    """The twin's filter, keeping the set as the laser model leaves it (weights normalised, before resampling)."""
+
+    weighed: tuple[NDArray[np.float64], NDArray[np.float64]] = (np.zeros((0, 3)), np.zeros(0))
+
+    def _sensor(self, ranges: NDArray[np.float64]) -> None:
+        super()._sensor(ranges)
+        self.weighed = (self.poses.copy(), self.weights.copy())
+
+
+def _compare_set(
+    got_set: tuple[NDArray[np.float64], NDArray[np.float64]],
+    arrays: Arrays,
+    i: int,
+    *,
+    stored: set[int],
+    key: str,
+    tolerance: float,
+) -> str:
+    """How a particle set differs from Nav2's at update i ('' when equal): count, SHA-256 (bitwise), stored set."""
+    poses, weights = got_set
+    count = int(arrays[f"{key}_count"][i])
+    if len(poses) != count:
+        return f"{len(poses)} particles, Nav2 {count}"
+    got = np.column_stack([poses, weights])
+    want = arrays[f"{key}_{i:03d}"] if i in stored else None
+    if tolerance == 0.0 and _set_digest(poses, weights) != str(arrays[f"{key}_sha256"][i]):
+        if want is None:
+            return "the particle set differs from Nav2's (SHA-256)"
+        bad = got != want
+        return _first_particle(got, want, bad, "particles (x, y, yaw, weight)") if bad.any() else "SHA-256 differs"
+    if want is not None:
+        bad = ~(np.abs(got - want) <= tolerance)
+        if bad.any():
+            return _first_particle(got, want, bad, f"particles (x, y, yaw, weight; beyond {tolerance:g})")
+    return ""
+
+
+def check_amcl_run(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    """The first update at which the twin's filter leaves Nav2's on a recorded run (`amcl_run_cases/README.md`).
+
+    The twin's `Amcl` is started from the recorded initial particles and fed every scan (odometry
+    pose, ranges) with Nav2's draws; at each update (the same scans as Nav2's gating) the particle set
+    and weights must equal Nav2's (bitwise for the C kernel: SHA-256 of every set, and the stored
+    sets; within 1e-9 m / rad for the numpy path, on the stored sets), and so must `w_slow` and
+    `w_fast` and the published pose and covariance. Stops at the first update that differs.
+    """
+    if missing := _native_missing(native):
+        return missing
+    occupancy = OccupancyMap(
+        resolution_m=float(meta["resolution"]),
+        origin_x_m=float(meta["origin"][0]),
+        origin_y_m=float(meta["origin"][1]),
+        data=arrays["map"].astype(np.int8),
+    )
+    params = AmclParams(**meta["params"])
+    draws = RunDraws(arrays["normals"], arrays["uniforms"], arrays["update_uniforms"])
+    amcl = _Watched(params, occupancy, LaserGeometry(**meta["laser"]), draws, native=native)
+    amcl.set_particles(arrays["initial_poses"])
+    tolerance = 0.0 if native else RUN_TOLERANCE_PYTHON
+    updates = {int(s): i for i, s in enumerate(arrays["update_scan"])}
+    stored = {int(i) for i in meta["stored_sets"]}
+    for s, (odom, ranges) in enumerate(zip(arrays["odom"], arrays["ranges"], strict=True)):
+        estimate = amcl.process_scan((float(odom[0]), float(odom[1]), float(odom[2])), ranges)
+        i = updates.get(s)
+        if i is None:
+            if amcl.updated:
+                return [f"scan {s}: the twin updated the filter, Nav2 did not"]
+            continue
+        where = f"update {i} (scan {s})"
+        if not amcl.updated:
+            return [f"{where}: Nav2 updated the filter, the twin did not"]
+        if differ := _compare_set(amcl.weighed, arrays, i, stored=stored, key="weighed", tolerance=tolerance):
+            return [f"{where}, after the motion and laser models: {differ}"]
+        if differ := _compare_set((amcl.poses, amcl.weights), arrays, i, stored=stored, key="set", tolerance=tolerance):
+            return [f"{where}, after resampling: {differ}"]
+        for name, got, want in (
+            ("w_slow", amcl.w_slow, arrays["w_slow"][i]),
+            ("w_fast", amcl.w_fast, arrays["w_fast"][i]),
+        ):
+            if not abs(got - float(want)) <= tolerance * abs(float(want)):
+                return [f"{where}: {name} (the running average of the weights): twin {got!r}, Nav2 {float(want)!r}"]
+        if estimate is None or not arrays["published"][i]:
+            if estimate is not None or arrays["published"][i]:
+                who = "the twin" if estimate is not None else "Nav2"
+                return [f"{where}: only {who} published a pose (amcl_pose)"]
+            continue
+        cov = estimate.covariance
+        got_pose = (estimate.x_m, estimate.y_m, estimate.yaw_rad, cov[0, 0], cov[0, 1], cov[1, 0], cov[1, 1], cov[2, 2])
+        want_pose = [*arrays["pose"][i], *arrays["covariance"][i]]
+        names = ("x", "y", "yaw", "covariance xx", "covariance xy", "covariance yx", "covariance yy", "covariance yaw")
+        for name, g, w in zip(names, got_pose, want_pose, strict=True):
+            if not abs(float(g) - float(w)) <= tolerance * max(1.0, abs(float(w))):
+                return [f"{where}: published {name}: twin {float(g)!r}, Nav2 {float(w)!r}"]
+    if draws.normals_used != int(meta["normals_used"]):
+        return [f"the twin used {draws.normals_used} normal draws, Nav2 {meta['normals_used']}"]
+    resamplings = int(np.count_nonzero(arrays["update_uniforms"]))
+    if draws.resamplings != resamplings:
+        return [f"the twin resampled {draws.resamplings} times, Nav2 {resamplings}"]
+    return []

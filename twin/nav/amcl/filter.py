@@ -25,7 +25,10 @@ LikelihoodFieldModel), vectorised over particles and beams:
   [min_particles, max_particles]. `pf_z` is used as given (0.99), as Nav2 does.
 - **Estimate**: particles are clustered by connected histogram bins; the pose is the mean of the
   heaviest cluster (yaw a circular mean); the covariance is the whole set's (x, y block and
-  the circular variance `-2 ln R` of yaw), as `amcl_pose` carries them.
+  the circular variance `-2 ln R` of yaw), as `amcl_pose` carries them. As Nav2's
+  pf_cluster_stats, they are taken when the set is drawn (initial pose, resampling) and published
+  when the filter resampled or on the first update after an initial pose.
+- **The map** is taken as the OccupancyGrid carries it: its resolution a float32 (`as_received`).
 - **map -> odom** is the estimate composed with the inverse of the odometry pose of the scan that
   produced it; Nav2 re-sends it on every scan stamped scan time + transform_tolerance.
 
@@ -38,7 +41,7 @@ update, in Nav2's order: per particle, rot1, trans, rot2.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
@@ -57,11 +60,14 @@ __all__ = [
     "DrawSource",
     "LaserGeometry",
     "LikelihoodField",
+    "Pz",
+    "as_received",
     "beam_endpoints",
     "cluster_estimate",
     "kld_limits",
     "kld_resample",
     "laser_likelihood",
+    "nav2_bearings",
     "nav2_distances",
     "odometry_update",
     "weight_total",
@@ -283,6 +289,66 @@ def _heap_pop(heap: list[_Cell]) -> None:
     heap.pop()
 
 
+def _rpy_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """tf2::Quaternion::setRPY: (x, y, z, w), its products in its order."""
+    cy, sy = math.cos(yaw * 0.5), math.sin(yaw * 0.5)
+    cp, sp = math.cos(pitch * 0.5), math.sin(pitch * 0.5)
+    cr, sr = math.cos(roll * 0.5), math.sin(roll * 0.5)
+    return (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )
+
+
+def _base_yaw(mount_yaw_rad: float, angle_rad: float) -> float:
+    """A scan angle's yaw in the base frame as amcl_node gets it: a quaternion about z, turned by the mount, getYaw."""
+    tx, ty, tz, tw = _rpy_quaternion(0.0, 0.0, mount_yaw_rad)
+    ax, ay, az, aw = _rpy_quaternion(0.0, 0.0, angle_rad)
+    x = tw * ax + tx * aw + ty * az - tz * ay
+    y = tw * ay + ty * aw + tz * ax - tx * az
+    z = tw * az + tz * aw + tx * ay - ty * ax
+    w = tw * aw - tx * ax - ty * ay - tz * az
+    sqx, sqy, sqz, sqw = x * x, y * y, z * z, w * w
+    sarg = -2.0 * (x * z - w * y) / (sqx + sqy + sqz + sqw)
+    if sarg <= -0.99999:
+        return -2.0 * math.atan2(y, x)
+    if sarg >= 0.99999:
+        return 2.0 * math.atan2(y, x)
+    return math.atan2(2.0 * (x * y + w * z), sqw + sqx - sqy - sqz)
+
+
+def nav2_bearings(laser: LaserGeometry, count: int) -> F64:
+    """Each beam's angle in the base frame as Nav2's amcl_node computes it (updateFilter).
+
+    The LaserScan carries `angle_min` and `angle_increment` as float32; AMCL turns `angle_min` and
+    `angle_min + angle_increment` (a float32 sum) into quaternions about z, into the base frame and
+    back to yaws (tf2), takes the increment as their difference wrapped by `fmod(d + 5 pi, 2 pi) - pi`,
+    and beam i's bearing as `angle_min + i * increment`. With the double increment instead, beam
+    359's bearing is 2e-7 rad off. The mount's rotation is taken as a yaw (`setRPY(0, 0, yaw)`,
+    the identity for TurtleBot3; a lidar mounted upside down has its angles mirrored in `laser`).
+    """
+    angle_min = np.float32(laser.angle_min_rad)
+    second = float(angle_min + np.float32(laser.angle_increment_rad))  # float + float in C++: a float
+    a_min = _base_yaw(laser.mount_yaw_rad, float(angle_min))
+    increment = _base_yaw(laser.mount_yaw_rad, second) - a_min
+    increment = math.fmod(increment + 5 * math.pi, 2 * math.pi) - math.pi
+    return a_min + np.arange(count, dtype=np.float64) * increment
+
+
+def as_received(occupancy: OccupancyMap) -> OccupancyMap:
+    """The map as AMCL receives it on `/map`: an OccupancyGrid, whose resolution is a float32.
+
+    Nav2's AMCL keeps that float32 as its map scale (`convertMap`): 0.05 m arrives as
+    0.05000000074505806 m, which moves the cell an endpoint falls in by up to a few 1e-8 m and the
+    likelihood field's distances in their last bits, and caps them at int(2.0 / scale) = 39 cells,
+    not 40 (`map_update_cspace`). The origin is a float64 in the message and stays as it is.
+    """
+    res = float(np.float32(occupancy.resolution_m))
+    return occupancy if res == occupancy.resolution_m else replace(occupancy, resolution_m=res)
+
+
 class LikelihoodField:
     """The map's distance to the nearest occupied cell as Nav2's AMCL computes it, and per-cell likelihood cubes.
 
@@ -306,13 +372,14 @@ class LikelihoodField:
         self.origin_x_m = occupancy.origin_x_m
         self.origin_y_m = occupancy.origin_y_m
         self.free_cells = np.argwhere(occupancy.data == 0)  # (row, col) for uniform pose draws
-        self._pz: dict[tuple[float, float, float, float], tuple[F64, float]] = {}
+        self._pz: dict[tuple[float, float, float, float], Pz] = {}
 
-    def pz(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> tuple[F64, float]:
-        """Return (pz per map cell, pz of an endpoint off the map) as the likelihood-field model computes them.
+    def pz(self, z_hit: float, z_rand: float, sigma_hit_m: float, range_max_m: float) -> Pz:
+        """Return pz per map cell and pz of an endpoint off the map as the likelihood-field model computes them.
 
         `pz = z_hit exp(-(z z) / (2 sigma sigma)) + z_rand (1 / range_max)`, z the cell's distance,
-        with libm's exp (`math.exp`) over the few distinct distances, so each value is Nav2's to the bit.
+        with libm's exp (`math.exp`) over the few distinct distances, so each value is Nav2's to the bit;
+        with each cell's `pz * pz * pz` (what a beam ending there adds, the same bits as taken per beam).
         """
         key = (z_hit, z_rand, sigma_hit_m, range_max_m)
         if key not in self._pz:
@@ -321,8 +388,21 @@ class LikelihoodField:
             values, index = np.unique(self.distance_m, return_inverse=True)
             table = np.array([z_hit * math.exp(-(z * z) / denominator) + rand for z in values.tolist()])
             off = z_hit * math.exp(-(self.max_dist_m * self.max_dist_m) / denominator) + rand
-            self._pz[key] = (np.ascontiguousarray(table[index.reshape(self.distance_m.shape)]), off)
+            per_cell = np.ascontiguousarray(table[index.reshape(self.distance_m.shape)])
+            cubes = np.ascontiguousarray(np.append((table * table * table)[index.ravel()], off * off * off))
+            self._pz[key] = Pz(per_cell, off, cubes)
         return self._pz[key]
+
+
+class Pz(NamedTuple):
+    """The likelihood field's pz for one set of model parameters."""
+
+    table: F64
+    """pz per map cell (rows, cols)."""
+    off_map: float
+    """pz of an endpoint off the map (at `laser_likelihood_max_dist`)."""
+    cubes: F64
+    """`pz * pz * pz` per cell, row-major, then the off-map one: rows * cols + 1 values (the C kernel's table)."""
 
 
 class Beams(NamedTuple):
@@ -362,9 +442,7 @@ def beam_endpoints(
     return Beams(x, y, np.ascontiguousarray(r), np.ascontiguousarray(angle), laser_xy_m)
 
 
-def laser_likelihood(
-    poses: F64, beams: Beams, field: LikelihoodField, pz: tuple[F64, float], *, native: bool = True
-) -> F64:
+def laser_likelihood(poses: F64, beams: Beams, field: LikelihoodField, pz: Pz, *, native: bool = True) -> F64:
     """Each particle's likelihood-field factor `1 + pz^3 + ...` over the beams (its weight is multiplied by it).
 
     As LikelihoodFieldModel::sensorFunction: each cube is `pz * pz * pz`, added to 1 beam by beam.
@@ -376,10 +454,10 @@ def laser_likelihood(
         poses: (n, 3) particles (x m, y m, yaw rad) in the map frame.
         beams: The beams used, from `beam_endpoints`.
         field: The map's likelihood field.
-        pz: pz per map cell and pz of an endpoint off the map (`field.pz`).
+        pz: The field's pz for the model's parameters (`field.pz`).
         native: Use the C kernel when it can be built.
     """
-    table, off_map = pz
+    table, off_map = pz.table, pz.off_map
     n = len(poses)
     if not len(beams.x_m):
         return np.ones(n)
@@ -395,7 +473,7 @@ def laser_likelihood(
         status = lib.twin_amcl_likelihood(
             poses.ctypes.data, n, field.origin_x_m, field.origin_y_m, inv_res,
             ex.ctypes.data, ey.ctypes.data, beams.range_m.ctypes.data, beams.bearing_rad.ctypes.data, len(ex),
-            lx, ly, field.resolution_m, table.ctypes.data, rows, cols, off_map, out.ctypes.data,
+            lx, ly, field.resolution_m, pz.cubes.ctypes.data, rows, cols, out.ctypes.data,
         )  # fmt: skip
         if status != 0:
             raise MemoryError("amcl likelihood: out of memory")
@@ -568,7 +646,12 @@ def cluster_estimate(poses: F64, weights: F64, *, native: bool = True) -> tuple[
     lib = load_kernel() if native else None
     poses = np.ascontiguousarray(poses, dtype=np.float64)
     w = np.ascontiguousarray(weights, dtype=np.float64)
-    keys: NDArray[np.int64] = np.floor(poses / _BIN_SIZE).astype(np.int64)
+    keys: NDArray[np.int64]
+    if lib is not None:
+        keys = np.empty((len(poses), 3), dtype=np.int64)
+        lib.twin_pf_keys(poses.ctypes.data, len(poses), _BIN_SIZE.ctypes.data, keys.ctypes.data)
+    else:
+        keys = np.floor(poses / _BIN_SIZE).astype(np.int64)
     cluster, count = _clusters(keys, lib)
     cov = np.zeros((3, 3))
     if lib is not None:
@@ -625,7 +708,7 @@ class Amcl:
         self.map = occupancy
         self.laser = laser
         self._rng = rng
-        self.field = LikelihoodField(occupancy, params.laser_likelihood_max_dist_m, native=native)
+        self.field = LikelihoodField(as_received(occupancy), params.laser_likelihood_max_dist_m, native=native)
         range_max = laser.range_max_m
         if params.laser_max_range_m > 0.0:
             range_max = min(range_max, params.laser_max_range_m)
@@ -642,7 +725,10 @@ class Amcl:
         self._pf_init = False  # the first scan after it was taken (odometry reference set)
         self._odom_ref = (0.0, 0.0, 0.0)
         self._resample_count = 0
+        self._stats: tuple[tuple[float, float, float], F64] = ((0.0, 0.0, 0.0), np.zeros((3, 3)))
         self.estimate: AmclEstimate | None = None
+        self.updated = False  # the last scan updated the filter
+        self._bearings: F64 = np.zeros(0)  # each beam's angle in the base frame, as updateFilter computes it
 
     # --- inputs -------------------------------------------------------------------------------
 
@@ -676,27 +762,41 @@ class Amcl:
             raise ConfigError(msg)
         n = self.params.max_particles
         draws = self._rng.standard_normal((n, 3)) * np.sqrt(np.maximum(values, 0.0))
-        poses = np.array([x_m, y_m, yaw_rad]) + draws @ vectors.T
-        self.poses = poses
+        self.set_particles(np.array([x_m, y_m, yaw_rad]) + draws @ vectors.T)
+
+    def set_particles(self, poses: F64) -> None:
+        """Start the filter from these particles (n, 3) of equal weight, as pf_init leaves it after drawing them.
+
+        The next scan only weighs them (no motion), as after an initial pose.
+        """
+        n = len(poses)
+        self.poses = np.array(poses, dtype=np.float64).reshape(n, 3)
         self.weights = np.full(n, 1.0 / n)
         self._w_slow = self._w_fast = 0.0
         self._initialised = True
         self._pf_init = False
         self._resample_count = 0
+        self._clusters_now()  # pf_init's cluster statistics
 
     def process_scan(self, odom_pose: tuple[float, float, float], ranges: NDArray[np.floating]) -> AmclEstimate | None:
         """Take one scan with the odometry pose (odom frame, base) at its stamp.
 
         Returns:
-            The new estimate when the filter updated (then `amcl_pose` and `particle_cloud` are
-            published), else None. Before an initial pose every scan is ignored. `map_odom()`
-            holds the transform to broadcast on every scan once an estimate exists.
+            The estimate AMCL publishes on `amcl_pose` with this scan, else None. As Nav2's
+            laserReceived, a pose is published when the filter resampled, and on the first update
+            after an initial pose (then from the clusters of the initial set unless it resampled):
+            with `resample_interval` above 1, updates in between publish none. `updated` tells
+            whether the filter updated with this scan (then `particle_cloud` is published). Before an
+            initial pose every scan is ignored. `map_odom()` holds the transform to broadcast on every
+            scan once an estimate exists.
         """
+        self.updated = False
         if not self._initialised:
             return None
         p = self.params
         x, y, yaw = odom_pose
-        if not self._pf_init:
+        first = not self._pf_init
+        if first:
             self._odom_ref = (x, y, yaw)
             self._pf_init = True
             self._resample_count = 0
@@ -709,11 +809,26 @@ class Amcl:
         if p.max_beams >= 2:  # Nav2's likelihood model refuses fewer than two beams (no weighting)
             self._sensor(np.asarray(ranges, dtype=np.float64))
         self._odom_ref = (x, y, yaw)
+        self.updated = True
         self._resample_count += 1
-        if self._resample_count % p.resample_interval == 0:
+        resampled = self._resample_count % p.resample_interval == 0
+        if resampled:
             self._resample()
+            self._clusters_now()
+        if not (resampled or first):
+            return None
         self.estimate = self._estimate(odom_pose)
         return self.estimate
+
+    @property
+    def w_slow(self) -> float:
+        """The slow running average of the weights' mean (pf's w_slow; 0 until the first weighing)."""
+        return self._w_slow
+
+    @property
+    def w_fast(self) -> float:
+        """The fast running average of the weights' mean (pf's w_fast)."""
+        return self._w_fast
 
     @property
     def has_initial_pose(self) -> bool:
@@ -735,9 +850,9 @@ class Amcl:
         laser = self.laser
         r: F64 = ranges.copy()
         r[r <= self._range_min] = self._range_max  # as amcl_node fills LaserData
-        bearings: F64 = (
-            laser.mount_yaw_rad + laser.angle_min_rad + np.arange(len(r), dtype=np.float64) * laser.angle_increment_rad
-        )
+        if len(self._bearings) != len(r):
+            self._bearings = nav2_bearings(laser, len(r))
+        bearings = self._bearings
         beams = beam_endpoints(r, bearings, (laser.mount_x_m, laser.mount_y_m), self._range_max, self.params.max_beams)
         likelihood = laser_likelihood(self.poses, beams, self.field, self._pz, native=self._lib is not None)
         weights = self.weights * likelihood
@@ -799,9 +914,13 @@ class Amcl:
         """Each particle's cluster (bins that touch), numbered from 1 in raster order of the bins."""
         return _clusters(bins, self._lib)
 
+    def _clusters_now(self) -> None:
+        """pf_cluster_stats: the published cluster's mean and the set's covariance, kept until the next resampling."""
+        self._stats = cluster_estimate(self.poses, self.weights, native=self._lib is not None)
+
     def _estimate(self, odom_pose: tuple[float, float, float]) -> AmclEstimate:
         poses = self.poses
-        (mx, my, myaw), cov = cluster_estimate(poses, self.weights, native=self._lib is not None)
+        (mx, my, myaw), cov = self._stats
         ox, oy, oyaw = odom_pose
         # map->odom = map->base * (odom->base)^-1
         tyaw = myaw - oyaw
