@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from twin.bag.frames import frame_prefix
 from twin.core.clock import NS_PER_S
 from twin.core.errors import ConfigError, WorldError
 from twin.node import LaunchArguments, Node, launch_context
@@ -195,7 +196,11 @@ class RobotGroup:
         self.scenario = scenario
         self.robot = robot
         self.namespace = namespace
-        self.launch = LaunchArguments(push_namespace=namespace, remappings=_TF_INTO_NAMESPACE)
+        # Gazebo's frame_prefix (`tf: {mode: frame_prefix}`): the robot's frames named `<ns>/odom`... on
+        # the shared /tf; else nav2_bringup's remapping of /tf into the namespace.
+        self.frame_prefix = namespace if namespace and scenario.tf.mode == "frame_prefix" else ""
+        remappings = {} if self.frame_prefix else _TF_INTO_NAMESPACE
+        self.launch = LaunchArguments(push_namespace=namespace, remappings=remappings)
         self.body: RobotBody | None = None
         self.monitor: CollisionMonitor | None = None
         self.drive: Drivetrain | None = None
@@ -419,7 +424,7 @@ class RobotGroup:
 
     def nodes(self) -> list[Node]:
         """The group's nodes in launch order, each under the group's namespace (a new set on each call)."""
-        with launch_context(self.launch):
+        with launch_context(self.launch), frame_prefix(self.frame_prefix):
             return self._nodes()
 
     def _nodes(self) -> list[Node]:
