@@ -56,6 +56,7 @@ from twin.robot.nodes import (
     tf_pose,
 )
 from twin.sim.fleet import Fleet, FleetMonitor, FleetView
+from twin.sim.obstacles import JoinedSource
 from twin.sim.rng import RngStreams
 from twin.sim.scenario import (
     BehaviorTreeMission,
@@ -241,6 +242,7 @@ class RobotGroup:
         step_ns: int,
         now: Callable[[], int],
         fleet: Fleet | None = None,
+        obstacle_markers: bool = True,
     ) -> None:
         """Build what the robot's nodes simulate; on failure the drive it made is closed again.
 
@@ -252,12 +254,15 @@ class RobotGroup:
             now: The executor's clock (ns).
             fleet: The run's robots when there are several (this group among them): the robot
                 collides with the others and its lidar sees them.
+            obstacle_markers: Whether this robot's obstacle node publishes `/obstacles` (one robot of a
+                fleet does; every robot tracks its own contacts with its own view of the obstacles).
 
         Raises:
             TwinError: Any section that cannot be honoured.
         """
         assert self.body is not None and self.monitor is not None
         self.obstacles = obstacles
+        self.obstacle_markers = obstacle_markers
         self.step_ns = step_ns
         self._now = now
         contact: CollisionMonitor | ObstacleMonitor | FleetMonitor = self.monitor
@@ -267,7 +272,8 @@ class RobotGroup:
         if fleet is not None:
             index = fleet.groups.index(self)
             contact = FleetMonitor(contact, fleet, index)
-            seen = FleetView(fleet, index)
+            robots = FleetView(fleet, index)
+            seen = robots if obstacles is None else JoinedSource(obstacles, robots)
         self.tracker = ContactTracker(contact)
         robot = self.robot
         self.lidar = (
@@ -475,7 +481,11 @@ class RobotGroup:
 
         if self.obstacles is not None:  # the world's; it reports its contacts to this robot
             period_s = self.obstacles.update_period_ns / NS_PER_S
-            nodes.append(ObstacleNode(self.obstacles, self.tracker, chassis, rate_hz=1.0 / period_s))
+            nodes.append(
+                ObstacleNode(
+                    self.obstacles, self.tracker, chassis, rate_hz=1.0 / period_s, markers=self.obstacle_markers
+                )
+            )
         if self.lidar is not None and robot.lidar is not None:
             nodes.append(LidarNode(self.lidar, robot.lidar.frame_id, robot.lidar.rate_hz, chassis))
 
