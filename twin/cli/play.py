@@ -14,7 +14,7 @@ examples:
   twin play bags/<run>                                       the twin's own bag, in real time
   twin play ../shared/fixtures/bags/tb3_waffle_gazebo_humble --speed 2 --loop
   twin play bags/<run> --port 9000 --host 0.0.0.0            serve other machines too
-  twin play bags/<fleet run> --namespace robot2             one robot of a fleet, as one robot's bag
+  twin play bags/<fleet run> --namespace robot2              one robot of a fleet, as one robot's bag
 
 Then in Foxglove (app or browser): Open connection > Foxglove WebSocket > ws://127.0.0.1:8765, and
 import docs/foxglove_layout.json for the 3D view, speed plots and the behaviour-tree log. Topics are
