@@ -176,3 +176,11 @@ def test_a_misspelt_tf_mode_is_refused_with_a_suggestion(tmp_path: Path) -> None
     bad.write_text("name: x\ntf: {mode: frame-prefix}\nrobots: [{name: a}]\n")
     with pytest.raises(ConfigError, match=r"bad.yaml:2: tf.mode: 'frame-prefix' is not allowed; did you mean"):
         load_scenario(bad)
+
+
+def test_an_unknown_tf_key_is_refused_with_a_suggestion(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\ntf: {mod: frame_prefix}\nrobots: [{name: a}]\n")
+    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [f"twin: error: {bad}:2: tf.mod: unknown key; did you mean 'mode'?"]
