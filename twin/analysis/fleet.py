@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from twin import __version__
 from twin.analysis import plots
 from twin.analysis.collect import ContactEvent, PoseTrack, collect, robot_namespaces
+from twin.analysis.metrics import RunMetrics, compute_metrics, metric_data
 from twin.analysis.report import Report, bag_line, bag_summary, build_report, markdown_html, robot_markdown
 from twin.bag import BagInfo, open_bag, read_messages
 from twin.bag.raw import raw_readable
@@ -36,6 +37,7 @@ __all__ = [
     "analyze_fleet",
     "bag_robots",
     "check_namespace",
+    "fleet_metrics",
     "fleet_summary_lines",
     "robot_distance",
     "write_fleet_report",
@@ -198,6 +200,27 @@ def robot_contacts(contacts: Mapping[str, list[ContactEvent] | None]) -> dict[st
         a, b = sorted(pair)
         out[a][b] = out[b][a] = len(times)
     return out
+
+
+def fleet_metrics(path: str | os.PathLike[str]) -> dict[str, tuple[RunMetrics, dict[str, int]]]:
+    """Each robot's run metrics and its contacts with each other robot, by namespace ({} for a one-robot bag).
+
+    The metrics are those `run_metrics` gives a one-robot bag, each from the robot's own topics;
+    the contacts with other robots are counted as `robot_contacts` counts them.
+
+    Raises:
+        BagError: If it is not a readable bag.
+    """
+    bag = Path(path)
+    namespaces = robot_namespaces(open_bag(bag))
+    metrics: dict[str, RunMetrics] = {}
+    contacts: dict[str, list[ContactEvent] | None] = {}
+    for ns in namespaces:
+        data = metric_data(bag, namespace=ns)
+        metrics[ns] = compute_metrics(data)
+        contacts[ns] = data.contacts
+    with_robots = robot_contacts(contacts)
+    return {ns: (metrics[ns], with_robots[ns]) for ns in namespaces}
 
 
 @dataclass(kw_only=True, slots=True)

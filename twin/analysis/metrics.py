@@ -345,11 +345,19 @@ def _rms_jerk(t: F64, v: F64) -> float | None:
     return float(math.sqrt(float(np.mean(j * j))))
 
 
-def run_metrics(bag_path: Path) -> RunMetrics:
-    """Read the bag at `bag_path` once and return its metrics.
+def run_metrics(bag_path: Path, *, namespace: str | None = None) -> RunMetrics:
+    """Read the bag at `bag_path` once and return its metrics (one robot's of a fleet's bag with `namespace`).
 
     Raises:
         BagError: If it is not a readable bag (a truncated one: run `twin bag recover`).
     """
-    data = collect(bag_path, topics=_METRIC_TOPICS, health=False)
-    return compute_metrics(data)
+    return compute_metrics(metric_data(bag_path, namespace=namespace))
+
+
+def metric_data(bag_path: Path, *, namespace: str | None = None) -> BagData:
+    """What `run_metrics` reads of the bag: the topics its metrics need (one robot's with `namespace`).
+
+    Raises:
+        BagError: If it is not a readable bag.
+    """
+    return collect(bag_path, topics=_METRIC_TOPICS, health=False, namespace=namespace)

@@ -5,6 +5,9 @@ sizes, padding, constant covariances) when it is constructed; `encode()` then on
 stamp and the values, usually with a single `struct.pack`. The bytes are exactly what rosbags'
 serializer produces for the same message (the tests check this byte for byte).
 
+Frame ids are taken as given, or under the frame prefix in force when the encoder is made
+(`twin.bag.frames.frame_prefix`: a fleet robot's frames on one shared `/tf`).
+
 Times are integer nanoseconds (`stamp_ns`); angles are radians; poses are `(x, y, z, qx, qy, qz,
 qw)`. Every encoder has a `msgtype` class attribute to pass to `Recorder.add_topic`.
 """
@@ -20,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from twin.bag.cdr import ENCAPSULATION, CdrWriter, Layout, string_bytes
+from twin.bag.frames import prefixed
 from twin.core.errors import BagError
 
 __all__ = [
@@ -128,7 +132,7 @@ class ImuEncoder:
         """
         layout = Layout()
         layout.var_time()
-        layout.const_string(frame_id)
+        layout.const_string(prefixed(frame_id))
         layout.var("orientation", "d", 4)
         orientation_at = layout.size - 32
         layout.const("d", *_fixed_f64(orientation_covariance, 9, "orientation_covariance"))
@@ -188,8 +192,8 @@ class OdometryEncoder:
         """
         layout = Layout()
         layout.var_time()
-        layout.const_string(frame_id)
-        layout.const_string(child_frame_id)
+        layout.const_string(prefixed(frame_id))
+        layout.const_string(prefixed(child_frame_id))
         layout.var("position.xy", "d", 2)
         layout.const("d", 0.0, 0.0, 0.0)  # position.z, orientation.x, orientation.y
         layout.var("orientation.zw", "d", 2)
@@ -239,10 +243,10 @@ class TFEncoder:
         if not pairs:
             msg = "TFEncoder needs at least one (parent, child) frame pair"
             raise BagError(msg)
-        self.pairs = tuple(pairs)
+        self.pairs = tuple((prefixed(parent), prefixed(child)) for parent, child in pairs)
         layout = Layout()
         layout.const_count(len(pairs))
-        for parent, child in pairs:
+        for parent, child in self.pairs:
             layout.var_time()
             layout.const_string(parent)
             layout.const_string(child)
@@ -437,7 +441,7 @@ class ScanEncoder:
         self.with_intensities = with_intensities
         self._prefix_pack = struct.Struct("<4siI").pack
         # Everything after the stamp up to the ranges' data is constant: all 4-byte aligned.
-        body = string_bytes(frame_id)
+        body = string_bytes(prefixed(frame_id))
         body += bytes((-(8 + len(body))) % 4)
         body += struct.pack(
             "<7fI",
@@ -498,7 +502,7 @@ class ImageEncoder:
             raise BagError(msg)
         self.size = width * height * channels[encoding]
         w = CdrWriter()
-        w.string(frame_id)
+        w.string(prefixed(frame_id))
         w.pack("I", height, width)
         w.string(encoding)
         w.pack("B", 0)  # is_bigendian: little-endian float depth, as gazebo_ros publishes it
@@ -530,7 +534,7 @@ class CompressedImageEncoder:
             format: e.g. `rgb8; jpeg compressed bgr8`, as image_transport's compressed plugin writes it.
         """
         w = CdrWriter()
-        w.string(frame_id)
+        w.string(prefixed(frame_id))
         w.string(format)
         body = w.getvalue()[len(ENCAPSULATION) :]
         self._body = body + bytes((-(8 + len(body))) % 4)
@@ -572,7 +576,7 @@ class PointCloud2Encoder:
         """
         self.size = width * height * point_step
         w = CdrWriter()
-        w.string(frame_id)
+        w.string(prefixed(frame_id))
         w.pack("I", height, width)
         w.count(len(fields))
         for name, offset, datatype, count in fields:
@@ -611,7 +615,7 @@ class CameraInfoEncoder:
             P: The 3x4 projection matrix, row-major.
         """
         w = CdrWriter()
-        w.string(frame_id)
+        w.string(prefixed(frame_id))
         w.pack("I", height, width)
         w.string("plumb_bob")
         w.count(5)
@@ -702,7 +706,7 @@ class ContactEncoder:
 
     def __init__(self, frame_id: str = "odom") -> None:
         """Contacts with positions and normals in `frame_id`."""
-        self.frame_id = frame_id
+        self.frame_id = prefixed(frame_id)
 
     def encode(
         self,
@@ -731,7 +735,7 @@ class _StampedPoseLayout:
     def __init__(self, frame_id: str, *, covariance: ArrayLike | None, with_covariance: bool) -> None:
         layout = Layout()
         layout.var_time()
-        layout.const_string(frame_id)
+        layout.const_string(prefixed(frame_id))
         layout.var("pose", "d", 7)
         if with_covariance:
             layout.var_bytes("covariance", 288, 8)
@@ -801,7 +805,7 @@ class PathEncoder:
 
     def __init__(self, frame_id: str = "map") -> None:
         """Paths in `frame_id`."""
-        self.frame_id = frame_id
+        self.frame_id = frame_id = prefixed(frame_id)
         # The path's header, the pose count and the first PoseStamped (4-aligned after the count, so
         # its doubles may need padding that the others do not) are one struct.
         frame = string_bytes(frame_id)
@@ -860,7 +864,7 @@ class NavigationFeedbackEncoder:
         """The current pose in `frame_id`."""
         layout = Layout()
         layout.var_time()
-        layout.const_string(frame_id)
+        layout.const_string(prefixed(frame_id))
         layout.var("pose", "d", 7)
         layout.var_time("navigation_time")
         layout.var_time("estimated_time_remaining")
@@ -905,7 +909,7 @@ class ParticleCloudEncoder:
 
     def __init__(self, frame_id: str = "map") -> None:
         """Particles in `frame_id`."""
-        self.frame_id = frame_id
+        self.frame_id = frame_id = prefixed(frame_id)
         frame = string_bytes(frame_id)
         # stamp, frame id, (pad to 4) particle count, then padding so the particles start 8-aligned
         count_pad = (-(8 + len(frame))) % 4
@@ -955,7 +959,7 @@ class OccupancyGridEncoder:
         origin: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> None:
         """A grid of `width` x `height` cells of `resolution_m`, its cell (0, 0) corner at `origin` (x, y, yaw)."""
-        self.frame_id = frame_id
+        self.frame_id = prefixed(frame_id)
         self.resolution_m = resolution_m
         self.width = width
         self.height = height
@@ -997,7 +1001,7 @@ class MarkerArrayEncoder:
 
     def __init__(self, frame_id: str = "map", namespace: str = "obstacles") -> None:
         """Markers in `frame_id`, in marker namespace `namespace`."""
-        self.frame_id = frame_id
+        self.frame_id = prefixed(frame_id)
         self.namespace = namespace
         self._layouts: dict[tuple[object, ...], tuple[Callable[..., bytes], bytes, bytes, int]] = {}
 

@@ -14,12 +14,17 @@ examples:
   twin play bags/<run>                                       the twin's own bag, in real time
   twin play ../shared/fixtures/bags/tb3_waffle_gazebo_humble --speed 2 --loop
   twin play bags/<run> --port 9000 --host 0.0.0.0            serve other machines too
+  twin play bags/<fleet run> --namespace robot2              one robot of a fleet, as one robot's bag
 
 Then in Foxglove (app or browser): Open connection > Foxglove WebSocket > ws://127.0.0.1:8765, and
 import docs/foxglove_layout.json for the 3D view, speed plots and the behaviour-tree log. Topics are
 sent as foxglove_bridge sends them (CDR with ros2msg schemas); latched topics (/tf_static,
 /robot_description, /map) reach a client that connects late. Any rosbag2 the twin reads plays:
 MCAP or sqlite3, metadata versions 4 to 9; a topic whose type is defined nowhere is left out.
+A fleet's bag serves every robot's topics as they are (/robot1/scan, /robot1/tf...); --namespace NS
+serves one robot alone under a single robot's names (/NS/scan as /scan, /NS/tf as /tf), with the
+topics under no namespace (/clock, /rosout, a frame_prefix fleet's shared /tf), so the shipped
+layout shows it (docs/fleet.md).
 Ctrl-C stops. Exit codes: 0 done, 2 bad option or port in use, 5 bag error, 130 interrupted.
 """
 
@@ -68,6 +73,12 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.add_argument("--loop", action="store_true", help="play again from the start at the end, until Ctrl-C")
     parser.add_argument("--host", default="127.0.0.1", metavar="ADDR", help="address to serve on (default 127.0.0.1)")
     parser.add_argument("--port", type=int, default=8765, metavar="N", help="port to serve on (default 8765)")
+    parser.add_argument(
+        "--namespace",
+        metavar="NS",
+        help="a fleet's bag: serve the robot under /NS/ alone, its topics as one robot's (/NS/scan as /scan), "
+        "with the topics under no namespace (default: every topic as it is)",
+    )
     parser.set_defaults(func=_play)
 
 
@@ -75,7 +86,12 @@ def _play(args: argparse.Namespace) -> int:
     from twin.bag import open_bag
     from twin.live import LiveServer, play_bag
 
-    open_bag(args.bag)  # a bad bag is reported before the port is taken
+    info = open_bag(args.bag)  # a bad bag (or namespace) is reported before the port is taken
+    namespace = None
+    if args.namespace is not None:
+        from twin.analysis.fleet import check_namespace
+
+        namespace = check_namespace(info, args.namespace)
     stop: list[int] = []
 
     def handle(signum: int, frame: object) -> None:
@@ -93,11 +109,14 @@ def _play(args: argparse.Namespace) -> int:
                 speed=None if args.speed == math.inf else args.speed,
                 loop=args.loop,
                 should_stop=lambda: bool(stop),
+                namespace=namespace,
             )
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
     skipped = f"; not served (no definition): {', '.join(report.skipped)}" if report.skipped else ""
+    if namespace is not None:
+        skipped += f"; /{namespace}/ alone, as one robot's topics"
     passes = f" in {report.passes} passes" if report.passes > 1 else ""
     print(
         f"played {report.messages} messages on {len(report.topics)} topics{passes} "

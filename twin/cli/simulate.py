@@ -13,7 +13,7 @@ import signal
 import sys
 import tempfile
 import threading
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,6 +37,7 @@ examples:
   twin simulate --json | jq .bag_path             a machine-readable summary on stdout
   twin simulate --live                            watch it in Foxglove (ws://127.0.0.1:8765), in real time
   twin simulate --live --speed 5 --port 9000      five times faster, on another port
+  twin simulate scenarios/house_two_waffles.yaml --live --namespace robot2   one robot of a fleet, as one robot's
   twin simulate --from-bag bags/run1 --out /tmp/rerun   re-run the scenario, seed and duration a bag recorded
   twin simulate --ros2 --ros2-role simulator      Gazebo's part on ROS 2 domain 0 (loopback), for your Nav2
 
@@ -108,6 +109,13 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     )
     live.add_argument("--host", default=None, metavar="ADDR", help="address to serve on (default 127.0.0.1)")
     live.add_argument("--port", type=int, default=None, metavar="N", help="port to serve on (default 8765)")
+    live.add_argument(
+        "--namespace",
+        default=None,
+        metavar="NS",
+        help="a fleet (robots:): serve the robot under /NS/ alone, its topics as one robot's (/NS/scan as /scan), "
+        "with /clock, /rosout and the shared /tf (default: every robot's topics as they are)",
+    )
     live.add_argument(
         "--speed",
         type=speed_arg,
@@ -326,7 +334,8 @@ def _simulate_checked(args: argparse.Namespace) -> int:
     bag_path = _bag_path(scenario, args.out)
 
     flag = _StopFlag()
-    with _live_view(args, flag, ros2=scenario.ros2.enabled) as sinks, _ros2_bridge(scenario) as bridge:
+    live = _live_view(args, flag, ros2=scenario.ros2.enabled, namespaces=[e.ns for e in scenario.robots])
+    with live as sinks, _ros2_bridge(scenario) as bridge:
         return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks + bridge, provenance=provenance)
 
 
@@ -373,11 +382,15 @@ def _ros2_bridge(scenario: Scenario) -> Iterator[list[Sink]]:
 
 
 @contextmanager
-def _live_view(args: argparse.Namespace, flag: _StopFlag, *, ros2: bool = False) -> Iterator[list[Sink]]:
+def _live_view(
+    args: argparse.Namespace, flag: _StopFlag, *, ros2: bool = False, namespaces: Sequence[str] = ()
+) -> Iterator[list[Sink]]:
     """The live server and pacer `--live`, `--speed` (and `--ros2`: real time) ask for, as sinks after the recorder."""
-    if not args.live and (args.host is not None or args.port is not None):
-        msg = "--host and --port serve the live view; add --live"
+    if not args.live and (args.host is not None or args.port is not None or args.namespace is not None):
+        given = [f for f, v in (("--host", args.host), ("--port", args.port), ("--namespace", args.namespace)) if v]
+        msg = f"{' and '.join(given)}: configure(s) the live view; add --live"
         raise ConfigError(msg)
+    namespace = _live_namespace(args.namespace, namespaces)
     speed = args.speed if args.speed is not None else (1.0 if args.live or ros2 else math.inf)
     if not args.live and speed == math.inf:
         yield []
@@ -391,7 +404,30 @@ def _live_view(args: argparse.Namespace, flag: _StopFlag, *, ros2: bool = False)
     port = DEFAULT_PORT if args.port is None else args.port
     with LiveServer(host=args.host or DEFAULT_HOST, port=port) as server:
         print(live_banner(server.url, speed), file=sys.stderr)
-        yield [LiveSink(server, pacer=pacer)]
+        if namespace is not None:
+            alone = f"twin: serving /{namespace}/ alone, as one robot's topics (/{namespace}/scan as /scan)"
+            print(alone, file=sys.stderr)
+        yield [LiveSink(server, pacer=pacer, namespace=namespace)]
+
+
+def _live_namespace(given: str | None, namespaces: Sequence[str]) -> str | None:
+    """The robot `--namespace` picks for the live view, checked against the scenario's robots.
+
+    Raises:
+        ConfigError: If the scenario has no such robot (naming its robots, with a "did you mean"), or no fleet.
+    """
+    if given is None:
+        return None
+    from twin.core.config import suggest
+
+    ns = given.strip("/")
+    if not namespaces:
+        msg = f"--namespace {given!r}: the scenario has one robot (no robots:); leave --namespace out"
+        raise ConfigError(msg)
+    if ns not in namespaces:
+        msg = f"--namespace {given!r} is not a robot of the scenario{suggest(ns, namespaces)}"
+        raise ConfigError(msg)
+    return ns
 
 
 def _run(

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from twin.bag import message_definitions, open_bag, read_messages
 from twin.core.errors import BagError
+from twin.live.namespace import NamespaceView
 from twin.live.pacing import Pacer
 from twin.live.server import LiveServer
 from twin.live.sink import is_latched
@@ -24,7 +25,7 @@ class PlayReport:
     """What `play_bag` served."""
 
     bag_path: Path
-    topics: tuple[str, ...]  #: the topics served
+    topics: tuple[str, ...]  #: the bag's topics served (under the names the bag has)
     skipped: tuple[str, ...]  #: topics left out: no message definition, so no client could decode them
     messages: int  #: messages published, over all passes
     passes: int  #: times the bag was played (more than one with `loop`)
@@ -40,6 +41,7 @@ def play_bag(
     loop: bool = False,
     should_stop: Callable[[], bool] = lambda: False,
     on_pass: Callable[[int], None] | None = None,
+    namespace: str | None = None,
 ) -> PlayReport:
     """Publish the bag's messages on `server` in time order, paced to `speed` (None: as fast as possible).
 
@@ -50,6 +52,8 @@ def play_bag(
         loop: Play again from the start after the end, until `should_stop()`.
         should_stop: Polled before each message.
         on_pass: Called with the pass number (1, 2, ...) as each pass starts.
+        namespace: A fleet's robot to serve alone: its topics without the namespace (`/robot1/scan` as
+            `/scan`) and the topics under no namespace (`twin.live.namespace`); None: every topic as it is.
 
     Raises:
         BagError: If the bag cannot be read, or has no topic with a message definition.
@@ -58,13 +62,17 @@ def play_bag(
     definitions = message_definitions(info.path)
     handles: dict[str, int] = {}
     skipped = []
+    view = NamespaceView(namespace) if namespace is not None else None
     for topic in info.topics:
+        served = view.served_as(topic.name) if view is not None else topic.name
+        if served is None:
+            continue  # another robot's
         definition = definitions.get(topic.msgtype)
         if definition is None:
             skipped.append(topic.name)
             _log.warning("%s: no definition of %s; %s is not served", info.path, topic.msgtype, topic.name)
             continue
-        handles[topic.name] = server.add_channel(topic.name, definition, latched=is_latched(topic.qos))
+        handles[topic.name] = server.add_channel(served, definition, latched=is_latched(topic.qos))
     if not handles:
         msg = f"{info.path}: no topic has a message definition (embedded or standard); nothing to serve"
         raise BagError(msg)

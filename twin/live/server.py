@@ -146,8 +146,8 @@ class LiveServer(Closing):
         Args:
             topic: Topic name, e.g. `/scan`.
             definition: The type's `ros2msg` definition (`TypeRegistry.definition`).
-            latched: Keep the last message (all of them on `/tf_static`) for clients that subscribe later,
-                as a transient-local publisher does.
+            latched: Keep the last message (all of them on `/tf_static` and a robot's `/<ns>/tf_static`)
+                for clients that subscribe later, as a transient-local publisher does.
         """
         key = (topic, definition.msgtype)
         existing = self._by_topic.get(key)
@@ -155,7 +155,7 @@ class LiveServer(Closing):
             return existing
         schema = foxglove.Schema(name=definition.msgtype, encoding=definition.encoding, data=definition.text.encode())
         channel = foxglove.Channel(topic, schema=schema, message_encoding="cdr", context=self._context)
-        keep = _TF_STATIC_KEEP if topic == "/tf_static" else 1
+        keep = _TF_STATIC_KEEP if topic == "/tf_static" or topic.endswith("/tf_static") else 1  # a fleet's too
         entry = _Channel(channel=channel, latched=deque(maxlen=keep) if latched else None)
         self._channels.append(entry)
         self._by_id[channel.id()] = entry

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 from twin.bag import Durability, QosProfile, default_qos
 from twin.bag.typesys import TypeRegistry
+from twin.live.namespace import NamespaceView
 from twin.live.pacing import Pacer
 from twin.live.server import LiveServer
 
@@ -29,10 +30,12 @@ class LiveSink:
     Args:
         server: Where the live view is served; None paces the run without serving it.
         pacer: Holds the messages to wall time; None runs as fast as possible.
+        namespace: A fleet's robot to serve alone (`twin.live.namespace`); None: every topic.
     """
 
-    def __init__(self, server: LiveServer | None, *, pacer: Pacer | None = None) -> None:
+    def __init__(self, server: LiveServer | None, *, pacer: Pacer | None = None, namespace: str | None = None) -> None:
         self._server = server
+        self._view = NamespaceView(namespace) if namespace is not None else None
         self._registry = TypeRegistry()
         self._publish = server.publish if server is not None else None
         self._wait = pacer.wait if pacer is not None else None
@@ -45,12 +48,15 @@ class LiveSink:
         """
         if self._server is None:
             return -1
+        served = self._view.served_as(topic) if self._view is not None else topic
+        if served is None:
+            return -1  # another robot's: paced, not served
         profiles = tuple(qos) if qos is not None else default_qos(topic)
-        return self._server.add_channel(topic, self._registry.definition(msgtype), latched=is_latched(profiles))
+        return self._server.add_channel(served, self._registry.definition(msgtype), latched=is_latched(profiles))
 
     def write(self, handle: int, t_ns: int, data: bytes) -> None:
         """Wait until `t_ns` is due (when paced), then publish the message live."""
         if self._wait is not None:
             self._wait(t_ns)
-        if self._publish is not None:
+        if self._publish is not None and handle >= 0:
             self._publish(handle, t_ns, data)

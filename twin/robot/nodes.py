@@ -232,7 +232,8 @@ class ObstacleNode(Node):
     reports an obstacle that moved or appeared into the robot as a contact (the robot is not pushed)
     and ends that contact once it has left, and publishes the obstacles present as a
     `visualization_msgs/MarkerArray` on `/obstacles` (latched) when the set changes, and at most
-    every `marker_period_s` while one moves. Data: the `ObstacleMarker`s.
+    every `marker_period_s` while one moves (unless `markers` is false: a fleet's other robots).
+    Data: the `ObstacleMarker`s.
     """
 
     def __init__(
@@ -243,9 +244,11 @@ class ObstacleNode(Node):
         *,
         rate_hz: float,
         marker_period_s: float = 0.1,
+        markers: bool = True,
     ) -> None:
         super().__init__("obstacles")
-        pub = self.create_publisher(MarkerArrayEncoder.msgtype, "/obstacles", LATCHED)
+        # A fleet's robots each track their own contacts; one of them shows the obstacles on /obstacles.
+        pub = self.create_publisher(MarkerArrayEncoder.msgtype, "/obstacles", LATCHED) if markers else None
         encode = MarkerArrayEncoder("map").encode
         kinds = {"box": MarkerArrayEncoder.CUBE, "cylinder": MarkerArrayEncoder.CYLINDER}
         marker_period_ns = round(marker_period_s * 1e9)
@@ -267,7 +270,7 @@ class ObstacleNode(Node):
                 tracker.touched_by(contacts)
             elif changed and tracker.by_obstacle and tracker.in_contact:
                 tracker.released = True
-            if field.membership != shown or (changed and t_ns >= next_marker_ns):
+            if pub is not None and (field.membership != shown or (changed and t_ns >= next_marker_ns)):
                 shown = field.membership
                 next_marker_ns = t_ns + marker_period_ns
                 markers = field.markers()

@@ -20,7 +20,7 @@ from typing import Any
 import yaml
 
 from twin import __version__
-from twin.sim.scenario import Ros2Section, Scenario
+from twin.sim.scenario import Ros2Section, Scenario, TfSection
 
 __all__ = ["fmu_record", "run_provenance", "scenario_yaml"]
 
@@ -45,6 +45,8 @@ def scenario_yaml(scenario: Scenario) -> str:
     plain = _plain(scenario)
     if scenario.ros2 == Ros2Section():  # a run off ROS 2 records what it did before the bridge existed
         del plain["ros2"]
+    if scenario.tf == TfSection():  # namespaced TF (the default) records what it did before frame_prefix
+        del plain["tf"]
     text: str = yaml.dump(plain, Dumper=dumper, sort_keys=False, allow_unicode=True)
     return text
 

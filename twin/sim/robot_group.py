@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from twin.bag.frames import frame_prefix
 from twin.core.clock import NS_PER_S
 from twin.core.errors import ConfigError, WorldError
 from twin.node import LaunchArguments, Node, launch_context
@@ -55,6 +56,7 @@ from twin.robot.nodes import (
     tf_pose,
 )
 from twin.sim.fleet import Fleet, FleetMonitor, FleetView
+from twin.sim.obstacles import JoinedSource
 from twin.sim.rng import RngStreams
 from twin.sim.scenario import (
     BehaviorTreeMission,
@@ -195,7 +197,11 @@ class RobotGroup:
         self.scenario = scenario
         self.robot = robot
         self.namespace = namespace
-        self.launch = LaunchArguments(push_namespace=namespace, remappings=_TF_INTO_NAMESPACE)
+        # Gazebo's frame_prefix (`tf: {mode: frame_prefix}`): the robot's frames named `<ns>/odom`... on
+        # the shared /tf; else nav2_bringup's remapping of /tf into the namespace.
+        self.frame_prefix = namespace if namespace and scenario.tf.mode == "frame_prefix" else ""
+        remappings = {} if self.frame_prefix else _TF_INTO_NAMESPACE
+        self.launch = LaunchArguments(push_namespace=namespace, remappings=remappings)
         self.body: RobotBody | None = None
         self.monitor: CollisionMonitor | None = None
         self.drive: Drivetrain | None = None
@@ -236,6 +242,7 @@ class RobotGroup:
         step_ns: int,
         now: Callable[[], int],
         fleet: Fleet | None = None,
+        obstacle_markers: bool = True,
     ) -> None:
         """Build what the robot's nodes simulate; on failure the drive it made is closed again.
 
@@ -247,12 +254,15 @@ class RobotGroup:
             now: The executor's clock (ns).
             fleet: The run's robots when there are several (this group among them): the robot
                 collides with the others and its lidar sees them.
+            obstacle_markers: Whether this robot's obstacle node publishes `/obstacles` (one robot of a
+                fleet does; every robot tracks its own contacts with its own view of the obstacles).
 
         Raises:
             TwinError: Any section that cannot be honoured.
         """
         assert self.body is not None and self.monitor is not None
         self.obstacles = obstacles
+        self.obstacle_markers = obstacle_markers
         self.step_ns = step_ns
         self._now = now
         contact: CollisionMonitor | ObstacleMonitor | FleetMonitor = self.monitor
@@ -262,7 +272,8 @@ class RobotGroup:
         if fleet is not None:
             index = fleet.groups.index(self)
             contact = FleetMonitor(contact, fleet, index)
-            seen = FleetView(fleet, index)
+            robots = FleetView(fleet, index)
+            seen = robots if obstacles is None else JoinedSource(obstacles, robots)
         self.tracker = ContactTracker(contact)
         robot = self.robot
         self.lidar = (
@@ -420,7 +431,7 @@ class RobotGroup:
 
     def nodes(self) -> list[Node]:
         """The group's nodes in launch order, each under the group's namespace (a new set on each call)."""
-        with launch_context(self.launch):
+        with launch_context(self.launch), frame_prefix(self.frame_prefix):
             return self._nodes()
 
     def _nodes(self) -> list[Node]:
@@ -471,7 +482,11 @@ class RobotGroup:
 
         if self.obstacles is not None:  # the world's; it reports its contacts to this robot
             period_s = self.obstacles.update_period_ns / NS_PER_S
-            nodes.append(ObstacleNode(self.obstacles, self.tracker, chassis, rate_hz=1.0 / period_s))
+            nodes.append(
+                ObstacleNode(
+                    self.obstacles, self.tracker, chassis, rate_hz=1.0 / period_s, markers=self.obstacle_markers
+                )
+            )
         if self.lidar is not None and robot.lidar is not None:
             nodes.append(LidarNode(self.lidar, robot.lidar.frame_id, robot.lidar.rate_hz, chassis))
 

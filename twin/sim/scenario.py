@@ -30,6 +30,7 @@ __all__ = [
     "RobotEntry",
     "Ros2Section",
     "Scenario",
+    "TfSection",
     "default_scenario_path",
     "fmu_fallback",
     "for_ros2_role",
@@ -440,6 +441,19 @@ def _is_ros_topic_name(name: str) -> bool:
     return all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", part) and "__" not in part for part in name[1:].split("/"))
 
 
+@dataclass(frozen=True, kw_only=True, slots=True)
+class TfSection:
+    """How a fleet's robots publish TF (docs/fleet.md, "Two ways to name a fleet's frames").
+
+    `namespaced` (nav2_bringup's multi-robot launch): each robot's TF on `/<ns>/tf` and
+    `/<ns>/tf_static` with the usual frame names. `frame_prefix` (Gazebo's and robot_state_publisher's
+    `frame_prefix`): every robot's TF on one shared `/tf` and `/tf_static`, its frames named
+    `<ns>/odom`, `<ns>/base_footprint`..., under one shared `map`.
+    """
+
+    mode: Literal["namespaced", "frame_prefix"] = "namespaced"
+
+
 #: The sections of a scenario that belong to one robot: a `robots:` entry may set each of them.
 ROBOT_SECTIONS = (
     "robot",
@@ -528,6 +542,7 @@ class Scenario:
     non_finite_messages: Literal["drop", "error"] = "drop"
     source_path: Path | None = None  # the scenario file (set by the loader; user modules are found beside it)
     robots: tuple[RobotEntry, ...] = ()  # a fleet, each under its namespace; empty: the one robot above
+    tf: TfSection = field(default_factory=TfSection)  # how a fleet's robots name their frames
 
     def __post_init__(self) -> None:
         for key, attr in (("name", "name"), ("namespace", "ns")):

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import yaml
 
-from twin.core.config import ConfigNode, build, load_yaml, merge
+from twin.core.config import ConfigNode, build, load_yaml, location, merge
+from twin.core.errors import ConfigError
 from twin.sim.replay import with_replay_start
 from twin.sim.scenario import DEFAULTS_PATH, ROBOT_SECTIONS, Scenario
 
@@ -24,8 +25,16 @@ def load_scenario(path: Path) -> Scenario:
         ConfigError: Naming file, line and key, if the file is unreadable or any key is wrong.
         BagError: If a replay mission's bag is unreadable or lacks its command or pose topic.
     """
-    node = with_fleet(merge(load_yaml(DEFAULTS_PATH), load_yaml(path)))
+    own = load_yaml(path)
+    node = with_fleet(merge(load_yaml(DEFAULTS_PATH), own))
     scenario: Scenario = build(Scenario, node, key="")
+    if scenario.tf.mode == "frame_prefix" and not scenario.robots:
+        where = next((k for k, _ in own.value if k.value == "tf"), own) if isinstance(own, yaml.MappingNode) else own
+        msg = (
+            f"{location(where)}: tf.mode: frame_prefix names each robot's frames after its namespace and needs "
+            "robots:; remove tf, or list the robots under robots:"
+        )
+        raise ConfigError(msg)
     # A scenario recorded in a bag (`--from-bag`) keeps the file it came from, where its nodes' modules are.
     source = scenario.source_path or Path(path).resolve()
     return with_replay_start(dataclasses.replace(scenario, source_path=source))

@@ -126,19 +126,21 @@ class Simulation(Closing):
         self.fleet = Fleet(self.groups) if len(self.groups) > 1 else None
         if self.fleet is not None:
             self.fleet.check_spawn()
-        self.obstacles = self._make_obstacles(bodies[0])
+        fields = self._make_obstacles(bodies)  # each robot's view of the world's obstacles (None: none)
+        self.obstacles = fields[0]
         self.recorder: Recorder | None = None
         self.executor = Executor(self.step_ns, profile=profile, non_finite=scenario.non_finite_messages)
         built: list[RobotGroup] = []
         try:  # a group that fails releases its own drive; the ones built before it are released here
-            for g in self.groups:
+            for i, g in enumerate(self.groups):
                 g.build(
                     scene,
-                    obstacles=self.obstacles,
+                    obstacles=fields[i],
                     rng=self._rng.under(g.namespace),
                     step_ns=self.step_ns,
                     now=self._now,
                     fleet=self.fleet,
+                    obstacle_markers=i == 0,
                 )
                 built.append(g)
         except BaseException:
@@ -265,31 +267,33 @@ class Simulation(Closing):
 
     # -- the world -------------------------------------------------------------------------------
 
-    def _make_obstacles(self, body: RobotBody) -> ObstacleField | None:
-        """The scenario's obstacles and blocks (None without any), refused where they cover the spawn pose."""
+    def _make_obstacles(self, bodies: Sequence[RobotBody]) -> list[ObstacleField | None]:
+        """The scenario's obstacles and blocks as each robot meets them (Nones without any).
+
+        One field per robot: the obstacles are the same (their paths depend on time alone), each
+        field checks its own robot's shapes against them. Refused where they cover a spawn pose.
+        """
         specs = scenario_obstacles(self.scenario, self._rng.stream("blocks"))
         if not specs:
-            return None
-        if len(self.groups) > 1:
-            msg = (
-                "obstacles and blocks are not yet supported with several robots (robots:); "
-                "remove them, or run one robot"
-            )
-            raise ConfigError(msg)
+            return [None] * len(bodies)
         period_ns = self.step_ns * max(1, round(_OBSTACLE_PERIOD_NS / self.step_ns))
-        field = ObstacleField(specs, body, update_period_ns=period_ns)
-        pose = self.scenario.robot.initial_pose
-        _, contacts = field.update(0, (pose.x_m, pose.y_m, pose.yaw_rad))
-        if contacts:
-            c = contacts[0]
-            index = next(ob.index for ob in field.obstacles if ob.name == c.model)
-            key = f"obstacles[{index}]" if index < len(self.scenario.obstacles) else "blocks"
-            msg = (
-                f"{key}: {c.model} stands on the robot's spawn pose ({pose.x_m}, {pose.y_m}) at t = 0; "
-                "move it, or the robot's initial_pose"
-            )
-            raise ConfigError(msg)
-        return field
+        fields: list[ObstacleField | None] = []
+        for i, (g, body) in enumerate(zip(self.groups, bodies, strict=True)):
+            field = ObstacleField(specs, body, update_period_ns=period_ns)
+            pose = g.scenario.robot.initial_pose
+            _, contacts = field.update(0, (pose.x_m, pose.y_m, pose.yaw_rad))
+            if contacts:
+                c = contacts[0]
+                index = next(ob.index for ob in field.obstacles if ob.name == c.model)
+                key = f"obstacles[{index}]" if index < len(self.scenario.obstacles) else "blocks"
+                whose = f"robots[{i}] ({g.namespace})'s" if g.namespace else "the robot's"
+                msg = (
+                    f"{key}: {c.model} stands on {whose} spawn pose ({pose.x_m}, {pose.y_m}) at t = 0; "
+                    "move it, or the robot's initial_pose"
+                )
+                raise ConfigError(msg)
+            fields.append(field)
+        return fields
 
     def _fmu_records(self) -> list[dict[str, str]]:
         """Provenance of the FMUs the drives loaded (none for the kinematic drive)."""

@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from twin.sweep.engine import SweepResult
-from twin.sweep.runner import METRIC_COLUMNS
+from twin.sweep.runner import FLEET_COLUMNS, METRIC_COLUMNS, ROBOT_COLUMNS
 
-__all__ = ["columns", "wilson_interval", "write_reports"]
+__all__ = ["columns", "robot_namespaces", "wilson_interval", "write_reports"]
 
 _log = logging.getLogger(__name__)
 
@@ -33,10 +33,25 @@ def wilson_interval(successes: int, runs: int, z: float = _Z95) -> tuple[float, 
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
+def robot_namespaces(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """A fleet sweep's robots, in their scenario's order (none for one robot)."""
+    found: dict[str, None] = {}
+    for row in rows:
+        for ns in row.get("robots") or ():
+            found.setdefault(str(ns), None)
+    return list(found)
+
+
 def columns(result: SweepResult) -> list[str]:
-    """The table's columns: run id, seed, the varied keys, outcome, reason, metrics, wall time, bag."""
+    """The table's columns: run id, seed, the varied keys, outcome, reason, metrics, wall time, bag.
+
+    A fleet's table adds the contacts between robots and, for each robot, its own columns
+    (`robot1.result`, `robot1.mission_time_s`... `ROBOT_COLUMNS`) after the fleet's.
+    """
     varied = [k for k, _ in result.spec.vary] + [d.key for d in result.spec.random]
-    return ["run_id", "seed", *varied, "outcome", "reason", *METRIC_COLUMNS, "wall_s", "bag_path"]
+    robots = robot_namespaces(result.rows)
+    fleet = [*FLEET_COLUMNS, *(f"{ns}.{c}" for ns in robots for c in ROBOT_COLUMNS)] if robots else []
+    return ["run_id", "seed", *varied, "outcome", "reason", *METRIC_COLUMNS, *fleet, "wall_s", "bag_path"]
 
 
 def write_reports(result: SweepResult) -> list[Path]:
@@ -147,6 +162,43 @@ def _rate(successes: int, runs: int) -> str:
     return f"{successes} of {runs} ({100 * successes / runs:.1f} %, 95 % CI {100 * low:.1f} to {100 * high:.1f} %)"
 
 
+def _robots_section(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """A fleet's table of robots: each robot's success, mission time and contacts over the runs (none for one robot)."""
+    robots = robot_namespaces(rows)
+    if not robots:
+        return []
+    lines = [
+        "## Robots",
+        "",
+        "A run succeeds when every robot's mission does. Each robot's own results, over the runs that "
+        "finished (contacts with robots: contacts between that robot and another):",
+        "",
+        "| robot | mission succeeded | mission time median (s) | max (s) | contacts | with robots "
+        "| runs with a contact |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for ns in robots:
+        finished = [r for r in rows if r.get(f"{ns}.result")]
+        ok = sum(1 for r in finished if r.get(f"{ns}.result") == "SUCCESS")
+        times = sorted(
+            float(r[f"{ns}.mission_time_s"])
+            for r in finished
+            if r.get(f"{ns}.result") == "SUCCESS" and isinstance(r.get(f"{ns}.mission_time_s"), int | float)
+        )
+        contacts = [r.get(f"{ns}.contacts") for r in finished]
+        with_robots = [r.get(f"{ns}.robot_contacts") for r in finished]
+        touched = sum(1 for c in contacts if isinstance(c, int) and c > 0)
+        median = f"{statistics.median(times):.2f}" if times else "-"
+        longest = f"{times[-1]:.2f}" if times else "-"
+        lines.append(
+            f"| {ns} | {_rate(ok, len(finished))} | {median} | {longest} "
+            f"| {sum(c for c in contacts if isinstance(c, int))} | {sum(c for c in with_robots if isinstance(c, int))} "
+            f"| {touched} |"
+        )
+    lines.append("")
+    return lines
+
+
 def _summary(result: SweepResult, plot: Path | None) -> str:
     spec, rows = result.spec, result.rows
     successes = sum(1 for r in rows if r.get("outcome") == "success")
@@ -177,6 +229,7 @@ def _summary(result: SweepResult, plot: Path | None) -> str:
         lines += ["No successful run.", ""]
     if plot is not None:
         lines += [f"![mission time]({plot.name})", ""]
+    lines += _robots_section(rows)
     for key, values in spec.vary:
         lines += [f"## By `{key}`", "", "| value | success |", "|---|---|"]
         for value in values:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-__all__ = ["METRIC_COLUMNS", "OUTCOMES", "RunTask", "execute_run", "read_result"]
+__all__ = ["FLEET_COLUMNS", "METRIC_COLUMNS", "OUTCOMES", "ROBOT_COLUMNS", "RunTask", "execute_run", "read_result"]
 
 OUTCOMES = ("success", "failure", "error", "crash", "timeout", "worker lost")
 """`success`: the mission succeeded. `failure`: the run completed but the mission did not succeed.
@@ -97,7 +97,7 @@ def execute_run(task: RunTask) -> dict[str, Any]:
     # A run cut short by its timeout or a crash is not analysed (its bag, if any, is kept as asked).
     if row["outcome"] in ("success", "failure", "error") and (bag / "metadata.yaml").exists():
         try:
-            row |= _metrics(bag)
+            row |= _metrics(bag, summary.get("robots") or {})
         except Exception as err:  # a bag that does not read back fails this run, not the sweep
             row |= {"outcome": "error", "reason": f"reading its bag: {type(err).__name__}: {err}".splitlines()[0]}
     failed = row["outcome"] != "success"
@@ -123,8 +123,18 @@ METRIC_COLUMNS = (
 """The metric columns of a row, from `twin.analysis.run_metrics` (the code behind `twin analyze`)."""
 
 
-def _metrics(bag: Path) -> dict[str, Any]:
-    """The run's metrics, read from its bag by the same code as `twin analyze`."""
+ROBOT_COLUMNS = ("result", "goals_reached", "goals", "mission_time_s", "path_length_m", "contacts", "robot_contacts")
+"""A fleet's columns for each robot, `<ns>.<column>`: its mission's result (SUCCESS, FAILURE, running) as the
+run's summary gives it, its metrics from its own topics, and its contacts with the other robots."""
+
+FLEET_COLUMNS = ("robot_contacts",)
+"""A fleet run's columns besides `METRIC_COLUMNS`: the contacts between robots (each one once)."""
+
+
+def _metrics(bag: Path, robots: dict[str, str]) -> dict[str, Any]:
+    """The run's metrics, read from its bag by the same code as `twin analyze` (each robot's, for a fleet)."""
+    if robots:
+        return _fleet_metrics(bag, robots)
     from twin.analysis import run_metrics
 
     m = run_metrics(bag)
@@ -139,6 +149,51 @@ def _metrics(bag: Path) -> dict[str, Any]:
         "localization_error_p95_m": m.localization_error_p95_m,
         "localization_error_max_m": m.localization_error_max_m,
     }
+
+
+def _fleet_metrics(bag: Path, robots: dict[str, str]) -> dict[str, Any]:
+    """A fleet run's row: each robot's columns (`ROBOT_COLUMNS`) and the fleet's in `METRIC_COLUMNS`.
+
+    The fleet's: goals, contacts, recoveries and path length summed over the robots; mission time
+    the longest robot's (the run's mission ends with its last robot's); localization error the
+    worst robot's; `robot_contacts` the contacts between robots, each counted once.
+    """
+    from twin.analysis.fleet import fleet_metrics
+
+    per = fleet_metrics(bag)
+    row: dict[str, Any] = {"robots": list(robots)}
+    for ns, result in robots.items():
+        found = per.get(ns)
+        m, others = found if found is not None else (None, {})
+        row[f"{ns}.result"] = result
+        row[f"{ns}.goals_reached"] = m.goals_succeeded if m is not None else None
+        row[f"{ns}.goals"] = len(m.goals) if m is not None else None
+        row[f"{ns}.mission_time_s"] = m.mission_duration_s if m is not None else None
+        row[f"{ns}.path_length_m"] = m.path_length_m if m is not None else None
+        row[f"{ns}.contacts"] = m.contacts if m is not None else None
+        row[f"{ns}.robot_contacts"] = sum(others.values()) if found is not None else None
+    metrics = [p[0] for p in per.values()]
+
+    def total(values: list[Any]) -> Any:
+        return None if not values or any(v is None for v in values) else sum(values)
+
+    def worst(values: list[Any]) -> Any:
+        known = [v for v in values if v is not None]
+        return max(known) if known else None
+
+    row |= {
+        "goals_reached": total([m.goals_succeeded for m in metrics]),
+        "goals": total([len(m.goals) for m in metrics]),
+        "mission_time_s": worst([m.mission_duration_s for m in metrics]),
+        "path_length_m": total([m.path_length_m for m in metrics]),
+        "contacts": total([m.contacts for m in metrics]),
+        "recoveries": total([m.recoveries for m in metrics]),
+        "localization_error_median_m": worst([m.localization_error_median_m for m in metrics]),
+        "localization_error_p95_m": worst([m.localization_error_p95_m for m in metrics]),
+        "localization_error_max_m": worst([m.localization_error_max_m for m in metrics]),
+        "robot_contacts": sum(sum(p[1].values()) for p in per.values()) // 2,
+    }
+    return row
 
 
 def _failed(returncode: int, stderr: str) -> dict[str, str]:

@@ -65,3 +65,32 @@ def test_no_blocks_by_default_and_more_blocks_than_locations_is_refused() -> Non
     )
     with pytest.raises(ConfigError, match="stand at the mission's locations"):
         scenario_obstacles(scenario, RngStreams(0).stream("blocks"))
+
+
+def _fleet_blocks(tmp_path: Path, second_locations: str, seed: int = 0) -> list[tuple[str, float, float]]:
+    scenario = tmp_path / "fleet.yaml"
+    scenario.write_text(
+        f"name: fleet\nseed: {seed}\nblocks: {{count: 3}}\n"
+        f"mission: {{locations: {REPO / 'trees' / 'sim_house_locations.yaml'}}}\n"
+        "robots:\n  - {name: robot1}\n"
+        f"  - {{name: robot2, robot: {{initial_pose: {{x_m: 1.5, y_m: -0.2}}}}, "
+        f"mission: {{locations: {second_locations}}}}}\n"
+    )
+    fleet = load_scenario(scenario)
+    specs = scenario_obstacles(fleet, RngStreams(seed).stream("blocks"))
+    return [(s.name or "", s.pose.x_m, s.pose.y_m) for s in specs if s.pose is not None]
+
+
+def test_a_fleet_touring_the_same_places_gets_the_blocks_one_robot_gets(tmp_path: Path) -> None:
+    reversed_tour = REPO / "trees" / "sim_house_locations_reversed.yaml"
+    for seed in range(4):
+        one = [(name, x, y) for name, x, y, _, _ in _blocks(seed=seed)]
+        assert _fleet_blocks(tmp_path, str(reversed_tour), seed) == one
+
+
+def test_a_fleet_s_blocks_may_stand_at_a_place_only_the_second_robot_visits(tmp_path: Path) -> None:
+    extra = tmp_path / "extra.yaml"
+    extra.write_text("far: [6.0, -1.0, 0.0]\n")
+    draws = [_fleet_blocks(tmp_path, str(extra), seed) for seed in range(12)]
+    # Five places to draw three from: the far one (a block 0.6 m along its heading 0) comes up.
+    assert any((x, y) == (6.6, -1.0) for draw in draws for _, x, y in draw)

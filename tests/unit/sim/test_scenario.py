@@ -149,3 +149,17 @@ def test_a_robots_entry_that_is_not_a_mapping_is_named(tmp_path: Path) -> None:
     path.write_text("name: t\nrobots: [robot1]\n")
     with pytest.raises(ConfigError, match=rf"^{path}:2: robots\[0\]: expected a mapping"):
         load_scenario(path)
+
+
+def test_the_default_tf_mode_leaves_the_recorded_scenario_as_before(tmp_path: Path) -> None:
+    """A run without `tf:` records no `tf` key (its bag's provenance is as before the option existed)."""
+    from twin.sim.provenance import scenario_yaml
+
+    one = tmp_path / "one.yaml"
+    one.write_text("name: one\n")
+    assert "\ntf:" not in scenario_yaml(load_scenario(one))
+    fleet = tmp_path / "fleet.yaml"
+    fleet.write_text("name: two\ntf: {mode: frame_prefix}\nrobots: [{name: a}, {name: b}]\n")
+    recorded = tmp_path / "recorded.yaml"
+    recorded.write_text(scenario_yaml(load_scenario(fleet)))
+    assert load_scenario(recorded).tf.mode == "frame_prefix"  # and a prefixed fleet's loads back as it ran

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from twin.bag import OccupancyGridEncoder
+from twin.bag.frames import current_frame_prefix, prefixed
 from twin.nav.costmap_2d.layered_costmap import Costmap, scan_observation
 from twin.nav.frames import Frames, LaserGeometry, compose
 from twin.node import PRIORITY_USER, Encoded, Node, QoSProfile
@@ -47,6 +48,7 @@ class CostmapNode(Node):
         in_odom = params.global_frame != "map"
         table = costmap_translation()
         pub = self.create_publisher(OccupancyGridEncoder.msgtype, "costmap", LATCHED)
+        prefix = current_frame_prefix()  # the robot's frame prefix, for the encoders made as the grid resizes
         now = self._graph_now
         latest: list[Any] = [None]
         use_scan = laser is not None and any(
@@ -90,7 +92,7 @@ class CostmapNode(Node):
             grid = costmap.grid
             rows, cols = grid.cost.shape
             encoder = OccupancyGridEncoder(
-                grid.frame_id, grid.resolution_m, cols, rows, (grid.origin_x_m, grid.origin_y_m, 0.0)
+                prefixed(grid.frame_id, prefix), grid.resolution_m, cols, rows, (grid.origin_x_m, grid.origin_y_m, 0.0)
             )
             cells = table[grid.cost]
             pub.publish(Encoded((encoder.encode, (t_ns, cells), grid)))
