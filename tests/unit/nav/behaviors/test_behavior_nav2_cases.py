@@ -37,9 +37,12 @@ def test_the_recorded_set_covers_the_issue() -> None:
     statuses = set(np.concatenate([a["out_status"] for m, a in cases if m["component"] == "behavior"]).tolist())
     assert statuses == {0, 1, 2, 3}  # running, succeeded, out of time, collision ahead
     assert {m["run_ok"] for m in metas if m["component"] == "behavior"} == {True, False}
-    poses = sum(len(a["poses"]) for m, a in cases if m["component"] == "behavior_collision")
-    free = np.concatenate([a["out_free"] for m, a in cases if m["component"] == "behavior_collision"])
-    assert poses >= 900 and 0.2 < free.mean() < 0.8
+    batches = [(m, a) for m, a in cases if m["component"] == "behavior_collision"]
+    poses = sum(len(a["poses"]) for _, a in batches)
+    edges = [a for m, a in batches if m["name"].startswith("collision_cell_edges")]
+    free = np.concatenate([a["out_free"] for m, a in batches if not m["name"].startswith("collision_cell_edges")])
+    assert poses >= 1900 and 0.2 < free.mean() < 0.8  # free and blocked poses both well represented
+    assert len(edges) >= 4 and {bool(v) for a in edges for v in a["out_free"]} == {True, False}
 
 
 @pytest.mark.parametrize("case", FILES, ids=[f.stem for f in FILES])
