@@ -145,16 +145,21 @@ def check_amcl_motion_model(meta: Mapping[str, Any], arrays: Arrays, native: boo
     return out
 
 
-def check_amcl_likelihood_field(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
-    """The ways the twin's likelihood-field model differs from Nav2's on one case (`amcl_cases/README.md`)."""
-    if missing := _native_missing(native):
-        return missing
-    occupancy = OccupancyMap(
+def _case_map(meta: Mapping[str, Any], arrays: Arrays) -> OccupancyMap:
+    """The case's map as AMCL receives it (its OccupancyGrid's resolution, origin and cells)."""
+    return OccupancyMap(
         resolution_m=float(meta["resolution"]),
         origin_x_m=float(meta["origin"][0]),
         origin_y_m=float(meta["origin"][1]),
         data=arrays["map"].astype(np.int8),
     )
+
+
+def check_amcl_likelihood_field(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> list[str]:
+    """The ways the twin's likelihood-field model differs from Nav2's on one case (`amcl_cases/README.md`)."""
+    if missing := _native_missing(native):
+        return missing
+    occupancy = _case_map(meta, arrays)
     field = LikelihoodField(occupancy, float(meta["laser_likelihood_max_dist"]), native=native)
     out: list[str] = []
     digest = hashlib.sha256(np.ascontiguousarray(field.distance_m, dtype="<f8").tobytes()).hexdigest()
@@ -322,12 +327,7 @@ def check_amcl_run(meta: Mapping[str, Any], arrays: Arrays, native: bool) -> lis
     """
     if missing := _native_missing(native):
         return missing
-    occupancy = OccupancyMap(
-        resolution_m=float(meta["resolution"]),
-        origin_x_m=float(meta["origin"][0]),
-        origin_y_m=float(meta["origin"][1]),
-        data=arrays["map"].astype(np.int8),
-    )
+    occupancy = _case_map(meta, arrays)
     params = AmclParams(**meta["params"])
     draws = RunDraws(arrays["normals"], arrays["uniforms"], arrays["update_uniforms"])
     amcl = _Watched(params, occupancy, LaserGeometry(**meta["laser"]), draws, native=native)
