@@ -1,16 +1,17 @@
 """A fleet's cameras, read back from the bag: each robot's own camera under its namespace, seeing the others.
 
-Two Waffles face each other in the empty world, robot2 driving towards robot1. Each robot's depth
-image shows the other robot's body at the distance the ground truth puts it (at the time of the
-frame), its pixels drawn over the background; every camera topic is under its robot's namespace,
-its frames as the robot's other messages name them (prefixed with `tf: {mode: frame_prefix}`).
+Two Waffles face each other (in the empty world, and in the house), robot2 driving towards robot1.
+Each robot's depth image shows the other robot's body at the distance the ground truth puts it (at
+the time of the frame), its pixels drawn over what stands behind it; every camera topic is under
+its robot's namespace, its frames as the robot's other messages name them (prefixed with
+`tf: {mode: frame_prefix}`); each robot's tree looks through its own camera.
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
@@ -74,10 +75,22 @@ def _record(scenario: Path, bag: Path, duration_s: float) -> dict[str, list[tupl
     return out
 
 
-@pytest.fixture(scope="module")
-def facing(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[tuple[int, Any]]]:
+class Facing(NamedTuple):
+    """A run of the two facing Waffles: its scenario file and its camera and ground-truth messages by topic."""
+
+    scenario: Path
+    topics: dict[str, list[tuple[int, Any]]]
+
+
+@pytest.fixture(scope="module", params=["empty_world", "house"])
+def facing(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Facing:
     tmp = tmp_path_factory.mktemp("fleet_camera")
-    return _record(_scenario(tmp), tmp / "bag", duration_s=2.5)
+    scenario = _scenario(tmp)
+    if request.param == "house":  # the default world: the thesis's house, walls behind both robots
+        data = yaml.safe_load(scenario.read_text())
+        del data["world"]
+        scenario.write_text(yaml.safe_dump(data))
+    return Facing(scenario, _record(scenario, tmp / "bag", duration_s=2.5))
 
 
 def _depth(msg: Any) -> NDArray[np.float32]:
@@ -101,19 +114,19 @@ def _waffle() -> Any:
 
 @pytest.mark.parametrize(("me", "other"), [("robot1", "robot2"), ("robot2", "robot1")])
 def test_each_depth_image_shows_the_other_robot_where_the_ground_truth_puts_it(
-    facing: dict[str, list[tuple[int, Any]]], me: str, other: str
+    facing: Facing, me: str, other: str
 ) -> None:
     robot = scenario_robot(_waffle())
     camera_x_m = float(np.asarray(robot.cameras[0].T_base_sensor)[0, 3])  # the R200 ahead of the origin
     front_m = float(robot_body(robot).vertices[:, 0].max())
     assert 0.06 < front_m < 0.08  # the Waffle's base plate reaches 0.069 m ahead of its origin
-    frames = facing[f"/{me}/camera/depth/image_raw"]
+    frames = facing.topics[f"/{me}/camera/depth/image_raw"]
     assert len(frames) >= 10
     gaps = []
     for t_ns, msg in frames:
         depth = _depth(msg)
-        mx, my = _truth_at(facing[f"/{me}/ground_truth/odom"], t_ns)
-        ox, oy = _truth_at(facing[f"/{other}/ground_truth/odom"], t_ns)
+        mx, my = _truth_at(facing.topics[f"/{me}/ground_truth/odom"], t_ns)
+        ox, oy = _truth_at(facing.topics[f"/{other}/ground_truth/odom"], t_ns)
         gap = math.hypot(ox - mx, oy - my)
         gaps.append(gap)
         # Below the optical axis, on the axis's column: the other robot's base plate, square to the axis.
@@ -123,28 +136,38 @@ def test_each_depth_image_shows_the_other_robot_where_the_ground_truth_puts_it(
     assert gaps[0] - gaps[-1] > 0.3  # robot2 drove: each frame saw it where it was then
 
 
-def test_the_other_robots_pixels_are_drawn_over_the_background(facing: dict[str, list[tuple[int, Any]]]) -> None:
-    for me in ("robot1", "robot2"):
-        (_, image), (_, depth) = facing[f"/{me}/camera/image_raw"][0], facing[f"/{me}/camera/depth/image_raw"][0]
-        rgb, d = _rgb(image), _depth(depth)
-        background = rgb[0, 0]  # the sky: nothing in the empty world stands that high
-        assert not np.isfinite(d[0, 0])
-        body = np.isfinite(d) & (d < 2.0)
-        assert body.sum() > 500  # the other Waffle fills a good part of a 160x120 frame at 1 m
-        assert np.all(np.any(rgb[body] != background, axis=1))
+def test_the_other_robot_hides_what_the_camera_sees_without_it(facing: Facing, tmp_path: Path) -> None:
+    # robot1 alone, where it stands in the fleet, in the same world: what its camera sees without robot2.
+    data = yaml.safe_load(facing.scenario.read_text())
+    data["robot"] = data.pop("robots")[0]["robot"]
+    alone = tmp_path / "alone.yaml"
+    alone.write_text(yaml.safe_dump(data))
+    topics = _record(alone, tmp_path / "bag", duration_s=0.1)
+    (t0, image), (t1, depth) = topics["/camera/image_raw"][0], topics["/camera/depth/image_raw"][0]
+    (f0, fleet_image), (f1, fleet_depth) = (
+        facing.topics["/robot1/camera/image_raw"][0],
+        facing.topics["/robot1/camera/depth/image_raw"][0],
+    )
+    assert t0 == t1 == f0 == f1 == 0
+    rgb, d, fleet_rgb, fleet_d = _rgb(image), _depth(depth), _rgb(fleet_image), _depth(fleet_depth)
+    hidden = fleet_d < d  # robot2 stands before what robot1 sees alone
+    assert hidden.sum() > 500  # the other Waffle fills a good part of a 160x120 frame at 1.2 m
+    assert np.array_equal(fleet_rgb[~hidden], rgb[~hidden])  # elsewhere the same picture
+    changed = np.any(fleet_rgb[hidden] != rgb[hidden], axis=1)
+    assert changed.mean() > 0.99, changed.mean()  # robot2's own colours, not what stands behind it
 
 
-def test_every_camera_topic_is_under_its_robots_namespace(facing: dict[str, list[tuple[int, Any]]]) -> None:
-    cameras = {topic for topic in facing if "/camera/" in topic}
+def test_every_camera_topic_is_under_its_robots_namespace(facing: Facing) -> None:
+    cameras = {topic for topic in facing.topics if "/camera/" in topic}
     assert cameras == {
         f"/{ns}/camera/{name}"
         for ns in ("robot1", "robot2")
         for name in ("image_raw", "camera_info", "depth/image_raw", "points")
     }
     for topic in cameras:
-        assert {m.header.frame_id for _, m in facing[topic]} == {"camera_rgb_optical_frame"}, topic
-    stamps = [t for t, _ in facing["/robot1/camera/image_raw"]]
-    assert stamps == [t for t, _ in facing["/robot2/camera/image_raw"]]  # both at the sensor's rate, in sim time
+        assert {m.header.frame_id for _, m in facing.topics[topic]} == {"camera_rgb_optical_frame"}, topic
+    stamps = [t for t, _ in facing.topics["/robot1/camera/image_raw"]]
+    assert stamps == [t for t, _ in facing.topics["/robot2/camera/image_raw"]]  # both at the sensor's rate, in sim time
 
 
 def test_each_robot_decides_its_own_camera_and_frame_prefix_names_its_frames(tmp_path: Path) -> None:
@@ -163,21 +186,18 @@ def test_each_robots_tree_looks_through_its_own_camera(tmp_path: Path) -> None:
     path = tmp_path / "two.yaml"
     data = yaml.safe_load((REPO / "scenarios" / "house_two_waffles.yaml").read_text())
     data["sensors"] = {"camera": {"enabled": True, "width": W, "height": H}}
+    data["recording"] = {"topics": {"exclude_regex": ".*/camera/.*"}}  # nothing records the images
     data["robots"][1]["mission"]["locations"] = str(REPO / "trees" / "sim_house_locations_reversed.yaml")
     path.write_text(yaml.safe_dump(data))
-    with Simulation(load_scenario(path), bag_path=None, duration_s=0.1) as sim:
+    with Simulation(load_scenario(path), bag_path=tmp_path / "bag", duration_s=0.5) as sim:
         missions = [g.mission for g in sim.groups]
         assert all(isinstance(m, TreeMission) for m in missions)
         sources = [m.images.source for m in missions if isinstance(m, TreeMission)]
-        assert all(s is not None for s in sources) and sources[0] is not sources[1]
-        for source in sources:
-            assert source is not None
-            source.want(True)  # as LookForObject does: the camera draws while a reader waits
+        assert sources[0] is not None and sources[1] is not None and sources[0] is not sources[1]
+        sources[0].want(True)  # robot1's LookForObject waits for a frame; robot2's tree asks for none
         sim.run()
-        for g, source in zip(sim.groups, sources, strict=True):
-            assert source is not None
-            frame = source.latest()
-            assert frame is not None, g.namespace  # each robot's own camera drew for its own reader
+        assert sources[0].latest() is not None  # robot1's camera drew for robot1's reader
+        assert sources[1].latest() is None  # robot2's camera drew nothing
 
 
 def test_a_camera_on_a_robot_without_one_names_the_fleet_entry(tmp_path: Path) -> None:
@@ -194,3 +214,22 @@ def test_a_camera_on_a_robot_without_one_names_the_fleet_entry(tmp_path: Path) -
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], lines
     assert not (tmp_path / "bag").exists()
+
+
+def test_a_robots_camera_draws_only_while_its_own_images_are_taken(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from twin.world.render import Renderer
+
+    drawn: dict[int, int] = {}
+    draw = Renderer.render
+
+    def counted(self: Renderer, *args: Any, **kwargs: Any) -> Any:
+        drawn[id(self)] = drawn.get(id(self), 0) + 1
+        return draw(self, *args, **kwargs)
+
+    monkeypatch.setattr(Renderer, "render", counted)
+    scenario = _scenario(tmp_path, recording={"topics": {"exclude_regex": "/robot2/camera/.*"}})
+    topics = _record(scenario, tmp_path / "bag", duration_s=1.0)
+    assert not any(topic.startswith("/robot2/camera/") for topic in topics)
+    assert sorted(drawn.values()) == [5]  # robot1's camera every period at 5 Hz; robot2's, unwatched, never
