@@ -8,8 +8,8 @@
 
 (the topic names as the sensor's gazebo_ros_camera plugin sets them; these are the defaults)
 
-Each frame is drawn from the world's visuals and the scenario's obstacles (`twin.world.render`) at
-the sensor's pose on the robot, stamped in sim time at the sensor's rate. Like a Gazebo camera
+Each frame is drawn from the world's visuals, the scenario's obstacles and a fleet's other robots
+(`twin.world.render`) at the sensor's pose on the robot, stamped in sim time at the sensor's rate. Like a Gazebo camera
 nobody subscribes to, it renders only while someone wants its images: always when the recorder
 records its image topic, otherwise only while a `LookForObject` node waits for a frame
 (`CameraFeed.want`). Data (in-process): the image array, (height, width, 3) uint8 or (height, width).
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -105,6 +105,12 @@ def _mono(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:
     return np.ascontiguousarray(np.floor(luma + 0.5).astype(np.uint8))
 
 
+def _planar(s: ChassisState) -> NDArray[np.float64]:
+    """The base's pose in the world (on the ground plane) as a 4x4 transform."""
+    c, sn = math.cos(s.yaw_rad), math.sin(s.yaw_rad)
+    return np.array([[c, -sn, 0.0, s.x_m], [sn, c, 0.0, s.y_m], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+
 class CameraNode(Node):
     """gazebo_ros_camera on the robot's camera sensor (see the module's doc).
 
@@ -119,6 +125,8 @@ class CameraNode(Node):
         depth: Also publish the depth image.
         compressed: Also publish the JPEG image (compressed only when a sink takes it).
         body: The robot's own visuals in its base frame (drawn where the robot stands).
+        others: The other robots of a fleet: each one's visuals in its base frame and its planar
+            pose now (drawn where it stands when a frame is drawn).
         recorded: The recorder records the image topic: render every period.
     """
 
@@ -136,6 +144,7 @@ class CameraNode(Node):
         compressed: bool = False,
         recorded: bool,
         body: Body | None = None,
+        others: Sequence[tuple[Body, Callable[[], ChassisState]]] = (),
     ) -> None:
         super().__init__(spec.name)
         w, h = spec.width, spec.height
@@ -196,13 +205,10 @@ class CameraNode(Node):
         def on_timer(t_ns: int) -> None:
             if not (recorded or feed.wanted):
                 return
-            s = chassis()
-            c, sn = math.cos(s.yaw_rad), math.sin(s.yaw_rad)
-            T_world_base = np.array(
-                [[c, -sn, 0.0, s.x_m], [sn, c, 0.0, s.y_m], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
-            )
+            T_world_base = _planar(chassis())
             seed = int(rng.integers(0, 2**63))
             parts = [] if body is None else [body.placed(T_world_base, lighting)]
+            parts += [other.placed(_planar(pose()), lighting) for other, pose in others]
             extra = obstacle_mesh()
             if extra is not None:
                 parts.append(extra)

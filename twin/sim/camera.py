@@ -2,13 +2,14 @@
 
 The camera is off unless `sensors.camera.enabled` is true (the thesis's mission has none, and its
 bag stays as it was). Enabled, it needs a camera sensor in the robot's SDF (the Waffle's R200); the
-scenario may change its size, rate, depth output and noise.
+scenario may change its size, rate, depth output and noise. In a fleet each robot whose section
+enables it has its own, under its namespace, and sees the other robots where they stand.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -19,10 +20,10 @@ from twin.robot.chassis import ChassisState
 from twin.sim.scenario import CameraSection
 from twin.world import RobotModelSpec, World
 from twin.world.obstacles import ObstacleField
-from twin.world.render import Renderer, body_of, lighting_of, world_visuals
+from twin.world.render import Body, Renderer, body_of, lighting_of, world_visuals
 from twin.world.robot_model import CameraSpec
 
-__all__ = ["Camera", "build_camera", "camera_spec"]
+__all__ = ["Camera", "build_camera", "camera_spec", "namespaced", "robot_body"]
 
 
 class Camera(NamedTuple):
@@ -69,18 +70,29 @@ def build_camera(
     obstacles: ObstacleField | None,
     rng: np.random.Generator,
     recorded: Callable[[str], bool],
+    namespace: str = "",
+    exclude_models: Sequence[str] | None = None,
+    body: Body | None = None,
+    others: Sequence[tuple[Body, Callable[[], ChassisState]]] = (),
 ) -> Camera | None:
-    """The camera node of a scenario, or None when `sensors.camera.enabled` is false.
+    """The camera node of a scenario (or of one robot of a fleet), or None when `sensors.camera.enabled` is false.
+
+    Construct it inside the robot's `launch_context` and `frame_prefix`, as its group's other nodes.
 
     Args:
-        section: The scenario's `sensors.camera`.
+        section: The robot's `sensors.camera`.
         robot: The robot (its camera sensor).
-        world: The world whose visuals the camera sees (the robot's own model left out).
+        world: The world whose visuals the camera sees (the robots' own models left out).
         chassis: The robot's planar pose now.
         obstacles: The scenario's obstacles and blocks.
         rng: The camera's noise stream.
         recorded: Whether the recorder records a topic or a user's node subscribes to it (then the
             camera renders every period).
+        namespace: The robot's namespace: the sensor's topics go under it (`/robot1/camera/image_raw`),
+            as gazebo_ros puts a robot spawned under a namespace.
+        exclude_models: The world's models not drawn as world (default: the robot's own model).
+        body: The robot's own visuals (default: read from its model).
+        others: A fleet's other robots: their visuals and their planar poses now.
 
     Raises:
         ConfigError: See `camera_spec`.
@@ -88,9 +100,10 @@ def build_camera(
     """
     if not section.enabled:
         return None
-    spec = camera_spec(robot, section)
+    spec = namespaced(camera_spec(robot, section), namespace)
     lighting = lighting_of(world)
-    renderer = Renderer(camera_model(spec), world_visuals(world, lighting, exclude_models=(robot.name,)), lighting)
+    excluded = (robot.name,) if exclude_models is None else tuple(exclude_models)
+    renderer = Renderer(camera_model(spec), world_visuals(world, lighting, exclude_models=excluded), lighting)
     feed = CameraFeed()
     depth = section.depth or spec.depth
     wanted = (
@@ -109,6 +122,30 @@ def build_camera(
         depth=depth,
         compressed=section.compressed,
         recorded=wanted,
-        body=body_of(robot.model.all_links(), robot.T_base_model),
+        body=body if body is not None else robot_body(robot),
+        others=others,
     )
     return Camera(node, feed)
+
+
+def robot_body(robot: RobotModelSpec) -> Body:
+    """The robot's visuals in its base frame, as a camera draws it.
+
+    Raises:
+        WorldError: If a visual's mesh cannot be read.
+    """
+    return body_of(robot.model.all_links(), robot.T_base_model)
+
+
+def namespaced(spec: CameraSpec, namespace: str) -> CameraSpec:
+    """The sensor with its topics under a robot's namespace (`""`: as they are)."""
+    ns = namespace.strip("/")
+    if not ns:
+        return spec
+    return dataclasses.replace(
+        spec,
+        image_topic=f"/{ns}{spec.image_topic}",
+        info_topic=f"/{ns}{spec.info_topic}",
+        depth_topic=f"/{ns}{spec.depth_topic}",
+        points_topic=f"/{ns}{spec.points_topic}",
+    )

@@ -121,16 +121,17 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
 
 
 def _check_camera_of_robot(scenario: Scenario, path: Path) -> None:
-    """An enabled camera needs a camera sensor in the robot's SDF (and a rate)."""
-    if not scenario.sensors.camera.enabled:
-        return
+    """An enabled camera needs a camera sensor in the robot's SDF (and a rate); a fleet's names the entry."""
     from twin.sim.camera import camera_spec
     from twin.sim.robot_group import scenario_robot
 
-    try:
-        camera_spec(scenario_robot(scenario), scenario.sensors.camera)
-    except TwinError as err:
-        raise err.with_context(before=f"{path}: ") from None
+    for i, (namespace, robot) in enumerate(scenario.robot_scenarios()):
+        if not robot.sensors.camera.enabled:
+            continue
+        try:
+            camera_spec(scenario_robot(robot), robot.sensors.camera)
+        except TwinError as err:
+            raise err.with_context(before=f"{path}: robots[{i}]." if namespace else f"{path}: ") from None
 
 
 def _check_blocks(scenario: Scenario, path: Path) -> None:

@@ -23,15 +23,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twin.bag import Recorder
+from twin.bag.frames import frame_prefix
 from twin.core.clock import NS_PER_S, s_to_ns
 from twin.core.closing import Closing
 from twin.core.errors import ConfigError
 from twin.core.gcpolicy import resume_collection
-from twin.node import Node
+from twin.node import Node, launch_context
 from twin.robot.drivetrain import Drivetrain
 from twin.robot.fmu_drivetrain import FmuDrivetrain
 from twin.robot.nodes import ClockNode
-from twin.sim.camera import build_camera
+from twin.sim.camera import build_camera, robot_body
 from twin.sim.executor import Executor, RecordFilter, Sink
 from twin.sim.fleet import AllDone, Fleet
 from twin.sim.launch import load_nodes
@@ -41,8 +42,9 @@ from twin.sim.rng import RngStreams
 from twin.sim.robot_group import RobotGroup
 from twin.sim.rosout import RosoutBridge
 from twin.sim.scenario import Scenario
-from twin.world import RobotModelSpec, build_scene, load_world
+from twin.world import RobotModelSpec, World, build_scene, load_world
 from twin.world.obstacles import ObstacleField
+from twin.world.render import Body
 from twin.world.scene import RobotBody, Scene
 
 if TYPE_CHECKING:
@@ -160,28 +162,9 @@ class Simulation(Closing):
                 exclude=selection.exclude,
                 exclude_regex=selection.exclude_regex,
             )
-            # The robot's camera: it renders only while something takes its images (the recorder, a
-            # user's node, the mission's LookForObject), so it joins after the user's nodes are known.
-            if scenario.sensors.camera.enabled and len(self.groups) > 1:
-                msg = "sensors.camera: the camera renders for one robot; with robots: set enabled: false"
-                raise ConfigError(msg)
-            camera = build_camera(
-                scenario.sensors.camera,
-                self.groups[0].robot,
-                world,
-                self.drive.chassis_state,
-                obstacles=self.obstacles,
-                rng=self._rng.stream("camera"),
-                recorded=lambda topic: (
-                    keep.takes(topic) or any(s.topic == topic for n in user_nodes for s in n.subscriptions)
-                ),
-            )
-            if camera is not None:
-                from twin.sim.mission import TreeMission
-
-                user_nodes = [*user_nodes, camera.node]
-                if isinstance(self.mission, TreeMission):
-                    self.mission.images.source = camera.feed
+            # The robots' cameras: each renders only while something takes its images (the recorder, a
+            # user's node, its mission's LookForObject), so they join after the user's nodes are known.
+            user_nodes = [*user_nodes, *self._cameras(world, keep, user_nodes)]
             # Wire the graph once without sinks: a node that cannot join (a duplicate name, a topic of
             # another type) is refused before a bag folder exists.
             scratch = Executor(self.step_ns)
@@ -232,6 +215,67 @@ class Simulation(Closing):
                 raise
             msg = f"robots[{index}].{err}"
             raise ConfigError(msg) from None
+
+    def _cameras(self, world: World, keep: RecordFilter, user_nodes: Sequence[Node]) -> list[Node]:
+        """One camera node per robot whose `sensors.camera` enables it, each feeding its robot's tree.
+
+        A fleet's camera is under its robot's namespace and frame prefix, draws from its own stream
+        (`robot1/camera`) and sees the other robots' visuals where they stand.
+
+        Raises:
+            ConfigError: A robot without a camera sensor (a fleet's names its entry).
+            WorldError: If a visual's mesh cannot be read.
+        """
+        from twin.sim.mission import TreeMission
+
+        if not any(g.scenario.sensors.camera.enabled for g in self.groups):
+            return []
+
+        def recorded(topic: str) -> bool:
+            return keep.takes(topic) or any(s.topic == topic for n in user_nodes for s in n.subscriptions)
+
+        bodies: dict[int, Body] = {}
+
+        def body(i: int) -> Body:
+            if i not in bodies:
+                bodies[i] = robot_body(self.groups[i].robot)
+            return bodies[i]
+
+        exclude = tuple(dict.fromkeys(g.robot.name for g in self.groups))
+        nodes: list[Node] = []
+        for i, g in enumerate(self.groups):
+            if not g.scenario.sensors.camera.enabled:
+                continue
+            assert g.drive is not None
+            others = [
+                (body(j), drive.chassis_state)
+                for j, other in enumerate(self.groups)
+                if j != i and (drive := other.drive) is not None
+            ]
+            try:
+                with launch_context(g.launch), frame_prefix(g.frame_prefix):
+                    camera = build_camera(
+                        g.scenario.sensors.camera,
+                        g.robot,
+                        world,
+                        g.drive.chassis_state,
+                        obstacles=g.obstacles,
+                        rng=self._rng.under(g.namespace).stream("camera"),
+                        recorded=recorded,
+                        namespace=g.namespace,
+                        exclude_models=exclude,
+                        body=body(i),
+                        others=others,
+                    )
+            except ConfigError as err:
+                if not g.namespace:
+                    raise
+                raise err.with_context(before=f"robots[{i}].") from None
+            assert camera is not None
+            nodes.append(camera.node)
+            if isinstance(g.mission, TreeMission):
+                g.mission.images.source = camera.feed
+        return nodes
 
     def _now(self) -> int:
         return self.executor.now_ns
