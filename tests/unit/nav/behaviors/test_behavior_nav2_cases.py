@@ -15,7 +15,7 @@ import pytest
 
 from tests.unit.nav.costmaps import grid
 from twin.nav.actions import ActionGoal, ActionState
-from twin.nav.behaviors.behavior_server import make_behavior
+from twin.nav.behaviors.behavior_server import BehaviorServer, make_behavior
 from twin.nav.behaviors.timed_behavior import BehaviorParams, BehaviorStatus
 from twin.nav.conformance import check_case, load_case
 from twin.nav.params import load_nav2_params
@@ -56,6 +56,24 @@ def _open() -> object:
     return grid(np.zeros((120, 120), dtype=np.uint8), origin_m=(-3.0, -3.0))
 
 
+def _server(finished: list[tuple[ActionState, str]]) -> BehaviorServer:
+    """A behaviour server on an open costmap with the robot at the origin, its finished goals listed."""
+
+    class _Frames:
+        odom_pose = (0.0, 0.0, 0.0)
+
+    class _Costmap:
+        footprint = BehaviorParams().footprint
+        grid = _open()
+
+    return BehaviorServer(
+        BehaviorParams(),
+        _Frames(),  # type: ignore[arg-type]
+        _Costmap(),  # type: ignore[arg-type]
+        finish=lambda goal, state, reason="": finished.append((state, reason)),
+    )
+
+
 def test_a_zero_time_allowance_means_no_limit() -> None:
     spin = make_behavior("spin")
     assert spin.start({"target_yaw": 1.0, "time_allowance": 0.0}, (0.0, 0.0, 0.0), 0) == ""
@@ -78,23 +96,8 @@ def test_drive_on_heading_drives_backwards_with_negative_distance_and_speed() ->
     ],
 )
 def test_a_goal_nav2_refuses_fails_at_once(server: str, request_: dict[str, float], reason: str) -> None:
-    from twin.nav.behaviors.behavior_server import BehaviorServer
-
     finished: list[tuple[ActionState, str]] = []
-
-    class _Frames:
-        odom_pose = (0.0, 0.0, 0.0)
-
-    class _Costmap:
-        footprint = BehaviorParams().footprint
-        grid = _open()
-
-    server_ = BehaviorServer(
-        BehaviorParams(),
-        _Frames(),  # type: ignore[arg-type]
-        _Costmap(),  # type: ignore[arg-type]
-        finish=lambda goal, state, reason="": finished.append((state, reason)),
-    )
+    server_ = _server(finished)
     goal = ActionGoal(server=server, request={**request_, "time_allowance": 10.0})
     server_.start(goal, 0)
     assert finished and finished[0][0] is ActionState.FAILED and finished[0][1].startswith(reason)
@@ -118,21 +121,7 @@ def test_backup_limits_come_from_the_behaviour_server_section(fixtures: Path) ->
 @pytest.mark.parametrize("server", ["spin", "wait"])
 def test_a_canceled_behaviour_stops_the_robot_once(server: str) -> None:
     # TimedBehavior::execute: a cancel request calls stopRobot (a zero twist on cmd_vel), Wait's too
-    from twin.nav.behaviors.behavior_server import BehaviorServer
-
-    class _Frames:
-        odom_pose = (0.0, 0.0, 0.0)
-
-    class _Costmap:
-        footprint = BehaviorParams().footprint
-        grid = _open()
-
-    behaviors = BehaviorServer(
-        BehaviorParams(),
-        _Frames(),  # type: ignore[arg-type]
-        _Costmap(),  # type: ignore[arg-type]
-        finish=lambda goal, state, reason="": None,
-    )
+    behaviors = _server([])
     goal = ActionGoal(server=server, request={"target_yaw": 1.57, "time_s": 5.0, "time_allowance": 10.0})
     behaviors.start(goal, 0)
     assert behaviors.cycle(S // 10) == ((0.0, 1.0) if server == "spin" else None)
