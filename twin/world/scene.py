@@ -548,6 +548,10 @@ def _pairs(
 
 # --- the robot against the scene ------------------------------------------------------------------
 
+# A shape's bounding circle is measured on its mesh, whose curved faces are polygons inside the true
+# surface; circles this much apart may still hold touching shapes, m (a 32-gon of 5 cm: 0.25 mm).
+_CIRCLE_PAD_M = 1e-3
+
 
 class RobotBody:
     """The robot's collision shapes as FCL objects, posed by a planar (x, y, yaw).
@@ -611,19 +615,95 @@ class RobotBody:
             self._bound_geometry, fcl.Transform(np.eye(3), np.array([0.0, 0.0, (z_lo + z_hi) / 2]))
         )
         self._bound_z = (z_lo + z_hi) / 2
-        self._placed_at: tuple[float, float, float] | None = None
+        # Each shape's bounding circle in the base frame's xy plane (cx, cy, r): a query between two
+        # robots places and asks FCL about only the shapes whose circles reach the other robot.
+        circles = []
+        for part in self._parts:
+            xy = part.mesh.vertices[:, :2]
+            centre = (xy.min(axis=0) + xy.max(axis=0)) / 2.0
+            circles.append((float(centre[0]), float(centre[1]), float(np.max(np.hypot(*(xy - centre).T)))))
+        self._circles: tuple[tuple[float, float, float], ...] = tuple(circles)
+        self._placed_at: tuple[float, float, float] | None = None  # every shape placed there, the tree updated
+        self._part_at: list[tuple[float, float, float] | None] = [None] * len(self._objects)
+        self._turned: tuple[float, F64, F64] | None = None  # a heading and the shapes turned by it
+        self._circles_at: tuple[tuple[float, float, float], list[tuple[float, float, float]]] | None = None
+
+    def _placements(self, x: float, y: float, yaw: float) -> tuple[F64, F64]:
+        """Every shape's rotation and translation in the world with the base frame at this pose."""
+        turned = self._turned
+        if turned is None or turned[0] != yaw:  # a robot pressed against another often keeps its heading
+            c, s = math.cos(yaw), math.sin(yaw)
+            rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            # each shape's rot @ R and rot @ t, as one product each
+            turned = self._turned = (yaw, rot @ self._rotations, (rot @ self._translations)[:, :, 0])
+        return turned[1], turned[2] + np.array([x, y, 0.0])
 
     def _place(self, x: float, y: float, yaw: float) -> None:
-        if (x, y, yaw) == self._placed_at:  # e.g. a robot stalled against another: asked again at one pose
+        """Place every shape at this pose and update the broad phase's tree (for a whole-body query)."""
+        pose = (x, y, yaw)
+        if pose == self._placed_at:  # e.g. a robot stalled against another: asked again at one pose
             return
-        self._placed_at = (x, y, yaw)
-        c, s = math.cos(yaw), math.sin(yaw)
-        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        rotations = rot @ self._rotations  # each shape's rot @ R, as one product
-        translations = (rot @ self._translations)[:, :, 0] + np.array([x, y, 0.0])
-        for obj, r, t in zip(self._objects, rotations, translations, strict=True):
-            obj.setTransform(fcl.Transform(r, t))
+        self._placed_at = pose
+        rotations, translations = self._placements(x, y, yaw)
+        part_at = self._part_at
+        for i, obj in enumerate(self._objects):
+            if part_at[i] != pose:
+                obj.setTransform(fcl.Transform(rotations[i], translations[i]))
+                part_at[i] = pose
         self._manager.update()
+
+    def _place_parts(self, pose: tuple[float, float, float], parts: Iterable[int]) -> None:
+        """Place only these shapes at this pose (the tree is left stale: the next `_place` updates it)."""
+        part_at = self._part_at
+        todo = [i for i in parts if part_at[i] != pose]
+        if not todo:
+            return
+        self._placed_at = None
+        rotations, translations = self._placements(*pose)  # the same numbers `_place` sets
+        objects = self._objects
+        for i in todo:
+            objects[i].setTransform(fcl.Transform(rotations[i], translations[i]))
+            part_at[i] = pose
+
+    def _placed_circles(self, pose: tuple[float, float, float]) -> list[tuple[float, float, float]]:
+        """Every shape's bounding circle (cx, cy, r) in the world with the base frame at `pose`."""
+        known = self._circles_at
+        if known is not None and known[0] == pose:
+            return known[1]
+        x, y, yaw = pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        circles = [(x + c * cx - s * cy, y + s * cx + c * cy, r) for cx, cy, r in self._circles]
+        self._circles_at = (pose, circles)
+        return circles
+
+    def _near_pairs(
+        self, pose: tuple[float, float, float], other: RobotBody, other_pose: tuple[float, float, float], reach_m: float
+    ) -> list[tuple[float, int, int]]:
+        """The pairs of shapes (mine, theirs) whose bounding circles are within `reach_m`, with that gap.
+
+        Two shapes whose circles are farther apart than a distance cannot be nearer than it, so a
+        query between two robots need ask FCL about these pairs only.
+        """
+        hypot = math.hypot
+        mine = [
+            (i, c)
+            for i, c in enumerate(self._placed_circles(pose))
+            if hypot(c[0] - other_pose[0], c[1] - other_pose[1]) - c[2] - other.radius_m <= reach_m
+        ]
+        if not mine:
+            return []
+        theirs = [
+            (j, c)
+            for j, c in enumerate(other._placed_circles(other_pose))
+            if hypot(c[0] - pose[0], c[1] - pose[1]) - c[2] - self.radius_m <= reach_m
+        ]
+        pairs = []
+        for i, (ax, ay, ar) in mine:
+            for j, (bx, by, br) in theirs:
+                gap = hypot(ax - bx, ay - by) - ar - br
+                if gap <= reach_m:
+                    pairs.append((gap, i, j))
+        return pairs
 
     def _place_bound(self, x: float, y: float) -> None:
         self._bound.setTranslation(np.array([x, y, self._bound_z]))
@@ -661,11 +741,22 @@ class RobotBody:
         self, pose: tuple[float, float, float], other: RobotBody, other_pose: tuple[float, float, float]
     ) -> float:
         """Return the distance between this robot's shapes at `pose` and another's at `other_pose` (0: touching)."""
-        self._place(*pose)
-        other._place(*other_pose)
-        data = fcl.DistanceData()
-        self._manager.distance(other._manager, data, fcl.defaultDistanceCallback)
-        return max(0.0, float(data.result.min_distance))
+        # FCL's distance between the shapes, pair by pair as its broad phase would ask, nearest
+        # circles first; a pair whose circles are farther apart than the distance found so far
+        # cannot lower it.
+        pairs = self._near_pairs(pose, other, other_pose, math.inf)
+        pairs.sort()
+        request, result = fcl.DistanceRequest(), fcl.DistanceResult()
+        own, others = self._objects, other._objects
+        for gap, i, j in pairs:
+            if gap - _CIRCLE_PAD_M >= result.min_distance:
+                break
+            self._place_parts(pose, (i,))  # each shape placed once, when first needed
+            other._place_parts(other_pose, (j,))
+            fcl.distance(own[i], others[j], request, result)
+            if result.min_distance <= 0.0:
+                break
+        return max(0.0, float(result.min_distance))
 
     def contacts_with(
         self,
@@ -680,13 +771,21 @@ class RobotBody:
         Returns:
             (own collision, other's collision, point, normal pointing from the other into this robot, depth m).
         """
-        self._place(*pose)
-        other._place(*other_pose)
         request = fcl.CollisionRequest(num_max_contacts=max_contacts, enable_contact=True)
-        data = fcl.CollisionData(request=request)
-        self._manager.collide(other._manager, data, fcl.defaultCollisionCallback)
+        result = fcl.CollisionResult()
+        own, others = self._objects, other._objects
+        # FCL's narrow phase on the pairs of shapes whose bounding circles touch (no other pair can),
+        # as its broad phase would ask them, until it has `max_contacts`.
+        pairs = self._near_pairs(pose, other, other_pose, _CIRCLE_PAD_M)
+        if pairs:
+            self._place_parts(pose, {i for _, i, _ in pairs})
+            other._place_parts(other_pose, {j for _, _, j in pairs})
+        for _, i, j in pairs:
+            fcl.collide(own[i], others[j], request, result)
+            if len(result.contacts) > max_contacts:  # where FCL's own callback stops
+                break
         out = []
-        for contact in data.result.contacts:
+        for contact in result.contacts:
             mine, theirs = self.owner(contact.o1), other.owner(contact.o2)
             normal = -np.asarray(contact.normal, dtype=float)
             if mine is None:
