@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import struct
 from collections.abc import Iterable, Sequence
 
 from twin.core.errors import FmuError
@@ -100,6 +101,8 @@ class _DriveState(ctypes.Structure):
         ("blocked", ctypes.c_bool),
     )
 
+
+_KINDS = {field[0]: field[1] for field in _DriveState._fields_}  # each field's ctypes type
 
 # Fields set through `write`: numbers and flags, not the pointers or the run's outputs.
 _WRITABLE = frozenset(field[0] for field in _DriveState._fields_) - {
@@ -189,6 +192,29 @@ class DriveLoop:
         """Byte offset of field `name` in `buffer` (fields are doubles but for the flags and pointers)."""
         offset: int = getattr(_DriveState, name).offset
         return offset
+
+    @staticmethod
+    def span(names: Sequence[str]) -> struct.Struct:
+        """A `struct` packing these fields of `buffer` at once, from the first one's offset.
+
+        The fields must follow each other in the structure (doubles, or a flag as a bool), so a
+        caller hands over or takes back many of them in one call instead of one attribute each.
+
+        Raises:
+            ValueError: If the fields do not follow each other without a gap.
+        """
+        codes = {_D: "d", ctypes.c_bool: "?"}
+        fmt = "<"
+        end = getattr(_DriveState, names[0]).offset
+        for name in names:
+            field = getattr(_DriveState, name)
+            kind = _KINDS[name]
+            if field.offset != end or kind not in codes:
+                msg = f"drive loop: field {name} does not follow the one before it"
+                raise ValueError(msg)
+            fmt += codes[kind]
+            end = field.offset + field.size
+        return struct.Struct(fmt)
 
     def read(self, names: Iterable[str]) -> tuple[float, ...]:
         """The fields `names`, in that order."""

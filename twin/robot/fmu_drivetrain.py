@@ -99,6 +99,9 @@ _WHEEL_STATE = (
     "volt_left",
     "volt_right",
 )
+_WHEELS = len(_WHEEL_STATE)
+# The wheels' state and then the chassis' (`ChassisDynamics`) follow each other in the loop's structure.
+_STATE_SPAN = DriveLoop.span(_WHEEL_STATE + ChassisDynamics._fields)
 
 
 class FmuDrivetrain(Closing):
@@ -396,25 +399,28 @@ class FmuDrivetrain(Closing):
         return wheel_state
 
     def _to_native(self) -> None:
-        """Hand the wheels' and the chassis' state to the compiled loop."""
+        """Hand the wheels' and the chassis' state to the compiled loop (one `struct` call)."""
         assert self._loop is not None
-        self._loop.write(
-            target_left=self._target_left,
-            target_right=self._target_right,
-            ref_left=self._ref_left,
-            ref_right=self._ref_right,
-            w_left=self._w_left,
-            w_right=self._w_right,
-            int_left=self._int_left,
-            int_right=self._int_right,
-            volt_left=self._volt_left,
-            volt_right=self._volt_right,
-            **self._chassis.dynamics()._asdict(),
+        _STATE_SPAN.pack_into(
+            self._loop.buffer,
+            self._loop.offset(_WHEEL_STATE[0]),
+            self._target_left,
+            self._target_right,
+            self._ref_left,
+            self._ref_right,
+            self._w_left,
+            self._w_right,
+            self._int_left,
+            self._int_right,
+            self._volt_left,
+            self._volt_right,
+            *self._chassis.dynamics(),
         )
 
     def _to_python(self) -> None:
-        """Take the wheels' and the chassis' state back from the compiled loop."""
+        """Take the wheels' and the chassis' state back from the compiled loop (one `struct` call)."""
         assert self._loop is not None
+        values = _STATE_SPAN.unpack_from(self._loop.buffer, self._loop.offset(_WHEEL_STATE[0]))
         (
             self._target_left,
             self._target_right,
@@ -426,8 +432,8 @@ class FmuDrivetrain(Closing):
             self._int_right,
             self._volt_left,
             self._volt_right,
-        ) = self._loop.read(_WHEEL_STATE)
-        self._chassis.set_dynamics(ChassisDynamics._make(self._loop.read(ChassisDynamics._fields)))
+        ) = values[:_WHEELS]
+        self._chassis.set_dynamics(ChassisDynamics._make(values[_WHEELS:]))
 
     def _probe(self, binding: Binding) -> float:
         """Estimate the drive's inertia at the wheel from one step under a small load torque."""

@@ -15,9 +15,10 @@ import pytest
 from tests.unit.cosim.helpers import acme
 from tests.unit.robot.test_drivetrain import ACME_MOTOR
 from twin.core.errors import FmuError
-from twin.robot.chassis import ChassisParams, SlipModel, SlipRegion
+from twin.cosim.drive_loop import DriveLoop
+from twin.robot.chassis import ChassisDynamics, ChassisParams, SlipModel, SlipRegion
 from twin.robot.fmu_drive import FmuDrive
-from twin.robot.fmu_drivetrain import FmuDrivetrain
+from twin.robot.fmu_drivetrain import _WHEEL_STATE, FmuDrivetrain
 from twin.sim.scenario import default_scenario_path
 from twin.sim.scenario_file import load_scenario
 from twin.world import build_scene, load_robot, load_world
@@ -294,3 +295,22 @@ def test_a_drive_creeping_in_place_at_a_free_pose_stays_in_the_compiled_loop(pro
     creeping = [now for before, now in itertools.pairwise(python) if now[9] and now[5] and now[1:4] == before[1:4]]
     assert len(creeping) > 100  # turning (yaw rate not 0) with the pose unchanged
     assert fast_calls < native_calls / 10  # the approach and the backing off only
+
+
+def test_the_state_handed_to_the_compiled_loop_and_back_is_every_field_by_name() -> None:
+    # `_to_native` and `_to_python` move the wheels' and the chassis' state with one `struct` call
+    # over consecutive fields of the loop's structure; the fields by name must hold the same numbers.
+    drive = FmuDrive(fmu="builtin:xm430_w210", profile="voltage")
+    with FmuDrivetrain(drive, WAFFLE, step_ns=MS, contact=None, free_distance=None, bounding_radius_m=0.0) as dt:
+        assert dt.native and dt._loop is not None
+        dt.set_cmd_vel(0.2, 0.7)
+        dt.advance(250)
+        dt._to_python()
+        wheels = tuple(getattr(dt, f"_{name}") for name in _WHEEL_STATE)
+        assert wheels == dt._loop.read(_WHEEL_STATE)
+        assert dt._chassis.dynamics() == ChassisDynamics._make(dt._loop.read(ChassisDynamics._fields))
+        dt._chassis.x_m += 1.0  # a change on the Python side reaches the loop
+        dt._to_native()
+        assert dt._loop.read(("x_m",))[0] == dt._chassis.x_m
+    with pytest.raises(ValueError, match="yaw_rad does not follow"):
+        DriveLoop.span(("x_m", "yaw_rad"))
