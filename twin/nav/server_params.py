@@ -21,6 +21,7 @@ from twin.nav.controller.regulated_pure_pursuit import NAV2_PARAMETERS as RPP_PA
 from twin.nav.params import Nav2Params
 from twin.nav.planner.navfn import NavfnParams
 from twin.nav.velocity_smoother.velocity_smoother import Feedback, SmootherParams
+from twin.node.node import validate_topic_name
 
 __all__ = ["Nav2Config", "nav2_config"]
 
@@ -159,9 +160,17 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         msg = f"{vwhere}.feedback: expected OPEN_LOOP or CLOSED_LOOP (as Nav2), got {feedback!r}"
         raise ConfigError(msg)
     defaults = SmootherParams()
+    odom_topic = vs.get("odom_topic", defaults.odom_topic)
+    problem = (
+        validate_topic_name(odom_topic) if isinstance(odom_topic, str) else f"expected a topic name, got {odom_topic!r}"
+    )
+    if problem is not None:
+        msg = f"{vwhere}.odom_topic: {problem}; fix the params file"
+        raise ConfigError(msg)
     smoother = SmootherParams(
         smoothing_frequency_hz=_num(vs, "smoothing_frequency", defaults.smoothing_frequency_hz, vwhere),
         feedback=Feedback(feedback),
+        odom_topic=odom_topic,
         odom_duration_s=_num(vs, "odom_duration", defaults.odom_duration_s, vwhere),
         max_velocity=_triple(vs, "max_velocity", defaults.max_velocity, vwhere),
         min_velocity=_triple(vs, "min_velocity", defaults.min_velocity, vwhere),
@@ -173,7 +182,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     )
     used["velocity_smoother"] = [
         "smoothing_frequency", "max_velocity", "min_velocity", "max_accel", "max_decel",
-        "deadband_velocity", "velocity_timeout", "feedback", "scale_velocities", "odom_duration",
+        "deadband_velocity", "velocity_timeout", "feedback", "scale_velocities", "odom_duration", "odom_topic",
     ]  # fmt: skip
     bs = params.node("behavior_server")
     bwhere = f"{src}: behavior_server"

@@ -74,6 +74,18 @@ def test_the_smoother_runs_closed_loop_and_refuses_other_feedback() -> None:
         nav2_config(bad)
 
 
+def test_the_smoother_reads_its_odom_topic_and_refuses_a_name_that_is_not_a_topic() -> None:
+    assert nav2_config(load_nav2_params(default_params_path("burger"))).smoother.odom_topic == "odom"
+    topic = {"velocity_smoother.odom_topic": "odometry/filtered"}
+    cfg = nav2_config(load_nav2_params(default_params_path("burger"), overrides=topic))
+    assert cfg.smoother.odom_topic == "odometry/filtered"
+    bad = load_nav2_params(default_params_path("burger"), overrides={"velocity_smoother.odom_topic": "2odom"})
+    with pytest.raises(
+        ConfigError, match=r"velocity_smoother\.odom_topic: '2odom' is not a topic name.*fix the params"
+    ):
+        nav2_config(bad)
+
+
 def test_an_unknown_controller_or_planner_plugin_is_a_config_error(tmp_path: Path) -> None:
     params = load_nav2_params(
         default_params_path("burger"), overrides={"controller_server.FollowPath.plugin": "acme::Teleporter"}

@@ -58,6 +58,7 @@ class SmootherParams:
 
     smoothing_frequency_hz: float = 20.0
     feedback: Feedback = Feedback.OPEN_LOOP
+    odom_topic: str = "odom"  # the odometry CLOSED_LOOP reads (relative: under the robot's namespace)
     odom_duration_s: float = 0.1
     max_velocity: Velocity = (0.5, 0.0, 2.5)
     min_velocity: Velocity = (-0.5, 0.0, -2.5)
@@ -198,7 +199,7 @@ class VelocitySmoother:
 
 
 class VelocitySmootherNode(Node):
-    """velocity_smoother: `cmd_vel_nav` in (and `odom` in CLOSED_LOOP), `/cmd_vel` out every `period_ns`."""
+    """velocity_smoother: `cmd_vel_nav` in (and `odom_topic` in CLOSED_LOOP), `/cmd_vel` out every `period_ns`."""
 
     def __init__(self, params: SmootherParams) -> None:
         super().__init__("velocity_smoother")
@@ -233,7 +234,7 @@ class VelocitySmootherNode(Node):
 
         self.create_subscription("geometry_msgs/msg/Twist", "cmd_vel_nav", on_cmd, 10, raw=True)
         if params.feedback is Feedback.CLOSED_LOOP:
-            self.create_subscription("nav_msgs/msg/Odometry", "odom", on_odom, 10, raw=True)
+            self.create_subscription("nav_msgs/msg/Odometry", params.odom_topic, on_odom, 10, raw=True)
         self.create_rate_timer(_NS_PER_S / params.period_ns, on_timer, priority=PRIORITY_COMMAND + 1)
 
 

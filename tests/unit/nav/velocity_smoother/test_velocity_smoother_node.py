@@ -20,10 +20,10 @@ class Robot(Node):
 
     builtin = True
 
-    def __init__(self) -> None:
+    def __init__(self, odom_topic: str = "odom") -> None:
         super().__init__("robot")
         self.cmd = self.create_publisher(Twist, "cmd_vel_nav", 10)
-        self.odom = self.create_publisher(OdometryEncoder.msgtype, "odom", 10)
+        self.odom = self.create_publisher(OdometryEncoder.msgtype, odom_topic, 10)
         self.encode = OdometryEncoder().encode
         self.heard: list[tuple[int, float, float, float]] = []
 
@@ -41,9 +41,9 @@ class Robot(Node):
         self.odom.publish(Encoded((self.encode, (t_ns, 0.0, 0.0, 0.0, v, w, zeros, zeros), (0.0, 0.0, 0.0, v, w))))
 
 
-def _run(params: SmootherParams) -> tuple[Executor, Robot]:
+def _run(params: SmootherParams, odom_topic: str = "odom") -> tuple[Executor, Robot]:
     ex = Executor(MS)
-    robot = Robot()
+    robot = Robot(odom_topic)
     ex.add_node(robot)
     ex.add_node(VelocitySmootherNode(params))
     return ex, robot
@@ -62,6 +62,18 @@ def test_in_closed_loop_the_node_starts_from_the_odometry() -> None:
     robot.send(0.5, 0.0)
     ex.spin(1)
     assert robot.heard == [(0, pytest.approx(0.3 + 0.125), 0.0, pytest.approx(-0.2 + 0.16))]
+
+
+@pytest.mark.parametrize("published_on", ["odometry/filtered", "odom"])
+def test_in_closed_loop_the_node_reads_the_odometry_on_its_odom_topic(published_on: str) -> None:
+    ex, robot = _run(SmootherParams(feedback=Feedback.CLOSED_LOOP, odom_topic="odometry/filtered"), published_on)
+    robot.odometry(0, 0.3, -0.2)
+    robot.send(0.5, 0.0)
+    ex.spin(1)
+    if published_on == "odom":  # not its topic: no odometry heard, the first output is one cycle from rest
+        assert robot.heard == [(0, pytest.approx(0.125), 0.0, 0.0)]
+    else:
+        assert robot.heard == [(0, pytest.approx(0.3 + 0.125), 0.0, pytest.approx(-0.2 + 0.16))]
 
 
 def test_the_node_drops_a_twist_with_a_nan_in_a_component_it_does_not_use() -> None:
