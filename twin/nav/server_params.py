@@ -161,9 +161,10 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         raise ConfigError(msg)
     defaults = SmootherParams()
     odom_topic = vs.get("odom_topic", defaults.odom_topic)
-    problem = (
-        validate_topic_name(odom_topic) if isinstance(odom_topic, str) else f"expected a topic name, got {odom_topic!r}"
-    )
+    if not isinstance(odom_topic, str):
+        msg = f"{vwhere}.odom_topic: expected a topic name, got {odom_topic!r}; fix the params file"
+        raise ConfigError(msg)
+    problem = validate_topic_name(odom_topic)
     if problem is not None:
         msg = f"{vwhere}.odom_topic: {problem}; fix the params file"
         raise ConfigError(msg)
