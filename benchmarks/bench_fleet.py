@@ -8,6 +8,12 @@ its namespace; the bag is recorded, as a user's run records it. Speed is never a
 machine is shared and noisy): compare the ratios within one run.
 
     python benchmarks/bench_fleet.py [--scenario scenarios/turtlebot3_world.yaml] [--robots 1 2 4 8] [--sim-s 60]
+                                     [--alone]
+
+With `--alone` each robot of each fleet also runs by itself (its spawn, its mission, the world to
+itself), and a fleet's CPU is compared with the sum of its robots' alone (`cost_ratio_vs_alone`):
+the cost of sharing the world (seeing and touching the others, the shared clock), apart from the
+robots' missions costing differently.
 """
 
 from __future__ import annotations
@@ -82,9 +88,11 @@ def fleet(scenario: Scenario, n: int, folder: Path) -> Scenario:
     return dataclasses.replace(scenario, robots=tuple(entries))
 
 
-def run_one(path: Path, n: int, sim_s: float) -> dict[str, float]:
+def run_one(path: Path, n: int, sim_s: float, alone: int | None = None) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         scenario = fleet(load_scenario(path), n, Path(tmp))
+        if alone is not None:  # robot `alone` of the fleet of `n`, by itself in the world
+            scenario = dataclasses.replace(scenario, robots=(scenario.robots[alone],))
         cpu0, wall0 = time.process_time(), time.perf_counter()
         with Simulation(scenario, bag_path=Path(tmp) / "bag", duration_s=sim_s) as sim:
             setup_cpu = time.process_time() - cpu0
@@ -112,19 +120,39 @@ def main() -> None:
     parser.add_argument("--scenario", type=Path, default=REPO / "scenarios" / "turtlebot3_world.yaml")
     parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 4, 8])
     parser.add_argument("--sim-s", type=float, default=60.0)
+    parser.add_argument(
+        "--alone",
+        action="store_true",
+        help="also run each robot of each fleet by itself (same spawn, same mission) and compare the fleet's "
+        "CPU with the sum of theirs: what sharing the world costs, apart from which missions the robots have",
+    )
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child process: one fleet size
+    parser.add_argument("--alone-index", type=int, help=argparse.SUPPRESS)  # ... or one robot of it alone
     args = parser.parse_args()
     if args.one is not None:
-        print(json.dumps(run_one(args.scenario, args.one, args.sim_s)))
+        print(json.dumps(run_one(args.scenario, args.one, args.sim_s, args.alone_index)))
         return
-    rows = []
-    for n in args.robots:
+
+    def child(n: int, alone: int | None = None) -> dict[str, Any]:
         cmd = [sys.executable, __file__, "--scenario", str(args.scenario), "--sim-s", str(args.sim_s), "--one", str(n)]
+        if alone is not None:
+            cmd += ["--alone-index", str(alone)]
         out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-        rows.append(json.loads(out.strip().splitlines()[-1]))
+        row: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
+        return row
+
+    rows = [child(n) for n in args.robots]
     base = rows[0]
+    alone_cpu: dict[int, float] = {}  # robot index -> its CPU by itself (the same in every fleet size)
     for row in rows:
         row["cost_ratio_vs_first"] = round(row["cpu_ms_per_robot_s"] / base["cpu_ms_per_robot_s"], 3)
+        if args.alone and row["robots"] > 1:
+            for i in range(row["robots"]):
+                if i not in alone_cpu:
+                    alone_cpu[i] = child(row["robots"], i)["run_cpu_s"]
+            summed = sum(alone_cpu[i] for i in range(row["robots"]))
+            row["alone_cpu_s"] = round(summed, 3)
+            row["cost_ratio_vs_alone"] = round(row["run_cpu_s"] / summed, 3)
         added = row["robots"] - base["robots"]
         row["mib_per_added_robot"] = round((row["peak_rss_mib"] - base["peak_rss_mib"]) / added, 1) if added else 0.0
     print(json.dumps({"scenario": str(args.scenario), "sim_s": args.sim_s, "fleets": rows}, indent=2))
