@@ -7,14 +7,15 @@ added robot is the difference). Every robot runs the scenario's own mission and 
 its namespace; the bag is recorded, as a user's run records it. Speed is never asserted (this
 machine is shared and noisy): compare the ratios within one run.
 
-With `--camera` every robot is a Waffle with its camera on (640x480 RGB + depth at 10 Hz, noise
-from the SDF), recorded as the shipped camera scenarios record it (the JPEG image and camera_info;
-not the raw 0.9 MB frames). Each fleet size then runs twice in fresh processes, without and with
-the cameras, and the JSON adds the frames each robot's camera drew, the CPU the renderer's calls
-took per frame, and the run's CPU over the same run without cameras per frame (drawing, the JPEG
-and the bag together): the missions compute the same either way (each camera has its own random
-stream), so the difference is what the cameras cost. (The one-off import of scipy.special that
-the first noisy frame of a process needs is made before the run and quoted on its own.)
+With `--camera` every robot is a Waffle with its camera on (640x480 RGB + depth at 10 Hz, noise from
+the SDF), recorded as the shipped camera scenarios record it (the JPEG image and camera_info; not
+the raw image, depth and points, 0.9, 1.2 and 9.8 MB a frame). Each fleet size then runs twice in
+fresh processes, without and with the cameras, and the JSON adds the frames each robot's camera
+drew, the CPU the renderer's calls took per frame, and the run's CPU over the same run without
+cameras per frame (drawing, the JPEG and the bag together): the missions compute the same either way
+(each camera has its own random stream), so the difference is what the cameras cost. (The one-off
+import of scipy.special that the first noisy frame of a process needs is made before the run and
+quoted on its own.)
 
     python benchmarks/bench_fleet.py [--scenario scenarios/turtlebot3_world.yaml] [--robots 1 2 4 8] [--sim-s 60]
     python benchmarks/bench_fleet.py --camera [--robots 1 2 4] [--scenario scenarios/default.yaml] [--repeat 3]
@@ -242,6 +243,8 @@ def main() -> None:
     parser.add_argument("--camera", action="store_true", help="every robot a Waffle with its camera on and recorded")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child process: one fleet size
     args = parser.parse_args()
+    if args.repeat < 1:
+        parser.error(f"--repeat must be 1 or more, got {args.repeat}")
     if args.one is not None:
         print(json.dumps(run_one(args.scenario, args.one, args.sim_s, camera=args.camera)))
         return
