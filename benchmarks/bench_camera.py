@@ -24,8 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from twin.bt.mission_nodes import load_locations
-
+from twin.mission.bt_nodes import load_locations
 from twin.world import load_robot, load_world
 from twin.world.render import CameraModel, Renderer, box_mesh, lighting_of, world_visuals
 

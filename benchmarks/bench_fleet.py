@@ -7,8 +7,22 @@ added robot is the difference). Every robot runs the scenario's own mission and 
 its namespace; the bag is recorded, as a user's run records it. Speed is never asserted (this
 machine is shared and noisy): compare the ratios within one run.
 
+With `--camera` every robot is a Waffle with its camera on (640x480 RGB + depth at 10 Hz, noise from
+the SDF), recorded as the shipped camera scenarios record it (the JPEG image and camera_info; not
+the raw image, depth and points, 0.9, 1.2 and 9.8 MB a frame). Each fleet size then runs twice in
+fresh processes, without and with the cameras, and the JSON adds the frames each robot's camera
+drew, the CPU the renderer's calls took per frame, and the run's CPU over the same run without
+cameras per frame (drawing, the JPEG and the bag together): the missions compute the same either way
+(each camera has its own random stream), so the difference is what the cameras cost. (The one-off
+import of scipy.special that the first noisy frame of a process needs is made before the run and
+quoted on its own.)
+
     python benchmarks/bench_fleet.py [--scenario scenarios/turtlebot3_world.yaml] [--robots 1 2 4 8] [--sim-s 60]
                                      [--alone]
+    python benchmarks/bench_fleet.py --camera [--robots 1 2 4] [--scenario scenarios/default.yaml] [--repeat 3]
+
+`--repeat N` runs each size N times, the sizes alternated round after round, and keeps each size's
+run of least CPU (the others' figures are listed), as a shared machine's load only ever adds.
 
 With `--alone` each robot of each fleet also runs by itself (its spawn, its mission, the world to
 itself), and a fleet's CPU is compared with the sum of its robots' alone (`cost_ratio_vs_alone`):
@@ -33,9 +47,19 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from twin.sim.scenario import InitialPose, RobotEntry, RobotSection, Scenario
+from twin.bag import open_bag
+from twin.sim.scenario import (
+    CameraSection,
+    InitialPose,
+    RecordingSection,
+    RobotEntry,
+    RobotSection,
+    Scenario,
+    SensorsSection,
+)
 from twin.sim.scenario_file import load_scenario
 from twin.sim.simulation import Simulation
+from twin.world.render import Renderer
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -54,6 +78,12 @@ SPAWNS = {
     ],
     "house": [(0.0, 0.0, 0.0), (1.5, -0.2, 0.0), (4.0, 0.5, 1.571), (2.75, 2.5, -1.571)],
 }
+
+
+# The shipped camera scenarios' camera (house_search_*.yaml), with the depth image the architecture's
+# 5 ms frame budget counts; the raw images are not recorded, as those scenarios leave them out.
+CAMERA = CameraSection(enabled=True, width=640, height=480, rate_hz=10.0, depth=True, compressed=True)
+NOT_RECORDED = r"/.*/camera/(image_raw|depth/image_raw|points)"
 
 
 def _rotated(mission: Any, i: int, folder: Path) -> Any:
@@ -88,10 +118,60 @@ def fleet(scenario: Scenario, n: int, folder: Path) -> Scenario:
     return dataclasses.replace(scenario, robots=tuple(entries))
 
 
-def run_one(path: Path, n: int, sim_s: float, alone: int | None = None) -> dict[str, float]:
-    with tempfile.TemporaryDirectory() as tmp:
-        scenario = fleet(load_scenario(path), n, Path(tmp))
-        if alone is not None:  # robot `alone` of the fleet of `n`, by itself in the world
+def with_cameras(scenario: Scenario) -> Scenario:
+    """The scenario with every robot a Waffle whose camera is on and recorded (before `fleet`, which copies both)."""
+    robot = dataclasses.replace(scenario.robot, model="turtlebot3_waffle")
+    sensors: SensorsSection = dataclasses.replace(scenario.sensors, camera=CAMERA)
+    topics = dataclasses.replace(scenario.recording.topics, exclude_regex=NOT_RECORDED)
+    recording: RecordingSection = dataclasses.replace(scenario.recording, topics=topics)
+    return dataclasses.replace(scenario, robot=robot, sensors=sensors, recording=recording)
+
+
+class RenderClock:
+    """Counts and times `Renderer.render` calls, per renderer (each robot's camera has its own)."""
+
+    def __init__(self) -> None:
+        self.frames: dict[int, int] = {}
+        self.cpu_s = 0.0
+        self.extra_triangles = 0
+        self.native = True
+        self._render = Renderer.render
+
+    def __enter__(self) -> RenderClock:
+        draw = self._render
+
+        def timed(renderer: Renderer, *args: Any, **kwargs: Any) -> Any:
+            t0 = time.process_time()
+            frame = draw(renderer, *args, **kwargs)
+            self.cpu_s += time.process_time() - t0
+            self.frames[id(renderer)] = self.frames.get(id(renderer), 0) + 1
+            self.native = self.native and renderer.native
+            extra = args[1] if len(args) > 1 else kwargs.get("extra")
+            self.extra_triangles += 0 if extra is None else len(extra.faces)
+            return frame
+
+        Renderer.render = timed  # type: ignore[method-assign,assignment]
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        Renderer.render = self._render  # type: ignore[method-assign]
+
+
+def run_one(path: Path, n: int, sim_s: float, *, camera: bool = False, alone: int | None = None) -> dict[str, Any]:
+    """One run of `n` robots (or, with `alone`, robot `alone` of those `n` by itself)."""
+    scenario = load_scenario(path)
+    import_cpu = 0.0
+    if camera:
+        scenario = with_cameras(scenario)
+        # The renderer's noise table imports scipy.special at the first noisy frame: once per
+        # process, whatever the fleet's size. Imported here, it stays out of the per-robot-second figures.
+        t0 = time.process_time()
+        import scipy.special  # noqa: F401
+
+        import_cpu = time.process_time() - t0
+    with tempfile.TemporaryDirectory() as tmp, RenderClock() as clock:
+        scenario = fleet(scenario, n, Path(tmp))
+        if alone is not None:
             scenario = dataclasses.replace(scenario, robots=(scenario.robots[alone],))
         cpu0, wall0 = time.process_time(), time.perf_counter()
         with Simulation(scenario, bag_path=Path(tmp) / "bag", duration_s=sim_s) as sim:
@@ -100,26 +180,78 @@ def run_one(path: Path, n: int, sim_s: float, alone: int | None = None) -> dict[
             summary = sim.run()
             run_cpu = time.process_time() - run_cpu0
         wall = time.perf_counter() - wall0
+        in_bag = {t.name: t.message_count for t in open_bag(Path(tmp) / "bag").topics}
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    return {
+    row: dict[str, Any] = {
         "robots": n,
         "sim_s": summary.sim_s,
         "run_cpu_s": round(run_cpu, 3),
         "setup_cpu_s": round(setup_cpu, 3),
-        "cpu_ms_per_robot_s": round(1000.0 * run_cpu / (n * summary.sim_s), 3),
+        "cpu_ms_per_robot_s": round(1000.0 * run_cpu / (len(scenario.robots or (0,)) * summary.sim_s), 3),
         "real_time_factor": round(summary.sim_s / summary.wall_s, 1),
         "wall_s": round(wall, 2),
         "peak_rss_mib": round(peak_mib, 1),
         "messages": summary.messages,
         "contacts": summary.contacts,
     }
+    if camera:
+        frames = sorted(clock.frames.values())
+        recorded = [in_bag.get(f"/robot{i + 1}/camera/image_raw/compressed", 0) for i in range(n)]
+        row |= {
+            "cameras": len(frames),
+            "frames_per_robot": frames,  # each camera's drawn frames, fewest first
+            "frames_recorded_per_robot": recorded,  # /robotN/camera/image_raw/compressed in the bag
+            "render_cpu_s": round(clock.cpu_s, 3),
+            "render_ms_per_frame": round(1000.0 * clock.cpu_s / max(sum(frames), 1), 3),
+            "robot_triangles_per_frame": round(clock.extra_triangles / max(sum(frames), 1)),
+            "native_renderer": clock.native,
+            "noise_import_cpu_s": round(import_cpu, 3),  # scipy.special, before the run (see above)
+        }
+    return row
+
+
+def _child(args: argparse.Namespace, n: int, *, camera: bool, alone: int | None = None) -> dict[str, Any]:
+    cmd = [sys.executable, __file__, "--scenario", str(args.scenario), "--sim-s", str(args.sim_s), "--one", str(n)]
+    cmd += ["--camera"] if camera else []
+    cmd += [] if alone is None else ["--alone-index", str(alone)]
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    row: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
+    return row
+
+
+def _rows(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """Each size's runs (without, then with cameras), round after round; per size its run of least CPU.
+
+    With `--camera` the row is the camera run's, the best run without cameras beside it.
+    """
+    kinds = (False, True) if args.camera else (False,)
+    runs: dict[tuple[int, bool], list[dict[str, Any]]] = {(n, k): [] for n in args.robots for k in kinds}
+    for _ in range(args.repeat):
+        for n in args.robots:
+            for camera in kinds:
+                runs[n, camera].append(_child(args, n, camera=camera))
+    rows = []
+    for n in args.robots:
+        bare = min(runs[n, False], key=lambda r: r["run_cpu_s"])
+        row = min(runs[n, args.camera], key=lambda r: r["run_cpu_s"])
+        if args.repeat > 1:
+            row["cpu_ms_per_robot_s_runs"] = [r["cpu_ms_per_robot_s"] for r in runs[n, args.camera]]
+        if args.camera:
+            frames = sum(row["frames_per_robot"])
+            keys = ("run_cpu_s", "cpu_ms_per_robot_s", "real_time_factor", "peak_rss_mib", "messages", "contacts")
+            row["without_cameras"] = {k: bare[k] for k in keys}
+            row["camera_ms_per_frame"] = round(1000.0 * (row["run_cpu_s"] - bare["run_cpu_s"]) / max(frames, 1), 3)
+        rows.append(row)
+    return rows
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", type=Path, default=REPO / "scenarios" / "turtlebot3_world.yaml")
-    parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 4, 8])
+    parser.add_argument("--robots", type=int, nargs="+", help="fleet sizes (default: 1 2 4 8; with --camera 1 2 4)")
     parser.add_argument("--sim-s", type=float, default=60.0)
+    parser.add_argument("--repeat", type=int, default=1, help="runs of each size, alternated; the least CPU is kept")
+    parser.add_argument("--camera", action="store_true", help="every robot a Waffle with its camera on and recorded")
     parser.add_argument(
         "--alone",
         action="store_true",
@@ -129,33 +261,39 @@ def main() -> None:
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child process: one fleet size
     parser.add_argument("--alone-index", type=int, help=argparse.SUPPRESS)  # ... or one robot of it alone
     args = parser.parse_args()
+    if args.repeat < 1:
+        parser.error(f"--repeat must be 1 or more, got {args.repeat}")
     if args.one is not None:
-        print(json.dumps(run_one(args.scenario, args.one, args.sim_s, args.alone_index)))
+        print(json.dumps(run_one(args.scenario, args.one, args.sim_s, camera=args.camera, alone=args.alone_index)))
         return
-
-    def child(n: int, alone: int | None = None) -> dict[str, Any]:
-        cmd = [sys.executable, __file__, "--scenario", str(args.scenario), "--sim-s", str(args.sim_s), "--one", str(n)]
-        if alone is not None:
-            cmd += ["--alone-index", str(alone)]
-        out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-        row: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
-        return row
-
-    rows = [child(n) for n in args.robots]
+    if args.robots is None:
+        args.robots = [1, 2, 4] if args.camera else [1, 2, 4, 8]
+    rows = _rows(args)
     base = rows[0]
-    alone_cpu: dict[int, float] = {}  # robot index -> its CPU by itself (the same in every fleet size)
     for row in rows:
         row["cost_ratio_vs_first"] = round(row["cpu_ms_per_robot_s"] / base["cpu_ms_per_robot_s"], 3)
-        if args.alone and row["robots"] > 1:
+        added = row["robots"] - base["robots"]
+        row["mib_per_added_robot"] = round((row["peak_rss_mib"] - base["peak_rss_mib"]) / added, 1) if added else 0.0
+    if args.alone:
+        alone_cpu: dict[int, float] = {}  # robot index -> its least CPU by itself (the same in every fleet size)
+        for row in rows:
+            if row["robots"] < 2:
+                continue
             for i in range(row["robots"]):
                 if i not in alone_cpu:
-                    alone_cpu[i] = child(row["robots"], i)["run_cpu_s"]
+                    runs = [_child(args, row["robots"], camera=args.camera, alone=i) for _ in range(args.repeat)]
+                    alone_cpu[i] = min(r["run_cpu_s"] for r in runs)
             summed = sum(alone_cpu[i] for i in range(row["robots"]))
             row["alone_cpu_s"] = round(summed, 3)
             row["cost_ratio_vs_alone"] = round(row["run_cpu_s"] / summed, 3)
-        added = row["robots"] - base["robots"]
-        row["mib_per_added_robot"] = round((row["peak_rss_mib"] - base["peak_rss_mib"]) / added, 1) if added else 0.0
-    print(json.dumps({"scenario": str(args.scenario), "sim_s": args.sim_s, "fleets": rows}, indent=2))
+    out: dict[str, Any] = {"scenario": str(args.scenario), "sim_s": args.sim_s, "repeat": args.repeat}
+    if args.camera:
+        out["camera"] = {
+            **{k: getattr(CAMERA, k) for k in ("width", "height", "rate_hz", "depth", "compressed", "noise")},
+            "not_recorded": NOT_RECORDED,
+        }
+    out["fleets"] = rows
+    print(json.dumps(out, indent=2))
 
 
 if __name__ == "__main__":
