@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -15,6 +16,7 @@ from twin.sim.fleet import Fleet, FleetMonitor, FleetView
 from twin.sim.robot_group import scenario_robot
 from twin.sim.scenario import default_scenario_path
 from twin.sim.scenario_file import load_scenario
+from twin.world.robot_model import load_robot
 from twin.world.scene import Contact, RobotBody
 
 
@@ -86,14 +88,32 @@ def test_the_lidar_view_holds_the_other_robots_lidar_housing_where_it_stands() -
     segments, circles = caster.shapes
     assert len(segments) == 0 and len(circles) == 1  # a Waffle's base is below its lidar: only the housing
     cx, cy, r = circles[0]
-    # The housing stands 0.049 m behind the base frame's origin; turned by 90 degrees, that is -y.
-    assert (cx, cy, r) == pytest.approx((2.0, 1.0 - 0.049, 0.055), abs=1e-9)
+    # The housing stands 0.052 m behind the base frame's origin; turned by 90 degrees, that is -y.
+    assert (cx, cy, r) == pytest.approx((2.0, 1.0 - 0.052, 0.0508), abs=1e-9)
     # Nothing of the robots at 0.3 m: above every shape of a Waffle.
     assert view.caster(0.3) is None
     # The other robot moves: the view follows it.
     other.drive.pose = (3.0, 1.0, math.pi / 2)
     moved = view.caster(height)
     assert moved is not None and moved.shapes[1][0][0] == pytest.approx(3.0)
+
+
+def test_another_waffles_lidar_sees_of_it_what_gazebos_ray_plane_cuts(fixtures: Path) -> None:
+    # Gazebo's ray sensor hits the collision shapes of turtlebot3_gazebo's model.sdf, the robot resting
+    # on its wheels: the plane of one Waffle's lidar, above the floor, must cut the same shapes of another.
+    gazebo = load_robot(fixtures / "gazebo_classic" / "models" / "turtlebot3_waffle" / "model.sdf")
+    assert gazebo.lidar is not None
+    gazebo_plane = gazebo.base_height_m + gazebo.lidar.mount.z_m
+    gazebo_segments, gazebo_circles = RobotBody(gazebo.collisions, base_height_m=gazebo.base_height_m).section(
+        gazebo_plane
+    )
+    me = _group("robot1", (0.0, 0.0, 0.0))
+    plane = me.robot.base_height_m + me.robot.lidar.mount.z_m
+    assert plane == pytest.approx(gazebo_plane, abs=0.002)  # the URDF's base_scan against Gazebo's ray pose
+    segments, circles = me.body.section(plane)
+    assert len(gazebo_segments) == len(segments) == 0  # the 27 cm base is below either plane
+    assert circles == pytest.approx(gazebo_circles, abs=1e-9)  # the LDS housing: where, and how wide
+    assert circles.shape == (1, 3)
 
 
 def test_a_pose_asked_again_is_answered_as_a_fresh_check_and_follows_the_other_robot() -> None:
