@@ -116,6 +116,20 @@ def test_another_waffles_lidar_sees_of_it_what_gazebos_ray_plane_cuts(fixtures: 
     assert circles.shape == (1, 3)
 
 
+def test_another_burgers_lidar_sees_of_it_what_gazebos_ray_plane_cuts(fixtures: Path) -> None:
+    # The same for the Burger: its 14 cm base tops out below either plane, the housing is Gazebo's.
+    cuts = []
+    for model in (fixtures / "gazebo_classic" / "models" / "turtlebot3_burger" / "model.sdf", "turtlebot3_burger"):
+        robot = load_robot(model, model_path=[default_scenario_path().parent.parent / "sdf" / "models"])
+        assert robot.lidar is not None
+        plane = robot.base_height_m + robot.lidar.mount.z_m
+        cuts.append((plane, *RobotBody(robot.collisions, base_height_m=robot.base_height_m).section(plane)))
+    (gazebo_plane, gazebo_segments, gazebo_circles), (plane, segments, circles) = cuts
+    assert plane == pytest.approx(gazebo_plane, abs=0.002)
+    assert len(gazebo_segments) == len(segments) == 0
+    assert circles.shape == (1, 3) and circles == pytest.approx(gazebo_circles, abs=1e-9)
+
+
 def test_a_pose_asked_again_is_answered_as_a_fresh_check_and_follows_the_other_robot() -> None:
     # A robot pressed against another is asked about the same few poses step after step; the answer
     # kept for a pose holds only while the other robot stands where it stood.
