@@ -14,7 +14,8 @@ A `Fleet` holds the robot groups of a run with more than one robot (`robots:` in
 What one robot's drive asks of the others each step stays about as cheap with eight robots as with
 two: the fleet keeps an odometer (`Fleet.travel`, every robot's motion summed), so a robot's free
 distance and its `repeats_free` look at the robots near it and bound the far ones by how far
-anything moved since they were last measured, instead of measuring every robot at every step.
+the other robots moved since they were last measured (the odometer less the robot's own share,
+`Fleet.own_nm`), instead of measuring every robot at every step.
 
 Nothing here coordinates the robots: each learns of the others from its own sensors only.
 """
@@ -114,6 +115,9 @@ class Fleet:
         Any robot's centre moved at most the odometer's increase since a moment: a distance
         measured then, less that increase, bounds the distance now. Whole nanometres, each motion
         rounded up, so the sum has no rounding of its own however long the run."""
+        self.own_nm = [0] * len(self.groups)
+        """Each robot's share of `travel_nm`: `travel_nm - own_nm[i]` is what the robots other than
+        `i` moved, all that can bring them nearer to robot `i` where it stands."""
 
     def body(self, i: int) -> RobotBody:
         """Robot `i`'s collision body."""
@@ -156,8 +160,12 @@ class Fleet:
         standing: list[_Pose] = [g.drive.chassis_state()[:3] for g in groups]  # (x, y, yaw) of each
         radii = self.radii
         last = self._last
-        if last is not None and last != standing:  # moved between advances (by hand): on the odometer too
-            self.travel_nm += sum(_nm(_moved(a, *b, r)) for a, b, r in zip(last, standing, radii, strict=True))
+        own = self.own_nm
+        if last is not None and last != standing:  # moved between advances (by hand): on the odometers too
+            for i, (a, b, r) in enumerate(zip(last, standing, radii, strict=True)):
+                nm = _nm(_moved(a, *b, r))
+                self.travel_nm += nm
+                own[i] += nm
         self._standing = standing
         hypot, remainder, tau, ceil = math.hypot, math.remainder, math.tau, math.ceil
         try:
@@ -169,8 +177,9 @@ class Fleet:
                 if x != bx or y != by or yaw != byaw:
                     standing[i] = (x, y, yaw)
                     # _nm(_moved(...)), inline: this runs for every robot at every event
-                    moved = hypot(x - bx, y - by) + radii[i] * abs(remainder(yaw - byaw, tau))
-                    self.travel_nm += ceil(moved * 1e9) + 1
+                    nm = ceil((hypot(x - bx, y - by) + radii[i] * abs(remainder(yaw - byaw, tau))) * 1e9) + 1
+                    self.travel_nm += nm
+                    own[i] += nm
         finally:
             self._standing = None
             self._moving = -1
@@ -222,6 +231,10 @@ class FleetMonitor:
         # when the world (`inner`) does not move (`static`); moving obstacles need a new look.
         self._measured: tuple[_Pose, int, float] | None = None
         self._static = bool(getattr(inner, "static", False))
+        # When the last measurement found no free motion because of another robot (its gap, from the
+        # exact distances kept, at or below 0): this robot's pose, that robot and its pose then.
+        self._touching: tuple[_Pose, int, _Pose] | None = None
+        self._stopped_by = -1  # the robot whose gap ended `_free_among`'s last look at 0 or below (-1: none)
         self.keep_m = _KEEP_M
         """`free_m` answers from its last measurement while that bound stays above this (inf: never)."""
 
@@ -269,7 +282,7 @@ class FleetMonitor:
                     del recent[next(iter(recent))]  # the oldest
                 recent[key] = pair
             found += pair
-        self._last_free = None if found else (pose, fleet.travel_nm, far, tuple(asked))
+        self._last_free = None if found else (pose, fleet.travel_nm - fleet.own_nm[self.index], far, tuple(asked))
         found.sort(key=lambda c: -c.depth_m)
         return tuple(found)
 
@@ -279,14 +292,15 @@ class FleetMonitor:
         It would when the world's check repeats its answer (`inner.repeats_free`), the robots it
         asked about stand where they stood, and the others are still too far to be asked about:
         the check's answer is a function of the pose and where the robots near it stand. "Still
-        too far" is the nearest one's gap then less the fleet's odometer since (any robot moved
-        less), so nothing here loops over the whole fleet.
+        too far" is the nearest one's gap then less what the other robots moved since (their share
+        of the fleet's odometer: the pose is the same), so nothing here loops over the whole fleet.
         """
         last = self._last_free
         if last is None or last[0] != (x_m, y_m, yaw_rad) or not self.inner.repeats_free(x_m, y_m, yaw_rad):
             return False
-        _, travel_nm, far, asked = last
-        if far - (self.fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M <= _MARGIN_M:
+        _, others_nm, far, asked = last
+        fleet = self.fleet
+        if far - (fleet.travel_nm - fleet.own_nm[self.index] - others_nm) * 1e-9 - _ROUNDING_M <= _MARGIN_M:
             return False
         return all(self._where(j) == where for j, where in asked)
 
@@ -299,35 +313,48 @@ class FleetMonitor:
         that bound is used up. The robots farther than `_NEAR_M` at the last full look are bounded
         by the fleet's odometer, and looked at again only when that bound could decide the answer:
         the measurement is the same as measuring every robot, at the cost of the near ones. In a
-        world that does not move, a measurement then answers (less this robot's motion and the
-        fleet's odometer since) while it stays above `keep_m`, far more than a robot moves between
-        two events: the compiled loop runs the same steps as with a new measurement.
+        world that does not move, a measurement then answers (less this robot's motion and the other
+        robots' since, `Fleet.own_nm`) while it stays above `keep_m`, far more than a robot moves
+        between two events: the compiled loop runs the same steps as with a new measurement.
+
+        A robot pressed against another is asked again and again at the same pose while that one
+        stands still. When the last measurement found no free motion because of one robot's gap,
+        the same two poses answer 0 again without a look: that gap is a function of the two poses
+        and the exact distance kept for the pair, which only a measurement changes.
         """
-        fleet = self.fleet
-        radius = fleet.radii[self.index]
+        touching = self._touching
+        if touching is not None and touching[0] == (x_m, y_m, yaw_rad) and self._where(touching[1]) == touching[2]:
+            return 0.0  # pressed against that robot, neither moved: what a measurement answers again
+        fleet, i = self.fleet, self.index
+        radius = fleet.radii[i]
         measured = self._measured
         if measured is not None:
-            (mx, my, myaw), travel_nm, value = measured
+            (mx, my, myaw), others_nm, value = measured
             moved = math.hypot(x_m - mx, y_m - my) + radius * abs(math.remainder(yaw_rad - myaw, math.tau))
-            bound = value - moved - (fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M
+            bound = value - moved - (fleet.travel_nm - fleet.own_nm[i] - others_nm) * 1e-9 - _ROUNDING_M
             if bound > self.keep_m:
                 return bound
         free = self._measure(x_m, y_m, yaw_rad, radius)
         keep = self._static and 2.0 * self.keep_m < free < math.inf
-        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm, free) if keep else None
+        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[i], free) if keep else None
+        j = self._stopped_by
+        pressed = free <= 0.0 and j >= 0 and self.keep_m < math.inf  # keep_m inf: measure at every call
+        self._touching = ((x_m, y_m, yaw_rad), j, self._where(j)) if pressed else None
         return free
 
     def _measure(self, x_m: float, y_m: float, yaw_rad: float, radius: float) -> float:
         """`free_m` measured: the world's free distance, the near robots' and a bound on the far ones'."""
+        self._stopped_by = -1
         inner = self.inner.free_m(x_m, y_m, yaw_rad)
         if inner <= 0.0:
             return 0.0
         fleet = self.fleet
         far = self._far
         if far is not None:
-            (ax, ay, ayaw), travel_nm, far_gap, near = far
+            (ax, ay, ayaw), others_nm, far_gap, near = far
             moved = math.hypot(x_m - ax, y_m - ay) + radius * abs(math.remainder(yaw_rad - ayaw, math.tau))
-            bound = far_gap - moved - (fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M - _MARGIN_M
+            others_moved = (fleet.travel_nm - fleet.own_nm[self.index] - others_nm) * 1e-9
+            bound = far_gap - moved - others_moved - _ROUNDING_M - _MARGIN_M  # (its own motion: `moved`)
             # When every far robot's gap exceeds `bound`, none can lower the answer or stop the look
             # early: it is what looking at every robot in turn gives.
             if not near:
@@ -347,7 +374,7 @@ class FleetMonitor:
                 far_gap = min(far_gap, gap)
             else:
                 near_list.append(j)
-        self._far = ((x_m, y_m, yaw_rad), fleet.travel_nm, far_gap, tuple(near_list))
+        self._far = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[self.index], far_gap, tuple(near_list))
         free = self._free_among(self.others, inner, x_m, y_m, yaw_rad, measured=self._exact)
         return free if free > 0.0 else 0.0
 
@@ -395,6 +422,7 @@ class FleetMonitor:
                     gap = distance - _TOLERANCE_M
             free = min(free, gap)
             if free <= 0.0:
+                self._stopped_by = j
                 return free
         return free
 
