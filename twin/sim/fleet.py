@@ -333,21 +333,26 @@ class FleetMonitor:
             moved = math.hypot(x_m - mx, y_m - my) + radius * abs(math.remainder(yaw_rad - myaw, math.tau))
             bound = value - moved - (fleet.travel_nm - fleet.own_nm[i] - others_nm) * 1e-9 - _ROUNDING_M
             if bound > self.keep_m:
-                return bound
-        free = self._measure(x_m, y_m, yaw_rad, radius)
-        keep = self._static and 2.0 * self.keep_m < free < math.inf
-        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[i], free) if keep else None
+                inner = self.inner.free_m(x_m, y_m, yaw_rad)
+                return 0.0 if inner <= 0.0 else inner if inner < bound else bound
+        free, robots = self._measure(x_m, y_m, yaw_rad, radius)
+        keep = self._static and 2.0 * self.keep_m < robots < math.inf
+        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[i], robots) if keep else None
         j = self._stopped_by
         pressed = free <= 0.0 and j >= 0 and self.keep_m < math.inf  # keep_m inf: measure at every call
         self._touching = ((x_m, y_m, yaw_rad), j, self._where(j)) if pressed else None
         return free
 
-    def _measure(self, x_m: float, y_m: float, yaw_rad: float, radius: float) -> float:
-        """`free_m` measured: the world's free distance, the near robots' and a bound on the far ones'."""
+    def _measure(self, x_m: float, y_m: float, yaw_rad: float, radius: float) -> tuple[float, float]:
+        """`free_m` measured: the world's free distance, the near robots' and a bound on the far ones'.
+
+        Returns the free distance and the other robots' part of it alone (a bound on how far this
+        robot may move touching none of them; 0 when not looked at), which `free_m` keeps.
+        """
         self._stopped_by = -1
         inner = self.inner.free_m(x_m, y_m, yaw_rad)
         if inner <= 0.0:
-            return 0.0
+            return 0.0, 0.0
         fleet = self.fleet
         far = self._far
         if far is not None:
@@ -359,13 +364,15 @@ class FleetMonitor:
             # early: it is what looking at every robot in turn gives.
             if not near:
                 if bound > inner:
-                    return inner
+                    return inner, bound
             else:
                 updates: dict[int, tuple[_Pose, _Pose, float]] = {}
-                free = self._free_among(near, inner, x_m, y_m, yaw_rad, measured=updates)
+                # (Lowered from inf, it stops where lowering `inner` would: at the first gap at or below 0.)
+                robots = self._free_among(near, math.inf, x_m, y_m, yaw_rad, measured=updates)
+                free = inner if inner < robots else robots
                 if bound > max(free, 0.0):
                     self._exact.update(updates)
-                    return free if free > 0.0 else 0.0
+                    return (free if free > 0.0 else 0.0), (robots if robots < bound else bound)
         radii, near_list, far_gap = fleet.radii, [], math.inf
         for j in self.others:
             where = self._where(j)
@@ -375,8 +382,9 @@ class FleetMonitor:
             else:
                 near_list.append(j)
         self._far = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[self.index], far_gap, tuple(near_list))
-        free = self._free_among(self.others, inner, x_m, y_m, yaw_rad, measured=self._exact)
-        return free if free > 0.0 else 0.0
+        robots = self._free_among(self.others, math.inf, x_m, y_m, yaw_rad, measured=self._exact)
+        free = inner if inner < robots else robots
+        return (free if free > 0.0 else 0.0), robots
 
     def _free_among(
         self,
