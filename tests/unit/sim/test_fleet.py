@@ -291,3 +291,43 @@ def test_a_robot_pressed_against_another_is_answered_as_a_measurement_answers_wi
             answers.append(answer)
     assert answers.count(0.0) > 200 and max(answers) > 0.0  # pressed most of the time, not always
     assert measures[0] < len(answers) / 2
+
+
+class _NearWall(_OpenWorld):
+    """A wall 3 cm ahead wherever the robot stands: the world's free distance is always small."""
+
+    def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
+        return 0.03
+
+
+def test_near_a_wall_the_free_distance_is_the_walls_and_the_robots_are_not_measured_again() -> None:
+    # The world leaves 3 cm; the other robots, about a metre away, leave far more. Each call answers
+    # the world's 3 cm (what measuring every robot answers), and the robots' part, measured once, is
+    # kept less their motion and robot1's: no new look at them while that bound stays large.
+    rng = np.random.default_rng(7)
+    me = _group("robot1", (0.0, 0.0, 0.0))
+    others = [
+        _group(f"robot{k + 2}", (1.2 * math.cos(k), 1.2 * math.sin(k), float(rng.uniform(-3, 3)))) for k in range(5)
+    ]
+    for g in (me, *others):
+        g.drive_node = _Idle()
+    fleet = Fleet([me, *others])
+    mine, every = FleetMonitor(_NearWall(), fleet, 0), FleetMonitor(_NearWall(), fleet, 0)
+    every.keep_m = every.near_m = math.inf  # measured at every call
+    measures = _counting_measures(mine)
+    for step in range(100):
+        fleet.advance(1)
+        x, y, yaw = me.drive.pose
+        me.drive.pose = (x + 0.001, y, yaw + 0.002)
+        assert mine.free_m(*me.drive.pose) == every.free_m(*me.drive.pose) == 0.03, step
+    assert measures[0] == 1
+    # The robots come near: the kept bound runs out and they are measured again, never overstated.
+    for step in range(150):
+        for g in others:
+            gx, gy, gyaw = g.drive.pose
+            g.drive.pose = (gx * 0.995, gy * 0.995, gyaw)
+        fleet.advance(1)
+        free = mine.free_m(*me.drive.pose)
+        true = min(me.body.distance_to(me.drive.pose, g.body, g.drive.pose) for g in others)
+        assert free <= min(0.03, true), step
+    assert measures[0] > 1
