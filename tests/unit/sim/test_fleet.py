@@ -226,7 +226,7 @@ def _counting_measures(monitor: FleetMonitor) -> list[int]:
     count = [0]
     measure = monitor._measure
 
-    def counted(*args: Any) -> float:
+    def counted(*args: Any) -> tuple[float, float]:
         count[0] += 1
         return measure(*args)
 
