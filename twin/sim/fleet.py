@@ -302,7 +302,7 @@ class FleetMonitor:
         fleet = self.fleet
         if far - (fleet.travel_nm - fleet.own_nm[self.index] - others_nm) * 1e-9 - _ROUNDING_M <= _MARGIN_M:
             return False
-        return all(self._where(j) == where for j, where in asked)
+        return not asked or all(self._where(j) == where for j, where in asked)  # (mostly none asked)
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor another robot.
