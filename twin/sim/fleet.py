@@ -118,6 +118,9 @@ class Fleet:
         self.own_nm = [0] * len(self.groups)
         """Each robot's share of `travel_nm`: `travel_nm - own_nm[i]` is what the robots other than
         `i` moved, all that can bring them nearer to robot `i` where it stands."""
+        # Per (robot, height): its shapes' section placed at a pose, shared by every other robot's
+        # lidar view (the lidars of a fleet scan at the same instants, each seeing the same robot).
+        self._placed: dict[tuple[int, float], tuple[_Pose, np.ndarray | None, np.ndarray | None]] = {}
 
     def body(self, i: int) -> RobotBody:
         """Robot `i`'s collision body."""
@@ -134,6 +137,31 @@ class Fleet:
             return (p.x_m, p.y_m, p.yaw_rad)
         s = drive.chassis_state()
         return (s.x_m, s.y_m, s.yaw_rad)
+
+    def placed_section(self, i: int, height_m: float, pose: _Pose) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Robot `i`'s section at `height_m` (`RobotBody.section`) placed at `pose` (None: nothing of it there).
+
+        Returns:
+            Its segments (M, 4) and circles (K, 3) in the world frame, m.
+        """
+        cached = self._placed.get((i, height_m))
+        if cached is not None and cached[0] == pose:
+            return cached[1], cached[2]
+        x, y, yaw = pose
+        segs, circs = self.bodies[i].section(height_m)
+        c, s = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, s], [-s, c]])  # row vectors: p @ rot is R p
+        placed_segs = placed_circs = None
+        if len(segs):
+            placed_segs = np.empty_like(segs)
+            placed_segs[:, 0:2] = segs[:, 0:2] @ rot + (x, y)
+            placed_segs[:, 2:4] = segs[:, 2:4] @ rot + (x, y)
+        if len(circs):
+            placed_circs = np.empty_like(circs)
+            placed_circs[:, 0:2] = circs[:, 0:2] @ rot + (x, y)
+            placed_circs[:, 2] = circs[:, 2]
+        self._placed[(i, height_m)] = (pose, placed_segs, placed_circs)
+        return placed_segs, placed_circs
 
     def check_spawn(self) -> None:
         """Refuse two robots spawned touching each other, naming both and their distance.
@@ -470,20 +498,13 @@ class FleetView:
             return cached[1]
         segments: list[np.ndarray] = []
         circles: list[np.ndarray] = []
-        for j, (x, y, yaw) in zip(self.others, poses, strict=True):
-            segs, circs = self.fleet.body(j).section(key)
-            c, s = math.cos(yaw), math.sin(yaw)
-            rot = np.array([[c, s], [-s, c]])  # row vectors: p @ rot is R p
-            if len(segs):
-                placed = np.empty_like(segs)
-                placed[:, 0:2] = segs[:, 0:2] @ rot + (x, y)
-                placed[:, 2:4] = segs[:, 2:4] @ rot + (x, y)
-                segments.append(placed)
-            if len(circs):
-                placed = np.empty_like(circs)
-                placed[:, 0:2] = circs[:, 0:2] @ rot + (x, y)
-                placed[:, 2] = circs[:, 2]
-                circles.append(placed)
+        placed_section = self.fleet.placed_section
+        for j, pose in zip(self.others, poses, strict=True):
+            segs, circs = placed_section(j, key, pose)
+            if segs is not None:
+                segments.append(segs)
+            if circs is not None:
+                circles.append(circs)
         caster = None
         if segments or circles:
             caster = ObstacleCaster(

@@ -331,3 +331,22 @@ def test_near_a_wall_the_free_distance_is_the_walls_and_the_robots_are_not_measu
         true = min(me.body.distance_to(me.drive.pose, g.body, g.drive.pose) for g in others)
         assert free <= min(0.03, true), step
     assert measures[0] > 1
+
+
+def test_the_lidar_views_of_a_fleet_share_each_robots_placed_section_and_follow_it() -> None:
+    # The lidars of a fleet scan at the same instants: robot3's section at the lidar's height is
+    # placed once for robot1's and robot2's views, and placed again when robot3 moves.
+    groups = [_group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (0.0, 2.0, 0.0)), _group("robot3", (2.0, 1.0, 0.5))]
+    fleet = Fleet(groups)
+    height = groups[0].robot.base_height_m + groups[0].robot.lidar.mount.z_m
+    views = [FleetView(fleet, 0), FleetView(fleet, 1)]
+    seen = [v.caster(height) for v in views]
+    assert all(c is not None for c in seen)
+    housing = [c.shapes[1][-1] for c in seen if c is not None]  # robot3's lidar housing, last in each
+    assert housing[0] == pytest.approx(housing[1]) and housing[0][0] == pytest.approx(2.0 - 0.049 * math.cos(0.5))
+    key = round(height, 9)
+    placed = fleet.placed_section(2, key, groups[2].drive.pose)
+    assert fleet.placed_section(2, key, groups[2].drive.pose)[1] is placed[1]  # placed once, then shared
+    groups[2].drive.pose = (3.0, 1.0, 0.5)
+    moved = [v.caster(height) for v in views]
+    assert [c.shapes[1][-1][0] for c in moved if c is not None] == pytest.approx([3.0 - 0.049 * math.cos(0.5)] * 2)
