@@ -12,7 +12,7 @@ A `Fleet` holds the robot groups of a run with more than one robot (`robots:` in
   shapes at the lidar's height, where that robot is at the time of the scan.
 
 What one robot's drive asks of the others each step stays about as cheap with eight robots as with
-two: the fleet keeps an odometer (`Fleet.travel`, every robot's motion summed), so a robot's free
+two: the fleet keeps an odometer (`Fleet.travel_nm`, every robot's motion summed), so a robot's free
 distance and its `repeats_free` look at the robots near it and bound the far ones by how far
 the other robots moved since they were last measured (the odometer less the robot's own share,
 `Fleet.own_nm`), instead of measuring every robot at every step.
@@ -255,8 +255,8 @@ class FleetMonitor:
         self._far: tuple[_Pose, int, float, tuple[int, ...]] | None = None
         self.near_m = _NEAR_M
         """The gap within which `free_m` measures another robot at every call (inf: every robot)."""
-        # The last measured free distance: the pose and odometer then, and the distance. Used only
-        # when the world (`inner`) does not move (`static`); moving obstacles need a new look.
+        # The other robots' part of the last measured free distance: the pose and the other robots'
+        # odometer then, and that part. Used only when the world (`inner`) does not move (`static`).
         self._measured: tuple[_Pose, int, float] | None = None
         self._static = bool(getattr(inner, "static", False))
         # When the last measurement found no free motion because of another robot (its gap, from the
@@ -341,9 +341,10 @@ class FleetMonitor:
         that bound is used up. The robots farther than `_NEAR_M` at the last full look are bounded
         by the fleet's odometer, and looked at again only when that bound could decide the answer:
         the measurement is the same as measuring every robot, at the cost of the near ones. In a
-        world that does not move, a measurement then answers (less this robot's motion and the other
-        robots' since, `Fleet.own_nm`) while it stays above `keep_m`, far more than a robot moves
-        between two events: the compiled loop runs the same steps as with a new measurement.
+        world that does not move, the other robots' part of a measurement is kept, and answers
+        (less this robot's motion and the other robots' since, `Fleet.own_nm`) with the world's
+        free distance asked again, while it stays above `keep_m`: far more than a robot moves
+        between two events, so the compiled loop runs the same steps as with a new measurement.
 
         A robot pressed against another is asked again and again at the same pose while that one
         stands still. When the last measurement found no free motion because of one robot's gap,
