@@ -255,9 +255,10 @@ class FleetMonitor:
         self._far: tuple[_Pose, int, float, tuple[int, ...]] | None = None
         self.near_m = _NEAR_M
         """The gap within which `free_m` measures another robot at every call (inf: every robot)."""
-        # The other robots' part of the last measured free distance: the pose and the other robots'
-        # odometer then, and that part. Used only when the world (`inner`) does not move (`static`).
-        self._measured: tuple[_Pose, int, float] | None = None
+        # The last measured free distance: the pose and the other robots' odometer then, the
+        # distance and its other robots' part. Used only when the world (`inner`) does not move
+        # (`static`): the distance less all motion since bounds the world's part too.
+        self._measured: tuple[_Pose, int, float, float] | None = None
         self._static = bool(getattr(inner, "static", False))
         # When the last measurement found no free motion because of another robot (its gap, from the
         # exact distances kept, at or below 0): this robot's pose, that robot and its pose then.
@@ -358,15 +359,20 @@ class FleetMonitor:
         radius = fleet.radii[i]
         measured = self._measured
         if measured is not None:
-            (mx, my, myaw), others_nm, value = measured
+            (mx, my, myaw), others_nm, value, robots = measured
             moved = math.hypot(x_m - mx, y_m - my) + radius * abs(math.remainder(yaw_rad - myaw, math.tau))
-            bound = value - moved - (fleet.travel_nm - fleet.own_nm[i] - others_nm) * 1e-9 - _ROUNDING_M
-            if bound > self.keep_m:
+            since = moved + (fleet.travel_nm - fleet.own_nm[i] - others_nm) * 1e-9 + _ROUNDING_M
+            keep_m = self.keep_m
+            if value - since > keep_m:  # the whole distance still holds: no need to ask the world
+                return value - since
+            bound = robots - since
+            if bound > keep_m:  # the robots' part holds: the world's (its own bound) asked again
                 inner = self.inner.free_m(x_m, y_m, yaw_rad)
                 return 0.0 if inner <= 0.0 else inner if inner < bound else bound
         free, robots = self._measure(x_m, y_m, yaw_rad, radius)
         keep = self._static and 2.0 * self.keep_m < robots < math.inf
-        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[i], robots) if keep else None
+        whole = free if free > 2.0 * self.keep_m else 0.0  # (a world's part as small is asked at each call)
+        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[i], whole, robots) if keep else None
         j = self._stopped_by
         pressed = free <= 0.0 and j >= 0 and self.keep_m < math.inf  # keep_m inf: measure at every call
         self._touching = ((x_m, y_m, yaw_rad), j, self._where(j)) if pressed else None
