@@ -12,9 +12,10 @@ A `Fleet` holds the robot groups of a run with more than one robot (`robots:` in
   shapes at the lidar's height, where that robot is at the time of the scan.
 
 What one robot's drive asks of the others each step stays about as cheap with eight robots as with
-two: the fleet keeps an odometer (`Fleet.travel`, every robot's motion summed), so a robot's free
+two: the fleet keeps an odometer (`Fleet.travel_nm`, every robot's motion summed), so a robot's free
 distance and its `repeats_free` look at the robots near it and bound the far ones by how far
-anything moved since they were last measured, instead of measuring every robot at every step.
+the other robots moved since they were last measured (the odometer less the robot's own share,
+`Fleet.own_nm`), instead of measuring every robot at every step.
 
 Nothing here coordinates the robots: each learns of the others from its own sensors only.
 """
@@ -114,6 +115,12 @@ class Fleet:
         Any robot's centre moved at most the odometer's increase since a moment: a distance
         measured then, less that increase, bounds the distance now. Whole nanometres, each motion
         rounded up, so the sum has no rounding of its own however long the run."""
+        self.own_nm = [0] * len(self.groups)
+        """Each robot's share of `travel_nm`: `travel_nm - own_nm[i]` is what the robots other than
+        `i` moved, all that can bring them nearer to robot `i` where it stands."""
+        # Per (robot, height): its shapes' section placed at a pose, shared by every other robot's
+        # lidar view (the lidars of a fleet scan at the same instants, each seeing the same robot).
+        self._placed: dict[tuple[int, float], tuple[_Pose, np.ndarray | None, np.ndarray | None]] = {}
 
     def body(self, i: int) -> RobotBody:
         """Robot `i`'s collision body."""
@@ -130,6 +137,31 @@ class Fleet:
             return (p.x_m, p.y_m, p.yaw_rad)
         s = drive.chassis_state()
         return (s.x_m, s.y_m, s.yaw_rad)
+
+    def placed_section(self, i: int, height_m: float, pose: _Pose) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Robot `i`'s section at `height_m` (`RobotBody.section`) placed at `pose` (None: nothing of it there).
+
+        Returns:
+            Its segments (M, 4) and circles (K, 3) in the world frame, m.
+        """
+        cached = self._placed.get((i, height_m))
+        if cached is not None and cached[0] == pose:
+            return cached[1], cached[2]
+        x, y, yaw = pose
+        segs, circs = self.bodies[i].section(height_m)
+        c, s = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, s], [-s, c]])  # row vectors: p @ rot is R p
+        placed_segs = placed_circs = None
+        if len(segs):
+            placed_segs = np.empty_like(segs)
+            placed_segs[:, 0:2] = segs[:, 0:2] @ rot + (x, y)
+            placed_segs[:, 2:4] = segs[:, 2:4] @ rot + (x, y)
+        if len(circs):
+            placed_circs = np.empty_like(circs)
+            placed_circs[:, 0:2] = circs[:, 0:2] @ rot + (x, y)
+            placed_circs[:, 2] = circs[:, 2]
+        self._placed[(i, height_m)] = (pose, placed_segs, placed_circs)
+        return placed_segs, placed_circs
 
     def check_spawn(self) -> None:
         """Refuse two robots spawned touching each other, naming both and their distance.
@@ -156,8 +188,12 @@ class Fleet:
         standing: list[_Pose] = [g.drive.chassis_state()[:3] for g in groups]  # (x, y, yaw) of each
         radii = self.radii
         last = self._last
-        if last is not None and last != standing:  # moved between advances (by hand): on the odometer too
-            self.travel_nm += sum(_nm(_moved(a, *b, r)) for a, b, r in zip(last, standing, radii, strict=True))
+        own = self.own_nm
+        if last is not None and last != standing:  # moved between advances (by hand): on the odometers too
+            for i, (a, b, r) in enumerate(zip(last, standing, radii, strict=True)):
+                nm = _nm(_moved(a, *b, r))
+                self.travel_nm += nm
+                own[i] += nm
         self._standing = standing
         hypot, remainder, tau, ceil = math.hypot, math.remainder, math.tau, math.ceil
         try:
@@ -169,8 +205,9 @@ class Fleet:
                 if x != bx or y != by or yaw != byaw:
                     standing[i] = (x, y, yaw)
                     # _nm(_moved(...)), inline: this runs for every robot at every event
-                    moved = hypot(x - bx, y - by) + radii[i] * abs(remainder(yaw - byaw, tau))
-                    self.travel_nm += ceil(moved * 1e9) + 1
+                    nm = ceil((hypot(x - bx, y - by) + radii[i] * abs(remainder(yaw - byaw, tau))) * 1e9) + 1
+                    self.travel_nm += nm
+                    own[i] += nm
         finally:
             self._standing = None
             self._moving = -1
@@ -218,10 +255,15 @@ class FleetMonitor:
         self._far: tuple[_Pose, int, float, tuple[int, ...]] | None = None
         self.near_m = _NEAR_M
         """The gap within which `free_m` measures another robot at every call (inf: every robot)."""
-        # The last measured free distance: the pose and odometer then, and the distance. Used only
-        # when the world (`inner`) does not move (`static`); moving obstacles need a new look.
-        self._measured: tuple[_Pose, int, float] | None = None
+        # The last measured free distance: the pose and the other robots' odometer then, the
+        # distance and its other robots' part. Used only when the world (`inner`) does not move
+        # (`static`): the distance less all motion since bounds the world's part too.
+        self._measured: tuple[_Pose, int, float, float] | None = None
         self._static = bool(getattr(inner, "static", False))
+        # When the last measurement found no free motion because of another robot (its gap, from the
+        # exact distances kept, at or below 0): this robot's pose, that robot and its pose then.
+        self._touching: tuple[_Pose, int, _Pose] | None = None
+        self._stopped_by = -1  # the robot whose gap ended `_free_among`'s last look at 0 or below (-1: none)
         self.keep_m = _KEEP_M
         """`free_m` answers from its last measurement while that bound stays above this (inf: never)."""
 
@@ -269,7 +311,7 @@ class FleetMonitor:
                     del recent[next(iter(recent))]  # the oldest
                 recent[key] = pair
             found += pair
-        self._last_free = None if found else (pose, fleet.travel_nm, far, tuple(asked))
+        self._last_free = None if found else (pose, fleet.travel_nm - fleet.own_nm[self.index], far, tuple(asked))
         found.sort(key=lambda c: -c.depth_m)
         return tuple(found)
 
@@ -279,16 +321,17 @@ class FleetMonitor:
         It would when the world's check repeats its answer (`inner.repeats_free`), the robots it
         asked about stand where they stood, and the others are still too far to be asked about:
         the check's answer is a function of the pose and where the robots near it stand. "Still
-        too far" is the nearest one's gap then less the fleet's odometer since (any robot moved
-        less), so nothing here loops over the whole fleet.
+        too far" is the nearest one's gap then less what the other robots moved since (their share
+        of the fleet's odometer: the pose is the same), so nothing here loops over the whole fleet.
         """
         last = self._last_free
         if last is None or last[0] != (x_m, y_m, yaw_rad) or not self.inner.repeats_free(x_m, y_m, yaw_rad):
             return False
-        _, travel_nm, far, asked = last
-        if far - (self.fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M <= _MARGIN_M:
+        _, others_nm, far, asked = last
+        fleet = self.fleet
+        if far - (fleet.travel_nm - fleet.own_nm[self.index] - others_nm) * 1e-9 - _ROUNDING_M <= _MARGIN_M:
             return False
-        return all(self._where(j) == where for j, where in asked)
+        return not asked or all(self._where(j) == where for j, where in asked)  # (mostly none asked)
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor another robot.
@@ -299,46 +342,72 @@ class FleetMonitor:
         that bound is used up. The robots farther than `_NEAR_M` at the last full look are bounded
         by the fleet's odometer, and looked at again only when that bound could decide the answer:
         the measurement is the same as measuring every robot, at the cost of the near ones. In a
-        world that does not move, a measurement then answers (less this robot's motion and the
-        fleet's odometer since) while it stays above `keep_m`, far more than a robot moves between
-        two events: the compiled loop runs the same steps as with a new measurement.
+        world that does not move, the other robots' part of a measurement is kept, and answers
+        (less this robot's motion and the other robots' since, `Fleet.own_nm`) with the world's
+        free distance asked again, while it stays above `keep_m`: far more than a robot moves
+        between two events, so the compiled loop runs the same steps as with a new measurement.
+
+        A robot pressed against another is asked again and again at the same pose while that one
+        stands still. When the last measurement found no free motion because of one robot's gap,
+        the same two poses answer 0 again without a look: that gap is a function of the two poses
+        and the exact distance kept for the pair, which only a measurement changes.
         """
-        fleet = self.fleet
-        radius = fleet.radii[self.index]
+        touching = self._touching
+        if touching is not None and touching[0] == (x_m, y_m, yaw_rad) and self._where(touching[1]) == touching[2]:
+            return 0.0  # pressed against that robot, neither moved: what a measurement answers again
+        fleet, i = self.fleet, self.index
+        radius = fleet.radii[i]
         measured = self._measured
         if measured is not None:
-            (mx, my, myaw), travel_nm, value = measured
+            (mx, my, myaw), others_nm, value, robots = measured
             moved = math.hypot(x_m - mx, y_m - my) + radius * abs(math.remainder(yaw_rad - myaw, math.tau))
-            bound = value - moved - (fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M
-            if bound > self.keep_m:
-                return bound
-        free = self._measure(x_m, y_m, yaw_rad, radius)
-        keep = self._static and 2.0 * self.keep_m < free < math.inf
-        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm, free) if keep else None
+            since = moved + (fleet.travel_nm - fleet.own_nm[i] - others_nm) * 1e-9 + _ROUNDING_M
+            keep_m = self.keep_m
+            if value - since > keep_m:  # the whole distance still holds: no need to ask the world
+                return value - since
+            bound = robots - since
+            if bound > keep_m:  # the robots' part holds: the world's (its own bound) asked again
+                inner = self.inner.free_m(x_m, y_m, yaw_rad)
+                return 0.0 if inner <= 0.0 else inner if inner < bound else bound
+        free, robots = self._measure(x_m, y_m, yaw_rad, radius)
+        keep = self._static and 2.0 * self.keep_m < robots < math.inf
+        whole = free if free > 2.0 * self.keep_m else 0.0  # (a world's part as small is asked at each call)
+        self._measured = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[i], whole, robots) if keep else None
+        j = self._stopped_by
+        pressed = free <= 0.0 and j >= 0 and self.keep_m < math.inf  # keep_m inf: measure at every call
+        self._touching = ((x_m, y_m, yaw_rad), j, self._where(j)) if pressed else None
         return free
 
-    def _measure(self, x_m: float, y_m: float, yaw_rad: float, radius: float) -> float:
-        """`free_m` measured: the world's free distance, the near robots' and a bound on the far ones'."""
+    def _measure(self, x_m: float, y_m: float, yaw_rad: float, radius: float) -> tuple[float, float]:
+        """`free_m` measured: the world's free distance, the near robots' and a bound on the far ones'.
+
+        Returns the free distance and the other robots' part of it alone (a bound on how far this
+        robot may move touching none of them; 0 when not looked at), which `free_m` keeps.
+        """
+        self._stopped_by = -1
         inner = self.inner.free_m(x_m, y_m, yaw_rad)
         if inner <= 0.0:
-            return 0.0
+            return 0.0, 0.0
         fleet = self.fleet
         far = self._far
         if far is not None:
-            (ax, ay, ayaw), travel_nm, far_gap, near = far
+            (ax, ay, ayaw), others_nm, far_gap, near = far
             moved = math.hypot(x_m - ax, y_m - ay) + radius * abs(math.remainder(yaw_rad - ayaw, math.tau))
-            bound = far_gap - moved - (fleet.travel_nm - travel_nm) * 1e-9 - _ROUNDING_M - _MARGIN_M
+            others_moved = (fleet.travel_nm - fleet.own_nm[self.index] - others_nm) * 1e-9
+            bound = far_gap - moved - others_moved - _ROUNDING_M - _MARGIN_M  # (its own motion: `moved`)
             # When every far robot's gap exceeds `bound`, none can lower the answer or stop the look
             # early: it is what looking at every robot in turn gives.
             if not near:
                 if bound > inner:
-                    return inner
+                    return inner, bound
             else:
                 updates: dict[int, tuple[_Pose, _Pose, float]] = {}
-                free = self._free_among(near, inner, x_m, y_m, yaw_rad, measured=updates)
+                # (Lowered from inf, it stops where lowering `inner` would: at the first gap at or below 0.)
+                robots = self._free_among(near, math.inf, x_m, y_m, yaw_rad, measured=updates)
+                free = inner if inner < robots else robots
                 if bound > max(free, 0.0):
                     self._exact.update(updates)
-                    return free if free > 0.0 else 0.0
+                    return (free if free > 0.0 else 0.0), (robots if robots < bound else bound)
         radii, near_list, far_gap = fleet.radii, [], math.inf
         for j in self.others:
             where = self._where(j)
@@ -347,9 +416,10 @@ class FleetMonitor:
                 far_gap = min(far_gap, gap)
             else:
                 near_list.append(j)
-        self._far = ((x_m, y_m, yaw_rad), fleet.travel_nm, far_gap, tuple(near_list))
-        free = self._free_among(self.others, inner, x_m, y_m, yaw_rad, measured=self._exact)
-        return free if free > 0.0 else 0.0
+        self._far = ((x_m, y_m, yaw_rad), fleet.travel_nm - fleet.own_nm[self.index], far_gap, tuple(near_list))
+        robots = self._free_among(self.others, math.inf, x_m, y_m, yaw_rad, measured=self._exact)
+        free = inner if inner < robots else robots
+        return (free if free > 0.0 else 0.0), robots
 
     def _free_among(
         self,
@@ -395,6 +465,7 @@ class FleetMonitor:
                     gap = distance - _TOLERANCE_M
             free = min(free, gap)
             if free <= 0.0:
+                self._stopped_by = j
                 return free
         return free
 
@@ -434,20 +505,13 @@ class FleetView:
             return cached[1]
         segments: list[np.ndarray] = []
         circles: list[np.ndarray] = []
-        for j, (x, y, yaw) in zip(self.others, poses, strict=True):
-            segs, circs = self.fleet.body(j).section(key)
-            c, s = math.cos(yaw), math.sin(yaw)
-            rot = np.array([[c, s], [-s, c]])  # row vectors: p @ rot is R p
-            if len(segs):
-                placed = np.empty_like(segs)
-                placed[:, 0:2] = segs[:, 0:2] @ rot + (x, y)
-                placed[:, 2:4] = segs[:, 2:4] @ rot + (x, y)
-                segments.append(placed)
-            if len(circs):
-                placed = np.empty_like(circs)
-                placed[:, 0:2] = circs[:, 0:2] @ rot + (x, y)
-                placed[:, 2] = circs[:, 2]
-                circles.append(placed)
+        placed_section = self.fleet.placed_section
+        for j, pose in zip(self.others, poses, strict=True):
+            segs, circs = placed_section(j, key, pose)
+            if segs is not None:
+                segments.append(segs)
+            if circs is not None:
+                circles.append(circs)
         caster = None
         if segments or circles:
             caster = ObstacleCaster(

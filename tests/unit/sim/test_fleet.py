@@ -253,3 +253,134 @@ def test_while_one_robot_advances_it_reads_itself_live_and_the_others_where_they
     assert groups[1].drive_node.seen == [((0.05, 0.0, 0.0), (2.05, 0.0, 0.0))]
     groups[1].drive.pose = (3.0, 0.0, 0.0)  # between advances every pose is read live
     assert fleet.pose(1) == (3.0, 0.0, 0.0)
+
+
+def _counting_measures(monitor: FleetMonitor) -> list[int]:
+    """Count the monitor's measurements (`_measure`: a look at the world and the robots)."""
+    count = [0]
+    measure = monitor._measure
+
+    def counted(*args: Any) -> tuple[float, float]:
+        count[0] += 1
+        return measure(*args)
+
+    monitor._measure = counted  # type: ignore[method-assign,assignment]
+    return count
+
+
+def test_a_robot_moving_among_still_ones_keeps_its_measured_free_distance_for_its_own_motion_alone() -> None:
+    # Seven robots stand still 0.3 m to 1 m away; robot1 drives away from them. Its kept free distance
+    # is less its own motion and the others' (none): one measurement lasts the whole drive, where
+    # the fleet's odometer alone (its own motion counted a second time) would ask for another.
+    me = _group("robot1", (0.0, 0.0, 0.0))
+    others = [_group(f"robot{k + 2}", (0.55 + 0.1 * k, 0.5 * (-1) ** k, 0.0)) for k in range(7)]
+    groups = [me, *others]
+    for g in groups:
+        g.drive_node = _Idle()
+    fleet = Fleet(groups)
+    monitor = FleetMonitor(_OpenWorld(), fleet, 0)
+    measures = _counting_measures(monitor)
+    first = monitor.free_m(*me.drive.pose)
+    assert 0.2 < first < 0.4
+    for _ in range(60):  # 0.12 m back, away from all of them
+        x, y, yaw = me.drive.pose
+        _moved_to(fleet, me, (x - 0.002, y, yaw))
+        free = monitor.free_m(*me.drive.pose)
+        true = min(me.body.distance_to(me.drive.pose, g.body, g.drive.pose) for g in others)
+        assert monitor.keep_m < free <= true
+    assert measures[0] == 1
+    # Another robot moves: its motion comes off the kept distance, down to a new measurement.
+    before = monitor.free_m(*me.drive.pose)
+    _moved_to(fleet, others[0], (0.5, 0.5, 0.0))
+    assert monitor.free_m(*me.drive.pose) == pytest.approx(before - 0.05, abs=1e-6)
+
+
+def test_a_robot_pressed_against_another_is_answered_as_a_measurement_answers_without_one() -> None:
+    # Robot1 pressed against robot2 is asked about the same pose again and again (it creeps below a
+    # pose's resolution) while robot3 drives about farther away and robot2 now and then moves.
+    # Every answer must be the one a monitor measuring at every call gives; most need no look.
+    me, touching = _group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (0.13, 0.0, math.pi))
+    walker = _group("robot3", (-1.0, 0.8, 0.0))
+    me.drive_node, touching.drive_node = _Idle(), _Idle()
+    walker.drive_node = _Walker(walker.drive, 3)
+    fleet = Fleet([me, touching, walker])
+    mine, every = FleetMonitor(_OpenWorld(), fleet, 0), FleetMonitor(_OpenWorld(), fleet, 0)
+    every.keep_m = every.near_m = math.inf  # measured at every call
+    measures = _counting_measures(mine)
+    rng = np.random.default_rng(5)
+    answers = []
+    for step in range(300):
+        fleet.advance(1)
+        if step % 37 == 36:  # robot2 shifts, pulls away or comes back
+            _moved_to(fleet, touching, (0.13 + float(rng.choice([0.0, 1e-4, 3e-3, 0.05])), 0.0, math.pi))
+        if step % 50 == 49:  # robot1 turns a little
+            x, y, yaw = me.drive.pose
+            _moved_to(fleet, me, (x, y, yaw + 0.01))
+        poses = [me.drive.pose]
+        if step % 10 == 0:  # and now and then a step back, as the drive's contact path asks
+            poses.append((me.drive.pose[0] - 0.002, 0.0, me.drive.pose[2]))
+        for pose in poses:
+            answer = mine.free_m(*pose)
+            assert answer == every.free_m(*pose), (step, pose)
+            answers.append(answer)
+    assert answers.count(0.0) > 200 and max(answers) > 0.0  # pressed most of the time, not always
+    assert measures[0] < len(answers) / 2
+
+
+class _NearWall(_OpenWorld):
+    """A wall 3 cm ahead wherever the robot stands: the world's free distance is always small."""
+
+    def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
+        return 0.03
+
+
+def test_near_a_wall_the_free_distance_is_the_walls_and_the_robots_are_not_measured_again() -> None:
+    # The world leaves 3 cm; the other robots, about a metre away, leave far more. Each call answers
+    # the world's 3 cm (what measuring every robot answers), and the robots' part, measured once, is
+    # kept less their motion and robot1's: no new look at them while that bound stays large.
+    rng = np.random.default_rng(7)
+    me = _group("robot1", (0.0, 0.0, 0.0))
+    others = [
+        _group(f"robot{k + 2}", (1.2 * math.cos(k), 1.2 * math.sin(k), float(rng.uniform(-3, 3)))) for k in range(5)
+    ]
+    for g in (me, *others):
+        g.drive_node = _Idle()
+    fleet = Fleet([me, *others])
+    mine, every = FleetMonitor(_NearWall(), fleet, 0), FleetMonitor(_NearWall(), fleet, 0)
+    every.keep_m = every.near_m = math.inf  # measured at every call
+    measures = _counting_measures(mine)
+    for step in range(100):
+        fleet.advance(1)
+        x, y, yaw = me.drive.pose
+        me.drive.pose = (x + 0.001, y, yaw + 0.002)
+        assert mine.free_m(*me.drive.pose) == every.free_m(*me.drive.pose) == 0.03, step
+    assert measures[0] == 1
+    # The robots come near: the kept bound runs out and they are measured again, never overstated.
+    for step in range(150):
+        for g in others:
+            gx, gy, gyaw = g.drive.pose
+            g.drive.pose = (gx * 0.995, gy * 0.995, gyaw)
+        fleet.advance(1)
+        free = mine.free_m(*me.drive.pose)
+        true = min(me.body.distance_to(me.drive.pose, g.body, g.drive.pose) for g in others)
+        assert free <= min(0.03, true), step
+    assert measures[0] > 1
+
+
+def test_the_lidar_views_of_a_fleet_share_each_robots_placed_section_and_follow_it() -> None:
+    # The lidars of a fleet scan at the same instants: robot3's section at the lidar's height is
+    # placed once for robot1's and robot2's views, and placed again when robot3 moves.
+    groups = [_group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (0.0, 2.0, 0.0)), _group("robot3", (2.0, 1.0, 0.5))]
+    fleet = Fleet(groups)
+    height = groups[0].robot.base_height_m + groups[0].robot.lidar.mount.z_m
+    views = [FleetView(fleet, 0), FleetView(fleet, 1)]
+    seen = [v.caster(height) for v in views]
+    assert all(c is not None for c in seen)
+    housing = [c.shapes[1][-1] for c in seen if c is not None]  # robot3's lidar housing, last in each
+    assert housing[0] == pytest.approx(housing[1]) and housing[0][0] == pytest.approx(2.0 - 0.049 * math.cos(0.5))
+    key = round(height, 9)
+    placed = fleet.placed_section(2, key, groups[2].drive.pose)
+    assert fleet.placed_section(2, key, groups[2].drive.pose)[1] is placed[1]  # placed once, then shared
+    groups[2].drive.pose = (3.0, 1.0, 0.5)
+    moved = [v.caster(height) for v in views]
+    assert [c.shapes[1][-1][0] for c in moved if c is not None] == pytest.approx([3.0 - 0.049 * math.cos(0.5)] * 2)
