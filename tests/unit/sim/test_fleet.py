@@ -377,10 +377,10 @@ def test_the_lidar_views_of_a_fleet_share_each_robots_placed_section_and_follow_
     seen = [v.caster(height) for v in views]
     assert all(c is not None for c in seen)
     housing = [c.shapes[1][-1] for c in seen if c is not None]  # robot3's lidar housing, last in each
-    assert housing[0] == pytest.approx(housing[1]) and housing[0][0] == pytest.approx(2.0 - 0.049 * math.cos(0.5))
+    assert housing[0] == pytest.approx(housing[1]) and housing[0][0] == pytest.approx(2.0 - 0.052 * math.cos(0.5))
     key = round(height, 9)
     placed = fleet.placed_section(2, key, groups[2].drive.pose)
     assert fleet.placed_section(2, key, groups[2].drive.pose)[1] is placed[1]  # placed once, then shared
     groups[2].drive.pose = (3.0, 1.0, 0.5)
     moved = [v.caster(height) for v in views]
-    assert [c.shapes[1][-1][0] for c in moved if c is not None] == pytest.approx([3.0 - 0.049 * math.cos(0.5)] * 2)
+    assert [c.shapes[1][-1][0] for c in moved if c is not None] == pytest.approx([3.0 - 0.052 * math.cos(0.5)] * 2)
