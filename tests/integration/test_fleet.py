@@ -118,17 +118,23 @@ def _pose_at(messages: list[tuple[int, Any]], t_ns: int) -> tuple[float, float, 
     return pose.position.x, pose.position.y, 2.0 * math.atan2(q.z, q.w)
 
 
+def _robot_lidar_housing(scenario_path: Path) -> tuple[Any, Any, Any]:
+    """The fleet's robot model, its lidar and its LDS housing's collision (a cylinder)."""
+    robot = scenario_robot(load_scenario(scenario_path).robot_scenarios()[0][1])
+    assert robot.lidar is not None
+    housing = next(c for c in robot.collisions if c.link.endswith("base_scan"))
+    assert isinstance(housing.geometry, Cylinder)
+    return robot, robot.lidar, housing
+
+
 @pytest.mark.parametrize(("me", "other"), [("robot1", "robot2"), ("robot2", "robot1")])
 def test_each_lidar_sees_the_other_robot_where_it_truly_is(
     fleet_run: tuple[dict[str, Any], Any, Path], me: str, other: str
 ) -> None:
     _, messages, scenario_path = fleet_run
-    robot = scenario_robot(load_scenario(scenario_path).robot_scenarios()[0][1])
-    lidar = robot.lidar
-    assert lidar is not None
+    _, lidar, housing = _robot_lidar_housing(scenario_path)
     # The other robot's lidar housing is what stands at lidar height (the Waffle's base is lower).
-    housing = next(c for c in robot.collisions if c.link.endswith("base_scan"))
-    hx, hr = float(housing.T_world[0, 3]), float(housing.geometry.radius_m)  # type: ignore[attr-defined]
+    hx, hr = float(housing.T_world[0, 3]), housing.geometry.radius_m
     t_ns, scan = messages[f"/{me}/scan"][0]  # both still at their spawn poses
     mx, my, myaw = _pose_at(messages[f"/{me}/ground_truth/odom"], t_ns)
     ox, oy, oyaw = _pose_at(messages[f"/{other}/ground_truth/odom"], t_ns)
@@ -178,12 +184,9 @@ def test_every_scan_shows_the_other_waffle_as_its_lidar_housing_not_its_base(
     # robot's LDS housing (placed by ground truth) read its distance within the lidar's noise, and
     # beams that cross its base box but miss the housing pass on beyond the box.
     _, messages, scenario_path = fleet_run
-    robot = scenario_robot(load_scenario(scenario_path).robot_scenarios()[0][1])
-    lidar = robot.lidar
-    assert lidar is not None
-    housing = next(c for c in robot.collisions if c.link.endswith("base_scan"))
+    robot, lidar, housing = _robot_lidar_housing(scenario_path)
     base = next(c for c in robot.collisions if c.name == "base_collision")
-    assert isinstance(housing.geometry, Cylinder) and isinstance(base.geometry, Box)
+    assert isinstance(base.geometry, Box)
     hx, hr = float(housing.T_world[0, 3]), housing.geometry.radius_m
     bx, half = float(base.T_world[0, 3]), base.geometry.size_m[0] / 2
     mine, theirs = _track(messages[f"/{me}/ground_truth/odom"]), _track(messages[f"/{other}/ground_truth/odom"])

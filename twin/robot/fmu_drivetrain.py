@@ -100,8 +100,10 @@ _WHEEL_STATE = (
     "volt_right",
 )
 _WHEELS = len(_WHEEL_STATE)
+_WHEEL_ATTRIBUTES = tuple(f"_{name}" for name in _WHEEL_STATE)
 # The wheels' state and then the chassis' (`ChassisDynamics`) follow each other in the loop's structure.
 _STATE_SPAN = DriveLoop.span(_WHEEL_STATE + ChassisDynamics._fields)
+_STATE_AT = DriveLoop.offset(_WHEEL_STATE[0])
 
 
 class FmuDrivetrain(Closing):
@@ -401,38 +403,15 @@ class FmuDrivetrain(Closing):
     def _to_native(self) -> None:
         """Hand the wheels' and the chassis' state to the compiled loop (one `struct` call)."""
         assert self._loop is not None
-        _STATE_SPAN.pack_into(
-            self._loop.buffer,
-            self._loop.offset(_WHEEL_STATE[0]),
-            self._target_left,
-            self._target_right,
-            self._ref_left,
-            self._ref_right,
-            self._w_left,
-            self._w_right,
-            self._int_left,
-            self._int_right,
-            self._volt_left,
-            self._volt_right,
-            *self._chassis.dynamics(),
-        )
+        wheels = (getattr(self, name) for name in _WHEEL_ATTRIBUTES)
+        _STATE_SPAN.pack_into(self._loop.buffer, _STATE_AT, *wheels, *self._chassis.dynamics())
 
     def _to_python(self) -> None:
         """Take the wheels' and the chassis' state back from the compiled loop (one `struct` call)."""
         assert self._loop is not None
-        values = _STATE_SPAN.unpack_from(self._loop.buffer, self._loop.offset(_WHEEL_STATE[0]))
-        (
-            self._target_left,
-            self._target_right,
-            self._ref_left,
-            self._ref_right,
-            self._w_left,
-            self._w_right,
-            self._int_left,
-            self._int_right,
-            self._volt_left,
-            self._volt_right,
-        ) = values[:_WHEELS]
+        values = _STATE_SPAN.unpack_from(self._loop.buffer, _STATE_AT)
+        for name, value in zip(_WHEEL_ATTRIBUTES, values[:_WHEELS], strict=True):
+            setattr(self, name, value)
         self._chassis.set_dynamics(ChassisDynamics._make(values[_WHEELS:]))
 
     def _probe(self, binding: Binding) -> float:
