@@ -22,6 +22,11 @@ def test_a_tree_spinning_on_wake_ups_is_named_at_every_sample() -> None:
     wheres: list[str] = []
 
     def watch() -> None:
+        # Sample only once the main thread is in the tick: on a loaded machine it may not have reached
+        # `tick_once` by the first sample (that sample would name the test, rightly).
+        deadline = time.monotonic() + 60.0
+        while "tree node '" not in describe_thread(main)[0] and time.monotonic() < deadline:
+            time.sleep(0.001)
         for _ in range(80):
             time.sleep(0.002)
             wheres.append(describe_thread(main)[0])
