@@ -18,14 +18,10 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import REPO, run_twin
+from tests.integration.fleet_helpers import ONE_GOAL_TREE, simulate_and_read, write_goals
 from twin.sim.robot_group import scenario_robot
 from twin.sim.scenario_file import load_scenario
 from twin.world.types import Box, Cylinder
-
-TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
-  <BehaviorTree ID="MainTree"><GoToPose name="go" loc="goal"/></BehaviorTree>
-</root>
-"""
 
 SCENARIO = """
 name: two_waffles
@@ -49,24 +45,11 @@ def fleet_run(
     tmp_path_factory: pytest.TempPathFactory,
 ) -> tuple[dict[str, Any], dict[str, list[tuple[int, Any]]], Path]:
     tmp = tmp_path_factory.mktemp("fleet")
-    (tmp / "tree.xml").write_text(TREE)
-    files = {}
-    for name, (x, y, yaw) in GOALS.items():
-        files[name] = tmp / f"{name}_locations.yaml"
-        files[name].write_text(f"goal: [{x}, {y}, {yaw}]\n")
+    tree, files = write_goals(tmp, GOALS)
     scenario = tmp / "two.yaml"
-    scenario.write_text(SCENARIO.format(tree=tmp / "tree.xml", goal1=files["robot1"], goal2=files["robot2"]))
-    bag = tmp / "bag"
-    result = run_twin("simulate", str(scenario), "--out", str(bag), "--json")
-    assert result.returncode == 0, result.stderr
-    summary = json.loads(result.stdout)
-    messages: dict[str, list[tuple[int, Any]]] = {}
-    with AnyReader([bag]) as reader:
-        for con, t_ns, raw in reader.messages():
-            if con.topic.endswith(("/scan", "/tf", "/tf_static", "/ground_truth/odom")):
-                messages.setdefault(con.topic, []).append((t_ns, reader.deserialize(raw, con.msgtype)))
-            else:
-                messages.setdefault(con.topic, []).append((t_ns, None))
+    scenario.write_text(SCENARIO.format(tree=tree, goal1=files["robot1"], goal2=files["robot2"]))
+    decoded = ("/scan", "/tf", "/tf_static", "/ground_truth/odom")
+    summary, messages = simulate_and_read(scenario, tmp / "bag", lambda con: con.topic.endswith(decoded))
     return summary, messages, scenario
 
 
@@ -323,7 +306,7 @@ def test_a_robot_whose_mission_fails_is_named_and_the_run_exits_1(tmp_path: Path
         '<root BTCPP_format="4" main_tree_to_execute="MainTree">\n'
         '  <BehaviorTree ID="MainTree"><AlwaysFailure name="give_up"/></BehaviorTree>\n</root>\n'
     )
-    (tmp_path / "tree.xml").write_text(TREE)
+    (tmp_path / "tree.xml").write_text(ONE_GOAL_TREE)
     (tmp_path / "goal.yaml").write_text("goal: [-1.0, -0.5, -2.25]\n")
     scenario = tmp_path / "s.yaml"
     scenario.write_text(

@@ -9,21 +9,15 @@ nav2_bringup's namespaced TF (only the names differ).
 from __future__ import annotations
 
 import itertools
-import json
 from pathlib import Path
 from typing import Any
 
 import pytest
-from rosbags.highlevel import AnyReader
 
 from tests.conftest import run_twin
+from tests.integration.fleet_helpers import Messages, simulate_and_read, write_goals
 from twin.core.errors import ConfigError
 from twin.sim.scenario_file import load_scenario
-
-TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
-  <BehaviorTree ID="MainTree"><GoToPose name="go" loc="goal"/></BehaviorTree>
-</root>
-"""
 
 SCENARIO = """
 name: two_waffles_prefixed
@@ -58,23 +52,12 @@ def _frames(msg: Any, out: set[str]) -> None:
             _frames(item, out)
 
 
-def _run(tmp: Path, tf: str) -> tuple[dict[str, Any], dict[str, list[tuple[int, Any]]]]:
-    (tmp / "tree.xml").write_text(TREE)
-    files = {}
-    for name, (x, y, yaw) in GOALS.items():
-        files[name] = tmp / f"{name}_locations.yaml"
-        files[name].write_text(f"goal: [{x}, {y}, {yaw}]\n")
+def _run(tmp: Path, tf: str) -> tuple[dict[str, Any], Messages]:
+    tree, files = write_goals(tmp, GOALS)
     scenario = tmp / "two.yaml"
-    scenario.write_text(SCENARIO.format(tf=tf, tree=tmp / "tree.xml", goal1=files["robot1"], goal2=files["robot2"]))
-    bag = tmp / "bag"
-    result = run_twin("simulate", str(scenario), "--out", str(bag), "--json")
-    assert result.returncode == 0, result.stderr
-    messages: dict[str, list[tuple[int, Any]]] = {}
-    with AnyReader([bag]) as reader:
-        for con, t_ns, raw in reader.messages():
-            keep = con.msgtype not in ("rcl_interfaces/msg/Log", "std_msgs/msg/String")
-            messages.setdefault(con.topic, []).append((t_ns, reader.deserialize(raw, con.msgtype) if keep else None))
-    return json.loads(result.stdout), messages
+    scenario.write_text(SCENARIO.format(tf=tf, tree=tree, goal1=files["robot1"], goal2=files["robot2"]))
+    skipped = ("rcl_interfaces/msg/Log", "std_msgs/msg/String")
+    return simulate_and_read(scenario, tmp / "bag", lambda con: con.msgtype not in skipped)
 
 
 @pytest.fixture(scope="module")

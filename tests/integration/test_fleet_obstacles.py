@@ -8,16 +8,15 @@ world's `/obstacles` is published once, not once per robot.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from rosbags.highlevel import AnyReader
 
 from tests.conftest import REPO, run_twin
+from tests.integration.fleet_helpers import simulate_and_read
 from twin.sim.robot_group import scenario_robot
 from twin.sim.scenario_file import load_scenario
 
@@ -54,15 +53,9 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], dict[
     tmp = tmp_path_factory.mktemp("fleet_obstacles")
     scenario = tmp / "boxes.yaml"
     scenario.write_text(SCENARIO)
-    bag = tmp / "bag"
-    result = run_twin("simulate", str(scenario), "--out", str(bag), "--json")
-    assert result.returncode == 0, result.stderr
-    messages: dict[str, list[tuple[int, Any]]] = {}
-    with AnyReader([bag]) as reader:
-        for con, t_ns, raw in reader.messages():
-            if con.topic.endswith(("/scan", "/contacts", "/ground_truth/odom", "/obstacles")):
-                messages.setdefault(con.topic, []).append((t_ns, reader.deserialize(raw, con.msgtype)))
-    return json.loads(result.stdout), messages, scenario
+    decoded = ("/scan", "/contacts", "/ground_truth/odom", "/obstacles")
+    summary, messages = simulate_and_read(scenario, tmp / "bag", lambda con: con.topic.endswith(decoded))
+    return summary, messages, scenario
 
 
 def _scan_origin(

@@ -7,13 +7,10 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import run_twin
+from tests.integration.fleet_helpers import ONE_GOAL_TREE
 from tests.integration.sweep_helpers import read_table
 from twin.analysis import run_metrics
 
-TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
-  <BehaviorTree ID="MainTree"><GoToPose name="go" loc="goal"/></BehaviorTree>
-</root>
-"""
 GIVE_UP = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
   <BehaviorTree ID="MainTree"><AlwaysFailure name="give_up"/></BehaviorTree>
 </root>
@@ -34,7 +31,7 @@ robots:
 @pytest.fixture(scope="module")
 def fleet_sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict[str, str]], str]:
     tmp = tmp_path_factory.mktemp("fleet_sweep")
-    (tmp / "tree.xml").write_text(TREE)
+    (tmp / "tree.xml").write_text(ONE_GOAL_TREE)
     (tmp / "give_up.xml").write_text(GIVE_UP)
     (tmp / "g1.yaml").write_text("goal: [-1.0, -0.5, -2.25]\n")
     (tmp / "g2.yaml").write_text("goal: [4.0, 0.5, 1.571]\n")

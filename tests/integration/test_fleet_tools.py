@@ -18,6 +18,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import REPO, run_twin
+from tests.integration.fleet_helpers import ONE_GOAL_TREE
 
 ROBOTS = ("robot1", "robot2")
 
@@ -31,11 +32,6 @@ def fleet_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     assert proc.returncode == 0, proc.stderr
     return bag
 
-
-TREE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
-  <BehaviorTree ID="MainTree"><GoToPose name="go" loc="goal"/></BehaviorTree>
-</root>
-"""
 
 # Head on: each robot's goal is behind the other, 1.5 m apart; they meet in the middle and touch.
 HEAD_ON = """
@@ -55,7 +51,7 @@ robots:
 @pytest.fixture(scope="module")
 def head_on_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tmp = tmp_path_factory.mktemp("head_on")
-    (tmp / "tree.xml").write_text(TREE)
+    (tmp / "tree.xml").write_text(ONE_GOAL_TREE)
     (tmp / "g1.yaml").write_text("goal: [2.0, 0.0, 0.0]\n")
     (tmp / "g2.yaml").write_text("goal: [-0.5, 0.0, 3.14]\n")
     scenario = tmp / "head_on.yaml"
