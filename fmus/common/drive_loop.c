@@ -13,10 +13,10 @@
  * (how far the robot may move with no contact possible) and the loop counts the chassis' motion
  * bound, translation plus |rotation| x reach_m, over the steps it takes; it stops before the chassis
  * update of a step that would reach the budget, so the caller can do that update with the contact
- * checks. A step with no motion needs no contact check and is always taken; nor does a step whose
- * motion is below the pose's float resolution (the pose stays where it is) at the pose the caller
- * last checked free (`free_pose_known`): the caller's check there would answer free again. A robot
- * pressed against another creeps so, step after step, in the mode its contact does not block.
+ * checks. A step that leaves the pose where it is needs no contact check and is always taken: one
+ * with no motion, and one whose motion is below the pose's float resolution (a stopped wheel's speed
+ * decays for ever; a robot pressed against another creeps so in the mode its contact does not
+ * block). Chassis.update never refuses such a step either.
  */
 #include <math.h>
 #include <stdbool.h>
@@ -36,9 +36,7 @@ typedef struct {
     int has_slip;                /* 0: no slip anywhere (then slip and the regions are unused) */
     int failed;                  /* out: the slot that failed, else -1 */
     int stopped_on_budget;       /* out: the last run stopped before a chassis update on the budget */
-    int free_pose_known;         /* in: the caller's last contact check, at free_*, found that pose free */
     double budget_m;             /* in: motion known free of contact for the next run (INFINITY: no world) */
-    double free_x_m, free_y_m, free_yaw_rad; /* in: that pose (with free_pose_known) */
     double step_s;               /* communication step */
     double kp, ki, v_max;        /* PI: V per rad/s, V per rad, output clamp V */
     double cmd_scale, cmd_offset, load_scale, load_offset, speed_scale, speed_offset; /* twin <-> FMU units */
@@ -91,11 +89,9 @@ static double slip_at(const TwinDrive *d, double x, double y) {
 
 static double unit_ramp(double a) { return a > 1.0 ? 1.0 : (a < -1.0 ? -1.0 : a); }
 
-/* Whether a step at body speeds v, w leaves the pose exactly where it is, at the pose the caller last
- * checked free (the same arithmetic as chassis_step's update, so "the same" is bit for bit). */
-static bool stays_at_free_pose(const TwinDrive *d, double v, double w) {
-    if (!d->free_pose_known || d->x_m != d->free_x_m || d->y_m != d->free_y_m || d->yaw_rad != d->free_yaw_rad)
-        return false;
+/* Whether a step at body speeds v, w leaves the pose exactly where it is (the same arithmetic as
+ * chassis_step's update, so "the same" is bit for bit). */
+static bool stays_in_place(const TwinDrive *d, double v, double w) {
     const double h = d->step_s, yaw = d->yaw_rad, vh = v * h, mid = yaw + 0.5 * w * h;
     return d->x_m + vh * cos(mid) == d->x_m && d->y_m + vh * sin(mid) == d->y_m && yaw + w * h == yaw;
 }
@@ -117,7 +113,7 @@ static bool chassis_step(TwinDrive *d, double *used_m, double usable_m) {
         const double travel = fabs(v * h) + d->reach_m * fabs(w * h);
         if (*used_m + travel < usable_m) {
             *used_m += travel;
-        } else if (!stays_at_free_pose(d, v, w)) {
+        } else if (!stays_in_place(d, v, w)) {
             return false;
         }
     }

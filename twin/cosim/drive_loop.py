@@ -38,14 +38,10 @@ class _DriveState(ctypes.Structure):
         ("has_slip", ctypes.c_int),
         ("failed", ctypes.c_int),
         ("stopped_on_budget", ctypes.c_int),
-        ("free_pose_known", ctypes.c_int),
         *(
             (name, _D)
             for name in (
                 "budget_m",
-                "free_x_m",
-                "free_y_m",
-                "free_yaw_rad",
                 "step_s",
                 "kp",
                 "ki",
@@ -114,10 +110,6 @@ _WRITABLE = frozenset(field[0] for field in _DriveState._fields_) - {
     "failed",
     "stopped_on_budget",
     "budget_m",
-    "free_pose_known",
-    "free_x_m",
-    "free_y_m",
-    "free_yaw_rad",
 }
 MAX_RUN = 1 << 30  # steps per C call (its count is an int)
 

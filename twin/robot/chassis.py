@@ -15,7 +15,10 @@ Load torques (wheel side, per wheel) for the next step are
   would penetrate is refused: if turning alone is free the chassis only turns (translation blocked),
   else it stays. A blocked mode gets a holding torque (the estimated drive torque plus damping), so
   the wheels stall and, with the voltage held, the current rises to about V/R. The block lifts when
-  the drive pushes the other way.
+  the drive pushes the other way. A step that leaves the pose where it is, to the last bit (a
+  stopped wheel's speed decays for ever, 1e-18 rad/s and less), is never refused and blocks
+  nothing: the direction of such a speed is noise, and a block in it would hold the robot against
+  its next command. It needs no check either, even at a pose something else moved into.
 
 `Chassis.update` is the reference of the compiled drive loop (`fmus/common/drive_loop.c`), which
 does the same arithmetic in C; `coefficients`, `dynamics` and `set_dynamics` hand a chassis to it
@@ -297,17 +300,20 @@ class Chassis:
         vh = v * h
         mid = yaw + 0.5 * w * h
         nx, ny, nyaw = x + vh * math.cos(mid), y + vh * math.sin(mid), yaw + w * h
+        # Whether the step moves the pose at all: a speed too small to change a coordinate by one
+        # float step (a stopped wheel's last 1e-18 rad/s) moves nothing, so nothing can refuse it.
+        drives, turns = nx != x or ny != y, nyaw != yaw
         blocked = False
         contact = self._contact
-        if contact is not None and (v or w) and contact(nx, ny, nyaw):
+        if contact is not None and (drives or turns) and contact(nx, ny, nyaw):
             blocked = True
-            if v and (not w or contact(x, y, nyaw)):
+            if drives and (not turns or contact(x, y, nyaw)):
                 self._block_common = 1.0 if v > 0.0 else -1.0
                 v = 0.0
-            if w and contact(x, y, nyaw):
+            if turns and contact(x, y, nyaw):
                 self._block_diff = 1.0 if w > 0.0 else -1.0
                 w = 0.0
-            if v and w:  # moving and turning together collide, each alone does not: stop moving
+            if v and w and drives and turns:  # moving and turning together collide, each alone does not: stop moving
                 self._block_common = 1.0 if v > 0.0 else -1.0
                 v = 0.0
             mid = yaw + 0.5 * w * h

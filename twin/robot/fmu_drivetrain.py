@@ -12,10 +12,9 @@ reference, `api: lowlevel` or `convenience`) and the compiled one (`api: native`
 `twin.cosim.drive_loop`), which runs a whole batch of steps in one C call. Contact stays in Python:
 the compiled loop runs while the robot's motion stays inside the distance the world reports free
 (`free_distance`), and the steps near the world run on the Python path with the contact check
-each step. A robot pressed against something often creeps in the mode its contact does not block,
-below the pose's float resolution: such a step leaves the pose where it is, and when the last check
-found that very pose free and the world near it has not moved since (`repeats_free`), the
-compiled loop takes it without a check, as the check would have answered free again.
+each step. A step that leaves the pose where it is, to the last bit, needs no check on either path
+(`Chassis.update`): a robot pressed against something often creeps so, below the pose's float
+resolution, in the mode its contact does not block, and a stopped wheel's speed decays for ever.
 """
 
 from __future__ import annotations
@@ -118,7 +117,6 @@ class FmuDrivetrain(Closing):
         pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
         contact: ContactFn | None = None,
         free_distance: DistanceFn | None = None,
-        repeats_free: Callable[[float, float, float], bool] | None = None,
         bounding_radius_m: float = 0.0,
         plugin_wheel_acceleration_mps2: float | None = None,
         robot_name: str = "",
@@ -134,10 +132,6 @@ class FmuDrivetrain(Closing):
             free_distance: `(x_m, y_m, yaw_rad) -> m` the robot may move from there with no
                 contact possible (e.g. `CollisionMonitor.free_m`). With `contact` and without it,
                 every moving step checks contact on the Python path.
-            repeats_free: `(x_m, y_m, yaw_rad) -> bool`, True when the last contact check was at
-                this pose, found it free, and would find it free again now (e.g.
-                `CollisionMonitor.repeats_free`). The compiled loop then takes the steps that leave
-                the robot at that pose without asking `contact`. None: every such step asks it.
             bounding_radius_m: The radius `free_distance` counts rotation with (the farthest point
                 of the robot's collision shape from its base frame).
             plugin_wheel_acceleration_mps2: The robot SDF diff-drive plugin's `max_wheel_acceleration`
@@ -157,7 +151,6 @@ class FmuDrivetrain(Closing):
             raise ValueError(msg)
         self._contact = contact
         self._free = free_distance
-        self._repeats_free = repeats_free
         self._reach_m = bounding_radius_m
         comm_s, self._ratio = communication_step(drive, step_ns)
         self._pending = 0
@@ -313,7 +306,6 @@ class FmuDrivetrain(Closing):
         assert loop is not None
         state, step, raise_failure = loop.state, loop.step, loop.raise_failure
         contact, free, near_world, ratio, inf = self._contact, self._free, self._near_world, self._ratio, math.inf
-        repeats_free = self._repeats_free
 
         def advance(n_steps: int) -> None:
             count = n_steps
@@ -321,9 +313,6 @@ class FmuDrivetrain(Closing):
                 pending = self._pending + n_steps
                 count = pending // ratio
                 self._pending = pending - count * ratio
-            if state.free_pose_known and count:  # the world may have moved since that check
-                assert repeats_free is not None
-                state.free_pose_known = repeats_free(state.free_x_m, state.free_y_m, state.free_yaw_rad)
             while count:
                 if contact is None:
                     budget = inf
@@ -540,9 +529,6 @@ class FmuDrivetrain(Closing):
         assert self._loop is not None
         run, state = self._loop.run, self._loop.state
         contact, free = self._contact, self._free
-        if state.free_pose_known:  # the world may have moved since that check
-            assert self._repeats_free is not None
-            state.free_pose_known = self._repeats_free(state.free_x_m, state.free_y_m, state.free_yaw_rad)
         while count:
             if contact is None:
                 budget = math.inf
@@ -559,12 +545,12 @@ class FmuDrivetrain(Closing):
         runs on the Python path, and so do the following steps while the chassis moves and
         `free_distance` reports no free motion. A chassis at rest (stalled against a wall) goes
         back to the compiled loop, which takes steps without motion and no contact check; so does
-        a chassis whose last step left its pose where it was, at a pose its check found free
-        (`repeats_free`): the compiled loop takes its steps while the pose stays there. Returns
-        the steps left for the compiled loop.
+        a chassis whose last step left its pose where it was (creeping below the pose's float
+        resolution): the compiled loop takes such steps without a check, as this path does.
+        Returns the steps left for the compiled loop.
         """
         self._to_python()
-        chassis, free, repeats_free = self._chassis, self._free, self._repeats_free
+        chassis, free = self._chassis, self._free
         try:
             before = (chassis.x_m, chassis.y_m, chassis.yaw_rad)
             chassis.update(self._w_left, self._w_right)
@@ -575,25 +561,14 @@ class FmuDrivetrain(Closing):
                 and (free is None or free(chassis.x_m, chassis.y_m, chassis.yaw_rad) <= 0.0)
             ):
                 pose = (chassis.x_m, chassis.y_m, chassis.yaw_rad)
-                if repeats_free is not None and pose == before and repeats_free(*pose):
-                    break  # creeping in place at a pose checked free: the compiled loop's steps
+                if pose == before:
+                    break  # creeping in place: the compiled loop's steps
                 before = pose
                 self._run_python(1)
                 count -= 1
             return count
         finally:
             self._to_native()
-            if repeats_free is not None:
-                self._remember_free_pose(repeats_free)
-
-    def _remember_free_pose(self, repeats_free: Callable[[float, float, float], bool]) -> None:
-        """Tell the compiled loop whether the chassis stands at a pose its last contact check found free."""
-        assert self._loop is not None
-        state, chassis = self._loop.state, self._chassis
-        known = repeats_free(chassis.x_m, chassis.y_m, chassis.yaw_rad)
-        state.free_pose_known = known
-        if known:
-            state.free_x_m, state.free_y_m, state.free_yaw_rad = chassis.x_m, chassis.y_m, chassis.yaw_rad
 
     # The two step loops below are the Python reference of the per-step path: everything they need
     # is bound to locals once per batch, and the loop body is straight-line code (one compiled call

@@ -13,7 +13,7 @@ A `Fleet` holds the robot groups of a run with more than one robot (`robots:` in
 
 What one robot's drive asks of the others each step stays about as cheap with eight robots as with
 two: the fleet keeps an odometer (`Fleet.travel_nm`, every robot's motion summed), so a robot's free
-distance and its `repeats_free` look at the robots near it and bound the far ones by how far
+distance looks at the robots near it and bounds the far ones by how far
 the other robots moved since they were last measured (the odometer less the robot's own share,
 `Fleet.own_nm`), instead of measuring every robot at every step.
 
@@ -59,8 +59,6 @@ class _Monitor(Protocol):
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]: ...
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float: ...
-
-    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool: ...
 
 
 class _Group(Protocol):
@@ -243,13 +241,9 @@ class FleetMonitor:
         self._exact: dict[int, tuple[tuple[float, float, float], tuple[float, float, float], float]] = {}
         # Per other robot: (this robot's pose, the other's) -> their contacts, for the last few pairs
         # of poses asked. A robot pressed against another is asked about the same few poses step
-        # after step (its motion is below a float's resolution, and `Chassis.update` asks about the
-        # refused step and the turn alone); the shapes are rigid, so the same poses give the same
-        # contacts, whatever the robots farther away do.
+        # after step (`Chassis.update` asks about the refused step and the turn alone); the shapes
+        # are rigid, so the same poses give the same contacts, whatever the robots farther away do.
         self._recent: dict[int, dict[tuple[_Pose, _Pose], tuple[Contact, ...]]] = {j: {} for j in self.others}
-        # The last check, when it found its pose free: that pose, the odometer then, the smallest gap
-        # of the robots it did not ask about (inf: none), and the ones it asked about with their poses.
-        self._last_free: tuple[_Pose, int, float, tuple[tuple[int, _Pose], ...]] | None = None
         # For `free_m`: the pose and odometer of its last full look, the smallest gap of the robots
         # farther than _NEAR_M then (inf: none), and the nearer ones (in index order).
         self._far: tuple[_Pose, int, float, tuple[int, ...]] | None = None
@@ -275,21 +269,15 @@ class FleetMonitor:
         """Return the contacts at this pose: the world's first, else the other robots' (empty when free)."""
         contacts = self.inner.check(x_m, y_m, yaw_rad)
         if contacts:
-            self._last_free = None
             return contacts
         fleet, body = self.fleet, self.fleet.body(self.index)
         radius, radii = body.radius_m, fleet.radii
         pose = (x_m, y_m, yaw_rad)
         found: list[Contact] = []
-        asked: list[tuple[int, _Pose]] = []
-        far = math.inf
         for j in self.others:
             where = self._where(j)
-            gap = math.hypot(where[0] - x_m, where[1] - y_m) - radius - radii[j]
-            if gap > _MARGIN_M:
-                far = min(far, gap)
+            if math.hypot(where[0] - x_m, where[1] - y_m) - radius - radii[j] > _MARGIN_M:
                 continue
-            asked.append((j, where))
             recent = self._recent[j]
             key = (pose, where)
             pair = recent.get(key)
@@ -311,27 +299,8 @@ class FleetMonitor:
                     del recent[next(iter(recent))]  # the oldest
                 recent[key] = pair
             found += pair
-        self._last_free = None if found else (pose, fleet.travel_nm - fleet.own_nm[self.index], far, tuple(asked))
         found.sort(key=lambda c: -c.depth_m)
         return tuple(found)
-
-    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
-        """Whether the last check was at this pose and found it free, and would find it free again now.
-
-        It would when the world's check repeats its answer (`inner.repeats_free`), the robots it
-        asked about stand where they stood, and the others are still too far to be asked about:
-        the check's answer is a function of the pose and where the robots near it stand. "Still
-        too far" is the nearest one's gap then less what the other robots moved since (their share
-        of the fleet's odometer: the pose is the same), so nothing here loops over the whole fleet.
-        """
-        last = self._last_free
-        if last is None or last[0] != (x_m, y_m, yaw_rad) or not self.inner.repeats_free(x_m, y_m, yaw_rad):
-            return False
-        _, others_nm, far, asked = last
-        fleet = self.fleet
-        if far - (fleet.travel_nm - fleet.own_nm[self.index] - others_nm) * 1e-9 - _ROUNDING_M <= _MARGIN_M:
-            return False
-        return not asked or all(self._where(j) == where for j, where in asked)  # (mostly none asked)
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor another robot.

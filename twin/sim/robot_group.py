@@ -421,7 +421,6 @@ class RobotGroup:
             pose=pose,
             contact=self.tracker.touches,
             free_distance=monitor.free_m,
-            repeats_free=monitor.repeats_free,
             bounding_radius_m=bounding_radius_m,
             plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2,
             robot_name=robot.name,

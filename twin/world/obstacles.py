@@ -589,7 +589,3 @@ class ObstacleMonitor:
         if walls <= 0.0 or not self.field.active:
             return walls
         return min(walls, self.field.free_m(x_m, y_m, yaw_rad))
-
-    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
-        """Never vouched for: the obstacles move between checks (a drive checks every step near them)."""
-        return False

@@ -965,9 +965,6 @@ class CollisionMonitor:
     stays where it was and tries the same step again). The scene does not move, so the answers of
     the last few queried poses are kept and a pose asked again is answered from them: the same
     contacts and the same free distance as a new query, without FCL.
-
-    After a check found a pose free, a check at that same pose answers free again, leaving the
-    monitor as it was (`repeats_free`): a drive creeping in place needs no new check.
     """
 
     RECENT_POSES = 8
@@ -988,7 +985,6 @@ class CollisionMonitor:
         """How many FCL queries were made (for benchmarks)."""
         self.repeats = 0
         """How many checks were answered from the poses asked before."""
-        self._last_free: tuple[float, float, float] | None = None  # the last check's pose, if it was free
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may still move from this pose with no contact possible (0 if unknown)."""
@@ -999,10 +995,9 @@ class CollisionMonitor:
     def check(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Return the contacts at this pose (empty tuple when free)."""
         moved = math.hypot(x_m - self._x, y_m - self._y) + self.body.radius_m * abs(yaw_rad - self._yaw)
-        pose = (x_m, y_m, yaw_rad)
         if moved < self._free_m:
-            self._last_free = pose
             return ()
+        pose = (x_m, y_m, yaw_rad)
         known = self._recent.get(pose)
         if known is not None:
             self.repeats += 1
@@ -1014,17 +1009,7 @@ class CollisionMonitor:
             if len(recent) >= self.RECENT_POSES:
                 del recent[next(iter(recent))]  # the oldest
             recent[pose] = (contacts, self._free_m)
-        self._last_free = None if contacts else pose
         return contacts
-
-    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
-        """Whether the last check was at this pose and found it free (a check there now would too).
-
-        A free answer leaves a positive free distance anchored within reach of the pose (or the
-        anchor as it was, the pose inside its free distance), so asking again answers free, with
-        no FCL query and nothing changed; the scene does not move.
-        """
-        return self._last_free == (x_m, y_m, yaw_rad)
 
     def _query(self, x_m: float, y_m: float, yaw_rad: float) -> tuple[Contact, ...]:
         """Ask FCL about this pose; set the free distance from it."""

@@ -247,54 +247,94 @@ def test_native_readers_return_what_the_loop_structure_holds(profile: str, fmu: 
         assert dt.chassis_state().x_m != 0.0
 
 
-class LastCheck:
-    """A static world's contact check that knows its last answer (`CollisionMonitor.repeats_free`'s contract)."""
-
-    def __init__(self, contact: Callable[[float, float, float], bool]) -> None:
-        self.contact = contact
-        self.calls = 0
-        self.last_free: tuple[float, float, float] | None = None
-
-    def __call__(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
-        self.calls += 1
-        hit = self.contact(x_m, y_m, yaw_rad)
-        self.last_free = None if hit else (x_m, y_m, yaw_rad)
-        return hit
-
-    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
-        return self.last_free == (x_m, y_m, yaw_rad)
-
-
 @pytest.mark.parametrize("profile,fmu", [("voltage", "xm430_w210"), ("velocity-servo", "xm430_w210_servo")])
-def test_a_drive_creeping_in_place_at_a_free_pose_stays_in_the_compiled_loop(profile: str, fmu: str) -> None:
+def test_a_drive_creeping_in_place_against_a_wall_stays_in_the_compiled_loop(profile: str, fmu: str) -> None:
     # Driven into a wall at x = 1.05 with a turn far below the yaw's float resolution: the wall blocks
     # the forward motion and the turn goes on at ~1e-14 rad/s, leaving the pose where it is, step
-    # after step. The Python path checks each of those steps; the compiled loop, told the pose was
-    # checked free, takes them without a check, along the same trajectory.
+    # after step. Such a step moves nothing, so neither path checks it or refuses it: the compiled
+    # loop takes them all, along the Python path's trajectory.
     script = ((0.15, 1e-14, 600), (0.15, 1e-14, 1500), (-0.1, 0.0, 300))
     drive = FmuDrive(fmu=f"builtin:{fmu}", profile=profile)  # type: ignore[arg-type]
     runs = {}
-    for api, vouch in (("native", True), ("native", False), ("lowlevel", False)):
-        check = LastCheck(lambda x, y, yaw: x > 1.05)
+    for api in ("native", "lowlevel"):
+        contact = Counted(lambda x, y, yaw: x > 1.05)
         with FmuDrivetrain(
             FmuDrive(**{**_fields(drive), "api": api}),  # type: ignore[arg-type]
             WAFFLE,
             step_ns=MS,
             pose=(1.0, 2.0, 0.3),
-            contact=check,
+            contact=contact,
             free_distance=lambda x, y, yaw: max(0.0, 1.05 - 1e-3 - x),  # none left within 1 mm of the wall
-            repeats_free=check.repeats_free if vouch else None,
             bounding_radius_m=0.2,
         ) as dt:
-            runs[api, vouch] = (_drive_script(dt, script), check.calls)
-    (fast, fast_calls), (native, native_calls), (python, _) = runs.values()
-    assert_same(fast, python)
+            runs[api] = (_drive_script(dt, script), contact.calls)
+    (native, native_calls), (python, python_calls) = runs.values()
     assert_same(native, python)
     blocked = [record[9] for record in python]
     assert sum(blocked) > 100 and not blocked[-1]  # pressed against the wall, then backed off
     creeping = [now for before, now in itertools.pairwise(python) if now[9] and now[5] and now[1:4] == before[1:4]]
     assert len(creeping) > 100  # turning (yaw rate not 0) with the pose unchanged
-    assert fast_calls < native_calls / 10  # the approach and the backing off only
+    # The compiled loop checks near the wall only (the Python path at every moving step), and none of
+    # the creeping steps: the approach and the backing off, of 2400 steps.
+    assert native_calls < 100 < python_calls
+
+
+class MovingFace:
+    """A face at `x = at` that the robot's flat front (0.2 m ahead, 0.3 m wide) must not cross, moved
+    as another robot moves between the drive's advances."""
+
+    def __init__(self, at: float) -> None:
+        self.at = at
+        self.calls = 0
+
+    def front(self, x_m: float, yaw_rad: float) -> float:
+        """The front's farthest x: turning either way brings a corner forward."""
+        return x_m + 0.2 * math.cos(yaw_rad) + 0.15 * abs(math.sin(yaw_rad))
+
+    def __call__(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        self.calls += 1
+        return self.front(x_m, yaw_rad) > self.at
+
+    def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
+        return max(0.0, self.at - 1e-3 - self.front(x_m, yaw_rad))
+
+
+@pytest.mark.parametrize("api", ["native", "lowlevel"])
+def test_a_stopped_robot_something_moved_into_backs_off_once_it_has_gone(api: str) -> None:
+    # Driven, turned and stopped: its wheels slow towards zero for ever (each step's motion below the
+    # pose's resolution, its sign noise). Then a face is moved into its front, as another robot comes
+    # into one that stands, and later away. Those steps move nothing, so nothing refuses them: no
+    # check, and no block in the direction of the noise, which would hold the robot against its
+    # next command (it did, for ever: a 1e-18 m/s backwards step refused set "blocked backwards").
+    phases = (
+        (1.5, 0.15, 0.0, 500),
+        (1.5, 0.0, 0.3, 600),
+        (1.5, 0.0, 0.0, 1500),
+        (1.26, 0.0, 0.0, 2500),
+        (1.5, -0.1, 0.0, 600),
+    )
+    face = MovingFace(phases[0][0])
+    with FmuDrivetrain(
+        FmuDrive(fmu="builtin:xm430_w210_servo", profile="velocity-servo", api=api),
+        WAFFLE,
+        step_ns=MS,
+        pose=(1.0, 2.0, 0.0),
+        contact=face,
+        free_distance=face.free_m,
+        bounding_radius_m=0.25,
+    ) as dt:
+        calls = []
+        for at, v, w, steps in phases:
+            face.at = at
+            dt.set_cmd_vel(v, w)
+            dt.advance(steps)
+            calls.append(face.calls)
+            if at == 1.26:
+                stopped = dt.chassis_state()
+                assert face.front(stopped.x_m, stopped.yaw_rad) > 1.26 and not stopped.blocked  # the face in it
+        end = dt.chassis_state()
+    assert calls[3] == calls[2]  # 2500 steps standing in contact, none checked
+    assert end.x_m < stopped.x_m - 0.03 and not end.blocked  # backed off
 
 
 def test_the_state_handed_to_the_compiled_loop_and_back_is_every_field_by_name() -> None:

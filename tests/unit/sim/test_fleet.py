@@ -41,9 +41,6 @@ class _OpenWorld:
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         return math.inf
 
-    def repeats_free(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
-        return True
-
 
 def _group(namespace: str, pose: tuple[float, float, float]) -> Any:
     robot = scenario_robot(load_scenario(default_scenario_path()))
@@ -157,31 +154,6 @@ def _moved_to(fleet: Fleet, group: Any, pose: tuple[float, float, float]) -> Non
     """Move a robot by hand, and let the fleet see it (as a run's robots move: in its advance)."""
     group.drive.pose = pose
     fleet.advance(1)
-
-
-def test_a_free_pose_is_vouched_for_while_no_robot_near_it_moves() -> None:
-    # The drive takes the steps that leave it at the pose its last check found free without a new
-    # check, while that check would answer free again: the robots near the pose stand still.
-    me = _group("robot1", (0.0, 0.0, 0.0))
-    near, far = _group("robot2", (0.2, 0.0, math.pi)), _group("robot3", (2.0, 0.0, 0.0))
-    for g in (me, near, far):
-        g.drive_node = _Idle()
-    fleet = Fleet([me, near, far])
-    monitor = FleetMonitor(_OpenWorld(), fleet, 0)
-    pose = (0.0, 0.0, 0.0)
-    assert not monitor.repeats_free(*pose)  # nothing checked yet
-    assert monitor.check(*pose) == ()
-    assert monitor.repeats_free(*pose) and not monitor.repeats_free(0.0, 0.0, 1e-9)
-    _moved_to(fleet, far, (1.5, 1.0, 0.0))  # moved, but too far to be asked about
-    assert monitor.repeats_free(*pose)
-    _moved_to(fleet, near, (0.19, 0.0, math.pi))  # the robot near it moved: the answer may differ
-    assert not monitor.repeats_free(*pose)
-    assert monitor.check(*pose) == () and monitor.repeats_free(*pose)
-    _moved_to(fleet, far, (0.0, 0.25, -math.pi / 2))  # the far one came near
-    assert not monitor.repeats_free(*pose)
-    _moved_to(fleet, near, (0.13, 0.0, math.pi))
-    assert monitor.check(*pose) != () and not monitor.repeats_free(*pose)  # a contact is never vouched for
-    assert monitor.check(-0.5, 0.0, 0.0) == () and not monitor.repeats_free(*pose)  # the last check was elsewhere
 
 
 class _Walker:

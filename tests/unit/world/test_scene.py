@@ -243,22 +243,6 @@ def test_the_monitor_answers_a_repeated_pose_with_the_same_free_distance(tmp_pat
     assert monitor.free_m(*near) == free
 
 
-def test_the_monitor_vouches_for_its_last_pose_only_when_that_check_found_it_free(tmp_path: Path) -> None:
-    # A drive creeping in place asks `repeats_free` instead of checking again: it must be true only
-    # when a check at that pose now answers free, leaving the monitor as it was.
-    scene, monitor = _robot_scene(tmp_path)
-    grazing, touching = (0.95 - 0.073 - 0.003, 0.0, 0.0), (0.8805, 0.0, 0.0)
-    assert not monitor.repeats_free(*grazing)  # nothing checked yet
-    for pose in [(0.5, 0.0, 0.0), grazing, grazing, (0.8, 0.0, 0.1), grazing]:  # fresh queries and repeats
-        assert monitor.check(*pose) == ()
-        assert monitor.repeats_free(*pose) and not monitor.repeats_free(pose[0], pose[1], pose[2] + 1e-9)
-        queries, repeats, free = monitor.queries, monitor.repeats, monitor.free_m(*pose)
-        assert monitor.check(*pose) == () and monitor.repeats_free(*pose)  # as vouched for ...
-        assert (monitor.queries, monitor.repeats, monitor.free_m(*pose)) == (queries, repeats, free)  # ... unchanged
-    assert scene.collides(monitor.body, *touching)
-    assert monitor.check(*touching) != () and not monitor.repeats_free(*touching)
-
-
 @pytest.mark.parametrize("name", ["turtlebot3_world.world", "turtlebot3_house.world", "empty_world.world"])
 def test_obstacle_extent_is_what_the_scene_holds(name: str) -> None:
     world = load_world(
