@@ -47,6 +47,11 @@ __all__ = ["FmuDrivetrain", "Saturation", "wheel_setpoints"]
 
 _log = logging.getLogger(__name__)
 
+# A blocked mode is probed this far in its direction at each advance (rotation: this far at the
+# robot's bounding radius); free there, what blocked it has gone and the block lifts, m. More than
+# a refused step leaves between the robot and what refused it (0.26 m/s x 1 ms).
+_BLOCK_PROBE_M = 2e-3
+
 
 def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits: CommandLimits) -> tuple[float, float]:
     """Inverse kinematics with the firmware's clamps: body command → (left, right) wheel speeds, rad/s."""
@@ -117,6 +122,7 @@ class FmuDrivetrain(Closing):
         pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
         contact: ContactFn | None = None,
         free_distance: DistanceFn | None = None,
+        probe: Callable[[float, float, float], object] | None = None,
         bounding_radius_m: float = 0.0,
         plugin_wheel_acceleration_mps2: float | None = None,
         robot_name: str = "",
@@ -132,6 +138,10 @@ class FmuDrivetrain(Closing):
             free_distance: `(x_m, y_m, yaw_rad) -> m` the robot may move from there with no
                 contact possible (e.g. `CollisionMonitor.free_m`). With `contact` and without it,
                 every moving step checks contact on the Python path.
+            probe: `(x_m, y_m, yaw_rad) -> truthy` when that pose would penetrate the world, with no
+                side effect (the contact monitor's own check; default `contact`). At each advance
+                a blocked mode is probed a little further in its direction and lifts when that is
+                free: a robot pushing against another one that leaves follows it.
             bounding_radius_m: The radius `free_distance` counts rotation with (the farthest point
                 of the robot's collision shape from its base frame).
             plugin_wheel_acceleration_mps2: The robot SDF diff-drive plugin's `max_wheel_acceleration`
@@ -151,6 +161,7 @@ class FmuDrivetrain(Closing):
             raise ValueError(msg)
         self._contact = contact
         self._free = free_distance
+        self._touching = probe if probe is not None else contact
         self._reach_m = bounding_radius_m
         comm_s, self._ratio = communication_step(drive, step_ns)
         self._pending = 0
@@ -306,6 +317,7 @@ class FmuDrivetrain(Closing):
         assert loop is not None
         state, step, raise_failure = loop.state, loop.step, loop.raise_failure
         contact, free, near_world, ratio, inf = self._contact, self._free, self._near_world, self._ratio, math.inf
+        probe, free_blocks = self._touching, self._free_blocks
 
         def advance(n_steps: int) -> None:
             count = n_steps
@@ -313,6 +325,10 @@ class FmuDrivetrain(Closing):
                 pending = self._pending + n_steps
                 count = pending // ratio
                 self._pending = pending - count * ratio
+            if count and probe is not None and (state.block_common or state.block_diff):
+                state.block_common, state.block_diff = free_blocks(
+                    state.x_m, state.y_m, state.yaw_rad, state.block_common, state.block_diff
+                )
             while count:
                 if contact is None:
                     budget = inf
@@ -522,7 +538,37 @@ class FmuDrivetrain(Closing):
         count = self._pending // self._ratio
         self._pending -= count * self._ratio
         if count:
+            self._release_blocks()
             self._run(count)
+
+    def _release_blocks(self) -> None:
+        """Lift a blocked mode whose motion is free again (`_free_blocks`), in the loop's state or the chassis'."""
+        if self._touching is None:
+            return
+        if self._loop is not None:
+            s = self._loop.state
+            if s.block_common or s.block_diff:
+                s.block_common, s.block_diff = self._free_blocks(s.x_m, s.y_m, s.yaw_rad, s.block_common, s.block_diff)
+            return
+        d = self._chassis.dynamics()
+        if d.block_common or d.block_diff:
+            common, diff = self._free_blocks(d.x_m, d.y_m, d.yaw_rad, d.block_common, d.block_diff)
+            self._chassis.set_dynamics(d._replace(block_common=common, block_diff=diff))
+
+    def _free_blocks(self, x: float, y: float, yaw: float, common: float, diff: float) -> tuple[float, float]:
+        """The block flags with each mode lifted whose motion, probed `_BLOCK_PROBE_M` on, touches nothing.
+
+        A block holds while the drive pushes into it; without this, it held after what blocked it
+        had gone (another robot driving off): a robot blocked turning left could then never turn left.
+        """
+        probe = self._touching
+        assert probe is not None
+        step = _BLOCK_PROBE_M
+        if common and not probe(x + common * step * math.cos(yaw), y + common * step * math.sin(yaw), yaw):
+            common = 0.0
+        if diff and not probe(x, y, yaw + diff * step / max(self._reach_m, step)):
+            diff = 0.0
+        return common, diff
 
     def _run_native(self, count: int) -> None:
         """Run `count` steps in the compiled loop, and on the Python path where contact is possible."""

@@ -421,6 +421,7 @@ class RobotGroup:
             pose=pose,
             contact=self.tracker.touches,
             free_distance=monitor.free_m,
+            probe=monitor.check,
             bounding_radius_m=bounding_radius_m,
             plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2,
             robot_name=robot.name,

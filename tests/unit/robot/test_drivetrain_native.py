@@ -265,6 +265,7 @@ def test_a_drive_creeping_in_place_against_a_wall_stays_in_the_compiled_loop(pro
             pose=(1.0, 2.0, 0.3),
             contact=contact,
             free_distance=lambda x, y, yaw: max(0.0, 1.05 - 1e-3 - x),  # none left within 1 mm of the wall
+            probe=lambda x, y, yaw: x > 1.05,  # (the blocked drive's probe at each advance, not counted)
             bounding_radius_m=0.2,
         ) as dt:
             runs[api] = (_drive_script(dt, script), contact.calls)
@@ -354,3 +355,44 @@ def test_the_state_handed_to_the_compiled_loop_and_back_is_every_field_by_name()
         assert dt._loop.read(("x_m",))[0] == dt._chassis.x_m
     with pytest.raises(ValueError, match="yaw_rad does not follow"):
         DriveLoop.span(("x_m", "yaw_rad"))
+
+
+def test_a_robot_pushing_against_another_follows_it_when_it_drives_off() -> None:
+    # Pushing forward against a face (another robot) and turning left until a second obstacle stops
+    # the turn (at yaw 0.05): both modes blocked. The obstacles move off between advances; the
+    # blocks lift at the next advance (each blocked mode probed 2 mm on), and the robot goes on as
+    # commanded, on both paths alike. Before, a block held as long as the drive pushed, whatever
+    # had gone: a robot blocked turning left stayed so for the rest of a two-robot run while its
+    # controller asked for a left turn.
+    runs = {}
+    for api in ("native", "lowlevel"):
+        front = MovingFace(1.3)
+        turn_stop = {"yaw": 0.05}
+
+        def touches(
+            x: float, y: float, yaw: float, front: MovingFace = front, stop: dict[str, float] = turn_stop
+        ) -> bool:
+            return front(x, y, yaw) or yaw > stop["yaw"]
+
+        with FmuDrivetrain(
+            FmuDrive(fmu="builtin:xm430_w210_servo", profile="velocity-servo", api=api),  # type: ignore[arg-type]
+            WAFFLE,
+            step_ns=MS,
+            pose=(1.0, 2.0, 0.0),
+            contact=touches,
+            free_distance=lambda x, y, yaw: 0.0,  # every moving step checked, on both paths
+            bounding_radius_m=0.25,
+        ) as dt:
+            trace: Trace = []
+            dt.set_cmd_vel(0.15, 0.5)
+            for front_at, stop_yaw, steps in ((1.3, 0.05, 1500), (1.6, 0.05, 400), (1.6, 9.0, 600)):
+                front.at, turn_stop["yaw"] = front_at, stop_yaw
+                for _ in range(steps // 5):
+                    dt.advance(5)
+                trace.append((dt.t_ns, *dt.chassis_state()))
+            runs[api] = trace
+    assert_same(runs["native"], runs["lowlevel"])
+    pressed, followed, turned = runs["lowlevel"]
+    assert pressed[9] and MovingFace(1.3).front(pressed[1], pressed[3]) > 1.29 and 0.04 < pressed[3] <= 0.05
+    assert followed[1] > pressed[1] + 0.03 and followed[3] <= 0.05  # the face went: it drove on, not turning
+    assert turned[3] > 0.1  # the turn's obstacle went too: it turned left
