@@ -47,10 +47,14 @@ __all__ = ["FmuDrivetrain", "Saturation", "wheel_setpoints"]
 
 _log = logging.getLogger(__name__)
 
-# A blocked mode is probed this far in its direction at each advance (rotation: this far at the
-# robot's bounding radius); free there, what blocked it has gone and the block lifts, m. More than
-# a refused step leaves between the robot and what refused it (0.26 m/s x 1 ms).
+# A blocked mode is probed this far in its direction (rotation: this far at the robot's bounding
+# radius); free there, what blocked it has gone and the block lifts, m. More than a refused step
+# leaves between the robot and what refused it (0.26 m/s x 1 ms).
 _BLOCK_PROBE_M = 2e-3
+# ... at the first advance after each multiple of this much drive time, s: a pressed robot's probe
+# is an FCL query when the robot it touches has moved, and its block lifts within this of the way
+# clearing, which the controller (20 Hz) does not notice.
+_BLOCK_PROBE_S = 0.05
 
 
 def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits: CommandLimits) -> tuple[float, float]:
@@ -162,6 +166,7 @@ class FmuDrivetrain(Closing):
         self._contact = contact
         self._free = free_distance
         self._touching = probe if probe is not None else contact
+        self._next_probe = 0  # the communication step from which a blocked mode is probed again
         self._reach_m = bounding_radius_m
         comm_s, self._ratio = communication_step(drive, step_ns)
         self._pending = 0
@@ -317,7 +322,7 @@ class FmuDrivetrain(Closing):
         assert loop is not None
         state, step, raise_failure = loop.state, loop.step, loop.raise_failure
         contact, free, near_world, ratio, inf = self._contact, self._free, self._near_world, self._ratio, math.inf
-        probe, free_blocks = self._touching, self._free_blocks
+        probe, free_blocks, group = self._touching, self._free_blocks, self._group
 
         def advance(n_steps: int) -> None:
             count = n_steps
@@ -325,7 +330,9 @@ class FmuDrivetrain(Closing):
                 pending = self._pending + n_steps
                 count = pending // ratio
                 self._pending = pending - count * ratio
-            if count and probe is not None and (state.block_common or state.block_diff):
+            blocked = state.block_common or state.block_diff
+            if count and blocked and probe is not None and group.index >= self._next_probe:
+                self._probed()
                 state.block_common, state.block_diff = free_blocks(
                     state.x_m, state.y_m, state.yaw_rad, state.block_common, state.block_diff
                 )
@@ -542,24 +549,33 @@ class FmuDrivetrain(Closing):
             self._run(count)
 
     def _release_blocks(self) -> None:
-        """Lift a blocked mode whose motion is free again (`_free_blocks`), in the loop's state or the chassis'."""
-        if self._touching is None:
+        """Lift a blocked mode whose motion is free again (`_free_blocks`), when a probe is due."""
+        if self._touching is None or self._group.index < self._next_probe:
             return
         if self._loop is not None:
             s = self._loop.state
             if s.block_common or s.block_diff:
+                self._probed()
                 s.block_common, s.block_diff = self._free_blocks(s.x_m, s.y_m, s.yaw_rad, s.block_common, s.block_diff)
             return
         d = self._chassis.dynamics()
         if d.block_common or d.block_diff:
+            self._probed()
             common, diff = self._free_blocks(d.x_m, d.y_m, d.yaw_rad, d.block_common, d.block_diff)
             self._chassis.set_dynamics(d._replace(block_common=common, block_diff=diff))
+
+    def _probed(self) -> None:
+        """Set the next probe to the first communication step of the next `_BLOCK_PROBE_S` period."""
+        period = max(1, round(_BLOCK_PROBE_S / self._h))
+        index = self._group.index
+        self._next_probe = index - index % period + period
 
     def _free_blocks(self, x: float, y: float, yaw: float, common: float, diff: float) -> tuple[float, float]:
         """The block flags with each mode lifted whose motion, probed `_BLOCK_PROBE_M` on, touches nothing.
 
-        A block holds while the drive pushes into it; without this, it held after what blocked it
-        had gone (another robot driving off): a robot blocked turning left could then never turn left.
+        Asked at most every `_BLOCK_PROBE_S` of drive time (`_release_blocks`). Without it, a block
+        held as long as the drive pushed into it, whatever had gone: a robot blocked turning left
+        by another robot could never turn left again after that robot left.
         """
         probe = self._touching
         assert probe is not None
