@@ -15,10 +15,11 @@ Load torques (wheel side, per wheel) for the next step are
   would penetrate is refused: if turning alone is free the chassis only turns (translation blocked),
   else it stays. A blocked mode gets a holding torque (the estimated drive torque plus damping), so
   the wheels stall and, with the voltage held, the current rises to about V/R. The block lifts when
-  the drive pushes the other way. A step that leaves the pose where it is, to the last bit (a
-  stopped wheel's speed decays for ever, 1e-18 rad/s and less), is never refused and blocks
-  nothing: the direction of such a speed is noise, and a block in it would hold the robot against
-  its next command. It needs no check either, even at a pose something else moved into.
+  the drive pushes the other way (and, `FmuDrivetrain` sees to it, when what blocked it has gone).
+  A step that leaves the pose where it is, to the last bit (a stopped wheel's speed decays for
+  ever, 1e-18 rad/s and less), is never refused and blocks nothing: the direction of such a speed
+  is noise, and a block in it would hold the robot against its next command. It needs no check
+  either, even at a pose something else moved into.
 
 `Chassis.update` is the reference of the compiled drive loop (`fmus/common/drive_loop.c`), which
 does the same arithmetic in C; `coefficients`, `dynamics` and `set_dynamics` hand a chassis to it

@@ -143,9 +143,9 @@ class FmuDrivetrain(Closing):
                 contact possible (e.g. `CollisionMonitor.free_m`). With `contact` and without it,
                 every moving step checks contact on the Python path.
             probe: `(x_m, y_m, yaw_rad) -> truthy` when that pose would penetrate the world, with no
-                side effect (the contact monitor's own check; default `contact`). At each advance
-                a blocked mode is probed a little further in its direction and lifts when that is
-                free: a robot pushing against another one that leaves follows it.
+                side effect (the contact monitor's own check; default `contact`). Every 50 ms of
+                drive time a blocked mode is probed 2 mm further in its direction and lifts when
+                that is free: a robot pushing against another one that leaves follows it.
             bounding_radius_m: The radius `free_distance` counts rotation with (the farthest point
                 of the robot's collision shape from its base frame).
             plugin_wheel_acceleration_mps2: The robot SDF diff-drive plugin's `max_wheel_acceleration`
