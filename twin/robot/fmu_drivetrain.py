@@ -171,6 +171,7 @@ class FmuDrivetrain(Closing):
         comm_s, self._ratio = communication_step(drive, step_ns)
         self._pending = 0
         self._h = comm_s
+        self._probe_period = max(1, round(_BLOCK_PROBE_S / comm_s))  # communication steps between probes
         accel = drive.max_wheel_acceleration_mps2
         if accel is None:
             accel = plugin_wheel_acceleration_mps2
@@ -322,7 +323,7 @@ class FmuDrivetrain(Closing):
         assert loop is not None
         state, step, raise_failure = loop.state, loop.step, loop.raise_failure
         contact, free, near_world, ratio, inf = self._contact, self._free, self._near_world, self._ratio, math.inf
-        probe, free_blocks, group = self._touching, self._free_blocks, self._group
+        release_blocks = self._release_blocks
 
         def advance(n_steps: int) -> None:
             count = n_steps
@@ -330,12 +331,8 @@ class FmuDrivetrain(Closing):
                 pending = self._pending + n_steps
                 count = pending // ratio
                 self._pending = pending - count * ratio
-            blocked = state.block_common or state.block_diff
-            if count and blocked and probe is not None and group.index >= self._next_probe:
-                self._probed()
-                state.block_common, state.block_diff = free_blocks(
-                    state.x_m, state.y_m, state.yaw_rad, state.block_common, state.block_diff
-                )
+            if count and (state.block_common or state.block_diff):
+                release_blocks()
             while count:
                 if contact is None:
                     budget = inf
@@ -566,7 +563,7 @@ class FmuDrivetrain(Closing):
 
     def _probed(self) -> None:
         """Set the next probe to the first communication step of the next `_BLOCK_PROBE_S` period."""
-        period = max(1, round(_BLOCK_PROBE_S / self._h))
+        period = self._probe_period
         index = self._group.index
         self._next_probe = index - index % period + period
 
