@@ -370,6 +370,20 @@ def _build_mapping(args: tuple[Any, ...], node: yaml.Node, key: str) -> Any:
     return types.MappingProxyType(out)
 
 
+def _one_level_down(hints: dict[str, Any], name: str, key: str) -> str:
+    """A hint for a key written a section too high: `robots[1].initial_pose` is `robots[1].robot.initial_pose`.
+
+    Names each section among `hints` (a section's settings and their types) that has the key, or ""
+    (also when more than three have it: a list that long helps no one).
+    """
+    owners = []
+    for field, tp in hints.items():
+        members = typing.get_args(tp) if typing.get_origin(tp) in (typing.Union, types.UnionType) else (tp,)
+        if any(_is_dataclass_type(m) and name in _init_fields(m) for m in members):
+            owners.append(f"{key}.{field}.{name}" if key else f"{field}.{name}")
+    return f"; did you mean {' or '.join(repr(o) for o in owners)}?" if 0 < len(owners) <= 3 else ""
+
+
 def _build_dataclass(cls: type, node: yaml.Node, key: str) -> Any:
     if not isinstance(node, yaml.MappingNode):
         _fail(node, key, f"expected {_describe(cls)}, got {_kind(node)}")
@@ -380,7 +394,7 @@ def _build_dataclass(cls: type, node: yaml.Node, key: str) -> Any:
         name = str(_scalar(k, key))
         sub = f"{key}.{name}" if key else name
         if name not in fields:
-            _fail(k, sub, f"unknown key{suggest(name, list(fields))}")
+            _fail(k, sub, f"unknown key{_one_level_down(hints, name, key) or suggest(name, list(fields))}")
         if name in kwargs:
             _fail(k, sub, "key given twice")
         kwargs[name] = build(hints[name], v, key=sub)

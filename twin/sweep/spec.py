@@ -347,6 +347,25 @@ def _entries(tp: Any) -> Any:
     return None
 
 
+def _one_level_down(fields: Mapping[str, Any], walked: Sequence[str], dotted: str) -> str:
+    """A hint for a key written a section too high: `robots[1].initial_pose...` is `robots[1].robot.initial_pose...`.
+
+    Names each section of `fields` under which the rest of the key (this part on) is a key, or "".
+    """
+    rest = dotted.split(".")[len(walked) :]  # this part and what follows it
+    owners = []
+    for name, section in fields.items():
+        tp = section
+        for part in rest:
+            inner = _fields(tp)
+            if inner is None or part not in inner:
+                break
+            tp = inner[part]
+        else:
+            owners.append(".".join([*walked, name, *rest]))
+    return f"; did you mean {' or '.join(repr(o) for o in owners)}?" if owners else ""
+
+
 def _schema_type(dotted: str, node: yaml.Node, section: str, base: Mapping[str, Any]) -> Any:
     """Return the type the scenario declares for a dotted key, or fail naming the nearest valid key.
 
@@ -375,7 +394,7 @@ def _schema_type(dotted: str, node: yaml.Node, section: str, base: Mapping[str, 
             msg = f"{location(node)}: {section}.{dotted}: {where} is a value, not a section; vary {where} itself"
             raise ConfigError(msg)
         if part not in fields:
-            hint = suggest(part, list(fields))
+            hint = _one_level_down(fields, walked, dotted) or suggest(part, list(fields))
             msg = f"{location(node)}: {section}.{dotted}: {where} has no key {part!r}{hint}"
             raise ConfigError(msg)
         tp = fields[part]

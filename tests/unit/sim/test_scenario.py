@@ -49,6 +49,20 @@ def test_a_key_without_its_unit_is_pointed_to_the_unit_named_one(tmp_path: Path)
         load_scenario(path)
 
 
+def test_a_key_one_section_too_high_is_pointed_to_its_sections(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text("robot:\n  x_m: 1.0\nrobots:\n  - name: r1\n    model: turtlebot3_burger\n")
+    with pytest.raises(
+        ConfigError, match=rf"^{path}:2: robot.x_m: unknown key; did you mean 'robot.initial_pose.x_m'\?$"
+    ):
+        load_scenario(path)
+    path.write_text("robots:\n  - name: r1\n    model: turtlebot3_burger\n")
+    with pytest.raises(
+        ConfigError, match=rf"^{path}:3: robots\[0\].model: unknown key; did you mean 'robots\[0\].robot.model'\?$"
+    ):
+        load_scenario(path)
+
+
 def test_overriding_one_key_keeps_the_rest(tmp_path: Path) -> None:
     path = tmp_path / "s.yaml"
     path.write_text("name: t\nrobot: {model: turtlebot3_burger}\nrecording: {storage: sqlite3}\n")

@@ -115,6 +115,13 @@ def test_a_fleet_robot_is_varied_by_its_index_and_keeps_its_other_keys(tmp_path:
         ),
         ("vary:\n  robots.robot.model: [a]\n", "robots is a list; name one entry, e.g. robots[0]"),
         ("vary:\n  robots[0].robto.model: [a]\n", "robots[0] has no key 'robto'; did you mean 'robot'?"),
+        (  # a key one section too high (as the issue writes it): each section it belongs to named
+            "vary:\n  robots[1].initial_pose.x_m: [1.5]\n",
+            "robots[1] has no key 'initial_pose'; did you mean 'robots[1].robot.initial_pose.x_m' or "
+            "'robots[1].localization.initial_pose.x_m'?",
+        ),
+        ("vary:\n  robot.x_m: [0.5]\n", "robot has no key 'x_m'; did you mean 'robot.initial_pose.x_m'?"),
+        ("vary:\n  model: [a]\n", "the scenario has no key 'model'; did you mean 'robot.model'?"),
         ("vary:\n  robot[0].model: [a]\n", "robot is not a list; write robot without [0]"),
         ("vary:\n  robots[x].name: [a]\n", "not a dotted key"),
     ],
