@@ -101,6 +101,10 @@ def stub_node(manifest: NodeManifest, name: str, config: NodeConfig) -> TreeNode
     return _STUBS[manifest.kind](name, config)
 
 
+# Control nodes whose child count BT.CPP checks only when they are ticked (the loader takes any).
+_TWO_OR_THREE = frozenset({"IfThenElse", "WhileDoElse"})
+
+
 def _check_element(
     parser: TreeParser, element: XmlElement, report: Callable[[str, str], None], declared_only: set[str]
 ) -> None:
@@ -129,6 +133,13 @@ def _check_element(
     manifest = factory.manifests.get(type_id) or parser.node_models.get(type_id)
     if manifest is None:
         return
+    if type_id in _TWO_OR_THREE and manifest.bound and len(element.children) not in (2, 3):
+        report(
+            element.location,
+            f"<{type_id}> needs 2 or 3 children (a condition, then one or two branches), it has "
+            f"{len(element.children)}; "
+            "BT.CPP loads it but fails when it is first ticked",
+        )
     if not manifest.bound:
         declared_only.add(type_id)
     check_ports(element, manifest, factory.enums, report)
@@ -182,7 +193,9 @@ def _check_depth(parser: TreeParser, report: Callable[[str, str], None]) -> bool
     return not too_deep
 
 
-def _validate(load: Callable[[TreeParser], None], source: str, factory: BehaviorTreeFactory) -> ValidationReport:
+def _validate(
+    load: Callable[[TreeParser], None], source: str, factory: BehaviorTreeFactory, *, main_tree: str | None = None
+) -> ValidationReport:
     problems: list[str] = []
 
     def report(location: str, message: str) -> None:
@@ -191,7 +204,7 @@ def _validate(load: Callable[[TreeParser], None], source: str, factory: Behavior
             problems.append(line)
 
     try:
-        return _check_all(load, source, factory, problems, report)
+        return _check_all(load, source, factory, problems, report, chosen=main_tree)
     except RecursionError:  # a safety net: the loader and checks bound what they recurse on
         line = f"{source}: the tree nests too deeply for twin to check it; flatten some SubTrees or nodes"
         return ValidationReport(source=source, problems=(*problems, line))
@@ -203,6 +216,8 @@ def _check_all(
     factory: BehaviorTreeFactory,
     problems: list[str],
     report: Callable[[str, str], None],
+    *,
+    chosen: str | None,
 ) -> ValidationReport:
     parser = TreeParser(factory, strict=True)
     parser.report = report
@@ -218,10 +233,15 @@ def _check_all(
     _check_recursion(parser, report)
     depth_ok = _check_depth(parser, report)
     main_tree: str | None = None
-    try:
-        main_tree = parser.main_tree_id()
-    except TreeError as err:
-        problems.append(str(err))
+    if chosen and chosen not in parser.tree_roots:
+        problems.append(
+            f"{source}: --main-tree {chosen!r} names no tree in the file{suggest(chosen, list(parser.tree_roots))}"
+        )
+    else:
+        try:
+            main_tree = parser.main_tree_id(chosen)
+        except TreeError as err:
+            problems.append(str(err))
     if not problems and depth_ok:
         for tree_id in parser.tree_roots:
             try:
@@ -282,13 +302,17 @@ def declare_node_models(factory: BehaviorTreeFactory, path: Path) -> list[str]:
     return declared
 
 
-def validate_file(path: Path, factory: BehaviorTreeFactory) -> ValidationReport:
-    """Check a tree file (and its includes) against the factory's node types."""
+def validate_file(path: Path, factory: BehaviorTreeFactory, *, main_tree: str | None = None) -> ValidationReport:
+    """Check a tree file (and its includes) against the factory's node types.
+
+    `main_tree` names the tree to execute, as BT.CPP's `createTree(ID)` does for a file without
+    `main_tree_to_execute` (it must name one of the file's trees).
+    """
 
     def load(parser: TreeParser) -> None:
         parser.load_file(Path(path))
 
-    return _validate(load, str(path), factory)
+    return _validate(load, str(path), factory, main_tree=main_tree)
 
 
 def validate_text(text: str, factory: BehaviorTreeFactory, *, source: str = "<string>") -> ValidationReport:

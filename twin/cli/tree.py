@@ -60,13 +60,19 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         epilog=(
             "examples:\n"
             "  twin tree validate trees/tree.xml\n"
-            "  twin tree validate my_nav2_tree.xml --nodes nav2_behavior_tree/nav2_tree_nodes.xml"
+            "  twin tree validate my_nav2_tree.xml --nodes nav2_behavior_tree/nav2_tree_nodes.xml\n"
+            "  twin tree validate several_trees.xml --main-tree MainTree"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
     validate.add_argument("file", type=Path, metavar="FILE", help="BT.CPP XML file")
     validate.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
+    validate.add_argument(
+        "--main-tree",
+        metavar="ID",
+        help="the tree to execute, for a file of several trees without main_tree_to_execute (default: that attribute)",
+    )
     _add_nodes_option(validate)
     validate.set_defaults(func=_validate)
 
@@ -185,7 +191,7 @@ def _factory(*, seed: int = 0, polls_to_arrive: int = 3, nodes: Sequence[Path] =
 def _validate(args: argparse.Namespace) -> int:
     from twin.bt.validate import validate_file
 
-    report = validate_file(args.file, _factory(nodes=args.nodes))
+    report = validate_file(args.file, _factory(nodes=args.nodes), main_tree=args.main_tree)
     if args.json:
         print(
             json.dumps(

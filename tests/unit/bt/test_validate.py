@@ -75,6 +75,18 @@ def test_the_shipped_trees_are_valid(factory: BehaviorTreeFactory, tree_file: st
             ' BTCPP_format="4"',
             "t.xml:3: a <ReactiveSequence> cannot have more than one async child",
         ),
+        (  # BT.CPP loads these and throws at their first tick: validate says so before a run
+            "<IfThenElse><AlwaysSuccess/></IfThenElse>",
+            "",
+            ' BTCPP_format="4"',
+            "t.xml:3: <IfThenElse> needs 2 or 3 children (a condition, then one or two branches), it has 1",
+        ),
+        (
+            "<WhileDoElse><AlwaysSuccess/><AlwaysSuccess/><AlwaysSuccess/><AlwaysSuccess/></WhileDoElse>",
+            "",
+            ' BTCPP_format="4"',
+            "t.xml:3: <WhileDoElse> needs 2 or 3 children",
+        ),
     ],
 )
 def test_each_problem_is_one_line_with_file_and_line(factory, body: str, extra: str, fmt: str, expected: str) -> None:
@@ -127,3 +139,18 @@ def test_an_unknown_port_lists_the_ports_once(factory: BehaviorTreeFactory) -> N
     report = validate_text(doc('<Timeout msec="1" zzz="2"><AlwaysSuccess/></Timeout>'), factory, source="t.xml")
     (problem,) = report.problems
     assert "unknown port 'zzz' of <Timeout>; its ports are msec" in problem and "valid:" not in problem
+
+
+def test_main_tree_picks_the_tree_of_a_file_of_several(factory: BehaviorTreeFactory, tmp_path: Path) -> None:
+    # BT.CPP's examples register such a file and create one of its trees by ID.
+    path = tmp_path / "two.xml"
+    path.write_text(
+        '<root BTCPP_format="4">\n<BehaviorTree ID="MainTree"><SubTree ID="Sub"/></BehaviorTree>\n'
+        '<BehaviorTree ID="Sub"><AlwaysSuccess/></BehaviorTree>\n</root>'
+    )
+    assert any("several trees (MainTree, Sub)" in p for p in validate_file(path, factory).problems)
+    report = validate_file(path, factory, main_tree="MainTree")
+    assert report.ok, report.problems
+    assert report.main_tree == "MainTree"
+    wrong = validate_file(path, factory, main_tree="MainTre")
+    assert wrong.problems == (f"{path}: --main-tree 'MainTre' names no tree in the file; did you mean 'MainTree'?",)
