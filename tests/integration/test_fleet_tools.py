@@ -267,6 +267,26 @@ def test_replay_one_robot_of_a_fleet(fleet_bag: Path, tmp_path: Path, truth: dic
     assert _path_length(truth["gt"]["robot2"]) > 1.0  # robot2 moved: the small error says something
 
 
+def test_a_bag_of_one_namespaced_robot_needs_no_namespace(tmp_path: Path) -> None:
+    # One robot under a namespace (nav2_bringup's multi-robot launch with one robot): the tools take it.
+    scenario = tmp_path / "one.yaml"
+    scenario.write_text(
+        "name: one_ns\nmax_duration_s: 6\nrobots:\n  - name: tb3_0\n"
+        "    robot: {initial_pose: {x_m: 0.0, y_m: 0.0, yaw_rad: 0.0}}\n"
+    )
+    bag = tmp_path / "bag"
+    assert run_twin("simulate", str(scenario), "--out", str(bag)).returncode == 0
+    world = REPO / "sdf" / "worlds" / "house.sdf"
+    proc = run_twin("replay", str(bag), "--world", str(world), "--out", str(tmp_path / "r"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["topic_a"] == "/tb3_0/ground_truth/odom"
+    proc = run_twin("analyze", "compare", str(bag), str(bag), "--json")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    assert result["topic_a"] == result["topic_b"] == "/tb3_0/ground_truth/odom"
+    assert result["position_error_max_m"] == 0.0
+
+
 def test_graph_groups_a_fleet_by_namespace() -> None:
     scenario = str(REPO / "scenarios" / "house_two_waffles.yaml")
     proc = run_twin("graph", scenario, "--measure-s", "1", "--json")

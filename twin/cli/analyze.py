@@ -201,8 +201,9 @@ def _analyze_fleet(args: argparse.Namespace, bag: Path, walls: Any, out: Path) -
 def _compare_namespaces(a: Path, b: Path, given: list[str] | None) -> tuple[str | None, str | None]:
     """The robot to compare in each bag: --namespace's in a fleet's bag, none in a one-robot bag.
 
-    One NS applies to each fleet bag; two apply to A and B in turn. A fleet's bag without one is
-    refused, naming its robots: comparing whichever robot came first would be a silent guess.
+    One NS applies to each fleet bag; two apply to A and B in turn. A bag of several robots without
+    one is refused, naming its robots: comparing whichever robot came first would be a silent guess.
+    A bag of one robot under a namespace compares that robot.
     """
     from twin.analysis.fleet import bag_robots, check_namespace
     from twin.core.errors import ConfigError
@@ -216,9 +217,11 @@ def _compare_namespaces(a: Path, b: Path, given: list[str] | None) -> tuple[str 
         info, robots = bag_robots(bag)
         fleets += bool(robots)
         ns = None if given is None else given[k] if len(given) == 2 else given[0]
-        if robots and ns is None:
+        if len(robots) > 1 and ns is None:
             msg = f"{bag} holds {len(robots)} robots ({', '.join(robots)}): choose one with --namespace NS"
             raise ConfigError(msg)
+        if len(robots) == 1 and ns is None:
+            ns = robots[0]  # its only robot
         if ns is not None and (robots or (given is not None and len(given) == 2)):
             out.append(check_namespace(info, ns))
         else:

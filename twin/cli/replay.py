@@ -88,17 +88,20 @@ def _robot_topics(
     """The command and pose topics to replay, and the robot's namespace (None: a one-robot bag).
 
     Raises:
-        ConfigError: If a fleet's bag comes without --namespace (its robots named), or with one it lacks.
+        ConfigError: If a bag of several robots comes without --namespace (its robots named), or with one
+            it lacks. A bag of one robot under a namespace needs none.
     """
     from twin.analysis.fleet import bag_robots, check_namespace
     from twin.core.errors import ConfigError
 
     info, robots = bag_robots(bag)
     if namespace is None:
-        if robots:
+        if len(robots) > 1:
             msg = f"{bag} holds {len(robots)} robots ({', '.join(robots)}): choose one with --namespace NS"
             raise ConfigError(msg)
-        return topic, pose_topic, None
+        if not robots:
+            return topic, pose_topic, None
+        namespace = robots[0]  # one robot under a namespace (a bag of nav2_bringup's multi-robot launch): that one
     ns = check_namespace(info, namespace)
     names = {t.name for t in info.topics}
     if pose_topic is not None:
