@@ -220,8 +220,8 @@ def _description_problem(path: Path) -> str | None:
         data = archive.read("modelDescription.xml")
     try:
         root = etree.fromstring(data, etree.XMLParser(resolve_entities=False, no_network=True))
-    except etree.XMLSyntaxError:
-        return None  # the parser's own message says where
+    except etree.XMLSyntaxError as err:  # (FMPy's message names a file of that name in the working folder)
+        return f"invalid modelDescription.xml: not well-formed XML: {err}"
     if etree.QName(root).localname != "fmiModelDescription":
         return f"modelDescription.xml: the root element is <{etree.QName(root).localname}>, not <fmiModelDescription>"
     version = root.get("fmiVersion")
@@ -287,7 +287,32 @@ def _load_problem(info: FmuInfo, library: Path, member: str) -> str | None:
     entry = _entry_point(info)
     if not hasattr(dll, entry):
         return f"{member} has no {entry} function; it is not an FMI {info.fmi_version} binary"
+    # Every function of the interface twin steps, bound as a run binds them (FMPy's class for it,
+    # without instantiating): a Model Exchange binary without fmi2CompletedIntegratorStep, say,
+    # fails here and not at the run's start.
+    unzipped = library.parents[2]  # library is <unzipped>/binaries/<platform>/<name>
+    try:
+        fmpy_class(info)(
+            guid=info.guid,
+            unzipDirectory=str(unzipped),
+            modelIdentifier=info.co_simulation or info.model_exchange,
+            instanceName="check",
+        )
+    except Exception as err:  # FMPy raises what ctypes does: AttributeError, OSError
+        text = str(err).replace(f"{library}: ", "").replace(str(library), member).strip()
+        interface = "Co-Simulation" if info.co_simulation else "Model Exchange"
+        return f"{member} lacks a function of FMI {info.fmi_version} {interface}: {text or type(err).__name__}"
     return None
+
+
+def fmpy_class(info: FmuInfo) -> Any:
+    """FMPy's class for the interface twin steps: Co-Simulation when the FMU has it, else Model Exchange."""
+    import fmpy.fmi2
+    import fmpy.fmi3
+
+    if info.co_simulation is None:
+        return fmpy.fmi2.FMU2Model if info.major_version == 2 else fmpy.fmi3.FMU3Model
+    return fmpy.fmi2.FMU2Slave if info.major_version == 2 else fmpy.fmi3.FMU3Slave
 
 
 def binary_problem(info: FmuInfo, extracted: Path | None = None) -> str | None:
@@ -302,7 +327,7 @@ def binary_problem(info: FmuInfo, extracted: Path | None = None) -> str | None:
         loader's message, or naming the platforms the FMU does have binaries for. None as well
         for FMI versions twin does not step (`stepping_problem` names those).
     """
-    if info.major_version not in (2, 3):
+    if info.major_version not in (2, 3) or (info.co_simulation is None and info.model_exchange is None):
         return None  # not steppable anyway: `stepping_problem` says why
     member = _binary_member(info)
     with zipfile.ZipFile(info.path) as archive:
@@ -319,7 +344,8 @@ def binary_problem(info: FmuInfo, extracted: Path | None = None) -> str | None:
         import tempfile
 
         with tempfile.TemporaryDirectory(prefix="twin-fmu-") as tmp:
-            target = Path(tmp) / Path(member).name
+            target = Path(tmp) / member  # laid out as in the FMU, where FMPy looks for it
+            target.parent.mkdir(parents=True)
             with archive.open(member) as src, target.open("wb") as dst:
                 shutil.copyfileobj(src, dst)
             return _load_problem(info, target, member)

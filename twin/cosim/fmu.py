@@ -26,7 +26,7 @@ import fmpy.fmi3
 from twin.core.closing import Closing
 from twin.core.errors import FmuError
 from twin.cosim.adapter import Adapter, Api, Messages, Stepper
-from twin.cosim.description import REAL_TYPES, binary_problem, read_fmu_info, stepping_problem
+from twin.cosim.description import REAL_TYPES, binary_problem, fmpy_class, read_fmu_info, stepping_problem
 from twin.cosim.fmi2 import Fmi2, Fmi2Exchange
 from twin.cosim.fmi3 import Fmi3, Fmi3Exchange
 
@@ -122,16 +122,11 @@ class FmuFile(Closing):
         }
         exchange = self.info.co_simulation is None
         try:
-            if exchange:
-                model_class = fmpy.fmi2.FMU2Model if self.info.major_version == 2 else fmpy.fmi3.FMU3Model
-                fmu: Any = model_class(**kwargs)
-            elif self.info.major_version == 2:
-                fmu = fmpy.fmi2.FMU2Slave(**kwargs)
-            else:
-                fmu = fmpy.fmi3.FMU3Slave(**kwargs)
+            fmu: Any = fmpy_class(self.info)(**kwargs)
         except Exception as err:
             platform = fmpy.platform if self.info.major_version == 2 else fmpy.platform_tuple
-            msg = f"{label}: cannot load the binary for {platform}: {err}"
+            text = str(err).replace(f"{self._dir}/", "")  # the member, not the folder it was extracted to
+            msg = f"{label}: cannot load the binary for {platform}: {text}"
             raise FmuError(msg) from None
         stepper: Adapter
         by_vr = {v.value_reference: v.name for v in self.info.variables.values() if v.type in REAL_TYPES}

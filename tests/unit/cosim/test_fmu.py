@@ -11,7 +11,7 @@ from tests.unit.cosim.helpers import acme
 from twin.core.errors import FmuError
 from twin.cosim.build import resolve_fmu
 from twin.cosim.contract import FmuMapping, Profile, check_contract
-from twin.cosim.description import read_fmu_info
+from twin.cosim.description import binary_problem, read_fmu_info, stepping_problem
 from twin.cosim.fmu import FmuFile
 
 
@@ -142,3 +142,43 @@ def test_check_names_the_interface_an_fmu_has_instead_of_co_simulation(
     assert report.ok == (problem is None), report.problems
     if problem is not None:
         assert problem in report.problems
+
+
+def _rewritten(source: Path, target: Path, old: bytes, new: bytes) -> Path:
+    """A copy of an FMU with its model description's `old` bytes replaced by `new`."""
+    with zipfile.ZipFile(source) as src, zipfile.ZipFile(target, "w") as dst:
+        for item in src.namelist():
+            data = src.read(item)
+            dst.writestr(item, data.replace(old, new) if item == "modelDescription.xml" else data)
+    return target
+
+
+def test_a_binary_without_the_functions_of_its_declared_interface_is_named(tmp_path: Path) -> None:
+    # Declared Model Exchange, built as Co-Simulation: the check binds what a run binds, not only
+    # fmi2Instantiate, so the FMU fails `fmu check` and `scenario check`, not the run's start.
+    source = resolve_fmu("builtin:xl430_w250", fmi_version=2)
+    me = _rewritten(source, tmp_path / "me.fmu", b"<CoSimulation", b"<ModelExchange")
+    problem = binary_problem(read_fmu_info(me))
+    assert problem is not None
+    assert problem.startswith("binaries/linux64/xl430_w250.so lacks a function of FMI 2.0 Model Exchange: ")
+    assert "undefined symbol: fmi2" in problem and str(tmp_path) not in problem and "/tmp" not in problem
+    assert binary_problem(read_fmu_info(source)) is None  # the same binary as Co-Simulation: complete
+
+
+def test_an_fmu_without_an_interface_is_told_so_not_that_its_binary_is_missing(tmp_path: Path) -> None:
+    source = resolve_fmu("builtin:xl430_w250", fmi_version=2)
+    bare = _rewritten(source, tmp_path / "bare.fmu", b"<CoSimulation", b"<VendorAnnotations")
+    info = read_fmu_info(bare)
+    assert binary_problem(info) is None
+    assert stepping_problem(info) == "no Co-Simulation or Model Exchange interface"
+
+
+def test_a_model_description_in_the_wrong_encoding_is_named_with_its_line(tmp_path: Path) -> None:
+    source = resolve_fmu("builtin:xl430_w250", fmi_version=2)
+    latin1 = _rewritten(source, tmp_path / "latin1.fmu", b'description="', b'description="Motor \xe9 ')
+    with pytest.raises(FmuError) as err:
+        read_fmu_info(latin1)
+    text = str(err.value)
+    assert text.startswith(f"{latin1}: invalid modelDescription.xml: not well-formed XML: ")
+    assert "line" in text and "\n" not in text
+    assert str(Path.cwd() / "modelDescription.xml") not in text  # FMPy's message named a file that is not there
