@@ -61,8 +61,9 @@ _DECODED_TOPICS = (
     "/robot_description",
 )
 
-#: Rates the twin publishes at (Gazebo's TurtleBot3 defaults), Hz: expected only of the twin's own bags;
-#: another bag's topics are judged against their own steady rate.
+#: Rates the twin publishes at with its TurtleBot3 models (Gazebo's defaults), Hz. A twin bag's topics
+#: are judged against the rates its own run had (`twin_rates`: its recorded scenario and robot
+#: model); another bag's against their own steady rate.
 EXPECTED_RATE_HZ: dict[str, float] = {
     "/imu": 200.0,
     "/odom": 30.0,
@@ -460,6 +461,50 @@ def namespace_view(info: BagInfo, namespace: str | None) -> dict[str, TopicInfo]
     return view
 
 
+def twin_rates(bag: Path, namespace: str | None = None) -> dict[str, float] | None:
+    """The rates the twin run that recorded `bag` published at, Hz, by topic (without the namespace).
+
+    Read from the scenario the bag records and the robot model it names (its lidar's and IMU's
+    update rates, its joint-state plugin's, the scenario's overrides); None when the bag records
+    no scenario or its robot model is not found here (its topics are then judged by their steady rate).
+    """
+    import tempfile
+
+    from twin.bag import read_provenance
+    from twin.core.errors import TwinError
+    from twin.sim.scenario_file import load_scenario, without_retired_keys
+    from twin.world.robot_model import load_robot
+
+    try:
+        provenance = read_provenance(bag)
+        if provenance is None or "scenario_yaml" not in provenance:
+            return None
+        with tempfile.TemporaryDirectory(prefix="twin-rates-") as tmp:
+            recorded = Path(tmp) / "scenario.yaml"
+            recorded.write_text(without_retired_keys(provenance["scenario_yaml"]), encoding="utf-8")
+            scenario = load_scenario(recorded)
+        robots = dict(scenario.robot_scenarios())
+        sc = robots.get(namespace or "") or (next(iter(robots.values())) if len(robots) == 1 else None)
+        if sc is None:
+            return None
+        sdf_log = logging.getLogger("twin.world.sdf")  # the run warned of its model's missing meshes already
+        level = sdf_log.level
+        sdf_log.setLevel(logging.ERROR)
+        try:
+            spec = load_robot(sc.robot.model, model_path=sc.world.model_path)
+        finally:
+            sdf_log.setLevel(level)
+    except (TwinError, OSError, ValueError):
+        return None
+    encoders = spec.joint_states.rate_hz if spec.joint_states is not None else 30.0  # as the run's JointStateNode
+    rates = {"/joint_states": encoders, "/odom": encoders, "/ground_truth/odom": sc.sensors.ground_truth.rate_hz}
+    if spec.lidar is not None:
+        rates["/scan"] = sc.sensors.lidar.rate_hz or spec.lidar.rate_hz
+    if spec.imu is not None and sc.sensors.imu.enabled:
+        rates["/imu"] = spec.imu.rate_hz
+    return rates
+
+
 def _is_twin_bag(bag: Path) -> bool:
     from twin.bag import read_provenance
     from twin.core.errors import BagError
@@ -512,7 +557,7 @@ def collect(
             pass
     info = open_bag(bag)
     data = BagData(info=info, start_ns=info.start_ns, twin_bag=_is_twin_bag(bag))
-    nominal = EXPECTED_RATE_HZ if data.twin_bag else {}
+    nominal = (twin_rates(bag, namespace) or {}) if data.twin_bag else {}
     # the topics as this pass names them: a robot's own without its namespace (see namespace_view)
     by_name = namespace_view(info, namespace)
     names = set(by_name)

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.conftest import run_twin
 from tests.unit.analysis.test_analyze_cli import _analyze, _copy_topics
 from twin.analysis import _cdr
 from twin.bag import Recorder, open_bag, read_messages
@@ -76,6 +77,20 @@ def test_the_twins_own_bag_is_judged_by_its_nominal_rates(twin_bag: Path, tmp_pa
     (odom,) = [h for h in report["topic_health"] if h["topic"] == "/odom"]
     assert odom["expected_rate_hz"] == 30.0
     assert odom["steady_rate_hz"] == pytest.approx(30.0, rel=0.02)  # 33 or 34 ms on the 1 ms step
+
+
+def test_a_twin_bag_is_judged_by_the_rates_its_own_scenario_set(tmp_path: Path) -> None:
+    # The lidar at 10 Hz (sensors.lidar.rate_hz): its /scan is expected at 10, not at the model's 5.
+    scenario = tmp_path / "fast_lidar.yaml"
+    scenario.write_text("name: fast_lidar\nsensors:\n  lidar: {rate_hz: 10.0}\n")
+    proc = run_twin("simulate", str(scenario), "--duration", "4", "--out", str(tmp_path / "bag"))
+    assert proc.returncode == 0, proc.stderr
+    report = _analyze(tmp_path / "bag", tmp_path / "r")
+    health = {h["topic"]: h for h in report["topic_health"]}
+    assert health["/scan"]["expected_rate_hz"] == 10.0
+    assert health["/scan"]["steady_rate_hz"] == pytest.approx(10.0, rel=0.02)
+    assert (health["/imu"]["expected_rate_hz"], health["/odom"]["expected_rate_hz"]) == (200.0, 30.0)
+    assert "expected 5" not in (tmp_path / "r" / "report.md").read_text()
 
 
 def test_goals_are_na_without_a_tree(gazebo_bag: Path, tmp_path: Path) -> None:
