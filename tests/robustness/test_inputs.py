@@ -541,6 +541,30 @@ def test_a_floor_slab_above_z_0_names_floor_height_and_then_runs(
     assert code == 0, err
 
 
+def test_a_thick_floor_is_not_taken_as_floor(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # gazebo_models' cafe stands on a floor box 19 cm high: taking it as floor (world.floor_height_m 0.2)
+    # would leave the robot at z = 0 with the furniture 19 cm up, above its lidar: not suggested, warned
+    world = tmp_path / "platform.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><model name='platform'><static>1</static><pose>0 0 0.095 0 0 0</pose>"
+        "<link name='floor'><collision name='c'><geometry><box><size>10 10 0.19</size></box></geometry></collision>"
+        "</link></model></world></sdf>"
+    )
+    values: dict[str, Any] = {
+        "world.sdf": str(world),
+        "mission": {"type": "cmd_vel_script", "segments": [{"duration_s": 1.0, "linear_mps": 0.1}]},
+        "localization.type": "none",
+    }
+    code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
+    assert code == 2, err
+    line = assert_one_line_error(err, contains="inside platform")
+    assert "its top is 19.0 cm above z = 0), lower the world's models by 0.190 m (their <pose> z)" in line
+    assert "set world.floor_height_m" not in line
+    values["world.floor_height_m"] = 0.2
+    code, _, err = run(["scenario", "check", str(write_scenario(tmp_path, values))], capsys)
+    assert "world.floor_height_m is 0.2 m: shapes whose top is at or below it are neither seen nor touched" in err
+
+
 def test_a_world_too_large_to_map_names_the_world_and_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # two pillars 400 m apart (as gz-sim's 3k_shapes spans 1.5 km): the world, not the spawn pose, is too large
     pillars = "".join(

@@ -12,6 +12,7 @@ also loads what the run would load (world, robot, behaviour tree) for `twin scen
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -229,8 +230,12 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
     """
     from twin.sim.navigation import check_map_extent
-    from twin.sim.robot_group import scenario_robot, spawn_monitor
+    from twin.sim.robot_group import floor_problem, scenario_robot, spawn_monitor
     from twin.world import build_scene, load_world
+
+    floor = floor_problem(scenario.world.floor_height_m)
+    if floor is not None:
+        logging.getLogger("twin.sim.simulation").warning("%s", floor)  # as the run warns
 
     try:
         world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)

@@ -153,6 +153,22 @@ def scenario_robot(scenario: Scenario) -> RobotModelSpec:
 _LOW_OBSTACLE_M = 0.2
 """An obstacle the robot is spawned inside whose top is no higher than this may be a raised floor."""
 
+THIN_FLOOR_M = 0.05
+"""The highest `world.floor_height_m` that keeps a run true: the robot stands at z = 0 whatever the
+floor, so what stands on a floor this far up is that much higher than the robot's lidar sees it in Gazebo."""
+
+
+def floor_problem(floor_height_m: float) -> str | None:
+    """Why a `world.floor_height_m` makes the run untrue (a floor too high to stand the robot under), or None."""
+    if floor_height_m <= THIN_FLOOR_M:
+        return None
+    return (
+        f"world.floor_height_m is {floor_height_m:g} m: shapes whose top is at or below it are neither seen nor "
+        "touched, and the robot still stands at z = 0, so what stands on a floor that high floats that high above "
+        f"the robot's lidar (it is meant for slabs of at most {100 * THIN_FLOOR_M:g} cm); lower the world's "
+        "models by the floor's height instead (their <pose> z)"
+    )
+
 
 def spawn_monitor(
     scene: Scene, robot: RobotModelSpec, pose: InitialPose, *, floor_height_m: float = 0.01
@@ -175,11 +191,19 @@ def spawn_monitor(
         )
         top = scene.top_m(c)
         if top is not None and floor_height_m < top <= _LOW_OBSTACLE_M:
-            msg += (
-                f", or, if that is the floor (its top is {100 * top:.1f} cm above z = 0), set world.floor_height_m "
-                f"to {math.ceil(top * 100 + 0.5) / 100:g} (now {floor_height_m:g}: shapes whose top is at or below "
-                "it are floor)"
-            )
+            floor = math.ceil(top * 100 + 0.5) / 100
+            if floor <= THIN_FLOOR_M:
+                msg += (
+                    f", or, if that is the floor (its top is {100 * top:.1f} cm above z = 0), set "
+                    f"world.floor_height_m to {floor:g} (now {floor_height_m:g}: shapes whose top is at or below it "
+                    "are floor)"
+                )
+            else:  # the robot would stand that far below what stands on the floor
+                msg += (
+                    f", or, if that is the floor (its top is {100 * top:.1f} cm above z = 0), lower the world's "
+                    f"models by {top:.3f} m (their <pose> z): the robot stands at z = 0, and world.floor_height_m "
+                    f"is for slabs of at most {100 * THIN_FLOOR_M:g} cm"
+                )
         raise ConfigError(msg)
     return body, monitor
 

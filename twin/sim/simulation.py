@@ -39,7 +39,7 @@ from twin.sim.launch import load_nodes
 from twin.sim.obstacles import scenario_obstacles
 from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.rng import RngStreams
-from twin.sim.robot_group import RobotGroup
+from twin.sim.robot_group import RobotGroup, floor_problem
 from twin.sim.rosout import RosoutBridge
 from twin.sim.scenario import Scenario
 from twin.world import RobotModelSpec, World, build_scene, load_world
@@ -120,6 +120,9 @@ class Simulation(Closing):
         world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
         for warning in world.warnings:
             _log.warning("%s", warning)
+        floor = floor_problem(scenario.world.floor_height_m)
+        if floor is not None:
+            _log.warning("%s", floor)
         # One group per robot (one robot, no namespace: the thesis's system, topic for topic).
         self.groups = [RobotGroup.load(sc, namespace=ns) for ns, sc in scenario.robot_scenarios()]
         exclude = tuple(dict.fromkeys(g.robot.name for g in self.groups))
