@@ -249,6 +249,10 @@ def _parse(data: bytes, path: Path | None) -> XmlNode:
     return _convert(root, path, skipped_lines)
 
 
+_FARTHEST_M = 1e7
+"""The farthest a `<pose>` may place anything, m: the bound `twin.core.numbers` sets on every scenario distance."""
+
+
 def parse_pose(node: XmlNode | None) -> Mat4:
     """Return the 4x4 matrix of an SDF `<pose>` (identity when absent or empty).
 
@@ -263,6 +267,10 @@ def parse_pose(node: XmlNode | None) -> Mat4:
     values = node.as_floats()
     if not all(math.isfinite(v) for v in values):
         msg = f"{node.where}: <pose> has a non-finite number: {node.text!r}"
+        raise WorldError(msg)
+    far = next((v for v in values[:3] if abs(v) > _FARTHEST_M), None)
+    if far is not None:  # (its float would not hold a millimetre, and the map and scans overflow)
+        msg = f"{node.where}: <pose> puts something {far:g} m from its frame's origin; no world is larger than 1e7 m"
         raise WorldError(msg)
     fmt = node.get("rotation_format", "euler_rpy")
     if fmt == "quat_xyzw":

@@ -503,3 +503,19 @@ def test_a_mesh_whose_name_differs_only_in_case_is_used_with_one_warning(tmp_pat
     assert isinstance(geometry, Mesh) and geometry.path == actual
     (warning,) = loaded.warnings
     assert f"mesh 'file://models/shelf/meshes/Shelf_Collision.STL' not found; using {actual}, whose name" in warning
+
+
+@pytest.mark.parametrize(("pose", "far"), [("1e30 0 0 0 0 0", "1e+30"), ("0 -2e7 0 0 0 0", "-2e+07")])
+def test_a_pose_farther_than_any_world_is_refused_where_it_is(tmp_path: Path, pose: str, far: str) -> None:
+    # 1e30 m overflowed the map's cells into numpy warnings and bounds of 1e30; a typo, named in one line
+    world = tmp_path / "far.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n<model name='far'><static>1</static>\n"
+        f"<pose>{pose}</pose><link name='l'><collision name='c'><geometry><box><size>1 1 1</size></box>"
+        "</geometry></collision></link></model></world></sdf>"
+    )
+    with pytest.raises(WorldError) as raised:
+        load_world(world)
+    assert str(raised.value) == (
+        f"{world}:3: <pose> puts something {far} m from its frame's origin; no world is larger than 1e7 m"
+    )
