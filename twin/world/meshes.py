@@ -137,6 +137,11 @@ class _Part(NamedTuple):
     faces: NDArray[np.int64]
 
 
+# The mesh formats read: COLLADA by `twin.world._collada`, the others by trimesh (Gazebo reads
+# COLLADA, STL and OBJ; glTF, PLY and OFF meshes occur in converted models).
+_MESH_FORMATS = frozenset({".dae", ".stl", ".obj", ".glb", ".gltf", ".ply", ".off"})
+
+
 class MeshCache:
     """Loads each mesh file once per world (the same file is often used by many collisions).
 
@@ -160,12 +165,23 @@ class MeshCache:
         parts = self._files.get(path)
         if parts is not None:
             return parts
-        if path.suffix.lower() == ".stl":
+        suffix = path.suffix.lower()
+        if suffix not in _MESH_FORMATS:
+            what = f"its format {path.suffix!r}" if suffix else "a file without an extension"
+            msg = (
+                f"{where}: cannot read mesh {path}: {what} is no mesh format twin reads "
+                f"({', '.join(sorted(_MESH_FORMATS))}); export the mesh as one of them and name the file after it"
+            )
+            raise WorldError(msg)
+        if suffix == ".stl":
             _check_stl(path, where)
         try:
-            parts = _collada_parts(path) if path.suffix.lower() == ".dae" else _trimesh_parts(path)
+            parts = _collada_parts(path) if suffix == ".dae" else _trimesh_parts(path)
         except Exception as err:  # the readers raise many kinds; all mean "not a mesh we can read"
-            msg = f"{where}: cannot read mesh {path}: {type(err).__name__}: {err}"
+            msg = (
+                f"{where}: cannot read mesh {path}: it is damaged or not valid {suffix[1:].upper()} "
+                f"({type(err).__name__}: {err}); export it again"
+            )
             raise WorldError(msg) from None
         if not any(len(part.faces) for part in parts):
             msg = f"{where}: mesh {path} holds no triangles"

@@ -202,3 +202,23 @@ def test_obj_with_a_missing_material_library_loads_quietly(tmp_path: Path, caplo
         vertices, faces = _arrays(path)
     assert len(faces) == 12 and vertices.max(axis=0) == pytest.approx([1, 1, 1])
     assert not [r for r in caplog.records if r.levelno >= logging.INFO]
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "expected"),
+    [
+        ("notes.txt", "v 0 0 0\n", r"its format '\.txt' is no mesh format twin reads \(\.dae, .*\.stl\); export"),
+        ("part", "v 0 0 0\n", r"a file without an extension is no mesh format twin reads"),
+        (
+            "part.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n",
+            r"it is damaged or not valid OBJ \(.*\); export it again$",
+        ),
+    ],
+)
+def test_a_mesh_twin_cannot_read_is_named_with_why_and_the_fix(
+    tmp_path: Path, name: str, text: str, expected: str
+) -> None:
+    with pytest.raises(WorldError, match=rf"^test: cannot read mesh .*{name}: {expected}") as err:
+        _arrays(_mesh_file(tmp_path, text, name))
+    assert "\n" not in str(err.value)
