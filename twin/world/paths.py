@@ -345,6 +345,11 @@ def missing_mesh_message(where: str, uri: str, base_dir: Path, owner: str) -> st
     head = f"{where}: collision mesh {uri!r} {owner} not found (searched {base_dir} and the model path)"
     folder = folder_to_add(uri, base_dir)
     if folder is None:
+        text = uri.strip()
+        for scheme in ("model://", "package://"):
+            if text.startswith(scheme) and (name := text[len(scheme) :].split("/", 1)[0]):
+                # (the model path holds packages and models by name: the folder to add is their parent)
+                return f"{head}; add the folder that holds {name}/ to the model path"
         return f"{head}; add the folder holding it to the model path"
     relative = uri.strip().removeprefix("file://")
     if (folder / relative).is_file():

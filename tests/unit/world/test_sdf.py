@@ -469,6 +469,18 @@ def _bookstore(tmp_path: Path, uri: str) -> tuple[Path, Path]:
     return root, world
 
 
+@pytest.mark.parametrize("scheme", ["package://", "model://"])
+def test_a_missing_package_or_model_mesh_names_the_folder_to_add(tmp_path: Path, scheme: str) -> None:
+    # package://turtlebot3_description/... resolves once the folder holding turtlebot3_description/ is on the path
+    root, world = _bookstore(tmp_path, f"{scheme}turtlebot3_description/meshes/bases/waffle_base.stl")
+    with pytest.raises(WorldError) as raised:
+        load_world(world, model_path=[root / "models"])
+    assert str(raised.value).endswith("; add the folder that holds turtlebot3_description/ to the model path")
+    packages = tmp_path / "ros_ws" / "share"
+    _stl(packages / "turtlebot3_description" / "meshes" / "bases" / "waffle_base.stl")
+    load_world(world, model_path=[root / "models", packages])  # as the message says
+
+
 def test_a_file_uri_relative_to_the_package_names_the_folder_to_add(tmp_path: Path) -> None:
     root, world = _bookstore(tmp_path, "file://models/shelf/meshes/shelf_collision.stl")
     _stl(root / "models" / "shelf" / "meshes" / "shelf_collision.stl")
