@@ -349,7 +349,9 @@ def infer_profile(info: FmuInfo, mapping: FmuMapping) -> tuple[Profile, str]:
     """The profile an FMU is built for, read from its variables (and the mapping's roles), and why.
 
     The profile whose contract the FMU satisfies; when both do, `voltage` (the twin's own speed
-    loop); when neither does, the one missing fewer required roles (`voltage` on a tie).
+    loop); when neither does, the one whose required variables the FMU has more of by name (a
+    `speed_setpoint` in an unknown unit is a velocity-servo FMU with a unit to fix, not a voltage
+    one without `voltage`), then the one missing fewer required roles (`voltage` on a tie).
     """
     reports = {p: check_contract(info, mapping, p) for p in Profile}
     ok = [p for p in Profile if reports[p].ok]
@@ -359,5 +361,11 @@ def infer_profile(info: FmuInfo, mapping: FmuMapping) -> tuple[Profile, str]:
         return chosen, f"its {mapping.binding(command[chosen]).name!r} input satisfies only the {chosen.value} contract"
     if len(ok) == 2:
         return Profile.VOLTAGE, "it satisfies both contracts; voltage is the default (the twin closes the speed loop)"
-    chosen = min(Profile, key=lambda p: len(reports[p].missing))
-    return chosen, f"it satisfies neither contract; {chosen.value} misses the fewest required roles"
+
+    def absent(p: Profile) -> int:  # required roles whose variable the FMU does not have at all
+        return sum(1 for r in reports[p].roles if r.required and r.variable not in info.variables)
+
+    chosen = min(Profile, key=lambda p: (absent(p), len(reports[p].missing)))
+    if absent(chosen) == 0:
+        return chosen, f"it satisfies neither contract; it has every variable {chosen.value} requires (see below)"
+    return chosen, f"it satisfies neither contract; it has more of the variables {chosen.value} requires"
