@@ -350,7 +350,21 @@ class ModelBuilder:
         if not parent or not child:
             msg = f"{node.where}: joint {name!r} needs <parent> and <child>"
             raise WorldError(msg)
-        T_model_joint = scope.T(name, node.where)
+        try:
+            T_model_joint = scope.T(name, node.where)  # (placed at its child, unless its <pose> says otherwise)
+        except WorldError:
+            try:
+                scope.T(child, node.where)
+            except WorldError:  # the child is what is missing: say so, where the joint is
+                pass
+            else:
+                raise
+            known = ", ".join(scope.names())
+            msg = (
+                f"{node.where}: joint {name!r}: its <child> {child!r} is no link or frame of model {raw.name!r} "
+                f"(frames here: {known}); name one of them in <child>"
+            )
+            raise WorldError(msg) from None
         if child in link_world:
             T_world = link_world[child] @ inverse(scope.T(child, node.where)) @ T_model_joint
         else:

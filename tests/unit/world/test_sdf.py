@@ -531,3 +531,19 @@ def test_a_pose_farther_than_any_world_is_refused_where_it_is(tmp_path: Path, po
     assert str(raised.value) == (
         f"{world}:3: <pose> puts something {far} m from its frame's origin; no world is larger than 1e7 m"
     )
+
+
+def test_a_joint_whose_child_is_missing_is_named_with_the_fix(tmp_path: Path) -> None:
+    # gazebo_models' drc_practice_handle_wheel_valve_wall names a child 'handle::link' it does not have
+    world = tmp_path / "j.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><model name='m'>\n<link name='base'/>\n"
+        "<joint name='hinge' type='revolute'><parent>base</parent>\n<child>handle::link</child></joint>\n"
+        "</model></world></sdf>"
+    )
+    with pytest.raises(WorldError) as raised:
+        load_world(world)
+    assert str(raised.value) == (
+        f"{world}:3: joint 'hinge': its <child> 'handle::link' is no link or frame of model 'm' "
+        "(frames here: __model__, base); name one of them in <child>"
+    )
