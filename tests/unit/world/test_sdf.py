@@ -545,5 +545,5 @@ def test_a_joint_whose_child_is_missing_is_named_with_the_fix(tmp_path: Path) ->
         load_world(world)
     assert str(raised.value) == (
         f"{world}:3: joint 'hinge': its <child> 'handle::link' is no link or frame of model 'm' "
-        "(frames here: __model__, base); name one of them in <child>"
+        "(frames here: __model__, base, hinge); name one of them in <child>"
     )
