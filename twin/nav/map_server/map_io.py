@@ -194,8 +194,10 @@ def occupancy_from_image(
 ) -> NDArray[np.int8]:
     """Turn an image (mean channel value 0..255, rows top first) into occupancy rows (row 0 at the origin)."""
     if mode is MapMode.TRINARY and alpha255 is not None:
-        # The alpha channel joins the mean as one more channel, 255 - alpha (three colours + alpha).
-        shade255 = (shade255 * 3.0 + (255.0 - alpha255)) / 4.0
+        # The alpha channel joins the mean as one more channel (three colours + alpha), as ROS 1's
+        # map_server averaged it in: Nav2 adds MaxRGB - alphaQuantum(), and GraphicsMagick's
+        # alphaQuantum is the opacity (0: opaque), so what it adds is the alpha, 255 when opaque.
+        shade255 = (shade255 * 3.0 + alpha255) / 4.0
     shade = shade255 / 255.0
     occ = shade if negate else 1.0 - shade
     out = np.full(shade.shape, -1, dtype=np.int8)

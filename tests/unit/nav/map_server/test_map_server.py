@@ -48,6 +48,23 @@ def test_modes_negate_and_row_order(tmp_path: Path) -> None:
     assert raw.data[0].tolist() == [0, 50, 100, -1, -1]
 
 
+@pytest.mark.parametrize("image_mode", ["RGBA", "LA"])
+def test_trinary_averages_the_alpha_in_as_map_server_does(tmp_path: Path, image_mode: str) -> None:
+    # map_server (Humble): the mean of R, G, B and MaxRGB - alphaQuantum(), GraphicsMagick's opacity
+    # (0: opaque): the alpha itself. An opaque white cell is free, as in the RGB image (it was unknown).
+    grey = np.array([[0, 60, 100, 200, 255, 255, 255]], dtype=np.uint8)
+    alpha = np.array([[255, 255, 255, 255, 255, 128, 0]], dtype=np.uint8)
+    planes = [grey, grey, grey, alpha] if image_mode == "RGBA" else [grey, alpha]
+    Image.fromarray(np.dstack(planes), mode=image_mode).save(tmp_path / "m.png")
+    (tmp_path / "m.yaml").write_text(
+        "image: m.png\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n"
+    )
+    occ = 1.0 - (3.0 * grey[0] + alpha[0]) / 4.0 / 255.0
+    expected = np.where(occ > 0.65, 100, np.where(occ < 0.25, 0, -1))
+    assert load_map(tmp_path / "m.yaml").data[0].tolist() == expected.tolist()
+    assert expected.tolist() == [100, -1, -1, 0, 0, 0, -1]  # (60 is occupied in the grey image, unknown here)
+
+
 def test_save_then_load_round_trips_in_map_saver_format(tmp_path: Path) -> None:
     data = np.array([[0, 100, -1], [19, 70, 40]], dtype=np.int8)
     original = OccupancyMap(resolution_m=0.05, origin_x_m=-1.0, origin_y_m=0.5, data=data)
