@@ -33,6 +33,14 @@ def test_every_scenario_in_scenarios_is_covered() -> None:
     assert "house_grid" not in names  # the grid stand-in is retired: Nav2's stack is the navigator
 
 
+@pytest.mark.parametrize("scenario", SCENARIOS, ids=lambda p: p.stem)
+def test_scenario_check_passes_every_shipped_scenario(scenario: Path) -> None:
+    # A fleet's robots are checked at their own spawn poses (the four-robot scenario's top-level
+    # pose, which no robot uses, lies inside the TurtleBot3 world's centre pillar).
+    result = run_twin("scenario", "check", str(scenario))
+    assert result.returncode == 0, result.stderr
+
+
 def _goals_reached(bag: Path) -> int:
     with AnyReader([bag]) as reader:
         cons = [c for c in reader.connections if c.topic == "/rosout"]

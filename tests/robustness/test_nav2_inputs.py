@@ -240,6 +240,20 @@ def test_bad_map_is_refused_with_one_line(case: str, tmp_path: Path, capsys: pyt
     assert f"{map_yaml}:" in line, line
 
 
+def test_a_pose_off_a_given_map_is_refused_by_check_as_by_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The map moved 10 m east: AMCL's initial estimate (the spawn pose) lies off it. `scenario check`
+    # passed this and the run refused it; both refuse it now, in the same line.
+    map_yaml = _map(tmp_path, {"origin": [10.0, 10.0, 0.0]})
+    _refused_alike(
+        _scenario(tmp_path, map=str(map_yaml)),
+        capsys,
+        "localization.initial_pose: (",
+        "lies outside the map (x 10.00..",
+    )
+
+
 def test_map_numbers_as_yaml_1_2_writes_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # `5e-2` is a number to ROS's yaml-cpp; PyYAML alone reads it as text
     map_yaml = _map(tmp_path, {})

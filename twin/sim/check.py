@@ -237,20 +237,33 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
     if floor is not None:
         logging.getLogger("twin.sim.simulation").warning("%s", floor)  # as the run warns
 
+    robots = scenario.robot_scenarios()  # a fleet's each with its own sections, as the run takes them
     try:
         world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
-        robot = scenario_robot(scenario)
-        scene = build_scene(world, exclude_models=(robot.name,), floor_height_m=scenario.world.floor_height_m)
-        spawn_monitor(scene, robot, scenario.robot.initial_pose, floor_height_m=scenario.world.floor_height_m)
-        check_map_extent(scenario, robot, scene)
-        if isinstance(scenario.mission, BehaviorTreeMission):
-            _load_tree(scenario.mission)
-        _load_navigation(scenario, robot)
+        models = [scenario_robot(sc) for _, sc in robots]
+        exclude = tuple(dict.fromkeys(robot.name for robot in models))
+        scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)
     except TwinError as err:
-        if str(err).startswith(str(path)):
-            raise
-        raise err.with_context(before=f"{path}: ") from None
-    _check_drive(scenario, path, robot.name)
+        raise _named(err, path) from None
+    for index, ((ns, sc), robot) in enumerate(zip(robots, models, strict=True)):
+        try:
+            spawn_monitor(scene, robot, sc.robot.initial_pose, floor_height_m=scenario.world.floor_height_m)
+            check_map_extent(sc, robot, scene)
+            if isinstance(sc.mission, BehaviorTreeMission):
+                _load_tree(sc.mission)
+            _load_navigation(sc, robot)
+        except ConfigError as err:
+            if not ns or str(err).startswith(("/", str(path))):
+                raise _named(err, path) from None
+            raise _named(ConfigError(f"robots[{index}].{err}"), path) from None  # as the run names its entry
+        except TwinError as err:
+            raise _named(err, path) from None
+        _check_drive(sc, path, robot.name)
+
+
+def _named(err: TwinError, path: Path) -> TwinError:
+    """`err` with the scenario file in front, unless it names its file already."""
+    return err if str(err).startswith(str(path)) else err.with_context(before=f"{path}: ")
 
 
 def in_scenario(err: TwinError, path: Path) -> TwinError:
@@ -304,6 +317,7 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
     from twin.nav.param_checks import check_nav2_inputs
     from twin.nav.params import default_params_path, load_nav2_params
     from twin.nav.server_params import nav2_config
+    from twin.sim.navigation import check_poses_on_map
 
     occupancy = load_map(Path(scenario.map)) if scenario.map != "from_world" else None
     nav = scenario.navigation
@@ -318,6 +332,8 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
         map_source = None if scenario.map == "from_world" else str(scenario.map)
         step_s = scenario.physics.step_s
         check_nav2_inputs(params, occupancy, map_source=map_source, amcl=amcl, nav2=nav2, physics_step_s=step_s)
+        if occupancy is not None and robot.lidar is not None and (amcl or nav2):
+            check_poses_on_map(scenario, occupancy, amcl=amcl)  # (a map made from the world covers them)
         if nav2:
             nav2_config(params)
     if nav.type == "nav2" and nav.bt_xml is not None:

@@ -179,22 +179,12 @@ class NavigationStack:
         pose = sc.robot.initial_pose
         amcl = None
         initial = None
+        estimate = check_poses_on_map(sc, occupancy, amcl=wants_amcl)
         if wants_amcl:
             amcl = Amcl(params.amcl, occupancy, laser, rng)
             est = sc.localization.initial_pose
-            if est is not None:
-                x = pose.x_m if est.x_m is None else est.x_m
-                y = pose.y_m if est.y_m is None else est.y_m
-                yaw = pose.yaw_rad if est.yaw_rad is None else est.yaw_rad
-                if occupancy.world_to_cell(x, y) is None:
-                    msg = (
-                        f"localization.initial_pose: ({x:.3f}, {y:.3f}) lies outside the map ({_extent(occupancy)}); "
-                        "give a pose on the map"
-                    )
-                    raise ConfigError(msg)
-                initial = ((x, y, yaw), est.xy_variance_m2, est.yaw_variance_rad2)
-        if isinstance(sc.mission, BehaviorTreeMission) and sc.mission.locations is not None:
-            _check_locations_on_map(sc.mission.locations, occupancy)
+            if est is not None and estimate is not None:
+                initial = (estimate, est.xy_variance_m2, est.yaw_variance_rad2)
         global_costmap = local_costmap = None
         config = None
         bt_xml = None
@@ -377,6 +367,32 @@ def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
     """
     if sc.map == "from_world" and robot.lidar is not None and (runs_amcl(sc) or runs_nav2(sc)):
         _map_bounds(sc, scene)
+
+
+def check_poses_on_map(sc: Scenario, occupancy: OccupancyMap, *, amcl: bool) -> tuple[float, float, float] | None:
+    """Refuse an AMCL initial estimate or a mission location off the map; return the estimate (x, y, yaw).
+
+    Raises:
+        ConfigError: Naming the pose (`localization.initial_pose`, or the locations file and entry)
+            and the map's extent.
+    """
+    estimate = None
+    est = sc.localization.initial_pose
+    if amcl and est is not None:
+        pose = sc.robot.initial_pose
+        x = pose.x_m if est.x_m is None else est.x_m
+        y = pose.y_m if est.y_m is None else est.y_m
+        yaw = pose.yaw_rad if est.yaw_rad is None else est.yaw_rad
+        if occupancy.world_to_cell(x, y) is None:
+            msg = (
+                f"localization.initial_pose: ({x:.3f}, {y:.3f}) lies outside the map ({_extent(occupancy)}); "
+                "give a pose on the map"
+            )
+            raise ConfigError(msg)
+        estimate = (x, y, yaw)
+    if isinstance(sc.mission, BehaviorTreeMission) and sc.mission.locations is not None:
+        _check_locations_on_map(sc.mission.locations, occupancy)
+    return estimate
 
 
 def _check_locations_on_map(path: Path, occupancy: OccupancyMap) -> None:
