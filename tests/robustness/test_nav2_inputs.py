@@ -48,9 +48,13 @@ def _params(folder: Path, changes: dict[str, Any] | None = None, text: str | Non
     return path
 
 
+_GONE = object()  # a map change that removes the key
+
+
 def _map(folder: Path, changes: dict[str, Any], image: bytes | None = None) -> Path:
     doc = yaml.safe_load((FIXTURE_MAP / "map.yaml").read_text())
     doc.update(changes)
+    doc = {k: v for k, v in doc.items() if v is not _GONE}
     if image is not None:
         (folder / "gen.pgm").write_bytes(image)
         doc["image"] = "gen.pgm"
@@ -227,6 +231,10 @@ MAP_CASES: dict[str, tuple[dict[str, Any], bytes | None, tuple[str, ...]]] = {
     "huge_resolution": ({"resolution": 1e300}, None, ("'resolution' must be between",)),
     "tiny_resolution": ({"resolution": 1e-9}, None, ("map.yaml: 'resolution' 1e-09 m", "would take")),
     "thresholds_swapped": ({"mode": "scale", "free_thresh": 0.7}, None, ("'free_thresh' (0.7) must be below",)),
+    # map_server (Humble) requires these three: without free_thresh the 205-grey unknown became free
+    "no_free_thresh": ({"free_thresh": _GONE}, None, ("'free_thresh' is missing", "add 'free_thresh: 0.25'")),
+    "no_occupied_thresh": ({"occupied_thresh": _GONE}, None, ("'occupied_thresh' is missing",)),
+    "no_negate": ({"negate": _GONE}, None, ("'negate' is missing", "add 'negate: 0'")),
     "pgm_bomb": ({}, b"P5\n20000 20000\n255\n" + b"\xfe" * 64, ("20000 x 20000 pixels", "GiB")),
     "pgm_truncated": ({}, b"P5\n300 300\n255\n" + b"\xfe" * 64, ("cannot be read",)),
 }

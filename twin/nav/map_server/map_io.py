@@ -87,8 +87,22 @@ class OccupancyMap:
 # --- reading -------------------------------------------------------------------------------------
 
 
-def _number(doc: dict[str, object], key: str, where: str, default: float | None = None) -> float:
-    value = doc.get(key, default)
+# What map_saver writes, offered when a map YAML lacks a key map_server requires.
+_MAP_SAVER_VALUES = {"free_thresh": "0.25", "occupied_thresh": "0.65", "negate": "0"}
+
+
+def _required(doc: dict[str, object], key: str, where: str) -> object:
+    """The value of a key Nav2's map_server requires (its loadMapYaml fails without it)."""
+    if key not in doc:
+        usual = _MAP_SAVER_VALUES.get(key)
+        fix = f"add '{key}: {usual}' (what map_saver writes)" if usual else f"add '{key}'"
+        msg = f"{where}: '{key}' is missing, and Nav2's map_server refuses a map YAML without it; {fix}"
+        raise ConfigError(msg)
+    return doc[key]
+
+
+def _number(doc: dict[str, object], key: str, where: str) -> float:
+    value = _required(doc, key, where)
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         msg = f"{where}: '{key}' must be a number, got {value!r}; fix the map YAML"
         raise ConfigError(msg)
@@ -152,9 +166,9 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
     if not (isinstance(origin, list) and len(origin) == 3 and all(isinstance(v, int | float) for v in origin)):
         msg = f"{where}: 'origin' must be [x, y, yaw], got {origin!r}; fix it"
         raise ConfigError(msg)
-    occupied = _number(doc, "occupied_thresh", where, 0.65)
-    free = _number(doc, "free_thresh", where, 0.25)
-    negate = doc.get("negate", 0)
+    occupied = _number(doc, "occupied_thresh", where)
+    free = _number(doc, "free_thresh", where)
+    negate = _required(doc, "negate", where)
     if negate not in (0, 1, True, False):
         msg = f"{where}: 'negate' must be 0 or 1, got {negate!r}; fix it"
         raise ConfigError(msg)

@@ -29,7 +29,8 @@ def test_the_turtlebot3_world_slam_map_loads_as_map_server_gives_it(fixtures: Pa
 
 def _write(tmp_path: Path, pixels: np.ndarray, **keys: object) -> Path:
     Image.fromarray(pixels).save(tmp_path / "m.png")
-    doc = {"image": "m.png", "resolution": 0.1, "origin": [1.0, 2.0, 0.0], **keys}
+    doc = {"image": "m.png", "resolution": 0.1, "origin": [1.0, 2.0, 0.0], "negate": 0}
+    doc |= {"occupied_thresh": 0.65, "free_thresh": 0.196} | keys  # (map_server requires all three)
     (tmp_path / "m.yaml").write_text("\n".join(f"{k}: {v}" for k, v in doc.items()))
     return tmp_path / "m.yaml"
 
@@ -79,7 +80,9 @@ def test_save_then_load_round_trips_in_map_saver_format(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("damage", ["missing", "corrupt"])
 def test_missing_or_corrupt_image_is_one_line_exit_2(tmp_path: Path, damage: str) -> None:
-    (tmp_path / "map.yaml").write_text("image: map.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    (tmp_path / "map.yaml").write_text(
+        "image: map.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n"
+    )
     if damage == "corrupt":
         (tmp_path / "map.pgm").write_bytes(b"P5\n10 10\n255\n\x00\x01")
     with pytest.raises(ConfigError, match=r"map\.yaml: map image .*map\.pgm") as info:
