@@ -90,6 +90,14 @@ def _refused_alike(scenario: Path, capsys: pytest.CaptureFixture[str], *contains
 # -- params files: file:line: node.key, the problem, the fix -----------------------------------------
 
 PARAMS_CASES: dict[str, tuple[dict[str, Any], tuple[str, ...]]] = {
+    "unknown_goal_checker": (
+        {"controller_server.general_goal_checker.plugin": "nav2_controller::PositionGoalChecker"},
+        ("general_goal_checker.plugin: unknown goal checker plugin", "nav2_controller::StoppedGoalChecker"),
+    ),
+    "unknown_progress_checker": (
+        {"controller_server.progress_checker.plugin": "my_pkg::Checker"},
+        ("progress_checker.plugin: unknown progress checker plugin", "nav2_controller::PoseProgressChecker"),
+    ),
     "zero_controller_frequency": (
         {"controller_server.controller_frequency": 0.0},
         ("controller_server.controller_frequency: must be at least", "got 0.0"),

@@ -41,6 +41,7 @@ import yaml
 
 from twin.core import yaml_numbers
 from twin.core.errors import ConfigError
+from twin.nav.controller.checkers import GOAL_CHECKER_PLUGINS, PROGRESS_CHECKER_PLUGINS
 from twin.nav.params import (
     MAX_DISTANCE_M,
     MAX_RATE_HZ,
@@ -297,14 +298,26 @@ def _controller_server(r: ParamReader, strict: bool, local_cells: int) -> float:
     checkers = r.str_list("goal_checker_plugins", ()) or (r.text("goal_checker_plugin", "goal_checker"),)
     r.text("goal_checker_plugin", "goal_checker")
     for name in checkers:
-        r.text(f"{name}.plugin", "nav2_controller::SimpleGoalChecker")
+        plugin = r.text(f"{name}.plugin", GOAL_CHECKER_PLUGINS[0])
+        if strict and plugin not in GOAL_CHECKER_PLUGINS:
+            raise r.fail(
+                f"{name}.plugin", f"unknown goal checker plugin {plugin!r}", f"use {' or '.join(GOAL_CHECKER_PLUGINS)}"
+            )
         r.number(f"{name}.xy_goal_tolerance", 0.25, low=0.0, high=_D, unit="m")
         r.number(f"{name}.yaw_goal_tolerance", 0.25, low=0.0, high=_D, unit="rad")
         r.flag(f"{name}.stateful", True)
+        if plugin == GOAL_CHECKER_PLUGINS[1]:
+            r.number(f"{name}.trans_stopped_velocity", 0.25, low=0.0, high=_D, unit="m/s")
+            r.number(f"{name}.rot_stopped_velocity", 0.25, low=0.0, high=_D, unit="rad/s")
     progress = r.text("progress_checker_plugin", "progress_checker")
-    r.text(f"{progress}.plugin", "nav2_controller::SimpleProgressChecker")
+    plugin = r.text(f"{progress}.plugin", PROGRESS_CHECKER_PLUGINS[0])
+    if strict and plugin not in PROGRESS_CHECKER_PLUGINS:
+        fix = f"use {' or '.join(PROGRESS_CHECKER_PLUGINS)}"
+        raise r.fail(f"{progress}.plugin", f"unknown progress checker plugin {plugin!r}", fix)
     r.number(f"{progress}.required_movement_radius", 0.5, low=0.0, high=_D, unit="m")
     r.number(f"{progress}.movement_time_allowance", 10.0, low=0.0, high=_D, unit="s")
+    if plugin == PROGRESS_CHECKER_PLUGINS[1]:
+        r.number(f"{progress}.required_movement_angle", 0.5, low=0.0, high=_D, unit="rad")
     return hz
 
 

@@ -15,7 +15,12 @@ from typing import Any
 
 from twin.core.errors import ConfigError
 from twin.nav.behaviors.timed_behavior import BehaviorParams
-from twin.nav.controller.checkers import SimpleGoalChecker
+from twin.nav.controller.checkers import (
+    GOAL_CHECKER_PLUGINS,
+    PROGRESS_CHECKER_PLUGINS,
+    SimpleGoalChecker,
+    StoppedGoalChecker,
+)
 from twin.nav.controller.controller_server import CONTROLLER_PLUGINS, controller_for_plugin
 from twin.nav.controller.regulated_pure_pursuit import NAV2_PARAMETERS as RPP_PARAMETERS
 from twin.nav.params import Nav2Params
@@ -37,6 +42,7 @@ class Nav2Config:
     goal_checkers: Mapping[str, SimpleGoalChecker] = field(default_factory=dict)
     progress_radius_m: float = 0.5
     progress_allowance_s: float = 10.0
+    progress_angle_rad: float | None = None  # PoseProgressChecker's required_movement_angle (None: Simple)
     planner: NavfnParams = field(default_factory=NavfnParams)
     behaviors: BehaviorParams = field(default_factory=BehaviorParams)
     smoother: SmootherParams = field(default_factory=SmootherParams)
@@ -118,18 +124,33 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     checker_names = _names(cs, "goal_checker_plugins", (), where) or (
         str(cs.get("goal_checker_plugin", "goal_checker")),
     )
-    checkers = {}
+    checkers: dict[str, SimpleGoalChecker] = {}
     for name in checker_names:
         section = _sub(cs, name)
-        checkers[name] = SimpleGoalChecker(
-            xy_goal_tolerance_m=_num(section, "xy_goal_tolerance", 0.25, f"{where}.{name}"),
-            yaw_goal_tolerance_rad=_num(section, "yaw_goal_tolerance", 0.25, f"{where}.{name}"),
-            stateful=bool(section.get("stateful", True)),
-        )
-        cu.extend(f"{name}.{k}" for k in section)
+        xy = _num(section, "xy_goal_tolerance", 0.25, f"{where}.{name}")
+        yaw = _num(section, "yaw_goal_tolerance", 0.25, f"{where}.{name}")
+        stateful = bool(section.get("stateful", True))
+        keys = ["plugin", "xy_goal_tolerance", "yaw_goal_tolerance", "stateful"]
+        if str(section.get("plugin", GOAL_CHECKER_PLUGINS[0])) == GOAL_CHECKER_PLUGINS[1]:
+            checkers[name] = StoppedGoalChecker(
+                xy_goal_tolerance_m=xy,
+                yaw_goal_tolerance_rad=yaw,
+                stateful=stateful,
+                trans_stopped_velocity_mps=_num(section, "trans_stopped_velocity", 0.25, f"{where}.{name}"),
+                rot_stopped_velocity_radps=_num(section, "rot_stopped_velocity", 0.25, f"{where}.{name}"),
+            )
+            keys += ["trans_stopped_velocity", "rot_stopped_velocity"]
+        else:
+            checkers[name] = SimpleGoalChecker(xy_goal_tolerance_m=xy, yaw_goal_tolerance_rad=yaw, stateful=stateful)
+        cu.extend(f"{name}.{k}" for k in keys if k in section)  # (another's key is named unused)
     progress_name = str(cs.get("progress_checker_plugin", "progress_checker"))
     progress = _sub(cs, progress_name)
-    cu.extend(f"{progress_name}.{k}" for k in progress)
+    progress_keys = ["plugin", "required_movement_radius", "movement_time_allowance"]
+    progress_angle = None
+    if str(progress.get("plugin", PROGRESS_CHECKER_PLUGINS[0])) == PROGRESS_CHECKER_PLUGINS[1]:
+        progress_angle = _num(progress, "required_movement_angle", 0.5, f"{where}.{progress_name}")
+        progress_keys.append("required_movement_angle")
+    cu.extend(f"{progress_name}.{k}" for k in progress_keys if k in progress)
     cu += ["controller_frequency", "failure_tolerance", "controller_plugins", "goal_checker_plugins"]
     cu += ["min_x_velocity_threshold", "min_theta_velocity_threshold"]
     cu += ["goal_checker_plugin", "progress_checker_plugin"]
@@ -213,6 +234,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         goal_checkers=checkers,
         progress_radius_m=_num(progress, "required_movement_radius", 0.5, f"{where}.{progress_name}"),
         progress_allowance_s=_num(progress, "movement_time_allowance", 10.0, f"{where}.{progress_name}"),
+        progress_angle_rad=progress_angle,
         planner=planner,
         behaviors=behaviors,
         smoother=smoother,

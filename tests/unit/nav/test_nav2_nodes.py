@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from twin.core.errors import ConfigError
+from twin.nav.controller.checkers import SimpleGoalChecker, StoppedGoalChecker
 from twin.nav.costmap_2d.costmap_node import costmap_translation
 from twin.nav.frames import Frames, compose, invert
 from twin.nav.params import default_params_path, load_nav2_params
@@ -56,6 +57,23 @@ def test_tb3_params_give_nav2s_server_values() -> None:
     # no velocity_smoother or behavior_server section in TB3's file: Humble's code defaults
     assert cfg.smoother.smoothing_frequency_hz == 20.0 and cfg.smoother.max_velocity == (0.5, 0.0, 2.5)
     assert cfg.behaviors.cycle_frequency_hz == 10.0
+
+
+def test_stopped_goal_and_pose_progress_checkers_are_taken_as_plugins() -> None:
+    overrides = {
+        "controller_server.general_goal_checker.plugin": "nav2_controller::StoppedGoalChecker",
+        "controller_server.general_goal_checker.trans_stopped_velocity": 0.05,
+        "controller_server.progress_checker.plugin": "nav2_controller::PoseProgressChecker",
+        "controller_server.progress_checker.required_movement_angle": 0.4,
+    }
+    cfg = nav2_config(load_nav2_params(default_params_path("waffle"), overrides=overrides))
+    checker = cfg.goal_checkers["general_goal_checker"]
+    assert isinstance(checker, StoppedGoalChecker)
+    assert (checker.trans_stopped_velocity_mps, checker.rot_stopped_velocity_radps) == (0.05, 0.25)
+    assert cfg.progress_angle_rad == 0.4
+    assert "general_goal_checker.trans_stopped_velocity" in cfg.used["controller_server"]
+    plain = nav2_config(load_nav2_params(default_params_path("waffle")))
+    assert type(plain.goal_checkers["general_goal_checker"]) is SimpleGoalChecker and plain.progress_angle_rad is None
 
 
 def test_nav2s_own_params_file_reads_its_smoother_limits(fixtures: Path) -> None:

@@ -82,6 +82,7 @@ class Nav2Servers:
             velocity_thresholds=config.velocity_thresholds,
             progress_radius_m=config.progress_radius_m,
             progress_allowance_s=config.progress_allowance_s,
+            progress_angle_rad=config.progress_angle_rad,
         )
         self.behavior_server = BehaviorServer(config.behaviors, frames, local_costmap, finish=self._finish)
         self._goals: dict[int, ActionGoal] = {}

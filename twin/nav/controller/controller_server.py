@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from twin.bag import PathEncoder, TwistEncoder
 from twin.core.errors import ConfigError
 from twin.nav.actions import ActionGoal, ActionState
-from twin.nav.controller.checkers import SimpleGoalChecker, SimpleProgressChecker
+from twin.nav.controller.checkers import PoseProgressChecker, SimpleGoalChecker, SimpleProgressChecker
 from twin.nav.costmap_2d.costmap_2d import CostGrid
 from twin.nav.costmap_2d.layered_costmap import Costmap
 from twin.nav.frames import Frames, invert
@@ -171,7 +171,7 @@ class FollowPathTask:
         else:
             self._last_valid_ns = t_ns
             reason = ""
-        if self.goal_checker.is_goal_reached(pose, goal):
+        if self.goal_checker.is_goal_reached(pose, goal, (vx, wz)):  # the thresholded odometry, as Humble's
             return FollowStep(status=FollowStatus.SUCCEEDED, cmd=(0.0, 0.0))
         return FollowStep(status=FollowStatus.RUNNING, cmd=cmd, reason=reason)
 
@@ -228,6 +228,7 @@ class ControllerServer:
         velocity_thresholds: `min_x_velocity_threshold`, `min_theta_velocity_threshold`.
         progress_radius_m: The progress checker's `required_movement_radius`.
         progress_allowance_s: The progress checker's `movement_time_allowance`.
+        progress_angle_rad: PoseProgressChecker's `required_movement_angle` (None: SimpleProgressChecker).
     """
 
     def __init__(
@@ -243,6 +244,7 @@ class ControllerServer:
         velocity_thresholds: tuple[float, float],
         progress_radius_m: float,
         progress_allowance_s: float,
+        progress_angle_rad: float | None = None,
     ) -> None:
         self.frames = frames
         self.local_costmap = local_costmap
@@ -268,9 +270,16 @@ class ControllerServer:
                     local_costmap.params.track_unknown_space,
                 )
             checker = next(iter(goal_checkers.values()), SimpleGoalChecker())
-            progress = SimpleProgressChecker(
-                required_movement_radius_m=progress_radius_m,
-                movement_time_allowance_s=progress_allowance_s,
+            progress = (
+                SimpleProgressChecker(
+                    required_movement_radius_m=progress_radius_m, movement_time_allowance_s=progress_allowance_s
+                )
+                if progress_angle_rad is None
+                else PoseProgressChecker(
+                    required_movement_radius_m=progress_radius_m,
+                    movement_time_allowance_s=progress_allowance_s,
+                    required_movement_angle_rad=progress_angle_rad,
+                )
             )
             self._tasks[name] = FollowPathTask(
                 controller,

@@ -7,7 +7,12 @@ import pytest
 
 from tests.unit.nav.costmaps import grid, inflate
 from twin.core.errors import ConfigError
-from twin.nav.controller.checkers import SimpleGoalChecker, SimpleProgressChecker
+from twin.nav.controller.checkers import (
+    PoseProgressChecker,
+    SimpleGoalChecker,
+    SimpleProgressChecker,
+    StoppedGoalChecker,
+)
 from twin.nav.controller.controller_server import FollowPathTask, FollowStatus, controller_for_plugin
 from twin.nav.controller.dwb.local_planner import DwbController, DwbParams
 from twin.nav.controller.regulated_pure_pursuit import RppController, RppParams
@@ -120,6 +125,30 @@ def test_progress_checker_fails_after_the_allowance_without_movement() -> None:
     assert checker.check((0.4, 0.0, 0.0), 10_000_000_000)
     assert not checker.check((0.4, 0.0, 0.0), 10_100_000_000)
     assert checker.check((0.6, 0.0, 0.0), 10_200_000_000)  # moved out of the radius: new baseline
+
+
+def test_stopped_goal_checker_also_needs_the_robot_stopped() -> None:
+    # nav2_controller::StoppedGoalChecker: SimpleGoalChecker's test (latching the position as it
+    # does), then |v| and |w| at or below trans_stopped_velocity and rot_stopped_velocity
+    checker = StoppedGoalChecker(trans_stopped_velocity_mps=0.1, rot_stopped_velocity_radps=0.2)
+    goal = (1.0, 1.0, 0.0)
+    assert not checker.is_goal_reached((1.1, 1.0, 0.0), goal, (0.15, 0.0))  # there, still driving
+    assert not checker.is_goal_reached((1.3, 1.0, 0.0), goal, (0.0, 0.3))  # (latched) turning too fast
+    assert checker.is_goal_reached((1.3, 1.0, 0.0), goal, (0.1, -0.2))  # latched, stopped enough
+    simple = SimpleGoalChecker()
+    assert simple.is_goal_reached((1.1, 1.0, 0.0), goal, (0.15, 0.0))  # the Simple one ignores the speed
+
+
+def test_pose_progress_checker_counts_turning_as_progress() -> None:
+    # nav2_controller::PoseProgressChecker: leaving the radius or turning past required_movement_angle
+    simple, pose = SimpleProgressChecker(), PoseProgressChecker(required_movement_angle_rad=0.5)
+    for checker in (simple, pose):
+        assert checker.check((0.0, 0.0, 0.0), 0)
+    # turning in place by 0.6 rad, then waiting past the allowance from the start
+    assert simple.check((0.0, 0.0, 0.6), 5_000_000_000) and pose.check((0.0, 0.0, 0.6), 5_000_000_000)
+    assert not simple.check((0.0, 0.0, 0.6), 10_100_000_000)  # the turn is no progress to it
+    assert pose.check((0.0, 0.0, 0.6), 10_100_000_000)  # its baseline moved with the turn at 5 s
+    assert not pose.check((0.0, 0.0, 0.9), 15_100_000_000)  # 0.3 rad more is not enough: 10.1 s since
 
 
 def test_dwb_samples_what_sim_time_can_reach_as_humble_does() -> None:
