@@ -427,6 +427,10 @@ def _salvage(damaged: Path, target: Path, max_rowid: int) -> None:
     try:
         db.execute("PRAGMA journal_mode=DELETE")
         db.execute("PRAGMA synchronous=OFF")
+        # SQLite checks an attached file's schema against the file when it reads it, and a file cut
+        # short (a disk that filled, a copy that stopped) fails that as a whole, every row with it;
+        # with the schema taken as written the rows that are there still read, one by one.
+        db.execute("PRAGMA writable_schema=ON")
         db.execute("ATTACH DATABASE ? AS old", (str(damaged),))
         try:
             entries = db.execute("SELECT type, name, sql FROM old.sqlite_master WHERE sql IS NOT NULL").fetchall()

@@ -104,6 +104,29 @@ def test_sqlite3_without_metadata_is_rebuilt_in_its_distro_form(tmp_path: Path, 
     assert sum(1 for _ in read_messages(bag)) == original.message_count
 
 
+def test_a_sqlite3_file_missing_its_last_page_keeps_every_row_that_is_there(tmp_path: Path) -> None:
+    # A file cut short (a disk that filled, a copy that stopped): SQLite refused to attach it at all,
+    # so the salvage copied nothing; with its schema taken as written, every row still there reads.
+    bag = tmp_path / "db"
+    _record_in_chunks(bag, storage="sqlite3")
+    recorded = open_bag(bag).message_count
+    (db_file,) = bag.glob("*.db3")
+    page = 4096
+    assert db_file.stat().st_size % page == 0
+    with db_file.open("r+b") as f:
+        f.truncate(db_file.stat().st_size - page)
+    cut = db_file.read_bytes()
+    report = recover_bag(bag)
+    assert (bag / (db_file.name + ".orig")).read_bytes() == cut  # the damaged original, kept as it was
+    info = open_bag(bag)
+    assert 0.9 * recorded <= info.message_count <= recorded, (info.message_count, recorded)
+    assert report.metadata.message_count == info.message_count
+    with AnyReader([bag]) as reader:
+        assert sum(1 for c, _, raw in reader.messages() if reader.deserialize(raw, c.msgtype) is not None) == (
+            info.message_count
+        )
+
+
 def test_sqlite3_interrupted_mid_transaction_rolls_back_to_the_last_commit(tmp_path: Path) -> None:
     """A hot journal (the process died inside a commit) is rolled back; committed batches stay."""
     bag = tmp_path / "hot"
