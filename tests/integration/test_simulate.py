@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import os
 import signal
@@ -17,6 +18,7 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import REPO, run_twin
+from twin.bag import open_bag
 
 RATES_HZ = {"/clock": 10.0, "/odom": 30.0, "/joint_states": 30.0, "/scan": 5.0}
 # Nav2's velocity_smoother publishes /cmd_vel at its smoothing_frequency (TB3's Humble file: 20 Hz) from the
@@ -237,3 +239,16 @@ def test_driving_into_a_wall_stops_the_robot_and_records_the_contact(tmp_path: P
     y_end = odom.pose.pose.position.y
     assert -1.281 < y_end - 0.0 < -0.9
     assert odom.twist.twist.linear.x == 0.0
+
+
+def test_the_summary_counts_the_messages_the_bag_holds(tmp_path: Path) -> None:
+    # A recording that leaves topics out (the camera scenarios' raw images): the summary said 2440
+    # messages of a bag holding 2390; it counts what the bag holds.
+    scenario = tmp_path / "few.yaml"
+    scenario.write_text("name: few\nrecording:\n  topics: {exclude: [/imu, /joint_states]}\n")
+    proc = run_twin("simulate", str(scenario), "--duration", "3", "--out", str(tmp_path / "bag"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    info = open_bag(tmp_path / "bag")
+    assert summary["messages"] == info.message_count
+    assert summary["topics"]["/imu"] > 0 and "/imu" not in {t.name for t in info.topics}

@@ -70,7 +70,7 @@ class RunSummary:
     sim_s: float
     wall_s: float
     real_time_factor: float
-    messages: int
+    messages: int  # the bag's (what the recording takes), or every publication without a bag
     topics: dict[str, int]
     contacts: int
     ended_by: str
@@ -208,6 +208,17 @@ class Simulation(Closing):
                 if self.recorder is not None:
                     self.recorder.close()
             raise
+
+    def _recorded_count(self) -> int:
+        """The messages the bag holds (those of the topics the recording takes), or all published without one."""
+        recorder = self.recorder
+        if recorder is None:
+            return self.executor.message_count
+        return sum(
+            t.count
+            for t in self.executor.topics.values()
+            if any(getattr(write, "__self__", None) is recorder for write, _ in t.sinks)
+        )
 
     def _spawn(self, index: int, group: RobotGroup, scene: Scene) -> RobotBody:
         """Spawn one group's robot; a fleet's error names its entry (`robots[1].robot.initial_pose: ...`)."""
@@ -469,7 +480,7 @@ class Simulation(Closing):
             sim_s=sim_s,
             wall_s=wall_s,
             real_time_factor=sim_s / wall_s if wall_s > 0 else math.inf,
-            messages=self.executor.message_count,
+            messages=self._recorded_count(),
             topics={name: t.count for name, t in self.executor.topics.items() if t.publishers},
             contacts=self.contacts,
             ended_by=ended_by,
