@@ -99,6 +99,27 @@ def _triple(
     return (float(value[0]), float(value[1]), float(value[2]))
 
 
+class _Reads(dict[str, object]):
+    """A plugin's parameters that note which keys its reader asked for (`get`, `[]`, `in`)."""
+
+    def __init__(self, section: Mapping[str, object]) -> None:
+        super().__init__(section)
+        self.read: set[str] = set()
+
+    def get(self, key: str, default: object = None) -> object:
+        self.read.add(key)
+        return super().get(key, default)
+
+    def __getitem__(self, key: str) -> object:
+        self.read.add(key)
+        return super().__getitem__(key)
+
+    def __contains__(self, key: object) -> bool:
+        if isinstance(key, str):
+            self.read.add(key)
+        return super().__contains__(key)
+
+
 def nav2_config(params: Nav2Params) -> Nav2Config:
     """Read the controller, planner, behaviour, smoother and navigator parameters of a Nav2 params file.
 
@@ -117,10 +138,14 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         section = _sub(cs, name)
         plugin = str(section.get("plugin", "dwb_core::DWBLocalPlanner"))
         # refuses unknown plugins, critics and bad values now, before the run
-        controller_for_plugin(plugin, section, where=f"{where}.{name}", controller_frequency_hz=frequency)
+        reads = _Reads(section)
+        controller_for_plugin(plugin, reads, where=f"{where}.{name}", controller_frequency_hz=frequency)
         controllers[name] = (plugin, section)
-        # RPP reads only the keys Humble's RPP declares; the others are named in the unused-parameters warning
-        cu.extend(f"{name}.{k}" for k in section if plugin != CONTROLLER_PLUGINS[1] or k in RPP_PARAMETERS)
+        # RPP: the keys Humble's RPP declares; DWB: the keys the twin's DWB reads (a typo such as
+        # max_vel_xx, or a parameter of a critic the list does not name, is not); the others are
+        # named in the unused-parameters warning
+        taken = RPP_PARAMETERS if plugin == CONTROLLER_PLUGINS[1] else reads.read | {"plugin"}
+        cu.extend(f"{name}.{k}" for k in section if k in taken)
     checker_names = _names(cs, "goal_checker_plugins", (), where) or (
         str(cs.get("goal_checker_plugin", "goal_checker")),
     )

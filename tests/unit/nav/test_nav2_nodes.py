@@ -10,6 +10,7 @@ import pytest
 
 from twin.core.errors import ConfigError
 from twin.nav.controller.checkers import SimpleGoalChecker, StoppedGoalChecker
+from twin.nav.controller.dwb.dwb_params import DwbParams
 from twin.nav.costmap_2d.costmap_node import costmap_translation
 from twin.nav.frames import Frames, compose, invert
 from twin.nav.params import default_params_path, load_nav2_params
@@ -74,6 +75,31 @@ def test_stopped_goal_and_pose_progress_checkers_are_taken_as_plugins() -> None:
     assert "general_goal_checker.trans_stopped_velocity" in cfg.used["controller_server"]
     plain = nav2_config(load_nav2_params(default_params_path("waffle")))
     assert type(plain.goal_checkers["general_goal_checker"]) is SimpleGoalChecker and plain.progress_angle_rad is None
+
+
+def test_dwb_keys_it_does_not_read_are_named_unused_and_critics_read_under_their_listed_names(tmp_path: Path) -> None:
+    # A typo (max_vel_xx) was taken as used, so no warning named it; a critic listed by its class name
+    # reads its parameters under that name, as DWB passes each critic the list's name.
+    text = default_params_path("waffle").read_text()
+    text = text.replace(
+        'critics: ["RotateToGoal",', 'max_vel_xx: 0.3\n      critics: ["dwb_critics::RotateToGoalCritic",'
+    )
+    text = text.replace(
+        "RotateToGoal.scale: 32.0", "RotateToGoal.scale: 32.0\n      dwb_critics::RotateToGoalCritic.scale: 7.0"
+    )
+    path = tmp_path / "params.yaml"
+    path.write_text(text)
+    params = load_nav2_params(path)
+    cfg = nav2_config(params)
+    used = set(cfg.used["controller_server"])
+    assert "FollowPath.max_vel_x" in used and "FollowPath.max_vel_xx" not in used
+    assert "FollowPath.dwb_critics::RotateToGoalCritic.scale" in used and "FollowPath.RotateToGoal.scale" not in used
+    warning = params.warning(cfg.used)
+    assert warning is not None and "controller_server.FollowPath.max_vel_xx" in warning
+    section = cfg.controllers["FollowPath"][1]
+    assert DwbParams.from_nav2(section).rotate_to_goal_scale == 7.0
+    plain = nav2_config(load_nav2_params(default_params_path("waffle"))).controllers["FollowPath"][1]
+    assert DwbParams.from_nav2(plain).rotate_to_goal_scale == 32.0
 
 
 def test_nav2s_own_params_file_reads_its_smoother_limits(fixtures: Path) -> None:

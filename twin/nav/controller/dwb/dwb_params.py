@@ -101,7 +101,7 @@ class DwbParams:
                 sideways velocities (the twin's robots are differential drive), or RotateToGoal's
                 `lookahead_time` / Oscillation's `oscillation_reset_time` (not implemented).
         """
-        s = dict(section)
+        s = section  # (read, not copied: a caller may note which keys were read)
 
         def num(key: str, default: float) -> float:
             value = s.get(key, default)
@@ -124,6 +124,13 @@ class DwbParams:
             msg = f"{where}.critics: expected a list of critic names, got {critics!r}; fix the params file"
             raise ConfigError(msg)
         names = [c.removeprefix("dwb_critics::").removesuffix("Critic") for c in critics]
+        # A critic reads its parameters under its name as listed (`dwb_critics::RotateToGoalCritic.scale`
+        # for that entry), as DWB passes each critic the list's name; an unlisted critic's are not read.
+        listed = dict(zip(names, critics, strict=True))
+
+        def key(critic: str, name: str) -> str:
+            return f"{listed.get(critic, critic)}.{name}"
+
         unknown = [c for c, n in zip(critics, names, strict=True) if n not in CRITICS]
         if unknown:
             msg = (
@@ -138,15 +145,19 @@ class DwbParams:
                 f"the twin has {', '.join(TRAJECTORY_GENERATORS)}"
             )
             raise ConfigError(msg)
-        for key in ("min_vel_y", "max_vel_y"):
-            if num(key, 0.0) != 0.0:
-                msg = f"{where}.{key}: the twin's robots are differential drive; set it to 0.0"
+        for sideways in ("min_vel_y", "max_vel_y"):
+            if num(sideways, 0.0) != 0.0:
+                msg = f"{where}.{sideways}: the twin's robots are differential drive; set it to 0.0"
                 raise ConfigError(msg)
-        if "RotateToGoal" in names and num("RotateToGoal.lookahead_time", -1.0) >= 0.0:
-            msg = f"{where}.RotateToGoal.lookahead_time: only -1.0 (the trajectory's end) is implemented; set -1.0"
+        for sideways in ("acc_lim_y", "decel_lim_y"):  # (read as Nav2 reads them: no sideways speed to limit)
+            num(sideways, 0.0)
+        if "RotateToGoal" in names and num(key("RotateToGoal", "lookahead_time"), -1.0) >= 0.0:
+            at = key("RotateToGoal", "lookahead_time")
+            msg = f"{where}.{at}: only -1.0 (the trajectory's end) is implemented; set -1.0"
             raise ConfigError(msg)
-        if "Oscillation" in names and num("Oscillation.oscillation_reset_time", -1.0) >= 0.0:
-            msg = f"{where}.Oscillation.oscillation_reset_time: not implemented; remove it (the default is -1.0)"
+        if "Oscillation" in names and num(key("Oscillation", "oscillation_reset_time"), -1.0) >= 0.0:
+            at = key("Oscillation", "oscillation_reset_time")
+            msg = f"{where}.{at}: not implemented; remove it (the default is -1.0)"
             raise ConfigError(msg)
         sim_period = s.get("sim_period")
         return cls(
@@ -176,19 +187,19 @@ class DwbParams:
             forward_prune_distance_m=num("forward_prune_distance", 2.0),
             shorten_transformed_plan=flag("shorten_transformed_plan", True),
             critics=tuple(names),
-            base_obstacle_scale=num("BaseObstacle.scale", 1.0),
-            path_align_scale=num("PathAlign.scale", 1.0),
-            path_align_forward_point_distance_m=num("PathAlign.forward_point_distance", 0.325),
-            goal_align_scale=num("GoalAlign.scale", 1.0),
-            goal_align_forward_point_distance_m=num("GoalAlign.forward_point_distance", 0.325),
-            path_dist_scale=num("PathDist.scale", 1.0),
-            goal_dist_scale=num("GoalDist.scale", 1.0),
-            rotate_to_goal_scale=num("RotateToGoal.scale", 1.0),
-            rotate_to_goal_slowing_factor=num("RotateToGoal.slowing_factor", 5.0),
-            oscillation_scale=num("Oscillation.scale", 1.0),
-            oscillation_reset_dist_m=num("Oscillation.oscillation_reset_dist", 0.05),
-            oscillation_reset_angle_rad=num("Oscillation.oscillation_reset_angle", 0.2),
-            x_only_threshold=num("Oscillation.x_only_threshold", 0.05),
+            base_obstacle_scale=num(key("BaseObstacle", "scale"), 1.0),
+            path_align_scale=num(key("PathAlign", "scale"), 1.0),
+            path_align_forward_point_distance_m=num(key("PathAlign", "forward_point_distance"), 0.325),
+            goal_align_scale=num(key("GoalAlign", "scale"), 1.0),
+            goal_align_forward_point_distance_m=num(key("GoalAlign", "forward_point_distance"), 0.325),
+            path_dist_scale=num(key("PathDist", "scale"), 1.0),
+            goal_dist_scale=num(key("GoalDist", "scale"), 1.0),
+            rotate_to_goal_scale=num(key("RotateToGoal", "scale"), 1.0),
+            rotate_to_goal_slowing_factor=num(key("RotateToGoal", "slowing_factor"), 5.0),
+            oscillation_scale=num(key("Oscillation", "scale"), 1.0),
+            oscillation_reset_dist_m=num(key("Oscillation", "oscillation_reset_dist"), 0.05),
+            oscillation_reset_angle_rad=num(key("Oscillation", "oscillation_reset_angle"), 0.2),
+            x_only_threshold=num(key("Oscillation", "x_only_threshold"), 0.05),
         )
 
     @property
