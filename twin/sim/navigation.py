@@ -198,6 +198,9 @@ class NavigationStack:
         warning = params.warning(config.used if config is not None else None)
         if warning:  # the packaged TB3 files hold keys Humble ignores: a fact, said with -v; a user's file: a warning
             _log.log(logging.WARNING if sc.navigation.params is not None else logging.INFO, "%s", warning)
+        if wants_nav2:
+            for line in unsimulated_sources(params):
+                _log.warning("%s", line)
         return cls(
             occupancy=occupancy,
             params=params,
@@ -367,6 +370,25 @@ def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
     """
     if sc.map == "from_world" and robot.lidar is not None and (runs_amcl(sc) or runs_nav2(sc)):
         _map_bounds(sc, scene)
+
+
+def unsimulated_sources(params: Nav2Params) -> list[str]:
+    """One line per costmap observation source the twin feeds nothing: a sensor type it does not simulate.
+
+    The twin's robots have a lidar (and a camera whose images no costmap reads): a PointCloud2 source
+    (a depth camera's points, a 3D lidar) stays empty, so its layer marks nothing from it.
+    """
+    lines = []
+    for costmap in (params.global_costmap, params.local_costmap):
+        for layer in costmap.obstacle_layers:
+            for source in layer.sources:
+                if source.data_type != "LaserScan":
+                    lines.append(
+                        f"{params.source}: {costmap.name}.{layer.name}.{source.name}: a {source.data_type} source "
+                        f"({source.topic or 'no topic'}) gets no data: the twin simulates the robot's lidar "
+                        "(LaserScan) only, so that layer marks nothing from it"
+                    )
+    return lines
 
 
 def check_poses_on_map(sc: Scenario, occupancy: OccupancyMap, *, amcl: bool) -> tuple[float, float, float] | None:

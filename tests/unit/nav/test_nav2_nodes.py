@@ -154,3 +154,15 @@ def test_smooth_path_keeps_the_ends_and_pulls_corners_in() -> None:
     # an interior pose faces along its neighbours' chord
     chord = out[3, :2] - out[1, :2]
     assert out[2, 2] == pytest.approx(math.atan2(chord[1], chord[0]))
+
+
+def test_a_sensor_source_the_twin_does_not_simulate_is_named(tmp_path: Path) -> None:
+    # TurtleBot3's waffle_pi-style depth camera source: a PointCloud2 the twin does not publish
+    from twin.sim.navigation import unsimulated_sources
+
+    assert unsimulated_sources(load_nav2_params(default_params_path("waffle"))) == []
+    text = default_params_path("waffle").read_text().replace('data_type: "LaserScan"', 'data_type: "PointCloud2"', 1)
+    path = tmp_path / "params.yaml"
+    path.write_text(text)
+    (line,) = unsimulated_sources(load_nav2_params(path))
+    assert line.startswith(f"{path}: ") and "a PointCloud2 source (/scan) gets no data" in line
