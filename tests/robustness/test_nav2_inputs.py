@@ -181,6 +181,16 @@ def test_params_file_with_only_amcl_localises_when_nothing_navigates(
     assert code == 0, err
 
 
+def test_an_empty_ros_parameters_says_what_to_do(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    params = _params(tmp_path, text="amcl:\n  ros__parameters:\n")
+    _refused_alike(
+        _scenario(tmp_path, navigation={"params": str(params)}),
+        capsys,
+        "amcl.ros__parameters is empty",
+        "indent the node's parameters under it, or remove 'amcl:' if it has none",
+    )
+
+
 def test_unknown_keys_in_a_params_file_stay_one_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     params = _params(tmp_path, {"amcl.sigma_hitt": 0.1})  # ROS keeps undeclared parameters too
     code, _, err = run(["scenario", "check", str(_scenario(tmp_path, navigation={"params": str(params)}))], capsys)

@@ -294,7 +294,11 @@ def _collect_nodes(
         for sub_key, sub in body.items():
             if sub_key == "ros__parameters":
                 if not isinstance(sub, Mapping):
-                    msg = f"{where}: {name}.ros__parameters must be a mapping of parameter names to values"
+                    what = "is empty" if sub is None else f"holds {sub!r}"
+                    msg = (
+                        f"{where}: {name}.ros__parameters {what}, where a mapping of parameter names to values "
+                        f"belongs; indent the node's parameters under it, or remove '{raw_key}:' if it has none"
+                    )
                     raise ConfigError(msg)
                 params = nodes.setdefault(name, {})
                 _flatten("", sub, params, f"{where}: node {name}")
