@@ -280,6 +280,17 @@ def test_a_pose_off_a_given_map_is_refused_by_check_as_by_the_run(
     )
 
 
+def test_a_map_origin_yaw_is_warned_of(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # map_server's documentation: "many parts of the system currently ignore yaw" (the costmaps and AMCL)
+    map_yaml = _map(tmp_path, {"origin": [-10.0, -10.0, 0.3]})
+    code, _, err = run(
+        ["simulate", str(_scenario(tmp_path, map=str(map_yaml))), "--duration", "1", "--out", str(tmp_path / "b")],
+        capsys,
+    )
+    assert code == 0, err
+    assert f"{map_yaml}: the map's origin yaw (0.3 rad) is published on /map but" in err
+
+
 def test_map_numbers_as_yaml_1_2_writes_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # `5e-2` is a number to ROS's yaml-cpp; PyYAML alone reads it as text
     map_yaml = _map(tmp_path, {})

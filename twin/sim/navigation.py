@@ -201,6 +201,13 @@ class NavigationStack:
         if wants_nav2:
             for line in unsimulated_sources(params):
                 _log.warning("%s", line)
+        if occupancy.origin_yaw_rad != 0.0:
+            _log.warning(
+                "%s: the map's origin yaw (%g rad) is published on /map but, as in Nav2, the costmaps and AMCL "
+                "read the map unrotated (x along its rows); give yaw 0 and a map drawn that way",
+                sc.map,
+                occupancy.origin_yaw_rad,
+            )
         return cls(
             occupancy=occupancy,
             params=params,
