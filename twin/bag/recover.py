@@ -18,11 +18,13 @@ version or distro.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from twin.bag.mcap_file import ZSTD_MAGIC, McapRecovery, recover_mcap, scan_mcap
 from twin.bag.metadata import (
@@ -352,6 +354,32 @@ def _compressed_messages(firsts: list[bytes]) -> bool:
     return any(data[:4] == ZSTD_MAGIC for data in firsts)
 
 
+def _known_hash(schema: Any) -> str:
+    """A channel's RIHS01 type hash from its schema, when the schema is a type the twin knows, word for word.
+
+    rosbag2 Humble's MCAP writer keeps no hash in the channel (metadata.yaml has it, written at the
+    end): a killed recording's hashes come back from the type itself, as the recorder computed them.
+    """
+    if schema is None:
+        return ""
+    registry = _registry()
+    try:
+        if not registry.knows(schema.name):
+            return ""
+        definition = registry.definition(schema.name)
+    except BagError:
+        return ""
+    return definition.type_hash if bytes(schema.data) == definition.text.encode() else ""
+
+
+@functools.cache
+def _registry() -> Any:
+    """One type registry per process (its definitions are cached)."""
+    from twin.bag.typesys import TypeRegistry
+
+    return TypeRegistry()
+
+
 def _file_info(name: str, start: int, end: int, count: int) -> FileInformation:
     return FileInformation(path=name, starting_time_ns=start, duration_ns=end - start, message_count=count)
 
@@ -395,7 +423,7 @@ def _recover_mcap_bag(bag: Path, files: list[Path], previous: BagMetadata | None
                         msgtype=schema.name if schema else "",
                         serialization_format=channel.message_encoding,
                         offered_qos_profiles=qos,
-                        type_description_hash=channel.metadata.get("topic_type_hash", ""),
+                        type_description_hash=channel.metadata.get("topic_type_hash", "") or _known_hash(schema),
                     )
             if stats.message_count:
                 starts.append(stats.start_ns)
