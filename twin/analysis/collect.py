@@ -464,43 +464,50 @@ def namespace_view(info: BagInfo, namespace: str | None) -> dict[str, TopicInfo]
 def twin_rates(bag: Path, namespace: str | None = None) -> dict[str, float] | None:
     """The rates the twin run that recorded `bag` published at, Hz, by topic (without the namespace).
 
-    Read from the scenario the bag records and the robot model it names (its lidar's and IMU's
-    update rates, its joint-state plugin's, the scenario's overrides); None when the bag records
-    no scenario or its robot model is not found here (its topics are then judged by their steady rate).
+    Read from the scenario the bag records (written whole, every default filled in) and the robot
+    model it names (its lidar's and IMU's update rates, its joint-state plugin's, the scenario's
+    overrides); None when the bag records no scenario or its robot model is not found here (its
+    topics are then judged by their steady rate).
     """
-    import tempfile
+    import yaml
 
     from twin.bag import read_provenance
     from twin.core.errors import TwinError
-    from twin.sim.scenario_file import load_scenario, without_retired_keys
     from twin.world.robot_model import load_robot
 
     try:
         provenance = read_provenance(bag)
         if provenance is None or "scenario_yaml" not in provenance:
             return None
-        with tempfile.TemporaryDirectory(prefix="twin-rates-") as tmp:
-            recorded = Path(tmp) / "scenario.yaml"
-            recorded.write_text(without_retired_keys(provenance["scenario_yaml"]), encoding="utf-8")
-            scenario = load_scenario(recorded)
-        robots = dict(scenario.robot_scenarios())
-        sc = robots.get(namespace or "") or (next(iter(robots.values())) if len(robots) == 1 else None)
-        if sc is None:
-            return None
+        scenario = yaml.safe_load(provenance["scenario_yaml"])
+        entries = scenario.get("robots") or []
+        if entries:  # a fleet's: the robot of this namespace (or the only one), its own sections
+            chosen = [e for e in entries if (e.get("namespace") or e.get("name")) == namespace] or (
+                entries if len(entries) == 1 else []
+            )
+            if not chosen:
+                return None
+            robot, sensors = chosen[0]["robot"], chosen[0]["sensors"]
+        else:
+            robot, sensors = scenario["robot"], scenario["sensors"]
+        model_path = scenario.get("world", {}).get("model_path") or []
         sdf_log = logging.getLogger("twin.world.sdf")  # the run warned of its model's missing meshes already
         level = sdf_log.level
         sdf_log.setLevel(logging.ERROR)
         try:
-            spec = load_robot(sc.robot.model, model_path=sc.world.model_path)
+            spec = load_robot(str(robot["model"]), model_path=[str(p) for p in model_path])
         finally:
             sdf_log.setLevel(level)
-    except (TwinError, OSError, ValueError):
+        lidar_hz = (sensors.get("lidar") or {}).get("rate_hz")
+        ground_truth_hz = float((sensors.get("ground_truth") or {}).get("rate_hz", 30.0))
+        imu_on = bool((sensors.get("imu") or {}).get("enabled", True))
+    except (TwinError, OSError, ValueError, KeyError, TypeError, AttributeError, yaml.YAMLError):
         return None
     encoders = spec.joint_states.rate_hz if spec.joint_states is not None else 30.0  # as the run's JointStateNode
-    rates = {"/joint_states": encoders, "/odom": encoders, "/ground_truth/odom": sc.sensors.ground_truth.rate_hz}
+    rates = {"/joint_states": encoders, "/odom": encoders, "/ground_truth/odom": ground_truth_hz}
     if spec.lidar is not None:
-        rates["/scan"] = sc.sensors.lidar.rate_hz or spec.lidar.rate_hz
-    if spec.imu is not None and sc.sensors.imu.enabled:
+        rates["/scan"] = float(lidar_hz) if lidar_hz else spec.lidar.rate_hz
+    if spec.imu is not None and imu_on:
         rates["/imu"] = spec.imu.rate_hz
     return rates
 
