@@ -55,11 +55,12 @@ class TickError(TreeError):
         node_type: its registration ID.
     """
 
-    def __init__(self, node_path: str, node_type: str, problem: str) -> None:
+    def __init__(self, node_path: str, node_type: str, problem: str, location: str = "") -> None:
         self.node_path = node_path
         self.node_type = node_type
         self.problem = problem
-        super().__init__(f"node '{node_path}' ({node_type}): {problem}")
+        at = f"{location}: " if location else ""  # the XML element's file:line, when the tree came from a file
+        super().__init__(f"{at}node '{node_path}' ({node_type}): {problem}")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True, slots=True)
@@ -282,7 +283,7 @@ class TreeNode:
 
     def _tick_error(self, err: Exception) -> TickError:
         text = str(err) if isinstance(err, TreeError) else f"{type(err).__name__}: {err}"
-        return TickError(self._config.path, self._registration_id, text)
+        return TickError(self._config.path, self._registration_id, text, self._config.location)
 
     def _check_pre_conditions(self, scripts: tuple[Script | None, ...]) -> NodeStatus | None:
         status = self._status
@@ -486,7 +487,12 @@ class SyncActionNode(ActionNode):
         """Tick; a RUNNING result is an error."""
         status = super().execute_tick()
         if status is RUNNING:
-            raise TickError(self._config.path, self._registration_id, "a SyncActionNode must never return RUNNING")
+            raise TickError(
+                self._config.path,
+                self._registration_id,
+                "a SyncActionNode must never return RUNNING",
+                self._config.location,
+            )
         return status
 
     def halt(self) -> None:

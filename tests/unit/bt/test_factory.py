@@ -151,6 +151,19 @@ def test_an_exception_in_a_node_names_its_path() -> None:
     assert isinstance(err.value, TreeError)
 
 
+def test_an_error_while_ticking_a_tree_file_names_the_file_and_line(tmp_path: Path) -> None:
+    # BT.CPP loads an IfThenElse with one child and throws at its first tick: say where it is
+    path = tmp_path / "t.xml"
+    path.write_text(v4("<Sequence>\n<IfThenElse>\n<AlwaysSuccess/>\n</IfThenElse>\n</Sequence>"))
+    tree = BehaviorTreeFactory().create_tree_from_file(path)
+    with pytest.raises(TickError) as err:
+        tree.tick_once()
+    line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if "<IfThenElse>" in text)
+    assert str(err.value) == (
+        f"{path}:{line}: node 'IfThenElse::2' (IfThenElse): IfThenElseNode must have either 2 or 3 children"
+    )
+
+
 def test_a_tick_must_return_a_status() -> None:
     class Sloppy(SyncActionNode):
         def tick(self):  # type: ignore[no-untyped-def]
