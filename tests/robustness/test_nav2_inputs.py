@@ -191,6 +191,38 @@ def test_an_empty_ros_parameters_says_what_to_do(tmp_path: Path, capsys: pytest.
     )
 
 
+def test_a_tree_calling_a_behaviour_the_params_do_not_load_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Nav2's BackUp leaf waits for the `backup` action server when the tree is created and throws without
+    # it: with behavior_plugins [spin, wait] Nav2 cannot create its default navigator tree
+    params = _params(
+        tmp_path,
+        {
+            "behavior_server.behavior_plugins": ["spin", "wait"],
+            "behavior_server.spin.plugin": "nav2_behaviors/Spin",
+            "behavior_server.wait.plugin": "nav2_behaviors/Wait",
+        },
+    )
+    line = _refused_alike(
+        _scenario(tmp_path, navigation={"params": str(params)}),
+        capsys,
+        "<BackUp> calls the 'backup' action, which behavior_server does not load (behavior_plugins: spin, wait)",
+        "add 'backup' to behavior_plugins with its plugin type",
+    )
+    assert "navigate_to_pose_w_replanning_and_recovery.xml:" in line
+
+
+def test_a_behaviour_list_without_plugin_types_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    params = _params(tmp_path, {"behavior_server.behavior_plugins": ["spin", "backup", "wait", "turn"]})
+    _refused_alike(
+        _scenario(tmp_path, navigation={"params": str(params)}),
+        capsys,
+        "behavior_server.turn.plugin: not set",
+        "nav2_behaviors/Spin",
+    )
+
+
 def test_unknown_keys_in_a_params_file_stay_one_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     params = _params(tmp_path, {"amcl.sigma_hitt": 0.1})  # ROS keeps undeclared parameters too
     code, _, err = run(["scenario", "check", str(_scenario(tmp_path, navigation={"params": str(params)}))], capsys)

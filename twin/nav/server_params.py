@@ -11,9 +11,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 from twin.core.errors import ConfigError
+from twin.nav.behaviors.behavior_server import BEHAVIORS
 from twin.nav.behaviors.timed_behavior import BehaviorParams
 from twin.nav.controller.checkers import (
     GOAL_CHECKER_PLUGINS,
@@ -45,6 +47,11 @@ class Nav2Config:
     progress_angle_rad: float | None = None  # PoseProgressChecker's required_movement_angle (None: Simple)
     planner: NavfnParams = field(default_factory=NavfnParams)
     behaviors: BehaviorParams = field(default_factory=BehaviorParams)
+    #: behavior_server's action servers: name → the behaviour it runs (`spin`, `backup`, `drive_on_heading`,
+    #: `wait`; None: AssistedTeleop, which the twin does not simulate), as `behavior_plugins` loads them.
+    behavior_servers: Mapping[str, str | None] = field(
+        default_factory=lambda: MappingProxyType(dict(zip(BEHAVIORS, BEHAVIORS, strict=True)))
+    )
     smoother: SmootherParams = field(default_factory=SmootherParams)
     bt_loop_duration_s: float = 0.01
     used: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
@@ -71,6 +78,51 @@ def _drive_limits(section: Mapping[str, Any], behavior: str, where: str) -> tupl
     keys = ("acceleration_limit", "deceleration_limit", "minimum_speed")
     accel, decel, minimum = (_num(section, f"{behavior}.{k}", 0.0, where) for k in keys)
     return accel, decel, minimum
+
+
+# behavior_server's plugin types (Humble), by the behaviour each runs (None: not simulated by the twin).
+BEHAVIOR_TYPES: Mapping[str, str | None] = {
+    "nav2_behaviors/Spin": "spin",
+    "nav2_behaviors/BackUp": "backup",
+    "nav2_behaviors/DriveOnHeading": "drive_on_heading",
+    "nav2_behaviors/Wait": "wait",
+    "nav2_behaviors/AssistedTeleop": None,
+}
+
+
+def _behavior_servers(bs: Mapping[str, Any], where: str) -> dict[str, str | None]:
+    """behavior_server's action servers as Humble's loads them: `behavior_plugins` and each one's `<name>.plugin`.
+
+    Without `behavior_plugins` Humble loads spin, backup, drive_on_heading and wait with their own
+    types; a name of the list outside those needs its type (Humble's server does not start without).
+
+    Raises:
+        ConfigError: A name without a plugin type in a given list, or a type Humble does not have.
+    """
+    names = _names(bs, "behavior_plugins", BEHAVIORS, where)
+    defaults = {"spin": "Spin", "backup": "BackUp", "drive_on_heading": "DriveOnHeading", "wait": "Wait"}
+    out: dict[str, str | None] = {}
+    for name in names:
+        plugin = bs.get(f"{name}.plugin")
+        if plugin is None and name in defaults:  # (Humble declares these for its default list)
+            plugin = f"nav2_behaviors/{defaults[name]}"
+        if plugin is None:
+            msg = (
+                f"{where}.{name}.plugin: not set, and Humble's behavior_server does not start without a plugin type "
+                f"for each name of behavior_plugins; give one of {', '.join(BEHAVIOR_TYPES)}"
+            )
+            raise ConfigError(msg)
+        kind = str(plugin).replace("::", "/")
+        if kind not in BEHAVIOR_TYPES:
+            msg = f"{where}.{name}.plugin: unknown behaviour {plugin!r}; Humble's are {', '.join(BEHAVIOR_TYPES)}"
+            raise ConfigError(msg)
+        out[name] = BEHAVIOR_TYPES[kind]
+    return out
+
+
+def _named_kind(servers: Mapping[str, str | None], kind: str) -> str:
+    """The name behavior_server loads a behaviour under (its parameters' prefix), or the behaviour's own."""
+    return next((name for name, k in servers.items() if k == kind), kind)
 
 
 def _names(section: Mapping[str, Any], key: str, default: Sequence[str], where: str) -> tuple[str, ...]:
@@ -233,6 +285,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     ]  # fmt: skip
     bs = params.node("behavior_server")
     bwhere = f"{src}: behavior_server"
+    servers = _behavior_servers(bs, bwhere)
     bd = BehaviorParams()
     behaviors = BehaviorParams(
         cycle_frequency_hz=_num(bs, "cycle_frequency", bd.cycle_frequency_hz, bwhere),
@@ -240,12 +293,13 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         max_rotational_vel=_num(bs, "max_rotational_vel", bd.max_rotational_vel, bwhere),
         min_rotational_vel=_num(bs, "min_rotational_vel", bd.min_rotational_vel, bwhere),
         rotational_acc_lim=_num(bs, "rotational_acc_lim", bd.rotational_acc_lim, bwhere),
-        backup_limits=_drive_limits(bs, "backup", bwhere),
-        drive_on_heading_limits=_drive_limits(bs, "drive_on_heading", bwhere),
+        backup_limits=_drive_limits(bs, _named_kind(servers, "backup"), bwhere),
+        drive_on_heading_limits=_drive_limits(bs, _named_kind(servers, "drive_on_heading"), bwhere),
     )
     used["behavior_server"] = [
         "cycle_frequency", "simulate_ahead_time", "max_rotational_vel", "min_rotational_vel", "rotational_acc_lim",
-        *(f"{b}.{k}" for b in ("backup", "drive_on_heading")
+        "behavior_plugins", *(f"{name}.plugin" for name in servers),
+        *(f"{b}.{k}" for b in (_named_kind(servers, "backup"), _named_kind(servers, "drive_on_heading"))
           for k in ("acceleration_limit", "deceleration_limit", "minimum_speed")),
     ]  # fmt: skip
     return Nav2Config(
@@ -262,6 +316,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
         progress_angle_rad=progress_angle,
         planner=planner,
         behaviors=behaviors,
+        behavior_servers=MappingProxyType(servers),
         smoother=smoother,
         bt_loop_duration_s=loop_ms / 1000.0,
         used={k: tuple(v) for k, v in used.items()},

@@ -312,12 +312,12 @@ def _load_tree(mission: BehaviorTreeMission) -> None:
 
 def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
     """Read the map, the Nav2 params file (with `navigation.set`) and the navigator tree the run would read."""
-    from twin.nav.bt_navigator.factory import nav2_factory
+    from twin.nav.bt_navigator.factory import nav2_factory, unloaded_behavior
     from twin.nav.map_server.map_io import load_map
     from twin.nav.param_checks import check_nav2_inputs
     from twin.nav.params import default_params_path, load_nav2_params
     from twin.nav.server_params import nav2_config
-    from twin.sim.navigation import check_poses_on_map
+    from twin.sim.navigation import DEFAULT_BT_XML, check_poses_on_map
 
     occupancy = load_map(Path(scenario.map)) if scenario.map != "from_world" else None
     nav = scenario.navigation
@@ -335,6 +335,9 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
         if occupancy is not None and robot.lidar is not None and (amcl or nav2):
             check_poses_on_map(scenario, occupancy, amcl=amcl)  # (a map made from the world covers them)
         if nav2:
-            nav2_config(params)
+            config = nav2_config(params)
+            problem = unloaded_behavior(nav.bt_xml or DEFAULT_BT_XML, config.behavior_servers)
+            if problem is not None:
+                raise ConfigError(problem)
     if nav.type == "nav2" and nav.bt_xml is not None:
         nav2_factory().create_tree_from_file(nav.bt_xml, clock=lambda: 0)

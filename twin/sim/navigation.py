@@ -27,6 +27,7 @@ from twin.nav.amcl.filter import Amcl
 from twin.nav.behaviors.behavior_server import BehaviorServerNode
 from twin.nav.bt_navigator.action_servers import Nav2Servers
 from twin.nav.bt_navigator.bt_navigator_node import BtNavigatorNode
+from twin.nav.bt_navigator.factory import unloaded_behavior
 from twin.nav.bt_navigator.navigator import BtNavigator
 from twin.nav.controller.controller_server import ControllerServerNode
 from twin.nav.costmap_2d.costmap_node import CostmapNode
@@ -195,6 +196,9 @@ class NavigationStack:
             for costmap in (global_costmap, local_costmap):  # composed before the first plan asks
                 costmap.update(pose.x_m, pose.y_m, pose.yaw_rad, ())
             bt_xml = sc.navigation.bt_xml or DEFAULT_BT_XML
+            problem = unloaded_behavior(bt_xml, config.behavior_servers)
+            if problem is not None:
+                raise ConfigError(problem)
         warning = params.warning(config.used if config is not None else None)
         if warning:  # the packaged TB3 files hold keys Humble ignores: a fact, said with -v; a user's file: a warning
             _log.log(logging.WARNING if sc.navigation.params is not None else logging.INFO, "%s", warning)

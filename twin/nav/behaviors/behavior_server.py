@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Protocol
 
 from twin.bag import TwistEncoder
@@ -53,9 +53,19 @@ class BehaviorServer:
     """
 
     def __init__(
-        self, params: BehaviorParams, frames: Frames, local_costmap: Costmap, *, finish: Callable[..., None]
+        self,
+        params: BehaviorParams,
+        frames: Frames,
+        local_costmap: Costmap,
+        *,
+        finish: Callable[..., None],
+        servers: Mapping[str, str | None] | None = None,
     ) -> None:
         self.params = params
+        #: The action servers it loads: name → behaviour (None: one the twin does not simulate).
+        self.servers: Mapping[str, str | None] = (
+            dict(zip(BEHAVIORS, BEHAVIORS, strict=True)) if servers is None else servers
+        )
         self.frames = frames
         self.local_costmap = local_costmap
         self._finish = finish
@@ -73,12 +83,13 @@ class BehaviorServer:
     def start(self, goal: ActionGoal, t_ns: int) -> None:
         """Start a behaviour goal (the caller cancels a running one first)."""
         request = dict(goal.request)
-        if goal.server == "wait" and "time_s" not in request:
+        kind = self.servers.get(goal.server) or goal.server
+        if kind == "wait" and "time_s" not in request:
             request["time_s"] = request.get("wait_duration", 1.0)
         # the behaviours check the local costmap's footprint, as behavior_server reads it from that costmap
         params = dataclasses.replace(self.params, footprint=tuple(self.local_costmap.footprint))
         self._stop = False
-        behavior = make_behavior(goal.server, params)
+        behavior = make_behavior(kind, params)
         self.recoveries += 1
         _log.info("Running %s", goal.server)
         refusal = behavior.start(request, self.frames.odom_pose, t_ns)
@@ -103,15 +114,16 @@ class BehaviorServer:
                 return (0.0, 0.0)
             return None
         step = impl.step(t_ns, self.frames.odom_pose, self.local_costmap.grid)
+        waits = isinstance(impl, Wait)  # (Wait commands nothing)
         if step.status is BehaviorStatus.RUNNING:
-            return None if goal.server == "wait" else step.cmd
+            return None if waits else step.cmd
         if step.status is BehaviorStatus.SUCCEEDED:
             self._finish(goal, ActionState.SUCCEEDED)
         else:
             _log.warning("%s failed: %s", goal.server, step.reason)
             self._finish(goal, ActionState.FAILED, reason=step.reason)
         self._goal = None
-        return None if goal.server == "wait" else (0.0, 0.0)
+        return None if waits else (0.0, 0.0)
 
 
 class _Servers(Protocol):

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from twin.nav.actions import ActionGoal, ActionState, ActionUpdate
-from twin.nav.behaviors.behavior_server import BEHAVIORS, BehaviorServer
+from twin.nav.behaviors.behavior_server import BehaviorServer
 from twin.nav.controller.controller_server import ControllerServer
 from twin.nav.costmap_2d.layered_costmap import Costmap
 from twin.nav.frames import Frames
@@ -84,7 +84,9 @@ class Nav2Servers:
             progress_allowance_s=config.progress_allowance_s,
             progress_angle_rad=config.progress_angle_rad,
         )
-        self.behavior_server = BehaviorServer(config.behaviors, frames, local_costmap, finish=self._finish)
+        self.behavior_server = BehaviorServer(
+            config.behaviors, frames, local_costmap, finish=self._finish, servers=config.behavior_servers
+        )
         self._goals: dict[int, ActionGoal] = {}
         self._next_id = 0
         self._generation = 0
@@ -125,11 +127,13 @@ class Nav2Servers:
             )
         elif server == "follow_path":
             self.controller_server.start(goal, t_ns)
-        elif server in BEHAVIORS:
+        elif self.behavior_server.servers.get(server) is not None:
             running = self.behavior_server.active
             if running is not None:
                 self._cancel(running)
             self.behavior_server.start(goal, t_ns)
+        elif server in self.behavior_server.servers:  # AssistedTeleop: loaded by the params, not simulated
+            self._finish(goal, ActionState.FAILED, reason=f"the twin does not simulate the {server!r} behaviour")
         else:
             self._finish(goal, ActionState.FAILED, reason=f"the twin has no {server!r} action server")
         return gid

@@ -5,16 +5,28 @@
   with their ports only, enough to validate and show a tree).
 - `register_nav2_controls(factory)`, `declare_nav2_leaves(factory)`, `register_nav2_leaves(factory,
   services)`: the parts on their own.
+- `unloaded_behavior(bt_xml, servers)`: a behaviour leaf whose action behavior_server does not load.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from pathlib import Path
+
 from twin.bt.factory import BehaviorTreeFactory
+from twin.bt.loader import TreeParser
 from twin.nav.bt_navigator.control_nodes import register_nav2_controls
 from twin.nav.bt_navigator.leaves import NavigationServices, register_nav2_leaves
 from twin.nav.bt_navigator.tree_nodes import declare_nav2_leaves
 
-__all__ = ["declare_nav2_leaves", "nav2_factory", "register_nav2_controls", "register_nav2_leaves"]
+__all__ = [
+    "BEHAVIOR_LEAVES",
+    "declare_nav2_leaves",
+    "nav2_factory",
+    "register_nav2_controls",
+    "register_nav2_leaves",
+    "unloaded_behavior",
+]
 
 
 def nav2_factory(services: NavigationServices | None = None) -> BehaviorTreeFactory:
@@ -30,3 +42,38 @@ def nav2_factory(services: NavigationServices | None = None) -> BehaviorTreeFact
         register_nav2_leaves(factory, services)
     declare_nav2_leaves(factory)
     return factory
+
+
+# Nav2's behaviour leaves and the behavior_server action each calls unless its `server_name` names another.
+BEHAVIOR_LEAVES = {
+    "Spin": "spin",
+    "BackUp": "backup",
+    "DriveOnHeading": "drive_on_heading",
+    "Wait": "wait",
+    "AssistedTeleop": "assisted_teleop",
+}
+
+
+def unloaded_behavior(bt_xml: Path, servers: Mapping[str, object]) -> str | None:
+    """Where the navigator tree calls a behaviour action behavior_server does not load, as one line; None if none.
+
+    Nav2 Humble's behaviour leaves wait for their action server when the tree is created and throw
+    without it, so the navigator cannot start a tree whose `<BackUp>` calls a `backup` that
+    `behavior_plugins` leaves out. A `server_name` taken from the blackboard is not judged.
+    """
+    parser = TreeParser(nav2_factory())
+    parser.load_file(Path(bt_xml))
+    for root, _ in parser.tree_roots.values():
+        for element in root.iter():
+            default = BEHAVIOR_LEAVES.get(element.type_name)
+            if default is None:
+                continue
+            server = element.attrs.get("server_name") or default
+            if server.strip().startswith("{") or server in servers:
+                continue
+            return (
+                f"{element.location}: <{element.type_name}> calls the {server!r} action, which behavior_server "
+                f"does not load (behavior_plugins: {', '.join(servers) or 'none'}), so Nav2 cannot create this "
+                f"tree; add {server!r} to behavior_plugins with its plugin type, or take the node out of the tree"
+            )
+    return None
