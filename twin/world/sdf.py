@@ -219,6 +219,14 @@ def _load_world(
     root, version = loader.read_sdf(path)
     world_node = root.find("world")
     if world_node is not None:
+        others = [w for w in root.findall("world") if w is not world_node]
+        if others:  # (Gazebo too runs the first; the others would be ignored without a word)
+            names = ", ".join(repr(w.get("name") or "") for w in others)
+            loader.warn(
+                "worlds",
+                f"{path}:{others[0].line}: the file holds {len(others) + 1} worlds; the twin loads the first, "
+                f"{world_node.get('name') or ''!r}, and not {names}",
+            )
         return _world_from_node(loader, world_node, version, path)
     model_node = root.find("model")
     if model_node is None:

@@ -547,3 +547,14 @@ def test_a_joint_whose_child_is_missing_is_named_with_the_fix(tmp_path: Path) ->
         f"{world}:3: joint 'hinge': its <child> 'handle::link' is no link or frame of model 'm' "
         "(frames here: __model__, base, hinge); name one of them in <child>"
     )
+
+
+def test_a_file_of_several_worlds_loads_the_first_and_says_so(tmp_path: Path) -> None:
+    world = tmp_path / "two.world"
+    world.write_text(
+        "<sdf version='1.6'>\n<world name='a'><model name='m'><link name='l'/></model></world>\n"
+        "<world name='b'/>\n</sdf>"
+    )
+    loaded = load_world(world)
+    assert loaded.name == "a"
+    assert f"{world}:3: the file holds 2 worlds; the twin loads the first, 'a', and not 'b'" in loaded.warnings
