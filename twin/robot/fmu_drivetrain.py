@@ -66,6 +66,14 @@ def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits
     half = w_radps * chassis.wheel_separation_m / 2.0
     left = (v_mps - half) / chassis.wheel_radius_m
     right = (v_mps + half) / chassis.wheel_radius_m
+    if not (math.isfinite(left) and math.isfinite(right)):
+        # A finite command too large for the arithmetic (1e308 m/s overflows to inf, and a cap's scale
+        # then makes NaN of it, which drove the wheels backwards): the same curvature at 1e12 rad/s, far
+        # beyond any motor, so the caps below and the supply's reach scale it as any other
+        size = max(abs(v_mps), abs(w_radps))
+        left, right = wheel_setpoints(v_mps / size, w_radps / size, chassis, CommandLimits())
+        peak = max(abs(left), abs(right))
+        left, right = left / peak * 1e12, right / peak * 1e12
     if limits.max_wheel_speed_radps is not None:
         cap = limits.max_wheel_speed_radps
         left, right = max(-cap, min(cap, left)), max(-cap, min(cap, right))
@@ -89,7 +97,7 @@ class Saturation:
             return ""
         return (
             f"{self.count} cmd_vel clamped to the motors' {self.cap_radps:.2f} rad/s at {self.supply_v:g} V "
-            f"(first at {self.first_t_s:.2f} s, asked up to {self.max_requested_radps:.2f} rad/s)"
+            f"(first at {self.first_t_s:.2f} s, asked up to {self.max_requested_radps:.4g} rad/s)"
         )
 
 
@@ -509,7 +517,7 @@ class FmuDrivetrain(Closing):
         if sat.count == 1:
             sat.first_t_s = self.t_ns * 1e-9
             _log.warning(
-                "drive: cmd_vel (%.3f m/s, %.3f rad/s) at t = %.3f s asks %.2f rad/s of a wheel, but %s reaches "
+                "drive: cmd_vel (%.4g m/s, %.4g rad/s) at t = %.3f s asks %.4g rad/s of a wheel, but %s reaches "
                 "%.2f rad/s (%.3f m/s) at %g V: clamped to that (reported once per run; /motor_state marks "
                 "every clamped command)",
                 v_mps,

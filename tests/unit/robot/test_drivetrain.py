@@ -174,6 +174,27 @@ def test_firmware_clamps_limit_command_and_wheels() -> None:
     assert left == pytest.approx((0.26 - 1.82 * 0.287 / 2) / 0.033)
 
 
+@pytest.mark.parametrize(("v", "w"), [(1e308, 0.0), (0.0, 1e308), (1e300, -1e308), (-1e308, 1e-3)])
+def test_a_finite_command_too_large_for_the_arithmetic_keeps_its_direction(v: float, w: float) -> None:
+    # 1e308 m/s overflowed the wheel speeds to inf, the supply cap's scale made NaN of them, and the
+    # drive ran both wheels backwards: the command keeps its curvature and direction at any size
+    chassis = ChassisParams.tb3_waffle()
+    left, right = wheel_setpoints(v, w, chassis, CommandLimits())
+    assert math.isfinite(left) and math.isfinite(right) and max(abs(left), abs(right)) > 1e9
+    # the same curvature as the command scaled into range
+    small_l, small_r = wheel_setpoints(v / 1e308, w / 1e308, chassis, CommandLimits())
+    assert left / max(abs(left), abs(right)) == pytest.approx(small_l / max(abs(small_l), abs(small_r)))
+    assert right / max(abs(left), abs(right)) == pytest.approx(small_r / max(abs(small_l), abs(small_r)))
+    with FmuDrivetrain(FmuDrive(), chassis, step_ns=MS) as dt:
+        dt.set_cmd_vel(v, w)
+        target = (dt._target_left, dt._target_right)
+    cap = dt.supply_speed_radps
+    assert cap is not None and all(math.isfinite(t) and abs(t) <= cap * (1 + 1e-12) for t in target)
+    assert math.copysign(1.0, target[0]) == math.copysign(1.0, left) and math.copysign(1.0, target[1]) == (
+        math.copysign(1.0, right)
+    )
+
+
 def test_communication_step_must_be_a_multiple_of_the_physics_step() -> None:
     with pytest.raises(ConfigError, match=r"whole multiple of the physics step"):
         FmuDrivetrain(FmuDrive(communication_step_s=0.0015), ChassisParams.tb3_waffle(), step_ns=MS)
