@@ -20,7 +20,7 @@ from twin.robot.chassis import ChassisState
 from twin.sim.scenario import CameraSection
 from twin.world import RobotModelSpec, World
 from twin.world.obstacles import ObstacleField
-from twin.world.render import Body, Renderer, body_of, lighting_of, world_visuals
+from twin.world.render import Body, Renderer, body_of, lighting_of, prepare_noise, world_visuals
 from twin.world.robot_model import CameraSpec
 
 __all__ = ["Camera", "build_camera", "camera_spec", "namespaced", "robot_body"]
@@ -104,6 +104,8 @@ def build_camera(
     lighting = lighting_of(world)
     excluded = (robot.name,) if exclude_models is None else tuple(exclude_models)
     renderer = Renderer(camera_model(spec), world_visuals(world, lighting, exclude_models=excluded), lighting)
+    if section.noise:
+        prepare_noise()  # now, not in the run's first frame
     feed = CameraFeed()
     depth = section.depth or spec.depth
     wanted = (

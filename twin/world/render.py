@@ -47,6 +47,7 @@ __all__ = [
     "box_mesh",
     "join_meshes",
     "lighting_of",
+    "prepare_noise",
     "shapes_mesh",
     "world_visuals",
 ]
@@ -389,12 +390,21 @@ def _levels(colours: F64) -> NDArray[np.uint8]:
 _QUANTILES: list[F64] = []
 
 
-def _noise_table(mean: float, std: float) -> NDArray[np.int32]:
-    """The noise's 4096 samples in 1/256ths of a level: N(mean, std) quantiles at (i + 0.5) / 4096."""
+def prepare_noise() -> None:
+    """Compute the normal quantiles noisy frames draw from (importing scipy.special: a few hundred ms, once).
+
+    A run calls it while it sets up: a run's first noisy frame taking that long would let the
+    recorder's wall-clock flush cut a chunk where another run of the same seed does not.
+    """
     if not _QUANTILES:
         from scipy.special import ndtri
 
         _QUANTILES.append(ndtri((np.arange(4096) + 0.5) / 4096.0))
+
+
+def _noise_table(mean: float, std: float) -> NDArray[np.int32]:
+    """The noise's 4096 samples in 1/256ths of a level: N(mean, std) quantiles at (i + 0.5) / 4096."""
+    prepare_noise()
     return np.ascontiguousarray(np.floor((mean + std * _QUANTILES[0]) * 65280.0 + 0.5).astype(np.int32))
 
 
