@@ -229,12 +229,14 @@ def test_robot_names_and_namespaces_are_checked(tmp_path: Path, entries: str, me
 def test_robots_spawned_overlapping_are_refused(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: x\nrobots:\n  - {name: a}\n  - {name: b, robot: {initial_pose: {x_m: 0.2, y_m: 0.0}}}\n")
-    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
-    assert result.returncode == 2
-    assert result.stderr.strip().splitlines() == [
-        "twin: error: robots[0] (a) and robots[1] (b) are spawned overlapping (0.200 m apart); "
-        "move one robot's initial_pose"
-    ]
+    for command in (("simulate", str(bad), "--out", str(tmp_path / "bag")), ("scenario", "check", str(bad))):
+        result = run_twin(*command)
+        assert result.returncode == 2
+        assert result.stderr.strip().splitlines() == [
+            f"twin: error: {bad}: robots[1].robot.initial_pose: robots[0] (a) and robots[1] (b) are spawned "
+            "overlapping (0.200 m apart); move one robot's initial_pose"
+        ]
+    assert not (tmp_path / "bag").exists()
 
 
 def test_the_shipped_two_robot_scenario_loads_with_opposite_tours() -> None:

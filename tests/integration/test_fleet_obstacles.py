@@ -130,12 +130,13 @@ def test_the_obstacles_are_published_once_for_the_world(run: tuple[Any, Any, Pat
 def test_an_obstacle_on_a_fleet_robots_spawn_pose_names_the_robot(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text(SCENARIO.replace("x_m: 0.0, y_m: 1.5", "x_m: 0.8, y_m: 1.5"))
-    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
-    assert result.returncode == 2
-    assert result.stderr.strip().splitlines() == [
-        f"twin: error: {bad}: obstacles[1]: box_b stands on robots[1] (robot2)'s spawn pose (0.8, 1.5) at t = 0; "
-        "move it, or the robot's initial_pose"
-    ]
+    for command in (("simulate", str(bad), "--out", str(tmp_path / "bag")), ("scenario", "check", str(bad))):
+        result = run_twin(*command)
+        assert result.returncode == 2
+        assert result.stderr.strip().splitlines() == [
+            f"twin: error: {bad}: obstacles[1]: box_b stands on robots[1] (robot2)'s spawn pose (0.8, 1.5) at t = 0; "
+            "move it, or the robot's initial_pose"
+        ]
 
 
 def test_with_obstacles_each_lidar_still_sees_the_other_robot(run: tuple[Any, Any, Path]) -> None:

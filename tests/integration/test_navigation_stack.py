@@ -131,6 +131,18 @@ def test_a_robot_without_a_lidar_sent_to_navigate_is_one_line_and_exit_2(tmp_pat
     lines = [ln for ln in result.stderr.splitlines() if ln.startswith("twin: error")]  # type: ignore[attr-defined]
     assert len(lines) == 1 and "has no lidar" in lines[0] and "cmd_vel_script" in lines[0], result.stderr  # type: ignore[attr-defined]
     assert not bag.exists()
+    checked = run_twin("scenario", "check", str(tmp_path / "blind.yaml"))  # refused before a run too, alike
+    assert checked.returncode == 2 and checked.stderr.strip() == lines[0], checked.stderr
+    # a fleet's names the robot's entry
+    fleet = tmp_path / "blind_fleet.yaml"
+    fleet.write_text(
+        f"name: blind_fleet\nrobots:\n  - {{name: a}}\n  - {{name: b, robot: {{model: {model}, "
+        "initial_pose: {x_m: 1.5, y_m: -0.2}}}\n"
+    )
+    for command in (("scenario", "check", str(fleet)), ("simulate", str(fleet), "--out", str(tmp_path / "fb"))):
+        refused = run_twin(*command)
+        assert refused.returncode == 2, refused.stderr
+        assert f"{fleet}: robots[1].robot.model: " in refused.stderr and "has no lidar" in refused.stderr
     # ... while a scripted drive needs no lidar: it builds no map, AMCL or Nav2 stack
     body = f"robot: {{model: {model}}}\nmission: {{type: cmd_vel_script, segments: [{{duration_s: 1, linear_mps: 0.1}}]}}\n"
     result, bag = simulate(tmp_path, "blind_script", body)

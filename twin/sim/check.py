@@ -229,8 +229,13 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
     Raises:
         TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
     """
-    from twin.sim.navigation import check_map_extent
+    from twin.core.clock import s_to_ns
+    from twin.sim.fleet import overlap_problem
+    from twin.sim.launch import check_node_plugins
+    from twin.sim.navigation import check_map_extent, lidar_problem
+    from twin.sim.rng import RngStreams
     from twin.sim.robot_group import floor_problem, scenario_robot, spawn_monitor
+    from twin.sim.simulation import obstacle_fields
     from twin.world import build_scene, load_world
 
     floor = floor_problem(scenario.world.floor_height_m)
@@ -245,9 +250,14 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)
     except TwinError as err:
         raise _named(err, path) from None
+    bodies = []
     for index, ((ns, sc), robot) in enumerate(zip(robots, models, strict=True)):
         try:
-            spawn_monitor(scene, robot, sc.robot.initial_pose, floor_height_m=scenario.world.floor_height_m)
+            body, _ = spawn_monitor(scene, robot, sc.robot.initial_pose, floor_height_m=scenario.world.floor_height_m)
+            bodies.append(body)
+            problem = lidar_problem(sc, robot)
+            if problem is not None:
+                raise ConfigError(problem)
             check_map_extent(sc, robot, scene)
             if isinstance(sc.mission, BehaviorTreeMission):
                 _load_tree(sc.mission)
@@ -259,6 +269,21 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         except TwinError as err:
             raise _named(err, path) from None
         _check_drive(sc, path, robot.name)
+    poses = [(ns, sc.robot.initial_pose) for ns, sc in robots]
+    try:
+        if len(robots) > 1:
+            overlap = overlap_problem(
+                [(ns, (p.x_m, p.y_m, p.yaw_rad), body) for (ns, p), body in zip(poses, bodies, strict=True)]
+            )
+            if overlap is not None:
+                raise ConfigError(overlap)
+        # the obstacles and blocks the run would place (its seed's `blocks` stream), none on a spawn pose
+        obstacle_fields(
+            scenario, poses, bodies, RngStreams(scenario.seed).stream("blocks"), s_to_ns(scenario.physics.step_s)
+        )
+        check_node_plugins(scenario)
+    except TwinError as err:
+        raise _named(err, path) from None
 
 
 def _named(err: TwinError, path: Path) -> TwinError:

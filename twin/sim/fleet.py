@@ -167,18 +167,10 @@ class Fleet:
         Raises:
             ConfigError: If two robots' shapes overlap at their initial poses.
         """
-        n = len(self.groups)
-        for i in range(n):
-            for j in range(i + 1, n):
-                a, b = self.pose(i), self.pose(j)
-                if self.body(i).distance_to(a, self.body(j), b) > _TOLERANCE_M:
-                    continue
-                centres = math.hypot(a[0] - b[0], a[1] - b[1])
-                msg = (
-                    f"robots[{i}] ({self.groups[i].namespace}) and robots[{j}] ({self.groups[j].namespace}) are "
-                    f"spawned overlapping ({centres:.3f} m apart); move one robot's initial_pose"
-                )
-                raise ConfigError(msg)
+        robots = [(g.namespace, self.pose(i), self.body(i)) for i, g in enumerate(self.groups)]
+        problem = overlap_problem(robots)
+        if problem is not None:
+            raise ConfigError(problem)
 
     def advance(self, n_steps: int) -> None:
         """Step every robot's drive `n_steps` physics steps, one robot after the other."""
@@ -437,6 +429,21 @@ class FleetMonitor:
                 self._stopped_by = j
                 return free
         return free
+
+
+def overlap_problem(robots: Sequence[tuple[str, _Pose, RobotBody]]) -> str | None:
+    """Two robots (namespace, spawn pose, body) spawned touching each other, named with their distance; or None."""
+    for i, (ns_a, a, body_a) in enumerate(robots):
+        for j in range(i + 1, len(robots)):
+            ns_b, b, body_b = robots[j]
+            if body_a.distance_to(a, body_b, b) > _TOLERANCE_M:
+                continue
+            centres = math.hypot(a[0] - b[0], a[1] - b[1])
+            return (
+                f"robots[{j}].robot.initial_pose: robots[{i}] ({ns_a}) and robots[{j}] ({ns_b}) are spawned "
+                f"overlapping ({centres:.3f} m apart); move one robot's initial_pose"
+            )
+    return None
 
 
 def _nm(distance_m: float) -> int:

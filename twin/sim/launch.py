@@ -124,6 +124,19 @@ def constructing_node(ident: int) -> str | None:
     return None
 
 
+def check_node_plugins(scenario: Scenario) -> None:
+    """Import each `nodes:` entry's plugin and find its Node class, as `load_nodes` does, constructing none.
+
+    Raises:
+        ConfigError: As `load_nodes` for a plugin that does not import or is not a Node.
+    """
+    source = scenario.source_path
+    folder = source.parent if source is not None else None
+    prefix = f"{source}: " if source is not None else ""
+    for i, spec in enumerate(scenario.nodes):
+        _resolve_class(spec, f"{prefix}nodes[{i}]", folder)
+
+
 def load_nodes(scenario: Scenario) -> list[Node]:
     """Construct the scenario's `nodes:` entries, in order.
 

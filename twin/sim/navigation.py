@@ -155,19 +155,9 @@ class NavigationStack:
         wants_nav2 = runs_nav2(sc)
         if not (wants_amcl or wants_nav2):
             return None
-        if robot.lidar is None:
-            if wants_nav2:
-                msg = (
-                    f"robot {robot.name!r} has no lidar: Nav2's costmaps and AMCL need /scan to carry out the "
-                    "mission's goals; give the robot a ray sensor in its SDF, or choose a mission that does not "
-                    "navigate (cmd_vel_script, waypoints, none)"
-                )
-            else:
-                msg = (
-                    f"localization: AMCL needs /scan but robot {robot.name!r} has no lidar; give the robot a ray "
-                    "sensor in its SDF, or set localization: {type: none}"
-                )
-            raise ConfigError(msg)
+        problem = lidar_problem(sc, robot)
+        if problem is not None:
+            raise ConfigError(problem)
         assert robot.lidar is not None
         params_path = _params_path(sc, robot)
         params = load_nav2_params(params_path, overrides=dict(sc.navigation.set))
@@ -381,6 +371,24 @@ def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
     """
     if sc.map == "from_world" and robot.lidar is not None and (runs_amcl(sc) or runs_nav2(sc)):
         _map_bounds(sc, scene)
+
+
+def lidar_problem(sc: Scenario, robot: RobotModelSpec) -> str | None:
+    """Why a robot without a lidar cannot run the scenario's navigation or localization (None when it can)."""
+    if robot.lidar is not None:
+        return None
+    if runs_nav2(sc):
+        return (
+            f"robot.model: {robot.name!r} has no lidar: Nav2's costmaps and AMCL need /scan to carry out the "
+            "mission's goals; give the robot a ray sensor in its SDF, or choose a mission that does not "
+            "navigate (cmd_vel_script, waypoints, none)"
+        )
+    if runs_amcl(sc):
+        return (
+            f"localization: AMCL needs /scan but robot {robot.name!r} has no lidar; give the robot a ray "
+            "sensor in its SDF, or set localization: {type: none}"
+        )
+    return None
 
 
 def unsimulated_sources(params: Nav2Params) -> list[str]:

@@ -41,23 +41,68 @@ from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.rng import RngStreams
 from twin.sim.robot_group import RobotGroup, floor_problem
 from twin.sim.rosout import RosoutBridge
-from twin.sim.scenario import Scenario
+from twin.sim.scenario import InitialPose, Scenario
 from twin.world import RobotModelSpec, World, build_scene, load_world
 from twin.world.obstacles import ObstacleField
 from twin.world.render import Body
 from twin.world.scene import RobotBody, Scene
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from twin.robot.lidar import Lidar
     from twin.sim.navigation import NavigationStack
     from twin.sim.robot_group import Mission
 
-__all__ = ["RunSummary", "Simulation"]
+__all__ = ["RunSummary", "Simulation", "obstacle_fields"]
 
 _log = logging.getLogger(__name__)
 
 # Obstacles appear and vanish on this grid (the /clock period); walkers near the robot step at it (5 mm at 0.5 m/s).
 _OBSTACLE_PERIOD_NS = 10_000_000
+
+
+def _names_a_key(text: str) -> bool:
+    """Whether an error starts with a scenario key (`robot.model: ...`), not a file or a sentence."""
+    head = text.split(" ", 1)[0]
+    return head.endswith(":") and not head.startswith(("/", ".")) and ".yaml" not in head and ".xml" not in head
+
+
+def obstacle_fields(
+    scenario: Scenario,
+    robots: Sequence[tuple[str, InitialPose]],
+    bodies: Sequence[RobotBody],
+    blocks_rng: np.random.Generator,
+    step_ns: int,
+) -> list[ObstacleField | None]:
+    """The scenario's obstacles and blocks as each robot (namespace, spawn pose, body) meets them.
+
+    One field per robot: the obstacles are the same (their paths depend on time alone), each field
+    checks its own robot's shapes against them. Nones without any obstacle.
+
+    Raises:
+        ConfigError: An obstacle or block that covers a robot's spawn pose at t = 0.
+    """
+    specs = scenario_obstacles(scenario, blocks_rng)
+    if not specs:
+        return [None] * len(bodies)
+    period_ns = step_ns * max(1, round(_OBSTACLE_PERIOD_NS / step_ns))
+    fields: list[ObstacleField | None] = []
+    for i, ((namespace, pose), body) in enumerate(zip(robots, bodies, strict=True)):
+        field = ObstacleField(specs, body, update_period_ns=period_ns)
+        _, contacts = field.update(0, (pose.x_m, pose.y_m, pose.yaw_rad))
+        if contacts:
+            c = contacts[0]
+            index = next(ob.index for ob in field.obstacles if ob.name == c.model)
+            key = f"obstacles[{index}]" if index < len(scenario.obstacles) else "blocks"
+            whose = f"robots[{i}] ({namespace})'s" if namespace else "the robot's"
+            msg = (
+                f"{key}: {c.model} stands on {whose} spawn pose ({pose.x_m}, {pose.y_m}) at t = 0; "
+                "move it, or the robot's initial_pose"
+            )
+            raise ConfigError(msg)
+        fields.append(field)
+    return fields
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -138,15 +183,21 @@ class Simulation(Closing):
         built: list[RobotGroup] = []
         try:  # a group that fails releases its own drive; the ones built before it are released here
             for i, g in enumerate(self.groups):
-                g.build(
-                    scene,
-                    obstacles=fields[i],
-                    rng=self._rng.under(g.namespace),
-                    step_ns=self.step_ns,
-                    now=self._now,
-                    fleet=self.fleet,
-                    obstacle_markers=i == 0,
-                )
+                try:
+                    g.build(
+                        scene,
+                        obstacles=fields[i],
+                        rng=self._rng.under(g.namespace),
+                        step_ns=self.step_ns,
+                        now=self._now,
+                        fleet=self.fleet,
+                        obstacle_markers=i == 0,
+                    )
+                except ConfigError as err:  # a fleet's names its entry (`robots[1].robot.model: ...`)
+                    if not g.namespace or not _names_a_key(str(err)):
+                        raise
+                    msg = f"robots[{i}].{err}"
+                    raise ConfigError(msg) from None
                 built.append(g)
         except BaseException:
             for g in built:
@@ -331,27 +382,8 @@ class Simulation(Closing):
         One field per robot: the obstacles are the same (their paths depend on time alone), each
         field checks its own robot's shapes against them. Refused where they cover a spawn pose.
         """
-        specs = scenario_obstacles(self.scenario, self._rng.stream("blocks"))
-        if not specs:
-            return [None] * len(bodies)
-        period_ns = self.step_ns * max(1, round(_OBSTACLE_PERIOD_NS / self.step_ns))
-        fields: list[ObstacleField | None] = []
-        for i, (g, body) in enumerate(zip(self.groups, bodies, strict=True)):
-            field = ObstacleField(specs, body, update_period_ns=period_ns)
-            pose = g.scenario.robot.initial_pose
-            _, contacts = field.update(0, (pose.x_m, pose.y_m, pose.yaw_rad))
-            if contacts:
-                c = contacts[0]
-                index = next(ob.index for ob in field.obstacles if ob.name == c.model)
-                key = f"obstacles[{index}]" if index < len(self.scenario.obstacles) else "blocks"
-                whose = f"robots[{i}] ({g.namespace})'s" if g.namespace else "the robot's"
-                msg = (
-                    f"{key}: {c.model} stands on {whose} spawn pose ({pose.x_m}, {pose.y_m}) at t = 0; "
-                    "move it, or the robot's initial_pose"
-                )
-                raise ConfigError(msg)
-            fields.append(field)
-        return fields
+        robots = [(g.namespace, g.scenario.robot.initial_pose) for g in self.groups]
+        return obstacle_fields(self.scenario, robots, bodies, self._rng.stream("blocks"), self.step_ns)
 
     def _fmu_records(self) -> list[dict[str, str]]:
         """Provenance of the FMUs the drives loaded (none for the kinematic drive)."""
