@@ -404,6 +404,42 @@ CLI_CASES: dict[str, tuple[list[str], int, str]] = {
         "--height must be a height >= 0 m: 1e+300 m is out of range",
     ),
     "world_info_dev_zero": (["world", "info", "/dev/zero"], 3, "/dev/zero: cannot read: not a regular file"),
+    # each of these was exit 70 (an OverflowError, AttributeErrors, a NaN to int, matplotlib's format refusal)
+    "replay_pose_topic_scan": (
+        [
+            "replay",
+            "{fixtures}/bags/tb3_waffle_gazebo_humble",
+            "--world",
+            "{fixtures}/gazebo_classic/worlds/turtlebot3_world.world",
+            "--model-path",
+            "{fixtures}/gazebo_classic/models",
+            "--pose-topic",
+            "/scan",
+            "--out",
+            "{d}/r",
+        ],
+        5,
+        "mission.pose_topic '/scan' is sensor_msgs/msg/LaserScan, which carries no pose",
+    ),
+    "map_save_free_nan": (
+        [
+            "map",
+            "save",
+            "{fixtures}/gazebo_classic/worlds/empty_world.world",
+            "--free",
+            "nan",
+            "0",
+            "--out",
+            "{d}/m.yaml",
+        ],
+        2,
+        "--free X (of the point X Y, m): is NaN",
+    ),
+    "step_response_out_txt": (
+        ["fmu", "step-response", "builtin:xm430_w210", "--out", "{d}/resp.txt"],
+        2,
+        "the plot is a PNG; give a file name ending in .png",
+    ),
     "sweep_workers_1e20": (["sweep", "{d}/nowhere.yaml", "--workers", str(10**20)], 2, "--workers 1000"),
     "fmu_check_missing": (["fmu", "check", "{d}/nowhere.fmu"], 4, "nowhere.fmu"),
     "bag_info_missing": (["bag", "info", "{d}/nowhere"], 5, "nowhere"),
@@ -640,3 +676,21 @@ def test_an_obstacle_too_slow_to_reach_its_path_end_in_any_run_still_runs(
     path = write_scenario(tmp_path, {"obstacles": [obstacle], "drive.type": "kinematic", "mission": {"type": "none"}})
     code, _, err = run(["simulate", str(path), "--duration", "0.5", "--out", str(tmp_path / "bag")], capsys)
     assert code == 0, err
+
+
+@pytest.mark.parametrize("command", ["play", "simulate"])
+def test_a_speed_too_slow_for_a_clock_is_refused(
+    command: str, tmp_path: Path, fixtures: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # --speed 1e-300 put the next message centuries on: an OverflowError in the pacer, exit 70
+    target = [str(fixtures / "bags" / "tb3_waffle_gazebo_humble")] if command == "play" else []
+    with pytest.raises(SystemExit) as stop:
+        main(
+            [command, *target, "--speed", "1e-300", "--out", str(tmp_path / "bag")]
+            if command == "simulate"
+            else [command, *target, "--speed", "1e-300"]
+        )
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "--speed must be at least 1e-06 (a million times slower than real time)" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1

@@ -140,7 +140,7 @@ def load_case(path: Path) -> ConformanceCase:
         raw = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise _fail(path, "file not found") from None
-    except (OSError, json.JSONDecodeError) as err:
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as err:
         raise _fail(path, f"not a readable JSON case ({err})") from None
     if not isinstance(raw, dict):
         raise _fail(path, "a case is a JSON object")

@@ -22,6 +22,7 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
+from typing import NoReturn
 
 from twin import __version__
 from twin.core.errors import Interrupted, TwinError
@@ -68,9 +69,16 @@ class _Formatter(argparse.RawDescriptionHelpFormatter):
     pass
 
 
+class _Parser(argparse.ArgumentParser):
+    """A usage error is one line (argparse printed the whole usage block before it), exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _common_parser(*, top: bool) -> argparse.ArgumentParser:
     """The global options; a subcommand's copy leaves unset options alone, so they work on either side."""
-    common = argparse.ArgumentParser(add_help=False)
+    common = _Parser(add_help=False)
     group = common.add_argument_group("output")
     default: object = False if top else argparse.SUPPRESS
     group.add_argument("--debug", action="store_true", default=default, help="show tracebacks and debug logs")
@@ -85,7 +93,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     `main` and the docs use the full parser; `main` builds only the command argv names.
     """
     common = _common_parser(top=False)
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="twin",
         description=(
             "A headless digital twin of a TurtleBot3: SDF worlds, FMU drivetrains, an EKF, "

@@ -163,6 +163,20 @@ def _read(args: argparse.Namespace, bag: ModuleType) -> ReplayInputs:
     if missing and not (args.no_gyro and missing == [args.imu_topic]):
         msg = f"{args.bag}: no {' or '.join(missing)} to replay; " + _topic_hint(info.topics, args, missing)
         raise EstimationError(msg)
+    from twin.bag.typesys import message_type_name
+
+    types = {t.name: message_type_name(t.msgtype) for t in info.topics}
+    expected = (
+        ("--imu-topic", args.imu_topic, ("sensor_msgs/msg/Imu",)),
+        ("--joint-topic", args.joint_topic, ("sensor_msgs/msg/JointState",)),
+        ("--odom-topic", args.odom_topic, ("nav_msgs/msg/Odometry",)),
+    )
+    for flag, topic, kinds in expected:
+        if topic in types and types[topic] not in kinds and not (flag == "--imu-topic" and args.no_gyro):
+            found = sorted(n for n, k in types.items() if k in kinds)
+            fix = f"pass {flag} {found[0]}" if found else f"the bag has no {kinds[0]} topic"
+            msg = f"{args.bag}: {flag} {topic} is {types[topic]}, not {kinds[0]}; {fix}"
+            raise EstimationError(msg)
     wanted = [t for t in (args.imu_topic, args.joint_topic, args.odom_topic) if t in names]
     messages = bag.read_messages(args.bag, wanted)
     return collect_inputs(

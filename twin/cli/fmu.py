@@ -267,6 +267,9 @@ def _check_step_response_args(args: argparse.Namespace) -> None:
         msg = f"--voltage must be a finite number of volts, at most {_MAX_VOLTAGE_V:g} V either way, got {args.voltage}"
         raise ConfigError(msg)
     if args.out is not None:
+        if args.out.suffix.lower() != ".png":  # (matplotlib refused other names deep inside: exit 70)
+            msg = f"--out {args.out}: the plot is a PNG; give a file name ending in .png"
+            raise ConfigError(msg)
         folder = args.out.parent if str(args.out.parent) else Path(".")
         while not folder.exists() and folder != folder.parent:
             folder = folder.parent

@@ -89,6 +89,11 @@ def _save(args: argparse.Namespace) -> int:
     if problem is not None or args.height < 0.0:
         msg = f"--height must be a height >= 0 m: {problem or f'got {args.height}'}"
         raise ConfigError(msg)
+    for axis, value in zip("XY", args.free or (), strict=False):
+        problem = number_problem(value, f"--free {axis}", unit="m")
+        if problem is not None:
+            msg = f"--free {axis} (of the point X Y, m): {problem}"
+            raise ConfigError(msg)
     if args.out.suffix not in (".yaml", ".yml"):
         msg = f"--out {str(args.out)!r} must name the map's YAML file (DIR/map.yaml)"
         raise ConfigError(msg)

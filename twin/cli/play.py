@@ -40,6 +40,11 @@ def speed_arg(text: str) -> float:
     if not (math.isfinite(speed) and speed > 0):
         msg = f"--speed must be a positive number (1 = real time, 5 = five times faster) or max, got {text!r}"
         raise argparse.ArgumentTypeError(msg)
+    from twin.live.pacing import MIN_SPEED
+
+    if speed < MIN_SPEED:  # (a second of messages would be due centuries on: past what a clock can wait for)
+        msg = f"--speed must be at least {MIN_SPEED:g} (a million times slower than real time), got {text!r}"
+        raise argparse.ArgumentTypeError(msg)
     return speed
 
 

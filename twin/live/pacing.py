@@ -11,6 +11,10 @@ from twin.core.errors import ConfigError
 __all__ = ["Pacer", "check_speed"]
 
 
+MIN_SPEED = 1e-6
+"""The slowest real-time factor: a message due 1 s of sim time on waits 11.6 days (slower overflows sleep)."""
+
+
 def check_speed(speed: float) -> float:
     """Return `speed` if it is a usable real-time factor.
 
@@ -19,6 +23,9 @@ def check_speed(speed: float) -> float:
     """
     if not (math.isfinite(speed) and speed > 0):
         msg = f"--speed must be a positive number (1 = real time, 5 = five times faster), got {speed}"
+        raise ConfigError(msg)
+    if speed < MIN_SPEED:
+        msg = f"--speed must be at least {MIN_SPEED:g} (a million times slower than real time), got {speed}"
         raise ConfigError(msg)
     return speed
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from twin.bag.typesys import message_type_name
 from twin.core.errors import BagError
 from twin.sim.scenario import InitialPose, ReplayMission, Scenario
 
@@ -26,6 +27,14 @@ __all__ = ["RecordedCommands", "check_bag", "first_pose", "load_commands", "star
 _log = logging.getLogger(__name__)
 
 _POSE_TOPICS = ("/ground_truth/odom", "/odom")
+# Types whose `pose` (or `pose.pose`) the replay reads its start pose from.
+_POSE_TYPES = frozenset(
+    {
+        "nav_msgs/msg/Odometry",
+        "geometry_msgs/msg/PoseStamped",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
+    }
+)
 _TWIST_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 
 
@@ -56,6 +65,14 @@ def _pose_topic(spec: ReplayMission, topics: dict[str, str]) -> str:
     if spec.pose_topic is not None:
         if spec.pose_topic not in topics:
             msg = f"{bag}: mission.pose_topic {spec.pose_topic!r} is not in the bag; it has {', '.join(sorted(topics))}"
+            raise BagError(msg)
+        kind = topics[spec.pose_topic]
+        if message_type_name(kind) not in _POSE_TYPES:
+            have = ", ".join(n for n, t in sorted(topics.items()) if message_type_name(t) in _POSE_TYPES) or "none"
+            msg = (
+                f"{bag}: mission.pose_topic {spec.pose_topic!r} is {kind}, which carries no pose; "
+                f"give an Odometry or PoseStamped topic (the bag's: {have})"
+            )
             raise BagError(msg)
         return spec.pose_topic
     for name in _POSE_TOPICS:

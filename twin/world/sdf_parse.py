@@ -9,6 +9,7 @@ joints, frames and nested models as XML still, with every `<include>` resolved
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -443,6 +444,32 @@ class SdfReader:
         for child in node.children:
             self.check_known(parent, child)
 
+    def _check_dimensions(self, shape: XmlNode, label: str) -> None:
+        """Refuse a shape extent that is not a finite number; warn of a negative or zero one.
+
+        A NaN box passed every check before (its bounds were NaN, the map save failed deep inside).
+        """
+        for child in shape.children:
+            if child.tag not in _DIMENSIONS or not child.text:
+                continue
+            values = child.as_floats()
+            if not all(math.isfinite(v) for v in values):
+                text = child.text.strip()
+                msg = f"{child.where}: <{shape.tag}><{child.tag}> of {label} is {text!r}; give finite numbers"
+                raise WorldError(msg)
+            if any(v < 0.0 for v in values):
+                self.warn(
+                    f"negative:{child.where}",
+                    f"{child.where}: <{shape.tag}><{child.tag}> of {label} is {child.text.strip()!r}; "
+                    "a negative extent is taken as its size",
+                )
+            elif any(v == 0.0 for v in values) and shape.tag != "plane":
+                self.warn(
+                    f"zero:{child.where}",
+                    f"{child.where}: <{shape.tag}><{child.tag}> of {label} is {child.text.strip()!r}; a shape without "
+                    "extent along an axis may be neither seen nor touched",
+                )
+
     def geometry(self, node: XmlNode, base_dir: Path, model: str, link: str, *, collision: bool) -> Geometry | None:
         """Read a collision's or visual's `<geometry>`, its mesh resolved (None when it is skipped)."""
         what = "collision" if collision else "visual"
@@ -466,6 +493,7 @@ class SdfReader:
             return None
         shape = shapes[0]
         tag = shape.tag
+        self._check_dimensions(shape, label)
         if tag == "box":
             size = _vector(shape, "size", (1.0, 1.0, 1.0))
             return Box(size_m=(size[0], size[1], size[2]))
@@ -531,6 +559,9 @@ class SdfReader:
             f"{shape.where}: <{tag}> geometry is not supported by the twin; that {what} is skipped",
         )
         return None
+
+
+_DIMENSIONS = ("size", "radius", "length", "radii", "scale", "height")  # a shape's numbers that are extents
 
 
 def _vector(node: XmlNode, tag: str, default: tuple[float, ...]) -> tuple[float, ...]:

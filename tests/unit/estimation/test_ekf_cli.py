@@ -114,6 +114,37 @@ def test_a_bag_without_imu_gets_one_line_naming_the_flag_that_helps(
     assert "not fused (wheel odometry alone)" in out
 
 
+@pytest.mark.parametrize(
+    ("flags", "expected"),
+    [
+        (
+            ("--imu-topic", "/scan"),
+            "--imu-topic /scan is sensor_msgs/msg/LaserScan, not sensor_msgs/msg/Imu; pass --imu-topic /imu",
+        ),
+        (
+            ("--joint-topic", "/odom"),
+            "--joint-topic /odom is nav_msgs/msg/Odometry, not sensor_msgs/msg/JointState; pass --joint-topic /joint_states",
+        ),
+        (
+            ("--odom-topic", "/scan"),
+            "--odom-topic /scan is sensor_msgs/msg/LaserScan, not nav_msgs/msg/Odometry; pass --odom-topic /odom",
+        ),
+    ],
+)
+def test_a_topic_of_another_type_is_named_with_the_one_to_pass(
+    gazebo_bag: Path,
+    tmp_path: Path,
+    bag_module: ModuleType,
+    capsys: pytest.CaptureFixture[str],
+    flags: tuple[str, str],
+    expected: str,
+) -> None:
+    # (these were AttributeErrors, exit 70)
+    code, out, err = replay(capsys, gazebo_bag, "--out", tmp_path / "out", *flags)
+    assert code == EstimationError.exit_code and out == ""
+    assert err.strip().splitlines() == [f"twin: error: {gazebo_bag}: {expected}"]
+
+
 def test_an_existing_output_bag_is_not_overwritten(
     gazebo_bag: Path, tmp_path: Path, bag_module: ModuleType, capsys: pytest.CaptureFixture[str]
 ) -> None:
