@@ -48,7 +48,7 @@ from twin.bag.provenance import PROVENANCE_NAME, PROVENANCE_TOPIC
 from twin.bag.qos import QOS_LATCHED, QosProfile, default_qos, qos_profiles_to_yaml
 from twin.bag.sqlite_file import Sqlite3Writer, sqlite_topic_stats
 from twin.bag.typesys import MessageDefinition, TypeRegistry
-from twin.core.errors import BagError
+from twin.core.errors import BagError, BagFolderTaken
 
 __all__ = ["STORAGES", "Recorder", "TopicHandle"]
 
@@ -153,11 +153,15 @@ class Recorder:
         self._failed = False
         self._written = 0
         self._end_ns: int | None = None  # the latest message time on disk
+        taken = f"{self.path}: the bag folder exists and is not empty; choose a new output folder"
         if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
-            msg = f"{self.path}: the bag folder exists and is not empty; choose a new output folder"
-            raise BagError(msg)
-        try:
-            self.path.mkdir(parents=True, exist_ok=True)
+            raise BagFolderTaken(taken)
+        try:  # made here, or an empty one given: never one another run made in the meantime
+            if not self.path.is_dir():
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self.path.mkdir()
+        except FileExistsError:
+            raise BagFolderTaken(taken) from None
         except OSError as err:
             msg = f"{self.path}: cannot create the bag folder: {err.strerror}"
             raise BagError(msg) from None
@@ -179,6 +183,8 @@ class Recorder:
                     fsync=fsync,
                 )
                 self._storage = self._sqlite
+        except FileExistsError:  # another run took the (empty) folder between the look and the file
+            raise BagFolderTaken(taken) from None
         except (OSError, sqlite3.Error) as err:
             msg = f"{self.file_path}: cannot create the bag file: {_reason(err)}"
             raise BagError(msg) from None

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 from twin.cli.play import live_banner, speed_arg
 from twin.cli.progress import Progress
 from twin.cli.watch import Guard, build_watched
-from twin.core.errors import ConfigError, Interrupted, TwinError, WorldError
+from twin.core.errors import BagFolderTaken, ConfigError, Interrupted, TwinError, WorldError
 from twin.core.numbers import number_problem
 
 if TYPE_CHECKING:
@@ -462,7 +462,9 @@ def _run(
             debug=debug,
         )
     except BaseException as err:
-        if not existed and bag_path.is_dir():  # refused after the bag folder was made: leave nothing behind
+        # Refused after the bag folder was made: leave nothing behind; but never a folder another run
+        # took between this run's look and its own (two runs on one --out: the other's bag stays)
+        if not existed and bag_path.is_dir() and not isinstance(err, BagFolderTaken):
             shutil.rmtree(bag_path, ignore_errors=True)
         if isinstance(err, WorldError) and str(err).startswith("robot.model: "):
             raise err.with_context(before=f"{path}: ") from err  # the robot the scenario names

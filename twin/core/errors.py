@@ -88,6 +88,10 @@ class BagError(TwinError, RuntimeError):
     exit_code: ClassVar[int] = 5
 
 
+class BagFolderTaken(BagError):
+    """The bag folder to write holds a bag already (maybe one another run is writing): never to be removed."""
+
+
 class TreeError(TwinError, ValueError):
     """A behaviour-tree file is invalid, or a node failed while ticking."""
 

@@ -288,3 +288,31 @@ def test_topics_can_appear_in_the_middle_of_a_recording(tmp_path: Path, storage:
     assert len(got) == 120
     assert [t for topic, t in got if topic == "/late"] == list(range(40, 80))
     assert open_bag(bag).topic("/late").message_count == 40
+
+
+def test_a_bag_folder_another_run_takes_meanwhile_is_refused_and_left_alone(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Two runs on one --out: the one refused deleted the folder the other was writing (it had looked
+    # before the other made it). The folder appears between this run's look and its mkdir here.
+    from twin.cli import main
+    from twin.core.errors import BagFolderTaken
+
+    target = tmp_path / "bag"
+    real_mkdir = Path.mkdir
+
+    def racing_mkdir(self: Path, *args: object, **kwargs: object) -> None:
+        if self == target:
+            real_mkdir(self)
+            (self / "bag_0.mcap").write_bytes(b"the other run's")
+        real_mkdir(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Path, "mkdir", racing_mkdir)
+    with pytest.raises(BagFolderTaken):
+        Recorder(target)
+    assert (target / "bag_0.mcap").read_bytes() == b"the other run's"
+    (target / "bag_0.mcap").unlink()
+    target.rmdir()
+    assert main(["simulate", "--duration", "1", "--out", str(target)]) == 5
+    assert "the bag folder exists and is not empty" in capsys.readouterr().err
+    assert (target / "bag_0.mcap").read_bytes() == b"the other run's"  # the other run's bag is still there
