@@ -16,6 +16,7 @@ the recorder.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib
 import logging
 import os
@@ -1167,6 +1168,44 @@ class McapRecovery:
     killed_writer: bool
 
 
+_TEXT_SCHEMAS = ("ros2msg", "ros2idl", "jsonschema")
+
+
+def _mend_schemas(schemas: Mapping[int, SchemaRecord]) -> dict[int, SchemaRecord]:
+    """The schemas whose definition text is not UTF-8 (a flipped byte), mended; empty when none is.
+
+    A type the twin knows gets its definition back whole (its text, byte for byte, as the twin
+    writes it); another gets its bad bytes replaced by U+FFFD, so readers open the bag and fail, if
+    at all, on that one type's messages.
+    """
+    from twin.bag.typesys import TypeRegistry
+    from twin.core.errors import BagError
+
+    out: dict[int, SchemaRecord] = {}
+    registry: TypeRegistry | None = None
+    for sid, schema in schemas.items():
+        if schema.encoding not in _TEXT_SCHEMAS:
+            continue
+        try:
+            schema.data.decode("utf-8")
+            continue
+        except UnicodeDecodeError:
+            pass
+        text = schema.data.decode("utf-8", "replace").encode("utf-8")
+        if schema.encoding == "ros2msg":
+            registry = registry or TypeRegistry()
+            try:
+                if registry.knows(schema.name):
+                    text = registry.definition(schema.name).text.encode("utf-8")
+            except BagError:
+                pass
+        out[sid] = dataclasses.replace(schema, data=text)
+    if out:
+        names = ", ".join(s.name for s in out.values())
+        _log.warning("mended the definitions of %d damaged schema(s): %s", len(out), names)
+    return out
+
+
 def recover_mcap(source: Path, target: Path) -> McapRecovery:
     """Write a complete MCAP file at `target` from what `source` holds; `source` is only read.
 
@@ -1180,10 +1219,12 @@ def recover_mcap(source: Path, target: Path) -> McapRecovery:
         OSError: If the source cannot be read or the target written (it must not exist).
     """
     scan = scan_mcap(source)
-    if scan.complete:
+    mended = _mend_schemas(scan.schemas)  # definitions whose text damage made them unreadable (no CRC covers them)
+    if scan.complete and not mended:
         return McapRecovery(
             scan=scan, was_complete=True, dropped_bytes=0, damaged=(), lost_messages=0, killed_writer=False
         )
+    scan.schemas.update(mended)
     if scan.data_end <= 8 and not scan.chunks:
         msg = "the file ends before its header: nothing was recorded"
         raise ValueError(msg)

@@ -252,3 +252,25 @@ def test_a_rewrite_keeps_the_original_metadata_as_a_backup(tmp_path: Path) -> No
     assert (bag / "metadata.yaml.orig").read_text() == stale
     recover_bag(bag)  # now complete: no second backup
     assert not (bag / "metadata.yaml.orig.2").exists()
+
+
+def test_a_schema_definition_with_a_flipped_byte_is_mended(tmp_path: Path) -> None:
+    # No CRC covers a schema's text: a flipped byte made it non-UTF-8, every reader refused the bag,
+    # and `recover` (seeing a complete file) changed nothing, sending the user round in a loop.
+    bag = tmp_path / "flipped"
+    _record_in_chunks(bag)
+    recorded = open_bag(bag).message_count
+    (file,) = bag.glob("*.mcap")
+    data = bytearray(file.read_bytes())
+    marker = b"================================================================================\nMSG: geometry_msgs/Point"
+    at = data.find(marker)
+    assert at > 0
+    while at >= 0:  # the schema's record and its copy in the summary: a flipped byte inside each
+        data[at + 3] = 0x8D
+        at = data.find(marker, at + 1)
+    file.write_bytes(bytes(data))
+    with pytest.raises(UnicodeDecodeError), AnyReader([bag]) as reader:  # (rosbags, as Foxglove's readers do)
+        sum(1 for _ in reader.messages())
+    report = recover_bag(bag)
+    assert not report.was_complete
+    _valid_everywhere(bag, recorded)  # every message back, decoding with the definitions mended
