@@ -138,3 +138,17 @@ def _running(fragment: str) -> list[int]:
         except OSError:
             continue
     return found
+
+
+def test_a_sweep_stopped_by_sigterm_exits_143_and_says_how_to_finish(tmp_path: Path) -> None:
+    # SIGTERM exited 130, as if Ctrl-C, with "interrupted" and no word of the finished runs
+    with _sweep(tmp_path, TIMEOUT.replace("timeout_s: 5", "timeout_s: 900"), workers=1) as sweep:
+        deadline = time.monotonic() + 300
+        while not _running(str(tmp_path / "out" / "runs" / "r0000")) and time.monotonic() < deadline:
+            time.sleep(0.2)  # the spinning run has started
+        sweep.send_signal(signal.SIGTERM)
+        _, stderr = sweep.communicate(timeout=300)
+    assert sweep.returncode == 143, stderr
+    assert "twin: sweep stopped by SIGTERM; the runs that finished are kept in their folders" in stderr
+    assert "Traceback" not in stderr
+    assert _running(str(tmp_path / "out" / "runs" / "r0000")) == []  # its run was told to stop

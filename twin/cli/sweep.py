@@ -137,6 +137,15 @@ def _sweep(args: argparse.Namespace) -> int:
             if args.out is None:
                 check_out_dir(out, option="the default output folder")
             result = run_sweep(spec, out_dir=out, keep_bags=args.keep_bags, progress=bar, cluster=cluster)
+    except KeyboardInterrupt as stop:
+        bar.close()
+        name = "SIGTERM" if isinstance(stop, _Terminated) else "SIGINT"
+        print(
+            f"twin: sweep stopped by {name}; the runs that finished are kept in their folders: "
+            "the same command again runs the others and writes the results",
+            file=sys.stderr,
+        )
+        return 128 + signal.SIGTERM if isinstance(stop, _Terminated) else 130
     finally:
         signal.signal(signal.SIGTERM, previous)
         bar.close()
@@ -185,8 +194,12 @@ def _counts(rows: list[dict[str, Any]]) -> dict[str, int]:
     return counts
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, unwinding the sweep as Ctrl-C does (the cluster stops, its runs are told to stop)."""
+
+
 def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
+    raise _Terminated
 
 
 def _outcomes(rows: tuple[dict[str, Any], ...]) -> list[str]:

@@ -262,7 +262,9 @@ def test_a_schema_definition_with_a_flipped_byte_is_mended(tmp_path: Path) -> No
     recorded = open_bag(bag).message_count
     (file,) = bag.glob("*.mcap")
     data = bytearray(file.read_bytes())
-    marker = b"================================================================================\nMSG: geometry_msgs/Point"
+    marker = (
+        b"================================================================================\nMSG: geometry_msgs/Point"
+    )
     at = data.find(marker)
     assert at > 0
     while at >= 0:  # the schema's record and its copy in the summary: a flipped byte inside each
