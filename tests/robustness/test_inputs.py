@@ -421,6 +421,29 @@ CLI_CASES: dict[str, tuple[list[str], int, str]] = {
         5,
         "mission.pose_topic '/scan' is sensor_msgs/msg/LaserScan, which carries no pose",
     ),
+    # a NaN threshold turned the check off (exit 0), inf passed as a wheel, one bag was a bag error (exit 5)
+    "compare_threshold_nan": (
+        [
+            "analyze",
+            "compare",
+            "{fixtures}/bags/tb3_waffle_gazebo_humble",
+            "{fixtures}/bags/tb3_waffle_gazebo_humble",
+            "--max-position-error",
+            "nan",
+        ],
+        2,
+        "--max-position-error must be a distance >= 0 m",
+    ),
+    "compare_one_bag": (
+        ["analyze", "compare", "{fixtures}/bags/tb3_waffle_gazebo_humble"],
+        2,
+        "analyze compare needs two bags A B, got 1",
+    ),
+    "ekf_wheel_radius_inf": (
+        ["ekf", "replay", "{fixtures}/bags/tb3_waffle_gazebo_humble", "--wheel-radius", "inf", "--out", "{d}/e"],
+        2,
+        "--wheel-radius must be a length in metres above 0 and at most 100, got inf",
+    ),
     "map_save_free_nan": (
         [
             "map",

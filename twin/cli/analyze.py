@@ -232,18 +232,36 @@ def _compare_namespaces(a: Path, b: Path, given: list[str] | None) -> tuple[str 
     return out[0], out[1]
 
 
+def check_threshold(value: float | None, flag: str = "--max-position-error") -> None:
+    """Refuse a position-error threshold that is not a finite distance >= 0 (NaN turned the check off).
+
+    Raises:
+        ConfigError: Naming the flag and the value.
+    """
+    from twin.core.errors import ConfigError
+    from twin.core.numbers import number_problem
+
+    if value is None:
+        return
+    problem = number_problem(value, flag, unit="m")
+    if problem is not None or value < 0.0:
+        msg = f"{flag} must be a distance >= 0 m: {problem or f'got {value}'}"
+        raise ConfigError(msg)
+
+
 def _compare(args: argparse.Namespace) -> int:
     from twin.analysis.compare import compare_bags, write_comparison
-    from twin.core.errors import BagError
+    from twin.core.errors import ConfigError
 
-    if len(args.rest) != 2:
+    if len(args.rest) != 2:  # usage errors: exit 2, as argparse's
         msg = f"analyze compare needs two bags A B, got {len(args.rest)}: `twin analyze compare A B`"
-        raise BagError(msg)
+        raise ConfigError(msg)
     a, b = (Path(p) for p in args.rest)
     topics = tuple(args.topic) if args.topic else None
     if topics is not None and len(topics) > 2:
         msg = f"--topic takes one topic (both bags) or two (A's, B's), got {len(topics)}"
-        raise BagError(msg)
+        raise ConfigError(msg)
+    check_threshold(args.max_position_error)
     namespaces = _compare_namespaces(a, b, args.namespace)
     result = compare_bags(
         a, b, topics=topics, align=args.align, same_clock=True if args.same_clock else None, namespaces=namespaces

@@ -303,17 +303,17 @@ def _check_writable(out: Path, option: str) -> None:
         raise ConfigError(msg)
 
 
+_MAX_WHEEL_M = 100.0  # a wheel radius or track this long is a typo (a TurtleBot3's: 0.033 and 0.287 m)
+
+
 def _replay(args: argparse.Namespace) -> int:
     from twin import bag
     from twin.estimation.replay import UnitsDecision, compare, infer_velocity_units, replay
 
-    given = [v for v in (args.wheel_radius, args.wheel_separation) if v is not None]
-    if not all(v > 0.0 for v in given):  # refused before the bag is read
-        msg = (
-            "--wheel-radius and --wheel-separation must be positive, "
-            f"got {args.wheel_radius} and {args.wheel_separation}"
-        )
-        raise ConfigError(msg)
+    for flag, value in (("--wheel-radius", args.wheel_radius), ("--wheel-separation", args.wheel_separation)):
+        if value is not None and not (0.0 < value <= _MAX_WHEEL_M):  # NaN and inf too; before the bag is read
+            msg = f"{flag} must be a length in metres above 0 and at most {_MAX_WHEEL_M:g}, got {value}"
+            raise ConfigError(msg)
     geometry_sources = _resolve_geometry(args, bag)
     if not (args.wheel_radius > 0.0 and args.wheel_separation > 0.0):
         msg = (

@@ -127,6 +127,7 @@ def _fleet_robot(bag: Path, namespace: str, model_path: list[Path]) -> Any:
 def _replay(args: argparse.Namespace) -> int:
     from twin.analysis.compare import compare_bags, write_comparison
     from twin.analysis.report import world_walls
+    from twin.cli.analyze import check_threshold
     from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
     from twin.sim.replay import check_bag
@@ -135,6 +136,7 @@ def _replay(args: argparse.Namespace) -> int:
     from twin.sim.simulation import Simulation
 
     model_path_folders(args.model_path)  # refuse a folder that does not exist before anything runs
+    check_threshold(args.max_position_error)
     bag = args.bag
     out = args.out if args.out is not None else Path("bags") / f"{bag.resolve().name}_replay"
     try:

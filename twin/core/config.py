@@ -126,7 +126,34 @@ def load_yaml(path: Path) -> yaml.Node:
     if node is None:
         node = yaml.MappingNode("tag:yaml.org,2002:map", [])
         node.start_mark = yaml.Mark(str(path), 0, 0, 0, "", 0)
+    _refuse_repeated_keys(node)
     return node
+
+
+def _refuse_repeated_keys(root: yaml.Node) -> None:
+    """Refuse a key given twice in one mapping (YAML forbids it; PyYAML kept the last, silently).
+
+    Raises:
+        ConfigError: Naming the file and line of the second, and the line of the first.
+    """
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[str, yaml.Node] = {}
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode) and key.value != "<<":
+                    first = seen.get(key.value)
+                    if first is not None:
+                        msg = (
+                            f"{location(key)}: {key.value!r} is given twice in one mapping (first at line "
+                            f"{first.start_mark.line + 1}); keep one"
+                        )
+                        raise ConfigError(msg)
+                    seen[key.value] = key
+                stack.append(value)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
 
 
 def _get(node: yaml.MappingNode, key: str) -> yaml.Node | None:

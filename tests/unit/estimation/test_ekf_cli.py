@@ -175,7 +175,7 @@ def test_filter_settings_come_from_an_estimation_section(
 def test_wrong_geometry_is_refused_before_reading(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = replay(capsys, tmp_path, "--wheel-radius", "0")
     assert code == ConfigError.exit_code
-    assert "--wheel-radius and --wheel-separation must be positive" in err
+    assert "--wheel-radius must be a length in metres above 0 and at most 100, got 0.0" in err
 
 
 def test_the_command_is_registered_and_explains_itself(repo: Path) -> None:

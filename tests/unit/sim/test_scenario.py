@@ -63,6 +63,19 @@ def test_a_key_one_section_too_high_is_pointed_to_its_sections(tmp_path: Path) -
         load_scenario(path)
 
 
+def test_a_key_given_twice_is_refused_where_it_is(tmp_path: Path) -> None:
+    # PyYAML kept the last silently: `seed: 1` then `seed: 2` ran seed 2
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nseed: 1\nrobot:\n  model: turtlebot3_burger\nseed: 2\n")
+    with pytest.raises(
+        ConfigError, match=rf"^{path}:5: 'seed' is given twice in one mapping \(first at line 2\); keep one$"
+    ):
+        load_scenario(path)
+    path.write_text("robots:\n  - {name: a, name: b}\n")  # inside a flow mapping of a list too
+    with pytest.raises(ConfigError, match="'name' is given twice"):
+        load_scenario(path)
+
+
 def test_overriding_one_key_keeps_the_rest(tmp_path: Path) -> None:
     path = tmp_path / "s.yaml"
     path.write_text("name: t\nrobot: {model: turtlebot3_burger}\nrecording: {storage: sqlite3}\n")
