@@ -285,6 +285,12 @@ def _draws(raw: Any, node: yaml.Node | None, base: Mapping[str, Any]) -> tuple[D
             len(args) != 2 or not all(isinstance(a, int | float) and not isinstance(a, bool) for a in args)
         ):
             _fail(where, f"random.{key}.{kind}", f"expected two numbers, got {args!r}")
+        if kind != "choice" and not all(math.isfinite(a) for a in args):
+            _fail(where, f"random.{key}.{kind}", f"expected finite numbers, got {args!r}")
+        if kind == "uniform" and args[0] > args[1]:
+            _fail(where, f"random.{key}.uniform", f"expected [low, high] with low <= high, got {args!r}; swap them")
+        if kind == "normal" and args[1] < 0:
+            _fail(where, f"random.{key}.normal", f"expected [mean, std] with std >= 0, got {args!r}")
         draws.append(Draw(key=str(key), distribution=kind, args=tuple(args)))
     return tuple(draws)
 

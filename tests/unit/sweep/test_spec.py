@@ -155,6 +155,12 @@ def test_a_robot_index_needs_a_fleet_in_the_base_scenario(tmp_path: Path) -> Non
         ("runs: 3\nvary:\n  seed: [1, 2]\n", "seed: vary the seed or give runs:/seeds:, not both"),
         ("timeout: 5\n", "timeout: unknown key; did you mean 'timeout_s'?"),
         ("random:\n  seed: {poisson: [1]}\n", "unknown distribution 'poisson'"),
+        (  # (these drew from a reversed range, or a negative spread, without a word)
+            "random:\n  robot.initial_pose.x_m: {uniform: [1, -1]}\n",
+            "random.robot.initial_pose.x_m.uniform: expected [low, high] with low <= high, got [1, -1]; swap them",
+        ),
+        ("random:\n  robot.initial_pose.x_m: {normal: [0, -1]}\n", "expected [mean, std] with std >= 0"),
+        ("random:\n  robot.initial_pose.x_m: {uniform: [0, .inf]}\n", "expected finite numbers"),
     ],
 )
 def test_bad_sweep_files_fail_in_one_line(tmp_path: Path, text: str, expected: str) -> None:
