@@ -154,7 +154,10 @@ class Recorder:
         self._written = 0
         self._end_ns: int | None = None  # the latest message time on disk
         taken = f"{self.path}: the bag folder exists and is not empty; choose a new output folder"
-        if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
+        if self.path.exists() and not self.path.is_dir():
+            msg = f"{self.path}: is a file, where the bag's folder goes; choose a new output folder"
+            raise BagFolderTaken(msg)
+        if self.path.exists() and any(self.path.iterdir()):
             raise BagFolderTaken(taken)
         try:  # made here, or an empty one given: never one another run made in the meantime
             if not self.path.is_dir():

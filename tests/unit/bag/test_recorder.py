@@ -119,6 +119,8 @@ def test_bad_arguments_raise_one_clear_bag_error(tmp_path: Path) -> None:
     (tmp_path / "full" / "x").write_text("")
     with pytest.raises(BagError, match="exists and is not empty"):
         Recorder(tmp_path / "full")
+    with pytest.raises(BagError, match=r"full/x: is a file, where the bag's folder goes"):  # (it said "not empty")
+        Recorder(tmp_path / "full" / "x")
     with pytest.raises(BagError, match="unknown bag storage 'rosbag'"):
         Recorder(tmp_path / "a", storage="rosbag")
     with pytest.raises(BagError, match="did you mean 'jazzy'"):
