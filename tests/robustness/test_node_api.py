@@ -201,3 +201,21 @@ def test_sigterm_during_start_up_stops_it_at_once_with_no_half_made_bag(tmp_path
     assert proc.returncode == 143, err
     assert_one_line_error(err, contains="stopped by SIGTERM before the run started; nothing was recorded")
     assert not bag.exists()
+
+
+@pytest.mark.parametrize(
+    ("parameters", "expected"),
+    [
+        ("{code: .nan}", "parameters.code: is NaN"),
+        ("{gains: [1.0, 1.0e+300]}", "parameters.gains[1]: 1e+300 is out of range"),
+    ],
+)
+def test_a_node_parameter_that_is_no_usable_number_is_refused(
+    parameters: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Every other number of a scenario was checked; a node's parameters reached declare_parameter as they were
+    scenario = _scenario(tmp_path, f"- plugin: api_nodes:Quitter\n  parameters: {parameters}\n")
+    for argv in (["scenario", "check", str(scenario)], ["simulate", str(scenario), "--out", str(tmp_path / "bag")]):
+        assert main(argv) == 2
+        assert_one_line_error(capsys.readouterr().err, contains=expected)
+    assert not (tmp_path / "bag").exists()

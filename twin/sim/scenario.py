@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from twin.core.native import compiler_candidates, find_compiler
+from twin.core.numbers import number_problem
 from twin.estimation import EstimationSection
 from twin.mission.path_follower import FollowerParams
 from twin.robot.disturbances import Disturbances
@@ -211,6 +212,11 @@ class CmdVelScriptMission:
     rate_hz: float = 10.0
     segments: tuple[CmdVelSegment, ...] = ()
 
+    def __post_init__(self) -> None:
+        if not self.segments:  # (ran 0 ms and called it a complete mission)
+            msg = "segments is empty: give at least one {duration_s, linear_mps, angular_radps}, or mission type none"
+            raise ValueError(msg)
+
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class WaypointsMission:
@@ -225,6 +231,9 @@ class WaypointsMission:
     follower: FollowerParams = field(default_factory=FollowerParams)
 
     def __post_init__(self) -> None:
+        if not self.points:  # (ran 0 ms and called it a complete mission)
+            msg = "points is empty: give at least one [x, y] to drive to, or mission type none"
+            raise ValueError(msg)
         for i, point in enumerate(self.points):
             if len(point) not in (2, 3):
                 msg = f"points[{i}] must be [x, y] or [x, y, yaw], got {list(point)}"
@@ -320,6 +329,21 @@ class NodeSpec:
     namespace: str = ""
     parameters: Mapping[str, Any] = field(default_factory=dict)
     remappings: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        # Every number a user gives is checked (docs/hardening.md): a parameter's too, where it lies
+        stack: list[tuple[str, Any]] = [(f"parameters.{k}", v) for k, v in self.parameters.items()]
+        while stack:
+            key, value = stack.pop()
+            if isinstance(value, Mapping):
+                stack += [(f"{key}.{k}", v) for k, v in value.items()]
+            elif isinstance(value, list | tuple):
+                stack += [(f"{key}[{i}]", v) for i, v in enumerate(value)]
+            elif isinstance(value, float | int) and not isinstance(value, bool):
+                problem = number_problem(value, key)
+                if problem is not None:
+                    msg = f"{key}: {problem}"
+                    raise ValueError(msg)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

@@ -76,6 +76,21 @@ def test_a_key_given_twice_is_refused_where_it_is(tmp_path: Path) -> None:
         load_scenario(path)
 
 
+@pytest.mark.parametrize(
+    ("mission", "expected"),
+    [
+        ("{type: cmd_vel_script, segments: []}", "mission: segments is empty"),
+        ("{type: waypoints, points: []}", "mission: points is empty"),
+    ],
+)
+def test_a_mission_with_nothing_to_do_is_refused(tmp_path: Path, mission: str, expected: str) -> None:
+    # (it ran 0 ms, wrote a 14-message bag and exited 0: a typo passed as a success)
+    path = tmp_path / "s.yaml"
+    path.write_text(f"name: t\nmission: {mission}\n")
+    with pytest.raises(ConfigError, match=rf"^{path}:2: {expected}"):
+        load_scenario(path)
+
+
 def test_overriding_one_key_keeps_the_rest(tmp_path: Path) -> None:
     path = tmp_path / "s.yaml"
     path.write_text("name: t\nrobot: {model: turtlebot3_burger}\nrecording: {storage: sqlite3}\n")
