@@ -321,15 +321,38 @@ def test_a_failed_mission_exits_1_naming_the_goal_and_why(tmp_path: Path, capsys
 
 def test_an_error_inside_a_tick_keeps_its_message(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     tree = tmp_path / "unknown.xml"
-    tree.write_text('<root BTCPP_format="4"><BehaviorTree ID="A"><GoToPose loc="nowhere"/></BehaviorTree></root>')
+    tree.write_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="A"><Sequence><Script code="where := \'nowhere\'"/>'
+        '<GoToPose loc="{where}"/></Sequence></BehaviorTree></root>'
+    )
     path = write_scenario(
         tmp_path, {"mission.tree": str(tree), "mission.locations": str(DATA / "unreachable_locations.yaml")}
     )
     bag = tmp_path / "bag"
     code, _, err = run(["simulate", str(path), "--out", str(bag)], capsys)
     assert code == 6, err
-    assert_one_line_error(err, contains="unknown location 'nowhere'; the locations are far_away")
+    assert_one_line_error(err, contains="unknown location 'nowhere' (the locations are far_away)")
     assert_bag_reads_back(bag)
+
+
+def test_a_location_the_tree_names_and_the_file_lacks_is_refused_before_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # (it failed at its first tick, seconds into the run, after `scenario check` had passed it)
+    tree = tmp_path / "unknown.xml"
+    tree.write_text('<root BTCPP_format="4"><BehaviorTree ID="A">\n<GoToPose loc="far_awy"/></BehaviorTree></root>')
+    locations = DATA / "unreachable_locations.yaml"
+    path = write_scenario(tmp_path, {"mission.tree": str(tree), "mission.locations": str(locations)})
+    bag = tmp_path / "bag"
+    for argv in (["scenario", "check", str(path)], ["simulate", str(path), "--out", str(bag)]):
+        code, _, err = run(argv, capsys)
+        assert code == 6, err
+        assert_one_line_error(
+            err,
+            contains=f"{tree}:2: <GoToPose loc='far_awy'>: {locations} has no location 'far_awy'; did you mean "
+            "'far_away'? (the locations are far_away)",
+        )
+    assert not bag.exists()
 
 
 def test_a_script_error_inside_a_tick_keeps_its_message(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

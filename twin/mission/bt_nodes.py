@@ -17,6 +17,7 @@ that reaches each goal after a fixed number of polls, for tests and `twin tree l
 
 from __future__ import annotations
 
+import difflib
 import enum
 import logging
 import random
@@ -25,9 +26,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple, Protocol
 
-from twin.bt.node import NodeConfig, StatefulActionNode, SyncActionNode
+from twin.bt.node import NodeConfig, StatefulActionNode, SyncActionNode, strip_pointer
 from twin.bt.ports import PortSpec, bidirectional_port, input_port, output_port
 from twin.bt.status import NodeStatus
+from twin.bt.tree import Tree
 from twin.bt.values import PortType
 from twin.core.config import build, load_yaml
 from twin.core.errors import ConfigError, TreeError
@@ -236,8 +238,7 @@ class GoToPose(StatefulActionNode):
             )
             return NodeStatus.FAILURE
         if location not in poses:
-            msg = f"unknown location {location!r}; the locations are {', '.join(sorted(poses))}"
-            raise TreeError(msg)
+            raise TreeError(unknown_location(str(location), poses))
         pose = Pose2D(*poses[location])
         self._goal_id = self._navigator.send_goal(pose, MAP_FRAME)
         _log.info("%s: sent goal %s (%.3f, %.3f, %.3f) in %s", self.full_path, location, *pose, MAP_FRAME)
@@ -303,3 +304,36 @@ def register_mission_nodes(factory: BehaviorTreeFactory, *, navigator: Navigator
     factory.register_node_type(SetLocations, "SetLocations", rng)
     factory.register_node_type(GetLocationFromQueue, "GetLocationFromQueue")
     factory.register_node_type(GoToPose, "GoToPose", navigator)
+
+
+def unknown_location(location: str, poses: Mapping[str, object]) -> str:
+    """Say that `location` is not among `poses`: the nearest name, and the names (a long list cut short)."""
+    return f"unknown location {location!r}{_nearest(location, poses)}"
+
+
+def _nearest(location: str, poses: Mapping[str, object]) -> str:
+    """`; did you mean 'x'? (the locations are a, b, ... and N more)` for a name not among `poses`."""
+    names = sorted(poses)
+    close = difflib.get_close_matches(location, names, n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    shown = ", ".join(names[:10]) + (f" and {len(names) - 10} more" if len(names) > 10 else "")
+    return f"{hint} (the locations are {shown or 'none'})"
+
+
+def unknown_literal_location(tree: Tree, locations: Path) -> str | None:
+    """A `GoToPose` whose `loc` names, as written in the tree, a location the file lacks (file:line), or None.
+
+    Such a goal fails when it is first ticked, seconds into a run; said before the run instead. A
+    `loc` read from the blackboard (`{location}`), or one of a node with `loc_poses`, is not judged.
+    """
+    poses = load_locations(locations)
+    for _, node in tree.walk():
+        if not isinstance(node, GoToPose):
+            continue
+        ports = node.config.input_ports
+        written = ports.get("loc")
+        if written is None or "loc_poses" in ports or strip_pointer(written) is not None or written in poses:
+            continue
+        where = f"{node.config.location}: " if node.config.location else ""
+        return f"{where}<GoToPose loc={written!r}>: {locations} has no location {written!r}{_nearest(written, poses)}"
+    return None

@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twin.core.errors import ConfigError, FmuError, TwinError
+from twin.core.errors import ConfigError, FmuError, TreeError, TwinError
 from twin.core.numbers import number_problem
 from twin.sim.scenario import BehaviorTreeMission, Scenario, runs_amcl, runs_nav2
 
@@ -324,7 +324,7 @@ def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
 def _load_tree(mission: BehaviorTreeMission) -> None:
     import random
 
-    from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes
+    from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes, unknown_literal_location
     from twin.mission.look_for_object import ImageSlot, register_vision_nodes
     from twin.nav.bt_navigator.factory import nav2_factory
 
@@ -332,7 +332,11 @@ def _load_tree(mission: BehaviorTreeMission) -> None:
     register_mission_nodes(factory, navigator=ScriptedNavigator(), rng=random.Random(0))
     register_vision_nodes(factory, slot=ImageSlot(), target_color=mission.target_color)
     factory.load_plugins()
-    factory.create_tree_from_file(mission.tree, main_tree=mission.main_tree, clock=lambda: 0)
+    tree = factory.create_tree_from_file(mission.tree, main_tree=mission.main_tree, clock=lambda: 0)
+    if mission.locations is not None:
+        problem = unknown_literal_location(tree, mission.locations)
+        if problem is not None:
+            raise TreeError(problem)
 
 
 def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:

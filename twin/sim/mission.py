@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING, Protocol
 from twin.bt import NodeStatus
 from twin.bt.log import StatusChange, StatusChangeBuffer
 from twin.core.clock import s_to_ns
-from twin.mission.bt_nodes import LOCATION_FILE_KEY, register_mission_nodes
+from twin.core.errors import TreeError
+from twin.mission.bt_nodes import LOCATION_FILE_KEY, register_mission_nodes, unknown_literal_location
 from twin.mission.look_for_object import ImageSlot, register_vision_nodes
 from twin.mission.path_follower import PathFollower
 from twin.sim.replay import load_commands
@@ -196,6 +197,9 @@ class TreeMission:
         factory.load_plugins()
         self.tree = factory.create_tree_from_file(spec.tree, main_tree=spec.main_tree, clock=clock)
         if spec.locations is not None:
+            problem = unknown_literal_location(self.tree, spec.locations)
+            if problem is not None:
+                raise TreeError(problem)
             self.tree.root_blackboard.set(LOCATION_FILE_KEY, str(spec.locations))
         self._changes = StatusChangeBuffer()
         self.tree.add_listener(self._changes)
