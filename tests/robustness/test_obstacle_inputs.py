@@ -88,6 +88,19 @@ CASES: dict[str, tuple[str, str, int | None]] = {
         "blocks.count: 3 blocks stand at the mission's locations",
         None,
     ),
+    # two obstacles of one name, or one with a block's, were one model in /contacts and the markers
+    "two_of_one_name": (
+        "obstacles:\n  - {name: a, shape: box, size_m: [0.3, 0.3, 0.4], pose: {x_m: 2.0, y_m: 0.0}}\n"
+        "  - {name: a, shape: box, size_m: [0.3, 0.3, 0.4], pose: {x_m: 3.0, y_m: 0.0}}\n",
+        "obstacles[0] and obstacles[1] have the same name 'a'; give each its own",
+        None,
+    ),
+    "a_blocks_name": (
+        "blocks: {count: 1}\nobstacles:\n  - {name: red_block, shape: box, size_m: [0.3, 0.3, 0.4], "
+        "pose: {x_m: 2.0, y_m: 0.0}}\n",
+        "obstacles[0]: its name 'red_block' is a block's",
+        None,
+    ),
     "spawn_inside_an_obstacle": (
         "obstacles:\n  - {shape: box, size_m: [1, 1, 1], pose: {x_m: 0.0, y_m: 0.0}}\n",
         "obstacles[0]: obstacle_0 stands on the robot's spawn pose",

@@ -109,7 +109,16 @@ def scenario_obstacles(scenario: Scenario, rng: np.random.Generator) -> tuple[Ob
                 n += 1
                 key = f"{name}_{n}"
             locations[key] = place
-    return specs + block_obstacles(scenario.blocks, locations, rng)
+    blocks = block_obstacles(scenario.blocks, locations, rng)
+    mine = {spec.name or f"obstacle_{i}": i for i, spec in enumerate(specs)}
+    for block in blocks:
+        if block.name in mine:  # /contacts and the markers would not tell them apart
+            msg = (
+                f"obstacles[{mine[block.name]}]: its name {block.name!r} is a block's (blocks: names them "
+                "red_block, green_block, blue_block...); rename the obstacle"
+            )
+            raise ConfigError(msg)
+    return specs + blocks
 
 
 class JoinedSource:

@@ -577,6 +577,13 @@ class Scenario:
                     msg = f"robots[{seen[value]}] and robots[{i}] have the same {key} {value!r}; give each its own"
                     raise ValueError(msg)
                 seen[value] = i
+        names: dict[str, int] = {}  # an obstacle's name is its model in /contacts and its marker
+        for i, spec in enumerate(self.obstacles):
+            name = spec.name or f"obstacle_{i}"
+            if name in names:
+                msg = f"obstacles[{names[name]}] and obstacles[{i}] have the same name {name!r}; give each its own"
+                raise ValueError(msg)
+            names[name] = i
 
     def robot_scenarios(self) -> list[tuple[str, Scenario]]:
         """Each robot's (namespace, its view of the scenario: its sections at the top level, no `robots`).
