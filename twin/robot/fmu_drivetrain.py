@@ -57,6 +57,11 @@ _BLOCK_PROBE_M = 2e-3
 _BLOCK_PROBE_S = 0.05
 
 
+def _fixed(value: float, decimals: int) -> str:
+    """`value` with `decimals` places, or in 4 significant digits when that would be a wall of digits (1e300)."""
+    return f"{value:.{decimals}f}" if abs(value) < 1e6 else f"{value:.4g}"
+
+
 def wheel_setpoints(v_mps: float, w_radps: float, chassis: ChassisParams, limits: CommandLimits) -> tuple[float, float]:
     """Inverse kinematics with the firmware's clamps: body command → (left, right) wheel speeds, rad/s."""
     if limits.max_linear_mps is not None:
@@ -97,7 +102,7 @@ class Saturation:
             return ""
         return (
             f"{self.count} cmd_vel clamped to the motors' {self.cap_radps:.2f} rad/s at {self.supply_v:g} V "
-            f"(first at {self.first_t_s:.2f} s, asked up to {self.max_requested_radps:.4g} rad/s)"
+            f"(first at {self.first_t_s:.2f} s, asked up to {_fixed(self.max_requested_radps, 2)} rad/s)"
         )
 
 
@@ -517,13 +522,13 @@ class FmuDrivetrain(Closing):
         if sat.count == 1:
             sat.first_t_s = self.t_ns * 1e-9
             _log.warning(
-                "drive: cmd_vel (%.4g m/s, %.4g rad/s) at t = %.3f s asks %.4g rad/s of a wheel, but %s reaches "
+                "drive: cmd_vel (%s m/s, %s rad/s) at t = %.3f s asks %s rad/s of a wheel, but %s reaches "
                 "%.2f rad/s (%.3f m/s) at %g V: clamped to that (reported once per run; /motor_state marks "
                 "every clamped command)",
-                v_mps,
-                w_radps,
+                _fixed(v_mps, 3),
+                _fixed(w_radps, 3),
                 sat.first_t_s,
-                peak_radps,
+                _fixed(peak_radps, 2),
                 self._fmu_name,
                 sat.cap_radps or 0.0,
                 (sat.cap_radps or 0.0) * self.params.wheel_radius_m,
