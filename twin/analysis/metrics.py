@@ -45,8 +45,8 @@ STOPPED_SPEED_MPS = 0.01
 STOPPED_YAW_RATE_RADPS = 0.01
 
 _GOAL_NODE = re.compile(r"go_?to|gotopose|navigate_?to_?pose|navigatetopose|\bgoal", re.IGNORECASE)
-_RECOVERY_NODE = re.compile(
-    r"^(spin|back_?up|wait|drive_?on_?heading|assisted_?teleop|clear\w*costmap\w*)$", re.IGNORECASE
+_RECOVERY_NODE = re.compile(  # (Nav2's trees name their clearing `ClearLocalCostmap-Context` and the like)
+    r"^(spin|back_?up|wait|drive_?on_?heading|assisted_?teleop|clear[\w-]*costmap[\w-]*)$", re.IGNORECASE
 )
 _TERMINAL = ("SUCCESS", "FAILURE")
 
@@ -125,7 +125,9 @@ def mission_timeline(events: list[tuple[float, str, str, str]]) -> MissionTimeli
                 open_goals[name] = t_s
             elif new in _TERMINAL and name in open_goals:
                 goals.append(GoalResult(name=name, start_s=open_goals.pop(name), end_s=t_s, result=new))
-        if new == "RUNNING" and prev != "RUNNING" and _RECOVERY_NODE.match(name):
+        # a recovery starts (RUNNING), or runs whole within one tick (a costmap clearing: IDLE to SUCCESS)
+        starts = (new == "RUNNING" and prev != "RUNNING") or (prev == "IDLE" and new in _TERMINAL)
+        if starts and _RECOVERY_NODE.match(name):
             recoveries.append((t_s, name))
     goals.extend(GoalResult(name=n, start_s=t, end_s=None, result="running") for n, t in open_goals.items())
     goals.sort(key=lambda g: g.start_s)
