@@ -88,8 +88,9 @@ class Comparison:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready numbers (no per-sample arrays but a 1 s error series)."""
-        span = float(self.t_s[-1]) if len(self.t_s) else 0.0
-        marks = np.arange(0.0, span + 1e-9, 1.0)
+        start = float(self.t_s[0]) if len(self.t_s) else 0.0  # (on one clock the match may begin after 0)
+        span = float(self.t_s[-1]) - start if len(self.t_s) else 0.0
+        marks = start + np.arange(0.0, span + 1e-9, 1.0)
         return {
             "bag_a": self.bag_a,
             "bag_b": self.bag_b,
@@ -234,7 +235,7 @@ def compare_bags(
         raise BagError(msg)
     ate = float(math.sqrt(float(np.mean(err * err))))
     rpe = _rpe(t, xy_a, yaw_a, xy_b, yaw_b, interval_s=rpe_interval_s)
-    fields = _field_differences(data_a, data_b, ta, tb, t)
+    fields = _field_differences(data_a, data_b, ta, tb, t, origin=origin)
     rates = []
     for name in sorted(set(data_a.health) | set(data_b.health)):
         ha, hb = data_a.health.get(name), data_b.health.get(name)
@@ -270,16 +271,19 @@ def compare_bags(
     )
 
 
-def _field_differences(a: BagData, b: BagData, ta: str, tb: str, t: F64) -> list[dict[str, Any]]:
+def _field_differences(
+    a: BagData, b: BagData, ta: str, tb: str, t: F64, *, origin: int | None = None
+) -> list[dict[str, Any]]:
     """RMS and max differences of the velocity fields both bags carry, over the matched span.
 
     The pose topics' twist (`twist.twist.linear.x`, `twist.twist.angular.z`) where both are
     Odometry, interpolated at A's times; `/cmd_vel` (`linear.x`, `angular.z`) as held commands,
-    both on the same clock (from each bag's first pose).
+    both on the clock the poses were matched on (from each bag's first pose, or from `origin`, the
+    one stamp both count from when they share a clock).
     """
     out: list[dict[str, Any]] = []
-    t_a, va = _relative(a.poses[ta])
-    t_b, vb = _relative(b.poses[tb])
+    t_a, va = _relative(a.poses[ta], origin)
+    t_b, vb = _relative(b.poses[tb], origin)
     for col, field in ((3, "twist.twist.linear.x"), (4, "twist.twist.angular.z")):
         if np.isnan(va[:, col]).all() or np.isnan(vb[:, col]).all():
             continue
@@ -297,7 +301,7 @@ def _field_differences(a: BagData, b: BagData, ta: str, tb: str, t: F64) -> list
     if a.cmd is not None and b.cmd is not None and len(a.cmd[0]) and len(b.cmd[0]):
         ca = [np.frombuffer(x, dtype=np.float64) for x in a.cmd]
         cb = [np.frombuffer(x, dtype=np.float64) for x in b.cmd]
-        cta, ctb = _command_times(a, ta, ca[0]), _command_times(b, tb, cb[0])
+        cta, ctb = _command_times(a, ta, ca[0], origin), _command_times(b, tb, cb[0], origin)
         for k, field in ((1, "linear.x"), (2, "angular.z")):
             xa = _held(cta, ca[k], t)
             xb = _held(ctb, cb[k], t)
@@ -313,14 +317,18 @@ def _field_differences(a: BagData, b: BagData, ta: str, tb: str, t: F64) -> list
     return out
 
 
-def _command_times(data: BagData, pose_topic: str, t_s: F64) -> F64:
-    """Command times on the pose topic's clock: sim time through /clock when the bag has it, from its first pose."""
+def _command_times(data: BagData, pose_topic: str, t_s: F64, origin: int | None = None) -> F64:
+    """Command times on the pose topic's clock: sim time through /clock when the bag has it, from its first pose.
+
+    With `origin` (a stamp both bags' times count from), from that instead.
+    """
     record_ns = data.start_ns + t_s * 1e9
     stamps = data.poses[pose_topic].stamp_ns
     sim = data.clock_at(record_ns.astype(np.int64))
-    if sim is None:  # no /clock: record times, from the pose topic's first record time
-        return (record_ns - float(data.poses[pose_topic].t_ns.min())) * 1e-9
-    return (sim - int(stamps.min())).astype(np.float64) * 1e-9
+    if sim is None:  # no /clock: record times, from the pose topic's first record time (or the origin)
+        first = float(data.poses[pose_topic].t_ns.min()) if origin is None else float(origin)
+        return (record_ns - first) * 1e-9
+    return (sim - (int(stamps.min()) if origin is None else origin)).astype(np.float64) * 1e-9
 
 
 def _held(times: F64, values: F64, at: F64) -> F64:

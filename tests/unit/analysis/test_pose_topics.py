@@ -39,6 +39,12 @@ def test_two_topics_of_one_bag_are_matched_on_their_stamps(twin_bag: Path, tmp_p
     assert len(result.t_s) > 100
     assert result.t_s[0] == pytest.approx(SKIP_NS * 1e-9, abs=0.05)  # only where both topics have poses
     assert result.max_position_error_m == 0.0  # the same poses at the same stamps
+    # ... and the same twists: they were timed from each topic's own first stamp (an RMS of 0.06 m/s)
+    twist = {f["field"]: f for f in result.to_dict()["field_differences"] if f["topic"] == f"{TRUTH} | {LATE}"}
+    assert twist and all(f["max_abs_diff"] == 0.0 for f in twist.values()), twist
+    doc = result.to_dict()  # the span and the 1 s series are the matched ones, from 5 s on
+    assert doc["matched_span_s"] == pytest.approx(float(result.t_s[-1] - result.t_s[0]))
+    assert doc["position_error_each_s"][0]["t_s"] == pytest.approx(float(result.t_s[0]))
     # matched from each topic's first pose instead, the late one is shifted by 5 s of driving
     shifted = compare_bags(bag, bag, topics=(TRUTH, LATE), same_clock=False)
     assert shifted.max_position_error_m > 0.05
