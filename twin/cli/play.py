@@ -106,7 +106,7 @@ def _play(args: argparse.Namespace) -> int:
 
     previous = {sig: signal.signal(sig, handle) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        with LiveServer(host=args.host, port=args.port) as server:
+        with LiveServer(host=args.host, port=args.port, hold_clients=True) as server:
             print(live_banner(server.url, args.speed), file=sys.stderr)
             report = play_bag(
                 args.bag,

@@ -402,7 +402,7 @@ def _live_view(
         yield [LiveSink(None, pacer=pacer)]
         return
     port = DEFAULT_PORT if args.port is None else args.port
-    with LiveServer(host=args.host or DEFAULT_HOST, port=port) as server:
+    with LiveServer(host=args.host or DEFAULT_HOST, port=port, hold_clients=True) as server:
         print(live_banner(server.url, speed), file=sys.stderr)
         if namespace is not None:
             alone = f"twin: serving /{namespace}/ alone, as one robot's topics (/{namespace}/scan as /scan)"

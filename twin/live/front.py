@@ -18,6 +18,7 @@ import logging
 import selectors
 import socket
 import threading
+import time
 from collections.abc import Sequence
 
 __all__ = ["LEGACY_SUBPROTOCOL", "SERVED_SUBPROTOCOLS", "HandshakeFront"]
@@ -86,17 +87,32 @@ class HandshakeFront:
         self._lock = threading.Lock()
         self._open: set[socket.socket] = set()
         self._refused: set[str] = set()
+        # Connections wait here until the server has every channel (`open`): a client that came
+        # while they were being created could subscribe to one the SDK did not know yet, get
+        # "Unknown channel ID", and (as Foxglove does) never ask again: no /tf_static all session.
+        self._ready = threading.Event()
         self._thread = threading.Thread(target=self._accept, name="twin-live-front", daemon=True)
         self._thread.start()
+
+    def open(self) -> None:
+        """Let the waiting and the coming connections through to the server (idempotent)."""
+        self._ready.set()
 
     @property
     def port(self) -> int:
         """The public port."""
         return int(self._listener.getsockname()[1])
 
-    def close(self) -> None:
-        """Stop accepting and drop every open connection."""
+    def close(self, grace_s: float = 0.0) -> None:
+        """Stop accepting and drop every open connection (after up to `grace_s` for them to end on their own)."""
         self._stop.set()
+        self._ready.set()  # (a connection still waiting ends with the rest)
+        deadline = time.monotonic() + grace_s
+        while time.monotonic() < deadline:  # the server's Close frames on their way through
+            with self._lock:
+                if not self._open:
+                    break
+            time.sleep(0.01)
         with contextlib.suppress(OSError):
             self._listener.shutdown(socket.SHUT_RDWR)
         self._listener.close()
@@ -153,6 +169,11 @@ class HandshakeFront:
             if request is None:
                 return
             head, rest = request
+            while not self._ready.wait(0.1):  # (the handshake's answer waits; the client just sees a slow server)
+                if self._stop.is_set():
+                    return
+            if self._stop.is_set():
+                return
             offered = _protocols(head)
             legacy = False
             if offered is not None and not any(p in SERVED_SUBPROTOCOLS for p in offered):

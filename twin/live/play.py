@@ -76,6 +76,7 @@ def play_bag(
     if not handles:
         msg = f"{info.path}: no topic has a message definition (embedded or standard); nothing to serve"
         raise BagError(msg)
+    server.ready()  # every channel is made: clients that came meanwhile go through now
     names = sorted(handles)
     pacer = Pacer(speed, should_stop=should_stop) if speed is not None else None
     publish = server.publish

@@ -83,12 +83,17 @@ class LiveServer(Closing):
         host: Address to bind; 127.0.0.1 (default) serves this machine only, 0.0.0.0 every interface.
         port: TCP port (8765, as foxglove_bridge; 0 picks a free one, see `port`).
         name: The server name Foxglove shows.
+        hold_clients: Hold connecting clients until `ready()` or the first `publish` (a run's or a
+            bag's channels are all made by then): a client that came while they were being made
+            could subscribe to one the SDK did not accept yet and, as Foxglove does, never again.
 
     Raises:
         ConfigError: If the address cannot be bound (port in use, unknown host).
     """
 
-    def __init__(self, *, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, name: str = "twin") -> None:
+    def __init__(
+        self, *, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, name: str = "twin", hold_clients: bool = False
+    ) -> None:
         if not 0 <= port <= 65535:
             msg = f"--port must be a TCP port number (0 to 65535), got {port}"
             raise ConfigError(msg)
@@ -123,6 +128,9 @@ class LiveServer(Closing):
         self._front = HandshakeFront(listener, ("127.0.0.1", self._server.port))
         self.port: int = self._front.port
         self._closed = False
+        self._open_to_clients = not hold_clients
+        if not hold_clients:
+            self._front.open()
 
     @property
     def url(self) -> str:
@@ -163,8 +171,15 @@ class LiveServer(Closing):
         self._by_topic[key] = handle
         return handle
 
+    def ready(self) -> None:
+        """Every channel is made: let clients in (they wait until then; the first `publish` says it too)."""
+        self._front.open()
+
     def publish(self, handle: int, t_ns: int, data: bytes) -> None:
         """Send one CDR message stamped `t_ns` to the clients subscribed to its channel."""
+        if not self._open_to_clients:
+            self._open_to_clients = True
+            self._front.open()
         if t_ns >= self._next_time_ns:
             self._server.broadcast_time(t_ns)
             self._next_time_ns = t_ns + _TIME_PERIOD_NS
@@ -202,9 +217,11 @@ class LiveServer(Closing):
         if self._closed:
             return
         self._closed = True
-        self._front.close()
+        # The SDK's server first, so that its Close frames reach the clients through the front
+        # (closing the front first cut them: code 1006, and "connection reset" errors on the console)
+        self._server.stop()
+        self._front.close(grace_s=1.0)
         for entry in self._channels:
             entry.channel.close()
-        self._server.stop()
         self.peer_errors.detach()
         self.peer_errors.flush()

@@ -156,3 +156,50 @@ def test_a_client_on_an_unknown_subprotocol_is_refused_with_one_log_line(caplog:
     assert len(lines) == 1, lines
     assert "foxglove.websocket.v2" in lines[0] and "foxglove.sdk.v1" in lines[0] and "foxglove.websocket.v1" in lines[0]
     assert "handshake failed" not in " ".join(r.getMessage() for r in caplog.records)
+
+
+def _handshake(port: int) -> socket.socket:
+    """A raw WebSocket opening handshake to the server, as a Foxglove client sends it."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+    sock.sendall(
+        b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+        b"Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n"
+    )
+    return sock
+
+
+def test_a_run_holds_its_clients_until_every_channel_is_made() -> None:
+    # A client that came while a run made its channels could subscribe to one the SDK did not accept
+    # yet ("Unknown channel ID"), and Foxglove never asks again: no /tf_static all session.
+    definition = REGISTRY.definition("sensor_msgs/msg/LaserScan")
+    with LiveServer(port=0, hold_clients=True) as server:
+        sock = _handshake(server.port)
+        server.add_channel("/scan", definition)
+        sock.settimeout(0.3)
+        with pytest.raises(TimeoutError):  # held: no answer before the server is ready (load only delays it more)
+            sock.recv(1)
+        server.ready()
+        sock.settimeout(10)
+        assert sock.recv(64).startswith(b"HTTP/1.1 101")
+        sock.close()
+        seen = asyncio.run(watch(server.url, ["/scan"], stop=lambda w: "/scan" in w.channels, timeout_s=10))
+    assert "/scan" in seen.channels
+
+
+def test_closing_the_server_sends_its_clients_a_close_frame() -> None:
+    # The front was closed before the SDK's server: clients saw the connection drop (1006) instead
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import ConnectionClosedOK
+
+    async def until_closed(server: LiveServer) -> None:
+        async with connect(server.url, subprotocols=["foxglove.websocket.v1"], open_timeout=10) as ws:  # type: ignore[list-item]
+            await ws.recv()  # serverInfo
+            await asyncio.get_running_loop().run_in_executor(None, server.close)
+            with pytest.raises(ConnectionClosedOK):
+                while True:
+                    await asyncio.wait_for(ws.recv(), timeout=10)
+
+    with LiveServer(port=0) as server:
+        server.add_channel("/scan", REGISTRY.definition("sensor_msgs/msg/LaserScan"))
+        asyncio.run(until_closed(server))
