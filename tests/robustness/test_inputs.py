@@ -467,6 +467,8 @@ CLI_CASES: dict[str, tuple[list[str], int, str]] = {
         2,
         "--wheel-radius must be a length in metres above 0 and at most 100, got inf",
     ),
+    "tree_log_seed_negative": (["tree", "log", "trees/tree.xml", "--seed", "-1"], 2, "--seed must be a non-negative"),
+    "tree_log_period_zero": (["tree", "log", "trees/tree.xml", "--period-ms", "0"], 2, "--period-ms and --ticks"),
     "map_save_free_nan": (
         [
             "map",

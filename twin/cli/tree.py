@@ -413,12 +413,16 @@ def _run_xml(args: argparse.Namespace) -> StatusLog:
     from twin.core.clock import NS_PER_S
     from twin.mission.bt_nodes import LOCATION_FILE_KEY, load_locations
 
-    if args.period_ms <= 0 or args.ticks <= 0:
-        msg = "--period-ms and --ticks must be positive"
-        raise TreeError(msg)
+    # usage errors: exit 2, as argparse's (they were tree errors, exit 6)
+    if not (args.period_ms > 0 and args.ticks > 0):  # NaN too
+        msg = f"--period-ms and --ticks must be positive, got {args.period_ms} and {args.ticks}"
+        raise ConfigError(msg)
     if args.polls_to_arrive < 1:
         msg = f"--polls-to-arrive must be at least 1 (navigator polls per goal), got {args.polls_to_arrive}"
-        raise TreeError(msg)
+        raise ConfigError(msg)
+    if args.seed < 0:
+        msg = f"--seed must be a non-negative whole number, got {args.seed}"
+        raise ConfigError(msg)
     try:
         load_locations(args.location_file)  # one line now, not a warning per node and a FAILURE later
     except ConfigError as err:
