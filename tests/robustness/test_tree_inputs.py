@@ -69,7 +69,7 @@ CASES: dict[str, tuple[list[str], int, str]] = {
     ),
     "log_deep_subtrees": (["tree", "log", "{d}/chain.xml"], 6, "chain.xml:1: <BehaviorTree ID='T0'> nests nodes 601"),
     "show_deep_subtrees": (["tree", "show", "{d}/chain.xml"], 6, "twin ticks trees up to 200 levels"),
-    "log_polls_to_arrive_0": (["tree", "log", NAV_TREE_QUEUE, "--polls-to-arrive", "0"], 6, "--polls-to-arrive"),
+    "log_polls_to_arrive_0": (["tree", "log", NAV_TREE_QUEUE, "--polls-to-arrive", "0"], 2, "--polls-to-arrive"),
     "log_save_in_missing_folder": (
         ["tree", "log", NAV_TREE_QUEUE, "--save", "{d}/no/x.jsonl"],
         6,
