@@ -369,8 +369,15 @@ class FmuDrivetrain(Closing):
             state: ChassisState = new(ChassisState, unpack_chassis(buffer, at))
             return state
 
+        unpack_pose = struct.Struct("<3d").unpack_from
+
+        def pose() -> tuple[float, float, float]:
+            xy_yaw: tuple[float, float, float] = unpack_pose(buffer, at)
+            return xy_yaw
+
         self.advance = advance  # type: ignore[method-assign]
         self.chassis_state = chassis_state  # type: ignore[method-assign]
+        self.pose = pose  # type: ignore[method-assign]
         self.wheel_state = self._native_wheel_state()  # type: ignore[method-assign]
 
     def _native_wheel_state(self) -> Callable[[], WheelState]:
@@ -724,6 +731,14 @@ class FmuDrivetrain(Closing):
         finally:
             self._ref_left, self._ref_right = ref_left, ref_right
             self._w_left, self._w_right = w_left, w_right
+
+    def pose(self) -> tuple[float, float, float]:
+        """The chassis' (x_m, y_m, yaw_rad) now: `chassis_state()[:3]`, cheaper (a fleet reads it at every event)."""
+        if self._loop is None:
+            c = self._chassis
+            return (c.x_m, c.y_m, c.yaw_rad)
+        s = self._loop.state
+        return (s.x_m, s.y_m, s.yaw_rad)
 
     def chassis_state(self) -> ChassisState:
         """Pose, rates and accelerations of the chassis now."""

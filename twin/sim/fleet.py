@@ -23,7 +23,7 @@ Nothing here coordinates the robots: each learns of the others from its own sens
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -119,6 +119,7 @@ class Fleet:
         # Per (robot, height): its shapes' section placed at a pose, shared by every other robot's
         # lidar view (the lidars of a fleet scan at the same instants, each seeing the same robot).
         self._placed: dict[tuple[int, float], tuple[_Pose, np.ndarray | None, np.ndarray | None]] = {}
+        self._bound: tuple[tuple[Callable[[int], None], Callable[[], _Pose]], ...] | None = None  # `_drives`
 
     def body(self, i: int) -> RobotBody:
         """Robot `i`'s collision body."""
@@ -172,10 +173,17 @@ class Fleet:
         if problem is not None:
             raise ConfigError(problem)
 
+    def _drives(self) -> tuple[tuple[Callable[[int], None], Callable[[], _Pose]], ...]:
+        """Each robot's drive node's `advance` and its drive's pose reader, bound once (the drives are built)."""
+        drives = self._bound
+        if drives is None:
+            drives = self._bound = tuple((g.drive_node.advance, _pose_reader(g.drive)) for g in self.groups)
+        return drives
+
     def advance(self, n_steps: int) -> None:
         """Step every robot's drive `n_steps` physics steps, one robot after the other."""
-        groups = self.groups
-        standing: list[_Pose] = [g.drive.chassis_state()[:3] for g in groups]  # (x, y, yaw) of each
+        drives = self._drives()
+        standing: list[_Pose] = [pose() for _, pose in drives]  # (x, y, yaw) of each
         radii = self.radii
         last = self._last
         own = self.own_nm
@@ -187,10 +195,10 @@ class Fleet:
         self._standing = standing
         hypot, remainder, tau, ceil = math.hypot, math.remainder, math.tau, math.ceil
         try:
-            for i, g in enumerate(groups):
+            for i, (advance, pose) in enumerate(drives):
                 self._moving = i
-                g.drive_node.advance(n_steps)
-                x, y, yaw = g.drive.chassis_state()[:3]
+                advance(n_steps)
+                x, y, yaw = pose()
                 bx, by, byaw = standing[i]
                 if x != bx or y != by or yaw != byaw:
                     standing[i] = (x, y, yaw)
@@ -411,8 +419,8 @@ class FleetMonitor:
                     mine, theirs, distance = known
                     bound = distance - _moved(mine, x_m, y_m, yaw_rad, radius)
                     bound -= _moved(theirs, *where, radii[j])
-                if bound > _MARGIN_M:
-                    gap = bound - _MARGIN_M
+                if bound > _TOLERANCE_M:  # as sound as a new measurement less the tolerance, and free
+                    gap = bound - _TOLERANCE_M
                 elif known is not None and known[0] == (x_m, y_m, yaw_rad) and known[1] == where:
                     gap = known[2] - _TOLERANCE_M  # neither moved (stalled against each other)
                 elif known is not None and known[2] <= _TOLERANCE_M and known[2] - bound < _STILL_TOUCHING_M:
@@ -444,6 +452,15 @@ def overlap_problem(robots: Sequence[tuple[str, _Pose, RobotBody]]) -> str | Non
                 f"overlapping ({centres:.3f} m apart); move one robot's initial_pose"
             )
     return None
+
+
+def _pose_reader(drive: Any) -> Callable[[], _Pose]:
+    """A drive's (x, y, yaw) reader: its `pose` where it has one, else from its `chassis_state`."""
+    pose = getattr(drive, "pose", None)
+    if callable(pose):
+        return pose  # type: ignore[no-any-return]
+    state = drive.chassis_state
+    return lambda: state()[:3]
 
 
 def _nm(distance_m: float) -> int:

@@ -243,8 +243,15 @@ def test_native_readers_return_what_the_loop_structure_holds(profile: str, fmu: 
             dt.set_cmd_vel(v, w)
             dt.advance(steps)
             assert dt.chassis_state() == FmuDrivetrain.chassis_state(dt)
+            assert dt.pose() == FmuDrivetrain.pose(dt) == dt.chassis_state()[:3]  # what a fleet reads
             assert repr(dt.wheel_state()) == repr(FmuDrivetrain.wheel_state(dt))  # repr: NaN where there is none
         assert dt.chassis_state().x_m != 0.0
+    python = FmuDrive(fmu=f"builtin:{fmu}", profile=profile, api="lowlevel")  # type: ignore[arg-type]
+    with FmuDrivetrain(python, WAFFLE, step_ns=MS, contact=None, free_distance=None, bounding_radius_m=0.0) as dt:
+        assert not dt.native
+        dt.set_cmd_vel(*SCRIPT[1][:2])
+        dt.advance(SCRIPT[1][2])
+        assert dt.pose() == dt.chassis_state()[:3] != (0.0, 0.0, 0.0)
 
 
 @pytest.mark.parametrize("profile,fmu", [("voltage", "xm430_w210"), ("velocity-servo", "xm430_w210_servo")])
