@@ -210,20 +210,23 @@ def test_a_fleet_scenario_with_an_unknown_per_robot_key_is_refused(tmp_path: Pat
 
 
 @pytest.mark.parametrize(
-    ("entries", "message"),
+    ("second", "message"),
     [
-        ("[{name: a}, {name: a}]", "robots[0] and robots[1] have the same name 'a'; give each its own"),
-        ("[{name: a}, {name: b, namespace: a}]", "robots[0] and robots[1] have the same namespace 'a'"),
-        ("[{name: a, namespace: 'x-y'}]", "namespace 'x-y' is not a ROS namespace"),
+        ("{name: a}", ":5: robots[1].name: robots[0] has the same name 'a'; give each robot its own"),
+        ("{name: b, namespace: a}", ":5: robots[1].namespace: robots[0] has the same namespace 'a'"),
+        ("{name: b, namespace: 'x-y'}", ":5: robots[1]: namespace 'x-y' is not a ROS namespace"),
+        # the tools take every topic under /a/ for robot a's
+        ("{name: b, namespace: a/b}", ":5: robots[1].namespace: namespace 'a/b' is inside robots[0]'s namespace 'a'"),
     ],
 )
-def test_robot_names_and_namespaces_are_checked(tmp_path: Path, entries: str, message: str) -> None:
+def test_robot_names_and_namespaces_are_checked_naming_the_entry(tmp_path: Path, second: str, message: str) -> None:
     bad = tmp_path / "bad.yaml"
-    bad.write_text(f"name: x\nrobots: {entries}\n")
-    result = run_twin("simulate", str(bad), "--out", str(tmp_path / "bag"))
-    assert result.returncode == 2
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and message in lines[0], lines
+    bad.write_text(f"# a fleet\nname: x\nrobots:\n  - {{name: a}}\n  - {second}\n")  # the second on line 5
+    for command in (("simulate", str(bad), "--out", str(tmp_path / "bag")), ("scenario", "check", str(bad))):
+        result = run_twin(*command)
+        assert result.returncode == 2
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and f"{bad}{message}" in lines[0], lines
 
 
 def test_robots_spawned_overlapping_are_refused(tmp_path: Path) -> None:

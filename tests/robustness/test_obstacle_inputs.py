@@ -92,7 +92,7 @@ CASES: dict[str, tuple[str, str, int | None]] = {
     "two_of_one_name": (
         "obstacles:\n  - {name: a, shape: box, size_m: [0.3, 0.3, 0.4], pose: {x_m: 2.0, y_m: 0.0}}\n"
         "  - {name: a, shape: box, size_m: [0.3, 0.3, 0.4], pose: {x_m: 3.0, y_m: 0.0}}\n",
-        "obstacles[0] and obstacles[1] have the same name 'a'; give each its own",
+        "obstacles[1].name: obstacles[0] has the same name 'a'; give each obstacle its own",
         None,
     ),
     "a_blocks_name": (

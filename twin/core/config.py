@@ -33,6 +33,7 @@ from twin.core.yaml_numbers import compose
 
 __all__ = [
     "ConfigNode",
+    "FieldError",
     "build",
     "load_config",
     "load_yaml",
@@ -49,6 +50,21 @@ ConfigNode = yaml.Node
 _CONSTRUCTOR = yaml.constructor.SafeConstructor()
 # A YAML file larger than this is no configuration (the largest shipped is a few kB).
 _MAX_TEXT_BYTES = 64 * 2**20
+
+
+class FieldError(ValueError):
+    """A dataclass's own check about one of its keys (`robots[1].name`), so the message names its line.
+
+    Args:
+        path: The key below the dataclass: names of mapping keys and indexes of list items, e.g.
+            `("robots", 1, "name")`. Where the file leaves the last keys out (a default), the
+            message names the deepest one it has.
+        message: What is wrong and the fix.
+    """
+
+    def __init__(self, path: tuple[str | int, ...], message: str) -> None:
+        super().__init__(message)
+        self.path = path
 
 
 def suggest(word: str, choices: Sequence[str]) -> str:
@@ -434,5 +450,22 @@ def _build_dataclass(cls: type, node: yaml.Node, key: str) -> Any:
         _fail(node, key, f"missing required key(s): {', '.join(missing)}")
     try:
         return cls(**kwargs)
+    except FieldError as err:
+        _fail(*_descend(node, key, err.path), str(err))
     except (ValueError, TypeError) as err:
         _fail(node, key, str(err))
+
+
+def _descend(node: yaml.Node, key: str, path: tuple[str | int, ...]) -> tuple[yaml.Node, str]:
+    """The node at `path` below `node` and its key, as deep as the file goes (see `FieldError`)."""
+    for step in path:
+        if isinstance(step, int) and isinstance(node, yaml.SequenceNode) and 0 <= step < len(node.value):
+            node, key = node.value[step], f"{key}[{step}]"
+        elif isinstance(step, str) and isinstance(node, yaml.MappingNode):
+            found = next((v for k, v in node.value if isinstance(k, yaml.ScalarNode) and k.value == step), None)
+            if found is None:
+                break
+            node, key = found, f"{key}.{step}" if key else step
+        else:
+            break
+    return node, key

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from twin.core.config import FieldError
 from twin.core.native import compiler_candidates, find_compiler
 from twin.core.numbers import number_problem
 from twin.estimation import EstimationSection
@@ -574,15 +575,25 @@ class Scenario:
             for i, entry in enumerate(self.robots):
                 value = getattr(entry, attr)
                 if value in seen:
-                    msg = f"robots[{seen[value]}] and robots[{i}] have the same {key} {value!r}; give each its own"
-                    raise ValueError(msg)
+                    msg = f"robots[{seen[value]}] has the same {key} {value!r}; give each robot its own"
+                    raise FieldError(("robots", i, key), msg)
                 seen[value] = i
+        for i, outer in enumerate(self.robots):
+            for j, inner in enumerate(self.robots):
+                if inner.ns.startswith(f"{outer.ns}/"):
+                    # The tools take everything under /<ns>/ for that robot's (analyze, play, replay).
+                    msg = (
+                        f"namespace {inner.ns!r} is inside robots[{i}]'s namespace {outer.ns!r}; give each "
+                        f"robot a namespace of its own beside the others (e.g. {outer.ns!r} and "
+                        f"{inner.ns.rsplit('/', 1)[0] + '_' + inner.ns.rsplit('/', 1)[1]!r})"
+                    )
+                    raise FieldError(("robots", j, "namespace"), msg)
         names: dict[str, int] = {}  # an obstacle's name is its model in /contacts and its marker
         for i, spec in enumerate(self.obstacles):
             name = spec.name or f"obstacle_{i}"
             if name in names:
-                msg = f"obstacles[{names[name]}] and obstacles[{i}] have the same name {name!r}; give each its own"
-                raise ValueError(msg)
+                msg = f"obstacles[{names[name]}] has the same name {name!r}; give each obstacle its own"
+                raise FieldError(("obstacles", i, "name"), msg)
             names[name] = i
 
     def robot_scenarios(self) -> list[tuple[str, Scenario]]:
