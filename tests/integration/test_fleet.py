@@ -340,3 +340,44 @@ def test_a_fleet_run_by_a_relative_path_reruns_from_its_bag(tmp_path: Path) -> N
             counts.append({c.topic: c.msgcount for c in reader.connections})
     assert counts[0] == counts[1]
     assert "/robot2/scan" in counts[0]
+
+
+@pytest.mark.parametrize(
+    ("entry", "message", "code"),
+    [
+        (
+            "robot: {model: turtlebot3_wafle, initial_pose: {x_m: 1.5}}",
+            "robots[1].robot.model: model 'turtlebot3_wafle' not found",
+            3,
+        ),
+        (
+            "robot: {initial_pose: {x_m: 1.5}}, disturbances: {wheel_slip: {left_fraction: 0.05, right_fraction: 0.0}}",
+            "robots[1].disturbances.wheel_slip: the FMU chassis slips both wheels alike",
+            2,
+        ),
+    ],
+)
+def test_a_robots_own_section_refused_by_its_model_or_drive_names_its_entry(
+    tmp_path: Path, entry: str, message: str, code: int
+) -> None:
+    # What the robot's model or its drive refuses is the entry's key, not the top level's (which is valid).
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"name: x\nrobots:\n  - {{name: a}}\n  - {{name: b, {entry}}}\n")
+    for command in (("simulate", str(bad), "--out", str(tmp_path / "bag")), ("scenario", "check", str(bad))):
+        result = run_twin(*command)
+        assert result.returncode == code, result.stderr
+        assert result.stderr.strip().splitlines()[0].startswith(f"twin: error: {bad}: {message}"), result.stderr
+
+
+def test_scenario_check_lists_a_fleets_robots_each_with_its_own_spawn_model_and_mission() -> None:
+    result = run_twin("scenario", "check", str(REPO / "scenarios" / "turtlebot3_world_four_robots.yaml"))
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert "  robots    4, frames namespaced" in lines
+    robots = [line.split() for line in lines if line.startswith("    /")]
+    assert [r[0] for r in robots] == ["/robot1", "/robot2", "/robot3", "/robot4"]
+    scenario = load_scenario(REPO / "scenarios" / "turtlebot3_world_four_robots.yaml")
+    for words, (_, sc) in zip(robots, scenario.robot_scenarios(), strict=True):
+        pose = sc.robot.initial_pose
+        assert " ".join(words[1:]).startswith(f"{sc.robot.model} at ({pose.x_m}, {pose.y_m}, {pose.yaw_rad})")
+    assert not any(line.startswith("  robot     ") for line in lines)  # no one robot at the origin

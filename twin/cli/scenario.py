@@ -70,9 +70,17 @@ def _check(args: argparse.Namespace) -> int:
     print(f"{args.file}: ok")
     print(f"  name      {scenario.name}")
     print(f"  world     {scenario.world.sdf}")
-    print(f"  robot     {scenario.robot.model} at {dataclasses.astuple(scenario.robot.initial_pose)}")
-    print(f"  drive     {scenario.drive.type}")
-    print(f"  mission   {scenario.mission.type}")
+    if scenario.robots:  # a fleet: each robot under its namespace, with its own sections
+        print(f"  robots    {len(scenario.robots)}, frames {scenario.tf.mode}")
+        for ns, robot in scenario.robot_scenarios():
+            print(
+                f"    /{ns:<12} {robot.robot.model} at {dataclasses.astuple(robot.robot.initial_pose)}, "
+                f"drive {robot.drive.type}, mission {robot.mission.type}"
+            )
+    else:
+        print(f"  robot     {scenario.robot.model} at {dataclasses.astuple(scenario.robot.initial_pose)}")
+        print(f"  drive     {scenario.drive.type}")
+        print(f"  mission   {scenario.mission.type}")
     print(f"  recording {scenario.recording.storage} ({scenario.recording.distro}) in {scenario.recording.out_dir}")
     print(f"  seed      {scenario.seed}, at most {scenario.max_duration_s:g} s")
     return 0

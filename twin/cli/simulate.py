@@ -8,6 +8,7 @@ import datetime
 import json
 import math
 import os
+import re
 import shutil
 import signal
 import sys
@@ -63,6 +64,8 @@ exit codes:
 
 
 _WATCHDOG_S = 10.0
+# A robot model the loader could not find, named by its scenario key (a fleet's names its entry).
+_ROBOT_MODEL_KEY = re.compile(r"(robots\[\d+\]\.)?robot\.model: ")
 
 
 def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
@@ -466,7 +469,7 @@ def _run(
         # took between this run's look and its own (two runs on one --out: the other's bag stays)
         if not existed and bag_path.is_dir() and not isinstance(err, BagFolderTaken):
             shutil.rmtree(bag_path, ignore_errors=True)
-        if isinstance(err, WorldError) and str(err).startswith("robot.model: "):
+        if isinstance(err, WorldError) and _ROBOT_MODEL_KEY.match(str(err)):
             raise err.with_context(before=f"{path}: ") from err  # the robot the scenario names
         if not isinstance(err, ConfigError):
             raise

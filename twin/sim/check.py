@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from twin.core.errors import ConfigError, FmuError, TreeError, TwinError
 from twin.core.numbers import number_problem
-from twin.sim.scenario import BehaviorTreeMission, Scenario, runs_amcl, runs_nav2
+from twin.sim.scenario import BehaviorTreeMission, Scenario, names_a_key, runs_amcl, runs_nav2
 
 if TYPE_CHECKING:
     from twin.world import RobotModelSpec
@@ -245,7 +245,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
     robots = scenario.robot_scenarios()  # a fleet's each with its own sections, as the run takes them
     try:
         world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
-        models = [scenario_robot(sc) for _, sc in robots]
+        models = [scenario_robot(sc, entry=f"robots[{i}]." if ns else "") for i, (ns, sc) in enumerate(robots)]
         exclude = tuple(dict.fromkeys(robot.name for robot in models))
         scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)
     except TwinError as err:
@@ -268,7 +268,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
             raise _named(ConfigError(f"robots[{index}].{err}"), path) from None  # as the run names its entry
         except TwinError as err:
             raise _named(err, path) from None
-        _check_drive(sc, path, robot.name)
+        _check_drive(sc, path, robot.name, entry=f"robots[{index}]." if ns else "")
     poses = [(ns, sc.robot.initial_pose) for ns, sc in robots]
     try:
         if len(robots) > 1:
@@ -305,8 +305,11 @@ def in_scenario(err: TwinError, path: Path) -> TwinError:
     return err.with_context(before=f"{path}: ")
 
 
-def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
-    """Bind the FMU drive as `simulate` does before its first step (contract, motor model, speed loop)."""
+def _check_drive(scenario: Scenario, path: Path, robot_name: str, *, entry: str = "") -> None:
+    """Bind the FMU drive as `simulate` does before its first step (contract, motor model, speed loop).
+
+    A fleet robot's errors name its entry (`entry`, `robots[1].`), as the run names them.
+    """
     from twin.core.clock import s_to_ns
     from twin.robot.fmu_drive import FmuDrive, check_fmu_drive
     from twin.sim.robot_group import fmu_drive_section
@@ -317,6 +320,9 @@ def _check_drive(scenario: Scenario, path: Path, robot_name: str) -> None:
     try:
         drive = fmu_drive_section(scenario)
         check_fmu_drive(drive, step_ns=s_to_ns(scenario.physics.step_s), robot_name=robot_name)
+    except ConfigError as err:
+        keyed = entry and names_a_key(str(err))
+        raise in_scenario(err.with_context(before=entry) if keyed else err, path) from None
     except TwinError as err:
         raise in_scenario(err, path) from None
 

@@ -138,16 +138,20 @@ def _yaw_inertia(robot: RobotModelSpec) -> float:
     return total
 
 
-def scenario_robot(scenario: Scenario) -> RobotModelSpec:
+def scenario_robot(scenario: Scenario, *, entry: str = "") -> RobotModelSpec:
     """Load the scenario's `robot.model` from its `world.model_path` (the project's own models last).
 
+    Args:
+        scenario: The robot's scenario (a fleet's: one robot's view, `Scenario.robot_scenarios`).
+        entry: A fleet robot's entry (`robots[1].`), put before the key its errors name.
+
     Raises:
-        WorldError: The loader's error, led by the scenario key `robot.model`.
+        WorldError: The loader's error, led by the scenario key (`robot.model`, `robots[1].robot.model`).
     """
     try:
         return load_robot(scenario.robot.model, model_path=scenario.world.model_path)
     except WorldError as err:
-        raise err.with_context(before="robot.model: ") from None
+        raise err.with_context(before=f"{entry}robot.model: ") from None
 
 
 _LOW_OBSTACLE_M = 0.2
@@ -232,14 +236,14 @@ class RobotGroup:
         self.mission_node: MissionNode | None = None
 
     @classmethod
-    def load(cls, scenario: Scenario, *, namespace: str = "") -> RobotGroup:
+    def load(cls, scenario: Scenario, *, namespace: str = "", entry: str = "") -> RobotGroup:
         """Read the robot's model.
 
         Raises:
             WorldError: The robot model cannot be loaded.
             ConfigError: The model has no differential drive, or lidar overrides without a lidar.
         """
-        robot = _lidar_spec(scenario_robot(scenario), scenario.sensors.lidar)
+        robot = _lidar_spec(scenario_robot(scenario, entry=entry), scenario.sensors.lidar)
         if robot.drive is None:
             msg = f"robot {robot.name!r} has no differential drive (wheel joints or a diff-drive plugin) in its SDF"
             raise ConfigError(msg)

@@ -36,6 +36,7 @@ __all__ = [
     "default_scenario_path",
     "fmu_fallback",
     "for_ros2_role",
+    "names_a_key",
     "runs_amcl",
     "runs_nav2",
 ]
@@ -621,6 +622,12 @@ def for_ros2_role(scenario: Scenario) -> Scenario:
         return scenario
     localization = dataclasses.replace(scenario.localization, type="none", initial_pose=None)
     return dataclasses.replace(scenario, mission=NoMission(), localization=localization)
+
+
+def names_a_key(text: str) -> bool:
+    """Whether an error starts with a scenario key (`robot.model: ...`), not a file or a sentence."""
+    head = text.split(" ", 1)[0]
+    return head.endswith(":") and not head.startswith(("/", ".")) and ".yaml" not in head and ".xml" not in head
 
 
 def default_scenario_path() -> Path:

@@ -41,7 +41,7 @@ from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.rng import RngStreams
 from twin.sim.robot_group import RobotGroup, floor_problem
 from twin.sim.rosout import RosoutBridge
-from twin.sim.scenario import InitialPose, Scenario
+from twin.sim.scenario import InitialPose, Scenario, names_a_key
 from twin.world import RobotModelSpec, World, build_scene, load_world
 from twin.world.obstacles import ObstacleField
 from twin.world.render import Body
@@ -60,12 +60,6 @@ _log = logging.getLogger(__name__)
 
 # Obstacles appear and vanish on this grid (the /clock period); walkers near the robot step at it (5 mm at 0.5 m/s).
 _OBSTACLE_PERIOD_NS = 10_000_000
-
-
-def _names_a_key(text: str) -> bool:
-    """Whether an error starts with a scenario key (`robot.model: ...`), not a file or a sentence."""
-    head = text.split(" ", 1)[0]
-    return head.endswith(":") and not head.startswith(("/", ".")) and ".yaml" not in head and ".xml" not in head
 
 
 def obstacle_fields(
@@ -169,7 +163,10 @@ class Simulation(Closing):
         if floor is not None:
             _log.warning("%s", floor)
         # One group per robot (one robot, no namespace: the thesis's system, topic for topic).
-        self.groups = [RobotGroup.load(sc, namespace=ns) for ns, sc in scenario.robot_scenarios()]
+        self.groups = [
+            RobotGroup.load(sc, namespace=ns, entry=f"robots[{i}]." if ns else "")
+            for i, (ns, sc) in enumerate(scenario.robot_scenarios())
+        ]
         exclude = tuple(dict.fromkeys(g.robot.name for g in self.groups))
         scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)
         bodies = [self._spawn(i, g, scene) for i, g in enumerate(self.groups)]
@@ -194,7 +191,7 @@ class Simulation(Closing):
                         obstacle_markers=i == 0,
                     )
                 except ConfigError as err:  # a fleet's names its entry (`robots[1].robot.model: ...`)
-                    if not g.namespace or not _names_a_key(str(err)):
+                    if not g.namespace or not names_a_key(str(err)):
                         raise
                     msg = f"robots[{i}].{err}"
                     raise ConfigError(msg) from None
