@@ -381,3 +381,19 @@ def test_scenario_check_lists_a_fleets_robots_each_with_its_own_spawn_model_and_
         pose = sc.robot.initial_pose
         assert " ".join(words[1:]).startswith(f"{sc.robot.model} at ({pose.x_m}, {pose.y_m}, {pose.yaw_rad})")
     assert not any(line.startswith("  robot     ") for line in lines)  # no one robot at the origin
+
+
+def test_the_run_summary_gives_each_robots_drive_and_localization_when_they_differ(tmp_path: Path) -> None:
+    # A Burger and a Waffle: different motors, each robot's AMCL; the summary is not the first robot's alone.
+    scenario = tmp_path / "mixed.yaml"
+    scenario.write_text(
+        "name: mixed\nrobots:\n  - {name: burger1, robot: {model: turtlebot3_burger}}\n"
+        "  - {name: waffle1, robot: {initial_pose: {x_m: 1.5, y_m: -0.2}}}\n"
+    )
+    result = run_twin("simulate", str(scenario), "--duration", "4", "--out", str(tmp_path / "bag"), "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["drive"].startswith("burger1: fmu xl430_w250_servo")
+    assert "; waffle1: fmu xm430_w210_servo" in summary["drive"]
+    assert set(summary["localization"]) == {"burger1", "waffle1"}
+    assert all(loc["updates"] > 0 for loc in summary["localization"].values()), summary["localization"]

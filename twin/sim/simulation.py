@@ -99,6 +99,12 @@ def obstacle_fields(
     return fields
 
 
+def _drive_notes(group: RobotGroup) -> str:
+    """What the robot's drive did of note (commands clamped to its motors' reach), '' when nothing."""
+    drive = group.drive
+    return drive.saturation.describe() if isinstance(drive, FmuDrivetrain) else ""
+
+
 @dataclass(frozen=True, kw_only=True, slots=True)
 class RunSummary:
     """What a run did, for the one-line summary and for scripts (`--json`)."""
@@ -116,9 +122,12 @@ class RunSummary:
     mission_result: str
     seed: int
     breakdown_s: dict[str, float]
-    drive: str = ""  # the drive that ran, e.g. `fmu xm430_w210_servo (FMI 2, velocity-servo)` or `kinematic`
+    # The drive that ran, e.g. `fmu xm430_w210_servo (FMI 2, velocity-servo)` or `kinematic`; a fleet's
+    # when all robots' are alike, else each robot's (`robot1: ...; robot2: ...`), as `drive_notes`.
+    drive: str = ""
     drive_notes: str = ""  # e.g. commands clamped to the motors' reach ('' when none)
-    localization: dict[str, Any] = field(default_factory=dict)  # AMCL vs the true pose ({} without AMCL)
+    # AMCL against the true pose ({} without AMCL); a fleet's by namespace.
+    localization: dict[str, Any] = field(default_factory=dict)
     refused_messages: dict[str, int] = field(default_factory=dict)  # topic -> non-finite messages from users' nodes
     robots: dict[str, str] = field(default_factory=dict)  # a fleet's robots: namespace -> its mission's result
 
@@ -423,6 +432,19 @@ class Simulation(Closing):
             if self.recorder is not None:
                 self.recorder.close()
 
+    def _per_robot(self, phrase: Callable[[RobotGroup], str]) -> str:
+        """A summary phrase of the robot; a fleet's: one when every robot's is the same, else each robot's."""
+        phrases = {g.namespace: phrase(g) for g in self.groups}
+        if len(set(phrases.values())) == 1:
+            return next(iter(phrases.values()))
+        return "; ".join(f"{ns}: {text or '-'}" for ns, text in phrases.items())
+
+    def _localization(self) -> dict[str, Any]:
+        """AMCL against the true pose ({} without AMCL); a fleet's by namespace (robots without AMCL left out)."""
+        if self.fleet is None:
+            return self.navigation.log.summary() if self.navigation is not None else {}
+        return {g.namespace: g.navigation.log.summary() for g in self.groups if g.navigation is not None}
+
     def _robot_results(self) -> dict[str, str]:
         """Each robot's mission result by namespace ({} for one robot)."""
         if self.fleet is None:
@@ -516,9 +538,9 @@ class Simulation(Closing):
             mission_result=self._mission_result(),
             seed=self.scenario.seed,
             breakdown_s=breakdown,
-            drive=self.drive.label,
-            drive_notes=self.drive.saturation.describe() if isinstance(self.drive, FmuDrivetrain) else "",
-            localization=self.navigation.log.summary() if self.navigation is not None else {},
+            drive=self._per_robot(lambda g: g.drive.label if g.drive is not None else ""),
+            drive_notes=self._per_robot(_drive_notes),
+            localization=self._localization(),
             refused_messages=dict(self.executor.refused),
             robots=self._robot_results(),
         )
