@@ -123,9 +123,11 @@ def _play(args: argparse.Namespace) -> int:
     if namespace is not None:
         skipped += f"; /{namespace}/ alone, as one robot's topics"
     passes = f" in {report.passes} passes" if report.passes > 1 else ""
+    span = f"{report.bag_s:.1f} s of bag each"
+    if report.stopped:  # stopped partway: how far into the bag (its last pass) it got
+        span = f"stopped at {report.reached_s:.1f} s of the bag's {report.bag_s:.1f} s"
     print(
-        f"played {report.messages} messages on {len(report.topics)} topics{passes} "
-        f"({report.bag_s:.1f} s of bag each): {report.bag_path}{skipped}"
+        f"played {report.messages} messages on {len(report.topics)} topics{passes} ({span}): {report.bag_path}{skipped}"
     )
     if stop:
         return 130 if stop[0] == signal.SIGINT else 128 + stop[0]

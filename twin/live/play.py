@@ -31,6 +31,7 @@ class PlayReport:
     passes: int  #: times the bag was played (more than one with `loop`)
     bag_s: float  #: bag time covered per pass
     stopped: bool  #: `should_stop` ended the playback
+    reached_s: float = 0.0  #: bag time of the last message served (of the last pass), from the bag's start
 
 
 def play_bag(
@@ -84,6 +85,7 @@ def play_bag(
     stopped = False
     while not stopped:
         passes += 1
+        last_ns = info.start_ns
         if passes > 1:
             server.restart_time()
             if pacer is not None:
@@ -98,6 +100,7 @@ def play_bag(
                 pacer.wait(m.t_ns)
             publish(handles[m.topic], m.t_ns, m.msg)
             messages += 1
+            last_ns = m.t_ns
         if not loop:
             break
     return PlayReport(
@@ -108,4 +111,5 @@ def play_bag(
         passes=passes,
         bag_s=info.duration_ns / 1e9,
         stopped=stopped,
+        reached_s=(last_ns - info.start_ns) / 1e9,
     )

@@ -44,6 +44,23 @@ def test_play_loops_until_asked_to_stop(tmp_path: Path) -> None:
     assert passes == [1, 2, 3]
     assert report.passes == 3 and report.stopped
     assert report.messages == 2 * 21  # two whole passes, the third stopped before its first message
+    assert report.reached_s == 0.0  # of that last pass
+
+
+def test_play_stopped_partway_reports_how_far_into_the_bag_it_got(tmp_path: Path) -> None:
+    bag = small_bag(tmp_path / "bag")  # /clock at 0, 10, ..., 190 ms
+    served: list[int] = []
+    with LiveServer(port=0) as server:
+        original = server.publish
+
+        def counting(*args: Any) -> None:
+            served.append(1)
+            original(*args)
+
+        server.publish = counting  # type: ignore[method-assign]
+        report = play_bag(bag, server, speed=None, should_stop=lambda: len(served) >= 6)
+    assert report.stopped and report.messages == 6  # the description and /clock up to 40 ms
+    assert report.reached_s == pytest.approx(0.04) and report.bag_s == pytest.approx(0.19)
 
 
 def test_play_paces_to_the_bags_timing_times_the_speed(tmp_path: Path) -> None:
