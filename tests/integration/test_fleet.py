@@ -397,3 +397,20 @@ def test_the_run_summary_gives_each_robots_drive_and_localization_when_they_diff
     assert "; waffle1: fmu xm430_w210_servo" in summary["drive"]
     assert set(summary["localization"]) == {"burger1", "waffle1"}
     assert all(loc["updates"] > 0 for loc in summary["localization"].values()), summary["localization"]
+
+
+def test_a_fleet_robots_console_warnings_name_the_robot(tmp_path: Path) -> None:
+    # Two robots driven head on: alpha's command beyond its motors and the contact each reports.
+    scenario = tmp_path / "headon.yaml"
+    script = "mission: {{type: cmd_vel_script, segments: [{{duration_s: 8.0, linear_mps: {v}}}]}}"
+    scenario.write_text(
+        "name: headon\nrobots:\n"
+        f"  - {{name: alpha, {script.format(v=0.3)}}}\n"
+        f"  - {{name: beta, robot: {{initial_pose: {{x_m: 1.5, yaw_rad: 3.14159}}}}, {script.format(v=0.15)}}}\n"
+    )
+    result = run_twin("simulate", str(scenario), "--duration", "8", "--out", str(tmp_path / "bag"))
+    assert result.returncode == 0, result.stderr
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("twin: WARNING: ")]
+    assert any(line.startswith("twin: WARNING: /alpha: drive: cmd_vel (0.300 m/s") for line in warnings), warnings
+    assert any("/alpha: t=" in line and "contact with beta::" in line for line in warnings), warnings
+    assert any("/beta: t=" in line and "contact with alpha::" in line for line in warnings), warnings

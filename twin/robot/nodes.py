@@ -217,11 +217,13 @@ class DiffDriveNode(Node):
         self._contact_pub.publish(
             Encoded((functools.partial(self._contact_enc.encode, *args, **kwargs), (), (event, c)))
         )
+        ns = self.get_namespace()
+        whose = f"{ns}: " if ns != "/" else ""  # a fleet's robot names itself
         if begin:
             self.contacts += 1
-            _log.warning("t=%.3f s: contact with %s; the robot stops", ns_to_s(t_ns), c.link)
+            _log.warning("%st=%.3f s: contact with %s; the robot stops", whose, ns_to_s(t_ns), c.link)
         else:
-            _log.info("t=%.3f s: contact with %s ended", ns_to_s(t_ns), c.link)
+            _log.info("%st=%.3f s: contact with %s ended", whose, ns_to_s(t_ns), c.link)
 
 
 class ObstacleNode(Node):

@@ -308,6 +308,8 @@ class RobotGroup:
             Lidar.from_robot(robot, scene, rng.stream("lidar"), obstacles=seen) if robot.lidar is not None else None
         )
         self.drive = self._make_drive(self.body.radius_m, contact)
+        if isinstance(self.drive, FmuDrivetrain) and self.namespace:
+            self.drive.robot = f"/{self.namespace}"  # a fleet's robot names itself in the drive's log lines
         try:  # from here on, a failure must release the drive (FMU instances) it leaves behind
             self.wheels = self._wheel_frames()
             self.imu = self._make_imu(rng)
