@@ -5,6 +5,7 @@ scenario: ../scenarios/default.yaml      # the base, relative to this file
 runs: 50                                 # seeds 0..49 (or seeds: [3, 7, 11])
 vary:                                    # dotted scenario keys: a grid, or zip: true to pair
   robot.model: [turtlebot3_waffle, turtlebot3_burger]
+  robots[1]: [{name: robot2, robot: {initial_pose: {x_m: 1.2}}}]   # a whole entry of a list, replaced
 zip: false
 random:                                  # seeded draws per run
   robot.initial_pose.x_m: {uniform: [-0.2, 0.2]}
@@ -93,8 +94,9 @@ def load_sweep(path: Path) -> SweepSpec:
 
     Raises:
         ConfigError: One line naming file, line and key: an unknown key (with a suggestion), a key to
-            vary that the scenario does not have, lists of different lengths with `zip: true`, a bad
-            draw, or a base scenario that does not load.
+            vary that the scenario does not have, a value of a section (`robots[1]`, `drive`) that is
+            not a mapping of its keys, lists of different lengths with `zip: true`, a bad draw, or a
+            base scenario that does not load.
     """
     node = load_yaml(path)
     if not isinstance(node, yaml.MappingNode):
@@ -129,6 +131,8 @@ def load_sweep(path: Path) -> SweepSpec:
         if not isinstance(values, list) or not values:
             _fail(where, f"vary.{key}", "expected a non-empty list of values")
         kind = _schema_type(str(key), where, "vary", base)
+        for value in values:
+            _check_value(value, kind, where, f"vary.{key}", str(key))
         vary.append((str(key), tuple(_fix_paths(v, kind, base_dir) for v in values)))
     if zip_flag and len({len(v) for _, v in vary}) > 1:
         lengths = ", ".join(f"{k}: {len(v)}" for k, v in vary)
@@ -273,7 +277,7 @@ def _draws(raw: Any, node: yaml.Node | None, base: Mapping[str, Any]) -> tuple[D
     draws = []
     for key, how in raw.items():
         where = _value_node(node, key)
-        _schema_type(str(key), where, "random", base)
+        tp = _schema_type(str(key), where, "random", base)
         if not isinstance(how, dict) or len(how) != 1:
             _fail(where, f"random.{key}", "expected one of {uniform: [lo, hi]}, {normal: [mean, std]}, {choice: [..]}")
         ((kind, args),) = how.items()
@@ -291,6 +295,8 @@ def _draws(raw: Any, node: yaml.Node | None, base: Mapping[str, Any]) -> tuple[D
             _fail(where, f"random.{key}.uniform", f"expected [low, high] with low <= high, got {args!r}; swap them")
         if kind == "normal" and args[1] < 0:
             _fail(where, f"random.{key}.normal", f"expected [mean, std] with std >= 0, got {args!r}")
+        for value in args if kind == "choice" else args[:1]:  # uniform and normal draw numbers, like their first
+            _check_value(value, tp, where, f"random.{key}.{kind}", str(key))
         draws.append(Draw(key=str(key), distribution=kind, args=tuple(args)))
     return tuple(draws)
 
@@ -423,6 +429,31 @@ def _schema_type(dotted: str, node: yaml.Node, section: str, base: Mapping[str, 
     return tp
 
 
+def _check_value(value: Any, tp: Any, node: yaml.Node, key: str, dotted: str) -> None:
+    """Refuse a value of a section (`robots[1]`, `drive`) that is not a mapping of the section's keys.
+
+    The value's keys are checked as a dotted key of the section would be; a type that also takes a
+    scalar, or null, takes one. `key` names the value in the sweep file (`vary.robots[1]`).
+    """
+    fields = _fields(tp)
+    if fields is None:
+        return
+    if not isinstance(value, dict):
+        if (value is None and type(None) in typing.get_args(tp)) or not all(map(_is_dataclass, _members(tp))):
+            return
+        first = next(iter(fields))
+        _fail(
+            node,
+            key,
+            f"{dotted} is a section: each value is a mapping of its keys, got {value!r}; "
+            f"write e.g. {{{first}: ...}}, or vary one of its keys, e.g. {dotted}.{first}",
+        )
+    for name, item in value.items():
+        if str(name) not in fields:
+            _fail(node, key, f"{dotted} has no key {name!r}{suggest(str(name), list(fields))}")
+        _check_value(item, fields[str(name)], node, key, f"{dotted}.{name}")
+
+
 def _fix_paths(value: Any, tp: Any, base_dir: Path) -> Any:
     """Make the relative paths in a value of type `tp` absolute, relative to `base_dir`."""
     members = _members(tp)
@@ -463,7 +494,7 @@ def _absolute_scenario(path: Path) -> dict[str, Any]:
 def _with_values(base: dict[str, Any], values: Sequence[tuple[str, Any]]) -> dict[str, Any]:
     out = json.loads(json.dumps(base))  # a deep copy of plain YAML data
     for dotted, value in values:
-        *parents, (last, _) = _parts(dotted)
+        *parents, (last, last_index) = _parts(dotted)
         section = out
         for part, index in parents:
             child = section.get(part)
@@ -472,6 +503,9 @@ def _with_values(base: dict[str, Any], values: Sequence[tuple[str, Any]]) -> dic
             elif not isinstance(child, dict):
                 child = section[part] = {}
             section = child
-        section[last] = value
+        if last_index is None:
+            section[last] = value
+        else:  # a whole entry of a list (`robots[1]`): the list's other entries stay
+            section[last][last_index] = value
     result: dict[str, Any] = out
     return result

@@ -10,6 +10,7 @@ import yaml
 
 from tests.conftest import REPO, run_twin
 from twin.core.errors import ConfigError
+from twin.sim.scenario_file import load_scenario
 from twin.sweep import expand_runs, load_sweep, wilson_interval
 
 DEFAULT = REPO / "scenarios" / "default.yaml"
@@ -131,6 +132,85 @@ def test_bad_fleet_keys_fail_in_one_line(tmp_path: Path, text: str, expected: st
         load_sweep(_fleet_sweep(tmp_path, text))
     assert expected in str(err.value)
     assert "\n" not in str(err.value)
+
+
+_SMALL_FLEET = """name: small_fleet
+max_duration_s: 20
+robots:
+  - name: robot1
+    robot: {initial_pose: {x_m: 0.0, y_m: 0.0, yaw_rad: 0.0}}
+  - name: robot2
+    robot: {initial_pose: {x_m: 1.5, y_m: -0.2, yaw_rad: 0.0}}
+"""
+
+
+def _small_fleet_sweep(tmp_path: Path, text: str) -> Path:
+    (tmp_path / "base.yaml").write_text(_SMALL_FLEET, encoding="utf-8")
+    path = tmp_path / "sweep.yaml"
+    path.write_text(f"scenario: base.yaml\n{text}", encoding="utf-8")
+    return path
+
+
+def test_a_whole_fleet_entry_replaces_that_entry_and_keeps_the_others(tmp_path: Path) -> None:
+    """`robots[1]: [{...}]` replaces robots[1] (it once turned `robots:` into that one mapping)."""
+    text = "vary:\n  robots[1]: [{name: robot2, robot: {initial_pose: {x_m: 2.0, y_m: 0.3}}}, {name: robot3}]\n"
+    runs = expand_runs(load_sweep(_small_fleet_sweep(tmp_path, text)))
+    assert [dict(r.values)["robots[1]"]["name"] for r in runs] == ["robot2", "robot3"]
+    for run in runs:
+        robots = yaml.safe_load(run.scenario_yaml)["robots"]
+        assert robots == [yaml.safe_load(_SMALL_FLEET)["robots"][0], dict(run.values)["robots[1]"]]
+        path = tmp_path / f"{run.run_id}.yaml"
+        path.write_text(run.scenario_yaml, encoding="utf-8")
+        assert [entry.name for entry in load_scenario(path).robots] == ["robot1", dict(run.values)["robots[1]"]["name"]]
+
+
+def test_a_list_entry_below_a_section_is_replaced_in_its_list(tmp_path: Path) -> None:
+    (tmp_path / "base.yaml").write_text(
+        "mission:\n  type: cmd_vel_script\n  segments: [{duration_s: 1.0, linear_mps: 0.1}, {duration_s: 2.0}]\n",
+        encoding="utf-8",
+    )
+    path = tmp_path / "sweep.yaml"
+    path.write_text("scenario: base.yaml\nvary:\n  mission.segments[1]: [{duration_s: 0.5, angular_radps: 0.2}]\n")
+    (run,) = expand_runs(load_sweep(path))
+    assert yaml.safe_load(run.scenario_yaml)["mission"]["segments"] == [
+        {"duration_s": 1.0, "linear_mps": 0.1},
+        {"duration_s": 0.5, "angular_radps": 0.2},
+    ]
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (
+            "vary:\n  robots[1]: [robot2]\n",
+            "sweep.yaml:3: vary.robots[1]: robots[1] is a section: each value is a mapping of its keys, got "
+            "'robot2'; write e.g. {name: ...}, or vary one of its keys, e.g. robots[1].name",
+        ),
+        ("vary:\n  robots[1]: [{nmae: robot2}]\n", "vary.robots[1]: robots[1] has no key 'nmae'; did you mean 'name'?"),
+        (
+            "vary:\n  robots[1]: [{name: r, robot: {initial_pose: {x: 1.0}}}]\n",
+            "vary.robots[1]: robots[1].robot.initial_pose has no key 'x'; did you mean 'x_m'?",
+        ),
+        ("vary:\n  robots[1].robot: [1.5]\n", "robots[1].robot is a section: each value is a mapping of its keys"),
+        ("vary:\n  robots[2]: [{name: robot3}]\n", "the base scenario has robots[0] to robots[1]; vary one it has"),
+        ("random:\n  robots[1]: {choice: [{name: robot2}, robot3]}\n", "random.robots[1].choice: robots[1] is a"),
+        ("random:\n  robots[1]: {uniform: [0, 1]}\n", "random.robots[1].uniform: robots[1] is a section"),
+    ],
+)
+def test_a_bad_whole_entry_fails_in_one_line(tmp_path: Path, text: str, expected: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        load_sweep(_small_fleet_sweep(tmp_path, text))
+    assert expected in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_the_cli_refuses_a_whole_entry_that_is_not_a_mapping_with_exit_2(tmp_path: Path) -> None:
+    sweep = _small_fleet_sweep(tmp_path, "vary:\n  robots[1]: [robot2]\n")
+    result = run_twin("sweep", str(sweep), "--workers", "1", "--out", str(tmp_path / "out"))
+    assert result.returncode == 2
+    assert result.stderr.strip().count("\n") == 0
+    assert f"{sweep}:3: vary.robots[1]: robots[1] is a section" in result.stderr
+    assert not (tmp_path / "out" / "runs").exists()
 
 
 def test_a_robot_index_needs_a_fleet_in_the_base_scenario(tmp_path: Path) -> None:
