@@ -94,3 +94,43 @@ def test_the_summary_has_a_table_of_robots(fleet_sweep: tuple[Path, list[dict[st
     assert "## Robots" in summary
     lines = {line.split("|")[1].strip(): line for line in summary.splitlines() if line.startswith("| robot")}
     assert "2 of 2" in lines["robot1"] and "1 of 2" in lines["robot2"], lines
+
+
+DONE = """<root BTCPP_format="4" main_tree_to_execute="MainTree">
+  <BehaviorTree ID="MainTree"><AlwaysSuccess name="done"/></BehaviorTree>
+</root>
+"""
+
+
+def test_a_robot_whose_script_completes_has_succeeded(tmp_path: Path) -> None:
+    """robot1 runs a cmd_vel script ("complete", no SUCCESS); robot2 a script, a tree that succeeds, one that fails."""
+    (tmp_path / "done.xml").write_text(DONE)
+    (tmp_path / "give_up.xml").write_text(GIVE_UP)
+    (tmp_path / "base.yaml").write_text(
+        "name: scripts\nmax_duration_s: 10\ndrive: {type: kinematic}\n"
+        "mission: {type: cmd_vel_script, segments: [{duration_s: 1.0, linear_mps: 0.1}]}\n"
+        "robots:\n  - name: robot1\n  - name: robot2\n    robot: {initial_pose: {x_m: 1.5, y_m: -0.2, yaw_rad: 0.0}}\n",
+        encoding="utf-8",
+    )
+    sweep = tmp_path / "sweep.yaml"
+    sweep.write_text(
+        "scenario: base.yaml\nvary:\n  robots[1].mission:\n"
+        "    - {type: cmd_vel_script, segments: [{duration_s: 0.5, angular_radps: 0.3}]}\n"
+        "    - {type: behavior_tree, tree: done.xml}\n    - {type: behavior_tree, tree: give_up.xml}\n",
+        encoding="utf-8",
+    )
+    out = tmp_path / "out"
+    result = run_twin("sweep", str(sweep), "--workers", "1", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    rows = read_table(out)
+    assert [(r["robot1.result"], r["robot2.result"]) for r in rows] == [
+        ("complete", "complete"),
+        ("complete", "SUCCESS"),
+        ("complete", "FAILURE"),
+    ]
+    assert [r["outcome"] for r in rows] == ["success", "success", "failure"]
+    assert "robot2" in rows[2]["reason"] and "robot1" not in rows[2]["reason"]
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    assert "**Success rate: 2 of 3" in summary
+    lines = {line.split("|")[1].strip(): line for line in summary.splitlines() if line.startswith("| robot")}
+    assert "3 of 3" in lines["robot1"] and "2 of 3" in lines["robot2"], lines

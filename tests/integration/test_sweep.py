@@ -170,3 +170,22 @@ def test_a_fleet_sweep_puts_each_robot_where_its_indexed_key_says(tmp_path: Path
         assert starts["robot2"] == pytest.approx((float(row["robots[1].robot.initial_pose.x_m"]), -0.2), abs=1e-6)
         assert starts["robot1"] == pytest.approx((0.0, 0.0), abs=1e-6)
     assert sorted(float(r["robots[1].robot.initial_pose.x_m"]) for r in rows) == [1.4, 1.7]
+
+
+def test_a_mission_that_is_not_a_tree_succeeds_when_it_completes(tmp_path: Path) -> None:
+    """A cmd_vel script has no SUCCESS: `twin simulate` says "mission complete", and the sweep counts a success."""
+    (tmp_path / "base.yaml").write_text(
+        "name: script\nmax_duration_s: 10\ndrive: {type: kinematic}\n"
+        "mission: {type: cmd_vel_script, segments: [{duration_s: 1.0, linear_mps: 0.1}]}\n",
+        encoding="utf-8",
+    )
+    sweep = tmp_path / "sweep.yaml"
+    sweep.write_text("scenario: base.yaml\nruns: 2\n", encoding="utf-8")
+    result = run_twin("sweep", str(sweep), "--workers", "1", "--out", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    assert "2 runs: 2 succeeded" in result.stdout
+    rows = read_table(tmp_path / "out")
+    assert [(r["outcome"], r["reason"]) for r in rows] == [("success", "")] * 2
+    summary = (tmp_path / "out" / "summary.md").read_text(encoding="utf-8")
+    assert "**Success rate: 2 of 2" in summary
+    assert "No successful run." not in summary

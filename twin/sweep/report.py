@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from twin.sweep.engine import SweepResult
-from twin.sweep.runner import FLEET_COLUMNS, METRIC_COLUMNS, ROBOT_COLUMNS
+from twin.sweep.runner import FLEET_COLUMNS, METRIC_COLUMNS, ROBOT_COLUMNS, SUCCEEDED
 
 __all__ = ["columns", "robot_namespaces", "wilson_interval", "write_reports"]
 
@@ -179,11 +179,11 @@ def _robots_section(rows: Sequence[dict[str, Any]]) -> list[str]:
     ]
     for ns in robots:
         finished = [r for r in rows if r.get(f"{ns}.result")]
-        ok = sum(1 for r in finished if r.get(f"{ns}.result") == "SUCCESS")
+        ok = sum(1 for r in finished if r.get(f"{ns}.result") in SUCCEEDED)
         times = sorted(
             float(r[f"{ns}.mission_time_s"])
             for r in finished
-            if r.get(f"{ns}.result") == "SUCCESS" and isinstance(r.get(f"{ns}.mission_time_s"), int | float)
+            if r.get(f"{ns}.result") in SUCCEEDED and isinstance(r.get(f"{ns}.mission_time_s"), int | float)
         )
         contacts = [r.get(f"{ns}.contacts") for r in finished]
         with_robots = [r.get(f"{ns}.robot_contacts") for r in finished]
@@ -225,6 +225,8 @@ def _summary(result: SweepResult, plot: Path | None) -> str:
             f"| {q[0]:.2f} | {q[-1]:.2f} | {times[-1]:.2f} |",
             "",
         ]
+    elif successes:
+        lines += ["No successful run has a mission time (a behaviour tree's, from its log).", ""]
     else:
         lines += ["No successful run.", ""]
     if plot is not None:

@@ -21,13 +21,26 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-__all__ = ["FLEET_COLUMNS", "METRIC_COLUMNS", "OUTCOMES", "ROBOT_COLUMNS", "RunTask", "execute_run", "read_result"]
+__all__ = [
+    "FLEET_COLUMNS",
+    "METRIC_COLUMNS",
+    "OUTCOMES",
+    "ROBOT_COLUMNS",
+    "SUCCEEDED",
+    "RunTask",
+    "execute_run",
+    "read_result",
+]
 
 OUTCOMES = ("success", "failure", "error", "crash", "timeout", "worker lost")
-"""`success`: the mission succeeded. `failure`: the run completed but the mission did not succeed.
-`error`: `twin simulate` refused the run (its error line is the reason). `crash`: the process died
-(a signal or an internal error). `timeout`: it ran past `timeout_s`. `worker lost`: the Dask worker
-running it died (set by the client)."""
+"""`success`: the mission succeeded (`SUCCEEDED`; a fleet's: every robot's). `failure`: the run completed
+but the mission did not succeed. `error`: `twin simulate` refused the run (its error line is the reason).
+`crash`: the process died (a signal or an internal error). `timeout`: it ran past `timeout_s`. `worker
+lost`: the Dask worker running it died (set by the client)."""
+
+SUCCEEDED = ("SUCCESS", "complete")
+"""The mission results that are a success: a tree's SUCCESS, and the end of a mission that has no
+SUCCESS (a cmd_vel script, waypoints, a replay), which `twin simulate` reports as `complete`."""
 
 KeepBags = Literal["failed", "none", "all"]
 
@@ -89,7 +102,9 @@ def execute_run(task: RunTask) -> dict[str, Any]:
             row |= {"outcome": "crash", "reason": "twin simulate printed no JSON summary"}
     if summary:
         result = summary.get("mission_result", "")
-        if result == "SUCCESS":
+        # A fleet's result is "running" when its robots' differ (one's SUCCESS, another's complete): ask each.
+        results = (summary.get("robots") or {"": result}).values()
+        if all(r in SUCCEEDED for r in results):
             row |= {"outcome": "success", "reason": ""}
         else:
             why = summary.get("mission_failure") or summary.get("ended_by", "")
@@ -124,8 +139,8 @@ METRIC_COLUMNS = (
 
 
 ROBOT_COLUMNS = ("result", "goals_reached", "goals", "mission_time_s", "path_length_m", "contacts", "robot_contacts")
-"""A fleet's columns for each robot, `<ns>.<column>`: its mission's result (SUCCESS, FAILURE, running) as the
-run's summary gives it, its metrics from its own topics, and its contacts with the other robots."""
+"""A fleet's columns for each robot, `<ns>.<column>`: its mission's result (SUCCESS, FAILURE, complete, running)
+as the run's summary gives it, its metrics from its own topics, and its contacts with the other robots."""
 
 FLEET_COLUMNS = ("robot_contacts",)
 """A fleet run's columns besides `METRIC_COLUMNS`: the contacts between robots (each one once)."""
