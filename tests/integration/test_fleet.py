@@ -414,3 +414,18 @@ def test_a_fleet_robots_console_warnings_name_the_robot(tmp_path: Path) -> None:
     assert any(line.startswith("twin: WARNING: /alpha: drive: cmd_vel (0.300 m/s") for line in warnings), warnings
     assert any("/alpha: t=" in line and "contact with beta::" in line for line in warnings), warnings
     assert any("/beta: t=" in line and "contact with alpha::" in line for line in warnings), warnings
+
+
+def test_a_fleet_whose_robots_missions_ended_well_in_different_ways_is_complete(tmp_path: Path) -> None:
+    # A script that completes beside a robot with no mission: the run is over, not "running".
+    scenario = tmp_path / "mixed.yaml"
+    scenario.write_text(
+        "name: mixed\nrobots:\n"
+        "  - {name: alpha, mission: {type: cmd_vel_script, segments: [{duration_s: 2.0, linear_mps: 0.1}]}}\n"
+        "  - {name: beta, robot: {initial_pose: {x_m: 1.5}}, mission: {type: none}}\n"
+    )
+    result = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"), "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["robots"] == {"alpha": "complete", "beta": "none"}
+    assert summary["mission_result"] == "complete" and summary["ended_by"] == "mission complete"

@@ -452,13 +452,19 @@ class Simulation(Closing):
         return {g.namespace: g.mission.result if g.mission is not None else "none" for g in self.groups}
 
     def _mission_result(self) -> str:
-        """The mission's result; a fleet's is FAILURE when any robot's is, else every robot's when they agree."""
+        """The mission's result; a fleet's is FAILURE when any robot's is, else every robot's when they agree.
+
+        Robots whose missions ended well in different ways (a tree's SUCCESS, a script's complete,
+        none) give `complete`; while any robot's goes on, `running`.
+        """
         if self.fleet is None:
             return self.mission.result if self.mission is not None else "none"
         results = set(self._robot_results().values())
         if "FAILURE" in results:
             return "FAILURE"
-        return results.pop() if len(results) == 1 else "running"
+        if len(results) == 1:
+            return results.pop()
+        return "running" if "running" in results else "complete"
 
     @property
     def failure(self) -> str:
