@@ -172,11 +172,17 @@ def test_a_fleet_sweep_puts_each_robot_where_its_indexed_key_says(tmp_path: Path
     assert sorted(float(r["robots[1].robot.initial_pose.x_m"]) for r in rows) == [1.4, 1.7]
 
 
-def test_a_mission_that_is_not_a_tree_succeeds_when_it_completes(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "mission",
+    [
+        "mission: {type: cmd_vel_script, segments: [{duration_s: 1.0, linear_mps: 0.1}]}\n",
+        "mission: {type: none}\nmax_duration_s: 1\n",  # nothing to fail: the run goes its duration
+    ],
+)
+def test_a_mission_that_is_not_a_tree_succeeds_when_it_completes(tmp_path: Path, mission: str) -> None:
     """A cmd_vel script has no SUCCESS: `twin simulate` says "mission complete", and the sweep counts a success."""
     (tmp_path / "base.yaml").write_text(
-        "name: script\nmax_duration_s: 10\ndrive: {type: kinematic}\n"
-        "mission: {type: cmd_vel_script, segments: [{duration_s: 1.0, linear_mps: 0.1}]}\n",
+        f"name: script\ndrive: {{type: kinematic}}\n{mission}" + ("max_duration_s: 10\n" * ("none" not in mission)),
         encoding="utf-8",
     )
     sweep = tmp_path / "sweep.yaml"

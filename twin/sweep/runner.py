@@ -38,9 +38,10 @@ but the mission did not succeed. `error`: `twin simulate` refused the run (its e
 `crash`: the process died (a signal or an internal error). `timeout`: it ran past `timeout_s`. `worker
 lost`: the Dask worker running it died (set by the client)."""
 
-SUCCEEDED = ("SUCCESS", "complete")
-"""The mission results that are a success: a tree's SUCCESS, and the end of a mission that has no
-SUCCESS (a cmd_vel script, waypoints, a replay), which `twin simulate` reports as `complete`."""
+SUCCEEDED = ("SUCCESS", "complete", "none")
+"""The mission results that are a success: a tree's SUCCESS, the end of a mission that has no
+SUCCESS (a cmd_vel script, waypoints, a replay), which `twin simulate` reports as `complete`, and
+`none` (`mission: {type: none}`: nothing to fail; the run went its duration)."""
 
 KeepBags = Literal["failed", "none", "all"]
 
@@ -102,7 +103,7 @@ def execute_run(task: RunTask) -> dict[str, Any]:
             row |= {"outcome": "crash", "reason": "twin simulate printed no JSON summary"}
     if summary:
         result = summary.get("mission_result", "")
-        # A fleet's result is "running" when its robots' differ (one's SUCCESS, another's complete): ask each.
+        # A fleet's: each robot's own (the run's says only complete when they ended well in different ways).
         results = (summary.get("robots") or {"": result}).values()
         if all(r in SUCCEEDED for r in results):
             row |= {"outcome": "success", "reason": ""}
