@@ -317,20 +317,18 @@ def test_graph_of_one_robot_has_no_groups() -> None:
 def test_head_on_contacts_and_closest_approach(head_on_bag: Path, tmp_path: Path) -> None:
     truth = _read_truth(head_on_bag)
     # the robots touched: each robot's own contacts name the other (robot2::turtlebot3_waffle::...)
-    between = {
-        t
+    own = {
+        ns: sum(1 for _t, what in truth["touching"][ns] if what.startswith(f"{other}::"))
         for ns, other in (("robot1", "robot2"), ("robot2", "robot1"))
-        for t, what in truth["touching"][ns]
-        if what.startswith(f"{other}::")
     }
-    assert between, truth["touching"]
+    assert all(own.values()), truth["touching"]
     proc = run_twin("analyze", str(head_on_bag), "--out", str(tmp_path / "r"), "--json", "--no-plots")
     assert proc.returncode == 0, proc.stderr
     report = json.loads(proc.stdout)
     for ns in ROBOTS:
         assert report["robots"][ns]["metrics"]["contacts"] == truth["contacts"][ns]
-    # one contact both robots report at one time counts once for each
-    assert report["robot_contacts"] == {"robot1": {"robot2": len(between)}, "robot2": {"robot1": len(between)}}
+    # both robots report their touches (some ms apart): each counts its own, the other's once in them
+    assert report["robot_contacts"] == {"robot1": {"robot2": own["robot1"]}, "robot2": {"robot1": own["robot2"]}}
     t_s, d = _distance(truth)
     i = int(np.argmin(d))
     dist = report["inter_robot_distance"]
@@ -338,6 +336,38 @@ def test_head_on_contacts_and_closest_approach(head_on_bag: Path, tmp_path: Path
     assert dist["min_t_s"] == pytest.approx(float(t_s[i]), abs=1e-9)
     assert dist["min_t_s"] > 1.0  # they closed in from 1.5 m: the minimum is not the start
     assert dist["min_m"] < 1.0
+
+
+# A Burger and a Waffle driven head on by their commands alone (no Nav2): they touch at about 4.7 s.
+MIXED_HEAD_ON = """
+name: mixed_head_on
+robots:
+  - name: robot1
+    robot: {model: turtlebot3_burger, initial_pose: {x_m: 0.0, y_m: 0.0, yaw_rad: 0.0}}
+    mission: {type: cmd_vel_script, rate_hz: 10.0, segments: [{duration_s: 10.0, linear_mps: 0.15, angular_radps: 0.0}]}
+  - name: robot2
+    robot: {initial_pose: {x_m: 1.5, y_m: 0.0, yaw_rad: 3.14159}}
+    mission: {type: cmd_vel_script, rate_hz: 10.0, segments: [{duration_s: 10.0, linear_mps: 0.15, angular_radps: 0.0}]}
+"""
+
+
+def test_a_touch_the_robots_report_ms_apart_counts_once(tmp_path: Path) -> None:
+    scenario = tmp_path / "mixed_head_on.yaml"
+    scenario.write_text(MIXED_HEAD_ON)
+    bag = tmp_path / "bag"
+    proc = run_twin("simulate", str(scenario), "--duration", "8", "--out", str(bag))
+    assert proc.returncode == 0, proc.stderr
+    truth = _read_truth(bag)
+    # each robot reports the touch, at a step of its own drive: not at one time
+    (t1, what1), (t2, what2) = truth["touching"]["robot1"] + truth["touching"]["robot2"]
+    assert what1.startswith("robot2::") and what2.startswith("robot1::")
+    assert t1 != t2 and abs(t1 - t2) < 50_000_000, (t1, t2)
+    proc = run_twin("analyze", str(bag), "--out", str(tmp_path / "r"), "--json", "--no-plots")
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    assert report["robot_contacts"] == {"robot1": {"robot2": 1}, "robot2": {"robot1": 1}}
+    for ns in ROBOTS:
+        assert report["robots"][ns]["metrics"]["contacts"] == 1
 
 
 def test_without_ground_truth_the_distance_comes_from_amcl(fleet_bag: Path, tmp_path: Path) -> None:

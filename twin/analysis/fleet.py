@@ -13,8 +13,9 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
+import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,7 @@ __all__ = [
     "check_namespace",
     "fleet_metrics",
     "fleet_summary_lines",
+    "pair_contacts",
     "robot_distance",
     "write_fleet_report",
 ]
@@ -173,33 +175,73 @@ def robot_distance(tracks: Mapping[str, PoseTrack], start_ns: int, source: str =
     )
 
 
+#: How far apart two robots' reports of one touch may lie when their episodes do not overlap, s: each
+#: robot finds the touch at a step of its own drive (a Burger and a Waffle head on: 4.725 and 4.730 s).
+_SAME_TOUCH_S = 0.1
+
+
 def _names_robot(event: ContactEvent, ns: str) -> bool:
     """Whether a contact's other party is robot `ns` (the twin names it `<namespace>::<model>::<link>`)."""
     return event.what.split("::", 1)[0].strip("/") == ns
 
 
+def _episodes(events: Iterable[ContactEvent], other: str) -> list[tuple[float, float]]:
+    """A robot's contact episodes with robot `other`: (begin s, end s), the end inf while it lasts."""
+    out: list[tuple[float, float]] = []
+    open_at: list[int] = []  # indices into out, oldest first
+    for e in events:
+        if not _names_robot(e, other):
+            continue
+        if e.begin:
+            open_at.append(len(out))
+            out.append((e.t_s, math.inf))
+        elif open_at:
+            k = open_at.pop(0)
+            out[k] = (out[k][0], e.t_s)
+    return out
+
+
+def _touches(own: list[tuple[float, float]], theirs: list[tuple[float, float]]) -> int:
+    """A robot's touches with another: its own episodes, and the other's that meet none of them.
+
+    Two episodes meet when they overlap or lie within `_SAME_TOUCH_S` of each other.
+    """
+    near = _SAME_TOUCH_S
+    alone = [(b0, b1) for b0, b1 in theirs if not any(a0 <= b1 + near and b0 <= a1 + near for a0, a1 in own)]
+    return len(own) + len(alone)
+
+
 def robot_contacts(contacts: Mapping[str, list[ContactEvent] | None]) -> dict[str, dict[str, int]]:
     """Contacts between robots: for each robot, how many contacts it had with each other robot.
 
-    A contact is counted from either robot's `/<ns>/contacts` (the robot that moves into another
-    reports it, and the other may too): one beginning at one time between two robots counts once.
+    A robot's contacts with another are its own contact episodes naming that robot (BEGIN to END on
+    its `/<ns>/contacts`), and the other robot's episodes naming it that none of its own meets: a
+    touch both report, each at a step of its own drive some ms apart, counts once; one only the
+    other reports (a robot standing still does not report being driven into) counts too. So a
+    robot that reports its touches has no more contacts with robots than contacts, and a robot
+    whose one episode spans two of the other's (it stayed blocked while the other backed off and
+    came again) counts one where the other counts two.
 
     Args:
-        contacts: Each robot's own contact events (None: it has no contacts topic).
+        contacts: Each robot's own contact events, in time order (None: it has no contacts topic).
     """
-    begins: dict[frozenset[str], set[float]] = {}
-    for ns, events in contacts.items():
-        for e in events or ():
-            if not e.begin:
-                continue
-            for other in contacts:
-                if other != ns and _names_robot(e, other):
-                    begins.setdefault(frozenset((ns, other)), set()).add(e.t_s)
     out: dict[str, dict[str, int]] = {ns: {} for ns in contacts}
-    for pair, times in begins.items():
-        a, b = sorted(pair)
-        out[a][b] = out[b][a] = len(times)
+    for a, b in itertools.permutations(contacts, 2):
+        n = _touches(_episodes(contacts[a] or (), b), _episodes(contacts[b] or (), a))
+        if n:
+            out[a][b] = n
     return out
+
+
+def pair_contacts(with_robots: Mapping[str, Mapping[str, int]]) -> int:
+    """The touches between robots, each once: for every pair, as many as the robot counting more counts.
+
+    Args:
+        with_robots: Each robot's contacts with each other robot, as `robot_contacts` gives them.
+    """
+    return sum(
+        max(with_robots[a].get(b, 0), with_robots[b].get(a, 0)) for a, b in itertools.combinations(with_robots, 2)
+    )
 
 
 def fleet_metrics(path: str | os.PathLike[str]) -> dict[str, tuple[RunMetrics, dict[str, int]]]:

@@ -172,9 +172,9 @@ def _fleet_metrics(bag: Path, robots: dict[str, str]) -> dict[str, Any]:
 
     The fleet's: goals, contacts, recoveries and path length summed over the robots; mission time
     the longest robot's (the run's mission ends with its last robot's); localization error the
-    worst robot's; `robot_contacts` the contacts between robots, each counted once.
+    worst robot's; `robot_contacts` the contacts between robots, each counted once (`pair_contacts`).
     """
-    from twin.analysis.fleet import fleet_metrics
+    from twin.analysis.fleet import fleet_metrics, pair_contacts
 
     per = fleet_metrics(bag)
     row: dict[str, Any] = {"robots": list(robots)}
@@ -207,7 +207,7 @@ def _fleet_metrics(bag: Path, robots: dict[str, str]) -> dict[str, Any]:
         "localization_error_median_m": worst([m.localization_error_median_m for m in metrics]),
         "localization_error_p95_m": worst([m.localization_error_p95_m for m in metrics]),
         "localization_error_max_m": worst([m.localization_error_max_m for m in metrics]),
-        "robot_contacts": sum(sum(p[1].values()) for p in per.values()) // 2,
+        "robot_contacts": pair_contacts({ns: p[1] for ns, p in per.items()}),
     }
     return row
 

@@ -11,7 +11,7 @@ import pytest
 
 from tests.conftest import run_twin
 from twin.analysis.collect import ContactEvent, PoseTrack, namespace_view, robot_namespaces
-from twin.analysis.fleet import robot_contacts, robot_distance
+from twin.analysis.fleet import pair_contacts, robot_contacts, robot_distance
 
 ODOM = "nav_msgs/msg/Odometry"
 
@@ -118,12 +118,73 @@ def test_a_contact_both_robots_report_counts_once_for_each() -> None:
         "robot2": [_contact("robot1::turtlebot3_waffle::base_link"), _contact("wall::link::collision", t_s=2.0)],
         "robot3": None,
     }
-    assert robot_contacts(contacts) == {"robot1": {"robot2": 2}, "robot2": {"robot1": 2}, "robot3": {}}
+    # robot2's episode never ends: robot1's second touch falls within it
+    assert robot_contacts(contacts) == {"robot1": {"robot2": 2}, "robot2": {"robot1": 1}, "robot3": {}}
 
 
 def test_a_contact_names_a_nested_namespace_whole() -> None:
     contacts = {"fleet/a": [_contact("fleet/b::m::l")], "fleet/b": [], "b": []}
     assert robot_contacts(contacts) == {"fleet/a": {"fleet/b": 1}, "fleet/b": {"fleet/a": 1}, "b": {}}
+
+
+def test_a_touch_the_robots_report_a_few_ms_apart_counts_once() -> None:
+    # a Burger and a Waffle head on: each finds the touch at a step of its own drive
+    contacts = {
+        "alpha": [_contact("beta::turtlebot3_waffle::base_link::camera_collision", t_s=4.730)],
+        "beta": [_contact("alpha::turtlebot3_burger::base_link::base_collision", t_s=4.7250000000000005)],
+    }
+    assert robot_contacts(contacts) == {"alpha": {"beta": 1}, "beta": {"alpha": 1}}
+
+
+def test_repeated_touches_among_three_robots_count_once_each() -> None:
+    r1, r2, r3 = "robot1::m::base_link", "robot2::m::base_link", "robot3::m::base_link"
+    contacts = {
+        # robot1 and robot2 touch twice, each reporting both episodes a few ms apart
+        "robot1": [
+            _contact(r2, t_s=1.000),
+            _contact(r2, t_s=1.500, begin=False),
+            _contact(r2, t_s=3.004),
+            _contact(r2, t_s=3.200, begin=False),
+            _contact(r3, t_s=6.0),  # robot1 runs into robot3, which reports it too
+        ],
+        "robot2": [
+            _contact(r1, t_s=1.005),
+            _contact(r1, t_s=1.400, begin=False),
+            _contact(r1, t_s=3.000),
+            _contact(r1, t_s=3.300, begin=False),
+        ],
+        # robot3 reports that touch, then runs into robot2, which does not report it
+        "robot3": [_contact(r1, t_s=6.002), _contact(r1, t_s=6.5, begin=False), _contact(r2, t_s=8.0)],
+    }
+    with_robots = robot_contacts(contacts)
+    assert with_robots == {
+        "robot1": {"robot2": 2, "robot3": 1},
+        "robot2": {"robot1": 2, "robot3": 1},
+        "robot3": {"robot1": 1, "robot2": 1},
+    }
+    assert pair_contacts(with_robots) == 4
+
+
+def test_a_robot_counts_its_own_episodes_when_the_other_s_span_several() -> None:
+    # robot2 stays blocked (one episode) while robot1 touches, backs off and touches again
+    contacts = {
+        "robot1": [
+            _contact("robot2::m::l", t_s=1.0),
+            _contact("robot2::m::l", t_s=1.2, begin=False),
+            _contact("robot2::m::l", t_s=1.6),
+        ],
+        "robot2": [_contact("robot1::m::l", t_s=1.004)],
+    }
+    with_robots = robot_contacts(contacts)
+    assert with_robots == {"robot1": {"robot2": 2}, "robot2": {"robot1": 1}}
+    assert pair_contacts(with_robots) == 2
+
+
+def test_a_touch_only_the_mover_reports_counts_for_both() -> None:
+    # a robot standing still does not report being driven into
+    with_robots = robot_contacts({"robot1": [_contact("robot2::m::l")], "robot2": []})
+    assert with_robots == {"robot1": {"robot2": 1}, "robot2": {"robot1": 1}}
+    assert pair_contacts(with_robots) == 1
 
 
 def test_a_one_robot_bag_gets_the_one_robot_report(gazebo_bag: Any, tmp_path: Any) -> None:
