@@ -26,6 +26,7 @@ __all__ = [
     "scan_ranges",
     "stamp_kind",
     "stamp_reader",
+    "tf_frames",
     "twist_reader",
     "type_store",
     "type_store_registry",
@@ -121,6 +122,18 @@ def scan_ranges(buf: bytes) -> tuple[int, float, float, float, float, float, NDA
 def _first_stamp_tf(buf: bytes) -> int | None:
     (n,) = struct.unpack_from(_fmt(buf, "I"), buf, _BASE)
     return _stamp(buf, _BASE + 4) if n else None
+
+
+def tf_frames(buf: bytes) -> tuple[str, str] | None:
+    """(frame_id, child_frame_id) of a TFMessage's first transform, or None when it has none."""
+    (n,) = struct.unpack_from(_fmt(buf, "I"), buf, _BASE)
+    if not n:
+        return None
+    frame_end = _skip_string(buf, _BASE + 12)  # after the count and the stamp
+    child_end = _skip_string(buf, frame_end)
+    frame = bytes(buf[_BASE + 16 : frame_end - 1])  # without the terminating NUL
+    child = bytes(buf[_align(frame_end, 4) + 4 : child_end - 1])
+    return frame.decode("utf-8", "replace"), child.decode("utf-8", "replace")
 
 
 def _first_stamp(buf: bytes) -> int | None:

@@ -636,6 +636,8 @@ def collect(
     route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]] = {
         by_name[name].name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
     }
+    if namespace:
+        _own_transforms_only(route, by_name, types, namespace, robot_namespaces(info))
     block = _BLOCK
     for topic, t_ns, raw in read_raw(bag, read_topics):
         r = route.get(topic)
@@ -669,6 +671,62 @@ def collect(
     for h in data.health.values():
         h.finish()
     return data
+
+
+def _robot_of_frame(frame: str, robots: list[str]) -> str | None:
+    """The robot whose frame this is with `frame_prefix` (`robot1/odom`: robot1), or None (`map`)."""
+    name = frame.lstrip("/")
+    under = [ns for ns in robots if name.startswith(f"{ns}/")]
+    return max(under, key=len) if under else None  # a nested namespace's own robot, not its parent's
+
+
+def _own_transforms_only(
+    route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]],
+    by_name: dict[str, TopicInfo],
+    types: dict[str, str],
+    namespace: str,
+    robots: list[str],
+) -> None:
+    """Read a fleet's shared TF topics (`tf: {mode: frame_prefix}`: one `/tf`) with one robot's transforms alone.
+
+    Every robot's transforms are then on the one `/tf`, their frames named `<ns>/odom`...: a
+    message whose first transform's child frame (else its parent frame) is another robot's is left
+    out of this robot's pass, so the topic's health (its rate) is the robot's own. Transforms of no
+    robot's frames (the world's) are every robot's, as `/clock` is.
+    """
+    ns = namespace.strip("/")
+    kept: dict[tuple[str, str], bool] = {}
+
+    def own(buf: bytes) -> bool:
+        frames = _cdr.tf_frames(buf)
+        if frames is None:
+            return True
+        keep = kept.get(frames)
+        if keep is None:
+            parent, child = frames
+            robot = _robot_of_frame(child, robots) or _robot_of_frame(parent, robots)
+            keep = kept[frames] = robot is None or robot == ns
+        return keep
+
+    for name, ti in by_name.items():
+        # a topic outside every namespace keeps its name in the robot's view
+        if ti.name == name and types[name] == "tf2_msgs/msg/TFMessage" and name in route:
+            health, handler = route[name]
+            route[name] = (None, _kept_handler(own, health, handler))
+
+
+def _kept_handler(
+    keep: Callable[[bytes], bool], health: TopicHealth | None, handler: Callable[[int, bytes], None] | None
+) -> Callable[[int, bytes], None]:
+    def handle(t_ns: int, buf: bytes) -> None:
+        if not keep(buf):
+            return
+        if health is not None:
+            health.add(t_ns, buf)
+        if handler is not None:
+            handler(t_ns, buf)
+
+    return handle
 
 
 def _add_series(

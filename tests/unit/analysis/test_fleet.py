@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
 import pytest
 
 from tests.conftest import run_twin
-from twin.analysis.collect import ContactEvent, PoseTrack, namespace_view, robot_namespaces
+from twin.analysis.collect import ContactEvent, PoseTrack, collect, namespace_view, robot_namespaces
+from twin.analysis.compare import compare_bags
 from twin.analysis.fleet import pair_contacts, robot_contacts, robot_distance
+from twin.bag import OdometryEncoder, Recorder, TFEncoder
 
 ODOM = "nav_msgs/msg/Odometry"
 
@@ -185,6 +188,57 @@ def test_a_touch_only_the_mover_reports_counts_for_both() -> None:
     with_robots = robot_contacts({"robot1": [_contact("robot2::m::l")], "robot2": []})
     assert with_robots == {"robot1": {"robot2": 1}, "robot2": {"robot1": 1}}
     assert pair_contacts(with_robots) == 1
+
+
+def _two_robot_bag(path: Path, *, frame_prefix: bool) -> Path:
+    """2 s of two robots' ground truth and TF at 20 Hz (robot1's wheels too, and AMCL's map -> odom at 5 Hz).
+
+    Namespaced TF on `/robot1/tf`, `/robot2/tf`; with `frame_prefix` all of it on one `/tf`, the
+    robots' frames named `robot1/odom`..., and a world's transform (`map -> world`) at 1 Hz.
+    """
+    with Recorder(path) as rec:
+        shared = rec.add_topic("/tf", TFEncoder.msgtype) if frame_prefix else None
+        for k, ns in enumerate(("robot1", "robot2")):
+            odom = rec.add_topic(f"/{ns}/ground_truth/odom", OdometryEncoder.msgtype)
+            rec.add_topic(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")  # offered: a robot's topic
+            tf = shared or rec.add_topic(f"/{ns}/tf", TFEncoder.msgtype)
+            p = f"{ns}/" if frame_prefix else ""
+            base = TFEncoder([(f"{p}odom", f"{p}base_footprint")])
+            wheels = TFEncoder([(f"{p}base_link", f"{p}wheel_left_link"), (f"{p}base_link", f"{p}wheel_right_link")])
+            amcl = TFEncoder([("map", f"{p}odom")])
+            gt = OdometryEncoder("map", f"{p}base_footprint")
+            for i in range(40):
+                t_ns = i * 50_000_000 + k  # the robots a nanosecond apart
+                x_m = 0.01 * i + k
+                rec.write(odom, t_ns, gt.encode(t_ns, x_m, 0.0, 0.0, 0.2, 0.0))
+                rec.write(tf, t_ns, base.encode_planar(t_ns, x_m, 0.0, 0.0))
+                if ns == "robot1":
+                    rec.write(tf, t_ns, wheels.encode(t_ns, [(0, 0.1, 0, 0, 0, 0, 1), (0, -0.1, 0, 0, 0, 0, 1)]))
+                if i % 4 == 0:
+                    rec.write(tf, t_ns, amcl.encode_planar(t_ns, 0.0, 0.0, 0.0))
+        if shared is not None:
+            world = TFEncoder([("map", "world")])
+            for i in range(2):
+                rec.write(shared, i * 1_000_000_000 + 7, world.encode_planar(i * 1_000_000_000 + 7, 0.0, 0.0, 0.0))
+    return path
+
+
+def test_a_robot_reads_only_its_own_transforms_on_a_frame_prefix_fleet_s_shared_tf(tmp_path: Path) -> None:
+    bag = _two_robot_bag(tmp_path / "fp", frame_prefix=True)
+    tf = {ns: collect(bag, namespace=ns, decoded=False).health["/tf"] for ns in ("robot1", "robot2")}
+    # robot1: odom -> base_footprint and its wheels, 40 each, map -> robot1/odom 10; the world's 2
+    assert (tf["robot1"].topic, tf["robot1"].count) == ("/tf", 40 + 40 + 10 + 2)
+    assert (tf["robot2"].topic, tf["robot2"].count) == ("/tf", 40 + 10 + 2)
+
+
+def test_comparing_a_robot_recorded_with_namespaced_and_prefixed_tf_finds_the_same_tf_rate(tmp_path: Path) -> None:
+    ns_bag = _two_robot_bag(tmp_path / "ns", frame_prefix=False)
+    fp_bag = _two_robot_bag(tmp_path / "fp", frame_prefix=True)
+    result = compare_bags(ns_bag, fp_bag, namespaces=("robot2", "robot2"))
+    (rate,) = [r for r in result.rates if r["topic"] == "/tf"]
+    assert (rate["count_a"], rate["count_b"]) == (50, 52)  # B: the world's map -> world besides robot2's
+    assert rate["rate_b_hz"] == pytest.approx(rate["rate_a_hz"], rel=0.05)
+    assert not any("/tf" in line for line in result.summary_lines())
 
 
 def test_a_one_robot_bag_gets_the_one_robot_report(gazebo_bag: Any, tmp_path: Any) -> None:
