@@ -48,7 +48,7 @@ def fleet_run(
     tree, files = write_goals(tmp, GOALS)
     scenario = tmp / "two.yaml"
     scenario.write_text(SCENARIO.format(tree=tree, goal1=files["robot1"], goal2=files["robot2"]))
-    decoded = ("/scan", "/tf", "/tf_static", "/ground_truth/odom")
+    decoded = ("/scan", "/tf", "/tf_static", "/ground_truth/odom", "/rosout")
     summary, messages = simulate_and_read(scenario, tmp / "bag", lambda con: con.topic.endswith(decoded))
     return summary, messages, scenario
 
@@ -73,6 +73,28 @@ def test_every_robot_topic_is_under_its_namespace(fleet_run: tuple[dict[str, Any
             assert f"/{name}/{topic}" in messages, (name, topic)
     stamps = [t for t, _ in messages["/clock"]]
     assert len(stamps) == len(set(stamps))  # one clock for the world, not one per robot
+
+
+def test_each_robots_log_lines_carry_its_namespace_as_ros2_names_a_namespaced_nodes_logger(
+    fleet_run: tuple[dict[str, Any], Any, Path],
+) -> None:
+    # rcl names /robot1/bt_navigator's logger `robot1.bt_navigator`: Nav2's lines, the mission tree's
+    # and AMCL's say which robot they are about, in the bag as on the console.
+    _, messages, _ = fleet_run
+    lines = [(m.name, m.msg) for _, m in messages["/rosout"]]
+    for name in GOALS:
+        assert (f"{name}.bt_navigator", "Goal succeeded") in lines, lines
+        assert any(n == f"{name}.bt_navigator" and t.startswith("Begin navigating") for n, t in lines), lines
+        assert any(n == f"{name}.mission" and t.endswith("goal reached") for n, t in lines), lines
+        assert any(n == f"{name}.amcl" and t.startswith("Setting pose") for n, t in lines), lines
+    # Under no robot: only the twin's own lines (the scenario, the run's end).
+    assert {n for n, _ in lines if not n.startswith(("robot1.", "robot2."))} == {"twin"}, lines
+
+
+def _rosout(bag: Path) -> list[Any]:
+    with AnyReader([bag]) as reader:
+        connections = [c for c in reader.connections if c.topic == "/rosout"]
+        return [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=connections)]
 
 
 def test_each_namespace_holds_one_tf_tree(fleet_run: tuple[dict[str, Any], Any, Path]) -> None:
@@ -411,9 +433,15 @@ def test_a_fleet_robots_console_warnings_name_the_robot(tmp_path: Path) -> None:
     result = run_twin("simulate", str(scenario), "--duration", "8", "--out", str(tmp_path / "bag"))
     assert result.returncode == 0, result.stderr
     warnings = [line for line in result.stderr.splitlines() if line.startswith("twin: WARNING: ")]
-    assert any(line.startswith("twin: WARNING: /alpha: drive: cmd_vel (0.300 m/s") for line in warnings), warnings
-    assert any("/alpha: t=" in line and "contact with beta::" in line for line in warnings), warnings
-    assert any("/beta: t=" in line and "contact with alpha::" in line for line in warnings), warnings
+    # As ROS 2 prints a namespaced node's lines: `[alpha.diff_drive]`, the logger name rcl gives /alpha/diff_drive.
+    drive = "twin: WARNING: [alpha.diff_drive] drive: cmd_vel (0.300 m/s"
+    assert any(line.startswith(drive) for line in warnings), "\n".join(warnings)
+    assert any("[alpha.diff_drive] t=" in line and "contact with beta::" in line for line in warnings), warnings
+    assert any("[beta.diff_drive] t=" in line and "contact with alpha::" in line for line in warnings), warnings
+    # The bag's /rosout carries the same names (rcl_interfaces/Log's `name`).
+    lines = [(m.name, m.msg) for m in _rosout(tmp_path / "bag")]
+    assert any(n == "alpha.diff_drive" and t.startswith("drive: cmd_vel") for n, t in lines), lines
+    assert any(n == "beta.diff_drive" and "contact with alpha::" in t for n, t in lines), lines
 
 
 def test_a_fleet_whose_robots_missions_ended_well_in_different_ways_is_complete(tmp_path: Path) -> None:

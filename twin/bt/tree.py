@@ -117,6 +117,8 @@ class Tree(TickContext):
         self._timers_fired = 0
         self._settled: tuple[int, object, int] | None = None
         self._timed = tuple(node for node in self.nodes if type(node).wake_ns is not TreeNode.wake_ns)
+        self.log = _log
+        """Where the tree's own warnings go (its owner's node logger names the node and the robot)."""
 
     # -- introspection -------------------------------------------------------------------------
 
@@ -265,7 +267,7 @@ class Tree(TickContext):
     def _note_reticks_capped(self) -> None:
         if not self._reticks_capped:
             self._reticks_capped = True
-            _log.warning(
+            self.log.warning(
                 "the tree woke itself up %d times in one tick at t=%.3f s (a loop BT.CPP ends only when "
                 "wall time passes); it goes on at the next tick",
                 MAX_WAKE_UP_RETICKS,

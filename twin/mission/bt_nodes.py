@@ -122,23 +122,24 @@ class SetLocations(SyncActionNode):
             output_port("loc_poses", LOCATION_POSES, description="location name -> pose [x, y, theta]"),
         )
 
-    def __init__(self, name: str, config: NodeConfig, rng: random.Random) -> None:
+    def __init__(self, name: str, config: NodeConfig, rng: random.Random, log: logging.Logger = _log) -> None:
         super().__init__(name, config)
         self._rng = rng
+        self._log = log
 
     def tick(self) -> NodeStatus:
         """Load, shuffle and publish the locations."""
         path = _location_file(self)
         if path is None:
-            _log.warning("%s: no %r on the blackboard", self.full_path, LOCATION_FILE_KEY)
+            self._log.warning("%s: no %r on the blackboard", self.full_path, LOCATION_FILE_KEY)
             return NodeStatus.FAILURE
         try:
             locations = load_locations(path)
         except ConfigError as err:
-            _log.warning("%s: cannot load the locations: %s", self.full_path, err)
+            self._log.warning("%s: cannot load the locations: %s", self.full_path, err)
             return NodeStatus.FAILURE
         if not locations:
-            _log.warning("%s: no locations in %s", self.full_path, path)
+            self._log.warning("%s: no locations in %s", self.full_path, path)
             return NodeStatus.FAILURE
         names = list(locations)
         self._rng.shuffle(names)
@@ -164,6 +165,10 @@ class GetLocationFromQueue(SyncActionNode):
             output_port("target_location", str, description="the name taken from the queue"),
         )
 
+    def __init__(self, name: str, config: NodeConfig, log: logging.Logger = _log) -> None:
+        super().__init__(name, config)
+        self._log = log
+
     def tick(self) -> NodeStatus:
         """Pop one name; FAILURE when the queue is empty."""
         remapped = "loc_names" in self.config.output_ports  # else the blackboard's, as the demos' trees use it
@@ -180,7 +185,7 @@ class GetLocationFromQueue(SyncActionNode):
             self.set_output("loc_names", queue)
         else:
             self.blackboard.set("loc_names", queue)
-        _log.info("%s: targeting location %s", self.full_path, target)
+        self._log.info("%s: targeting location %s", self.full_path, target)
         return NodeStatus.SUCCESS
 
 
@@ -195,9 +200,10 @@ class GoToPose(StatefulActionNode):
             input_port("loc_poses", LOCATION_POSES, description="location name -> pose (else the location file)"),
         )
 
-    def __init__(self, name: str, config: NodeConfig, navigator: Navigator) -> None:
+    def __init__(self, name: str, config: NodeConfig, navigator: Navigator, log: logging.Logger = _log) -> None:
         super().__init__(name, config)
         self._navigator = navigator
+        self._log = log
         self._goal_id: int | None = None
         self._file_cache: dict[Path, dict[str, Pose2D]] = {}
         self._location = ""
@@ -208,18 +214,18 @@ class GoToPose(StatefulActionNode):
         if "loc_poses" in self.config.input_ports:
             ok, poses = self.read_input("loc_poses")
             if not ok:
-                _log.warning("%s: cannot read loc_poses: %s", self.full_path, poses)
+                self._log.warning("%s: cannot read loc_poses: %s", self.full_path, poses)
                 return None
             return poses  # type: ignore[no-any-return]
         path = _location_file(self)
         if path is None:
-            _log.warning("%s: neither loc_poses nor %r on the blackboard", self.full_path, LOCATION_FILE_KEY)
+            self._log.warning("%s: neither loc_poses nor %r on the blackboard", self.full_path, LOCATION_FILE_KEY)
             return None
         if path not in self._file_cache:
             try:
                 self._file_cache[path] = load_locations(path)
             except ConfigError as err:
-                _log.warning("%s: cannot load the locations: %s", self.full_path, err)
+                self._log.warning("%s: cannot load the locations: %s", self.full_path, err)
                 return None
         return self._file_cache[path]
 
@@ -228,7 +234,7 @@ class GoToPose(StatefulActionNode):
         ok, location = self.read_input("loc")
         self._location = str(location)
         if not ok:
-            _log.warning("%s: cannot read loc: %s", self.full_path, location)
+            self._log.warning("%s: cannot read loc: %s", self.full_path, location)
             return NodeStatus.FAILURE
         poses = self._poses()
         if poses is None:
@@ -241,7 +247,7 @@ class GoToPose(StatefulActionNode):
             raise TreeError(unknown_location(str(location), poses))
         pose = Pose2D(*poses[location])
         self._goal_id = self._navigator.send_goal(pose, MAP_FRAME)
-        _log.info("%s: sent goal %s (%.3f, %.3f, %.3f) in %s", self.full_path, location, *pose, MAP_FRAME)
+        self._log.info("%s: sent goal %s (%.3f, %.3f, %.3f) in %s", self.full_path, location, *pose, MAP_FRAME)
         return NodeStatus.RUNNING
 
     def on_running(self) -> NodeStatus:
@@ -252,7 +258,7 @@ class GoToPose(StatefulActionNode):
         if status is NavigationStatus.RUNNING:
             return NodeStatus.RUNNING
         if status is NavigationStatus.SUCCEEDED:
-            _log.info("%s: goal reached", self.full_path)
+            self._log.info("%s: goal reached", self.full_path)
             return NodeStatus.SUCCESS
         reason_of = getattr(self._navigator, "failure_reason", None)
         reason = reason_of(self._goal_id) if reason_of is not None else ""
@@ -260,7 +266,7 @@ class GoToPose(StatefulActionNode):
             self.now_ns(),
             f"goal {self._location!r} ({self.full_path}) failed: {reason or 'the navigator reported failure'}",
         )
-        _log.info("%s: failed to reach the goal", self.full_path)
+        self._log.info("%s: failed to reach the goal", self.full_path)
         return NodeStatus.FAILURE
 
     def on_halted(self) -> None:
@@ -299,11 +305,16 @@ class ScriptedNavigator:
         return NavigationStatus.FAILED if goal_id in self.failing_goals else NavigationStatus.SUCCEEDED
 
 
-def register_mission_nodes(factory: BehaviorTreeFactory, *, navigator: Navigator, rng: random.Random) -> None:
-    """Register SetLocations (shuffling with `rng`), GetLocationFromQueue and GoToPose (using `navigator`)."""
-    factory.register_node_type(SetLocations, "SetLocations", rng)
-    factory.register_node_type(GetLocationFromQueue, "GetLocationFromQueue")
-    factory.register_node_type(GoToPose, "GoToPose", navigator)
+def register_mission_nodes(
+    factory: BehaviorTreeFactory, *, navigator: Navigator, rng: random.Random, log: logging.Logger = _log
+) -> None:
+    """Register SetLocations (shuffling with `rng`), GetLocationFromQueue and GoToPose (using `navigator`).
+
+    Their lines go to `log`: the mission node's logger, which names the robot in a fleet.
+    """
+    factory.register_node_type(SetLocations, "SetLocations", rng, log)
+    factory.register_node_type(GetLocationFromQueue, "GetLocationFromQueue", log)
+    factory.register_node_type(GoToPose, "GoToPose", navigator, log)
 
 
 def unknown_location(location: str, poses: Mapping[str, object]) -> str:

@@ -116,8 +116,11 @@ class LookForObject(StatefulActionNode):
         """No ports: the target colour is a node parameter, as in the demos."""
         return ()
 
-    def __init__(self, name: str, config: NodeConfig, slot: ImageSlot, target_color: str) -> None:
+    def __init__(
+        self, name: str, config: NodeConfig, slot: ImageSlot, target_color: str, log: logging.Logger = _log
+    ) -> None:
         super().__init__(name, config)
+        self._log = log
         if target_color not in HSV_THRESHOLDS:
             msg = f"target_color {target_color!r} is not one of {', '.join(HSV_THRESHOLDS)}"
             raise ValueError(msg)
@@ -141,7 +144,7 @@ class LookForObject(StatefulActionNode):
         self._start_ns = self.now_ns()
         if self._slot.source is None:
             self.failure = (self._start_ns, f"{self.full_path}: no camera image (the scenario's camera is off)")
-            _log.warning("%s: no camera: enable sensors.camera in the scenario", self.full_path)
+            self._log.warning("%s: no camera: enable sensors.camera in the scenario", self.full_path)
             return NodeStatus.FAILURE
         self._want(True)
         return self.on_running()
@@ -156,15 +159,15 @@ class LookForObject(StatefulActionNode):
                 return NodeStatus.RUNNING
             self._want(False)
             self.failure = (now, f"{self.full_path}: Image timeout exceeded")
-            _log.info("%s: Image timeout exceeded", self.full_path)
+            self._log.info("%s: Image timeout exceeded", self.full_path)
             return NodeStatus.FAILURE
         self._want(False)
         self.found = find_blobs(latest[1], self.target_color)
         if self.found:
-            _log.info("%s: found %d %s object(s)", self.full_path, len(self.found), self.target_color)
+            self._log.info("%s: found %d %s object(s)", self.full_path, len(self.found), self.target_color)
             return NodeStatus.SUCCESS
         self.failure = (now, f"{self.full_path}: no {self.target_color} object in view")
-        _log.info("%s: no %s object in view", self.full_path, self.target_color)
+        self._log.info("%s: no %s object in view", self.full_path, self.target_color)
         return NodeStatus.FAILURE
 
     def on_halted(self) -> None:
@@ -172,6 +175,8 @@ class LookForObject(StatefulActionNode):
         self._want(False)
 
 
-def register_vision_nodes(factory: BehaviorTreeFactory, *, slot: ImageSlot, target_color: str = "blue") -> None:
-    """Register `LookForObject` looking for `target_color` in the images of `slot`'s camera."""
-    factory.register_node_type(LookForObject, "LookForObject", slot, target_color)
+def register_vision_nodes(
+    factory: BehaviorTreeFactory, *, slot: ImageSlot, target_color: str = "blue", log: logging.Logger = _log
+) -> None:
+    """Register `LookForObject` looking for `target_color` in the images of `slot`'s camera (its lines to `log`)."""
+    factory.register_node_type(LookForObject, "LookForObject", slot, target_color, log)

@@ -38,6 +38,8 @@ from twin.node.node import (
     Time,
     Timer,
     launch_context,
+    logger_name,
+    node_logger,
     resolve_topic_name,
     validate_topic_name,
 )
@@ -62,6 +64,8 @@ __all__ = [
     "Time",
     "Timer",
     "launch_context",
+    "logger_name",
+    "node_logger",
     "resolve_topic_name",
     "validate_topic_name",
 ]

@@ -45,6 +45,8 @@ __all__ = [
     "Time",
     "Timer",
     "launch_context",
+    "logger_name",
+    "node_logger",
     "resolve_topic_name",
     "validate_topic_name",
 ]
@@ -281,6 +283,7 @@ class NodeLogger:
     __slots__ = ("_logger", "_seen")
 
     def __init__(self, name: str) -> None:
+        """`name`: the logger name (`logger_name`), `robot1.amcl` for a node in a namespace."""
         self._logger = logging.getLogger(f"twin.node.{name}")
         self._seen: set[tuple[int, str]] = set()
 
@@ -361,6 +364,28 @@ class LaunchArguments:
 _LAUNCH: contextvars.ContextVar[LaunchArguments | None] = contextvars.ContextVar("twin_launch", default=None)
 
 
+def logger_name(node_name: str, namespace: str = "") -> str:
+    """The logger name rcl gives a node: `amcl` alone, `robot1.amcl` for `/robot1/amcl` (the namespace's `/` as `.`).
+
+    It names the node's lines on the console (`[robot1.amcl]`) and in `/rosout`, as ROS 2 does.
+    """
+    ns = namespace.strip("/").replace("/", ".")
+    return f"{ns}.{node_name}" if ns else node_name
+
+
+def node_logger(node_name: str, namespace: str | None = None) -> logging.Logger:
+    """The Python logger whose lines are node `node_name`'s (`twin.node.<logger_name>`).
+
+    For the parts of a node that are not the node (Nav2's planner inside planner_server, a mission's
+    tree inside the mission node): their lines then name the node, and in a fleet its robot.
+    `namespace` None is the enclosing launch context's (a robot group's nodes are built in one).
+    """
+    if namespace is None:
+        launch = _LAUNCH.get()
+        namespace = launch.push_namespace if launch is not None else ""
+    return logging.getLogger(f"twin.node.{logger_name(node_name, namespace)}")
+
+
 @contextlib.contextmanager
 def launch_context(arguments: LaunchArguments) -> Iterator[None]:
     """Give nodes constructed inside this block these launch arguments (as `--ros-args` does)."""
@@ -413,7 +438,7 @@ class Node:
         self.subscriptions: list[Subscription] = []
         self.timers: list[Timer] = []
         self._graph: Graph | None = None
-        self._logger = NodeLogger(name)
+        self._logger = NodeLogger(logger_name(name, self._namespace))
 
     # -- identity --------------------------------------------------------------------------------
 

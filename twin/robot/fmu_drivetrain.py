@@ -274,8 +274,8 @@ class FmuDrivetrain(Closing):
         self._int_left = self._int_right = 0.0
         self.supply_speed_radps = self._supply_speed(drive)
         self.saturation = Saturation(cap_radps=self.supply_speed_radps, supply_v=drive.speed_loop.voltage_limit_v)
-        self.robot = ""
-        """The robot's namespace (`/robot1`) that its log lines lead with; '' for one robot."""
+        self.log = _log
+        """Where its run-time lines go: its drive node's logger (`[robot1.diff_drive]` in a fleet)."""
         self.command_radps = (0.0, 0.0)  # the last command's wheel speeds, before the supply clamp
         self._volt_left = self._volt_right = 0.0
         self._w_left = self._speed(self._left)
@@ -530,11 +530,10 @@ class FmuDrivetrain(Closing):
         sat.max_requested_radps = max(sat.max_requested_radps, peak_radps)
         if sat.count == 1:
             sat.first_t_s = self.t_ns * 1e-9
-            _log.warning(
-                "%sdrive: cmd_vel (%s m/s, %s rad/s) at t = %.3f s asks %s rad/s of a wheel, but %s reaches "
+            self.log.warning(
+                "drive: cmd_vel (%s m/s, %s rad/s) at t = %.3f s asks %s rad/s of a wheel, but %s reaches "
                 "%.2f rad/s (%.3f m/s) at %g V: clamped to that (reported once per run; /motor_state marks "
                 "every clamped command)",
-                f"{self.robot}: " if self.robot else "",
                 _fixed(v_mps, 3),
                 _fixed(w_radps, 3),
                 sat.first_t_s,

@@ -23,7 +23,6 @@ node's publisher (a `twin.msgs` class) is read field by field instead.
 from __future__ import annotations
 
 import functools
-import logging
 import math
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
@@ -68,7 +67,6 @@ __all__ = [
     "tf_pose",
 ]
 
-_log = logging.getLogger(__name__)
 
 LATCHED = QoSProfile(depth=1, durability="transient_local")
 SENSOR_DATA = QoSProfile(depth=5, reliability="best_effort")
@@ -217,13 +215,12 @@ class DiffDriveNode(Node):
         self._contact_pub.publish(
             Encoded((functools.partial(self._contact_enc.encode, *args, **kwargs), (), (event, c)))
         )
-        ns = self.get_namespace()
-        whose = f"{ns}: " if ns != "/" else ""  # a fleet's robot names itself
+        log = self.get_logger()  # `[robot1.diff_drive]`: a fleet's robot names itself
         if begin:
             self.contacts += 1
-            _log.warning("%st=%.3f s: contact with %s; the robot stops", whose, ns_to_s(t_ns), c.link)
+            log.warn(f"t={ns_to_s(t_ns):.3f} s: contact with {c.link}; the robot stops")
         else:
-            _log.info("%st=%.3f s: contact with %s ended", whose, ns_to_s(t_ns), c.link)
+            log.info(f"t={ns_to_s(t_ns):.3f} s: contact with {c.link} ended")
 
 
 class ObstacleNode(Node):

@@ -80,14 +80,14 @@ class BagReplay:
         BagError: If the bag is unreadable or lacks the command topic or poses (see `load_commands`).
     """
 
-    def __init__(self, spec: ReplayMission) -> None:
+    def __init__(self, spec: ReplayMission, log: logging.Logger = _log) -> None:
         self.spec = spec
         self.commands = load_commands(spec)
         t, v, w = self.commands.t_ns.tolist(), self.commands.v_mps.tolist(), self.commands.w_radps.tolist()
         finite = [math.isfinite(a) and math.isfinite(b) for a, b in zip(v, w, strict=True)]
         if not all(finite):  # refused as a user node's are: the drive keeps the command before them
             first = finite.index(False)
-            _log.warning(
+            log.warning(
                 "%s: %d of %d commands on %s hold NaN or infinity (the first at %.3f s: %s, %s): skipped, the "
                 "drive keeps the command before each, as Nav2 drops a NaN velocity",
                 spec.bag,
@@ -106,7 +106,7 @@ class BagReplay:
         self._i = -1
         self.done = False
         self.result = "running"
-        _log.info(
+        log.info(
             "replaying %d commands on %s from %s (%s), %.3f s",
             len(self._t),
             spec.topic,
@@ -184,18 +184,21 @@ class TreeMission:
         *,
         clock: Callable[[], int],
         seed: int,
+        log: logging.Logger = _log,
     ) -> None:
         self.spec = spec
         self.navigator = navigator
+        self._log = log
         from twin.nav.bt_navigator.factory import nav2_factory  # only a tree mission needs Nav2's BT nodes
 
         factory = nav2_factory()
-        register_mission_nodes(factory, navigator=navigator, rng=random.Random(seed))
+        register_mission_nodes(factory, navigator=navigator, rng=random.Random(seed), log=log)
         self.images = ImageSlot()
         """Where `LookForObject` finds the camera (filled in when the scenario's camera is on)."""
-        register_vision_nodes(factory, slot=self.images, target_color=spec.target_color)
+        register_vision_nodes(factory, slot=self.images, target_color=spec.target_color, log=log)
         factory.load_plugins()
         self.tree = factory.create_tree_from_file(spec.tree, main_tree=spec.main_tree, clock=clock)
+        self.tree.log = log
         if spec.locations is not None:
             problem = unknown_literal_location(self.tree, spec.locations)
             if problem is not None:
@@ -207,7 +210,7 @@ class TreeMission:
         self.result = "running"
         self.ticks = 0
         self._failed_uid: int | None = None
-        _log.info("BT created from %s", spec.tree)
+        self._log.info("BT created from %s", spec.tree)
 
     def tick(self, t_ns: int) -> Sequence[StatusChange]:
         """Tick the tree once (BT.CPP `tickOnce`) and return the status changes it made."""
@@ -219,9 +222,9 @@ class TreeMission:
             self.done = True
             self.result = status.name
             if status is NodeStatus.SUCCESS:
-                _log.info("Finished Navigation")
+                self._log.info("Finished Navigation")
             else:
-                _log.warning("Navigation Failed")
+                self._log.warning("Navigation Failed")
                 changes = self._changes.flush()
                 # Children fail before their parents: the first FAILURE of the last tick is the cause.
                 first = next((c for c in changes if c.new is NodeStatus.FAILURE), None)

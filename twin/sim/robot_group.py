@@ -34,7 +34,7 @@ import numpy as np
 from twin.bag.frames import frame_prefix
 from twin.core.clock import NS_PER_S
 from twin.core.errors import ConfigError, WorldError
-from twin.node import LaunchArguments, Node, launch_context
+from twin.node import LaunchArguments, Node, launch_context, node_logger
 from twin.robot.chassis import ChassisParams, SlipModel
 from twin.robot.drivetrain import Drivetrain
 from twin.robot.encoders import EncoderModel, EncoderSpec
@@ -308,8 +308,8 @@ class RobotGroup:
             Lidar.from_robot(robot, scene, rng.stream("lidar"), obstacles=seen) if robot.lidar is not None else None
         )
         self.drive = self._make_drive(self.body.radius_m, contact)
-        if isinstance(self.drive, FmuDrivetrain) and self.namespace:
-            self.drive.robot = f"/{self.namespace}"  # a fleet's robot names itself in the drive's log lines
+        if isinstance(self.drive, FmuDrivetrain):
+            self.drive.log = node_logger("diff_drive", self.namespace)  # its node's (a fleet's robot's) lines
         try:  # from here on, a failure must release the drive (FMU instances) it leaves behind
             self.wheels = self._wheel_frames()
             self.imu = self._make_imu(rng)
@@ -340,19 +340,20 @@ class RobotGroup:
             return None
         from twin.sim import mission
 
+        log = node_logger("mission", self.namespace)  # the mission node's: its tree's lines name the robot
         if isinstance(spec, BehaviorTreeMission):
             from twin.mission.navigate_to_pose import Nav2Navigator
 
             nav = self.navigation
             assert nav is not None and nav.navigates  # a tree mission always has Nav2's stack (or refused)
             navigator = Nav2Navigator(lambda: nav.navigator)
-            return mission.TreeMission(spec, navigator, clock=self._now, seed=self._tree_seed())
+            return mission.TreeMission(spec, navigator, clock=self._now, seed=self._tree_seed(), log=log)
         if isinstance(spec, CmdVelScriptMission):
             return mission.CmdVelScript(spec)
         if isinstance(spec, ReplayMission):
             from twin.sim.replay import start_moving
 
-            replay = mission.BagReplay(spec)
+            replay = mission.BagReplay(spec, log)
             assert self.drive is not None
             start_moving(self.drive, *replay.commands.start_velocity)
             return replay

@@ -9,7 +9,15 @@ import pytest
 import twin.msgs as msgs
 from twin.core.errors import ConfigError
 from twin.msgs import Header, LaserScan, PoseWithCovarianceStamped, Twist
-from twin.node import LaunchArguments, Node, ParameterNotDeclaredError, Time, launch_context, resolve_topic_name
+from twin.node import (
+    LaunchArguments,
+    Node,
+    ParameterNotDeclaredError,
+    Time,
+    launch_context,
+    node_logger,
+    resolve_topic_name,
+)
 
 
 class Talker(Node):
@@ -67,6 +75,21 @@ def test_a_pushed_namespace_leads_the_nodes_own_as_a_launch_group_does(
         node = SubNamespaced()
     assert node.get_namespace() == namespace
     assert node.pub.topic_name == f"{namespace}/out"
+
+
+def test_a_namespaced_nodes_logger_is_named_as_rcl_names_it(caplog: pytest.LogCaptureFixture) -> None:
+    # rcl: /robot1/amcl logs as `robot1.amcl`, /fleet/a/amcl as `fleet.a.amcl`; a node in no namespace as `amcl`.
+    with launch_context(LaunchArguments(push_namespace="robot1")):
+        node = Node("amcl")
+        inner = node_logger("planner_server")  # a part of a node built in the group: the group's namespace
+    assert node.get_logger().name == "twin.node.robot1.amcl"
+    assert inner.name == "twin.node.robot1.planner_server"
+    assert Node("amcl", namespace="/fleet/a").get_logger().name == "twin.node.fleet.a.amcl"
+    assert Node("amcl").get_logger().name == "twin.node.amcl"
+    assert node_logger("bt_navigator").name == "twin.node.bt_navigator"
+    with caplog.at_level("INFO", logger="twin.node"):
+        node.get_logger().warn("lost")
+    assert [(r.name, r.getMessage()) for r in caplog.records] == [("twin.node.robot1.amcl", "lost")]
 
 
 def test_a_group_remapping_moves_an_absolute_topic_into_the_namespace() -> None:

@@ -9,7 +9,6 @@ smoother's.
 from __future__ import annotations
 
 import dataclasses
-import logging
 from collections.abc import Callable, Mapping
 from typing import Protocol
 
@@ -21,11 +20,10 @@ from twin.nav.behaviors.timed_behavior import BehaviorParams, BehaviorStatus
 from twin.nav.behaviors.wait import Wait
 from twin.nav.costmap_2d.layered_costmap import Costmap
 from twin.nav.frames import Frames
-from twin.node import PRIORITY_COMMAND, Encoded, Node
+from twin.node import PRIORITY_COMMAND, Encoded, Node, node_logger
 
 __all__ = ["BEHAVIORS", "BehaviorServer", "BehaviorServerNode", "make_behavior"]
 
-_log = logging.getLogger(__name__)
 
 BEHAVIORS = ("spin", "backup", "drive_on_heading", "wait")
 """The behaviour action servers, by Nav2's action names."""
@@ -61,6 +59,7 @@ class BehaviorServer:
         finish: Callable[..., None],
         servers: Mapping[str, str | None] | None = None,
     ) -> None:
+        self._log = node_logger("behavior_server")  # its node's lines: `[robot1.behavior_server]` in a fleet
         self.params = params
         #: The action servers it loads: name → behaviour (None: one the twin does not simulate).
         self.servers: Mapping[str, str | None] = (
@@ -91,10 +90,10 @@ class BehaviorServer:
         self._stop = False
         behavior = make_behavior(kind, params)
         self.recoveries += 1
-        _log.info("Running %s", goal.server)
+        self._log.info("Running %s", goal.server)
         refusal = behavior.start(request, self.frames.odom_pose, t_ns)
         if refusal:  # Nav2's onRun refused it: "Initial checks failed", the goal is aborted at once
-            _log.warning("Initial checks failed for %s: %s", goal.server, refusal)
+            self._log.warning("Initial checks failed for %s: %s", goal.server, refusal)
             self._finish(goal, ActionState.FAILED, reason=refusal)
             return
         self._goal, self._impl = goal, behavior
@@ -120,7 +119,7 @@ class BehaviorServer:
         if step.status is BehaviorStatus.SUCCEEDED:
             self._finish(goal, ActionState.SUCCEEDED)
         else:
-            _log.warning("%s failed: %s", goal.server, step.reason)
+            self._log.warning("%s failed: %s", goal.server, step.reason)
             self._finish(goal, ActionState.FAILED, reason=step.reason)
         self._goal = None
         return None if waits else (0.0, 0.0)

@@ -19,7 +19,6 @@ object and runs its server's cycles on the node graph.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -33,10 +32,10 @@ from twin.nav.frames import Frames
 from twin.nav.planner.planner_server import PlannerServer
 from twin.nav.server_params import Nav2Config
 from twin.nav.smoother.simple_smoother import smooth_path
+from twin.node import node_logger
 
 __all__ = ["Nav2Servers"]
 
-_log = logging.getLogger(__name__)
 
 Pose = tuple[float, float, float]
 
@@ -65,6 +64,7 @@ class Nav2Servers:
         now: Callable[[], int],
         native: bool = True,
     ) -> None:
+        self._log = node_logger("bt_navigator")  # its node's lines: `[robot1.bt_navigator]` in a fleet
         self.config = config
         self.frames = frames
         self.global_costmap = global_costmap
@@ -180,7 +180,7 @@ class Nav2Servers:
         kind = str(request.get("kind", "clear_entirely"))
         targets = [c for key, c in (("global", self.global_costmap), ("local", self.local_costmap)) if key in service]
         if not targets:
-            _log.warning("no service %r in the twin (costmap clearing services only)", service)
+            self._log.warning("no service %r in the twin (costmap clearing services only)", service)
             return False
         for costmap in targets:
             if kind == "clear_entirely":

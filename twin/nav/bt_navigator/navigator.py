@@ -8,7 +8,6 @@ iteration; `status`/`reason` answer the action's client (the mission's `GoToPose
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -22,10 +21,10 @@ from twin.bt.status import NodeStatus
 from twin.nav.actions import ActionState
 from twin.nav.bt_navigator.action_servers import Nav2Servers
 from twin.nav.bt_navigator.factory import nav2_factory
+from twin.node import node_logger
 
 __all__ = ["BtNavigator"]
 
-_log = logging.getLogger(__name__)
 
 Pose = tuple[float, float, float]
 F64 = NDArray[np.float64]
@@ -39,10 +38,12 @@ class BtNavigator:
     """
 
     def __init__(self, servers: Nav2Servers, bt_xml: Path, *, now: Callable[[], int]) -> None:
+        self._log = node_logger("bt_navigator")  # its node's lines: `[robot1.bt_navigator]` in a fleet
         self.servers = servers
         self.bt_xml = bt_xml
         factory = nav2_factory(servers)
         self.tree = factory.create_tree_from_file(bt_xml, clock=now)
+        self.tree.log = self._log
         self.changes = StatusChangeBuffer()
         self.tree.add_listener(self.changes)
         self.now = now
@@ -67,7 +68,7 @@ class BtNavigator:
             self._goal_id += 1
             self._status[self._goal_id] = ActionState.FAILED
             self._reasons[self._goal_id] = "Initial robot pose is not available (AMCL has no initial pose yet)"
-            _log.warning("NavigateToPose goal rejected: the robot's pose in map is not available yet")
+            self._log.warning("NavigateToPose goal rejected: the robot's pose in map is not available yet")
             return self._goal_id
         if self.active:
             self._status[self._goal_id] = ActionState.FAILED
@@ -84,7 +85,7 @@ class BtNavigator:
             self.servers.last_error = ""
         self.active = True
         self._status[self._goal_id] = ActionState.RUNNING
-        _log.info("Begin navigating from current location to (%.2f, %.2f)", pose[0], pose[1])
+        self._log.info("Begin navigating from current location to (%.2f, %.2f)", pose[0], pose[1])
         return self._goal_id
 
     def status(self, goal_id: int) -> ActionState:
@@ -107,12 +108,12 @@ class BtNavigator:
         self.active = False
         if status is NodeStatus.SUCCESS:
             self._status[self._goal_id] = ActionState.SUCCEEDED
-            _log.info("Goal succeeded")
+            self._log.info("Goal succeeded")
         else:
             self._status[self._goal_id] = ActionState.FAILED
             reason = self.servers.last_error or "the navigation tree failed"
             self._reasons[self._goal_id] = reason
-            _log.warning("Goal failed: %s", reason)
+            self._log.warning("Goal failed: %s", reason)
         return False
 
     def distance_remaining(self, pose: Pose) -> float:

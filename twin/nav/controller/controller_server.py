@@ -15,7 +15,6 @@ active controller's local plan on `/local_plan` (odom).
 from __future__ import annotations
 
 import enum
-import logging
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -31,7 +30,7 @@ from twin.nav.controller.checkers import PoseProgressChecker, SimpleGoalChecker,
 from twin.nav.costmap_2d.costmap_2d import CostGrid
 from twin.nav.costmap_2d.layered_costmap import Costmap
 from twin.nav.frames import Frames, invert
-from twin.node import PRIORITY_COMMAND, Encoded, Node
+from twin.node import PRIORITY_COMMAND, Encoded, Node, node_logger
 
 __all__ = [
     "CONTROLLER_PLUGINS",
@@ -44,7 +43,6 @@ __all__ = [
     "controller_for_plugin",
 ]
 
-_log = logging.getLogger(__name__)
 
 F64 = NDArray[np.float64]
 Finish = Callable[..., None]
@@ -246,6 +244,7 @@ class ControllerServer:
         progress_allowance_s: float,
         progress_angle_rad: float | None = None,
     ) -> None:
+        self._log = node_logger("controller_server")  # its node's lines: `[robot1.controller_server]` in a fleet
         self.frames = frames
         self.local_costmap = local_costmap
         self.goal_checkers = goal_checkers
@@ -344,7 +343,7 @@ class ControllerServer:
         if step.status is FollowStatus.SUCCEEDED:
             self._finish(goal, ActionState.SUCCEEDED)
         else:
-            _log.warning("FollowPath failed: %s", step.reason)
+            self._log.warning("FollowPath failed: %s", step.reason)
             self._finish(goal, ActionState.FAILED, reason=step.reason)
         self._follow = None
         return (0.0, 0.0)

@@ -8,7 +8,6 @@ publishes each computed path on `/plan` (nav_msgs/Path, map).
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
@@ -19,11 +18,10 @@ from twin.bag import PathEncoder
 from twin.nav.costmap_2d.layered_costmap import Costmap
 from twin.nav.frames import Frames
 from twin.nav.planner.navfn import NavfnParams, NavfnPlanner, PlanFailure
-from twin.node import Encoded, Node
+from twin.node import Encoded, Node, node_logger
 
 __all__ = ["PlannerServer", "PlannerServerNode"]
 
-_log = logging.getLogger(__name__)
 
 F64 = NDArray[np.float64]
 
@@ -39,6 +37,7 @@ class PlannerServer:
     """
 
     def __init__(self, params: NavfnParams, frames: Frames, global_costmap: Costmap, *, native: bool = True) -> None:
+        self._log = node_logger("planner_server")  # its node's lines: `[robot1.planner_server]` in a fleet
         self.frames = frames
         self.global_costmap = global_costmap
         self.planner = NavfnPlanner(params, native=native)
@@ -56,7 +55,7 @@ class PlannerServer:
             end = (float(target[0]), float(target[1]), float(target[2]))
             result = self.planner.make_plan(grid, here, end)  # type: ignore[arg-type]
             if isinstance(result, PlanFailure):
-                _log.warning("GridBased: failed to create plan: %s", result.message)
+                self._log.warning("GridBased: failed to create plan: %s", result.message)
                 return f"planner: {result.message}"
             pieces.append(result.poses if not pieces else result.poses[1:])
             here = end
