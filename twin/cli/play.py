@@ -23,8 +23,9 @@ sent as foxglove_bridge sends them (CDR with ros2msg schemas); latched topics (/
 MCAP or sqlite3, metadata versions 4 to 9; a topic whose type is defined nowhere is left out.
 A fleet's bag serves every robot's topics as they are (/robot1/scan, /robot1/tf...); --namespace NS
 serves one robot alone under a single robot's names (/NS/scan as /scan, /NS/tf as /tf), with the
-topics under no namespace (/clock, /rosout, a frame_prefix fleet's shared /tf), so the shipped
-layout shows it (docs/fleet.md).
+topics under no namespace (/clock, /rosout), so the shipped layout shows it (docs/fleet.md). In a
+bag whose robots share one /tf with prefixed frames (NS/odom, Gazebo's frame_prefix), NS/ is taken
+off the robot's frames and only its own and the world's transforms of the shared /tf are served.
 Ctrl-C stops. Exit codes: 0 done, 2 bad option or port in use, 5 bag error, 130 interrupted.
 """
 
@@ -93,10 +94,13 @@ def _play(args: argparse.Namespace) -> int:
 
     info = open_bag(args.bag)  # a bad bag (or namespace) is reported before the port is taken
     namespace = None
+    robots: list[str] = []
     if args.namespace is not None:
+        from twin.analysis.collect import robot_namespaces
         from twin.analysis.fleet import check_namespace
 
         namespace = check_namespace(info, args.namespace)
+        robots = robot_namespaces(info)
     stop: list[int] = []
 
     def handle(signum: int, frame: object) -> None:
@@ -115,6 +119,7 @@ def _play(args: argparse.Namespace) -> int:
                 loop=args.loop,
                 should_stop=lambda: bool(stop),
                 namespace=namespace,
+                robots=robots,
             )
     finally:
         for sig, old in previous.items():

@@ -337,7 +337,13 @@ def _simulate_checked(args: argparse.Namespace) -> int:
     bag_path = _bag_path(scenario, args.out)
 
     flag = _StopFlag()
-    live = _live_view(args, flag, ros2=scenario.ros2.enabled, namespaces=[e.ns for e in scenario.robots])
+    live = _live_view(
+        args,
+        flag,
+        ros2=scenario.ros2.enabled,
+        namespaces=[e.ns for e in scenario.robots],
+        frame_prefix=scenario.tf.mode == "frame_prefix",
+    )
     with live as sinks, _ros2_bridge(scenario) as bridge:
         return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks + bridge, provenance=provenance)
 
@@ -386,7 +392,12 @@ def _ros2_bridge(scenario: Scenario) -> Iterator[list[Sink]]:
 
 @contextmanager
 def _live_view(
-    args: argparse.Namespace, flag: _StopFlag, *, ros2: bool = False, namespaces: Sequence[str] = ()
+    args: argparse.Namespace,
+    flag: _StopFlag,
+    *,
+    ros2: bool = False,
+    namespaces: Sequence[str] = (),
+    frame_prefix: bool = False,
 ) -> Iterator[list[Sink]]:
     """The live server and pacer `--live`, `--speed` (and `--ros2`: real time) ask for, as sinks after the recorder."""
     if not args.live and (args.host is not None or args.port is not None or args.namespace is not None):
@@ -410,7 +421,7 @@ def _live_view(
         if namespace is not None:
             alone = f"twin: serving /{namespace}/ alone, as one robot's topics (/{namespace}/scan as /scan)"
             print(alone, file=sys.stderr)
-        yield [LiveSink(server, pacer=pacer, namespace=namespace)]
+        yield [LiveSink(server, pacer=pacer, namespace=namespace, frame_prefix=frame_prefix, robots=namespaces)]
 
 
 def _live_namespace(given: str | None, namespaces: Sequence[str]) -> str | None:

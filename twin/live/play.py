@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from twin.bag import message_definitions, open_bag, read_messages
+from twin.bag.typesys import TypeRegistry, message_type_name
 from twin.core.errors import BagError
 from twin.live.namespace import NamespaceView
 from twin.live.pacing import Pacer
@@ -43,6 +44,7 @@ def play_bag(
     should_stop: Callable[[], bool] = lambda: False,
     on_pass: Callable[[int], None] | None = None,
     namespace: str | None = None,
+    robots: Sequence[str] = (),
 ) -> PlayReport:
     """Publish the bag's messages on `server` in time order, paced to `speed` (None: as fast as possible).
 
@@ -55,6 +57,9 @@ def play_bag(
         on_pass: Called with the pass number (1, 2, ...) as each pass starts.
         namespace: A fleet's robot to serve alone: its topics without the namespace (`/robot1/scan` as
             `/scan`) and the topics under no namespace (`twin.live.namespace`); None: every topic as it is.
+            In a bag whose robots share one `/tf` with prefixed frames (`robot1/odom`), its prefix
+            is taken off its frames and the other robots' transforms are left out.
+        robots: The bag's robots' namespaces (whose prefixed frames are not this robot's).
 
     Raises:
         BagError: If the bag cannot be read, or has no topic with a message definition.
@@ -63,7 +68,15 @@ def play_bag(
     definitions = message_definitions(info.path)
     handles: dict[str, int] = {}
     skipped = []
-    view = NamespaceView(namespace) if namespace is not None else None
+    view = None
+    rewrites: dict[str, Callable[[bytes], bytes | None]] = {}
+    registry = TypeRegistry()
+    if namespace is not None:
+        ns = namespace.strip("/")
+        have = {t.name for t in info.topics}
+        # The robots' TF on the one shared /tf, none under the namespace: frames named `robot1/odom`.
+        shared = bool({"/tf", "/tf_static"} & have) and not {f"/{ns}/tf", f"/{ns}/tf_static"} & have
+        view = NamespaceView(ns, frame_prefix=shared, robots=robots)
     for topic in info.topics:
         served = view.served_as(topic.name) if view is not None else topic.name
         if served is None:
@@ -74,6 +87,13 @@ def play_bag(
             _log.warning("%s: no definition of %s; %s is not served", info.path, topic.msgtype, topic.name)
             continue
         handles[topic.name] = server.add_channel(served, definition, latched=is_latched(topic.qos))
+        if view is not None and view.frame_prefix:
+            msgtype = message_type_name(topic.msgtype)
+            if not registry.knows(msgtype):
+                registry.register(msgtype, definition.text)
+            rewrite = view.rewriter(msgtype, registry.store)
+            if rewrite is not None:
+                rewrites[topic.name] = rewrite
     if not handles:
         msg = f"{info.path}: no topic has a message definition (embedded or standard); nothing to serve"
         raise BagError(msg)
@@ -98,7 +118,14 @@ def play_bag(
                 break
             if pacer is not None:
                 pacer.wait(m.t_ns)
-            publish(handles[m.topic], m.t_ns, m.msg)
+            data = m.msg
+            if rewrites:
+                rewrite = rewrites.get(m.topic)
+                if rewrite is not None:
+                    data = rewrite(bytes(data))
+                    if data is None:
+                        continue  # only other robots' transforms
+            publish(handles[m.topic], m.t_ns, data)
             messages += 1
             last_ns = m.t_ns
         if not loop:

@@ -8,7 +8,7 @@ so a run at `speed` 1 publishes in real time, and so does the recorder.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from twin.bag import Durability, QosProfile, default_qos
 from twin.bag.typesys import TypeRegistry
@@ -33,12 +33,23 @@ class LiveSink:
         namespace: A fleet's robot to serve alone (`twin.live.namespace`); None: every topic.
     """
 
-    def __init__(self, server: LiveServer | None, *, pacer: Pacer | None = None, namespace: str | None = None) -> None:
+    def __init__(
+        self,
+        server: LiveServer | None,
+        *,
+        pacer: Pacer | None = None,
+        namespace: str | None = None,
+        frame_prefix: bool = False,
+        robots: Sequence[str] = (),
+    ) -> None:
         self._server = server
-        self._view = NamespaceView(namespace) if namespace is not None else None
+        self._view = (
+            NamespaceView(namespace, frame_prefix=frame_prefix, robots=robots) if namespace is not None else None
+        )
         self._registry = TypeRegistry()
         self._publish = server.publish if server is not None else None
         self._wait = pacer.wait if pacer is not None else None
+        self._rewrite: dict[int, Callable[[bytes], bytes | None]] = {}  # by handle: frames to take the prefix off
 
     def add_topic(self, topic: str, msgtype: str, *, qos: Sequence[QosProfile] | None = None) -> int:
         """Advertise the topic live with its type's `ros2msg` definition; return the handle `write` takes.
@@ -52,11 +63,23 @@ class LiveSink:
         if served is None:
             return -1  # another robot's: paced, not served
         profiles = tuple(qos) if qos is not None else default_qos(topic)
-        return self._server.add_channel(served, self._registry.definition(msgtype), latched=is_latched(profiles))
+        handle = self._server.add_channel(served, self._registry.definition(msgtype), latched=is_latched(profiles))
+        if self._view is not None:
+            rewrite = self._view.rewriter(msgtype, self._registry.store)
+            if rewrite is not None:
+                self._rewrite[handle] = rewrite
+        return handle
 
     def write(self, handle: int, t_ns: int, data: bytes) -> None:
         """Wait until `t_ns` is due (when paced), then publish the message live."""
         if self._wait is not None:
             self._wait(t_ns)
         if self._publish is not None and handle >= 0:
+            if self._rewrite:
+                rewrite = self._rewrite.get(handle)
+                if rewrite is not None:
+                    served = rewrite(data)
+                    if served is None:
+                        return  # only other robots' transforms
+                    data = served
             self._publish(handle, t_ns, data)
