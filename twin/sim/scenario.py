@@ -616,12 +616,29 @@ def for_ros2_role(scenario: Scenario) -> Scenario:
 
     As a simulator the run keeps the world, robot, sensors, drive, odometry, TF, robot_state_publisher
     and /clock, and drops its mission, AMCL and Nav2 (and so its map and map→odom): an external
-    stack brings its own and drives the robot on /cmd_vel.
+    stack brings its own and drives the robot on /cmd_vel. In a fleet every robot is so, and the
+    topics taken by default are each robot's (`/robot1/cmd_vel`, `/robot1/initialpose`...), as a
+    multi-robot Nav2 publishes them.
     """
-    if not scenario.ros2.enabled or scenario.ros2.role == "full":
+    if not scenario.ros2.enabled:
         return scenario
-    localization = dataclasses.replace(scenario.localization, type="none", initial_pose=None)
-    return dataclasses.replace(scenario, mission=NoMission(), localization=localization)
+    ros2 = scenario.ros2
+    if scenario.robots and ros2.subscribe == Ros2Section().subscribe:
+        each = tuple(f"/{entry.ns}{topic}" for entry in scenario.robots for topic in ros2.subscribe)
+        scenario = dataclasses.replace(scenario, ros2=dataclasses.replace(ros2, subscribe=each))
+    if ros2.role == "full":
+        return scenario
+
+    def simulated(localization: LocalizationSection) -> LocalizationSection:
+        return dataclasses.replace(localization, type="none", initial_pose=None)
+
+    robots = tuple(
+        dataclasses.replace(entry, mission=NoMission(), localization=simulated(entry.localization))
+        for entry in scenario.robots
+    )
+    return dataclasses.replace(
+        scenario, mission=NoMission(), localization=simulated(scenario.localization), robots=robots
+    )
 
 
 def names_a_key(text: str) -> bool:

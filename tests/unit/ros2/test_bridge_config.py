@@ -79,6 +79,24 @@ def test_the_simulator_role_runs_no_mission_and_no_localization_of_its_own() -> 
     assert sim.world == scenario.world and sim.robot == scenario.robot and sim.drive == scenario.drive
 
 
+def test_the_simulator_role_applies_to_every_robot_of_a_fleet_and_takes_each_robots_topics() -> None:
+    # An external multi-robot Nav2 drives each robot on /<ns>/cmd_vel: none of the twin's own stacks may run.
+    fleet = load_scenario(REPO / "scenarios" / "house_two_waffles.yaml")
+    assert all(isinstance(e.mission, BehaviorTreeMission) for e in fleet.robots)
+    sim = for_ros2_role(dataclasses.replace(fleet, ros2=Ros2Section(enabled=True, role="simulator")))
+    assert [e.ns for e in sim.robots] == ["robot1", "robot2"]
+    for entry, before in zip(sim.robots, fleet.robots, strict=True):
+        assert isinstance(entry.mission, NoMission), entry.ns
+        assert entry.localization.type == "none" and entry.localization.initial_pose is None
+        assert entry.robot == before.robot and entry.drive == before.drive and entry.sensors == before.sensors
+    each = ("/robot1/cmd_vel", "/robot1/initialpose", "/robot2/cmd_vel", "/robot2/initialpose")
+    assert sim.ros2.subscribe == each
+    full = for_ros2_role(dataclasses.replace(fleet, ros2=Ros2Section(enabled=True)))
+    assert full.ros2.subscribe == each and full.robots == fleet.robots  # full: the fleet's own stacks run
+    chosen = Ros2Section(enabled=True, subscribe=("/robot2/cmd_vel",))
+    assert for_ros2_role(dataclasses.replace(fleet, ros2=chosen)).ros2.subscribe == ("/robot2/cmd_vel",)
+
+
 @pytest.mark.parametrize(
     ("section", "expected"),
     [
