@@ -236,7 +236,21 @@ def test_a_fleet_scenario_with_an_unknown_per_robot_key_is_refused(tmp_path: Pat
     [
         ("{name: a}", ":5: robots[1].name: robots[0] has the same name 'a'; give each robot its own"),
         ("{name: b, namespace: a}", ":5: robots[1].namespace: robots[0] has the same namespace 'a'"),
-        ("{name: b, namespace: 'x-y'}", ":5: robots[1]: namespace 'x-y' is not a ROS namespace"),
+        ("{name: b, namespace: 'x-y'}", ":5: robots[1].namespace: namespace 'x-y' is not a ROS namespace"),
+        ("{name: 2b}", ":5: robots[1].name: name '2b' must be letters, digits and _"),
+        # a robot's own lidar settings are checked as the top level's are (not an internal error at the run)
+        (
+            "{name: b, robot: {initial_pose: {x_m: 1.5}}, sensors: {lidar: {samples: 0}}}",
+            ": robots[1].sensors.lidar.samples: must be between 1 and 100000, got 0",
+        ),
+        (
+            "{name: b, robot: {initial_pose: {x_m: 1.5}}, sensors: {lidar: {angle_min_rad: 1.0, angle_max_rad: -1.0}}}",
+            ": robots[1].sensors.lidar.angle_min_rad: 1.0 is not below angle_max_rad -1.0",
+        ),
+        (
+            "{name: b, robot: {initial_pose: {x_m: 1.5}}, sensors: {lidar: {range_min_m: 50}}}",
+            ": robots[1].sensors.lidar.range_min_m: the lidar's range would be 50 .. 3.5 m",
+        ),
         # the tools take every topic under /a/ for robot a's
         ("{name: b, namespace: a/b}", ":5: robots[1].namespace: namespace 'a/b' is inside robots[0]'s namespace 'a'"),
     ],

@@ -93,16 +93,30 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
         raise _refuse(path, "seed", f"must be a non-negative whole number, got {scenario.seed}")
     if not scenario.max_duration_s > 0:
         raise _refuse(path, "max_duration_s", f"must be a positive number of seconds, got {scenario.max_duration_s}")
+    _check_lidar(scenario, path, "")  # the top level's, named as written (a fleet lays it under each entry)
+    for i, (namespace, robot) in enumerate(scenario.robot_scenarios()):
+        entry = f"robots[{i}]." if namespace else ""  # a fleet's robot: its entry's key
+        if namespace:
+            _check_lidar(robot, path, entry)
+        _check_lidar_of_robot(robot, path, entry)
+    _check_files(scenario, path)
+    _check_blocks(scenario, path)
+    _check_camera_of_robot(scenario, path)
+
+
+def _check_lidar(scenario: Scenario, path: Path, entry: str) -> None:
+    """The lidar's overrides: float32 values, a sample count, a range and a span (a fleet's robot: its `entry`)."""
     lidar = scenario.sensors.lidar
-    for key, value in _values(lidar, "sensors.lidar"):
+    for key, value in _values(lidar, f"{entry}sensors.lidar"):
         if isinstance(value, float) and abs(value) > _FLOAT32_MAX:
             raise _refuse(path, key, f"{value!r} does not fit a LaserScan's float32 fields; give at most 3.4e+38")
     if lidar.samples is not None and not 1 <= lidar.samples <= _MAX_SAMPLES:
-        raise _refuse(path, "sensors.lidar.samples", f"must be between 1 and {_MAX_SAMPLES}, got {lidar.samples}")
+        key = f"{entry}sensors.lidar.samples"
+        raise _refuse(path, key, f"must be between 1 and {_MAX_SAMPLES}, got {lidar.samples}")
     if lidar.range_min_m is not None and lidar.range_max_m is not None and lidar.range_min_m >= lidar.range_max_m:
         raise _refuse(
             path,
-            "sensors.lidar.range_min_m",
+            f"{entry}sensors.lidar.range_min_m",
             f"{lidar.range_min_m} is not below range_max_m {lidar.range_max_m}; make range_min_m < range_max_m",
         )
     if (
@@ -112,13 +126,9 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
     ):
         raise _refuse(
             path,
-            "sensors.lidar.angle_min_rad",
+            f"{entry}sensors.lidar.angle_min_rad",
             f"{lidar.angle_min_rad} is not below angle_max_rad {lidar.angle_max_rad}",
         )
-    _check_files(scenario, path)
-    _check_blocks(scenario, path)
-    _check_lidar_of_robot(scenario, path)
-    _check_camera_of_robot(scenario, path)
 
 
 def _check_camera_of_robot(scenario: Scenario, path: Path) -> None:
@@ -149,7 +159,7 @@ def _check_blocks(scenario: Scenario, path: Path) -> None:
         raise err.with_context(before=f"{path}: ") from None
 
 
-def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
+def _check_lidar_of_robot(scenario: Scenario, path: Path, entry: str = "") -> None:
     """Check the lidar overrides against the robot's own SDF values (one override may contradict the other)."""
     lidar = scenario.sensors.lidar
     if lidar.range_min_m is None and lidar.range_max_m is None:
@@ -157,7 +167,7 @@ def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
     from twin.sim.robot_group import scenario_robot
 
     try:
-        robot = scenario_robot(scenario)
+        robot = scenario_robot(scenario, entry=entry)
     except TwinError as err:
         raise err.with_context(before=f"{path}: ") from None
     if robot.lidar is None:
@@ -168,7 +178,7 @@ def _check_lidar_of_robot(scenario: Scenario, path: Path) -> None:
         key = "sensors.lidar.range_min_m" if lidar.range_min_m is not None else "sensors.lidar.range_max_m"
         raise _refuse(
             path,
-            key,
+            entry + key,
             f"the lidar's range would be {range_min:g} .. {range_max:g} m (the robot's SDF gives the other end); "
             "make range_min_m < range_max_m",
         )

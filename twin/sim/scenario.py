@@ -519,14 +519,14 @@ class RobotEntry:
     def __post_init__(self) -> None:
         if not _ROS_TOKEN.match(self.name):
             msg = f"name {self.name!r} must be letters, digits and _ (not starting with a digit)"
-            raise ValueError(msg)
+            raise FieldError(("name",), msg)
         ns = self.ns
         if not all(_ROS_TOKEN.match(token) for token in ns.split("/")):
             msg = (
                 f"namespace {self.namespace!r} is not a ROS namespace: tokens of letters, digits and _ "
                 "(not starting with a digit) joined by /"
             )
-            raise ValueError(msg)
+            raise FieldError(("namespace",) if self.namespace is not None else ("name",), msg)
 
     @property
     def ns(self) -> str:
