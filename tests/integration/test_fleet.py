@@ -265,6 +265,32 @@ def test_robot_names_and_namespaces_are_checked_naming_the_entry(tmp_path: Path,
         assert len(lines) == 1 and f"{bad}{message}" in lines[0], lines
 
 
+@pytest.mark.parametrize(
+    ("mission", "code", "message"),
+    [
+        ("{main_tree: Nope}", 6, "trees/tree.xml:5: no <BehaviorTree ID='Nope'> in the loaded files"),
+        ("{locations: broken.yaml}", 2, "broken.yaml:2:1: invalid YAML"),
+        ("{locations: one.yaml}", 6, "one.yaml has no location 'location2'; did you mean 'location1'?"),
+    ],
+)
+def test_a_robots_own_tree_or_locations_file_refused_names_its_entry(
+    tmp_path: Path, mission: str, code: int, message: str
+) -> None:
+    # In a fleet of four, "which robot's mission is wrong" is the first thing to know.
+    (tmp_path / "broken.yaml").write_text("location1: [1, 2\n")
+    (tmp_path / "one.yaml").write_text("location1: [1.0, 0.5, 0.0]\n")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(
+        f"name: x\nrobots:\n  - {{name: a}}\n  - {{name: b, robot: {{initial_pose: {{x_m: 1.5}}}}, mission: {mission}}}\n"
+    )
+    for command in (("simulate", str(bad), "--out", str(tmp_path / "bag")), ("scenario", "check", str(bad))):
+        result = run_twin(*command)
+        assert result.returncode == code, result.stderr
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"twin: error: {bad}: robots[1]: "), lines
+        assert message in lines[0], lines
+
+
 def test_robots_spawned_overlapping_are_refused(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: x\nrobots:\n  - {name: a}\n  - {name: b, robot: {initial_pose: {x_m: 0.2, y_m: 0.0}}}\n")

@@ -482,7 +482,7 @@ def _run(
             shutil.rmtree(bag_path, ignore_errors=True)
         if isinstance(err, WorldError) and _ROBOT_MODEL_KEY.match(str(err)):
             raise err.with_context(before=f"{path}: ") from err  # the robot the scenario names
-        if not isinstance(err, ConfigError):
+        if not isinstance(err, ConfigError) and not (isinstance(err, TwinError) and str(err).startswith("robots[")):
             raise
         # A scenario value the loaded world or robot refuses: name the scenario file too.
         named = in_scenario(err, path)

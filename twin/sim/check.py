@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from twin.core.errors import ConfigError, FmuError, TreeError, TwinError
 from twin.core.numbers import number_problem
-from twin.sim.scenario import BehaviorTreeMission, Scenario, names_a_key, runs_amcl, runs_nav2
+from twin.sim.scenario import BehaviorTreeMission, Scenario, in_entry, names_a_key, runs_amcl, runs_nav2
 
 if TYPE_CHECKING:
     from twin.world import RobotModelSpec
@@ -272,12 +272,8 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
             if isinstance(sc.mission, BehaviorTreeMission):
                 _load_tree(sc.mission)
             _load_navigation(sc, robot)
-        except ConfigError as err:
-            if not ns or str(err).startswith(("/", str(path))):
-                raise _named(err, path) from None
-            raise _named(ConfigError(f"robots[{index}].{err}"), path) from None  # as the run names its entry
-        except TwinError as err:
-            raise _named(err, path) from None
+        except TwinError as err:  # a fleet's names its entry, as the run does
+            raise _named(in_entry(err, f"robots[{index}]." if ns else ""), path) from None
         _check_drive(sc, path, robot.name, entry=f"robots[{index}]." if ns else "")
     poses = [(ns, sc.robot.initial_pose) for ns, sc in robots]
     try:
@@ -308,6 +304,8 @@ def in_scenario(err: TwinError, path: Path) -> TwinError:
     error that names its own file (a mapping file, an FMU) is left as it is.
     """
     text = str(err)
+    if text.startswith("robots["):  # a fleet robot's (`twin.sim.scenario.in_entry`): the entry names it
+        return err.with_context(before=f"{path}: ")
     if not isinstance(err, ConfigError) or text.startswith(("/", str(path))):
         return err
     if not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text:

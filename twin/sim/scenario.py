@@ -14,9 +14,10 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 from twin.core.config import FieldError
+from twin.core.errors import TwinError
 from twin.core.native import compiler_candidates, find_compiler
 from twin.core.numbers import number_problem
 from twin.estimation import EstimationSection
@@ -36,10 +37,13 @@ __all__ = [
     "default_scenario_path",
     "fmu_fallback",
     "for_ros2_role",
+    "in_entry",
     "names_a_key",
     "runs_amcl",
     "runs_nav2",
 ]
+
+TwinErrorT = TypeVar("TwinErrorT", bound=TwinError)
 
 _log = logging.getLogger(__name__)
 
@@ -639,6 +643,18 @@ def for_ros2_role(scenario: Scenario) -> Scenario:
     return dataclasses.replace(
         scenario, mission=NoMission(), localization=simulated(scenario.localization), robots=robots
     )
+
+
+def in_entry(err: TwinErrorT, entry: str) -> TwinErrorT:
+    """A fleet robot's error naming its entry (`robots[1].`): before its key, else before the whole line.
+
+    `robots[1].robot.model: ...` for an error about a key; `robots[1]: trees/tree.xml:5: ...` for one
+    that names a file of the robot's (its tree, its locations, its Nav2 params). No entry: `err` as it is.
+    """
+    if not entry or str(err).startswith(entry.rstrip(".")):
+        return err
+    text = str(err)
+    return err.with_context(before=entry if names_a_key(text) else f"{entry.rstrip('.')}: ")
 
 
 def names_a_key(text: str) -> bool:

@@ -26,7 +26,7 @@ from twin.bag import Recorder
 from twin.bag.frames import frame_prefix
 from twin.core.clock import NS_PER_S, s_to_ns
 from twin.core.closing import Closing
-from twin.core.errors import ConfigError
+from twin.core.errors import ConfigError, TwinError
 from twin.core.gcpolicy import resume_collection
 from twin.node import Node, launch_context
 from twin.robot.drivetrain import Drivetrain
@@ -41,7 +41,7 @@ from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.rng import RngStreams
 from twin.sim.robot_group import RobotGroup, floor_problem
 from twin.sim.rosout import RosoutBridge
-from twin.sim.scenario import InitialPose, Scenario, names_a_key
+from twin.sim.scenario import InitialPose, Scenario, in_entry
 from twin.world import RobotModelSpec, World, build_scene, load_world
 from twin.world.obstacles import ObstacleField
 from twin.world.render import Body
@@ -199,11 +199,10 @@ class Simulation(Closing):
                         fleet=self.fleet,
                         obstacle_markers=i == 0,
                     )
-                except ConfigError as err:  # a fleet's names its entry (`robots[1].robot.model: ...`)
-                    if not g.namespace or not names_a_key(str(err)):
+                except TwinError as err:  # a fleet's names its entry (`robots[1].robot.model: ...`)
+                    if not g.namespace:
                         raise
-                    msg = f"robots[{i}].{err}"
-                    raise ConfigError(msg) from None
+                    raise in_entry(err, f"robots[{i}].") from None
                 built.append(g)
         except BaseException:
             for g in built:
@@ -284,8 +283,7 @@ class Simulation(Closing):
         except ConfigError as err:
             if not group.namespace:
                 raise
-            msg = f"robots[{index}].{err}"
-            raise ConfigError(msg) from None
+            raise in_entry(err, f"robots[{index}].") from None
 
     def _cameras(self, world: World, keep: RecordFilter, user_nodes: Sequence[Node]) -> list[Node]:
         """One camera node per robot whose `sensors.camera` enables it, each feeding its robot's tree.
