@@ -988,12 +988,19 @@ def _summary_span(view: memoryview) -> tuple[int, int, int] | None:
 
 
 def _add_summary_definitions(scan: McapScan, view: memoryview) -> None:
-    """Add the summary's schemas and channels that the data section lost to damage."""
+    """Add the summary's schemas and channels that the data section lost to damage.
+
+    The summary is found from the Footer; with the Footer or the closing magic damaged, from the
+    DataEnd record, which the summary section follows. Only records that parse exactly are taken.
+    """
     span = _summary_span(view)
-    if span is None:
+    if span is not None:
+        start, end = span[0], span[1]
+    elif scan.found_data_end:
+        start, end = scan.data_end + 13, len(view)  # after the 13-byte DataEnd, up to the first broken record
+    else:
         return
-    start, footer, _crc = span
-    for op, offset, length in _records(view[:footer], start):
+    for op, offset, length in _records(view[:end], start):
         try:
             if op == OP_SCHEMA:
                 schema = _schema_record(_body(view, offset, length), exact=True)

@@ -219,6 +219,47 @@ def test_another_writers_zstd_chunks_holding_their_schemas_recover(tmp_path: Pat
     assert "name: /chatter" in meta and "type: std_msgs/msg/String" in meta
 
 
+def test_channels_defined_in_a_damaged_chunk_come_from_the_summary_when_the_closing_magic_is_damaged_too(
+    tmp_path: Path,
+) -> None:
+    """The mcap library defines a channel inside the chunk of its first message and again in the summary.
+
+    With that first chunk damaged and the file's last bytes flipped (the closing magic), the summary
+    is still there after DataEnd: the later, intact chunks keep their messages.
+    """
+    import struct
+
+    from mcap.writer import CompressionType, Writer
+
+    bag = tmp_path / "other"
+    bag.mkdir()
+    file = bag / "other_0.mcap"
+    with file.open("wb") as stream:
+        writer = Writer(stream, chunk_size=2000, compression=CompressionType.ZSTD, enable_crcs=True)
+        writer.start(profile="ros2", library="another writer")
+        schema = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        channel = writer.register_channel("/chatter", "cdr", schema)
+        for i in range(1, 501):
+            text = f"hello {i}".encode() + b"\0"
+            writer.add_message(
+                channel, log_time=i, publish_time=i, data=b"\0\1\0\0" + struct.pack("<I", len(text)) + text
+            )
+        writer.finish()
+    with file.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    first, *rest = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    data = bytearray(file.read_bytes())
+    data[first.chunk_start_offset + first.chunk_length // 2] ^= 0x10  # inside the chunk that defines /chatter
+    data[-3] ^= 0x01  # the closing magic
+    file.write_bytes(bytes(data))
+    report = recover_bag(bag)
+    expected = sum(c.message_end_time - c.message_start_time + 1 for c in rest)  # log times run 1, 2, 3, ...
+    assert report.message_count == expected
+    _valid_everywhere(bag, expected)
+    assert "name: /chatter" in (bag / "metadata.yaml").read_text()
+
+
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_a_complete_bag_is_reported_complete_and_left_untouched(tmp_path: Path, storage: str) -> None:
     bag = tmp_path / "ok"
