@@ -388,6 +388,7 @@ def test_a_robot_whose_mission_fails_is_named_and_the_run_exits_1(tmp_path: Path
     assert summary["mission_result"] == "FAILURE"
     assert summary["mission_failure"].startswith("robot2: ")
     assert "robot1" not in summary["mission_failure"]
+    assert summary["ended_by"] == "mission failed"  # every robot's mission ended, not all well
 
 
 def test_a_fleet_run_by_a_relative_path_reruns_from_its_bag(tmp_path: Path) -> None:

@@ -116,7 +116,8 @@ def test_a_robot_whose_script_completes_has_succeeded(tmp_path: Path) -> None:
     sweep.write_text(
         "scenario: base.yaml\nvary:\n  robots[1].mission:\n"
         "    - {type: cmd_vel_script, segments: [{duration_s: 0.5, angular_radps: 0.3}]}\n"
-        "    - {type: behavior_tree, tree: done.xml}\n    - {type: behavior_tree, tree: give_up.xml}\n",
+        "    - {type: behavior_tree, tree: done.xml}\n    - {type: behavior_tree, tree: give_up.xml}\n"
+        "    - {type: cmd_vel_script, segments: [{duration_s: 30.0, angular_radps: 0.3}]}\n",
         encoding="utf-8",
     )
     out = tmp_path / "out"
@@ -127,10 +128,16 @@ def test_a_robot_whose_script_completes_has_succeeded(tmp_path: Path) -> None:
         ("complete", "complete"),
         ("complete", "SUCCESS"),
         ("complete", "FAILURE"),
+        ("complete", "running"),
     ]
-    assert [r["outcome"] for r in rows] == ["success", "success", "failure"]
+    assert [r["outcome"] for r in rows] == ["success", "success", "failure", "failure"]
     assert "robot2" in rows[2]["reason"] and "robot1" not in rows[2]["reason"]
+    # Cut short by max_duration_s: the reason names the robot whose mission had not ended, and only it.
+    assert "max_duration_s reached" in rows[3]["reason"] and "robot2 running" in rows[3]["reason"], rows[3]
+    assert "robot1" not in rows[3]["reason"]
+    # A fleet's goals count its robots with a tree; a script's robot has none, so no blank total.
+    assert [(r["goals"], r["recoveries"]) for r in rows[1:3]] == [("0", "0"), ("0", "0")]
     summary = (out / "summary.md").read_text(encoding="utf-8")
-    assert "**Success rate: 2 of 3" in summary
+    assert "**Success rate: 2 of 4" in summary
     lines = {line.split("|")[1].strip(): line for line in summary.splitlines() if line.startswith("| robot")}
-    assert "3 of 3" in lines["robot1"] and "2 of 3" in lines["robot2"], lines
+    assert "4 of 4" in lines["robot1"] and "2 of 4" in lines["robot2"], lines

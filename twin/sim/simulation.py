@@ -496,11 +496,16 @@ class Simulation(Closing):
             TwinError: From any node; the bag stays readable (close it with `close`).
         """
         logging.getLogger("twin").addHandler(self._rosout.handler)
+        robots = (
+            f"robot {self.robot.name}"
+            if self.fleet is None
+            else f"{len(self.groups)} robots ({', '.join(f'{g.namespace} {g.robot.name}' for g in self.groups)})"
+        )
         _log.info(
-            "scenario %s: world %s, robot %s, seed %d",
+            "scenario %s: world %s, %s, seed %d",
             self.scenario.name,
             self.scenario.world.sdf.name,
-            self.robot.name,
+            robots,
             self.scenario.seed,
         )
         missions = [g.mission for g in self.groups if g.mission_node is not None and g.mission is not None]
@@ -517,7 +522,8 @@ class Simulation(Closing):
         why = self.executor.spin(self.end_k, done=done, should_stop=should_stop, progress=progress)
         wall_s = time.perf_counter() - wall0
         ended_by = {
-            "done": "mission complete",
+            # the mission (every robot's) has ended: well, or in FAILURE (the summary says which robot)
+            "done": "mission failed" if self._mission_result() == "FAILURE" else "mission complete",
             "interrupted": "interrupted",
             "duration": "duration"
             if self._run_to_limit or mission is None

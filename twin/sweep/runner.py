@@ -109,6 +109,9 @@ def execute_run(task: RunTask) -> dict[str, Any]:
             row |= {"outcome": "success", "reason": ""}
         else:
             why = summary.get("mission_failure") or summary.get("ended_by", "")
+            robots = summary.get("robots") or {}
+            if robots and not summary.get("mission_failure"):  # a fleet cut short: name who had not ended well
+                why += " (" + ", ".join(f"{ns} {r}" for ns, r in robots.items() if r not in SUCCEEDED) + ")"
             row |= {"outcome": "failure", "reason": f"mission {result or 'unfinished'}: {why}"}
     # A run cut short by its timeout or a crash is not analysed (its bag, if any, is kept as asked).
     if row["outcome"] in ("success", "failure", "error") and (bag / "metadata.yaml").exists():
@@ -170,7 +173,8 @@ def _metrics(bag: Path, robots: dict[str, str]) -> dict[str, Any]:
 def _fleet_metrics(bag: Path, robots: dict[str, str]) -> dict[str, Any]:
     """A fleet run's row: each robot's columns (`ROBOT_COLUMNS`) and the fleet's in `METRIC_COLUMNS`.
 
-    The fleet's: goals, contacts, recoveries and path length summed over the robots; mission time
+    The fleet's: goals, contacts, recoveries and path length summed over the robots (goals and
+    recoveries over those with a tree, the others have none); mission time
     the longest robot's (the run's mission ends with its last robot's); localization error the
     worst robot's; `robot_contacts` the contacts between robots, each counted once (`pair_contacts`).
     """
@@ -193,17 +197,21 @@ def _fleet_metrics(bag: Path, robots: dict[str, str]) -> dict[str, Any]:
     def total(values: list[Any]) -> Any:
         return None if not values or any(v is None for v in values) else sum(values)
 
+    def navigating(values: list[Any]) -> Any:  # goals and recoveries: a robot without a tree has none
+        known = [v for v in values if v is not None]
+        return sum(known) if known else None
+
     def worst(values: list[Any]) -> Any:
         known = [v for v in values if v is not None]
         return max(known) if known else None
 
     row |= {
-        "goals_reached": total([m.goals_succeeded for m in metrics]),
-        "goals": total([len(m.goals) for m in metrics]),
+        "goals_reached": navigating([m.goals_succeeded for m in metrics]),
+        "goals": navigating([len(m.goals) for m in metrics]),
         "mission_time_s": worst([m.mission_duration_s for m in metrics]),
         "path_length_m": total([m.path_length_m for m in metrics]),
         "contacts": total([m.contacts for m in metrics]),
-        "recoveries": total([m.recoveries for m in metrics]),
+        "recoveries": navigating([m.recoveries for m in metrics]),
         "localization_error_median_m": worst([m.localization_error_median_m for m in metrics]),
         "localization_error_p95_m": worst([m.localization_error_p95_m for m in metrics]),
         "localization_error_max_m": worst([m.localization_error_max_m for m in metrics]),
