@@ -128,7 +128,7 @@ def test_twin_play_namespace_serves_one_robot(robot2_live: tuple[Path, Watch]) -
     ("extra", "message"),
     [
         (["--live", "--namespace", "robot3"], "--namespace 'robot3' is not a robot of the scenario; did you mean"),
-        (["--namespace", "robot1"], "--namespace: configure(s) the live view; add --live"),
+        (["--namespace", "robot1"], "--namespace: configures the live view; add --live"),
     ],
 )
 def test_a_bad_live_namespace_is_one_line_and_exit_2(

@@ -136,6 +136,13 @@ def tf_frames(buf: bytes) -> tuple[str, str] | None:
     return frame.decode("utf-8", "replace"), child.decode("utf-8", "replace")
 
 
+def log_name(buf: bytes) -> str:
+    """The logger name of an `rcl_interfaces/Log` (`/rosout`): `robot1.amcl`, `twin`."""
+    at = _align(_BASE + 8 + 1, 4)  # after the stamp and the level byte
+    (n,) = struct.unpack_from(_fmt(buf, "I"), buf, at)
+    return bytes(buf[at + 4 : at + 4 + max(n - 1, 0)]).decode("utf-8", "replace")
+
+
 def _first_stamp(buf: bytes) -> int | None:
     return _stamp(buf, _BASE)
 

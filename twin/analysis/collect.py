@@ -638,6 +638,7 @@ def collect(
     }
     if namespace:
         _own_transforms_only(route, by_name, types, namespace, robot_namespaces(info))
+        _own_log_lines_only(route, by_name, types, namespace, robot_namespaces(info))
     block = _BLOCK
     for topic, t_ns, raw in read_raw(bag, read_topics):
         r = route.get(topic)
@@ -711,6 +712,36 @@ def _own_transforms_only(
     for name, ti in by_name.items():
         # a topic outside every namespace keeps its name in the robot's view
         if ti.name == name and types[name] == "tf2_msgs/msg/TFMessage" and name in route:
+            health, handler = route[name]
+            route[name] = (None, _kept_handler(own, health, handler))
+
+
+def _own_log_lines_only(
+    route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]],
+    by_name: dict[str, TopicInfo],
+    types: dict[str, str],
+    namespace: str,
+    robots: list[str],
+) -> None:
+    """Read the shared `/rosout` with this robot's lines and the world's alone (not another robot's).
+
+    A namespaced node logs under the name rcl gives it, `robot1.amcl` for `/robot1/amcl`: a line of
+    another robot's nodes is left out of this robot's pass, so its rate and count are the robot's.
+    """
+    ns = namespace.strip("/")
+    prefixes = sorted(((r.strip("/").replace("/", ".") + ".", r.strip("/")) for r in robots), reverse=True)
+    kept: dict[str, bool] = {}
+
+    def own(buf: bytes) -> bool:
+        name = _cdr.log_name(buf)
+        keep = kept.get(name)
+        if keep is None:
+            robot = next((r for p, r in prefixes if name.startswith(p)), None)  # (longest prefix first)
+            keep = kept[name] = robot is None or robot == ns
+        return keep
+
+    for name, ti in by_name.items():
+        if ti.name == name and types[name] == "rcl_interfaces/msg/Log" and name in route:
             health, handler = route[name]
             route[name] = (None, _kept_handler(own, health, handler))
 

@@ -359,7 +359,8 @@ def _ros2_section(args: argparse.Namespace, scenario: Scenario) -> Any:
     """The scenario's `ros2:` section with `--ros2`, `--domain-id`, `--ros2-role`, `--ros2-interface` over it."""
     given = {key: getattr(args, dest) for key, (_, dest) in _ROS2_FLAGS.items() if getattr(args, dest) is not None}
     if given and not (args.ros2 or scenario.ros2.enabled):
-        msg = f"{', '.join(_ROS2_FLAGS[k][0] for k in given)}: configure(s) the ROS 2 bridge; add --ros2"
+        verb = "configures" if len(given) == 1 else "configure"
+        msg = f"{', '.join(_ROS2_FLAGS[k][0] for k in given)}: {verb} the ROS 2 bridge; add --ros2"
         raise ConfigError(msg)
     if not (args.ros2 or given):
         return None
@@ -402,7 +403,7 @@ def _live_view(
     """The live server and pacer `--live`, `--speed` (and `--ros2`: real time) ask for, as sinks after the recorder."""
     if not args.live and (args.host is not None or args.port is not None or args.namespace is not None):
         given = [f for f, v in (("--host", args.host), ("--port", args.port), ("--namespace", args.namespace)) if v]
-        msg = f"{' and '.join(given)}: configure(s) the live view; add --live"
+        msg = f"{' and '.join(given)}: {'configures' if len(given) == 1 else 'configure'} the live view; add --live"
         raise ConfigError(msg)
     namespace = _live_namespace(args.namespace, namespaces)
     speed = args.speed if args.speed is not None else (1.0 if args.live or ros2 else math.inf)

@@ -142,9 +142,18 @@ class NavigationStack:
 
     @classmethod
     def build(
-        cls, scenario: Scenario, robot: RobotModelSpec, scene: Scene, rng: np.random.Generator
+        cls,
+        scenario: Scenario,
+        robot: RobotModelSpec,
+        scene: Scene,
+        rng: np.random.Generator,
+        *,
+        log: logging.Logger = _log,
     ) -> NavigationStack | None:
         """Build the stack the scenario asks for, or None when it runs neither AMCL nor Nav2.
+
+        Its warnings (parameters the twin does not use, sources it does not simulate) go to `log`: a
+        fleet robot's names the robot.
 
         Raises:
             ConfigError: A params file, map or initial pose that cannot be used (one line naming it).
@@ -191,12 +200,12 @@ class NavigationStack:
                 raise ConfigError(problem)
         warning = params.warning(config.used if config is not None else None)
         if warning:  # the packaged TB3 files hold keys Humble ignores: a fact, said with -v; a user's file: a warning
-            _log.log(logging.WARNING if sc.navigation.params is not None else logging.INFO, "%s", warning)
+            log.log(logging.WARNING if sc.navigation.params is not None else logging.INFO, "%s", warning)
         if wants_nav2:
             for line in unsimulated_sources(params):
-                _log.warning("%s", line)
+                log.warning("%s", line)
         if occupancy.origin_yaw_rad != 0.0:
-            _log.warning(
+            log.warning(
                 "%s: the map's origin yaw (%g rad) is published on /map but, as in Nav2, the costmaps and AMCL "
                 "read the map unrotated (x along its rows); give yaw 0 and a map drawn that way",
                 sc.map,

@@ -332,7 +332,10 @@ class RobotGroup:
             return None  # no map, AMCL or Nav2 stack: nothing is imported for them either
         from twin.sim.navigation import NavigationStack
 
-        return NavigationStack.build(self.scenario, self.robot, scene, rng.stream("amcl"))
+        if not self.namespace:
+            return NavigationStack.build(self.scenario, self.robot, scene, rng.stream("amcl"))
+        log = node_logger("navigation", self.namespace)  # a fleet's robot: its lines name it
+        return NavigationStack.build(self.scenario, self.robot, scene, rng.stream("amcl"), log=log)
 
     def _make_mission(self) -> Mission | None:
         spec = self.scenario.mission

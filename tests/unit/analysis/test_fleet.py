@@ -14,7 +14,7 @@ from tests.conftest import run_twin
 from twin.analysis.collect import ContactEvent, PoseTrack, collect, namespace_view, robot_namespaces
 from twin.analysis.compare import compare_bags
 from twin.analysis.fleet import pair_contacts, robot_contacts, robot_distance
-from twin.bag import OdometryEncoder, Recorder, TFEncoder
+from twin.bag import LogEncoder, OdometryEncoder, Recorder, TFEncoder
 
 ODOM = "nav_msgs/msg/Odometry"
 
@@ -229,6 +229,27 @@ def test_a_robot_reads_only_its_own_transforms_on_a_frame_prefix_fleet_s_shared_
     # robot1: odom -> base_footprint and its wheels, 40 each, map -> robot1/odom 10; the world's 2
     assert (tf["robot1"].topic, tf["robot1"].count) == ("/tf", 40 + 40 + 10 + 2)
     assert (tf["robot2"].topic, tf["robot2"].count) == ("/tf", 40 + 10 + 2)
+
+
+def test_a_robot_reads_only_its_own_and_the_worlds_log_lines_on_the_shared_rosout(tmp_path: Path) -> None:
+    # rcl names /robot1/amcl's logger `robot1.amcl`: robot1's report counts its lines and the twin's, not robot2's.
+    bag = tmp_path / "bag"
+    with Recorder(bag) as rec:
+        rosout = rec.add_topic("/rosout", LogEncoder.msgtype)
+        for ns in ("robot1", "robot2", "fleet/a"):
+            rec.add_topic(f"/{ns}/ground_truth/odom", OdometryEncoder.msgtype)
+            rec.add_topic(f"/{ns}/cmd_vel", "geometry_msgs/msg/Twist")
+        lines = [("twin", 1), ("robot1.amcl", 3), ("robot1.bt_navigator", 2), ("robot2.amcl", 5), ("fleet.a.amcl", 4)]
+        t_ns = 0
+        for name, n in lines:
+            for _ in range(n):
+                t_ns += 1_000_000
+                rec.write(rosout, t_ns, LogEncoder(name).encode_line(t_ns, 20, "a line", ("f.py", "f", 1)))
+    count = {
+        ns: collect(bag, namespace=ns, decoded=False).health["/rosout"].count for ns in ("robot1", "robot2", "fleet/a")
+    }
+    assert count == {"robot1": 1 + 3 + 2, "robot2": 1 + 5, "fleet/a": 1 + 4}
+    assert collect(bag, decoded=False).health["/rosout"].count == 15  # the whole bag's, read as one
 
 
 def test_comparing_a_robot_recorded_with_namespaced_and_prefixed_tf_finds_the_same_tf_rate(tmp_path: Path) -> None:

@@ -122,7 +122,7 @@ def test_a_bad_ros2_section_is_one_line_naming_file_and_key_exit_2(tmp_path: Pat
     ("args", "expected"),
     [
         (["--ros2", "--domain-id", "233"], "--domain-id: domain_id must be a whole number from 0 to 232, got 233"),
-        (["--domain-id", "3"], "--domain-id: configure(s) the ROS 2 bridge; add --ros2"),
+        (["--domain-id", "3"], "--domain-id: configures the ROS 2 bridge; add --ros2"),
         (["--ros2", "--ros2-role", "gazebo"], "invalid choice: 'gazebo'"),
     ],
 )
