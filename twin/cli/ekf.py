@@ -23,6 +23,7 @@ examples:
   twin ekf replay ../shared/fixtures/bags/tb3_waffle_gazebo_humble
   twin ekf replay my_robot_bag --joint-velocity-units m/s --wheel-separation 0.160 --out /tmp/fused
   twin ekf replay my_robot_bag --no-gyro --json        wheel odometry alone, numbers for a script
+  twin ekf replay bags/<fleet run> --namespace robot2   one robot of a fleet: /robot2/imu, its URDF...
 
 The filter steps on every joint state and fuses the gyro samples in between (docs/estimation.md).
 It writes DIR/odometry (a rosbag2 with nav_msgs/Odometry, odom -> base_footprint) and
@@ -106,6 +107,12 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     topics.add_argument("--left-joint", help="left wheel joint name (default: URDF, else wheel_left_joint)")
     topics.add_argument("--right-joint", help="right wheel joint name (default: URDF, else wheel_right_joint)")
     topics.add_argument("--topic", default="/odometry/filtered", help="topic of the fused odometry in the new bag")
+    topics.add_argument(
+        "--namespace",
+        metavar="NS",
+        help="a fleet's robot (its topics under /NS/): /NS/imu, /NS/joint_states, /NS/odom and the URDF of "
+        "/NS/robot_description, unless a topic flag names another",
+    )
     rep.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="storage of the new bag")
     rep.add_argument("--json", action="store_true", help="print the summary as JSON")
     rep.set_defaults(func=_replay)
@@ -253,8 +260,9 @@ def _resolve_geometry(args: argparse.Namespace, bag_mod: ModuleType) -> dict[str
         return sources
     urdf = None
     info = bag_mod.open_bag(args.bag)
-    if "/robot_description" in {t.name for t in info.topics}:
-        for m in bag_mod.read_messages(args.bag, ["/robot_description"]):
+    description = getattr(args, "description_topic", "/robot_description")
+    if description in {t.name for t in info.topics}:
+        for m in bag_mod.read_messages(args.bag, [description]):
             urdf = wheels_from_urdf(str(m.msg.data))
             break
     found = (
@@ -273,15 +281,46 @@ def _resolve_geometry(args: argparse.Namespace, bag_mod: ModuleType) -> dict[str
         if key in found:
             setattr(args, key, found[key])
             assert urdf is not None
-            sources[key] = f"/robot_description (URDF of {urdf.robot or 'the robot'})"
+            sources[key] = f"{description} (URDF of {urdf.robot or 'the robot'})"
             if urdf.skid_steer and key in ("left_joint", "right_joint"):
                 side = urdf.left_joints if key == "left_joint" else urdf.right_joints
                 sources[key] += f"; skid-steer, the front one of {'/'.join(side)}"
         else:
             setattr(args, key, default)
-            reason = "no /robot_description" if urdf is None and not found else "not in the URDF"
+            reason = f"no {description}" if urdf is None and not found else "not in the URDF"
             sources[key] = f"TurtleBot3 Waffle default ({reason})"
     return sources
+
+
+_TOPIC_DEFAULTS = {"imu_topic": "/imu", "joint_topic": "/joint_states", "odom_topic": "/odom"}
+
+
+def _pick_robot(args: argparse.Namespace, bag_mod: ModuleType) -> None:
+    """With `--namespace NS`, read that robot's topics and URDF; a fleet's bag without it is refused.
+
+    Raises:
+        ConfigError: A namespace the bag has no robot under, or a fleet's bag whose robot is not chosen.
+    """
+    from twin.analysis.collect import robot_namespaces
+    from twin.analysis.fleet import check_namespace
+
+    info = bag_mod.open_bag(args.bag)
+    args.description_topic = "/robot_description"
+    if args.namespace is None:
+        robots = robot_namespaces(info)
+        names = {t.name for t in info.topics}
+        if robots and args.joint_topic not in names:
+            msg = (
+                f"{info.path}: a fleet's bag (robots {', '.join(robots)}) has no {args.joint_topic}; "
+                f"pick a robot with --namespace (e.g. --namespace {robots[0]})"
+            )
+            raise ConfigError(msg)
+        return
+    ns = check_namespace(info, args.namespace)
+    for key, default in _TOPIC_DEFAULTS.items():
+        if getattr(args, key) == default:
+            setattr(args, key, f"/{ns}{default}")
+    args.description_topic = f"/{ns}/robot_description"
 
 
 def _free_name(base: Path) -> Path:
@@ -314,6 +353,7 @@ def _replay(args: argparse.Namespace) -> int:
         if value is not None and not (0.0 < value <= _MAX_WHEEL_M):  # NaN and inf too; before the bag is read
             msg = f"{flag} must be a length in metres above 0 and at most {_MAX_WHEEL_M:g}, got {value}"
             raise ConfigError(msg)
+    _pick_robot(args, bag)
     geometry_sources = _resolve_geometry(args, bag)
     if not (args.wheel_radius > 0.0 and args.wheel_separation > 0.0):
         msg = (

@@ -200,3 +200,35 @@ def test_a_bag_without_joint_states_gets_a_hint_that_works(
         # --no-gyro would fail the same way: the line says what the EKF needs instead
         assert "--no-gyro" not in lines[0]
         assert "sensor_msgs/JointState" in lines[0] and "/joint_states" in lines[0] and str(bag) in lines[0]
+
+
+def test_a_fleet_robot_is_replayed_with_its_own_topics_and_urdf(tmp_path: Path) -> None:
+    # A Burger and a Waffle: replaying the Burger with the Waffle's track (the default) would be 45 % off.
+    from tests.conftest import run_twin
+
+    scenario = tmp_path / "pair.yaml"
+    script = "{type: cmd_vel_script, segments: [{duration_s: 6.0, linear_mps: 0.15, angular_radps: 0.3}]}"
+    scenario.write_text(
+        f"name: pair\nmission: {script}\nrobots:\n  - {{name: waffle}}\n"
+        "  - {name: burger, robot: {model: turtlebot3_burger, initial_pose: {x_m: 1.5, y_m: -0.2}}}\n"
+    )
+    bag = tmp_path / "bag"
+    assert run_twin("simulate", str(scenario), "--out", str(bag), "-q").returncode == 0
+    result = run_twin("ekf", "replay", str(bag), "--namespace", "burger", "--out", str(tmp_path / "b"), "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["geometry_sources"]["wheel_separation"] == "/burger/robot_description (URDF of turtlebot3_burger)"
+    assert summary["wheel_separation_m"] == pytest.approx(0.160)
+    assert summary["reference_topic"] == "/burger/odom"
+    assert summary["comparison"]["final_error_percent_of_distance"] < 1.0
+    unchosen = run_twin("ekf", "replay", str(bag), "--out", str(tmp_path / "x"))
+    assert unchosen.returncode == 2
+    assert unchosen.stderr.strip().splitlines() == [
+        f"twin: error: {bag}: a fleet's bag (robots burger, waffle) has no /joint_states; "
+        "pick a robot with --namespace (e.g. --namespace burger)"
+    ]
+    wrong = run_twin("ekf", "replay", str(bag), "--namespace", "robot9", "--out", str(tmp_path / "y"))
+    assert (
+        wrong.returncode == 2
+        and "--namespace 'robot9' is not a robot of this bag; it has burger, waffle" in wrong.stderr
+    )
