@@ -91,6 +91,7 @@ def test_the_queue_tree_shuffles_by_seed_and_ends_in_failure_by_design(tmp_path:
         result = run_twin("simulate", str(scenario), "--out", str(bag))
         assert result.returncode == 1, result.stderr  # a failed mission exits 1 (CI tells it from a good run)
         assert "(GetLocationFromQueue) returned FAILURE" in result.stderr  # the queue ran dry
+        assert "mission failed (tree FAILURE)" in result.stdout  # ended, not "complete"
         logs = [m.msg for _, m in read(bag, "/rosout")["/rosout"]]
         assert any("Navigation Failed" in line for line in logs)  # the queue empties: FAILURE, as in the demos
         orders.append([line.split("sent goal ")[1].split(" ")[0] for line in logs if "sent goal" in line])

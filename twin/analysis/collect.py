@@ -733,7 +733,10 @@ def _own_log_lines_only(
     kept: dict[str, bool] = {}
 
     def own(buf: bytes) -> bool:
-        name = _cdr.log_name(buf)
+        try:
+            name = _cdr.log_name(buf)
+        except (struct.error, IndexError):
+            return True  # a damaged line: its health says so, whoever's it was
         keep = kept.get(name)
         if keep is None:
             robot = next((r for p, r in prefixes if name.startswith(p)), None)  # (longest prefix first)

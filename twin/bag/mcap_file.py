@@ -996,8 +996,8 @@ def _add_summary_definitions(scan: McapScan, view: memoryview) -> None:
     span = _summary_span(view)
     if span is not None:
         start, end = span[0], span[1]
-    elif scan.found_data_end:
-        start, end = scan.data_end + 13, len(view)  # after the 13-byte DataEnd, up to the first broken record
+    elif scan.found_data_end:  # after the DataEnd record, up to the first broken record
+        start, end = scan.data_end + 9 + _RECORD.unpack_from(view, scan.data_end)[1], len(view)
     else:
         return
     for op, offset, length in _records(view[:end], start):

@@ -131,7 +131,7 @@ class _ConsoleFormatter(logging.Formatter):
 
     def format(self, record: logging.LogRecord) -> str:
         name = record.name
-        if name.startswith(_NODE_LOGGER) and not name.startswith(_NOT_NODES):
+        if name.startswith(_NODE_LOGGER) and not any(name == m or name.startswith(m + ".") for m in _NOT_NODES):
             node = name.removeprefix(_NODE_LOGGER)
             fields = {**record.__dict__, "msg": f"[{node}] %s", "args": (record.getMessage(),)}
             record = logging.makeLogRecord(fields)

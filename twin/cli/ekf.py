@@ -101,9 +101,9 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         "--config", type=Path, metavar="FILE", help="YAML with an `estimation:` section (a scenario works)"
     )
     topics = rep.add_argument_group("topics and joints")
-    topics.add_argument("--imu-topic", default="/imu", help="sensor_msgs/Imu topic (default /imu)")
-    topics.add_argument("--joint-topic", default="/joint_states", help="sensor_msgs/JointState topic")
-    topics.add_argument("--odom-topic", default="/odom", help="reference nav_msgs/Odometry topic (default /odom)")
+    topics.add_argument("--imu-topic", help="sensor_msgs/Imu topic (default /imu; with --namespace /NS/imu)")
+    topics.add_argument("--joint-topic", help="sensor_msgs/JointState topic (default /joint_states)")
+    topics.add_argument("--odom-topic", help="reference nav_msgs/Odometry topic (default /odom)")
     topics.add_argument("--left-joint", help="left wheel joint name (default: URDF, else wheel_left_joint)")
     topics.add_argument("--right-joint", help="right wheel joint name (default: URDF, else wheel_right_joint)")
     topics.add_argument("--topic", default="/odometry/filtered", help="topic of the fused odometry in the new bag")
@@ -307,6 +307,9 @@ def _pick_robot(args: argparse.Namespace, bag_mod: ModuleType) -> None:
     info = bag_mod.open_bag(args.bag)
     args.description_topic = "/robot_description"
     if args.namespace is None:
+        for key, default in _TOPIC_DEFAULTS.items():
+            if getattr(args, key) is None:
+                setattr(args, key, default)
         robots = robot_namespaces(info)
         names = {t.name for t in info.topics}
         if robots and args.joint_topic not in names:
@@ -318,7 +321,7 @@ def _pick_robot(args: argparse.Namespace, bag_mod: ModuleType) -> None:
         return
     ns = check_namespace(info, args.namespace)
     for key, default in _TOPIC_DEFAULTS.items():
-        if getattr(args, key) == default:
+        if getattr(args, key) is None:  # a topic given by its flag is read as given
             setattr(args, key, f"/{ns}{default}")
     args.description_topic = f"/{ns}/robot_description"
 

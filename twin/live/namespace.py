@@ -21,6 +21,7 @@ are served byte for byte.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -28,6 +29,8 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
 __all__ = ["NamespaceView"]
+
+_log = logging.getLogger(__name__)
 
 _TF = "tf2_msgs/msg/TFMessage"
 _FRAME_FIELDS = ("frame_id", "child_frame_id")
@@ -68,18 +71,30 @@ class NamespaceView:
         """
         if not self.frame_prefix:
             return None
-        if msgtype == _TF:
-            return lambda data: self._own_transforms(data, store)
-        plan = self._plan(msgtype, store)
-        if not plan:
+        plan = () if msgtype == _TF else self._plan(msgtype, store)
+        if msgtype != _TF and not plan:
             return None
 
-        def strip(data: bytes) -> bytes:
+        def rewrite(data: bytes) -> bytes | None:
+            if msgtype == _TF:
+                return self._own_transforms(data, store)
             msg = store.deserialize_cdr(data, msgtype)
             self._strip(msg, plan)
             return bytes(store.serialize_cdr(msg, msgtype))
 
-        return strip
+        warned = False
+
+        def served(data: bytes) -> bytes | None:
+            nonlocal warned
+            try:
+                return rewrite(data)
+            except Exception as err:  # rosbags' decoder raises several kinds on damaged bytes
+                if not warned:  # a damaged message (a recovered bag) is served as it is, not fatal
+                    warned = True
+                    _log.warning("a %s message does not decode (%s): served as recorded", msgtype, err)
+                return data
+
+        return served
 
     def robot_of(self, frame: str) -> str | None:
         """The robot whose prefixed frame this is (`robot1/odom`: robot1; nested: the longest), or None (`map`)."""
@@ -93,6 +108,8 @@ class NamespaceView:
 
     def _own_transforms(self, data: bytes, store: Typestore) -> bytes | None:
         msg: Any = store.deserialize_cdr(data, _TF)
+        if not msg.transforms:
+            return data  # nothing of anyone's: as it is
         kept = []
         for tf in msg.transforms:
             robots = {self.robot_of(tf.header.frame_id), self.robot_of(tf.child_frame_id)} - {None}

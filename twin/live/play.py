@@ -59,7 +59,7 @@ def play_bag(
             `/scan`) and the topics under no namespace (`twin.live.namespace`); None: every topic as it is.
             In a bag whose robots share one `/tf` with prefixed frames (`robot1/odom`), its prefix
             is taken off its frames and the other robots' transforms are left out.
-        robots: The bag's robots' namespaces (whose prefixed frames are not this robot's).
+        robots: The bag's robots' namespaces (whose prefixed frames are not this robot's); empty: found in the bag.
 
     Raises:
         BagError: If the bag cannot be read, or has no topic with a message definition.
@@ -76,6 +76,10 @@ def play_bag(
         have = {t.name for t in info.topics}
         # The robots' TF on the one shared /tf, none under the namespace: frames named `robot1/odom`.
         shared = bool({"/tf", "/tf_static"} & have) and not {f"/{ns}/tf", f"/{ns}/tf_static"} & have
+        if shared and not robots:
+            from twin.analysis.collect import robot_namespaces  # whose prefixed frames are not this robot's
+
+            robots = robot_namespaces(info)
         view = NamespaceView(ns, frame_prefix=shared, robots=robots)
     for topic in info.topics:
         served = view.served_as(topic.name) if view is not None else topic.name

@@ -97,16 +97,29 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
     for i, (namespace, robot) in enumerate(scenario.robot_scenarios()):
         entry = f"robots[{i}]." if namespace else ""  # a fleet's robot: its entry's key
         if namespace:
-            _check_lidar(robot, path, entry)
+            _check_lidar(robot, path, entry, base=scenario.sensors.lidar)
         _check_lidar_of_robot(robot, path, entry)
     _check_files(scenario, path)
     _check_blocks(scenario, path)
     _check_camera_of_robot(scenario, path)
 
 
-def _check_lidar(scenario: Scenario, path: Path, entry: str) -> None:
-    """The lidar's overrides: float32 values, a sample count, a range and a span (a fleet's robot: its `entry`)."""
+def _check_lidar(scenario: Scenario, path: Path, entry: str, *, base: Any = None) -> None:
+    """The lidar's overrides: float32 values, a sample count, a range and a span (a fleet's robot: its `entry`).
+
+    `base`: the top level's lidar section, which a fleet's entry is laid over; of two values that
+    disagree, the one the entry sets (that differs from the top level's) is named.
+    """
     lidar = scenario.sensors.lidar
+
+    def disorder(first: str, second: str) -> tuple[str, str]:
+        """The key to name for `first` not below `second`, and what is wrong (the entry's own value named)."""
+        low, high = getattr(lidar, first), getattr(lidar, second)
+        inherited = base is not None and low == getattr(base, first)
+        if inherited and high != getattr(base, second):
+            return f"{entry}sensors.lidar.{second}", f"{high} is not above {first} {low}"
+        return f"{entry}sensors.lidar.{first}", f"{low} is not below {second} {high}"
+
     for key, value in _values(lidar, f"{entry}sensors.lidar"):
         if isinstance(value, float) and abs(value) > _FLOAT32_MAX:
             raise _refuse(path, key, f"{value!r} does not fit a LaserScan's float32 fields; give at most 3.4e+38")
@@ -114,21 +127,15 @@ def _check_lidar(scenario: Scenario, path: Path, entry: str) -> None:
         key = f"{entry}sensors.lidar.samples"
         raise _refuse(path, key, f"must be between 1 and {_MAX_SAMPLES}, got {lidar.samples}")
     if lidar.range_min_m is not None and lidar.range_max_m is not None and lidar.range_min_m >= lidar.range_max_m:
-        raise _refuse(
-            path,
-            f"{entry}sensors.lidar.range_min_m",
-            f"{lidar.range_min_m} is not below range_max_m {lidar.range_max_m}; make range_min_m < range_max_m",
-        )
+        key, wrong = disorder("range_min_m", "range_max_m")
+        raise _refuse(path, key, f"{wrong}; make range_min_m < range_max_m")
     if (
         lidar.angle_min_rad is not None
         and lidar.angle_max_rad is not None
         and lidar.angle_min_rad >= lidar.angle_max_rad
     ):
-        raise _refuse(
-            path,
-            f"{entry}sensors.lidar.angle_min_rad",
-            f"{lidar.angle_min_rad} is not below angle_max_rad {lidar.angle_max_rad}",
-        )
+        key, wrong = disorder("angle_min_rad", "angle_max_rad")
+        raise _refuse(path, key, wrong)
 
 
 def _check_camera_of_robot(scenario: Scenario, path: Path) -> None:

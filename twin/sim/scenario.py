@@ -657,10 +657,23 @@ def in_entry(err: TwinErrorT, entry: str) -> TwinErrorT:
     return err.with_context(before=entry if names_a_key(text) else f"{entry.rstrip('.')}: ")
 
 
+_KEY_PATH = re.compile(r"[A-Za-z_]\w*(\[\d+\])*(\.[A-Za-z_]\w*(\[\d+\])*)*:")
+
+
+_FILE_ENDINGS = tuple(
+    f".{ext}:"
+    for ext in ("yaml", "yml", "xml", "pgm", "png", "sdf", "world", "urdf", "fmu", "csv", "json", "mcap", "db3")
+)
+
+
 def names_a_key(text: str) -> bool:
-    """Whether an error starts with a scenario key (`robot.model: ...`), not a file or a sentence."""
+    """Whether an error starts with a scenario key (`robot.model: ...`), not a file or a sentence.
+
+    A key is dotted names with list indexes (`robots[1].sensors.lidar.samples:`); a file
+    (`maps/map.pgm:`, `nav2.yaml:3:`) or a URI (`model://x:`) is not.
+    """
     head = text.split(" ", 1)[0]
-    return head.endswith(":") and not head.startswith(("/", ".")) and ".yaml" not in head and ".xml" not in head
+    return bool(_KEY_PATH.fullmatch(head)) and not head.endswith(_FILE_ENDINGS)
 
 
 def default_scenario_path() -> Path:

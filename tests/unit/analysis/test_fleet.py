@@ -245,11 +245,12 @@ def test_a_robot_reads_only_its_own_and_the_worlds_log_lines_on_the_shared_rosou
             for _ in range(n):
                 t_ns += 1_000_000
                 rec.write(rosout, t_ns, LogEncoder(name).encode_line(t_ns, 20, "a line", ("f.py", "f", 1)))
+        rec.write(rosout, t_ns + 1, b"\x00\x01\x00\x00\x01\x00")  # a damaged line: counted for everyone
     count = {
         ns: collect(bag, namespace=ns, decoded=False).health["/rosout"].count for ns in ("robot1", "robot2", "fleet/a")
     }
-    assert count == {"robot1": 1 + 3 + 2, "robot2": 1 + 5, "fleet/a": 1 + 4}
-    assert collect(bag, decoded=False).health["/rosout"].count == 15  # the whole bag's, read as one
+    assert count == {"robot1": 1 + 3 + 2 + 1, "robot2": 1 + 5 + 1, "fleet/a": 1 + 4 + 1}
+    assert collect(bag, decoded=False).health["/rosout"].count == 16  # the whole bag's, read as one
 
 
 def test_comparing_a_robot_recorded_with_namespaced_and_prefixed_tf_finds_the_same_tf_rate(tmp_path: Path) -> None:

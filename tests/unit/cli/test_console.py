@@ -26,6 +26,10 @@ def test_a_nodes_console_lines_carry_its_name() -> None:
         _line("twin.node.fmu.left", "DcMotorWheel instance 'left': ok")
         == "twin: INFO: DcMotorWheel instance 'left': ok"
     )
+    # a fleet robot's node, as rcl names it: even in a namespace that starts like a module's name
+    assert _line("twin.node.robot1.amcl", "pose set") == "twin: INFO: [robot1.amcl] pose set"
+    assert _line("twin.node.node1.planner_server", "no path") == "twin: INFO: [node1.planner_server] no path"
+    assert _line("twin.node.fmu_bot.diff_drive", "clamped") == "twin: INFO: [fmu_bot.diff_drive] clamped"
 
 
 @pytest.mark.parametrize(

@@ -221,6 +221,9 @@ def test_a_fleet_robot_is_replayed_with_its_own_topics_and_urdf(tmp_path: Path) 
     assert summary["wheel_separation_m"] == pytest.approx(0.160)
     assert summary["reference_topic"] == "/burger/odom"
     assert summary["comparison"]["final_error_percent_of_distance"] < 1.0
+    flagged = ("--namespace", "burger", "--odom-topic", "/waffle/odom", "--json")
+    other = run_twin("ekf", "replay", str(bag), *flagged, "--out", str(tmp_path / "w"))
+    assert json.loads(other.stdout)["reference_topic"] == "/waffle/odom"  # a topic flag is read as given
     unchosen = run_twin("ekf", "replay", str(bag), "--out", str(tmp_path / "x"))
     assert unchosen.returncode == 2
     assert unchosen.stderr.strip().splitlines() == [

@@ -170,6 +170,12 @@ def test_a_prefixed_fleets_robot_is_served_with_its_own_frames_unprefixed(tmp_pa
         ("odom", "base_footprint", 1.0)
     }
     assert {(s.header.frame_id, tuple(s.ranges)) for s in got["/scan"]} == {("base_scan", (2.0, 2.0))}
+    # Without the robots named, play_bag finds them in the bag: robot1's transforms stay out all the same.
+    _, found = served(bag, namespace="robot2")
+    assert {(t.header.frame_id, t.child_frame_id) for m in found["/tf"] for t in m.transforms} == {
+        ("map", "odom"),
+        ("odom", "base_footprint"),
+    }
     # Served whole, the bag keeps every frame as recorded.
     _, whole = served(bag)
     assert {t.child_frame_id for m in whole["/tf"] for t in m.transforms} == {
@@ -212,3 +218,19 @@ def test_a_live_prefixed_fleet_run_serves_one_robot_with_its_frames_unprefixed()
     (only,) = deserialize(published[0][1], TFEncoder.msgtype).transforms
     assert (only.header.frame_id, only.child_frame_id) == ("map", "odom")
     assert deserialize(published[1][1], "sensor_msgs/msg/LaserScan").header.frame_id == "base_scan"
+
+
+def test_a_damaged_or_empty_message_of_a_prefixed_fleet_is_served_as_recorded() -> None:
+    # A recovered bag may hold a message that does not decode: served as it is, not the end of the playback.
+    from twin.msgs import deserialize, get_message, serialize
+
+    view = NamespaceView("robot2", frame_prefix=True, robots=ROBOTS)
+    store = TypeRegistry().store
+    scan = view.rewriter("sensor_msgs/msg/LaserScan", store)
+    assert scan is not None
+    assert scan(b"\x00\x01\x00\x00\x07\x00") == b"\x00\x01\x00\x00\x07\x00"
+    tf = view.rewriter(TFEncoder.msgtype, store)
+    assert tf is not None
+    empty = serialize(get_message("tf2_msgs/msg/TFMessage")())
+    assert deserialize(tf(empty), TFEncoder.msgtype).transforms == []  # nobody's: served, not dropped
+    assert tf(TFEncoder([("map", "robot1/odom")]).encode(0, [(0, 0, 0, 0, 0, 0, 1)])) is None  # robot1's alone
