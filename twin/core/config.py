@@ -143,7 +143,45 @@ def load_yaml(path: Path) -> yaml.Node:
         node = yaml.MappingNode("tag:yaml.org,2002:map", [])
         node.start_mark = yaml.Mark(str(path), 0, 0, 0, "", 0)
     _refuse_repeated_keys(node)
+    _merge_keys(node)
     return node
+
+
+def _merge_keys(root: yaml.Node) -> None:
+    """Lay out YAML merge keys (`<<: *defaults`) in place, as a YAML loader does: the mapping's own keys win.
+
+    Raises:
+        ConfigError: A `<<` whose value is not a mapping or a list of mappings (file and line).
+    """
+    stack, done = [root], set()
+    while stack:
+        node = stack.pop()
+        if id(node) in done:
+            continue
+        done.add(id(node))
+        if isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+            continue
+        if not isinstance(node, yaml.MappingNode):
+            continue
+        merged: list[tuple[yaml.Node, yaml.Node]] = []
+        own: list[tuple[yaml.Node, yaml.Node]] = []
+        for key, value in node.value:
+            if not (isinstance(key, yaml.ScalarNode) and key.value == "<<" and key.tag.endswith(":merge")):
+                own.append((key, value))
+                continue
+            sources = value.value if isinstance(value, yaml.SequenceNode) else [value]
+            for source in sources:
+                if not isinstance(source, yaml.MappingNode):
+                    msg = f"{location(key)}: '<<' (a YAML merge key) takes a mapping or a list of mappings"
+                    raise ConfigError(msg)
+                _merge_keys(source)
+                taken = {k.value for k, _ in merged}
+                merged += [(k, v) for k, v in source.value if k.value not in taken]  # the first source wins
+        if len(own) != len(node.value):
+            keys = {k.value for k, _ in own}
+            node.value = [(k, v) for k, v in merged if k.value not in keys] + own
+        stack.extend(v for _, v in node.value)
 
 
 def _refuse_repeated_keys(root: yaml.Node) -> None:

@@ -575,6 +575,12 @@ class Scenario:
     tf: TfSection = field(default_factory=TfSection)  # how a fleet's robots name their frames
 
     def __post_init__(self) -> None:
+        if not _SCENARIO_NAME.fullmatch(self.name):
+            msg = (
+                f"{self.name[:60]!r}{'...' if len(self.name) > 60 else ''} cannot name the bag folder "
+                "(<recording.out_dir>/<name>_<time>): use letters, digits, _, -, . (not first) and spaces (not last), at most 100"
+            )
+            raise FieldError(("name",), msg)
         for key, attr in (("name", "name"), ("namespace", "ns")):
             seen: dict[str, int] = {}
             for i, entry in enumerate(self.robots):
@@ -656,6 +662,9 @@ def in_entry(err: TwinErrorT, entry: str) -> TwinErrorT:
     text = str(err)
     return err.with_context(before=entry if names_a_key(text) else f"{entry.rstrip('.')}: ")
 
+
+# A scenario's name leads its bag folder's: a file name, never a path (`../x`, `a/b`) or too long for one.
+_SCENARIO_NAME = re.compile(r"[A-Za-z0-9_\-]([A-Za-z0-9_. \-]{0,98}[A-Za-z0-9_.\-])?")
 
 _KEY_PATH = re.compile(r"[A-Za-z_]\w*(\[\d+\])*(\.[A-Za-z_]\w*(\[\d+\])*)*:")
 

@@ -63,6 +63,36 @@ def test_a_key_one_section_too_high_is_pointed_to_its_sections(tmp_path: Path) -
         load_scenario(path)
 
 
+def test_yaml_merge_keys_lay_out_as_a_yaml_loader_does(tmp_path: Path) -> None:
+    # `<<: *robot` is how a YAML user shares an entry; the mapping's own keys win over the merged ones.
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        "name: t\n<<: {seed: 3, max_duration_s: 9}\nseed: 4\nrobots:\n"
+        "  - &r {name: a, sensors: {lidar: {samples: 180}}, robot: {initial_pose: {x_m: 0.0}}}\n"
+        "  - {<<: *r, name: b, robot: {initial_pose: {x_m: 1.5}}}\n"
+    )
+    sc = load_scenario(path)
+    assert (sc.seed, sc.max_duration_s) == (4, 9.0)
+    a, b = sc.robots
+    assert (a.name, b.name) == ("a", "b") and b.sensors.lidar.samples == 180 and b.robot.initial_pose.x_m == 1.5
+    path.write_text("name: t\n<<: 3\n")
+    with pytest.raises(
+        ConfigError, match=rf"^{path}:2: '<<' \(a YAML merge key\) takes a mapping or a list of mappings$"
+    ):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize("name", ["../../escape", "a/b", "x" * 101, ".hidden", "trailing "])
+def test_a_scenario_name_that_cannot_name_a_bag_folder_is_refused(tmp_path: Path, name: str) -> None:
+    # The bag folder is <out_dir>/<name>_<time>: `../x` wrote outside it, 300 characters was an OSError.
+    path = tmp_path / "s.yaml"
+    path.write_text(f"name: {name!r}\n")
+    with pytest.raises(ConfigError, match=rf"^{path}:1: name: .* cannot name the bag folder"):
+        load_scenario(path)
+    path.write_text("name: 'my run v1.2-b'\n")
+    assert load_scenario(path).name == "my run v1.2-b"
+
+
 def test_a_key_given_twice_is_refused_where_it_is(tmp_path: Path) -> None:
     # PyYAML kept the last silently: `seed: 1` then `seed: 2` ran seed 2
     path = tmp_path / "s.yaml"
