@@ -135,6 +135,31 @@ def _names(section: Mapping[str, Any], key: str, default: Sequence[str], where: 
     return tuple(value)
 
 
+def _plugins(params: Nav2Params, node: str, key: str, default: str) -> tuple[str, ...]:
+    """A server's plugin names (`planner_plugins`), refused empty or naming a plugin whose type is not set.
+
+    Nav2 (Humble) gives the default plugin its type only while the list is its default (`[GridBased]`,
+    `[FollowPath]`); any other name must say which plugin it is (`<name>.plugin`), or the server fails
+    to configure. An empty list loads nothing: every goal the navigator's tree sends it would fail.
+    """
+    section = params.node(node)
+    names = _names(section, key, (default,), f"{params.source}: {node}")
+
+    def at(name: str) -> str:
+        origin = params.origin
+        return origin.locate(node, name) if origin is not None else f"{params.source}: {node}.{name}"
+
+    if not names:
+        msg = f"{at(key)}: is empty, so {node} has no plugin for its goals; name one (e.g. [{default}])"
+        raise ConfigError(msg)
+    if names != (default,):
+        for name in names:
+            if f"{name}.plugin" not in section:
+                msg = f"{at(key)}: names {name!r}, but {name}.plugin is not set; Nav2 needs each plugin's type"
+                raise ConfigError(msg)
+    return names
+
+
 def _sub(section: Mapping[str, Any], prefix: str) -> dict[str, object]:
     return {k[len(prefix) + 1 :]: v for k, v in section.items() if k.startswith(prefix + ".")}
 
@@ -183,7 +208,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     where = f"{src}: controller_server"
     used: dict[str, list[str]] = {"controller_server": [], "planner_server": [], "bt_navigator": []}
     cu = used["controller_server"]
-    plugins = _names(cs, "controller_plugins", ("FollowPath",), where)
+    plugins = _plugins(params, "controller_server", "controller_plugins", "FollowPath")
     frequency = _num(cs, "controller_frequency", 20.0, where)
     controllers: dict[str, tuple[str, Mapping[str, object]]] = {}
     for name in plugins:
@@ -233,7 +258,7 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     cu += ["goal_checker_plugin", "progress_checker_plugin"]
     ps = params.node("planner_server")
     pwhere = f"{src}: planner_server"
-    planner_names = _names(ps, "planner_plugins", ("GridBased",), pwhere)
+    planner_names = _plugins(params, "planner_server", "planner_plugins", "GridBased")
     grid = _sub(ps, planner_names[0])
     plugin = str(grid.get("plugin", "nav2_navfn_planner/NavfnPlanner"))
     if plugin.replace("::", "/") != "nav2_navfn_planner/NavfnPlanner":

@@ -59,6 +59,25 @@ def test_set_typo_suggests_the_parameter() -> None:
         check_nav2_inputs(params)
 
 
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ({"planner_server.planner_plugins": []}, "is empty, so planner_server has no plugin"),
+        ({"controller_server.controller_plugins": []}, "is empty, so controller_server has"),
+        # Nav2 gives a type only to the default name in the default list
+        ({"planner_server.planner_plugins": ["Other"]}, "names 'Other', but Other.plugin is not set"),
+        ({"controller_server.controller_plugins": ["Fast"]}, "names 'Fast', but Fast.plugin is not set"),
+    ],
+)
+def test_a_server_loading_no_plugin_or_one_of_no_type_is_refused_where_it_was_set(
+    override: dict[str, object], message: str
+) -> None:
+    # `planner_plugins: []` was an IndexError (exit 70); an empty controller list failed the first goal at run time.
+    params = load_nav2_params(default_params_path("waffle"), overrides=override)
+    with pytest.raises(ConfigError, match=rf"^navigation\.set\.{next(iter(override))}: .*{message}"):
+        nav2_config(params)
+
+
 def test_set_keys_of_servers_are_known_when_nav2_does_not_run() -> None:
     params = load_nav2_params(default_params_path("waffle"), overrides={"controller_server.FollowPath.max_vel_x": 0.2})
     check_nav2_inputs(params, nav2=False)
