@@ -76,6 +76,10 @@ class Spinner(Node):
         while True:
             pass
 
+class NoSuper(Node):
+    def __init__(self):
+        self.ready = True  # forgot super().__init__("no_super")
+
 class StuckInit(Node):
     def __init__(self):
         super().__init__("stuck_init")
@@ -111,6 +115,27 @@ def test_sys_exit_in_a_callback_is_a_node_fault(code: int, tmp_path: Path, capsy
         err, contains=f"node quitter: timer callback Quitter.on_timer called sys.exit({code}) at t=1.000 s"
     )
     assert_bag_reads_back(bag)
+
+
+@pytest.mark.parametrize(
+    ("nodes", "message"),
+    [
+        # was an internal error (AttributeError: no attribute '_namespace'), exit 70
+        ("- plugin: api_nodes:NoSuper\n", "nodes[0]: NoSuper.__init__ does not call super().__init__('node_name')"),
+        # was run as `/bad ns/fast`, a name no ROS tool takes
+        ("- {plugin: api_nodes:Fast, namespace: 'bad ns'}\n", "node fast: namespace '/bad ns' is not a ROS namespace"),
+    ],
+)
+def test_a_node_that_is_not_set_up_as_a_node_is_refused(
+    nodes: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scenario = _scenario(tmp_path, nodes)
+    bag = tmp_path / "bag"
+    code = main(["simulate", str(scenario), "--duration", "1", "--out", str(bag)])
+    _, err = capsys.readouterr()
+    assert code == 2, err
+    assert_one_line_error(err, contains=message)
+    assert not bag.exists()
 
 
 def test_a_timer_period_below_a_nanosecond_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

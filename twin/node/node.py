@@ -424,6 +424,9 @@ class Node:
         if not ns.startswith("/"):
             ns = f"{launch.push_namespace.strip('/')}/{ns}"
         self._name = name
+        if ns.strip("/") and not all(_TOKEN.match(token) for token in ns.strip("/").split("/")):
+            msg = f"node {name}: namespace {ns!r} is not a ROS namespace: names of letters, digits and _ joined by /"
+            raise ConfigError(msg)
         self._namespace = "/" + ns.strip("/") if ns.strip("/") else ""
         self._overrides: dict[str, Any] = {**(parameter_overrides or {}), **launch.parameters}
         self._remappings: dict[str, str] = {}

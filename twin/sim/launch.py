@@ -167,5 +167,11 @@ def load_nodes(scenario: Scenario) -> list[Node]:
         except (Exception, SystemExit) as err:  # sys.exit() in a constructor too: the node's fault
             msg = f"{where}: constructing {cls.__name__} raised {type(err).__name__}: {err}"
             raise ConfigError(msg) from None
+        if "_namespace" not in vars(node):  # Node.__init__ never ran: nothing of the node is set up
+            msg = (
+                f"{where}: {cls.__name__}.__init__ does not call super().__init__('node_name'); call it first, "
+                "as an rclpy node does"
+            )
+            raise ConfigError(msg)
         nodes.append(node)
     return nodes

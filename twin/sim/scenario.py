@@ -578,7 +578,8 @@ class Scenario:
         if not _SCENARIO_NAME.fullmatch(self.name):
             msg = (
                 f"{self.name[:60]!r}{'...' if len(self.name) > 60 else ''} cannot name the bag folder "
-                "(<recording.out_dir>/<name>_<time>): use letters, digits, _, -, . (not first) and spaces (not last), at most 100"
+                "(<recording.out_dir>/<name>_<time>): use letters, digits, _, -, . (not first) and spaces "
+                "(not last), at most 100"
             )
             raise FieldError(("name",), msg)
         for key, attr in (("name", "name"), ("namespace", "ns")):
