@@ -46,6 +46,14 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def _of_messages(msg: Any, name: str, value: list[Any] | tuple[Any, ...]) -> bool:
+    """Whether a sequence field holds messages (by its declared type: an empty one as well as a full one)."""
+    if value:
+        return hasattr(value[0], "__dataclass_fields__")
+    declared = str(getattr(msg.__dataclass_fields__.get(name), "type", ""))
+    return "__msg__" in declared or "__srv__" in declared or "__action__" in declared
+
+
 def flatten(msg: Any, prefix: str = "") -> dict[str, Any]:
     """One message as {field path: value}; arrays as lists, sequences of messages as JSON text."""
     row: dict[str, Any] = {}
@@ -56,7 +64,7 @@ def flatten(msg: Any, prefix: str = "") -> dict[str, Any]:
         elif isinstance(value, np.ndarray):
             row[key] = value.tolist()
         elif isinstance(value, list | tuple):
-            if value and hasattr(value[0], "__dataclass_fields__"):
+            if _of_messages(msg, name, value):  # JSON text in every row, an empty sequence too (one column type)
                 row[key] = json.dumps(_plain(value))
             else:
                 row[key] = list(value)

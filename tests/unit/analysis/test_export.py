@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import sqlite3
 from pathlib import Path
 
@@ -53,6 +54,23 @@ def test_parquet_keeps_arrays_as_lists(twin_bag: Path, tmp_path: Path) -> None:
     msgs = list(read_messages(twin_bag, ["/ground_truth/odom"]))
     assert table["pose.pose.position.y"] == [m.msg.pose.pose.position.y for m in msgs]
     assert table["twist.covariance"][0] == pytest.approx(list(msgs[0].msg.twist.covariance))
+
+
+def test_parquet_takes_a_sequence_of_messages_empty_in_some_rows_as_json_text(gazebo_bag: Path, tmp_path: Path) -> None:
+    # The real Humble bag's /parameter_events: new_parameters is [] in one event and a list in another
+    # (it was an ArrowTypeError, exit 70: a list column, then text).
+    proc = run_twin(
+        "bag", "export", str(gazebo_bag), "--topics", "/parameter_events", "--format", "parquet", "--out", str(tmp_path)
+    )
+    assert proc.returncode == 0, proc.stderr
+    table = pq.read_table(tmp_path / "parameter_events.parquet").to_pydict()
+    events = [m.msg for m in read_messages(gazebo_bag, ["/parameter_events"])]
+    exported = [json.loads(v) for v in table["new_parameters"]]
+    assert [[p["name"] for p in row] for row in exported] == [[p.name for p in e.new_parameters] for e in events]
+    assert [[p["value"]["type"] for p in row] for row in exported] == [
+        [p.value.type for p in e.new_parameters] for e in events
+    ]
+    assert any(e.new_parameters for e in events) and any(not e.new_parameters for e in events)
 
 
 def test_unknown_topic_is_one_line_exit_5(twin_bag: Path, tmp_path: Path) -> None:
