@@ -312,6 +312,17 @@ def test_a_pose_off_a_given_map_is_refused_by_check_as_by_the_run(
     )
 
 
+def test_an_initial_estimate_off_the_map_made_from_the_world_is_refused_by_check_as_by_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # No `map:`: the run makes the map from the world and refused the estimate; `scenario check` passed it.
+    _refused_alike(
+        _scenario(tmp_path, localization={"initial_pose": {"x_m": 100.0}}),
+        capsys,
+        "localization.initial_pose: (100.000, -0.500) lies outside the map (x ",
+    )
+
+
 def test_a_map_origin_yaw_is_warned_of(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # map_server's documentation: "many parts of the system currently ignore yaw" (the costmaps and AMCL)
     map_yaml = _map(tmp_path, {"origin": [-10.0, -10.0, 0.3]})

@@ -379,7 +379,18 @@ def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
         ConfigError: As `_map_bounds`.
     """
     if sc.map == "from_world" and robot.lidar is not None and (runs_amcl(sc) or runs_nav2(sc)):
-        _map_bounds(sc, scene)
+        x0, y0, x1, y1 = _map_bounds(sc, scene)
+        est = sc.localization.initial_pose  # AMCL's estimate: on the map the run makes (its bounds, at least)
+        if runs_amcl(sc) and est is not None:
+            pose = sc.robot.initial_pose
+            x = pose.x_m if est.x_m is None else est.x_m
+            y = pose.y_m if est.y_m is None else est.y_m
+            if not (x0 <= x <= x1 and y0 <= y <= y1):
+                msg = (
+                    f"localization.initial_pose: ({x:.3f}, {y:.3f}) lies outside the map "
+                    f"(x {x0:.2f}..{x1:.2f}, y {y0:.2f}..{y1:.2f}); give a pose on the map"
+                )
+                raise ConfigError(msg)
 
 
 def lidar_problem(sc: Scenario, robot: RobotModelSpec) -> str | None:
