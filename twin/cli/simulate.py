@@ -152,7 +152,13 @@ def _bag_path(scenario: Scenario, out: Path | None) -> Path:
     if out is not None:
         return out
     stamp = datetime.datetime.now().strftime("%Y_%m_%d-%H_%M_%S")
-    base = Path(scenario.recording.out_dir) / f"{scenario.name}_{stamp}"
+    out_dir = Path(scenario.recording.out_dir)
+    above = next((p for p in (out_dir, *out_dir.parents) if p.exists()), None)
+    if above is not None and not above.is_dir():  # a file, a device (/dev/null): no folder can go there
+        where = f"{scenario.source_path}: " if scenario.source_path is not None else ""
+        msg = f"{where}recording.out_dir: {out_dir}: {above} is not a folder; give a folder for the bags (or --out)"
+        raise ConfigError(msg)
+    base = out_dir / f"{scenario.name}_{stamp}"
     path, n = base, 1
     while path.exists():
         n += 1

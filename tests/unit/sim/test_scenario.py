@@ -235,3 +235,22 @@ def test_the_default_tf_mode_leaves_the_recorded_scenario_as_before(tmp_path: Pa
     recorded = tmp_path / "recorded.yaml"
     recorded.write_text(scenario_yaml(load_scenario(fleet)))
     assert load_scenario(recorded).tf.mode == "frame_prefix"  # and a prefixed fleet's loads back as it ran
+
+
+@pytest.mark.parametrize("out_dir", ["/dev/null", "{file}/bags"])
+def test_an_out_dir_where_no_folder_can_go_is_refused_naming_the_key(tmp_path: Path, out_dir: str) -> None:
+    # It said "the bag folder exists and is not empty" (exit 5): nothing was there, a file was in the way.
+    from tests.conftest import run_twin
+
+    file = tmp_path / "a_file"
+    file.write_text("")
+    out_dir = out_dir.format(file=file)
+    path = tmp_path / "s.yaml"
+    path.write_text(f"name: t\nmax_duration_s: 1\nrecording: {{out_dir: {out_dir}}}\n")
+    result = run_twin("simulate", str(path))
+    assert result.returncode == 2, result.stderr
+    blocker = "/dev/null" if out_dir == "/dev/null" else str(file)
+    assert result.stderr.strip().splitlines() == [
+        f"twin: error: {path}: recording.out_dir: {out_dir}: {blocker} is not a folder; give a folder for the bags "
+        "(or --out)"
+    ]
