@@ -442,7 +442,7 @@ CLI_CASES: dict[str, tuple[list[str], int, str]] = {
             "{d}/r",
         ],
         5,
-        "mission.pose_topic '/scan' is sensor_msgs/msg/LaserScan, which carries no pose",
+        "mission.pose_topic (twin replay --pose-topic) '/scan' is sensor_msgs/msg/LaserScan, which carries no pose",
     ),
     # a NaN threshold turned the check off (exit 0), inf passed as a wheel, one bag was a bag error (exit 5)
     "compare_threshold_nan": (

@@ -64,13 +64,17 @@ def _pose_topic(spec: ReplayMission, topics: dict[str, str]) -> str:
     bag = spec.bag
     if spec.pose_topic is not None:
         if spec.pose_topic not in topics:
-            msg = f"{bag}: mission.pose_topic {spec.pose_topic!r} is not in the bag; it has {', '.join(sorted(topics))}"
+            msg = (
+                f"{bag}: mission.pose_topic (twin replay --pose-topic) {spec.pose_topic!r} is not in the bag; it has "
+                f"{', '.join(sorted(topics))}"
+            )
             raise BagError(msg)
         kind = topics[spec.pose_topic]
         if message_type_name(kind) not in _POSE_TYPES:
             have = ", ".join(n for n, t in sorted(topics.items()) if message_type_name(t) in _POSE_TYPES) or "none"
             msg = (
-                f"{bag}: mission.pose_topic {spec.pose_topic!r} is {kind}, which carries no pose; "
+                f"{bag}: mission.pose_topic (twin replay --pose-topic) {spec.pose_topic!r} is {kind}, which carries "
+                "no pose; "
                 f"give an Odometry or PoseStamped topic (the bag's: {have})"
             )
             raise BagError(msg)
@@ -78,7 +82,10 @@ def _pose_topic(spec: ReplayMission, topics: dict[str, str]) -> str:
     for name in _POSE_TOPICS:
         if name in topics:
             return name
-    msg = f"{bag}: no {' or '.join(_POSE_TOPICS)} to start the replay from; set mission.pose_topic to its pose topic"
+    msg = (
+        f"{bag}: no {' or '.join(_POSE_TOPICS)} to start the replay from; set mission.pose_topic "
+        "(twin replay --pose-topic) to its pose topic"
+    )
     raise BagError(msg)
 
 
@@ -100,7 +107,7 @@ def _first(spec: ReplayMission) -> tuple[str, int, tuple[float, float, float], t
             first, first_t = m.msg, _stamp_ns(m.msg) or m.t_ns
         last_t = _stamp_ns(m.msg) or m.t_ns
     if first is None:
-        msg = f"{spec.bag}: {topic} has no messages to start the replay from; set mission.pose_topic"
+        msg = f"{spec.bag}: {topic} has no messages to start the replay from; set mission.pose_topic (--pose-topic)"
         raise BagError(msg)
     twist = getattr(getattr(first, "twist", None), "twist", None)
     velocity = (float(twist.linear.x), float(twist.angular.z)) if twist is not None else (0.0, 0.0)
@@ -135,7 +142,10 @@ def check_bag(spec: ReplayMission) -> dict[str, str]:
         )
         raise BagError(msg)
     if topics[spec.topic] not in _TWIST_TYPES:
-        msg = f"{bag}: {spec.topic} is {topics[spec.topic]}, not a Twist; set mission.topic to a Twist topic"
+        msg = (
+            f"{bag}: {spec.topic} is {topics[spec.topic]}, not a Twist; set mission.topic (twin replay --topic) "
+            "to a Twist topic"
+        )
         raise BagError(msg)
     return topics
 
