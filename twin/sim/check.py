@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from twin.core.config import suggest
 from twin.core.errors import ConfigError, FmuError, TreeError, TwinError
 from twin.core.numbers import number_problem
 from twin.sim.scenario import BehaviorTreeMission, Scenario, in_entry, names_a_key, runs_amcl, runs_nav2
@@ -96,12 +97,27 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
     _check_lidar(scenario, path, "")  # the top level's, named as written (a fleet lays it under each entry)
     for i, (namespace, robot) in enumerate(scenario.robot_scenarios()):
         entry = f"robots[{i}]." if namespace else ""  # a fleet's robot: its entry's key
+        _check_builtin_fmu(robot, path, entry)
         if namespace:
             _check_lidar(robot, path, entry, base=scenario.sensors.lidar)
         _check_lidar_of_robot(robot, path, entry)
     _check_files(scenario, path)
     _check_blocks(scenario, path)
     _check_camera_of_robot(scenario, path)
+
+
+def _check_builtin_fmu(scenario: Scenario, path: Path, entry: str) -> None:
+    """Refuse a `drive.fmu: builtin:NAME` the twin does not ship, naming the key (not an FMU error without it)."""
+    from twin.cosim.build import BUILTIN_PREFIX, builtin_variants
+
+    drive = scenario.drive
+    fmu = getattr(drive, "fmu", None)
+    if getattr(drive, "fmu_file", None) is not None or not isinstance(fmu, str) or not fmu.startswith(BUILTIN_PREFIX):
+        return
+    name, variants = fmu[len(BUILTIN_PREFIX) :], builtin_variants()
+    if name not in variants:
+        problem = f"unknown built-in FMU {name!r}{suggest(name, sorted(variants))}"
+        raise _refuse(path, f"{entry}drive.fmu", problem)
 
 
 def _check_lidar(scenario: Scenario, path: Path, entry: str, *, base: Any = None) -> None:

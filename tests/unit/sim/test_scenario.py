@@ -254,3 +254,19 @@ def test_an_out_dir_where_no_folder_can_go_is_refused_naming_the_key(tmp_path: P
         f"twin: error: {path}: recording.out_dir: {out_dir}: {blocker} is not a folder; give a folder for the bags "
         "(or --out)"
     ]
+
+
+def test_an_unknown_built_in_fmu_names_the_key_and_the_nearest_built_in(tmp_path: Path) -> None:
+    # It said "unknown built-in FMU 'xm430_w21'" with exit 4: no file, no key, no nearest name.
+    from tests.conftest import run_twin
+
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        "name: t\nrobots:\n  - {name: a}\n  - {name: b, robot: {initial_pose: {x_m: 1.5}}, drive: {fmu: 'builtin:xm430_w21'}}\n"
+    )
+    for command in (("scenario", "check", str(path)), ("simulate", str(path), "--out", str(tmp_path / "bag"))):
+        result = run_twin(*command)
+        assert result.returncode == 2, result.stderr
+        assert result.stderr.strip().splitlines() == [
+            f"twin: error: {path}: robots[1].drive.fmu: unknown built-in FMU 'xm430_w21'; did you mean 'xm430_w210'?"
+        ]
