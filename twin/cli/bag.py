@@ -224,7 +224,8 @@ def _recover(args: argparse.Namespace) -> int:
     if report.path.is_file():
         form = "a single file: no metadata.yaml needed"
     else:
-        form = f"metadata version {report.metadata.version}, {report.metadata.ros_distro}"
+        distro = report.metadata.ros_distro  # (a version 5 file, Galactic's and Humble's, names none)
+        form = f"metadata version {report.metadata.version}{f', {distro}' if distro else ''}"
     print(
         f"{report.path}: {report.storage} bag {state}: {report.message_count} messages on "
         f"{len(report.topic_counts)} topics ({form})"

@@ -278,6 +278,12 @@ def test_a_real_humble_bag_is_left_untouched(tmp_path: Path, fixtures: Path) -> 
     before = {f.name: f.read_bytes() for f in bag.iterdir()}
     assert recover_bag(bag).was_complete
     assert {f.name: f.read_bytes() for f in bag.iterdir()} == before
+    from tests.conftest import run_twin
+
+    result = run_twin("bag", "recover", str(bag))  # its metadata (version 5) names no distro: none printed
+    assert result.stdout.strip() == (
+        f"{bag}: sqlite3 bag complete (nothing changed): 9432 messages on 13 topics (metadata version 5)"
+    )
 
 
 def test_a_rewrite_keeps_the_original_metadata_as_a_backup(tmp_path: Path) -> None:
