@@ -511,17 +511,17 @@ class Node:
         if isinstance(period, bool) or not isinstance(period, int | float) or not 0 < period < float("inf"):
             msg = f"node {self._name}: timer period must be a positive number of seconds, got {period!r}"
             raise ConfigError(msg)
+        if period > MAX_TIMER_PERIOD_S:  # before rounding: 1e300 s in ns is no integer
+            msg = (
+                f"node {self._name}: timer period {period!r} s is longer than any run "
+                f"({MAX_TIMER_PERIOD_S:g} s at most)"
+            )
+            raise ConfigError(msg)
         period_ns = round(period * NS_PER_S)
         if period_ns < 1:
             msg = (
                 f"node {self._name}: timer period {period!r} s is below the clock's resolution (1 ns); "
                 "give 1e-09 s or more"
-            )
-            raise ConfigError(msg)
-        if period > MAX_TIMER_PERIOD_S:
-            msg = (
-                f"node {self._name}: timer period {period!r} s is longer than any run "
-                f"({MAX_TIMER_PERIOD_S:g} s at most)"
             )
             raise ConfigError(msg)
         timer = Timer(node=self, period_ns=period_ns, callback=callback)

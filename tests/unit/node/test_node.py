@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -155,3 +156,14 @@ def test_short_and_full_message_names_and_a_misspelling() -> None:
     assert msgs.get_message("ParticleCloud").__msgtype__ == "nav2_msgs/msg/ParticleCloud"
     with pytest.raises(ConfigError, match="did you mean 'LaserScan'"):
         msgs.get_message("LaserScn")
+
+
+@pytest.mark.parametrize("period", [1e300, 1e12])
+def test_a_timer_period_longer_than_any_run_is_refused_in_words(period: float) -> None:
+    # 1e300 s was an OverflowError (no integer of nanoseconds): the same refusal as any too long a period.
+    from twin.core.errors import ConfigError
+
+    with pytest.raises(
+        ConfigError, match=rf"node slow: timer period {re.escape(repr(period))} s is longer than any run"
+    ):
+        Node("slow").create_timer(period, lambda: None)
