@@ -1076,6 +1076,11 @@ def read_mcap_summary(path: Path) -> McapSummary:
         if f.read(8) != MAGIC:
             msg = "not an MCAP file (bad magic)"
             raise ValueError(msg)
+        head = f.read(9)
+        if len(head) < 9 or head[0] != OP_HEADER or 17 + _RECORD.unpack_from(head)[1] > size:
+            # (`twin bag recover` cannot help either: there is nothing to keep)
+            msg = "the MCAP file ends before its header: nothing was recorded"
+            raise ValueError(msg)
         tail = _FOOTER.size + len(MAGIC)
         f.seek(max(size - tail, 0))
         end = f.read(tail)

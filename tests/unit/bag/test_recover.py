@@ -182,6 +182,20 @@ def test_recover_refuses_what_it_cannot_recover(tmp_path: Path) -> None:
         recover_bag(tmp_path / "junkdb")
 
 
+def test_an_mcap_file_of_its_magic_alone_is_said_to_hold_nothing_not_sent_to_recover(tmp_path: Path) -> None:
+    # `bag info` said "a recording that was killed; `twin bag recover` completes it", and recover then refused it.
+    from tests.conftest import run_twin
+
+    file = tmp_path / "x.mcap"
+    file.write_bytes(b"\x89MCAP0\r\n")
+    info = run_twin("bag", "info", str(file))
+    assert info.returncode == 5
+    assert info.stderr.strip().splitlines() == [
+        f"twin: error: {file}: the MCAP file ends before its header: nothing was recorded"
+    ]
+    assert "cannot recover: the file ends before its header" in run_twin("bag", "recover", str(file)).stderr
+
+
 def test_another_writers_zstd_chunks_holding_their_schemas_recover(tmp_path: Path) -> None:
     """Writers such as rosbag2's and the mcap libraries put Schema and Channel records inside
     (compressed) chunks; a killed file of theirs must recover with its topics, not as an empty bag."""
