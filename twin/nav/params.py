@@ -623,6 +623,12 @@ def _costmap(r: ParamReader, name: str) -> CostmapParams:
     inflation: InflationParams | None = None
     for layer in plugins:
         plugin = r.text(f"{layer}.plugin", _PLUGIN_BY_NAME.get(layer, ""))
+        if not plugin:  # a name in `plugins` without a `<name>.plugin`: named where the list was given
+            raise r.fail(
+                "plugins",
+                f"names layer {layer!r}, but {layer}.plugin is not set",
+                f"give its type ({layer}: {{plugin: nav2_costmap_2d::ObstacleLayer}}...) or remove it from plugins",
+            )
         kind = plugin.rsplit("::", 1)[-1].rsplit("/", 1)[-1]
         if kind == "StaticLayer":
             static = StaticLayerParams(

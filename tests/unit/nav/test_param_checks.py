@@ -67,15 +67,16 @@ def test_set_typo_suggests_the_parameter() -> None:
         # Nav2 gives a type only to the default name in the default list
         ({"planner_server.planner_plugins": ["Other"]}, "names 'Other', but Other.plugin is not set"),
         ({"controller_server.controller_plugins": ["Fast"]}, "names 'Fast', but Fast.plugin is not set"),
+        # a costmap layer without its type was "the twin has no costmap layer ''", blamed on the params file
+        ({"local_costmap/local_costmap.plugins": ["voxel_layer", "foo"]}, "names layer 'foo', but foo.plugin is not"),
     ],
 )
 def test_a_server_loading_no_plugin_or_one_of_no_type_is_refused_where_it_was_set(
     override: dict[str, object], message: str
 ) -> None:
     # `planner_plugins: []` was an IndexError (exit 70); an empty controller list failed the first goal at run time.
-    params = load_nav2_params(default_params_path("waffle"), overrides=override)
     with pytest.raises(ConfigError, match=rf"^navigation\.set\.{next(iter(override))}: .*{message}"):
-        nav2_config(params)
+        nav2_config(load_nav2_params(default_params_path("waffle"), overrides=override))
 
 
 def test_set_keys_of_servers_are_known_when_nav2_does_not_run() -> None:
