@@ -637,8 +637,9 @@ def collect(
         by_name[name].name: (health_of.get(name), handlers.get(name)) for name in set(health_of) | set(handlers)
     }
     if namespace:
-        _own_transforms_only(route, by_name, types, namespace, robot_namespaces(info))
-        _own_log_lines_only(route, by_name, types, namespace, robot_namespaces(info))
+        robots = robot_namespaces(info)
+        _keep_only(route, by_name, types, "tf2_msgs/msg/TFMessage", _own_transforms(namespace, robots))
+        _keep_only(route, by_name, types, "rcl_interfaces/msg/Log", _own_log_lines(namespace, robots))
     block = _BLOCK
     for topic, t_ns, raw in read_raw(bag, read_topics):
         r = route.get(topic)
@@ -681,14 +682,8 @@ def _robot_of_frame(frame: str, robots: list[str]) -> str | None:
     return max(under, key=len) if under else None  # a nested namespace's own robot, not its parent's
 
 
-def _own_transforms_only(
-    route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]],
-    by_name: dict[str, TopicInfo],
-    types: dict[str, str],
-    namespace: str,
-    robots: list[str],
-) -> None:
-    """Read a fleet's shared TF topics (`tf: {mode: frame_prefix}`: one `/tf`) with one robot's transforms alone.
+def _own_transforms(namespace: str, robots: list[str]) -> Callable[[bytes], bool]:
+    """Whether a message of a fleet's shared TF topics (`tf: {mode: frame_prefix}`: one `/tf`) is this robot's.
 
     Every robot's transforms are then on the one `/tf`, their frames named `<ns>/odom`...: a
     message whose first transform's child frame (else its parent frame) is another robot's is left
@@ -709,21 +704,11 @@ def _own_transforms_only(
             keep = kept[frames] = robot is None or robot == ns
         return keep
 
-    for name, ti in by_name.items():
-        # a topic outside every namespace keeps its name in the robot's view
-        if ti.name == name and types[name] == "tf2_msgs/msg/TFMessage" and name in route:
-            health, handler = route[name]
-            route[name] = (None, _kept_handler(own, health, handler))
+    return own
 
 
-def _own_log_lines_only(
-    route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]],
-    by_name: dict[str, TopicInfo],
-    types: dict[str, str],
-    namespace: str,
-    robots: list[str],
-) -> None:
-    """Read the shared `/rosout` with this robot's lines and the world's alone (not another robot's).
+def _own_log_lines(namespace: str, robots: list[str]) -> Callable[[bytes], bool]:
+    """Whether a line of the shared `/rosout` is this robot's or the world's (not another robot's).
 
     A namespaced node logs under the name rcl gives it, `robot1.amcl` for `/robot1/amcl`: a line of
     another robot's nodes is left out of this robot's pass, so its rate and count are the robot's.
@@ -743,8 +728,19 @@ def _own_log_lines_only(
             keep = kept[name] = robot is None or robot == ns
         return keep
 
+    return own
+
+
+def _keep_only(
+    route: dict[str, tuple[TopicHealth | None, Callable[[int, bytes], None] | None]],
+    by_name: dict[str, TopicInfo],
+    types: dict[str, str],
+    msgtype: str,
+    own: Callable[[bytes], bool],
+) -> None:
+    """Read the topics of `msgtype` outside every namespace (a robot's view keeps their names) with `own`'s messages."""
     for name, ti in by_name.items():
-        if ti.name == name and types[name] == "rcl_interfaces/msg/Log" and name in route:
+        if ti.name == name and types[name] == msgtype and name in route:
             health, handler = route[name]
             route[name] = (None, _kept_handler(own, health, handler))
 

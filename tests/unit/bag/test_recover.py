@@ -7,6 +7,7 @@ import re
 import shutil
 import sqlite3
 from pathlib import Path
+from typing import Any
 
 import pytest
 from mcap.reader import make_reader
@@ -196,9 +197,9 @@ def test_an_mcap_file_of_its_magic_alone_is_said_to_hold_nothing_not_sent_to_rec
     assert "cannot recover: the file ends before its header" in run_twin("bag", "recover", str(file)).stderr
 
 
-def test_another_writers_zstd_chunks_holding_their_schemas_recover(tmp_path: Path) -> None:
-    """Writers such as rosbag2's and the mcap libraries put Schema and Channel records inside
-    (compressed) chunks; a killed file of theirs must recover with its topics, not as an empty bag."""
+def _another_writers_bag(tmp_path: Path, *, crcs: bool) -> tuple[Path, Path, list[Any]]:
+    """500 `/chatter` strings (log times 1, 2, ...) as the mcap library writes them: zstd chunks of ~2 kB,
+    the schema and channel inside the first chunk (and in the summary); the bag, its file, its chunk indexes."""
     import struct
 
     from mcap.writer import CompressionType, Writer
@@ -207,7 +208,7 @@ def test_another_writers_zstd_chunks_holding_their_schemas_recover(tmp_path: Pat
     bag.mkdir()
     file = bag / "other_0.mcap"
     with file.open("wb") as stream:
-        writer = Writer(stream, chunk_size=2000, compression=CompressionType.ZSTD)
+        writer = Writer(stream, chunk_size=2000, compression=CompressionType.ZSTD, enable_crcs=crcs)
         writer.start(profile="ros2", library="another writer")
         schema = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
         channel = writer.register_channel("/chatter", "cdr", schema)
@@ -220,7 +221,13 @@ def test_another_writers_zstd_chunks_holding_their_schemas_recover(tmp_path: Pat
     with file.open("rb") as stream:
         summary = make_reader(stream).get_summary()
     assert summary is not None
-    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    return bag, file, sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+
+
+def test_another_writers_zstd_chunks_holding_their_schemas_recover(tmp_path: Path) -> None:
+    """Writers such as rosbag2's and the mcap libraries put Schema and Channel records inside
+    (compressed) chunks; a killed file of theirs must recover with its topics, not as an empty bag."""
+    bag, file, chunks = _another_writers_bag(tmp_path, crcs=False)
     assert len(chunks) >= 4 and {c.compression for c in chunks} == {"zstd"}
     kept = chunks[len(chunks) // 2]
     cut = kept.chunk_start_offset + kept.chunk_length + 5  # inside its message indexes, as a kill leaves it
@@ -241,28 +248,7 @@ def test_channels_defined_in_a_damaged_chunk_come_from_the_summary_when_the_clos
     With that first chunk damaged and the file's last bytes flipped (the closing magic), the summary
     is still there after DataEnd: the later, intact chunks keep their messages.
     """
-    import struct
-
-    from mcap.writer import CompressionType, Writer
-
-    bag = tmp_path / "other"
-    bag.mkdir()
-    file = bag / "other_0.mcap"
-    with file.open("wb") as stream:
-        writer = Writer(stream, chunk_size=2000, compression=CompressionType.ZSTD, enable_crcs=True)
-        writer.start(profile="ros2", library="another writer")
-        schema = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
-        channel = writer.register_channel("/chatter", "cdr", schema)
-        for i in range(1, 501):
-            text = f"hello {i}".encode() + b"\0"
-            writer.add_message(
-                channel, log_time=i, publish_time=i, data=b"\0\1\0\0" + struct.pack("<I", len(text)) + text
-            )
-        writer.finish()
-    with file.open("rb") as stream:
-        summary = make_reader(stream).get_summary()
-    assert summary is not None
-    first, *rest = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    bag, file, (first, *rest) = _another_writers_bag(tmp_path, crcs=True)
     data = bytearray(file.read_bytes())
     data[first.chunk_start_offset + first.chunk_length // 2] ^= 0x10  # inside the chunk that defines /chatter
     data[-3] ^= 0x01  # the closing magic
