@@ -26,7 +26,7 @@ from twin.analysis import _cdr
 from twin.analysis.series import TopicSeries, series_kind
 from twin.bag import BagInfo, TopicInfo, open_bag, read_messages, read_raw
 from twin.bag.raw import raw_readable
-from twin.bag.reader import undecodable
+from twin.bag.reader import robot_namespaces, undecodable
 from twin.bag.typesys import message_type_name
 
 __all__ = [
@@ -410,35 +410,6 @@ def _pose_topics(types: dict[str, str], extra: Iterable[str]) -> list[str]:
         others = [t for t, ty in types.items() if t not in out and _cdr.pose_reader(ty) is not None]
         out += sorted(others, key=lambda t: (types[t] != "nav_msgs/msg/Odometry", t))
     return out
-
-
-#: Topics besides the odometry that show a namespace holds a robot (one of them is enough).
-_ROBOT_SIBLINGS = ("/cmd_vel", "/scan", "/tf", "/amcl_pose", "/joint_states", "/imu", "/robot_description")
-
-
-def robot_namespaces(info: BagInfo) -> list[str]:
-    """The namespaces of the robots in a bag (`robot1`, `fleet/robot2`), sorted; empty for a single robot.
-
-    A namespace holds a robot when it has an Odometry topic `<ns>/odom` or `<ns>/ground_truth/odom`
-    and one more of a robot's topics (`<ns>/cmd_vel`, `<ns>/scan`, `<ns>/tf`...): nav2_bringup's
-    multi-robot naming. A lone `/wheel/odom` is not a robot.
-    """
-    names = {t.name for t in info.topics}
-    found: set[str] = set()
-    for t in info.topics:
-        if message_type_name(t.msgtype) != "nav_msgs/msg/Odometry":
-            continue
-        for tail in ("/ground_truth/odom", "/odom"):
-            if t.name.endswith(tail):
-                prefix = t.name[: -len(tail)]
-                break
-        else:
-            continue
-        if not prefix.strip("/") or prefix.endswith("/ground_truth"):
-            continue
-        if any(prefix + s in names for s in _ROBOT_SIBLINGS):
-            found.add(prefix.strip("/"))
-    return sorted(found)
 
 
 def namespace_view(info: BagInfo, namespace: str | None) -> dict[str, TopicInfo]:

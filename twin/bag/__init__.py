@@ -50,7 +50,15 @@ from twin.bag.recorder import STORAGES, Recorder, TopicHandle
 if TYPE_CHECKING:
     from twin.bag.provenance import read_provenance
     from twin.bag.raw import read_raw
-    from twin.bag.reader import BagInfo, BagMessage, TopicInfo, message_definitions, open_bag, read_messages
+    from twin.bag.reader import (
+        BagInfo,
+        BagMessage,
+        TopicInfo,
+        message_definitions,
+        open_bag,
+        read_messages,
+        robot_namespaces,
+    )
     from twin.bag.recover import RecoveryReport, recover_bag
 
 _LAZY = {
@@ -62,6 +70,7 @@ _LAZY = {
     "message_definitions": "twin.bag.reader",
     "open_bag": "twin.bag.reader",
     "read_messages": "twin.bag.reader",
+    "robot_namespaces": "twin.bag.reader",
     "RecoveryReport": "twin.bag.recover",
     "recover_bag": "twin.bag.recover",
 }
@@ -112,6 +121,7 @@ __all__ = [
     "read_provenance",
     "read_raw",
     "recover_bag",
+    "robot_namespaces",
 ]
 
 

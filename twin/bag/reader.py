@@ -50,6 +50,7 @@ __all__ = [
     "message_definitions",
     "open_bag",
     "read_messages",
+    "robot_namespaces",
     "undecodable",
 ]
 
@@ -583,3 +584,32 @@ def message_definitions(path: str | os.PathLike[str]) -> dict[str, MessageDefini
     finally:
         reader.close()
     return definitions
+
+
+#: Topics besides the odometry that show a namespace holds a robot (one of them is enough).
+_ROBOT_SIBLINGS = ("/cmd_vel", "/scan", "/tf", "/amcl_pose", "/joint_states", "/imu", "/robot_description")
+
+
+def robot_namespaces(info: BagInfo) -> list[str]:
+    """The namespaces of the robots in a bag (`robot1`, `fleet/robot2`), sorted; empty for a single robot.
+
+    A namespace holds a robot when it has an Odometry topic `<ns>/odom` or `<ns>/ground_truth/odom`
+    and one more of a robot's topics (`<ns>/cmd_vel`, `<ns>/scan`, `<ns>/tf`...): nav2_bringup's
+    multi-robot naming. A lone `/wheel/odom` is not a robot.
+    """
+    names = {t.name for t in info.topics}
+    found: set[str] = set()
+    for t in info.topics:
+        if message_type_name(t.msgtype) != "nav_msgs/msg/Odometry":
+            continue
+        for tail in ("/ground_truth/odom", "/odom"):
+            if t.name.endswith(tail):
+                prefix = t.name[: -len(tail)]
+                break
+        else:
+            continue
+        if not prefix.strip("/") or prefix.endswith("/ground_truth"):
+            continue
+        if any(prefix + s in names for s in _ROBOT_SIBLINGS):
+            found.add(prefix.strip("/"))
+    return sorted(found)

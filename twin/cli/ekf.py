@@ -301,8 +301,8 @@ def _pick_robot(args: argparse.Namespace, bag_mod: ModuleType) -> None:
     Raises:
         ConfigError: A namespace the bag has no robot under, or a fleet's bag whose robot is not chosen.
     """
-    from twin.analysis.collect import robot_namespaces
     from twin.analysis.fleet import check_namespace
+    from twin.bag import robot_namespaces
 
     info = bag_mod.open_bag(args.bag)
     args.description_topic = "/robot_description"

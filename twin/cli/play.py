@@ -96,8 +96,8 @@ def _play(args: argparse.Namespace) -> int:
     namespace = None
     robots: list[str] = []
     if args.namespace is not None:
-        from twin.analysis.collect import robot_namespaces
         from twin.analysis.fleet import check_namespace
+        from twin.bag import robot_namespaces
 
         namespace = check_namespace(info, args.namespace)
         robots = robot_namespaces(info)

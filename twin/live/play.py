@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.bag import message_definitions, open_bag, read_messages
+from twin.bag import message_definitions, open_bag, read_messages, robot_namespaces
 from twin.bag.typesys import TypeRegistry, message_type_name
 from twin.core.errors import BagError
 from twin.live.namespace import NamespaceView
@@ -77,9 +77,7 @@ def play_bag(
         # The robots' TF on the one shared /tf, none under the namespace: frames named `robot1/odom`.
         shared = bool({"/tf", "/tf_static"} & have) and not {f"/{ns}/tf", f"/{ns}/tf_static"} & have
         if shared and not robots:
-            from twin.analysis.collect import robot_namespaces  # whose prefixed frames are not this robot's
-
-            robots = robot_namespaces(info)
+            robots = robot_namespaces(info)  # whose prefixed frames are not this robot's
         view = NamespaceView(ns, frame_prefix=shared, robots=robots)
     for topic in info.topics:
         served = view.served_as(topic.name) if view is not None else topic.name
