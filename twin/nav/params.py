@@ -590,10 +590,23 @@ def _footprint(r: ParamReader) -> tuple[tuple[float, float], ...]:
 def _source(r: ParamReader, layer: str, name: str) -> ObservationSource:
     p = f"{layer}.{name}."
     d = MAX_DISTANCE_M
+    topic = r.text(p + "topic", "")
+    if not topic:  # Nav2's layer would subscribe to "" and fail to configure
+        block = f"give it a block ({name}: {{topic: /scan, data_type: LaserScan, marking: true, clearing: true}})"
+        if r.has(p + "topic"):
+            raise r.fail(p + "topic", f"source {name!r} has an empty topic", "name the topic it reads")
+        raise r.fail(
+            f"{layer}.observation_sources",
+            f"names source {name!r}, but {p}topic is not set",
+            f"{block} or remove it from observation_sources",
+        )
+    data_type = r.text(p + "data_type", "LaserScan")
+    if data_type not in ("LaserScan", "PointCloud2"):
+        raise r.fail(p + "data_type", f"must be LaserScan or PointCloud2, got {data_type!r}", "fix the value")
     return ObservationSource(
         name=name,
-        topic=r.text(p + "topic", ""),
-        data_type=r.text(p + "data_type", "LaserScan"),
+        topic=topic,
+        data_type=data_type,
         marking=r.flag(p + "marking", True),
         clearing=r.flag(p + "clearing", False),
         obstacle_max_range_m=r.number(p + "obstacle_max_range", 2.5, low=0.0, high=d, unit="m"),

@@ -79,6 +79,37 @@ def test_a_server_loading_no_plugin_or_one_of_no_type_is_refused_where_it_was_se
         nav2_config(load_nav2_params(default_params_path("waffle"), overrides=override))
 
 
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        # a source without its block took the lidar's scan; Nav2's layer subscribes to "" and fails
+        (
+            {"local_costmap/local_costmap.voxel_layer.observation_sources": ["scan", "bump"]},
+            r"names source 'bump', but voxel_layer\.bump\.topic is not set; give it a block",
+        ),
+        ({"global_costmap/global_costmap.obstacle_layer.scan.topic": ""}, "source 'scan' has an empty topic"),
+        (
+            {"local_costmap/local_costmap.voxel_layer.scan.data_type": "Range"},
+            "must be LaserScan or PointCloud2, got 'Range'",
+        ),
+    ],
+)
+def test_an_observation_source_nav2_could_not_subscribe_is_refused_where_it_was_set(
+    override: dict[str, object], message: str
+) -> None:
+    with pytest.raises(ConfigError, match=rf"^navigation\.set\.{next(iter(override))}: {message}"):
+        nav2_config(load_nav2_params(default_params_path("waffle"), overrides=override))
+
+
+def test_an_observation_source_without_its_block_names_the_line_of_the_list(tmp_path: Path) -> None:
+    text = default_params_path("burger").read_text()
+    path = tmp_path / "p.yaml"
+    path.write_text(text.replace("observation_sources: scan\n", "observation_sources: scan bumper\n", 1))
+    line = next(n for n, ln in enumerate(path.read_text().splitlines(), 1) if "scan bumper" in ln)
+    with pytest.raises(ConfigError, match=rf"p\.yaml:{line}: .*observation_sources: names source 'bumper'"):
+        nav2_config(load_nav2_params(path))
+
+
 def test_set_keys_of_servers_are_known_when_nav2_does_not_run() -> None:
     params = load_nav2_params(default_params_path("waffle"), overrides={"controller_server.FollowPath.max_vel_x": 0.2})
     check_nav2_inputs(params, nav2=False)
