@@ -111,3 +111,31 @@ def test_simulate_records_the_fmu_messages_on_rosout(
     # Stamped with sim time: the step that reached each whole second (stamped at its start).
     assert len(stamps_s) == 2
     assert stamps_s == pytest.approx([1.0, 2.0], abs=0.011)
+
+
+@pytest.mark.parametrize("isolation", ["none", "process"])
+def test_a_fleet_robots_fmu_messages_name_the_robot(
+    isolation: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Two robots' drives both had the logger fmu.left: their lines could not be told apart.
+    scenario = tmp_path / "warn.yaml"
+    scenario.write_text(
+        "name: fmu_warns\n"
+        "drive:\n"
+        "  type: fmu\n"
+        f"  fmu_file: {faulty()}\n"
+        "  profile: velocity-servo\n"
+        f"  mapping: {{parameters: {{fault_mode: {WARN}, fault_time: 0.0}}}}\n"
+        f"  isolation: {isolation}\n"
+        "robots:\n"
+        "  - {name: robot1, robot: {initial_pose: {x_m: 0.0, y_m: 0.0}}}\n"
+        "  - {name: robot2, robot: {initial_pose: {x_m: 1.5, y_m: -0.2}}}\n"
+    )
+    bag = tmp_path / "bag"
+    code = main(["simulate", str(scenario), "--duration", "1.5", "--out", str(bag)])
+    err = capsys.readouterr().err
+    assert code in (0, 1), err
+    console = sorted(line.split("] ")[0] for line in err.splitlines() if "winding temperature check" in line)
+    assert console == [f"twin: WARNING: [robot{i}.fmu.{side}" for i in (1, 2) for side in ("left", "right")], err
+    logs = [m.msg for m in read_messages(bag) if m.topic == "/rosout" and "winding temperature check" in m.msg.msg]
+    assert sorted(m.name for m in logs) == [f"robot{i}.fmu.{side}" for i in (1, 2) for side in ("left", "right")]

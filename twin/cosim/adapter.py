@@ -60,13 +60,14 @@ _STATUS_LEVELS = (logging.INFO, logging.WARNING, logging.WARNING, logging.DEBUG,
 MAX_FORWARDED_MESSAGES = 1000
 
 
-def fmu_logger(instance_name: str) -> logging.Logger:
+def fmu_logger(instance_name: str, log_name: str = "fmu") -> logging.Logger:
     """The logger an FMU instance's own log messages go to.
 
     Its records reach the console (INFO with `-v`, warnings always) and, during `twin simulate`,
-    `/rosout` under the name `fmu.<instance_name>` (twin.node.rosout maps `twin.node.X` to `X`).
+    `/rosout` under the name `<log_name>.<instance_name>` (twin.node.rosout maps `twin.node.X` to
+    `X`): `fmu.left`, or `robot1.fmu.left` for a fleet robot's drive (`log_name` `robot1.fmu`).
     """
-    return logging.getLogger(f"twin.node.fmu.{instance_name}")
+    return logging.getLogger(f"twin.node.{log_name}.{instance_name}")
 
 
 class Messages:
@@ -76,11 +77,11 @@ class Messages:
     Fatal are DEBUG, since the FmuError that follows them repeats the message.
     """
 
-    def __init__(self, label: str, instance_name: str = "fmu") -> None:
+    def __init__(self, label: str, instance_name: str = "fmu", log_name: str = "fmu") -> None:
         self.label = label
         self.recent: collections.deque[tuple[int, str]] = collections.deque(maxlen=8)
         self._unread = 0
-        self.logger = fmu_logger(instance_name)
+        self.logger = fmu_logger(instance_name, log_name)
         self.forwarded = 0
 
     @property

@@ -86,6 +86,7 @@ class FmuFile(Closing):
         start_time_s: float = 0.0,
         api: Api = "lowlevel",
         purpose: str = "",
+        log_name: str = "fmu",
     ) -> Stepper:
         """Create, set up and initialise one instance.
 
@@ -100,6 +101,8 @@ class FmuFile(Closing):
             api: `lowlevel` (direct C calls) or `convenience` (FMPy's wrappers).
             purpose: What the instance is for, said after its name in messages when the name alone
                 means nothing to the user (an instance the twin makes for itself).
+            log_name: Where the instance's log messages go (`fmu_logger`): `robot1.fmu` for a
+                fleet robot's, so its lines name the robot.
 
         Raises:
             FmuError: If the library cannot be loaded, instantiation returns NULL, a start value
@@ -113,7 +116,7 @@ class FmuFile(Closing):
                 "own process (drive.isolation: process)"
             )
             raise FmuError(msg)
-        messages = Messages(label, name)
+        messages = Messages(label, name, log_name)
         kwargs = {
             "guid": self.info.guid,
             "unzipDirectory": str(self._dir),

@@ -97,6 +97,7 @@ class IsolatedGroup:
         start: Mapping[str, float],
         timeout_s: float,
         process_per_instance: bool = False,
+        log_name: str = "fmu",
     ) -> None:
         """Start the child, load `path` there and create one instance per name.
 
@@ -111,6 +112,7 @@ class IsolatedGroup:
             timeout_s: Longest wall time one step of all instances may take before the FMU counts as hung.
             process_per_instance: One child process per instance, for an FMU that may be instantiated
                 only once per process (`canBeInstantiatedOnlyOncePerProcess`); the children step in parallel.
+            log_name: Where the instances' log messages go (`twin.cosim.adapter.fmu_logger`).
 
         Raises:
             FmuError: If the child cannot start, or the FMU cannot be loaded or instantiated there.
@@ -156,7 +158,8 @@ class IsolatedGroup:
                     "inputs": list(inputs),
                     "outputs": list(outputs),
                     "start": dict(start),
-                    "fmu_log_level": logging.getLogger("twin.node.fmu").getEffectiveLevel(),
+                    "log_name": log_name,
+                    "fmu_log_level": logging.getLogger(f"twin.node.{log_name}").getEffectiveLevel(),
                 }
                 process = context.Process(target=_child_main, args=(spec, child_conn), daemon=True)
                 child = _Child(process, conn, owned)
@@ -309,7 +312,7 @@ class _Forward(logging.Handler):
 def _child_main(spec: dict[str, Any], conn: multiprocessing.connection.Connection) -> None:
     """The child: load the FMU, answer each step request, exit on close or when the parent goes away."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and closes the child
-    fmu_log = logging.getLogger("twin.node.fmu")
+    fmu_log = logging.getLogger(f"twin.node.{spec['log_name']}")
     fmu_log.setLevel(spec["fmu_log_level"])
     fmu_log.propagate = False
     fmu_log.addHandler(_Forward(conn))
@@ -329,6 +332,7 @@ def _child_main(spec: dict[str, Any], conn: multiprocessing.connection.Connectio
                 inputs=spec["inputs"],
                 outputs=spec["outputs"],
                 start=spec["start"],
+                log_name=spec["log_name"],
             )
             for k in slots
         ]

@@ -143,6 +143,7 @@ class FmuDrivetrain(Closing):
         bounding_radius_m: float = 0.0,
         plugin_wheel_acceleration_mps2: float | None = None,
         robot_name: str = "",
+        log_name: str = "fmu",
     ) -> None:
         """Build (on first use), load and bind the FMU, design the speed loop, instantiate both wheels.
 
@@ -164,6 +165,8 @@ class FmuDrivetrain(Closing):
             plugin_wheel_acceleration_mps2: The robot SDF diff-drive plugin's `max_wheel_acceleration`
                 (rim, m/s²), used when `drive.max_wheel_acceleration_mps2` is null; None or 0: none.
             robot_name: The robot model's name, for `fmu: auto`.
+            log_name: Where the FMU instances' own log messages go (`twin.cosim.adapter.fmu_logger`):
+                `robot1.fmu` in a fleet, so their lines name the robot.
 
         Raises:
             FmuError: If the FMU cannot be built, loaded, bound to the profile or initialised.
@@ -199,6 +202,7 @@ class FmuDrivetrain(Closing):
         self._fmu_name = name
         self.label = f"fmu {name} (FMI {self._file.info.major_version}, {drive.profile})"
         self._isolated: IsolatedGroup | None = None
+        self._log_name = log_name
         try:
             self._setup(drive, chassis, pose, contact, plan_fmu_drive(drive, self._file.info, step_ns=step_ns))
         except BaseException:
@@ -251,14 +255,21 @@ class FmuDrivetrain(Closing):
                 start=binding.start,
                 timeout_s=drive.step_timeout_s,
                 process_per_instance=self._file.info.instantiated_once,
+                log_name=self._log_name,
             )
             self._left, self._right = self._isolated.steppers
         else:
-            self._left = self._file.instantiate(
-                "left", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
-            )
-            self._right = self._file.instantiate(
-                "right", step_s=self._h, inputs=in_vrs, outputs=out_vrs, start=binding.start, api=api
+            self._left, self._right = (
+                self._file.instantiate(
+                    side,
+                    step_s=self._h,
+                    inputs=in_vrs,
+                    outputs=out_vrs,
+                    start=binding.start,
+                    api=api,
+                    log_name=self._log_name,
+                )
+                for side in ("left", "right")
             )
             self._group = StepGroup((self._left, self._right), step_s=self._h)
         self._chassis = Chassis(
@@ -460,6 +471,7 @@ class FmuDrivetrain(Closing):
                 "a third instance the twin steps once before the run, under a small load torque, to estimate "
                 "the drive's inertia at the wheel; drive.wheel_inertia_kgm2 or drive.motor skips it"
             ),
+            log_name=self._log_name,
         )
         try:
             cmd, load = binding.inputs

@@ -34,7 +34,7 @@ import numpy as np
 from twin.bag.frames import frame_prefix
 from twin.core.clock import NS_PER_S
 from twin.core.errors import ConfigError, WorldError
-from twin.node import LaunchArguments, Node, launch_context, node_logger
+from twin.node import LaunchArguments, Node, launch_context, logger_name, node_logger
 from twin.robot.chassis import ChassisParams, SlipModel
 from twin.robot.drivetrain import Drivetrain
 from twin.robot.encoders import EncoderModel, EncoderSpec
@@ -459,6 +459,7 @@ class RobotGroup:
             bounding_radius_m=bounding_radius_m,
             plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2,
             robot_name=robot.name,
+            log_name=logger_name("fmu", self.namespace),
         )
 
     # -- the nodes -------------------------------------------------------------------------------
