@@ -25,7 +25,7 @@ from twin.core.msgdefs import EXTRA_DEFINITIONS
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-__all__ = ["deserialize", "get_message", "message_type_name", "serialize", "typestore"]
+__all__ = ["deserialize", "get_message", "message_type_name", "misfit_field", "serialize", "typestore"]
 
 _PACKAGE_ORDER = (
     "geometry_msgs",
@@ -140,6 +140,89 @@ def _normalize(msg: Any, msgtype: str) -> Any:
                 for item in value:
                     _normalize(item, inner[1])
     return msg
+
+
+_INTEGER_RANGES = {
+    "byte": (0, 255),
+    "char": (0, 255),
+    "int8": (-(1 << 7), (1 << 7) - 1),
+    "uint8": (0, (1 << 8) - 1),
+    "int16": (-(1 << 15), (1 << 15) - 1),
+    "uint16": (0, (1 << 16) - 1),
+    "int32": (-(1 << 31), (1 << 31) - 1),
+    "uint32": (0, (1 << 32) - 1),
+    "int64": (-(1 << 63), (1 << 63) - 1),
+    "uint64": (0, (1 << 64) - 1),
+}
+
+
+def misfit_field(msg: Any, msgtype: str, path: str = "") -> str | None:
+    """Return the first field whose value its type cannot hold (`linear.x is 'fast' (str), not a float64`), or None.
+
+    What the serialiser only says as "required argument is not a float": said with the field's name,
+    its value and the type it needs, for a user's node that filled a message wrongly.
+    """
+    fields: Any = typestore().fielddefs[msgtype][1]
+    for name, (kind, args) in fields:
+        where = f"{path}{name}"
+        if not hasattr(msg, name):
+            return f"{where} is missing"
+        value = getattr(msg, name)
+        if kind == 1:
+            found = _misfit_base(value, args[0], where)
+        elif kind == 2:
+            if hasattr(value, "__msgtype__"):  # a message (of this type or one with its fields)
+                found = misfit_field(value, args, where + ".")
+            else:
+                found = f"{where} is {value!r} ({type(value).__name__}), not a {args}"
+        else:
+            found = _misfit_sequence(value, kind, args, where)
+        if found is not None:
+            return found
+    return None
+
+
+def _misfit_sequence(value: Any, kind: int, args: Any, where: str) -> str | None:
+    """A fixed array (kind 3: args (inner, size)) or a sequence (kind 4: (inner, bound)) that does not fit."""
+    import numpy as np
+
+    inner, size = args
+    if isinstance(value, str | bytes) or not isinstance(value, list | tuple | np.ndarray):
+        return f"{where} is {value!r} ({type(value).__name__}), not a sequence"
+    if kind == 3 and len(value) != size:
+        return f"{where} has {len(value)} items, not the {size} its type fixes"
+    if kind == 4 and size and len(value) > size:
+        return f"{where} has {len(value)} items, more than its bound {size}"
+    if isinstance(value, np.ndarray):
+        return None  # the serialiser casts an array's numbers (rclpy takes both)
+    for i, item in enumerate(value):
+        if inner[0] == 1:
+            found = _misfit_base(item, inner[1][0], f"{where}[{i}]")
+        else:
+            found = misfit_field(item, inner[1], f"{where}[{i}].")
+        if found is not None:
+            return found
+    return None
+
+
+def _misfit_base(value: Any, base: str, where: str) -> str | None:
+    """A number, bool or string field whose value its type cannot hold."""
+    import numpy as np
+
+    if base in ("float32", "float64"):
+        ok = isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+    elif base == "bool":
+        ok = isinstance(value, bool | np.bool_)
+    elif base in ("string", "wstring"):
+        ok = isinstance(value, str)
+    elif base in _INTEGER_RANGES:
+        low, high = _INTEGER_RANGES[base]
+        if isinstance(value, int | np.integer) and not isinstance(value, bool) and not low <= value <= high:
+            return f"{where} is {value}, outside {base}'s {low} to {high}"
+        ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
+    else:
+        return None
+    return None if ok else f"{where} is {value!r} ({type(value).__name__}), not a {base}"
 
 
 def get_message(name: str) -> type:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 import logging
 import re
+import struct
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -227,7 +228,7 @@ class Executor:
 
     def _publish_function(self, topic: Topic, node: Node, qos: QoSProfile, *, checked: bool) -> Callable[[Any], None]:
         """Build one publisher's `publish`: specialised for its topic's sinks, its QoS and its node's trust."""
-        from twin.msgs import serialize
+        from twin.msgs import misfit_field, serialize
 
         callbacks, msgtype = topic.callbacks, topic.msgtype
         if len(topic.sinks) == 1:  # the common case, inlined: the recorder
@@ -279,7 +280,17 @@ class Executor:
                         self._refuse(node, topic, bad)
                         self._publish_refused(topic, msg)
                         return
-            unchecked(msg)
+            try:
+                unchecked(msg)
+            except (struct.error, TypeError, ValueError, OverflowError, AttributeError) as err:
+                bad = None if type(msg) is Encoded else misfit_field(msg, msgtype)
+                if bad is None:
+                    raise
+                text = (
+                    f"node {node.get_name()} published a {msgtype} on {topic.name} whose {bad} "
+                    f"at t={ns_to_s(self.now_ns):.3f} s; fill the field with a value of its type"
+                )
+                raise SimulationError(text) from err
 
         return checked_publish
 
