@@ -195,6 +195,10 @@ class Graph(Protocol):
         """Start a timer a node created while running (in a callback): first firing one period from now."""
         ...
 
+    def count_publishers(self, topic: str) -> int:
+        """How many publishers the graph has on `topic` (a full name)."""
+        ...
+
 
 class Clock:
     """The simulation clock as a node sees it (`node.get_clock().now()`)."""
@@ -566,6 +570,14 @@ class Node:
     def get_clock(self) -> Clock:
         """Return the simulation clock."""
         return Clock(self)
+
+    def count_publishers(self, topic_name: str) -> int:
+        """Return how many publishers the graph has on a topic, as rclpy's does.
+
+        A relative name resolves in the node's namespace. 0 before the node is added to an executor.
+        """
+        graph = self._graph
+        return 0 if graph is None else graph.count_publishers(self._resolve(topic_name))
 
     def get_logger(self) -> NodeLogger:
         """Return the node's logger: its lines go to the console and, stamped with sim time, to `/rosout`."""

@@ -369,6 +369,11 @@ class Executor:
 
         return guarded
 
+    def count_publishers(self, topic: str) -> int:
+        """How many publishers the graph has on `topic` (a full name)."""
+        known = self.topics.get(topic)
+        return 0 if known is None else len(known.publishers)
+
     def add_timer(self, timer: Timer) -> None:
         """Start a timer a node created while running: it first fires one period from now, as rclpy's."""
         node = timer.node

@@ -284,3 +284,19 @@ def test_a_timer_created_in_a_callback_fires_once_per_period_also_on_a_latched_m
     ex.add_node(node)  # gets the latched message while it joins: creates its timer then
     ex.spin(50)
     assert node.fired == [11 * MS, 21 * MS, 31 * MS, 41 * MS]  # one period after its creation (at 1 ms), once each
+
+
+def test_count_publishers_answers_as_rclpy_does() -> None:
+    log = Log()
+    ex = Executor(MS)
+    listener = Listener("listener", "/robot1/chat", log)
+    assert listener.count_publishers("/robot1/chat") == 0  # not on a graph yet
+    ex.add_node(listener)
+    assert listener.count_publishers("/robot1/chat") == 0  # subscribed, not published
+    ex.add_node(Publisher("talker", "/robot1/chat", 0.1, log))
+    ex.add_node(Publisher("other", "/robot1/chat", 0.1, log))
+    assert listener.count_publishers("/robot1/chat") == 2
+    assert listener.count_publishers("/nobody") == 0
+    inner = Node("probe", namespace="/robot1")
+    ex.add_node(inner)
+    assert inner.count_publishers("chat") == 2  # a relative name resolves in the node's namespace

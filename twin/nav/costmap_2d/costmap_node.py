@@ -17,7 +17,7 @@ from twin.nav.costmap_2d.layered_costmap import Costmap, scan_observation
 from twin.nav.frames import Frames, LaserGeometry, compose
 from twin.node import PRIORITY_USER, Encoded, Node, QoSProfile
 
-__all__ = ["CostmapNode", "costmap_translation"]
+__all__ = ["CostmapNode", "costmap_translation", "source_topic"]
 
 LATCHED = QoSProfile(depth=1, durability="transient_local")
 
@@ -28,6 +28,27 @@ def costmap_translation() -> NDArray[np.int8]:
     table[1:253] = 1 + (97 * (np.arange(1, 253) - 1)) // 251
     table[253], table[254], table[255] = 99, 100, -1
     return table.astype(np.int8)
+
+
+def source_topic(topic: str, costmap_namespace: str, robot_namespace: str) -> str:
+    """An observation source's topic as Nav2 Humble's costmap subscribes to it, on the twin's graph.
+
+    A relative topic is resolved in the costmap node's own namespace (`scan` in `/local_costmap` is
+    `/local_costmap/scan`: Humble's layers have no `joinWithParentNamespace`, which came later). An
+    absolute one is taken as it is; for a fleet robot (`robot_namespace` `/robot1`) it is read under
+    the robot's namespace (`/scan` is `/robot1/scan`), as nav2_bringup's multi-robot params files
+    write each robot's topics, since the twin's robots share one params file.
+    """
+    if topic.startswith("/"):
+        return f"{robot_namespace}{topic}"
+    return f"{costmap_namespace.rstrip('/')}/{topic}"
+
+
+def _field(geometry: Any, name: str) -> float:
+    """A scan geometry's number: `LaserGeometry`'s `<name>_rad`/`<name>_m`, or a LaserScan message's `<name>`."""
+    if isinstance(geometry, LaserGeometry):
+        return float(getattr(geometry, f"{name}_rad" if name.startswith("angle") else f"{name}_m"))
+    return float(getattr(geometry, name))
 
 
 class CostmapNode(Node):
@@ -50,42 +71,84 @@ class CostmapNode(Node):
         pub = self.create_publisher(OccupancyGridEncoder.msgtype, "costmap", LATCHED)
         prefix = current_frame_prefix()  # the robot's frame prefix, for the encoders made as the grid resizes
         now = self._graph_now
-        latest: list[Any] = [None]
-        use_scan = laser is not None and any(
-            s.data_type == "LaserScan" for layer in params.obstacle_layers for s in layer.sources
-        )
+        robot_ns = self.get_namespace().rpartition("/")[0]  # the costmap's own namespace is <robot's>/<name>
+        lidar_topic = f"{robot_ns}/scan"
+        # Each LaserScan source's topic as Nav2 Humble resolves it, and the sources reading it.
+        readers: dict[str, list[str]] = {}
+        unfed: list[tuple[str, str]] = []  # (topic, what to say if nothing publishes it) for a topic not the lidar's
+        if laser is not None:
+            for layer in params.obstacle_layers:
+                for source in layer.sources:
+                    if source.data_type != "LaserScan":
+                        continue
+                    topic = source_topic(source.topic, self.get_namespace(), robot_ns)
+                    readers.setdefault(topic, []).append(f"{layer.name}.{source.name}")
+                    if topic != lidar_topic:
+                        hint = (
+                            ""
+                            if source.topic.startswith("/")
+                            else (
+                                " (Nav2 Humble resolves a relative topic in the costmap's own namespace: write /"
+                                f"{source.topic})"
+                            )
+                        )
+                        unfed.append((
+                            topic,
+                            f"{layer.name}.{source.name}: topic {source.topic!r} is {topic}, which nothing publishes "
+                            f"(the robot's lidar scans on {lidar_topic}): the layer marks nothing from it{hint}",
+                        ))  # fmt: skip
+        # (topic, the sources it feeds: None for every source) and its latest scan: one topic, as usual,
+        # feeds every source; several feed each its own (`<layer>.<source>`).
+        feeds = [(topic, None if len(readers) == 1 else names) for topic, names in readers.items()]
+        latest: dict[str, Any] = {}
 
         def on_odom(msg: Any) -> None:
             frames.on_odom(now(), msg)
 
-        def on_scan(msg: Any) -> None:
-            latest[0] = msg[2] if type(msg) is Encoded else np.asarray(msg.ranges, dtype=np.float64)
+        def receiver(topic: str) -> Any:
+            def on_scan(msg: Any) -> None:
+                latest[topic] = msg
+
+            return on_scan
 
         def robot() -> tuple[float, float, float]:
             return frames.odom_pose if in_odom else frames.map_pose()
 
         def on_update(t_ns: int) -> None:
+            if unfed:  # the first update: every node is on the graph by now
+                for topic, line in unfed:
+                    if not self.count_publishers(topic):
+                        self.get_logger().warning(line)
+                unfed.clear()
             if not in_odom and not frames.localized:
                 return
             x, y, yaw = robot()
             observations = []
-            ranges = latest[0]
-            if ranges is not None and laser is not None:
-                latest[0] = None
+            if latest and laser is not None:
                 sx, sy, syaw = compose((x, y, yaw), (laser.mount_x_m, laser.mount_y_m, laser.mount_yaw_rad))
-                observations.append(
-                    scan_observation(
-                        ranges,
-                        angle_min_rad=laser.angle_min_rad,
-                        angle_increment_rad=laser.angle_increment_rad,
-                        range_min_m=laser.range_min_m,
-                        range_max_m=laser.range_max_m,
-                        sensor_x_m=sx,
-                        sensor_y_m=sy,
-                        sensor_z_m=laser.mount_z_m,
-                        sensor_yaw_rad=syaw,
-                    )
-                )
+                for topic, names in feeds:
+                    msg = latest.pop(topic, None)
+                    if msg is None:
+                        continue
+                    if type(msg) is Encoded:  # the lidar's own scan: its ranges, its geometry
+                        ranges, geometry = msg[2], laser
+                    else:  # a node's LaserScan: its own angles and limits, in the lidar's mount
+                        ranges, geometry = np.asarray(msg.ranges, dtype=np.float64), msg
+                    for source_name in names or (None,):
+                        observations.append(
+                            scan_observation(
+                                ranges,
+                                angle_min_rad=_field(geometry, "angle_min"),
+                                angle_increment_rad=_field(geometry, "angle_increment"),
+                                range_min_m=_field(geometry, "range_min"),
+                                range_max_m=_field(geometry, "range_max"),
+                                sensor_x_m=sx,
+                                sensor_y_m=sy,
+                                sensor_z_m=laser.mount_z_m,
+                                sensor_yaw_rad=syaw,
+                                source=source_name,
+                            )
+                        )
             costmap.update(x, y, yaw, observations)
 
         def on_publish(t_ns: int) -> None:
@@ -97,9 +160,8 @@ class CostmapNode(Node):
             cells = table[grid.cost]
             pub.publish(Encoded((encoder.encode, (t_ns, cells), grid)))
 
-        robot_ns = self.get_namespace().rpartition("/")[0]  # the costmap's own namespace is <robot's>/<name>
         self.create_subscription("nav_msgs/msg/Odometry", f"{robot_ns}/odom", on_odom, 10, raw=True)
-        if use_scan:
-            self.create_subscription("sensor_msgs/msg/LaserScan", f"{robot_ns}/scan", on_scan, 10, raw=True)
+        for topic in readers:
+            self.create_subscription("sensor_msgs/msg/LaserScan", topic, receiver(topic), 10, raw=True)
         self.create_rate_timer(params.update_frequency_hz, on_update, priority=PRIORITY_USER - 5)
         self.create_rate_timer(params.publish_frequency_hz, on_publish, priority=PRIORITY_USER - 4)

@@ -105,7 +105,8 @@ class Observation:
             `scan_observation`, whose points are projected when first asked for (the C kernel projects the
             ranges itself, with the same roundings).
         scan: The scan the points come from.
-        source: The observation source that made it (None: every source of every obstacle layer takes it).
+        source: The observation source that made it: its name, or `<layer>.<source>` for one layer's
+            alone (None: every source of every obstacle layer takes it).
     """
 
     __slots__ = ("_points", "origin_x_m", "origin_y_m", "origin_z_m", "scan", "source")
@@ -166,17 +167,18 @@ def scan_observation(
     sensor_y_m: float,
     sensor_yaw_rad: float,
     sensor_z_m: float = 0.0,
+    source: str | None = None,
 ) -> Observation:
     """Project a LaserScan into the costmap's frame (the sensor's pose given in that frame).
 
     Ranges that are not finite or lie outside [range_min, range_max) give no point, as
     laser_geometry's projection does for Nav2's obstacle layer (`inf_is_valid` false); every point
-    is at the sensor's height.
+    is at the sensor's height. `source` names the observation source it is for (None: every one).
     """
     r = np.ascontiguousarray(ranges, dtype=np.float64)
     cos_a, sin_a = _beam_directions(angle_min_rad, angle_increment_rad, len(r))
     scan = _Scan(r, cos_a, sin_a, range_min_m, range_max_m, math.cos(sensor_yaw_rad), math.sin(sensor_yaw_rad))
-    return Observation(origin_x_m=sensor_x_m, origin_y_m=sensor_y_m, origin_z_m=sensor_z_m, scan=scan)
+    return Observation(origin_x_m=sensor_x_m, origin_y_m=sensor_y_m, origin_z_m=sensor_z_m, scan=scan, source=source)
 
 
 @functools.lru_cache(maxsize=8)
@@ -357,6 +359,11 @@ def _inflate_py(
 
 
 _FRESH_COLUMN = 0xFFFF  # VoxelGrid::reset: every voxel of a column unknown
+
+
+def _takes(layer: _ObstacleLayer, source: ObservationSource, tag: str | None) -> bool:
+    """Whether an observation tagged `tag` is `source`'s: untagged, its name, or `<layer>.<source>`."""
+    return tag is None or tag in (source.name, f"{layer.params.name}.{source.name}")
 
 
 class _ObstacleLayer:
@@ -617,7 +624,7 @@ class Costmap:
         n = len(self._obstacles)
         layer_d, layer_k = np.zeros((n, 18)), np.zeros((n, 6), dtype=np.int64)
         for i, layer in enumerate(self._obstacles):
-            taking = [s for s in layer.sources if source_name in (None, s.name)]
+            taking = [s for s in layer.sources if _takes(layer, s, source_name)]
             if len(taking) != 1 or not (taking[0].clearing and taking[0].marking):
                 return key, None
             source, lp = taking[0], layer.params
@@ -645,7 +652,7 @@ class Costmap:
         bounds[:] = (rows, -1, cols, -1)
         for layer in self._obstacles:
             # as ObstacleLayer::updateBounds: every clearing observation first, then every marking one
-            pairs = [(src, obs) for src in layer.sources for obs in observations if obs.source in (None, src.name)]
+            pairs = [(src, obs) for src in layer.sources for obs in observations if _takes(layer, src, obs.source)]
             clearing = [(source, obs) for source, obs in pairs if source.clearing]
             marking = [(source, obs) for source, obs in pairs if source.marking]
             if self._lib is not None and len(clearing) == 1 and clearing == marking:

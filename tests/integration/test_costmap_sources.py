@@ -1,0 +1,107 @@
+"""A costmap observation source reads the topic its params name, resolved as Nav2 Humble resolves it.
+
+The twin used to feed every LaserScan source the robot's lidar, whatever its `topic`. Nav2 Humble's
+obstacle layer subscribes to the topic it is given: a relative `scan` resolves in the costmap's own
+namespace (`/local_costmap/scan`, which nothing publishes: the layer stays empty, the turtlebot4
+users' well-known Humble pitfall), and a laser filter's `/scan_filtered` is read when a node
+publishes it. A crate 1 m ahead of the spawn pose shows what each costmap learned.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.highlevel import AnyReader
+
+from tests.conftest import run_twin
+from twin.nav.costmap_2d.costmap_node import source_topic
+
+SCENARIO = """
+name: costmap_sources
+localization: {type: none}
+navigation:
+  type: nav2
+  set: {SET}
+obstacles:
+  - {shape: box, size_m: [0.3, 0.3, 0.5], pose: {x_m: 1.0, y_m: 0.0}, name: crate}
+"""
+
+FILTER = """
+from twin.msgs import LaserScan
+from twin.node import Node
+
+class ScanFilter(Node):
+    '''Republishes /scan on /scan_filtered with every range halved: where the costmap marks tells which it read.'''
+
+    def __init__(self):
+        super().__init__("scan_filter")
+        self.pub = self.create_publisher(LaserScan, "/scan_filtered", 10)
+        self.create_subscription(LaserScan, "/scan", self.on_scan, 10)
+
+    def on_scan(self, scan):
+        scan.ranges = [r / 2.0 for r in scan.ranges]
+        self.pub.publish(scan)
+"""
+
+CRATE = (0.85, 1.15, -0.15, 0.15)
+
+
+def _both_layers(topic: str) -> str:
+    """`navigation.set` giving both obstacle layers of the (Burger's) local costmap this source topic."""
+    keys = [f"local_costmap/local_costmap.{layer}.scan.topic: {topic}" for layer in ("obstacle_layer", "voxel_layer")]
+    return "{" + ", ".join(keys) + "}"
+
+
+def _last_costmaps(tmp: Path, settings: str, *nodes: str) -> tuple[Any, Any, str]:
+    scenario = tmp / "scenario.yaml"
+    text = SCENARIO.replace("{SET}", settings)
+    if nodes:
+        (tmp / "scan_filter.py").write_text(FILTER)
+        text += "nodes: [" + ", ".join(f"{{plugin: {n}}}" for n in nodes) + "]\n"
+    scenario.write_text(text)
+    bag = tmp / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "3")
+    assert result.returncode == 0, result.stderr
+    last: dict[str, Any] = {}
+    with AnyReader([bag]) as reader:
+        wanted = [c for c in reader.connections if c.topic.endswith("_costmap/costmap")]
+        for connection, _, raw in reader.messages(connections=wanted):
+            last[connection.topic] = reader.deserialize(raw, connection.msgtype)
+    return last["/local_costmap/costmap"], last["/global_costmap/costmap"], result.stderr
+
+
+def _crate_cost(grid: Any) -> int:
+    info = grid.info
+    data = np.asarray(grid.data, dtype=np.int16).reshape(info.height, info.width)
+    res, ox, oy = info.resolution, info.origin.position.x, info.origin.position.y
+    x0, x1, y0, y1 = CRATE
+    return int(
+        data[int((y0 - oy) // res) : int((y1 - oy) // res) + 1, int((x0 - ox) // res) : int((x1 - ox) // res) + 1].max()
+    )
+
+
+def test_a_relative_source_topic_reads_nothing_as_in_nav2_humble(tmp_path: Path) -> None:
+    local, global_costmap, err = _last_costmaps(tmp_path, _both_layers("scan"))
+    assert np.max(local.data) < 99  # the local costmap (no static layer) never saw anything
+    assert _crate_cost(global_costmap) == 100  # the global one, reading /scan, did
+    assert "[local_costmap.local_costmap] voxel_layer.scan: topic 'scan' is /local_costmap/scan, which nothing" in err
+    assert "write /scan" in err
+
+
+def test_a_filtered_scan_a_node_publishes_is_read(tmp_path: Path) -> None:
+    local, global_costmap, err = _last_costmaps(tmp_path, _both_layers("/scan_filtered"), "scan_filter:ScanFilter")
+    # Marks where the halved ranges end (nearer than anything is), none where the lidar sees the crate.
+    assert np.max(local.data) == 100
+    assert _crate_cost(local) < 100  # (inscribed, at most: the marks inflated)
+    assert _crate_cost(global_costmap) == 100  # the global costmap reads /scan
+    assert "nothing publishes" not in err
+
+
+def test_source_topics_resolve_as_in_nav2_humble() -> None:
+    assert source_topic("/scan", "/local_costmap", "") == "/scan"
+    assert source_topic("scan", "/local_costmap", "") == "/local_costmap/scan"
+    # a fleet robot: the params' absolute topic is the robot's own, as nav2_bringup's per-robot files write it
+    assert source_topic("/scan", "/robot1/local_costmap", "/robot1") == "/robot1/scan"
+    assert source_topic("scan", "/robot1/local_costmap", "/robot1") == "/robot1/local_costmap/scan"
