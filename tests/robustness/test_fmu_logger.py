@@ -75,11 +75,9 @@ def test_an_fmu_error_is_said_once_in_the_fmu_error(fmi_version: int, caplog: py
     assert "fault_mode 9 is not one of 0 to 5" in records[1].getMessage()
 
 
-@pytest.mark.parametrize("isolation", ["none", "process"])
-def test_simulate_records_the_fmu_messages_on_rosout(
-    isolation: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    scenario = tmp_path / "warn.yaml"
+def _warning_scenario(folder: Path, isolation: str, more: str = "") -> Path:
+    """A scenario whose drive is the faulty motor warning once a simulated second (`more`: further keys)."""
+    scenario = folder / "warn.yaml"
     scenario.write_text(
         "name: fmu_warns\n"
         "drive:\n"
@@ -87,8 +85,16 @@ def test_simulate_records_the_fmu_messages_on_rosout(
         f"  fmu_file: {faulty()}\n"
         "  profile: velocity-servo\n"
         f"  mapping: {{parameters: {{fault_mode: {WARN}, fault_time: 0.0}}}}\n"
-        f"  isolation: {isolation}\n"
+        f"  isolation: {isolation}\n" + more
     )
+    return scenario
+
+
+@pytest.mark.parametrize("isolation", ["none", "process"])
+def test_simulate_records_the_fmu_messages_on_rosout(
+    isolation: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scenario = _warning_scenario(tmp_path, isolation)
     bag = tmp_path / "bag"
     code = main(["-v", "simulate", str(scenario), "--duration", "2.5", "--out", str(bag)])
     err = capsys.readouterr().err
@@ -118,19 +124,12 @@ def test_a_fleet_robots_fmu_messages_name_the_robot(
     isolation: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # Two robots' drives both had the logger fmu.left: their lines could not be told apart.
-    scenario = tmp_path / "warn.yaml"
-    scenario.write_text(
-        "name: fmu_warns\n"
-        "drive:\n"
-        "  type: fmu\n"
-        f"  fmu_file: {faulty()}\n"
-        "  profile: velocity-servo\n"
-        f"  mapping: {{parameters: {{fault_mode: {WARN}, fault_time: 0.0}}}}\n"
-        f"  isolation: {isolation}\n"
+    fleet = (
         "robots:\n"
         "  - {name: robot1, robot: {initial_pose: {x_m: 0.0, y_m: 0.0}}}\n"
         "  - {name: robot2, robot: {initial_pose: {x_m: 1.5, y_m: -0.2}}}\n"
     )
+    scenario = _warning_scenario(tmp_path, isolation, fleet)
     bag = tmp_path / "bag"
     code = main(["simulate", str(scenario), "--duration", "1.5", "--out", str(bag)])
     err = capsys.readouterr().err
