@@ -44,13 +44,6 @@ def source_topic(topic: str, costmap_namespace: str, robot_namespace: str) -> st
     return f"{costmap_namespace.rstrip('/')}/{topic}"
 
 
-def _field(geometry: Any, name: str) -> float:
-    """A scan geometry's number: `LaserGeometry`'s `<name>_rad`/`<name>_m`, or a LaserScan message's `<name>`."""
-    if isinstance(geometry, LaserGeometry):
-        return float(getattr(geometry, f"{name}_rad" if name.startswith("angle") else f"{name}_m"))
-    return float(getattr(geometry, name))
-
-
 class CostmapNode(Node):
     """One Nav2 costmap (global in map, local rolling in odom) on the node graph (see the module docstring).
 
@@ -101,6 +94,9 @@ class CostmapNode(Node):
         # feeds every source; several feed each its own (`<layer>.<source>`).
         feeds = [(topic, None if len(readers) == 1 else names) for topic, names in readers.items()]
         latest: dict[str, Any] = {}
+        lidar_geometry: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # (no lidar: no scan to read)
+        if laser is not None:
+            lidar_geometry = (laser.angle_min_rad, laser.angle_increment_rad, laser.range_min_m, laser.range_max_m)
 
         def on_odom(msg: Any) -> None:
             frames.on_odom(now(), msg)
@@ -131,17 +127,24 @@ class CostmapNode(Node):
                     if msg is None:
                         continue
                     if type(msg) is Encoded:  # the lidar's own scan: its ranges, its geometry
-                        ranges, geometry = msg[2], laser
+                        ranges, geometry = msg[2], lidar_geometry
                     else:  # a node's LaserScan: its own angles and limits, in the lidar's mount
-                        ranges, geometry = np.asarray(msg.ranges, dtype=np.float64), msg
+                        ranges = np.asarray(msg.ranges, dtype=np.float64)
+                        geometry = (
+                            float(msg.angle_min),
+                            float(msg.angle_increment),
+                            float(msg.range_min),
+                            float(msg.range_max),
+                        )
+                    angle_min, angle_increment, range_min, range_max = geometry
                     for source_name in names or (None,):
                         observations.append(
                             scan_observation(
                                 ranges,
-                                angle_min_rad=_field(geometry, "angle_min"),
-                                angle_increment_rad=_field(geometry, "angle_increment"),
-                                range_min_m=_field(geometry, "range_min"),
-                                range_max_m=_field(geometry, "range_max"),
+                                angle_min_rad=angle_min,
+                                angle_increment_rad=angle_increment,
+                                range_min_m=range_min,
+                                range_max_m=range_max,
                                 sensor_x_m=sx,
                                 sensor_y_m=sy,
                                 sensor_z_m=laser.mount_z_m,
