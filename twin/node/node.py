@@ -461,6 +461,17 @@ class Node:
         """Return `/namespace/name`."""
         return f"{self._namespace}/{self._name}"
 
+    def resolve_topic_name(self, topic: str, *, only_expand: bool = False) -> str:
+        """Return a topic's full name as this node's publishers and subscriptions use it, as rclpy's does.
+
+        A relative name resolves in the node's namespace, `~` in the node's own; remappings apply
+        unless `only_expand`.
+
+        Raises:
+            ConfigError: If the name is not a valid ROS topic name.
+        """
+        return self._resolve(topic, remap=not only_expand)
+
     def _resolve(self, topic: str, *, remap: bool = True) -> str:
         try:
             full = resolve_topic_name(topic, node_name=self._name, namespace=self._namespace)

@@ -128,6 +128,13 @@ class AmclNode(Node):
 
         def on_odom(msg: Any) -> None:
             t_ns = now()
+            if unfed[0]:  # every node is on the graph by now
+                unfed[0] = False
+                if not self.count_publishers(full_topic):
+                    log.warn(
+                        f"scan_topic {amcl.params.scan_topic!r} is {full_topic}, which nothing publishes (the "
+                        f"robot's lidar scans on {lidar_topic}): AMCL gets no scan and never localizes"
+                    )
             frames.on_odom(t_ns, msg)
             odoms.append((t_ns, frames.odom_pose))
             if len(odoms) > 2:
@@ -136,9 +143,41 @@ class AmclNode(Node):
                 t_scan, ranges, true_pose = pending.pop()
                 process(t_scan, ranges, at(t_scan), true_pose)
 
+        laser = amcl.laser
+        # The params' scan_topic as Nav2 Humble resolves it: relative in AMCL's namespace (TB3's `scan`);
+        # absolute as it is, and for a fleet robot under its namespace, as the costmaps' sources.
+        scan_topic = amcl.params.scan_topic
+        if scan_topic.startswith("/"):
+            scan_topic = self.get_namespace().rstrip("/") + scan_topic
+        lidar_topic = self.get_namespace().rstrip("/") + "/scan"
+        full_topic = self.resolve_topic_name(scan_topic)
+        unfed = [full_topic != lidar_topic]  # warn at the first odometry if nothing publishes it
+        misfit_warned = [False]
+
+        def fits(msg: Any) -> bool:
+            """Whether a node's LaserScan has the lidar's angles (AMCL's beam model takes the lidar's)."""
+            if math.isclose(msg.angle_min, laser.angle_min_rad, abs_tol=1e-6) and math.isclose(
+                msg.angle_increment, laser.angle_increment_rad, abs_tol=1e-9
+            ):
+                return True
+            if not misfit_warned[0]:
+                misfit_warned[0] = True
+                log.warn(
+                    f"ignoring scans on {full_topic} whose beams are not the lidar's "
+                    f"(from {msg.angle_min:g} rad by {msg.angle_increment:g}; the lidar's from "
+                    f"{laser.angle_min_rad:g} by {laser.angle_increment_rad:g}): a filter may change ranges, "
+                    "not angles"
+                )
+            return False
+
         def on_scan(msg: Any) -> None:
             t_ns = now()
-            ranges = msg[2] if type(msg) is Encoded else np.asarray(msg.ranges, dtype=np.float64)
+            if type(msg) is Encoded:
+                ranges = msg[2]
+            elif fits(msg):
+                ranges = np.asarray(msg.ranges, dtype=np.float64)
+            else:
+                return
             true_pose = truth() if truth is not None else None
             if odoms and odoms[-1][0] == t_ns:
                 process(t_ns, ranges, odoms[-1][1], true_pose)
@@ -162,7 +201,7 @@ class AmclNode(Node):
             pending.clear()
 
         self.create_subscription("nav_msgs/msg/Odometry", "odom", on_odom, 10, raw=True)
-        self.create_subscription("sensor_msgs/msg/LaserScan", "scan", on_scan, 10, raw=True)
+        self.create_subscription("sensor_msgs/msg/LaserScan", scan_topic, on_scan, 10, raw=True)
         self.create_subscription(
             "geometry_msgs/msg/PoseWithCovarianceStamped", "initialpose", on_initial_pose, 10, raw=True
         )

@@ -1,10 +1,11 @@
-"""A costmap observation source reads the topic its params name, resolved as Nav2 Humble resolves it.
+"""Costmap observation sources and AMCL read the scan topics their params name, resolved as Nav2 Humble does.
 
 The twin used to feed every LaserScan source the robot's lidar, whatever its `topic`. Nav2 Humble's
 obstacle layer subscribes to the topic it is given: a relative `scan` resolves in the costmap's own
 namespace (`/local_costmap/scan`, which nothing publishes: the layer stays empty, the turtlebot4
 users' well-known Humble pitfall), and a laser filter's `/scan_filtered` is read when a node
-publishes it. A crate 1 m ahead of the spawn pose shows what each costmap learned.
+publishes it. A crate 1 m ahead of the spawn pose shows what each costmap learned. AMCL's
+`scan_topic` was ignored the same way.
 """
 
 from __future__ import annotations
@@ -105,3 +106,67 @@ def test_source_topics_resolve_as_in_nav2_humble() -> None:
     # a fleet robot: the params' absolute topic is the robot's own, as nav2_bringup's per-robot files write it
     assert source_topic("/scan", "/robot1/local_costmap", "/robot1") == "/robot1/scan"
     assert source_topic("scan", "/robot1/local_costmap", "/robot1") == "/robot1/local_costmap/scan"
+
+
+AMCL_SCENARIO = """
+name: amcl_scan_topic
+navigation:
+  type: nav2
+  set: {amcl.scan_topic: TOPIC}
+"""
+
+REPUBLISHER = '''
+from twin.msgs import LaserScan
+from twin.node import Node
+
+class Republisher(Node):
+    """Republishes /scan on /scan_copy: as it is, or with its angles shifted by `shift_rad`."""
+
+    def __init__(self):
+        super().__init__("republisher")
+        self.shift = self.declare_parameter("shift_rad", 0.0).value
+        self.pub = self.create_publisher(LaserScan, "/scan_copy", 10)
+        self.create_subscription(LaserScan, "/scan", self.on_scan, 10)
+
+    def on_scan(self, scan):
+        scan.angle_min += self.shift
+        scan.angle_max += self.shift
+        self.pub.publish(scan)
+'''
+
+
+def _amcl_poses(tmp: Path, topic: str, shift_rad: float | None = None) -> tuple[int, str]:
+    tmp.mkdir(parents=True, exist_ok=True)
+    scenario = tmp / "scenario.yaml"
+    text = AMCL_SCENARIO.replace("TOPIC", topic)
+    if shift_rad is not None:
+        (tmp / "republisher.py").write_text(REPUBLISHER)
+        text += f"nodes: [{{plugin: republisher:Republisher, parameters: {{shift_rad: {shift_rad}}}}}]\n"
+    scenario.write_text(text)
+    bag = tmp / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "4")
+    assert result.returncode == 0, result.stderr
+    with AnyReader([bag]) as reader:
+        wanted = [c for c in reader.connections if c.topic == "/amcl_pose"]
+        count = sum(1 for _ in reader.messages(connections=wanted))
+    return count, result.stderr
+
+
+def test_amcl_reads_its_scan_topic(tmp_path: Path) -> None:
+    default, _ = _amcl_poses(tmp_path / "a", "scan")  # TB3's own value
+    assert default > 0
+    copied, err = _amcl_poses(tmp_path / "b", "/scan_copy", shift_rad=0.0)
+    assert copied == default, err  # the same scans, from another topic
+    assert "nothing publishes" not in err
+
+
+def test_amcl_on_a_topic_nothing_publishes_is_said_and_never_localizes(tmp_path: Path) -> None:
+    count, err = _amcl_poses(tmp_path, "/nowhere")
+    assert count == 0
+    assert "[amcl] scan_topic '/nowhere' is /nowhere, which nothing publishes" in err
+
+
+def test_amcl_ignores_a_scan_whose_beams_are_not_the_lidars(tmp_path: Path) -> None:
+    count, err = _amcl_poses(tmp_path, "/scan_copy", shift_rad=0.1)
+    assert count == 0
+    assert err.count("[amcl] ignoring scans on /scan_copy whose beams are not the lidar's") == 1
