@@ -10,13 +10,14 @@ publishes it. A crate 1 m ahead of the spawn pose shows what each costmap learne
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from rosbags.highlevel import AnyReader
 
-from tests.conftest import run_twin
+from tests.conftest import REPO, run_twin
 from twin.nav.costmap_2d.costmap_node import source_topic
 
 SCENARIO = """
@@ -170,3 +171,34 @@ def test_amcl_ignores_a_scan_whose_beams_are_not_the_lidars(tmp_path: Path) -> N
     count, err = _amcl_poses(tmp_path, "/scan_copy", shift_rad=0.1)
     assert count == 0
     assert err.count("[amcl] ignoring scans on /scan_copy whose beams are not the lidar's") == 1
+
+
+def test_the_lidar_publishes_on_its_sdf_plugins_topic_and_nav2_reads_it_there(tmp_path: Path) -> None:
+    # A robot whose ray sensor plugin remaps its output to scan_front, and Nav2 params that name it.
+    model = tmp_path / "front_burger"
+    shutil.copytree(REPO / "sdf" / "models" / "turtlebot3_burger", model)
+    sdf = model / "model.sdf"
+    sdf.write_text(sdf.read_text().replace("~/out:=scan<", "~/out:=scan_front<"))
+    keys = [f"{c}/{c}.{layer}.scan.topic: /scan_front" for c in ("global_costmap", "local_costmap")
+            for layer in ("obstacle_layer", "voxel_layer")]  # fmt: skip
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(
+        f"name: scan_front\nrobot: {{model: {sdf}}}\n"
+        "navigation: {type: nav2, set: {amcl.scan_topic: scan_front, " + ", ".join(keys) + "}}\n"
+        "obstacles:\n  - {shape: box, size_m: [0.3, 0.3, 0.5], pose: {x_m: 1.0, y_m: 0.0}, name: crate}\n"
+    )
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "4")
+    assert result.returncode == 0, result.stderr
+    assert "nothing publishes" not in result.stderr
+    with AnyReader([bag]) as reader:
+        topics = {c.topic for c in reader.connections}
+        wanted = [c for c in reader.connections if c.topic in ("/amcl_pose", "/local_costmap/costmap")]
+        last: dict[str, Any] = {}
+        poses = 0
+        for connection, _, raw in reader.messages(connections=wanted):
+            poses += connection.topic == "/amcl_pose"
+            last[connection.topic] = reader.deserialize(raw, connection.msgtype)
+    assert "/scan_front" in topics and "/scan" not in topics
+    assert poses > 0  # AMCL localized from /scan_front
+    assert _crate_cost(last["/local_costmap/costmap"]) == 100  # the costmap saw the crate on /scan_front

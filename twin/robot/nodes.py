@@ -280,9 +280,14 @@ class ObstacleNode(Node):
 
 
 class LidarNode(Node):
-    """Gazebo's ray sensor plugin: a scan of the world at the lidar's rate on `/scan`. Data: the ranges (float32)."""
+    """Gazebo's ray sensor plugin: a scan of the world at the lidar's rate on `/scan`. Data: the ranges (float32).
 
-    def __init__(self, lidar: Lidar, frame_id: str, rate_hz: float, chassis: Callable[[], ChassisState]) -> None:
+    `topic` is the plugin's (`lidar_topic`: TurtleBot3's `scan`), in the robot's namespace.
+    """
+
+    def __init__(
+        self, lidar: Lidar, frame_id: str, rate_hz: float, chassis: Callable[[], ChassisState], topic: str = "scan"
+    ) -> None:
         super().__init__("lidar")
         geo = lidar.geometry
         encode = ScanEncoder(
@@ -296,7 +301,7 @@ class LidarNode(Node):
             range_max_m=geo.range_max_m,
             samples=geo.num_ranges,
         ).encode
-        pub = self.create_publisher(ScanEncoder.msgtype, "scan", SENSOR_DATA)
+        pub = self.create_publisher(ScanEncoder.msgtype, topic, SENSOR_DATA)
         scan = lidar.scan
 
         def on_timer(t_ns: int) -> None:

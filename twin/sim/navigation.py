@@ -111,6 +111,7 @@ class NavigationStack:
         params: Nav2Params,
         laser: LaserGeometry | None,
         amcl: Amcl | None,
+        scan_topic: str = "scan",
         initial_pose: tuple[Pose, float, float] | None,
         global_costmap: Costmap | None,
         local_costmap: Costmap | None,
@@ -120,6 +121,7 @@ class NavigationStack:
         self.occupancy = occupancy
         self.params = params
         self.laser = laser
+        self.scan_topic = scan_topic  # the lidar's, in the robot's namespace
         self.amcl = amcl
         self.initial_pose = initial_pose
         self.global_costmap = global_costmap
@@ -216,6 +218,7 @@ class NavigationStack:
             params=params,
             laser=laser,
             amcl=amcl,
+            scan_topic=robot.lidar.scan_topic,
             initial_pose=initial,
             global_costmap=global_costmap,
             local_costmap=local_costmap,
@@ -262,12 +265,13 @@ class NavigationStack:
                     transform_tolerance_s=self.params.amcl.transform_tolerance_s,
                     on_estimate=log.add,
                     truth=truth,
+                    lidar_topic=self.scan_topic,
                 )
             )
         if self.config is not None:
             assert self.global_costmap is not None and self.local_costmap is not None and self.bt_xml is not None
-            nodes.append(CostmapNode("global_costmap", self.global_costmap, frames, self.laser))
-            nodes.append(CostmapNode("local_costmap", self.local_costmap, frames, self.laser))
+            for name, costmap in (("global_costmap", self.global_costmap), ("local_costmap", self.local_costmap)):
+                nodes.append(CostmapNode(name, costmap, frames, self.laser, lidar_topic=self.scan_topic))
             servers = Nav2Servers(self.config, frames, self.global_costmap, self.local_costmap, now=now)
             navigator = self.navigator = BtNavigator(servers, self.bt_xml, now=now)
             nodes += [

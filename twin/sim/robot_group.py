@@ -523,7 +523,8 @@ class RobotGroup:
                 )
             )
         if self.lidar is not None and robot.lidar is not None:
-            nodes.append(LidarNode(self.lidar, robot.lidar.frame_id, robot.lidar.rate_hz, chassis))
+            lidar = robot.lidar
+            nodes.append(LidarNode(self.lidar, lidar.frame_id, lidar.rate_hz, chassis, topic=lidar.scan_topic))
 
         names = [w[0] for w in self.wheels]
         fmu = isinstance(drive, FmuDrivetrain) and len(self.wheels) == 2

@@ -122,6 +122,14 @@ class LidarSpec:
     mount: Pose = field(default_factory=Pose)
 
     @property
+    def scan_topic(self) -> str:
+        """The scans' topic in the robot's namespace: the plugin's (`scan` when it names none).
+
+        An absolute one (`/scan`) is kept in the namespace too, so a fleet robot's scans stay under `/robot1/`.
+        """
+        return (self.topic or "scan").strip("/") or "scan"
+
+    @property
     def count(self) -> int:
         """Number of ranges per scan (Gazebo's range count: samples x resolution)."""
         return max(1, int(self.samples * self.resolution))

@@ -77,6 +77,7 @@ class AmclNode(Node):
         transform_tolerance_s: float = 1.0,
         on_estimate: Callable[[int, Pose, Pose], None] | None = None,
         truth: Callable[[], Pose] | None = None,
+        lidar_topic: str = "scan",
     ) -> None:
         super().__init__("amcl")
         self.amcl = amcl
@@ -149,7 +150,7 @@ class AmclNode(Node):
         scan_topic = amcl.params.scan_topic
         if scan_topic.startswith("/"):
             scan_topic = self.get_namespace().rstrip("/") + scan_topic
-        lidar_topic = self.get_namespace().rstrip("/") + "/scan"
+        lidar_topic = self.get_namespace().rstrip("/") + "/" + lidar_topic  # the robot's lidar's scans
         full_topic = self.resolve_topic_name(scan_topic)
         unfed = [full_topic != lidar_topic]  # warn at the first odometry if nothing publishes it
         misfit_warned = [False]

@@ -52,10 +52,12 @@ class CostmapNode(Node):
         costmap: The costmap.
         frames: Shared transforms.
         laser: The lidar's scan geometry and mount.
-        odom_frame: True for a costmap in the odom frame (else map).
+        lidar_topic: The lidar's scan topic in the robot's namespace (its SDF plugin's; TurtleBot3's `scan`).
     """
 
-    def __init__(self, name: str, costmap: Costmap, frames: Frames, laser: LaserGeometry | None) -> None:
+    def __init__(
+        self, name: str, costmap: Costmap, frames: Frames, laser: LaserGeometry | None, *, lidar_topic: str = "scan"
+    ) -> None:
         super().__init__(name, namespace=name)
         self.costmap = costmap
         params = costmap.params
@@ -65,7 +67,7 @@ class CostmapNode(Node):
         prefix = current_frame_prefix()  # the robot's frame prefix, for the encoders made as the grid resizes
         now = self._graph_now
         robot_ns = self.get_namespace().rpartition("/")[0]  # the costmap's own namespace is <robot's>/<name>
-        lidar_topic = f"{robot_ns}/scan"
+        lidar_topic = f"{robot_ns}/{lidar_topic}"  # the robot's lidar's scans
         # Each LaserScan source's topic as Nav2 Humble resolves it, and the sources reading it.
         readers: dict[str, list[str]] = {}
         unfed: list[tuple[str, str]] = []  # (topic, what to say if nothing publishes it) for a topic not the lidar's
