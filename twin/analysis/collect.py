@@ -14,7 +14,7 @@ import math
 import os
 import struct
 from array import array
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -344,6 +344,7 @@ class BagData:
     cmd: tuple[array[float], array[float], array[float]] | None = None  # t s, v, ω
     cmd_stamped: bool = False
     scan_min: tuple[array[float], array[float]] | None = None  # t s, min valid range m
+    scan_topic: str | None = None  # where scan_min comes from: /scan, else the bag's one LaserScan topic
     scan_cells: dict[int, int] = field(default_factory=dict)  # cell (x << 32 | y) -> scans that hit it
     scan_from: tuple[float, float, float] | None = None  # pose of the last scan placed
     health: dict[str, TopicHealth] = field(default_factory=dict)
@@ -542,6 +543,7 @@ def collect(
     by_real = {ti.name: ti for ti in by_name.values()}
     types = {n: message_type_name(t.msgtype) for n, t in by_name.items()}  # full names, as the fast readers know them
     pose_list = _pose_topics(types, pose_topics)
+    scan_topic = _scan_topic(types)
     wanted = None
     if topics is not None:
         asked = list(topics)
@@ -549,6 +551,8 @@ def collect(
         if pose_topics or any(t in asked for t in POSE_TOPICS):
             # a caller asking for the usual pose topics gets whatever the bag carries poses on
             wanted += [t for t in pose_list if t not in wanted]
+        if SCAN_TOPIC in asked and scan_topic is not None and scan_topic not in wanted:
+            wanted.append(scan_topic)  # ... and for /scan, its one LaserScan topic
     for name, ti in by_name.items():
         if wanted is None or name in wanted:
             data.health[name] = TopicHealth(
@@ -564,9 +568,9 @@ def collect(
     if twist_fn is not None:
         data.cmd = (array("d"), array("d"), array("d"))
         data.cmd_stamped = types[CMD_TOPIC].endswith("Stamped")
-    scan_ok = SCAN_TOPIC in by_name and types[SCAN_TOPIC] == "sensor_msgs/msg/LaserScan"
-    if scan_ok:
+    if scan_topic is not None:
         data.scan_min = (array("d"), array("d"))
+        data.scan_topic = scan_topic
     clock_ok = "/clock" in by_name and types["/clock"] == "rosgraph_msgs/msg/Clock"
     if clock_ok:
         data.clock = (array("q"), array("q"))
@@ -588,8 +592,8 @@ def collect(
         handlers[topic] = _pose_handler(data, topic, fn, state if pose_rank[topic] == best_rank else None)
     if twist_fn is not None and data.cmd is not None:
         handlers[CMD_TOPIC] = _cmd_handler(data, twist_fn)
-    if data.scan_min is not None:
-        handlers[SCAN_TOPIC] = lambda t_ns, buf: _add_scan(data, t_ns, buf, state["pose"] if scan_points else None)
+    if data.scan_min is not None and scan_topic is not None:
+        handlers[scan_topic] = lambda t_ns, buf: _add_scan(data, t_ns, buf, state["pose"] if scan_points else None)
     if data.clock is not None:
         handlers["/clock"] = _clock_handler(data.clock)
     if decoded:
@@ -728,6 +732,15 @@ def _kept_handler(
             handler(t_ns, buf)
 
     return handle
+
+
+def _scan_topic(types: Mapping[str, str]) -> str | None:
+    """The lidar's topic: `/scan`, else the bag's one LaserScan topic (`/front/scan`); None: none, or several."""
+    laser = "sensor_msgs/msg/LaserScan"
+    if types.get(SCAN_TOPIC) == laser:
+        return SCAN_TOPIC
+    scans = [name for name, msgtype in types.items() if msgtype == laser]
+    return scans[0] if len(scans) == 1 else None
 
 
 def _add_series(

@@ -294,8 +294,10 @@ def compute_metrics(data: BagData) -> RunMetrics:
 
     min_r = min_t = None
     if data.scan_min is None:
-        notes.append("clearance needs /scan")
+        notes.append("clearance needs /scan (or a bag's only LaserScan topic)")
     else:
+        if data.scan_topic != SCAN_TOPIC:
+            notes.append(f"clearance from {data.scan_topic} (the bag has no /scan)")
         ranges = np.frombuffer(data.scan_min[1], dtype=np.float64)
         if len(ranges) and not np.all(np.isnan(ranges)):
             i = int(np.nanargmin(ranges))

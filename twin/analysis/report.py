@@ -201,7 +201,9 @@ def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str,
     elif data.occupancy is not None:
         layers = plots.MapLayers(occupancy=data.occupancy, background="/map")
     elif data.scan_cells:
-        layers = plots.MapLayers(scan_points=scan_points(data), background="/scan endpoints, placed on the best pose")
+        layers = plots.MapLayers(
+            scan_points=scan_points(data), background=f"{data.scan_topic} endpoints, placed on the best pose"
+        )
     else:
         layers = plots.MapLayers(background="")
     layers.tracks = tracks
@@ -260,7 +262,7 @@ def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str,
         r = np.frombuffer(data.scan_min[1], dtype=np.float64)
         _plot(report, "clearance", render, lambda: plots.clearance_plot(t, r, f"{title}: minimum lidar range"))
     else:
-        add(Section(name="clearance", available=False, needs="/scan (sensor_msgs/LaserScan)"))
+        add(Section(name="clearance", available=False, needs="/scan, or the bag's only LaserScan topic"))
 
     # Mission timeline.
     tl = report.timeline

@@ -78,3 +78,31 @@ def test_a_bag_with_poses_under_other_names_is_analysed(twin_bag: Path, tmp_path
     # and compare takes such a topic by name
     result = compare_bags(twin_bag, bag, topics=("/odom", "/odometry/filtered"))
     assert result.max_position_error_m == 0.0
+
+
+def test_a_bag_whose_lidar_is_not_on_scan_gets_its_clearance_from_its_one_laserscan(
+    twin_bag: Path, tmp_path: Path
+) -> None:
+    # A Jackal's /front/scan: the clearance was "needs /scan"; with two LaserScan topics none is guessed.
+    info = open_bag(twin_bag)
+    expected = _analyze(twin_bag, tmp_path / "r0")["metrics"]["min_lidar_range_m"]
+    assert expected is not None
+
+    def renamed(folder: Path, names: dict[str, str]) -> Path:
+        with Recorder(folder) as rec:
+            handles = {src: rec.add_topic(dst, info.topic(src).msgtype) for src, dst in names.items()}
+            for m in read_messages(twin_bag, list(names), decode=False):
+                rec.write(handles[m.topic], m.t_ns, m.msg)
+        return folder
+
+    front = renamed(tmp_path / "front", {"/odom": "/odom", "/scan": "/front/scan"})
+    report = _analyze(front, tmp_path / "r1")
+    assert report["metrics"]["min_lidar_range_m"] == expected
+    assert "clearance from /front/scan (the bag has no /scan)" in report["metrics"]["notes"]
+    with Recorder(tmp_path / "two") as rec:  # the same scans on two topics: which is the lidar is not guessed
+        front_h = rec.add_topic("/front/scan", info.topic("/scan").msgtype)
+        rear_h = rec.add_topic("/rear/scan", info.topic("/scan").msgtype)
+        for m in read_messages(twin_bag, ["/scan"], decode=False):
+            rec.write(front_h, m.t_ns, m.msg)
+            rec.write(rear_h, m.t_ns, m.msg)
+    assert _analyze(tmp_path / "two", tmp_path / "r2")["metrics"]["min_lidar_range_m"] is None
