@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import REPO, run_twin
@@ -202,3 +203,32 @@ def test_the_lidar_publishes_on_its_sdf_plugins_topic_and_nav2_reads_it_there(tm
     assert "/scan_front" in topics and "/scan" not in topics
     assert poses > 0  # AMCL localized from /scan_front
     assert _crate_cost(last["/local_costmap/costmap"]) == 100  # the costmap saw the crate on /scan_front
+
+
+def test_the_imu_and_joint_states_go_on_their_plugins_topics_and_the_ekf_reads_them_there(tmp_path: Path) -> None:
+    model = tmp_path / "renamed_burger"
+    shutil.copytree(REPO / "sdf" / "models" / "turtlebot3_burger", model)
+    sdf = model / "model.sdf"
+    text = sdf.read_text().replace("~/out:=imu<", "~/out:=imu_raw<").replace("~/out:=joint_states<", "~/out:=wheels<")
+    sdf.write_text(text)
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(f"name: renamed\nrobot: {{model: {sdf}}}\nlocalization: {{type: none}}\n")
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "4")
+    assert result.returncode == 0, result.stderr
+    with AnyReader([bag]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        odom = [
+            reader.deserialize(raw, c.msgtype).pose.pose.position.x
+            for c, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic == "/odom"])
+        ]
+        truth = [
+            reader.deserialize(raw, c.msgtype).pose.pose.position.x
+            for c, _, raw in reader.messages(
+                connections=[c for c in reader.connections if c.topic == "/ground_truth/odom"]
+            )
+        ]
+    assert counts["/imu_raw"] > 0 and counts["/wheels"] > 0
+    assert "/imu" not in counts and "/joint_states" not in counts
+    assert abs(truth[-1] - truth[0]) > 0.05  # the robot moved
+    assert odom[-1] - odom[0] == pytest.approx(truth[-1] - truth[0], abs=0.02)  # and the EKF followed it

@@ -21,7 +21,16 @@ __all__ = ["EkfNode"]
 class EkfNode(Node):
     """Fuses wheel encoders (and the gyro, with `fuse_gyro`) into `/odom` and the odom→base transform."""
 
-    def __init__(self, ekf: OdometryFilter, *, base_frame: str, wheel_joints: Sequence[str], fuse_gyro: bool) -> None:
+    def __init__(
+        self,
+        ekf: OdometryFilter,
+        *,
+        base_frame: str,
+        wheel_joints: Sequence[str],
+        fuse_gyro: bool,
+        imu_topic: str = "imu",
+        joint_states_topic: str = "joint_states",
+    ) -> None:
         super().__init__("ekf_odometry")
         names = tuple(wheel_joints)
         encode_odom = OdometryEncoder("odom", base_frame).encode
@@ -54,5 +63,5 @@ class EkfNode(Node):
                 else:
                     add_gyro(*imu_yaw_rate(msg))
 
-            self.create_subscription("sensor_msgs/msg/Imu", "imu", on_imu, 10, raw=True)
-        self.create_subscription("sensor_msgs/msg/JointState", "joint_states", on_joint_states, 10, raw=True)
+            self.create_subscription("sensor_msgs/msg/Imu", imu_topic, on_imu, 10, raw=True)
+        self.create_subscription("sensor_msgs/msg/JointState", joint_states_topic, on_joint_states, 10, raw=True)

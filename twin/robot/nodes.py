@@ -326,8 +326,12 @@ class ImuNode(Node):
         initial_yaw_rad: float,
         *,
         chassis_address: int | None = None,
+        topic: str = "imu",
     ) -> None:
-        """`chassis_address`: where the compiled drive loop keeps the chassis (see `ImuModel.compiled_sampler`)."""
+        """`chassis_address`: where the compiled drive loop keeps the chassis (see `ImuModel.compiled_sampler`).
+
+        `topic`: the plugin's (TurtleBot3's `imu`), in the robot's namespace.
+        """
         super().__init__("imu")
         encoder = ImuEncoder(
             imu.spec.frame_id,
@@ -336,7 +340,7 @@ class ImuNode(Node):
             linear_acceleration_covariance=imu.linear_acceleration_covariance,
         )
         encode = encoder.encode
-        pub = self.create_publisher(ImuEncoder.msgtype, "imu", SENSOR_DATA)
+        pub = self.create_publisher(ImuEncoder.msgtype, topic, SENSOR_DATA)
         compiled = None
         if chassis_address is not None:
             compiled = imu.compiled_sampler(chassis_address, initial_yaw_rad, encoder)
@@ -379,10 +383,11 @@ class JointStateNode(Node):
         encoders: EncoderModel | None,
         *,
         with_effort: bool,
+        topic: str = "joint_states",
     ) -> None:
         super().__init__("joint_states")
         encode = JointStateEncoder(list(names), with_effort=with_effort).encode
-        pub = self.create_publisher(JointStateEncoder.msgtype, "joint_states", 10)
+        pub = self.create_publisher(JointStateEncoder.msgtype, topic, 10)
 
         def on_timer(t_ns: int) -> None:
             ws = wheel_state()
@@ -498,6 +503,8 @@ class RobotStatePublisher(Node):
         urdf: str,
         static: Sequence[tuple[str, str, Pose7]],
         wheels: Sequence[tuple[str, str, str, Mat4, tuple[float, float, float]]],
+        *,
+        joint_states_topic: str = "joint_states",
     ) -> None:
         super().__init__("robot_state_publisher")
         static_encoder = TFEncoder([(p, c) for p, c, _ in static])
@@ -527,4 +534,4 @@ class RobotStatePublisher(Node):
                 t_ns, (pl, pr) = read
             tf_pub.publish(Encoded((encode, (t_ns, (left.at(pl), right.at(pr))), None)))
 
-        self.create_subscription(JointStateEncoder.msgtype, "joint_states", on_joint_states, 10, raw=True)
+        self.create_subscription(JointStateEncoder.msgtype, joint_states_topic, on_joint_states, 10, raw=True)

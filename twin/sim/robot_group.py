@@ -72,6 +72,7 @@ from twin.sim.scenario import (
 )
 from twin.world import RobotModelSpec, load_robot, urdf_from_robot
 from twin.world.obstacles import ObstacleField, ObstacleMonitor
+from twin.world.robot_model import in_namespace
 from twin.world.scene import CollisionMonitor, RobotBody, Scene
 from twin.world.tf_static import static_frames
 
@@ -483,7 +484,11 @@ class RobotGroup:
         external = self.scenario.ros2.enabled and self.scenario.ros2.role == "simulator"
         static = [] if localizes or external else [("map", "odom", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
         static += [(parent, child, tf_pose(T)) for parent, child, T in static_frames(robot)]  # casters, optical frames
-        nodes.append(RobotStatePublisher(urdf_from_robot(robot), static, self.wheels))
+        imu_topic = in_namespace(robot.imu.topic if robot.imu is not None else None, "imu")
+        joints_topic = in_namespace(
+            robot.joint_states.topic if robot.joint_states is not None else None, "joint_states"
+        )
+        nodes.append(RobotStatePublisher(urdf_from_robot(robot), static, self.wheels, joint_states_topic=joints_topic))
 
         def truth() -> tuple[float, float, float]:
             c = chassis()
@@ -532,14 +537,16 @@ class RobotGroup:
         if self.encoders is not None:
             rate = self.encoders.spec.rate_hz
             encoders = self.encoders if self.ekf is not None else None
-            nodes.append(JointStateNode(names, rate, drive.wheel_state, encoders, with_effort=with_effort))
+            nodes.append(
+                JointStateNode(names, rate, drive.wheel_state, encoders, with_effort=with_effort, topic=joints_topic)
+            )
             if self.ekf is None:
                 nodes.append(GazeboOdometryNode(robot.base_frame, rate, chassis))
 
         nodes.append(GroundTruthNode(robot.base_frame, sc.sensors.ground_truth.rate_hz, chassis))
         if self.imu is not None:
             address = drive.chassis_address if isinstance(drive, FmuDrivetrain) else None
-            nodes.append(ImuNode(self.imu, chassis, pose.yaw_rad, chassis_address=address))
+            nodes.append(ImuNode(self.imu, chassis, pose.yaw_rad, chassis_address=address, topic=imu_topic))
 
         motor_rate = robot.joint_states.rate_hz if robot.joint_states is not None else 30.0
         self.drive_node = DiffDriveNode(
@@ -550,5 +557,14 @@ class RobotGroup:
             from twin.estimation.node import EkfNode
 
             fuse_gyro = self.imu is not None and sc.estimation.fuse_gyro
-            nodes.append(EkfNode(self.ekf, base_frame=robot.base_frame, wheel_joints=names, fuse_gyro=fuse_gyro))
+            nodes.append(
+                EkfNode(
+                    self.ekf,
+                    base_frame=robot.base_frame,
+                    wheel_joints=names,
+                    fuse_gyro=fuse_gyro,
+                    imu_topic=imu_topic,
+                    joint_states_topic=joints_topic,
+                )
+            )
         return nodes

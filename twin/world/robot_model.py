@@ -52,6 +52,7 @@ __all__ = [
     "LinkInertia",
     "NoiseSpec",
     "RobotModelSpec",
+    "in_namespace",
     "load_robot",
     "robot_spec_from_model",
 ]
@@ -98,6 +99,14 @@ class NoiseSpec:
         )
 
 
+def in_namespace(topic: str | None, default: str) -> str:
+    """A sensor plugin's topic as the twin publishes it, relative to the robot's namespace (`default` when none).
+
+    An absolute one (`/scan`) is kept in the namespace too, so a fleet robot's topics stay under `/robot1/`.
+    """
+    return (topic or default).strip("/") or default
+
+
 @dataclass(frozen=True, kw_only=True, slots=True)
 class LidarSpec:
     """A planar lidar as Gazebo's ray sensor and gazebo_ros_ray_sensor publish it.
@@ -123,11 +132,8 @@ class LidarSpec:
 
     @property
     def scan_topic(self) -> str:
-        """The scans' topic in the robot's namespace: the plugin's (`scan` when it names none).
-
-        An absolute one (`/scan`) is kept in the namespace too, so a fleet robot's scans stay under `/robot1/`.
-        """
-        return (self.topic or "scan").strip("/") or "scan"
+        """The scans' topic in the robot's namespace: the plugin's (`scan` when it names none)."""
+        return in_namespace(self.topic, "scan")
 
     @property
     def count(self) -> int:
