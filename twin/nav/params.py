@@ -319,6 +319,8 @@ def _read_file(path: Path) -> dict[str, dict[str, ParamValue]]:
     except RecursionError:
         msg = f"{path}: Nav2 params YAML nested too deeply; flatten it"
         raise ConfigError(msg) from None
+    if isinstance(doc, Mapping):
+        doc = _with_repeated_keys_merged(text, str(path), doc)
     if doc is None:
         doc = {}
     if not isinstance(doc, Mapping):
@@ -327,6 +329,48 @@ def _read_file(path: Path) -> dict[str, dict[str, ParamValue]]:
     nodes: dict[str, dict[str, ParamValue]] = {}
     _collect_nodes(doc, "", nodes, str(path))
     return nodes
+
+
+def _with_repeated_keys_merged(text: str, name: str, doc: Any) -> Any:
+    """The file's data as ROS 2's parameter parser reads it: a key given twice in one mapping is merged.
+
+    rcl_yaml_param_parser reads the file event by event into one table, so a node's section given
+    twice (`amcl:` ... `amcl:`) contributes the parameters of both, and a parameter given twice takes
+    the later value. A YAML loader keeps only the later section of the two, dropping the earlier
+    one's parameters without a word. `doc` is returned as it is when no key repeats.
+    """
+    root = yaml_numbers.compose(text, name)
+    if root is None or not _repeats_a_key(root):
+        return doc
+    return yaml_numbers.Loader("").construct_document(_merge_repeated(root))
+
+
+def _repeats_a_key(node: yaml.Node) -> bool:
+    if isinstance(node, yaml.MappingNode):
+        keys = [k.value for k, _ in node.value if isinstance(k, yaml.ScalarNode)]
+        return len(keys) != len(set(keys)) or any(_repeats_a_key(v) for _, v in node.value)
+    if isinstance(node, yaml.SequenceNode):
+        return any(_repeats_a_key(v) for v in node.value)
+    return False
+
+
+def _merge_repeated(node: yaml.Node) -> yaml.Node:
+    """`node` with each mapping's repeated keys merged: two mappings into one, else the later value."""
+    if not isinstance(node, yaml.MappingNode):
+        return node
+    merged: dict[Any, tuple[yaml.Node, yaml.Node]] = {}
+    for key, value in node.value:
+        ident = key.value if isinstance(key, yaml.ScalarNode) else id(key)
+        earlier = merged.get(ident)
+        both = earlier is not None and isinstance(earlier[1], yaml.MappingNode) and isinstance(value, yaml.MappingNode)
+        if both:
+            assert earlier is not None
+            joined = yaml.MappingNode(value.tag, earlier[1].value + value.value, value.start_mark, value.end_mark)
+            merged[ident] = (key, joined)
+        else:
+            merged[ident] = (key, value)
+    pairs = [(key, _merge_repeated(value)) for key, value in merged.values()]
+    return yaml.MappingNode(node.tag, pairs, node.start_mark, node.end_mark, node.flow_style)
 
 
 def _key_lines(node: yaml.Node | None, namespace: str, out: dict[tuple[str, str], int]) -> None:

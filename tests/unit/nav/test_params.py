@@ -108,3 +108,22 @@ def test_bad_params_fail_with_one_line_naming_file_and_key(tmp_path: Path, text:
     with pytest.raises(ConfigError, match=match) as info:
         load_nav2_params(path)
     assert "\n" not in str(info.value) and ConfigError.exit_code == 2
+
+
+def test_a_section_given_twice_contributes_both_as_ros2s_parser_reads_it(tmp_path: Path) -> None:
+    # A YAML loader kept only the later `amcl:` (max_particles fell back to its default without a
+    # word); rcl's parser reads both, the later value winning for a parameter given in each.
+    path = tmp_path / "p.yaml"
+    path.write_text(
+        "amcl:\n  ros__parameters:\n    max_particles: 1234\n    alpha1: 0.3\n"
+        "local_costmap:\n  local_costmap:\n    ros__parameters:\n      width: 4\n"
+        "amcl:\n  ros__parameters:\n    min_particles: 321\n    alpha1: 0.4\n"
+        "local_costmap:\n  local_costmap:\n    ros__parameters:\n      height: 2\n"
+    )
+    params = load_nav2_params(path)
+    assert (params.amcl.max_particles, params.amcl.min_particles, params.amcl.alpha1) == (1234, 321, 0.4)
+    assert (params.local_costmap.width_m, params.local_costmap.height_m) == (4.0, 2.0)
+    # a bad value in the earlier section is still named at its own line
+    path.write_text(path.read_text().replace("max_particles: 1234", "max_particles: -5"))
+    with pytest.raises(ConfigError, match=r"p\.yaml:3: amcl\.max_particles"):
+        load_nav2_params(path)
