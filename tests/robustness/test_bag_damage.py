@@ -362,3 +362,22 @@ def test_a_sqlite3_timestamp_that_is_not_an_integer_is_a_damaged_bag(
     for argv, code, err in _read_with_commands(bag, tmp_path, capsys):
         assert code == 5, f"{argv}: {err}"
         assert "has time ''" in assert_one_line_error(err, contains="twin bag recover"), err
+
+
+def test_a_truncated_mcap_is_one_error_line_for_every_reading_command(
+    runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # `ekf replay` said the error three times (a warning from each open_bag first), and `play` read
+    # the bag's metadata and got as far as serving before it failed.
+    bag, path = _copy(runs["mcap"], tmp_path)
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    for argv in (
+        ["ekf", "replay", str(bag), "--out", str(tmp_path / "ekf")],
+        ["play", str(bag), "--port", "0"],
+        ["analyze", str(bag), "--out", str(tmp_path / "analysis"), "--no-plots"],
+    ):
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code == 5, f"{argv}: {err}"
+        assert_one_line_error(err, contains="run `twin bag recover")
+        assert len(err.strip().splitlines()) == 1, err  # and no warning before it

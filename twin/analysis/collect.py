@@ -24,8 +24,8 @@ from numpy.typing import NDArray
 
 from twin.analysis import _cdr
 from twin.analysis.series import TopicSeries, series_kind
-from twin.bag import BagInfo, TopicInfo, open_bag, read_messages, read_raw
-from twin.bag.raw import raw_readable
+from twin.bag import BagInfo, TopicInfo, open_bag, read_raw
+from twin.bag.raw import require_readable
 from twin.bag.reader import robot_namespaces, undecodable
 from twin.bag.typesys import message_type_name
 
@@ -531,9 +531,7 @@ def collect(
     """
     bag = Path(path)
     # Opening the storage first turns a truncated file into one error line, not a warning and an error.
-    if not raw_readable(bag):
-        for _ in read_messages(bag, []):
-            pass
+    require_readable(bag)
     info = open_bag(bag)
     data = BagData(info=info, start_ns=info.start_ns, twin_bag=_is_twin_bag(bag))
     nominal = (twin_rates(bag, namespace) or {}) if data.twin_bag else {}

@@ -28,8 +28,8 @@ from twin.analysis import plots
 from twin.analysis.collect import ContactEvent, PoseTrack, collect, robot_namespaces
 from twin.analysis.metrics import RunMetrics, compute_metrics, metric_data
 from twin.analysis.report import Report, bag_line, bag_summary, build_report, markdown_html, robot_markdown
-from twin.bag import BagInfo, open_bag, read_messages
-from twin.bag.raw import raw_readable
+from twin.bag import BagInfo, open_bag
+from twin.bag.raw import require_readable
 from twin.core.errors import ConfigError
 
 __all__ = [
@@ -61,9 +61,7 @@ def bag_robots(path: str | os.PathLike[str]) -> tuple[BagInfo, list[str]]:
         BagError: If it is not a readable bag (a truncated one: run `twin bag recover`).
     """
     bag = Path(path)
-    if not raw_readable(bag):  # as `collect` does: a truncated file is one error line
-        for _ in read_messages(bag, []):
-            pass
+    require_readable(bag)  # as `collect` does: a truncated file is one error line
     info = open_bag(bag)
     return info, robot_namespaces(info)
 

@@ -49,7 +49,7 @@ from twin.bag.recorder import STORAGES, Recorder, TopicHandle
 
 if TYPE_CHECKING:
     from twin.bag.provenance import read_provenance
-    from twin.bag.raw import read_raw
+    from twin.bag.raw import read_raw, require_readable
     from twin.bag.reader import (
         BagInfo,
         BagMessage,
@@ -64,6 +64,7 @@ if TYPE_CHECKING:
 _LAZY = {
     "read_provenance": "twin.bag.provenance",
     "read_raw": "twin.bag.raw",
+    "require_readable": "twin.bag.raw",
     "BagInfo": "twin.bag.reader",
     "BagMessage": "twin.bag.reader",
     "TopicInfo": "twin.bag.reader",
@@ -121,6 +122,7 @@ __all__ = [
     "read_provenance",
     "read_raw",
     "recover_bag",
+    "require_readable",
     "robot_namespaces",
 ]
 

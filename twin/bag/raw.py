@@ -23,7 +23,7 @@ from twin.bag.reader import _bag_dir, bag_metadata, read_messages, storage_paths
 from twin.core.errors import BagError
 from twin.core.numbers import INT64_MAX
 
-__all__ = ["raw_readable", "read_raw"]
+__all__ = ["raw_readable", "read_raw", "require_readable"]
 
 _RECORD = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQQI")
@@ -51,6 +51,21 @@ def raw_readable(path: str | os.PathLike[str]) -> bool:
         BagError: If `path` is not a bag (no such folder or file, no metadata.yaml).
     """
     return _fast(_bag_dir(path), None) is not None
+
+
+def require_readable(path: str | os.PathLike[str]) -> None:
+    """Raise the bag's one-line error now if its storage cannot be read (a truncated file: `twin bag recover`).
+
+    `open_bag` reads such a bag from its metadata.yaml alone, with a warning, so that `twin bag info`
+    still shows it; a command that goes on to read its messages calls this first, so that it says
+    one error line, not a warning per `open_bag` and then the error.
+
+    Raises:
+        BagError: If it is not a bag, or its storage cannot be read.
+    """
+    if not raw_readable(path):
+        for _ in read_messages(path, []):
+            pass
 
 
 def read_raw(

@@ -356,6 +356,7 @@ def _replay(args: argparse.Namespace) -> int:
         if value is not None and not (0.0 < value <= _MAX_WHEEL_M):  # NaN and inf too; before the bag is read
             msg = f"{flag} must be a length in metres above 0 and at most {_MAX_WHEEL_M:g}, got {value}"
             raise ConfigError(msg)
+    bag.require_readable(args.bag)  # a truncated file: one error line, not a warning per reading first
     _pick_robot(args, bag)
     geometry_sources = _resolve_geometry(args, bag)
     if not (args.wheel_radius > 0.0 and args.wheel_separation > 0.0):

@@ -89,9 +89,10 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
 
 
 def _play(args: argparse.Namespace) -> int:
-    from twin.bag import open_bag
+    from twin.bag import open_bag, require_readable
     from twin.live import LiveServer, play_bag
 
+    require_readable(args.bag)  # a truncated file: one error line, before the port is taken
     info = open_bag(args.bag)  # a bad bag (or namespace) is reported before the port is taken
     namespace = None
     robots: list[str] = []
