@@ -232,3 +232,47 @@ def test_the_imu_and_joint_states_go_on_their_plugins_topics_and_the_ekf_reads_t
     assert "/imu" not in counts and "/joint_states" not in counts
     assert abs(truth[-1] - truth[0]) > 0.05  # the robot moved
     assert odom[-1] - odom[0] == pytest.approx(truth[-1] - truth[0], abs=0.02)  # and the EKF followed it
+
+
+def _burger_remapped(tmp_path: Path, remapping: str) -> Path:
+    """The project's Burger with its gazebo_ros_diff_drive given this `<ros>` remapping."""
+    model = tmp_path / "remapped_burger"
+    shutil.copytree(REPO / "sdf" / "models" / "turtlebot3_burger", model)
+    sdf = model / "model.sdf"
+    ros = f"<ros><remapping>{remapping}</remapping></ros>"
+    sdf.write_text(sdf.read_text().replace("<update_rate>30</update_rate>", ros + "<update_rate>30</update_rate>", 1))
+    return sdf
+
+
+def test_a_diff_drive_remapped_away_from_cmd_vel_hears_nothing_as_in_gazebo_and_says_so(tmp_path: Path) -> None:
+    # gazebo_ros_diff_drive listening on cmd_vel_raw: Nav2's /cmd_vel reaches nothing, and one line says so.
+    sdf = _burger_remapped(tmp_path, "cmd_vel:=cmd_vel_raw")
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(f"name: raw\nrobot: {{model: {sdf}}}\n")
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "4")
+    assert result.returncode == 0, result.stderr
+    (line,) = [ln for ln in result.stderr.splitlines() if "nothing publishes" in ln]
+    assert "/cmd_vel_raw" in line and "/cmd_vel has publishers" in line
+    with AnyReader([bag]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        truth = [
+            reader.deserialize(raw, c.msgtype).pose.pose.position
+            for c, _, raw in reader.messages(
+                connections=[c for c in reader.connections if c.topic == "/ground_truth/odom"]
+            )
+        ]
+    assert counts["/cmd_vel"] > 20  # Nav2 drove
+    assert max(abs(p.x - truth[0].x) + abs(p.y - truth[0].y) for p in truth) < 1e-3  # and the robot never moved
+
+
+def test_ground_truth_odometry_goes_on_the_diff_drives_remapped_odom_topic(tmp_path: Path) -> None:
+    sdf = _burger_remapped(tmp_path, "odom:=wheel_odom")
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(f"name: wheel_odom\nrobot: {{model: {sdf}}}\nodometry: ground_truth\nmission: {{type: none}}\n")
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "1")
+    assert result.returncode == 0, result.stderr
+    with AnyReader([bag]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts["/wheel_odom"] == 30 and "/odom" not in counts  # its 30 Hz, on its topic

@@ -135,6 +135,7 @@ class DiffDriveNode(Node):
         *,
         motor_joints: Sequence[str] = (),
         motor_rate_hz: float = 30.0,
+        command_topic: str = "cmd_vel",
     ) -> None:
         super().__init__("diff_drive")
         self.drive = drive
@@ -150,7 +151,9 @@ class DiffDriveNode(Node):
             else:
                 set_cmd_vel(*twist_of(msg))
 
-        self.create_subscription("geometry_msgs/msg/Twist", "cmd_vel", on_cmd_vel, 10, raw=True)
+        self.create_subscription("geometry_msgs/msg/Twist", command_topic, on_cmd_vel, 10, raw=True)
+        if command_topic != "cmd_vel":  # the SDF's plugin renames it: say so if the commands go to cmd_vel
+            self._check_commands(command_topic)
         self._contact_pub = self.create_publisher(ContactEncoder.msgtype, "contacts", 10)
         self._contact_enc = ContactEncoder("map")
         if motor_joints:
@@ -175,6 +178,21 @@ class DiffDriveNode(Node):
 
         # The executor steps the drivetrain `n_steps` physics steps between events.
         self.advance: Callable[[int], None] = drive.advance
+
+    def _check_commands(self, command_topic: str) -> None:
+        """One second in, warn once if nothing publishes the drive's topic while something publishes `cmd_vel`."""
+
+        def check() -> None:
+            timer.cancel()
+            if not self.count_publishers(command_topic) and self.count_publishers("cmd_vel"):
+                self.get_logger().warning(
+                    f"the diff drive listens on {self.resolve_topic_name(command_topic)} (its SDF plugin's "
+                    f"topic), which nothing publishes, while {self.resolve_topic_name('cmd_vel')} has "
+                    "publishers: the robot will not move; make the plugin's topic cmd_vel or publish the "
+                    "commands where it listens"
+                )
+
+        timer = self.create_timer(1.0, check)
 
     def after_advance(self, t_ns: int) -> None:
         """Report a contact's beginning, and its end once the robot is clear of it again."""
@@ -408,17 +426,19 @@ class JointStateNode(Node):
 
 
 class GazeboOdometryNode(Node):
-    """Gazebo diff drive's perfect odometry (`odometry: ground_truth`): `/odom` and odom→base from the chassis.
+    """Gazebo diff drive's perfect odometry (`odometry: ground_truth`): `/odom` (the plugin's topic) and odom→base.
 
     Data: (x, y, yaw, v, yaw rate) in the odom frame.
     """
 
-    def __init__(self, base_frame: str, rate_hz: float, chassis: Callable[[], ChassisState]) -> None:
+    def __init__(
+        self, base_frame: str, rate_hz: float, chassis: Callable[[], ChassisState], *, topic: str = "odom"
+    ) -> None:
         super().__init__("gazebo_odometry")
         cov = np.diag(_ODOM_COV)
         encode_odom = OdometryEncoder("odom", base_frame, pose_covariance=cov, twist_covariance=cov).encode
         encode_tf = TFEncoder([("odom", base_frame)]).encode_planar
-        odom_pub = self.create_publisher(OdometryEncoder.msgtype, "odom", 10)
+        odom_pub = self.create_publisher(OdometryEncoder.msgtype, topic, 10)
         tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
 
         def on_timer(t_ns: int) -> None:

@@ -541,7 +541,8 @@ class RobotGroup:
                 JointStateNode(names, rate, drive.wheel_state, encoders, with_effort=with_effort, topic=joints_topic)
             )
             if self.ekf is None:
-                nodes.append(GazeboOdometryNode(robot.base_frame, rate, chassis))
+                odom_topic = in_namespace(robot.drive.odometry_topic, "odom")
+                nodes.append(GazeboOdometryNode(robot.base_frame, rate, chassis, topic=odom_topic))
 
         nodes.append(GroundTruthNode(robot.base_frame, sc.sensors.ground_truth.rate_hz, chassis))
         if self.imu is not None:
@@ -550,7 +551,11 @@ class RobotGroup:
 
         motor_rate = robot.joint_states.rate_hz if robot.joint_states is not None else 30.0
         self.drive_node = DiffDriveNode(
-            drive, self.tracker, motor_joints=names if fmu else (), motor_rate_hz=motor_rate
+            drive,
+            self.tracker,
+            motor_joints=names if fmu else (),
+            motor_rate_hz=motor_rate,
+            command_topic=in_namespace(robot.drive.command_topic, "cmd_vel"),
         )
         nodes.append(self.drive_node)
         if self.ekf is not None:

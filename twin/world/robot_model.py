@@ -682,14 +682,31 @@ def _topological(frames: list[FrameSpec], root: str) -> list[FrameSpec]:
     return out
 
 
-def _remapped(plugin: Plugin) -> str | None:
+def _remapped(plugin: Plugin, source: str = "~/out") -> str | None:
+    """The target of the plugin's `<ros><remapping>source:=target</remapping>`, or None."""
     ros = plugin.element.find("ros")
     if ros is None:
         return None
     for remap in ros.findall("remapping"):
-        if "~/out:=" in remap.text:
-            return remap.text.split(":=", 1)[1].strip()
+        text = remap.text.strip()
+        if ":=" in text and text.split(":=", 1)[0].strip() == source:
+            return text.split(":=", 1)[1].strip()
     return None
+
+
+def _gazebo_ros_topic(plugin: Plugin, topic: str) -> str:
+    """A gazebo_ros plugin's own topic (`cmd_vel`, `odom`) as its `<ros>` remaps and namespaces it.
+
+    gazebo_ros_diff_drive in ROS 2 subscribes `cmd_vel` and publishes `odom` relative to its node,
+    whose namespace is `<ros><namespace>`; `<remapping>cmd_vel:=...</remapping>` renames them. (Its
+    ROS 1 `<command_topic>` and `<odometry_topic>` are ignored, as the Humble plugin ignores them.)
+    """
+    target = _remapped(plugin, topic) or _remapped(plugin, f"~/{topic}") or topic
+    if target.startswith("/"):
+        return target
+    ros = plugin.element.find("ros")
+    namespace = (ros.text_at("namespace") or "").strip("/") if ros is not None else ""
+    return f"{namespace}/{target}" if namespace else target
 
 
 def _wheel_radius(link: Link | None) -> float | None:
@@ -758,6 +775,19 @@ def _drive(
             wheel_radius_m=radius,
             base_frame=root,
         )
+    if plugin.filename == "libgazebo_ros_diff_drive.so":
+        command_topic, odometry_topic = _gazebo_ros_topic(plugin, "cmd_vel"), _gazebo_ros_topic(plugin, "odom")
+        legacies = (("command_topic", "cmd_vel", command_topic), ("odometry_topic", "odom", odometry_topic))
+        for legacy, own, topic in legacies:
+            named = (plugin.param(legacy) or own).strip()
+            if named.strip("/") not in (own, topic.strip("/")):  # a rename the plugin will not make
+                warnings.append(
+                    f"{plugin.where}: <{legacy}>{named}</{legacy}> is ROS 1's; gazebo_ros_diff_drive in ROS 2 "
+                    f"ignores it and uses {topic!r}: rename with <ros><remapping>{own}:={named}</remapping></ros>"
+                )
+    else:  # gz-sim's DiffDrive: its Gazebo topics, as a ros_gz bridge of the same names carries them
+        command_topic = plugin.param("topic") or "cmd_vel"
+        odometry_topic = plugin.param("odom_topic") or "odom"
     return DiffDriveSpec(
         left_joint=left.name,
         right_joint=right.name,
@@ -767,8 +797,8 @@ def _drive(
         max_linear_acceleration_mps2=_float_param(plugin, "max_linear_acceleration"),
         max_wheel_torque_nm=_float_param(plugin, "max_wheel_torque"),
         update_rate_hz=_float_param(plugin, "update_rate"),
-        command_topic=plugin.param("command_topic") or plugin.param("topic") or "cmd_vel",
-        odometry_topic=plugin.param("odometry_topic") or plugin.param("odom_topic") or "odom",
+        command_topic=command_topic,
+        odometry_topic=odometry_topic,
         odometry_frame=plugin.param("odometry_frame") or plugin.param("frame_id") or "odom",
         base_frame=plugin.param("robot_base_frame") or plugin.param("child_frame_id") or root,
         publish_odom=_bool_param(plugin, "publish_odom", True),

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import dataclasses
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -129,3 +130,62 @@ def test_urdf_attributes_are_quoted_as_the_standard_library_quotes_them(name: st
     from twin.world.urdf import _quoteattr
 
     assert _quoteattr(name) == quoteattr(name)
+
+
+def _burger_with_drive(tmp_path: Path, old: str, new: str) -> Path:
+    """The project's Burger with its diff drive plugin's text changed."""
+    model = tmp_path / "burger"
+    shutil.copytree(REPO / "sdf" / "models" / "turtlebot3_burger", model)
+    sdf = model / "model.sdf"
+    text = sdf.read_text()
+    assert old in text
+    sdf.write_text(text.replace(old, new, 1))
+    return sdf
+
+
+def test_every_turtlebot3_diff_drive_takes_cmd_vel_and_publishes_odom() -> None:
+    for path, _ in _fixture_models():
+        drive = load_robot(path, model_path=[path.parent.parent]).drive
+        assert drive is not None
+        assert (drive.command_topic, drive.odometry_topic) == ("cmd_vel", "odom"), path
+
+
+@pytest.mark.parametrize(
+    ("ros", "command", "odom"),
+    [
+        ("<remapping>cmd_vel:=cmd_vel_raw</remapping>", "cmd_vel_raw", "odom"),
+        ("<namespace>/tb3</namespace><remapping>odom:=wheel_odom</remapping>", "tb3/cmd_vel", "tb3/wheel_odom"),
+        ("<namespace>tb3</namespace><remapping>cmd_vel:=/teleop/cmd_vel</remapping>", "/teleop/cmd_vel", "tb3/odom"),
+    ],
+)
+def test_gazebo_ros_diff_drive_topics_follow_its_ros_remappings(
+    tmp_path: Path, ros: str, command: str, odom: str
+) -> None:
+    # In ROS 2 the plugin subscribes cmd_vel and publishes odom in its <ros> namespace, remapped there.
+    sdf = _burger_with_drive(
+        tmp_path, "<update_rate>30</update_rate>", f"<ros>{ros}</ros><update_rate>30</update_rate>"
+    )
+    robot = load_robot(sdf)
+    assert robot.drive is not None
+    assert (robot.drive.command_topic, robot.drive.odometry_topic) == (command, odom)
+    assert not [w for w in robot.warnings if "ROS 1" in w]
+
+
+def test_a_ros1_command_topic_is_ignored_as_humble_ignores_it_and_said(tmp_path: Path) -> None:
+    sdf = _burger_with_drive(tmp_path, "<command_topic>cmd_vel<", "<command_topic>tb3_cmd<")
+    robot = load_robot(sdf)
+    assert robot.drive is not None and robot.drive.command_topic == "cmd_vel"
+    (warning,) = [w for w in robot.warnings if "command_topic" in w]
+    assert "model.sdf" in warning and "<remapping>cmd_vel:=tb3_cmd</remapping>" in warning
+
+
+def test_gz_sim_diff_drive_topics_are_its_topic_and_odom_topic(tmp_path: Path) -> None:
+    source = FIXTURES / "gz_sim" / "models" / "turtlebot3_burger" / "model.sdf"
+    text = source.read_text().replace("<topic>cmd_vel</topic>", "<topic>drive/cmd</topic>", 1)
+    text = text.replace("<odom_topic>odom</odom_topic>", "<odom_topic>/drive/odom</odom_topic>", 1)
+    model = tmp_path / "turtlebot3_burger"
+    shutil.copytree(source.parent, model)
+    (model / "model.sdf").write_text(text)
+    robot = load_robot(model / "model.sdf", model_path=[FIXTURES / "gz_sim" / "models"])
+    assert robot.drive is not None
+    assert (robot.drive.command_topic, robot.drive.odometry_topic) == ("drive/cmd", "/drive/odom")
