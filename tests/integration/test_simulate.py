@@ -252,3 +252,27 @@ def test_the_summary_counts_the_messages_the_bag_holds(tmp_path: Path) -> None:
     info = open_bag(tmp_path / "bag")
     assert summary["messages"] == info.message_count
     assert summary["topics"]["/imu"] > 0 and "/imu" not in {t.name for t in info.topics}
+
+
+def test_a_missing_include_is_refused_unless_the_scenario_skips_it_and_check_says_what_the_run_says(
+    tmp_path: Path,
+) -> None:
+    world = tmp_path / "tb3.sdf"
+    text = (REPO / "sdf" / "worlds" / "turtlebot3_world.sdf").read_text()
+    world.write_text(text.replace("</world>", "<include><uri>model://VendingMachine</uri></include>\n</world>", 1))
+    line = text[: text.index("</world>")].count("\n") + 1
+    scenario = tmp_path / "s.yaml"
+    base = f"name: t\nrobot: {{initial_pose: {{x_m: -2.0, y_m: -0.5}}}}\nmission: {{type: none}}\nworld: {{sdf: {world}"
+    scenario.write_text(base + "}\n")
+    for command in (("scenario", "check", str(scenario)), ("simulate", str(scenario), "--out", str(tmp_path / "b0"))):
+        refused = run_twin(*command)
+        assert refused.returncode == 3, refused.stderr
+        (error,) = refused.stderr.strip().splitlines()
+        assert f"{world}:{line}: <include> 'model://VendingMachine' not found" in error
+        assert "world.missing_includes: warn" in error
+    scenario.write_text(base + ", missing_includes: warn}\n")
+    for command in (("scenario", "check", str(scenario)), ("simulate", str(scenario), "--out", str(tmp_path / "b1"))):
+        done = run_twin(*command, "--duration", "1") if command[0] == "simulate" else run_twin(*command)
+        assert done.returncode == 0, done.stderr
+        (warning,) = [ln for ln in done.stderr.splitlines() if "VendingMachine" in ln]
+        assert f"{world}:{line}:" in warning and "skipped" in warning

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 from pathlib import Path
@@ -53,6 +54,12 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         help=f"folder holding model folders, for model://NAME (repeatable, or {os.pathsep}-separated)",
     )
     save.add_argument(
+        "--skip-missing",
+        action="store_true",
+        help="skip a model:// include not on the model path, with a warning, as Gazebo Classic does "
+        "(default: refuse the world, as the map would lack its walls)",
+    )
+    save.add_argument(
         "--height", type=float, default=0.132, metavar="M", help="lidar beam height above the floor (default 0.132)"
     )
     save.add_argument("--resolution", type=float, default=0.05, metavar="M", help="cell size (default 0.05)")
@@ -97,7 +104,13 @@ def _save(args: argparse.Namespace) -> int:
     if args.out.suffix not in (".yaml", ".yml"):
         msg = f"--out {str(args.out)!r} must name the map's YAML file (DIR/map.yaml)"
         raise ConfigError(msg)
-    world = load_world(args.world, model_path=model_path_folders(args.model_path))
+    world = load_world(
+        args.world,
+        model_path=model_path_folders(args.model_path),
+        missing_includes="warn" if args.skip_missing else "error",
+    )
+    for warning in world.warnings:  # what the map leaves out (skipped includes, unsupported shapes)
+        logging.getLogger("twin.cli.map").warning("%s", warning)
     occupancy = map_from_scene(
         build_scene(world),
         height_m=args.height,

@@ -277,7 +277,13 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
 
     robots = scenario.robot_scenarios()  # a fleet's each with its own sections, as the run takes them
     try:
-        world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
+        world = load_world(
+            scenario.world.sdf,
+            model_path=scenario.world.model_path,
+            missing_includes=scenario.world.missing_includes,
+        )
+        for warning in world.warnings:  # as the run warns: a skipped include, an unsupported element
+            logging.getLogger("twin.sim.simulation").warning("%s", warning)
         models = [scenario_robot(sc, entry=f"robots[{i}]." if ns else "") for i, (ns, sc) in enumerate(robots)]
         exclude = tuple(dict.fromkeys(robot.name for robot in models))
         scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)

@@ -64,6 +64,8 @@ class WorldSection:
     sdf: Path
     model_path: tuple[Path, ...] = ()
     floor_height_m: float = 0.01
+    missing_includes: Literal["error", "warn"] = "error"
+    """A `model://` include not on the model path: refuse the world, or skip it with a warning (as Gazebo Classic)."""
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.floor_height_m <= 0.5:

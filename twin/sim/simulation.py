@@ -165,7 +165,11 @@ class Simulation(Closing):
 
         t0 = time.perf_counter()
         # The world, once.
-        world = load_world(scenario.world.sdf, model_path=scenario.world.model_path)
+        world = load_world(
+            scenario.world.sdf,
+            model_path=scenario.world.model_path,
+            missing_includes=scenario.world.missing_includes,
+        )
         for warning in world.warnings:
             _log.warning("%s", warning)
         floor = floor_problem(scenario.world.floor_height_m)

@@ -20,7 +20,7 @@ from twin.core.errors import WorldError
 from twin.core.files import read_input
 from twin.core.geometry import Mat4, Pose, matrix_from_pose
 
-__all__ = ["XmlNode", "parse_file", "parse_string"]
+__all__ = ["FarPoseError", "XmlNode", "parse_file", "parse_string"]
 
 # An SDF, URDF or model.config larger than this is no description (the largest real worlds are a few MB).
 _MAX_XML_BYTES = 256 * 2**20
@@ -253,6 +253,17 @@ _FARTHEST_M = 1e7
 """The farthest a `<pose>` may place anything, m: the bound `twin.core.numbers` sets on every scenario distance."""
 
 
+class FarPoseError(WorldError):
+    """A `<pose>` farther than `_FARTHEST_M`: a world leaves out the model it places (one fallen out of it)."""
+
+    def __init__(self, where: str, distance_m: float) -> None:
+        self.where = where
+        self.distance_m = distance_m
+        super().__init__(
+            f"{where}: <pose> puts something {distance_m:g} m from its frame's origin; no world is larger than 1e7 m"
+        )
+
+
 def parse_pose(node: XmlNode | None) -> Mat4:
     """Return the 4x4 matrix of an SDF `<pose>` (identity when absent or empty).
 
@@ -270,8 +281,7 @@ def parse_pose(node: XmlNode | None) -> Mat4:
         raise WorldError(msg)
     far = next((v for v in values[:3] if abs(v) > _FARTHEST_M), None)
     if far is not None:  # (its float would not hold a millimetre, and the map and scans overflow)
-        msg = f"{node.where}: <pose> puts something {far:g} m from its frame's origin; no world is larger than 1e7 m"
-        raise WorldError(msg)
+        raise FarPoseError(node.where, far)
     fmt = node.get("rotation_format", "euler_rpy")
     if fmt == "quat_xyzw":
         if len(values) != 7:

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.core.errors import WorldError
-from twin.world._xml import XmlNode, parse_pose
+from twin.world._xml import FarPoseError, XmlNode, parse_pose
 from twin.world.paths import find_model_dir, model_file, search_path
 from twin.world.sdf_frames import ModelBuilder, Scope, StateOverrides, collect_state
 from twin.world.sdf_parse import UNSUPPORTED_WORLD, MissingIncludes, RawModel, SdfReader, second_model_message
@@ -140,6 +140,7 @@ def _world_from_node(loader: SdfReader, world_node: XmlNode, version: tuple[int,
         found = collect_state(loader, state, names)
         overrides.models.update(found.models)
         overrides.links.update(found.links)
+        overrides.far.update(found.far)
 
     # The world is a scope too: models and frames may be placed relative to each other (SDF 1.7+).
     world_raw = RawModel(
@@ -147,13 +148,24 @@ def _world_from_node(loader: SdfReader, world_node: XmlNode, version: tuple[int,
     )
     world_raw.models = raw_models
     world_raw.frames = frames
+    loader.frames_named_apart(world_raw)
     scope = Scope(world_raw)
     # Inside the world scope "__model__" is the world frame; SDF spells it "world".
     scope.define("world", np.eye(4))
-    models = [
-        ModelBuilder(loader).build_model(raw, scope.nested(raw.name), scope.T(raw.name, raw.node.where), "", overrides)
-        for raw in raw_models
-    ]
+    models = []
+    for raw in raw_models:
+        try:
+            far = overrides.far.get(raw.name)
+            if far is not None:
+                raise far
+            T = scope.T(raw.name, raw.node.where)
+            models.append(ModelBuilder(loader).build_model(raw, scope.nested(raw.name), T, "", overrides))
+        except FarPoseError as err:  # e.g. furniture that fell through the floor before the world was saved
+            loader.warn(
+                f"far:{raw.name}",
+                f"{err.where}: <pose> puts model {raw.name!r} {err.distance_m:g} m from its frame's origin, "
+                "beyond any world; left out",
+            )
     return World(
         name=world_raw.name,
         models=tuple(models),

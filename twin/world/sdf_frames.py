@@ -15,7 +15,7 @@ import numpy as np
 
 from twin.core.errors import WorldError
 from twin.core.geometry import Mat4
-from twin.world._xml import XmlNode, parse_pose
+from twin.world._xml import FarPoseError, XmlNode, parse_pose
 from twin.world.sdf_parse import RawModel, SdfReader, material_color
 from twin.world.types import (
     Collision,
@@ -57,8 +57,14 @@ class Scope:
     def nested(self, name: str) -> Scope:
         """Return the scope of the nested model `name`."""
         if name not in self._nested:
-            _, raw = self._entries[name]
-            assert isinstance(raw, RawModel)
+            kind, raw = self._entries[name]
+            if not isinstance(raw, RawModel):  # a link or joint of the model's name took it first
+                twin = next(m for m in self.raw.models if m.name == name)
+                msg = (
+                    f"{twin.node.where}: model {name!r} has the name of a <{kind}> at {raw.where} in the same "
+                    "scope; the names of a scope's links, joints, models and frames must be unique: rename one"
+                )
+                raise WorldError(msg)
             self._nested[name] = Scope(raw)
         return self._nested[name]
 
@@ -127,6 +133,8 @@ class StateOverrides:
 
     models: dict[str, Mat4] = field(default_factory=dict)
     links: dict[str, Mat4] = field(default_factory=dict)
+    far: dict[str, FarPoseError] = field(default_factory=dict)
+    """Top-level models a pose of which lies beyond any world (`FarPoseError`), by name: left out."""
 
 
 class ModelBuilder:
@@ -424,7 +432,10 @@ def collect_state(loader: SdfReader, state: XmlNode, known_models: dict[str, Raw
             )
             return
         if (pose := node.find("pose")) is not None:
-            out.models[scoped] = parse_pose(pose)
+            try:
+                out.models[scoped] = parse_pose(pose)
+            except FarPoseError as err:
+                out.far.setdefault(scoped.split("::", 1)[0], err)
         scale = node.find("scale")
         if scale is not None and scale.text and tuple(scale.as_floats(3)) != (1.0, 1.0, 1.0):
             loader.warn(f"state-scale:{scoped}", f"{scale.where}: <state> scales model {scoped!r}; scale is ignored")
@@ -438,7 +449,10 @@ def collect_state(loader: SdfReader, state: XmlNode, known_models: dict[str, Raw
                 )
                 continue
             if (pose := link.find("pose")) is not None:
-                out.links[f"{scoped}::{link_name}"] = parse_pose(pose)
+                try:
+                    out.links[f"{scoped}::{link_name}"] = parse_pose(pose)
+                except FarPoseError as err:
+                    out.far.setdefault(scoped.split("::", 1)[0], err)
         nested = {m.name: m for m in raw.models}
         for child in node.findall("model"):
             visit(child, scoped, nested.get(child.get("name") or ""))

@@ -8,6 +8,7 @@ joints, frames and nested models as XML still, with every `<include>` resolved
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Sequence
@@ -318,6 +319,7 @@ class SdfReader:
             else:
                 self.check_known("model", child)
         self.check_unique(raw)
+        self.frames_named_apart(raw)
         nested: dict[str, RawModel] = {}
         for model in raw.models:
             if model.name in nested and not model.merged:
@@ -337,6 +339,46 @@ class SdfReader:
                 msg = f"{node.where}: a second <{node.tag}> named {name!r} in model {raw.name!r}; names must be unique"
                 raise WorldError(msg)
             seen[name] = node.tag
+
+    def frames_named_apart(self, raw: RawModel) -> None:
+        """Give a `<frame>` named like a sibling link, joint or model a name of its own, as libsdformat does.
+
+        Before SDF 1.7 such a frame is renamed `<name>_frame` (libsdformat's conversion of older
+        files); from 1.7 on, sibling names must be unique and the file is refused (its DUPLICATE_NAME).
+
+        Raises:
+            WorldError: From SDF 1.7, naming the frame, the sibling and the fix.
+        """
+        taken: dict[str, XmlNode] = {}
+        for node in (*raw.links, *raw.joints):
+            taken.setdefault(node.get("name") or "", node)
+        for model in raw.models:
+            if not model.merged:
+                taken.setdefault(model.name, model.node)
+        frames = []
+        for node in raw.frames:
+            name = node.get("name") or ""
+            sibling = taken.get(name)
+            if sibling is not None:
+                scope = "the world" if raw.node.tag == "world" else f"model {raw.name!r}"
+                if raw.version >= (1, 7):
+                    msg = (
+                        f"{node.where}: <frame name={name!r}> has the name of the <{sibling.tag}> at "
+                        f"{sibling.where} in {scope}; from SDF 1.7 the names of a scope's links, joints, models "
+                        "and frames must be unique: rename one"
+                    )
+                    raise WorldError(msg)
+                renamed = f"{name}_frame"
+                self.warn(
+                    f"frame-renamed:{node.where}",
+                    f"{node.where}: <frame name={name!r}> shares its name with a <{sibling.tag}> in {scope}; "
+                    f"read as {renamed!r}, as libsdformat reads SDF {raw.version[0]}.{raw.version[1]}",
+                )
+                attrib = tuple((k, renamed if k == "name" else v) for k, v in node.attrib)
+                frames.append(dataclasses.replace(node, attrib=attrib))
+                continue
+            frames.append(node)
+        raw.frames = frames
 
     def check_known(self, parent: str, child: XmlNode) -> None:
         """Keep and warn about (once per tag) a child element `parent` does not have in SDF."""
@@ -384,14 +426,18 @@ class SdfReader:
                     "skipped (`gz fuel download -u URI` caches it, or put the model on the model path)",
                 )
                 return None
-            msg = (
+            missing = (
                 f"{node.where}: <include> {uri!r} not found in the model path "
-                f"[{', '.join(str(p) for p in self.search) or 'empty'}]; "
-                "add its parent folder with --model-path or TWIN_MODEL_PATH"
+                f"[{', '.join(str(p) for p in self.search) or 'empty'}]"
             )
+            where = "(--model-path, a scenario's world.model_path, or TWIN_MODEL_PATH)"
             if self.missing_includes == "error":
+                msg = (
+                    f"{missing}; put its parent folder on the model path {where}, or skip missing includes "
+                    "(map save --skip-missing, world.missing_includes: warn)"
+                )
                 raise WorldError(msg)
-            self.warn(f"include:{uri}", f"{msg}; skipped")
+            self.warn(f"include:{uri}", f"{missing}; skipped (its parent folder on the model path {where} adds it)")
             return None
         if target in self.include_stack:
             msg = f"{node.where}: <include> {uri!r} includes itself (through {target})"
@@ -402,6 +448,13 @@ class SdfReader:
             model_node = root.find("model")
             if model_node is None:
                 if root.find("light") is not None:
+                    return None
+                actor = root.find("actor")
+                if actor is not None:  # as an inline <actor>
+                    self.warn(
+                        f"unsupported:actor:{target}",
+                        f"{node.where}: <include> {uri!r} is an <actor>: animated actors are not simulated; skipped",
+                    )
                     return None
                 what = "a world" if root.find("world") is not None else "no <model>"
                 msg = f"{node.where}: <include> {uri!r} resolves to {target}, which holds {what}; expected a <model>"

@@ -36,7 +36,7 @@ def make_error(cls: type[TwinError]) -> TwinError:
     for p in params:
         if p.default is not p.empty:
             continue
-        values[p.name] = 3 if p.annotation in ("int", int) else f"original {cls.__name__} {p.name}"
+        values[p.name] = 3 if p.annotation in ("int", int, "float", float) else f"original {cls.__name__} {p.name}"
     return cls(**values)
 
 

@@ -517,20 +517,113 @@ def test_a_mesh_whose_name_differs_only_in_case_is_used_with_one_warning(tmp_pat
     assert f"mesh 'file://models/shelf/meshes/Shelf_Collision.STL' not found; using {actual}, whose name" in warning
 
 
+_FAR_BOX = (
+    "<model name='{name}'><static>1</static>\n{pose}<link name='l'><collision name='c'><geometry><box>"
+    "<size>1 1 1</size></box></geometry></collision></link></model>\n"
+)
+
+
 @pytest.mark.parametrize(("pose", "far"), [("1e30 0 0 0 0 0", "1e+30"), ("0 -2e7 0 0 0 0", "-2e+07")])
-def test_a_pose_farther_than_any_world_is_refused_where_it_is(tmp_path: Path, pose: str, far: str) -> None:
-    # 1e30 m overflowed the map's cells into numpy warnings and bounds of 1e30; a typo, named in one line
+def test_a_model_placed_beyond_any_world_is_left_out_and_named(tmp_path: Path, pose: str, far: str) -> None:
+    # AWS's hospital world saved furniture that fell through the floor at z = -7.6e8 m: Gazebo loads
+    # the world; the twin leaves the model out (1e30 m overflowed the map's cells) and says where.
     world = tmp_path / "far.world"
     world.write_text(
-        "<sdf version='1.6'><world name='w'>\n<model name='far'><static>1</static>\n"
-        f"<pose>{pose}</pose><link name='l'><collision name='c'><geometry><box><size>1 1 1</size></box>"
-        "</geometry></collision></link></model></world></sdf>"
+        "<sdf version='1.6'><world name='w'>\n"
+        + _FAR_BOX.format(name="far", pose=f"<pose>{pose}</pose>")
+        + _FAR_BOX.format(name="near", pose="<pose>1 0 0.5 0 0 0</pose>")
+        + "<model name='fallen'><static>1</static>\n<include><uri>model://crate</uri>"
+        + f"<pose>{pose}</pose></include></model>\n"
+        + "</world></sdf>"
+    )
+    crate = tmp_path / "models" / "crate"
+    crate.mkdir(parents=True)
+    (crate / "model.config").write_text("<model><name>crate</name><sdf>model.sdf</sdf></model>")
+    (crate / "model.sdf").write_text("<sdf version='1.6'>" + _FAR_BOX.format(name="crate", pose="") + "</sdf>")
+    loaded = load_world(world, model_path=[tmp_path / "models"])
+    assert [m.name for m in loaded.models] == ["near"]
+    assert [w for w in loaded.warnings if "beyond any world" in w] == [
+        f"{world}:3: <pose> puts model 'far' {far} m from its frame's origin, beyond any world; left out",
+        f"{world}:7: <pose> puts model 'fallen' {far} m from its frame's origin, beyond any world; left out",
+    ]
+
+
+def test_a_world_state_that_puts_a_model_beyond_any_world_leaves_it_out(tmp_path: Path) -> None:
+    world = tmp_path / "state.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n"
+        + _FAR_BOX.format(name="shelf", pose="<pose>1 0 0.5 0 0 0</pose>")
+        + "<state world_name='w'><model name='shelf'>\n<pose>0 0 -7.57769e+08 0 0 0</pose></model></state>"
+        + "</world></sdf>"
+    )
+    loaded = load_world(world)
+    assert loaded.models == ()
+    assert any(w.startswith(f"{world}:5: <pose> puts model 'shelf' -7.57769e+08 m") for w in loaded.warnings)
+
+
+def test_a_robot_link_beyond_any_world_is_refused_where_it_is(tmp_path: Path) -> None:
+    model = tmp_path / "bot.sdf"
+    model.write_text(
+        "<sdf version='1.6'><model name='bot'>\n<link name='base'>\n<pose>0 0 1e9 0 0 0</pose></link></model></sdf>"
     )
     with pytest.raises(WorldError) as raised:
-        load_world(world)
+        load_world(model)
     assert str(raised.value) == (
-        f"{world}:3: <pose> puts something {far} m from its frame's origin; no world is larger than 1e7 m"
+        f"{model}:3: <pose> puts something 1e+09 m from its frame's origin; no world is larger than 1e7 m"
     )
+
+
+def _frame_and_model_named_ground(version: str) -> str:
+    return (
+        f"<sdf version='{version}'><world name='w'>\n<model name='ground'><pose>0 2 0 0 0 0</pose><link name='L'/>"
+        "</model>\n<frame name='ground'><pose>0 0 3 0 0 0</pose></frame>\n"
+        "<model name='above'><pose relative_to='ground_frame'>1 0 0 0 0 0</pose><link name='L'/></model>\n"
+        "</world></sdf>"
+    )
+
+
+def test_a_frame_named_like_a_model_is_renamed_before_sdf_1_7_as_libsdformat_does(tmp_path: Path) -> None:
+    world = tmp_path / "w.world"
+    world.write_text(_frame_and_model_named_ground("1.6"))
+    loaded = load_world(world)
+    poses = {m.name: tuple(m.T_world[:3, 3]) for m in loaded.models}
+    assert poses == {"ground": (0.0, 2.0, 0.0), "above": (1.0, 0.0, 3.0)}  # the frame is `ground_frame`
+    assert any("read as 'ground_frame'" in w and f"{world}:3:" in w for w in loaded.warnings)
+
+
+def test_a_frame_named_like_a_model_is_refused_from_sdf_1_7_in_one_line(tmp_path: Path) -> None:
+    # was an AssertionError (exit 70); libsdformat refuses it (DUPLICATE_NAME)
+    world = tmp_path / "w.world"
+    world.write_text(_frame_and_model_named_ground("1.7").replace("ground_frame", "ground"))
+    with pytest.raises(WorldError) as raised:
+        load_world(world)
+    assert str(raised.value).startswith(f"{world}:3: <frame name='ground'> has the name of the <model> at {world}:2")
+    assert str(raised.value).endswith("must be unique: rename one")
+
+
+def test_a_nested_model_named_like_a_link_is_refused_in_one_line(tmp_path: Path) -> None:
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.7'><world name='w'><model name='outer'>\n<link name='inner'/>\n"
+        "<model name='inner'><link name='L'/></model></model></world></sdf>"
+    )
+    with pytest.raises(WorldError, match=rf"^{world}:3: model 'inner' has the name of a <link> at {world}:2"):
+        load_world(world)
+
+
+def test_an_included_actor_is_skipped_with_a_warning_as_an_inline_actor_is(tmp_path: Path) -> None:
+    actor = tmp_path / "models" / "walker"
+    actor.mkdir(parents=True)
+    (actor / "model.config").write_text("<model><name>walker</name><sdf>model.sdf</sdf></model>")
+    (actor / "model.sdf").write_text(
+        "<sdf version='1.8'><actor name='walker'><skin><filename>w.dae</filename></skin></actor></sdf>"
+    )
+    world = tmp_path / "w.world"
+    world.write_text("<sdf version='1.8'><world name='w'>\n<include><uri>model://walker</uri></include></world></sdf>")
+    loaded = load_world(world, model_path=[tmp_path / "models"])
+    assert loaded.models == ()
+    (warning,) = loaded.warnings
+    assert warning.startswith(f"{world}:2: <include> 'model://walker' is an <actor>") and "not simulated" in warning
 
 
 def test_a_joint_whose_child_is_missing_is_named_with_the_fix(tmp_path: Path) -> None:

@@ -197,3 +197,26 @@ def test_a_walled_world_maps_its_inside_and_leaves_the_outside_unknown(tmp_path:
     grid = map_from_scene(build_scene(load_world(world)), height_m=0.132, padding_m=3.0)
     # the ring outside the walls is larger than a quarter of the inside, yet the inside is the map
     assert _cell(grid, 0.0, 0.0) == 0 and _cell(grid, 4.5, 4.5) == -1
+
+
+def test_map_save_refuses_a_missing_include_unless_told_to_skip_it_and_says_what_it_left_out(tmp_path: Path) -> None:
+    # A world whose furniture is on Fuel (AWS's hospital): the map needs every wall, so the default
+    # refuses in one line; --skip-missing maps what is there and names each model it left out.
+    world = tmp_path / "room.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n<model name='walls'><static>1</static><pose>0 0 0.5 0 0 0</pose>"
+        "<link name='l'><collision name='e'><pose>2 0 0 0 0 0</pose><geometry><box><size>0.2 4 1</size></box>"
+        "</geometry></collision><collision name='w'><pose>-2 0 0 0 0 0</pose><geometry><box><size>0.2 4 1</size>"
+        "</box></geometry></collision></link></model>\n<include><uri>model://VendingMachine</uri><pose>0 1 0 0 0 0</pose></include>\n"
+        "</world></sdf>"
+    )
+    out = tmp_path / "map" / "map.yaml"
+    refused = run_twin("map", "save", str(world), "--out", str(out), "--free", "0", "0")
+    assert refused.returncode == 3 and refused.stderr.count("\n") == 1, refused.stderr
+    assert f"{world}:3: <include> 'model://VendingMachine' not found" in refused.stderr
+    assert "--skip-missing" in refused.stderr and not out.exists()
+    done = run_twin("map", "save", str(world), "--out", str(out), "--free", "0", "0", "--skip-missing")
+    assert done.returncode == 0, done.stderr
+    (warning,) = [line for line in done.stderr.splitlines() if "VendingMachine" in line]
+    assert f"{world}:3:" in warning and "skipped" in warning
+    assert (load_map(out).data == 100).any()  # the wall is mapped
