@@ -1055,6 +1055,7 @@ def _placed_obstacles(
         for link in model.links:
             for collision in link.collisions:
                 if isinstance(collision.geometry, Plane):
+                    _warn_if_tilted(collision)
                     continue
                 local = geometry_arrays(collision.geometry, cache, collision.where)
                 if local is None:
@@ -1076,6 +1077,25 @@ def _placed_obstacles(
             skipped_floor,
             trimmed,
         )
+
+
+_TILTED_PLANES: set[str] = set()  # the tilted planes warned of (once a process, however often a world is read)
+
+
+def _warn_if_tilted(collision: Collision) -> None:
+    """Warn once that a `<plane>` which is not the ground (its normal not vertical) is no obstacle here."""
+    normal = np.asarray(collision.T_world)[:3, :3] @ np.asarray(collision.geometry.normal, dtype=float)  # type: ignore[union-attr]
+    length = float(np.linalg.norm(normal))
+    if length == 0.0 or abs(normal[2]) >= 0.999 * length or collision.where in _TILTED_PLANES:
+        return
+    _TILTED_PLANES.add(collision.where)
+    _log.warning(
+        "%s: <plane> %r has a normal of (%.3g, %.3g, %.3g) in the world: the twin takes planes as the ground only, "
+        "so this one is no obstacle; make the wall a <box>",
+        collision.where,
+        collision.name,
+        *(normal / length),
+    )
 
 
 def obstacle_extent(

@@ -387,3 +387,25 @@ def test_cone_mesh_is_closed_and_placed_as_sdf_defines() -> None:
     assert mesh.volume == pytest.approx(math.pi * 0.4**2 / 3, rel=0.01)
     apex = mesh.vertices[np.argmax(mesh.vertices[:, 2])]
     assert apex == pytest.approx([0, 0, 0.5])
+
+
+def test_a_plane_that_is_not_the_ground_is_warned_of_once_as_no_obstacle(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # A vertical <plane> meant as a wall was dropped without a word: the twin's planes are the ground.
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'>\n<model name='m'><static>1</static><link name='l'>"
+        "<collision name='ground'><geometry><plane><normal>0 0 1</normal></plane></geometry></collision>\n"
+        "<collision name='wall'><pose>2 0 0 0 0 0</pose><geometry><plane><normal>1 0 0</normal></plane></geometry>"
+        "</collision>\n<collision name='turned'><pose>0 0 0 1.5707963 0 0</pose><geometry><plane><normal>0 0 1"
+        "</normal></plane></geometry></collision></link></model></world></sdf>"
+    )
+    loaded = load_world(world)
+    with caplog.at_level("WARNING", logger="twin.world.scene"):
+        obstacle_extent(loaded)
+        build_scene(loaded)
+    lines = [r.getMessage() for r in caplog.records if "<plane>" in r.getMessage()]
+    assert len(lines) == 2  # the wall and the plane turned upright, once each; never the ground
+    assert lines[0].startswith(f"{world}:3: <plane> 'wall' has a normal of (1, 0, 0)") and "a <box>" in lines[0]
+    assert lines[1].startswith(f"{world}:4: <plane> 'turned' has a normal of (0, -1,")
