@@ -307,3 +307,15 @@ def test_a_live_search_run_shows_the_cameras_frames_as_the_bag_records_them(tmp_
     frame = seen.decode("/camera/image_raw/compressed", seen.messages["/camera/image_raw/compressed"][0][1])
     assert frame.format.startswith("rgb8") or "jpeg" in frame.format
     assert bytes(frame.data[:2]) == b"\xff\xd8"  # a JPEG's start-of-image marker
+
+
+def test_looping_a_bag_with_no_messages_ends_instead_of_spinning(tmp_path: Path) -> None:
+    # rosbag2's own empty_bag resource: `play --loop` spun at full CPU for ever and did not hear Ctrl-C.
+    from rosbags.rosbag2 import Writer
+
+    bag = tmp_path / "empty"
+    with Writer(bag, version=8) as writer:
+        writer.add_connection("/chatter", "std_msgs/msg/String", typestore=get_typestore(Stores.ROS2_HUMBLE))
+    result = run_twin("play", str(bag), "--loop", "--port", "0", timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "played 0 messages on 1 topics" in result.stdout and "nothing to loop over" in result.stdout

@@ -22,6 +22,7 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
+from rosbags.highlevel import AnyReader
 
 from tests.conftest import run_twin
 from tests.robustness.helpers import assert_one_line_error
@@ -99,14 +100,16 @@ def _mcap_messages(file: Path) -> Counter[tuple[str, int, bytes]]:
         return Counter((channel.topic, m.log_time, m.data) for _, channel, m in reader.iter_messages())
 
 
-def _as_other_writer(source: Path, bag: Path) -> Path:
+def _as_other_writer(
+    source: Path, bag: Path, *, chunk_size: int = 100_000, compression: CompressionType = CompressionType.ZSTD
+) -> Path:
     """The run as the mcap library writes it (as rosbag2's writer does): zstd chunks with CRCs, schemas inside."""
     bag.mkdir()
     shutil.copy(source.parent / "metadata.yaml", bag / "metadata.yaml")
     file = bag / source.name
     with source.open("rb") as stream, file.open("wb") as out:
         reader = make_reader(stream)
-        writer = Writer(out, chunk_size=100_000, compression=CompressionType.ZSTD, enable_crcs=True)
+        writer = Writer(out, chunk_size=chunk_size, compression=compression, enable_crcs=True)
         writer.start(profile="ros2", library="mcap python")
         schemas: dict[int, int] = {}
         channels: dict[int, int] = {}
@@ -164,6 +167,46 @@ def test_recover_keeps_every_intact_mcap_chunk_and_the_original(
         f"intact chunks hold {must_total}, recovered {got_total}"
     )
     print("\n" + _REPORT[-1])
+
+
+def _whole_messages_before(data: bytes, chunk_start: int, cut: int) -> Counter[tuple[str, int, bytes]]:
+    """The messages of an uncompressed chunk whose records end before byte `cut` (topic, log time, data)."""
+    summary = make_reader(io.BytesIO(data)).get_summary()
+    assert summary is not None
+    out: Counter[tuple[str, int, bytes]] = Counter()
+    pos = chunk_start + 1 + 8 + 8 + 8 + 8 + 4 + 4 + 8  # op, length, start, end, size, crc, "" compression, length
+    while pos + 9 <= cut:
+        op, length = data[pos], int.from_bytes(data[pos + 1 : pos + 9], "little")
+        body = data[pos + 9 : pos + 9 + length]
+        if pos + 9 + length > cut:
+            break
+        if op == 0x05:  # Message: channel, sequence, log time, publish time, data
+            channel = summary.channels[int.from_bytes(body[:2], "little")].topic
+            out[(channel, int.from_bytes(body[6:14], "little"), bytes(body[22:]))] += 1
+        pos += 9 + length
+    return out
+
+
+@pytest.mark.parametrize("cut", [0.05, 0.3, 0.8])
+def test_an_mcap_cut_inside_its_one_uncompressed_chunk_keeps_every_message_before_the_cut(
+    cut: float, runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # As rosbags' MCAP writer leaves a bag: one large uncompressed chunk. Cut inside it, the chunk is
+    # lost, but its records are whole up to the cut: `recover` stopped on an internal error (exit 70).
+    (source,) = runs["mcap"].glob("*.mcap")
+    bag = _as_other_writer(source, tmp_path / "one_chunk", chunk_size=1 << 30, compression=CompressionType.NONE)
+    (file,) = bag.glob("*.mcap")
+    data = file.read_bytes()
+    ((start, end, _),) = _mcap_chunks(data)
+    at = start + int(cut * (end - start))
+    must = _whole_messages_before(data, start, at)
+    file.write_bytes(data[:at])
+    assert _recover(bag, capsys) == 0
+    _original_kept(file, data[:at])
+    got = _mcap_messages(file)
+    assert sum(must.values()) > 100 and got == must  # every message the cut left whole, each once
+    with AnyReader([bag]) as reader:
+        assert sum(1 for _ in reader.messages()) == sum(got.values())
 
 
 # -- sqlite3 -----------------------------------------------------------------------------------------

@@ -1218,6 +1218,16 @@ def _mend_schemas(schemas: Mapping[int, SchemaRecord]) -> dict[int, SchemaRecord
     return out
 
 
+def _loose_chunk(messages: Sequence[memoryview]) -> bytes:
+    """An uncompressed Chunk record holding these Message records (time-sorted, as a writer's chunk)."""
+    times = [_U64.unpack_from(m, 15)[0] for m in messages]  # op, length, channel, sequence, then log time
+    order = sorted(range(len(messages)), key=times.__getitem__)
+    records = b"".join(messages[i] for i in order)
+    head = _CHUNK_HEAD.pack(times[order[0]], times[order[-1]], len(records), zlib.crc32(records))
+    body = head + _string("") + _U64.pack(len(records)) + records
+    return _RECORD.pack(OP_CHUNK, len(body)) + body
+
+
 def recover_mcap(source: Path, target: Path) -> McapRecovery:
     """Write a complete MCAP file at `target` from what `source` holds; `source` is only read.
 
@@ -1253,32 +1263,52 @@ def recover_mcap(source: Path, target: Path) -> McapRecovery:
     chunks: list[_ChunkInfo] = []
     chunk_indexes: list[bytes] = []
     metadata_indexes: list[bytes] = []
-    for op, offset, length in scan.kept:
-        if op in (OP_SCHEMA, OP_CHANNEL) or (op == OP_CHUNK and offset not in kept_chunks):
+
+    def add_chunk(record: bytes | memoryview, chunk: _ChunkInfo) -> None:
+        """Append a chunk record and its fresh message indexes at `pos`."""
+        nonlocal pos
+        length = len(record)
+        indexes, index_offsets = _message_indexes(chunk.channels, chunk.times, chunk.offsets, pos + length)
+        parts.extend((record, indexes))
+        chunks.append(chunk)
+        chunk_indexes.append(
+            _chunk_index(
+                start_ns=chunk.start_ns,
+                end_ns=chunk.end_ns,
+                chunk_offset=pos,
+                chunk_length=length,
+                index_offsets=index_offsets,
+                index_length=len(indexes),
+                size=chunk.size,
+                compression=chunk.compression,
+                compressed_size=chunk.compressed_size,
+            )
+        )
+        pos += length + len(indexes)
+
+    # Message records outside any chunk (the records of a cut chunk, found again past its damage, or
+    # an unchunked writer's) go into chunks of their own: indexed readers read chunked messages only.
+    loose: list[memoryview] = []
+    for op, offset, length in [*scan.kept, (-1, 0, 0)]:  # (-1: the end, which closes a run of loose messages)
+        if op == OP_MESSAGE:
+            if _U16.unpack_from(view, offset + 9)[0] in scan.channels:
+                loose.append(view[offset : offset + length])
+            else:
+                lost += 1
+            continue
+        if loose:
+            record = _loose_chunk(loose)
+            add_chunk(record, _parse_chunk(memoryview(record), 0, len(record)))
+            loose = []
+        if op < 0 or op in (OP_SCHEMA, OP_CHANNEL) or (op == OP_CHUNK and offset not in kept_chunks):
+            continue
+        if op == OP_CHUNK:
+            add_chunk(view[offset : offset + length], kept_chunks[offset])
             continue
         parts.append(view[offset : offset + length])
         if op == OP_METADATA:
             name = next(m[2] for m in scan.metadata if m[0] == offset)
             metadata_indexes.append(_record(OP_METADATA_INDEX, _U64.pack(pos) + _U64.pack(length) + _string(name)))
-        elif op == OP_CHUNK:
-            chunk = kept_chunks[offset]
-            indexes, index_offsets = _message_indexes(chunk.channels, chunk.times, chunk.offsets, pos + length)
-            parts.append(indexes)
-            chunks.append(chunk)
-            chunk_indexes.append(
-                _chunk_index(
-                    start_ns=chunk.start_ns,
-                    end_ns=chunk.end_ns,
-                    chunk_offset=pos,
-                    chunk_length=length,
-                    index_offsets=index_offsets,
-                    index_length=len(indexes),
-                    size=chunk.size,
-                    compression=chunk.compression,
-                    compressed_size=chunk.compressed_size,
-                )
-            )
-            pos += len(indexes)
         pos += length
     data_end = _record(OP_DATA_END, _U32.pack(0))
     parts.append(data_end)

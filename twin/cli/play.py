@@ -128,6 +128,8 @@ def _play(args: argparse.Namespace) -> int:
     skipped = f"; not served (no definition): {', '.join(report.skipped)}" if report.skipped else ""
     if namespace is not None:
         skipped += f"; /{namespace}/ alone, as one robot's topics"
+    if args.loop and not report.messages and not report.stopped:
+        skipped += "; nothing to loop over"
     passes = f" in {report.passes} passes" if report.passes > 1 else ""
     span = f"{report.bag_s:.1f} s of bag each"
     if report.stopped:  # stopped partway: how far into the bag (its last pass) it got

@@ -114,6 +114,7 @@ def play_bag(
                 pacer.restart()
         if on_pass is not None:
             on_pass(passes)
+        sent = messages
         for m in read_messages(info.path, names, decode=False):
             if should_stop():
                 stopped = True
@@ -130,7 +131,9 @@ def play_bag(
             publish(handles[m.topic], m.t_ns, data)
             messages += 1
             last_ns = m.t_ns
-        if not loop:
+        if not stopped and should_stop():  # (a pass may publish nothing: a stop is looked for after it too)
+            stopped = True
+        if not loop or messages == sent:  # a pass that published nothing would loop at full speed for ever
             break
     return PlayReport(
         bag_path=info.path,

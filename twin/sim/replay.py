@@ -169,24 +169,58 @@ def load_commands(spec: ReplayMission) -> RecordedCommands:
             clock_rec.append(m.t_ns)
             clock_sim.append(int(m.msg.clock.sec) * 1_000_000_000 + int(m.msg.clock.nanosec))
     stamped = topics[spec.topic].endswith("Stamped")
-    times: list[int] = []
+    stamps: list[int] = []
+    recorded: list[int] = []
     v: list[float] = []
     w: list[float] = []
     for m in read_messages(bag, [spec.topic]):
         twist = m.msg.twist if stamped else m.msg
-        times.append(_stamp_ns(m.msg) if stamped else m.t_ns)
+        if stamped:
+            stamps.append(_stamp_ns(m.msg))
+        recorded.append(m.t_ns)
         v.append(float(twist.linear.x))
         w.append(float(twist.angular.z))
-    t = np.asarray(times, dtype=np.int64)
+    # The commands' times on the poses' clock: their header stamps, else their record times mapped
+    # through /clock, else their record times; the first of these that puts most commands within the
+    # poses' span (a stamp of 0, or of the wall clock in a sim-time bag, does not).
+    rec = np.asarray(recorded, dtype=np.int64)
+    candidates: list[tuple[str, NDArray[np.int64]]] = []
     if stamped:
-        source = "header stamps"
-    elif len(clock_rec) >= 2:
-        rec = np.asarray(clock_rec, dtype=np.float64)
-        sim = np.asarray(clock_sim, dtype=np.float64)
-        t = np.round(np.interp(t.astype(np.float64), rec, sim)).astype(np.int64)
-        source = "record times mapped through /clock"
+        candidates.append(("header stamps", np.asarray(stamps, dtype=np.int64)))
+    if len(clock_rec) >= 2:
+        mapped = np.interp(rec.astype(np.float64), np.asarray(clock_rec, np.float64), np.asarray(clock_sim, np.float64))
+        candidates.append(("record times mapped through /clock", np.round(mapped).astype(np.int64)))
+        candidates.append(("record times", rec))
     else:
-        source = "record times (no /clock)"
+        candidates.append(("record times (no /clock)", rec))
+    margin = 1_000_000_000
+
+    def within(times: NDArray[np.int64]) -> int:  # (a header stamp of 0 is one never set: never within)
+        return int(np.count_nonzero((times >= t0_ns - margin) & (times <= last_ns + margin) & (times != 0)))
+
+    source, t = next(((name, times) for name, times in candidates if 2 * within(times) >= len(times)), candidates[0])
+    if within(t) == 0:
+        source, t = max(candidates, key=lambda c: within(c[1]))
+    if within(t) == 0:
+        msg = (
+            f"{bag}: no command on {spec.topic} falls within the poses on {pose_topic} "
+            f"({_span(t0_ns, last_ns)}), by {' or '.join(name for name, _ in candidates)} "
+            f"(the commands' {candidates[0][0]}: {_span(int(candidates[0][1].min()), int(candidates[0][1].max()))}): "
+            "the bag's clocks disagree; record the commands and poses on one clock"
+        )
+        raise BagError(msg)
+    if source != candidates[0][0]:
+        first = candidates[0][1]
+        _log.warning(
+            "%s: the %s of %s are not on the clock of the poses on %s (%s against %s): replayed at their %s",
+            bag,
+            candidates[0][0],
+            spec.topic,
+            pose_topic,
+            _span(int(first.min()), int(first.max())),
+            _span(t0_ns, last_ns),
+            source,
+        )
     t = t - t0_ns
     # A command recorded before the bag's first pose reached no drive that published poses (Gazebo's
     # diff drive subscribes when it starts): the robot's state at the first pose already holds its effect.
@@ -208,6 +242,11 @@ def load_commands(spec: ReplayMission) -> RecordedCommands:
         pose_topic=pose_topic,
         time_source=source,
     )
+
+
+def _span(first_ns: int, last_ns: int) -> str:
+    """Two times of a bag, in seconds, for a message."""
+    return f"{first_ns / 1e9:.3f} s to {last_ns / 1e9:.3f} s"
 
 
 def start_moving(drive: object, v_mps: float, w_radps: float) -> bool:

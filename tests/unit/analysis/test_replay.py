@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,7 @@ from tests.conftest import run_twin
 from tests.unit.analysis.test_analyze_cli import _copy_topics, _one_line_error
 from twin.analysis.compare import compare_bags
 from twin.bag import Recorder, open_bag, read_messages
-from twin.core.errors import ConfigError
+from twin.core.errors import BagError, ConfigError
 from twin.sim.bag_robot import robot_from_bag, robot_from_urdf
 from twin.sim.replay import load_commands
 from twin.sim.scenario import ReplayMission
@@ -284,3 +285,50 @@ def test_a_burger_bag_replays_as_a_burger_with_its_own_motors(
     assert _error_at(src, twin, 25.0) <= 0.010
     if drive == "fmu":  # the Burger's XL430 servos, as `simulate` runs them (fmu: auto), not the Waffle's XM430
         assert "xl430_w250_servo" in proc.stderr and "xm430" not in proc.stderr
+
+
+def _stamped_copy(gazebo_bag: Path, bag: Path, stamp: Callable[[int], int], topics: list[str]) -> Path:
+    """The bag's /odom (and `topics`) with its /cmd_vel as TwistStamped stamped `stamp(record time)`."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    Header, Stamped, Time = (
+        store.types[n] for n in ("std_msgs/msg/Header", "geometry_msgs/msg/TwistStamped", "builtin_interfaces/msg/Time")
+    )
+    info = open_bag(gazebo_bag)
+    with Recorder(bag) as rec:
+        handles = {t: rec.add_topic(t, info.topic(t).msgtype) for t in topics}
+        cmd = rec.add_topic("/cmd_vel", "geometry_msgs/msg/TwistStamped")
+        for m in read_messages(gazebo_bag, topics, decode=False):
+            rec.write(handles[m.topic], m.t_ns, m.msg)
+        for m in read_messages(gazebo_bag, ["/cmd_vel"]):
+            ns = stamp(m.t_ns)
+            header = Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id="base_link")
+            rec.write(cmd, m.t_ns, store.serialize_cdr(Stamped(header=header, twist=m.msg), Stamped.__msgtype__))
+    return bag
+
+
+@pytest.mark.parametrize(
+    ("name", "stamp"),
+    [("zero", lambda t: 0), ("wall_clock", lambda t: t)],  # the bag's record times: the wall clock
+)
+def test_stamped_commands_off_the_poses_clock_replay_at_their_record_times_and_say_so(
+    gazebo_bag: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture, name: str, stamp: Callable[[int], int]
+) -> None:
+    # A TwistStamped /cmd_vel stamped 0 (never set) or on the wall clock in a sim-time bag: every
+    # command fell before the first pose or after the last, and the replay drove nothing, silently.
+    bag = _stamped_copy(gazebo_bag, tmp_path / name, stamp, ["/odom", "/clock"])
+    plain = load_commands(ReplayMission(bag=gazebo_bag, pose_topic="/odom"))
+    with caplog.at_level("WARNING", logger="twin.sim.replay"):
+        stamped = load_commands(ReplayMission(bag=bag, pose_topic="/odom"))
+    assert stamped.time_source == "record times mapped through /clock"
+    assert stamped.t_ns.tolist() == plain.t_ns.tolist() and stamped.v_mps.tolist() == plain.v_mps.tolist()
+    (line,) = [r.getMessage() for r in caplog.records]
+    assert "the header stamps of /cmd_vel are not on the clock of the poses on /odom" in line
+
+
+def test_commands_no_clock_puts_among_the_poses_are_one_line(gazebo_bag: Path, tmp_path: Path) -> None:
+    # stamps never set and no /clock to map the record (wall) times onto the poses' sim time
+    bag = _stamped_copy(gazebo_bag, tmp_path / "lost", lambda t: 0, ["/odom"])
+    with pytest.raises(BagError, match=r"no command on /cmd_vel falls within the poses on /odom .* clocks disagree"):
+        load_commands(ReplayMission(bag=bag, pose_topic="/odom"))
