@@ -28,6 +28,7 @@ from twin.bag import BagInfo, TopicInfo, open_bag, read_raw
 from twin.bag.raw import require_readable
 from twin.bag.reader import robot_namespaces, undecodable
 from twin.bag.typesys import message_type_name
+from twin.core.errors import ConfigError
 
 __all__ = [
     "CMD_TOPIC",
@@ -345,6 +346,7 @@ class BagData:
     cmd_stamped: bool = False
     scan_min: tuple[array[float], array[float]] | None = None  # t s, min valid range m
     scan_topic: str | None = None  # where scan_min comes from: /scan, else the bag's one LaserScan topic
+    scan_choices: tuple[str, ...] = ()  # without /scan, the bag's several LaserScan topics (none taken)
     scan_cells: dict[int, int] = field(default_factory=dict)  # cell (x << 32 | y) -> scans that hit it
     scan_from: tuple[float, float, float] | None = None  # pose of the last scan placed
     health: dict[str, TopicHealth] = field(default_factory=dict)
@@ -505,6 +507,7 @@ def collect(
     pose_topics: Iterable[str] = (),
     series: bool = False,
     namespace: str | None = None,
+    scan_topic: str | None = None,
 ) -> BagData:
     """Read the bag once (twice with `decoded`) and keep the series analysis uses.
 
@@ -524,6 +527,7 @@ def collect(
             other fields are keyed by those), plus the bag's topics outside every robot's namespace
             (`/clock`); tracks and topic health keep the bag's own names. `topics` and
             `pose_topics` are then given without the namespace.
+        scan_topic: The LaserScan topic clearance comes from (None: `/scan`, else the bag's only one).
 
     Raises:
         BagError: If the folder is not a readable bag; a truncated storage file says to run
@@ -541,7 +545,7 @@ def collect(
     by_real = {ti.name: ti for ti in by_name.values()}
     types = {n: message_type_name(t.msgtype) for n, t in by_name.items()}  # full names, as the fast readers know them
     pose_list = _pose_topics(types, pose_topics)
-    scan_topic = _scan_topic(types)
+    scan_topic = _scan_topic(types) if scan_topic is None else _chosen_scan(bag, types, scan_topic)
     wanted = None
     if topics is not None:
         asked = list(topics)
@@ -569,6 +573,8 @@ def collect(
     if scan_topic is not None:
         data.scan_min = (array("d"), array("d"))
         data.scan_topic = scan_topic
+    else:
+        data.scan_choices = tuple(sorted(n for n, t in types.items() if t == "sensor_msgs/msg/LaserScan"))
     clock_ok = "/clock" in by_name and types["/clock"] == "rosgraph_msgs/msg/Clock"
     if clock_ok:
         data.clock = (array("q"), array("q"))
@@ -730,6 +736,19 @@ def _kept_handler(
             handler(t_ns, buf)
 
     return handle
+
+
+def _chosen_scan(bag: Path, types: Mapping[str, str], topic: str) -> str:
+    """The LaserScan topic a user named, checked.
+
+    Raises:
+        ConfigError: If the bag has no LaserScan topic of that name, naming those it has.
+    """
+    if types.get(topic) != "sensor_msgs/msg/LaserScan":
+        scans = [name for name, msgtype in types.items() if msgtype == "sensor_msgs/msg/LaserScan"]
+        msg = f"--scan-topic {topic}: {bag} has no LaserScan topic of that name (it has: {', '.join(scans) or 'none'})"
+        raise ConfigError(msg)
+    return topic
 
 
 def _scan_topic(types: Mapping[str, str]) -> str | None:

@@ -294,7 +294,7 @@ def compute_metrics(data: BagData) -> RunMetrics:
 
     min_r = min_t = None
     if data.scan_min is None:
-        notes.append("clearance needs /scan (or a bag's only LaserScan topic)")
+        notes.append(clearance_needs(data.scan_choices))
     else:
         if data.scan_topic != SCAN_TOPIC:
             notes.append(f"clearance from {data.scan_topic} (the bag has no /scan)")
@@ -365,3 +365,10 @@ def metric_data(bag_path: Path, *, namespace: str | None = None) -> BagData:
         BagError: If it is not a readable bag.
     """
     return collect(bag_path, topics=_METRIC_TOPICS, health=False, namespace=namespace)
+
+
+def clearance_needs(choices: tuple[str, ...]) -> str:
+    """What clearance needs that the bag lacks: /scan, or one LaserScan topic chosen among several."""
+    if len(choices) > 1:
+        return f"clearance needs /scan or --scan-topic: the bag has several LaserScan topics ({', '.join(choices)})"
+    return "clearance needs /scan (or a bag's only LaserScan topic)"

@@ -110,6 +110,7 @@ def analyze(
     plots_enabled: bool = True,
     progress: Callable[[float], None] | None = None,
     namespace: str | None = None,
+    scan_topic: str | None = None,
 ) -> Report:
     """Read the bag and compute its report (metrics, mission timeline, topic health, plots).
 
@@ -121,12 +122,16 @@ def analyze(
         plots_enabled: Render the PNGs (the slow part on long bags).
         progress: Called with the fraction of the bag read.
         namespace: Report on this robot of a fleet's bag (its topics under `/<namespace>/`).
+        scan_topic: The LaserScan topic clearance comes from (None: `/scan`, else the bag's only one).
 
     Raises:
         BagError: If it is not a readable bag.
+        ConfigError: If `scan_topic` is not a LaserScan topic of the bag.
     """
     bag = Path(path)
-    data = collect(bag, scan_points=walls is None, progress=progress, series=True, namespace=namespace)
+    data = collect(
+        bag, scan_points=walls is None, progress=progress, series=True, namespace=namespace, scan_topic=scan_topic
+    )
     return build_report(bag, data, walls=walls, world_name=world_name, plots_enabled=plots_enabled, namespace=namespace)
 
 
@@ -262,7 +267,13 @@ def _sections(report: Report, data: BagData, walls: F64 | None, world_name: str,
         r = np.frombuffer(data.scan_min[1], dtype=np.float64)
         _plot(report, "clearance", render, lambda: plots.clearance_plot(t, r, f"{title}: minimum lidar range"))
     else:
-        add(Section(name="clearance", available=False, needs="/scan, or the bag's only LaserScan topic"))
+        several = data.scan_choices if len(data.scan_choices) > 1 else ()
+        needs = (
+            f"/scan, or --scan-topic (one of {', '.join(several)})"
+            if several
+            else "/scan, or the bag's only LaserScan topic"
+        )
+        add(Section(name="clearance", available=False, needs=needs))
 
     # Mission timeline.
     tl = report.timeline

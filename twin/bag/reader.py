@@ -323,7 +323,8 @@ def _open_reader(bag: Path) -> Reader:
                 f"({_parse_failure(err)}); they may be damaged: run `twin bag recover {bag}`"
             )
         else:
-            msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, meta)}"
+            hint = _killed_hint(bag, meta) or _damage_hint(bag, err)
+            msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{hint}"
         raise BagError(msg) from None
     return reader
 
@@ -349,6 +350,14 @@ def _killed_hint(bag: Path, meta: BagMetadata | None) -> str:
             continue
         if file.suffix == ".db3" and any(file.with_name(file.name + end).exists() for end in ("-journal", "-wal")):
             return f"; if its recording was killed, run `twin bag recover {bag}`"
+    return ""
+
+
+def _damage_hint(bag: Path, err: Exception) -> str:
+    """The recover hint, if SQLite says the database itself is damaged (a file cut or overwritten); else ""."""
+    text = str(err)
+    if "malformed" in text or "not a database" in text:
+        return f"; its storage is damaged: `twin bag recover {bag}` keeps the rows that still read"
     return ""
 
 
@@ -529,7 +538,8 @@ def read_messages(
                 raise undecodable(bag, data, err, topic=conn.topic, t_ns=t_ns, msgtype=conn.msgtype) from None
             yield BagMessage(conn.topic, conn.msgtype, t_ns, msg_obj)
     except ReaderError as err:
-        msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{_killed_hint(bag, _metadata_or_none(bag))}"
+        hint = _killed_hint(bag, _metadata_or_none(bag)) or _damage_hint(bag, err)
+        msg = f"{bag}: cannot read the bag: {str(err).rstrip('.')}{hint}"
         raise BagError(msg) from None
     except (
         _SqliteError,

@@ -497,6 +497,13 @@ def _recover_sqlite_bag(bag: Path, files: list[Path], previous: BagMetadata | No
                 infos.append(_file_info(file.name, start, end, sum(r.count for r in live)))
             else:
                 infos.append(_file_info(file.name, 0, 0, 0))
+        if previous is not None and previous.message_count and not any(counts.values()):
+            msg = (
+                f"{bag}: cannot recover: not one of the {previous.message_count} messages its {METADATA_FILE} "
+                "lists still reads (SQLite finds no row of the messages table: the file is cut or overwritten "
+                "where they are); nothing was changed"
+            )
+            raise BagError(msg)
         meta = _metadata(
             storage="sqlite3",
             files=files,
@@ -567,7 +574,9 @@ def _metadata(
         compression_format="zstd" if compressed else "",
         compression_mode="MESSAGE" if compressed else "",
         custom_data=previous.custom_data if previous else (),
-        ros_distro=previous.ros_distro if previous and previous.ros_distro else profile.name,
+        # the distro the bag names (its metadata, its storage's records), never one made up: a Foxy
+        # bag's version 4 metadata names none, and the report should not call it Humble
+        ros_distro=previous.ros_distro if previous and previous.ros_distro else distro,
     )
 
 

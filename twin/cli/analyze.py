@@ -101,6 +101,11 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         metavar="NS",
         help="a fleet's bag: only the robot under /NS/ (compare: in each fleet bag, or one NS per bag)",
     )
+    parser.add_argument(
+        "--scan-topic",
+        metavar="TOPIC",
+        help="the LaserScan topic clearance comes from (default: /scan, else the bag's only LaserScan topic)",
+    )
     cmp = parser.add_argument_group("compare A B")
     cmp.add_argument("--topic", nargs="+", metavar="TOPIC", help="pose topic in both bags (or one per bag)")
     cmp.add_argument("--align", action="store_true", help="Umeyama-align B's trajectory to A's before the ATE")
@@ -157,6 +162,9 @@ def _analyze(args: argparse.Namespace) -> int:
     walls = _walls(args)
     out = args.out if args.out is not None else Path("bags") / f"{bag.resolve().name}_report"
     if namespaces and namespace is None:
+        if args.scan_topic is not None:
+            msg = f"--scan-topic is one robot's: {bag} holds {len(namespaces)} robots; add --namespace NS"
+            raise ConfigError(msg)
         return _analyze_fleet(args, bag, walls, out)
     with _Fraction(f"reading {bag}", enabled=not args.quiet) as bar:
         report = analyze(
@@ -166,6 +174,7 @@ def _analyze(args: argparse.Namespace) -> int:
             plots_enabled=not args.no_plots,
             progress=bar.update,
             namespace=namespace,
+            scan_topic=args.scan_topic,
         )
     files = _writing(out, lambda: write_report(report, out))
     if args.json:

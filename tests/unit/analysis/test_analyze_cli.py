@@ -147,15 +147,22 @@ def test_truncated_bag_is_one_line_suggesting_recover(twin_bag: Path, tmp_path: 
     assert "twin bag recover" in line
 
 
-def test_a_damaged_sqlite3_file_is_one_line_without_a_recover_hint(twin_bag_sqlite: Path, tmp_path: Path) -> None:
-    # A killed recording leaves a sqlite3 file whole, with its journal; a file cut in half is damage
-    # `twin bag recover` cannot mend (its integrity check refuses it), so the error does not send users there.
+def test_a_damaged_sqlite3_file_is_one_line_naming_recover_which_keeps_what_still_reads(
+    twin_bag_sqlite: Path, tmp_path: Path
+) -> None:
+    # A sqlite3 file cut short: SQLite calls it malformed. `twin bag recover` copies the rows that
+    # still read (a quarter cut off keeps most), or says in one line that none does.
     bag = tmp_path / "cut"
     shutil.copytree(twin_bag_sqlite, bag)
     (storage_file,) = [p for p in bag.iterdir() if p.suffix == ".db3"]
-    os.truncate(storage_file, storage_file.stat().st_size // 2)
+    total = open_bag(bag).message_count
+    os.truncate(storage_file, storage_file.stat().st_size * 3 // 4)
     line = _one_line_error(run_twin("analyze", str(bag), "--out", str(tmp_path / "r")))
-    assert "malformed" in line and "recover" not in line
+    assert "malformed" in line and f"`twin bag recover {bag}` keeps the rows that still read" in line
+    recovered = run_twin("bag", "recover", str(bag))
+    assert recovered.returncode == 0, recovered.stderr
+    assert 0 < open_bag(bag).message_count < total
+    assert _analyze(bag, tmp_path / "r2")["metrics"]["duration_s"] > 0
 
 
 def test_an_unsupported_serialization_format_is_one_line_without_a_recover_hint(tmp_path: Path) -> None:

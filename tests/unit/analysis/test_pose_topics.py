@@ -105,4 +105,13 @@ def test_a_bag_whose_lidar_is_not_on_scan_gets_its_clearance_from_its_one_lasers
         for m in read_messages(twin_bag, ["/scan"], decode=False):
             rec.write(front_h, m.t_ns, m.msg)
             rec.write(rear_h, m.t_ns, m.msg)
-    assert _analyze(tmp_path / "two", tmp_path / "r2")["metrics"]["min_lidar_range_m"] is None
+    two = _analyze(tmp_path / "two", tmp_path / "r2")["metrics"]
+    assert two["min_lidar_range_m"] is None
+    assert "the bag has several LaserScan topics (/front/scan, /rear/scan)" in " ".join(two["notes"])
+    # ... and the user names it
+    chosen = _analyze(tmp_path / "two", tmp_path / "r3", "--scan-topic", "/rear/scan")["metrics"]
+    assert chosen["min_lidar_range_m"] == expected
+    assert "clearance from /rear/scan (the bag has no /scan)" in chosen["notes"]
+    wrong = run_twin("analyze", str(tmp_path / "two"), "--out", str(tmp_path / "r4"), "--scan-topic", "/odom")
+    assert wrong.returncode == 2
+    assert wrong.stderr.strip().endswith("has no LaserScan topic of that name (it has: /front/scan, /rear/scan)")

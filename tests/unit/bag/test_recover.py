@@ -323,3 +323,52 @@ def test_a_schema_definition_with_a_flipped_byte_is_mended(tmp_path: Path) -> No
     report = recover_bag(bag)
     assert not report.was_complete
     _valid_everywhere(bag, recorded)  # every message back, decoding with the definitions mended
+
+
+def test_a_foxy_database_without_metadata_is_rebuilt_naming_no_distro(tmp_path: Path) -> None:
+    # rosbag2 on Foxy wrote no schema table and no distro anywhere: the rebuilt metadata called it Humble.
+    from tests.conftest import run_twin
+
+    bag = tmp_path / "foxy"
+    bag.mkdir()
+    with sqlite3.connect(bag / "foxy_0.db3") as db:
+        db.execute(
+            "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL, "
+            "serialization_format TEXT NOT NULL, offered_qos_profiles TEXT NOT NULL)"
+        )
+        db.execute(
+            "CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, timestamp INTEGER NOT NULL, "
+            "data BLOB NOT NULL)"
+        )
+        db.execute("INSERT INTO topics VALUES (1, '/chatter', 'std_msgs/msg/String', 'cdr', '')")
+        for i in range(3):
+            data = b"\x00\x01\x00\x00" + (5).to_bytes(4, "little") + b"hi %d\x00" % i
+            db.execute("INSERT INTO messages VALUES (?, 1, ?, ?)", (i + 1, (i + 1) * 10**8, data))
+    result = run_twin("bag", "recover", str(bag))
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().endswith("3 messages on 1 topics (metadata version 8)")  # no distro named
+    assert open_bag(bag).ros_distro == ""
+    assert [m.msg.data for m in read_messages(bag, ["/chatter"])] == ["hi 0", "hi 1", "hi 2"]
+
+
+def test_a_database_cut_before_its_messages_is_refused_unchanged_and_reading_it_says_recover(
+    tmp_path: Path, fixtures: Path
+) -> None:
+    from tests.conftest import run_twin
+
+    bag = tmp_path / "cut"
+    shutil.copytree(fixtures / "bags" / "tb3_waffle_gazebo_humble", bag)
+    for file in bag.iterdir():
+        file.chmod(0o644)
+    (file,) = bag.glob("*.db3")
+    with file.open("r+b") as f:
+        f.truncate(1_000_000)  # of 4 MB: SQLite finds none of the messages' rows
+    before = {f.name: f.read_bytes() for f in bag.iterdir()}
+    read = run_twin("analyze", str(bag), "--out", str(tmp_path / "report"))
+    assert read.returncode == 5
+    assert "database disk image is malformed" in read.stderr and f"`twin bag recover {bag}`" in read.stderr
+    result = run_twin("bag", "recover", str(bag))
+    assert result.returncode == 5
+    (line,) = result.stderr.strip().splitlines()[-1:]
+    assert "cannot recover: not one of the 9432 messages its metadata.yaml lists still reads" in line
+    assert {f.name: f.read_bytes() for f in bag.iterdir()} == before
