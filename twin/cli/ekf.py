@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import logging
 import math
 import os
 import sys
@@ -289,6 +290,17 @@ def _resolve_geometry(args: argparse.Namespace, bag_mod: ModuleType) -> dict[str
             setattr(args, key, default)
             reason = f"no {description}" if urdf is None and not found else "not in the URDF"
             sources[key] = f"TurtleBot3 Waffle default ({reason})"
+    guessed = [f"--{k.replace('_', '-')}" for k in ("wheel_radius", "wheel_separation") if "default" in sources[k]]
+    joints = (args.left_joint, args.right_joint)
+    if guessed and joints != (_DEFAULT_GEOMETRY["left_joint"], _DEFAULT_GEOMETRY["right_joint"]):
+        logging.getLogger("twin.cli.ekf").warning(
+            "the wheels %s and %s are not a TurtleBot3's, yet their %s are the TurtleBot3 Waffle's defaults "
+            "(nothing in the bag's %s gives them): give %s",
+            *joints,
+            " and ".join(g.removeprefix("--wheel-") for g in guessed),
+            description,
+            " and ".join(guessed),
+        )
     return sources
 
 
@@ -306,12 +318,15 @@ def _pick_robot(args: argparse.Namespace, bag_mod: ModuleType) -> None:
 
     info = bag_mod.open_bag(args.bag)
     args.description_topic = "/robot_description"
+    robots = robot_namespaces(info)
+    names = {t.name for t in info.topics}
+    if args.namespace is None and len(robots) == 1 and "/joint_states" not in names:
+        args.namespace = robots[0]  # one robot, all under its namespace: that robot, as analyze reads it
+        logging.getLogger("twin.cli.ekf").info("%s: the robot under /%s/", info.path, robots[0])
     if args.namespace is None:
         for key, default in _TOPIC_DEFAULTS.items():
             if getattr(args, key) is None:
                 setattr(args, key, default)
-        robots = robot_namespaces(info)
-        names = {t.name for t in info.topics}
         if robots and args.joint_topic not in names:
             msg = (
                 f"{info.path}: a fleet's bag (robots {', '.join(robots)}) has no {args.joint_topic}; "

@@ -235,3 +235,55 @@ def test_a_fleet_robot_is_replayed_with_its_own_topics_and_urdf(tmp_path: Path) 
         wrong.returncode == 2
         and "--namespace 'robot9' is not a robot of this bag; it has burger, waffle" in wrong.stderr
     )
+
+
+@pytest.mark.usefixtures("ekf_backend")
+def test_another_robots_wheels_on_turtlebot3_geometry_are_warned_of(
+    gazebo_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A Husky's bag without its URDF: the radius and separation fell back to the Waffle's, said only in the summary.
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    bag = tmp_path / "husky"
+    renames = {"wheel_left_joint": "front_left_wheel_joint", "wheel_right_joint": "front_right_wheel_joint"}
+    with Reader(gazebo_bag) as reader, Writer(bag, version=8) as writer:
+        keep = ("/imu", "/joint_states", "/odom")
+        conns = {
+            c.id: writer.add_connection(c.topic, c.msgtype, typestore=store)
+            for c in reader.connections
+            if c.topic in keep
+        }
+        for conn, t_ns, raw in reader.messages():
+            if conn.id not in conns:
+                continue
+            data = raw
+            if conn.topic == "/joint_states":
+                msg = store.deserialize_cdr(raw, conn.msgtype)
+                msg.name = [renames.get(n, n) for n in msg.name]
+                data = store.serialize_cdr(msg, conn.msgtype)
+            writer.write(conns[conn.id], t_ns, data)
+    joints = ("--left-joint", "front_left_wheel_joint", "--right-joint", "front_right_wheel_joint")
+    code, _, err = replay(capsys, bag, "--out", tmp_path / "out", *joints)
+    assert code == 0, err
+    (line,) = [ln for ln in err.splitlines() if "not a TurtleBot3's" in ln]
+    assert "front_left_wheel_joint and front_right_wheel_joint" in line
+    assert line.endswith("give --wheel-radius and --wheel-separation")
+    code, _, err = replay(
+        capsys, bag, "--out", tmp_path / "out2", *joints, "--wheel-radius", "0.165", "--wheel-separation", "0.555"
+    )
+    assert code == 0 and "not a TurtleBot3's" not in err
+
+
+@pytest.mark.usefixtures("ekf_backend")
+def test_a_bag_of_one_robot_under_a_namespace_needs_no_namespace_flag(
+    gazebo_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # analyze, compare and replay read such a bag's one robot; ekf replay asked for --namespace tb3.
+    bag = tmp_path / "tb3"
+    topics = ("/imu", "/joint_states", "/odom", "/robot_description", "/clock")
+    dropped = {t for t in ("/scan", "/tf", "/tf_static", "/rosout", "/parameter_events", "/cmd_vel")}
+    _copy_without(gazebo_bag, bag, dropped, renamed={t: f"/tb3{t}" for t in topics if t != "/clock"})
+    code, out, err = replay(capsys, bag, "--out", tmp_path / "out", "--json")
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["reference_topic"] == "/tb3/odom"
+    assert summary["comparison"]["final_error_percent_of_distance"] < 1.0
