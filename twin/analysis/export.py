@@ -30,8 +30,9 @@ _BLOCK_ROWS = 10_000
 
 
 def _fields(msg: Any) -> Iterator[tuple[str, Any]]:
-    for name in getattr(msg, "__dataclass_fields__", {}):
-        if name.startswith("__"):
+    """A message's fields, without its constants (`Log.DEBUG`...: rosbags declares them `ClassVar`)."""
+    for name, declared in getattr(msg, "__dataclass_fields__", {}).items():
+        if name.startswith("__") or "ClassVar" in str(declared.type):
             continue
         yield name, getattr(msg, name)
 

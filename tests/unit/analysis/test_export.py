@@ -148,3 +148,12 @@ def test_ekf_replay_without_urdf_names_the_default_it_used(twin_bag: Path, tmp_p
     assert s["geometry_sources"]["wheel_separation"] == "--wheel-separation"
     assert s["geometry_sources"]["wheel_radius"] == "TurtleBot3 Waffle default (no /robot_description)"
     assert s["wheel_radius_m"] == 0.033
+
+
+def test_a_message_types_constants_are_not_columns(twin_bag: Path, tmp_path: Path) -> None:
+    # rcl_interfaces/Log declares DEBUG...FATAL: they were five columns of the same value in every row
+    proc = run_twin("bag", "export", str(twin_bag), "--topics", "/rosout", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    with (tmp_path / "rosout.csv").open() as f:
+        header = next(csv.reader(f))
+    assert header[1:] == ["stamp.sec", "stamp.nanosec", "level", "name", "msg", "file", "function", "line"]
