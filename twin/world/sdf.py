@@ -163,8 +163,8 @@ def _world_from_node(loader: SdfReader, world_node: XmlNode, version: tuple[int,
         except FarPoseError as err:  # e.g. furniture that fell through the floor before the world was saved
             loader.warn(
                 f"far:{raw.name}",
-                f"{err.where}: <pose> puts model {raw.name!r} {err.distance_m:g} m from its frame's origin, "
-                "beyond any world; left out",
+                f"{err.where}: a <pose> {err.distance_m:g} m from its frame's origin, beyond any world, places "
+                f"model {raw.name!r}: left out",
             )
     return World(
         name=world_raw.name,

@@ -102,6 +102,15 @@ class Scope:
             msg = f"{where}: the pose of {name!r} in model {self.raw.name!r} depends on itself (relative_to cycle)"
             raise WorldError(msg)
         self._visiting.add(name)
+        try:
+            result = self._resolve(name, where)
+        finally:  # (a far pose raised there leaves its model out, and a model placed on it with it)
+            self._visiting.discard(name)
+        self._cache[name] = result
+        return result
+
+    def _resolve(self, name: str, where: str) -> Mat4:
+        """`T` of an entry of this scope, from its pose and the frame that pose is relative to."""
         kind, raw = self._entries[name]
         if isinstance(raw, RawModel):
             pose_node = raw.pose_node
@@ -122,8 +131,6 @@ class Scope:
             result = self.T(relative_to, pose_node.where if pose_node is not None else raw.where) @ parse_pose(
                 pose_node
             )
-        self._visiting.discard(name)
-        self._cache[name] = result
         return result
 
 

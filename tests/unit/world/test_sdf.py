@@ -543,8 +543,8 @@ def test_a_model_placed_beyond_any_world_is_left_out_and_named(tmp_path: Path, p
     loaded = load_world(world, model_path=[tmp_path / "models"])
     assert [m.name for m in loaded.models] == ["near"]
     assert [w for w in loaded.warnings if "beyond any world" in w] == [
-        f"{world}:3: <pose> puts model 'far' {far} m from its frame's origin, beyond any world; left out",
-        f"{world}:7: <pose> puts model 'fallen' {far} m from its frame's origin, beyond any world; left out",
+        f"{world}:3: a <pose> {far} m from its frame's origin, beyond any world, places model 'far': left out",
+        f"{world}:7: a <pose> {far} m from its frame's origin, beyond any world, places model 'fallen': left out",
     ]
 
 
@@ -558,7 +558,27 @@ def test_a_world_state_that_puts_a_model_beyond_any_world_leaves_it_out(tmp_path
     )
     loaded = load_world(world)
     assert loaded.models == ()
-    assert any(w.startswith(f"{world}:5: <pose> puts model 'shelf' -7.57769e+08 m") for w in loaded.warnings)
+    assert (
+        f"{world}:5: a <pose> -7.57769e+08 m from its frame's origin, beyond any world, places model 'shelf': left out"
+        in loaded.warnings
+    )
+
+
+def test_a_model_placed_on_one_beyond_any_world_is_left_out_with_it_and_the_rest_loads(tmp_path: Path) -> None:
+    world = tmp_path / "rel.world"
+    world.write_text(
+        "<sdf version='1.7'><world name='w'>\n<model name='fallen'><pose>0 0 -7e8 0 0 0</pose><link name='l'/></model>\n"
+        "<model name='on_it'><pose relative_to='fallen'>0 0 1 0 0 0</pose><link name='l'/></model>\n"
+        "<model name='also_on_it'><pose relative_to='fallen'>0 0 2 0 0 0</pose><link name='l'/></model>\n"
+        "<model name='fine'><pose>1 0 0 0 0 0</pose><link name='l'/></model>\n</world></sdf>"
+    )
+    loaded = load_world(world)
+    assert [m.name for m in loaded.models] == ["fine"]  # (a second model on it was a relative_to "cycle")
+    assert [w.rsplit("places ", 1)[1] for w in loaded.warnings] == [
+        "model 'fallen': left out",
+        "model 'on_it': left out",
+        "model 'also_on_it': left out",
+    ]
 
 
 def test_a_robot_link_beyond_any_world_is_refused_where_it_is(tmp_path: Path) -> None:
