@@ -108,6 +108,39 @@ def test_source_topics_resolve_as_in_nav2_humble() -> None:
     # a fleet robot: the params' absolute topic is the robot's own, as nav2_bringup's per-robot files write it
     assert source_topic("/scan", "/robot1/local_costmap", "/robot1") == "/robot1/scan"
     assert source_topic("scan", "/robot1/local_costmap", "/robot1") == "/robot1/local_costmap/scan"
+    # ... one that names the robot already (a per-robot file, or `<robot_namespace>/scan` filled in) as it is
+    assert source_topic("/robot1/scan", "/robot1/local_costmap", "/robot1") == "/robot1/scan"
+    assert source_topic("/robot10/scan", "/robot1/local_costmap", "/robot1") == "/robot1/robot10/scan"
+
+
+def test_a_fleets_shared_params_file_with_robot_namespace_placeholders_reads_each_robots_scans(
+    tmp_path: Path,
+) -> None:
+    # nav2_bringup Humble's nav2_multirobot_params_all.yaml writes `<robot_namespace>/scan`, which its
+    # launch fills in per robot: the run failed with "'/global_costmap/<robot_namespace>/scan' is not a topic name"
+    waffle = REPO.parent / "shared" / "fixtures" / "nav2" / "turtlebot3_navigation2_humble" / "param" / "humble"
+    text = (waffle / "waffle.yaml").read_text()
+    assert text.count("topic: /scan") == 4  # both layers of both costmaps
+    params = tmp_path / "all.yaml"
+    params.write_text(text.replace("topic: /scan", "topic: <robot_namespace>/scan"))
+    scenario = tmp_path / "pair.yaml"
+    scenario.write_text(
+        f"name: pair\nnavigation: {{type: nav2, params: {params}}}\nrobots:\n  - {{name: robot1}}\n"
+        "  - {name: robot2, robot: {initial_pose: {x_m: 1.5, y_m: -0.2}}}\n"
+    )
+    checked = run_twin("scenario", "check", str(scenario))
+    assert checked.returncode == 0, checked.stderr
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "4")
+    assert result.returncode == 0, result.stderr
+    assert "nothing publishes" not in result.stderr and "<robot_namespace>" not in result.stderr
+    last: dict[str, Any] = {}
+    with AnyReader([bag]) as reader:
+        wanted = [c for c in reader.connections if c.topic.endswith("/local_costmap/costmap")]
+        for connection, _, raw in reader.messages(connections=wanted):
+            last[connection.topic] = reader.deserialize(raw, connection.msgtype)
+    for ns in ("robot1", "robot2"):  # each costmap marked what its own robot's lidar saw
+        assert (np.asarray(last[f"/{ns}/local_costmap/costmap"].data) == 100).any(), ns
 
 
 AMCL_SCENARIO = """

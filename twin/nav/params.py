@@ -306,8 +306,10 @@ def _collect_nodes(
                 _collect_nodes({sub_key: sub}, name, nodes, where)
 
 
-def _read_file(path: Path) -> dict[str, dict[str, ParamValue]]:
+def _read_file(path: Path, substitutions: Mapping[str, str]) -> dict[str, dict[str, ParamValue]]:
     text = read_text_file(path, ConfigError, what="a Nav2 params YAML file")
+    for placeholder, value in substitutions.items():  # a launch file's substitutions, made on the text
+        text = text.replace(placeholder, value)
     try:
         doc = yaml_numbers.safe_load(text)  # `1e-5` is a number, as ROS 2's parameter parser reads it
     except yaml.YAMLError as err:
@@ -782,7 +784,13 @@ def _set_override(
         overridden[(node, name)] = f"{node_short}.{name}"
 
 
-def load_nav2_params(path: str | Path, *, overrides: Mapping[str, Any] | None = None) -> Nav2Params:
+ROBOT_NAMESPACE = "<robot_namespace>"
+"""nav2_bringup's placeholder in a params file shared by a fleet, replaced by `/<namespace>` at launch."""
+
+
+def load_nav2_params(
+    path: str | Path, *, overrides: Mapping[str, Any] | None = None, namespace: str = ""
+) -> Nav2Params:
     """Read a Nav2 params YAML and apply single-value overrides.
 
     Values are checked as they are read (types, ranges); `twin.nav.param_checks` checks the rest
@@ -793,6 +801,8 @@ def load_nav2_params(path: str | Path, *, overrides: Mapping[str, Any] | None = 
         overrides: A scenario's `navigation.set`: values that replace the file's, keyed `node.param`
             (`amcl.max_particles`, `local_costmap.inflation_layer.inflation_radius`), or nested
             mappings of the same. A bad value among them is reported as `navigation.set.KEY`.
+        namespace: The robot's (a fleet's): `<robot_namespace>` in the file becomes `/<namespace>`,
+            as nav2_bringup's multi-robot launch (ReplaceString) writes it; "" for a robot alone.
 
     Raises:
         ConfigError: If the file cannot be read or parsed, a node's section is not a mapping, or a
@@ -800,7 +810,7 @@ def load_nav2_params(path: str | Path, *, overrides: Mapping[str, Any] | None = 
             line and key, or the override).
     """
     path = Path(path)
-    nodes = _read_file(path)
+    nodes = _read_file(path, {ROBOT_NAMESPACE: f"/{namespace}" if namespace else ""})
     flat_overrides: dict[str, ParamValue] = {}
     if overrides:
         _flatten("", overrides, flat_overrides, SET_KEY)

@@ -83,6 +83,18 @@ def validate_topic_name(name: str) -> str | None:
     return None
 
 
+def in_robot_namespace(topic: str, robot_namespace: str) -> str:
+    """An absolute topic of a params file shared by a fleet, on one robot's graph.
+
+    Under `robot_namespace` (`/robot1`: `/scan` is `/robot1/scan`), unless it names that namespace
+    already (`/robot1/scan`, or `<robot_namespace>/scan` as the launch fills it in).
+    """
+    namespace = robot_namespace.rstrip("/")
+    if not namespace or topic.startswith(f"{namespace}/"):
+        return topic
+    return f"{namespace}{topic}"
+
+
 def resolve_topic_name(name: str, *, node_name: str, namespace: str) -> str:
     """Return the absolute topic name of `name` for a node, as rcl expands it (`~` is the node's name).
 

@@ -300,7 +300,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
             check_map_extent(sc, robot, scene)
             if isinstance(sc.mission, BehaviorTreeMission):
                 _load_tree(sc.mission)
-            _load_navigation(sc, robot)
+            _load_navigation(sc, robot, namespace=ns or "")
         except TwinError as err:  # a fleet's names its entry, as the run does
             raise _named(in_entry(err, f"robots[{index}]." if ns else ""), path) from None
         _check_drive(sc, path, robot.name, entry=f"robots[{index}]." if ns else "")
@@ -382,9 +382,10 @@ def _load_tree(mission: BehaviorTreeMission) -> None:
             raise TreeError(problem)
 
 
-def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
+def _load_navigation(scenario: Scenario, robot: RobotModelSpec, *, namespace: str = "") -> None:
     """Read the map, the Nav2 params file (with `navigation.set`) and the navigator tree the run would read."""
-    from twin.nav.bt_navigator.factory import nav2_factory, unloaded_behavior
+    from twin.bt.validate import validate_file
+    from twin.nav.bt_navigator.factory import nav2_factory, unimplemented_leaf, unloaded_behavior
     from twin.nav.map_server.map_io import load_map
     from twin.nav.param_checks import check_nav2_inputs
     from twin.nav.params import default_params_path, load_nav2_params
@@ -400,7 +401,7 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
             path = nav.params if nav.params is not None else default_params_path(robot.name)
         except ConfigError as err:
             raise err.with_context(before="navigation.params: ") from None
-        params = load_nav2_params(path, overrides=dict(nav.set))
+        params = load_nav2_params(path, overrides=dict(nav.set), namespace=namespace)
         map_source = None if scenario.map == "from_world" else str(scenario.map)
         step_s = scenario.physics.step_s
         check_nav2_inputs(params, occupancy, map_source=map_source, amcl=amcl, nav2=nav2, physics_step_s=step_s)
@@ -412,4 +413,8 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec) -> None:
             if problem is not None:
                 raise ConfigError(problem)
     if nav.type == "nav2" and nav.bt_xml is not None:
-        nav2_factory().create_tree_from_file(nav.bt_xml, clock=lambda: 0)
+        # as the run reads it: valid against Nav2's palette, and every Nav2 node one the twin runs
+        report = validate_file(nav.bt_xml, nav2_factory())
+        problem = report.problems[0] if report.problems else unimplemented_leaf(nav.bt_xml)
+        if problem is not None:
+            raise TreeError(problem)

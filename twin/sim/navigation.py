@@ -151,6 +151,7 @@ class NavigationStack:
         rng: np.random.Generator,
         *,
         log: logging.Logger = _log,
+        namespace: str = "",
     ) -> NavigationStack | None:
         """Build the stack the scenario asks for, or None when it runs neither AMCL nor Nav2.
 
@@ -171,7 +172,7 @@ class NavigationStack:
             raise ConfigError(problem)
         assert robot.lidar is not None
         params_path = _params_path(sc, robot)
-        params = load_nav2_params(params_path, overrides=dict(sc.navigation.set))
+        params = load_nav2_params(params_path, overrides=dict(sc.navigation.set), namespace=namespace)
         laser = LaserGeometry.from_spec(robot.lidar)
         occupancy = cls._map(sc, robot, scene)
         map_source = None if sc.map == "from_world" else str(sc.map)

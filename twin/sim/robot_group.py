@@ -336,7 +336,9 @@ class RobotGroup:
         if not self.namespace:
             return NavigationStack.build(self.scenario, self.robot, scene, rng.stream("amcl"))
         log = node_logger("navigation", self.namespace)  # a fleet's robot: its lines name it
-        return NavigationStack.build(self.scenario, self.robot, scene, rng.stream("amcl"), log=log)
+        return NavigationStack.build(
+            self.scenario, self.robot, scene, rng.stream("amcl"), log=log, namespace=self.namespace
+        )
 
     def _make_mission(self) -> Mission | None:
         spec = self.scenario.mission

@@ -21,7 +21,7 @@ from twin.bag import ParticleCloudEncoder, PoseWithCovarianceStampedEncoder, TFE
 from twin.core.errors import TwinError
 from twin.nav.amcl.filter import Amcl
 from twin.nav.frames import Frames
-from twin.node import Encoded, Node, QoSProfile
+from twin.node import Encoded, Node, QoSProfile, in_robot_namespace
 
 __all__ = ["AmclNode", "InitialPoseNode"]
 
@@ -149,7 +149,7 @@ class AmclNode(Node):
         # absolute as it is, and for a fleet robot under its namespace, as the costmaps' sources.
         scan_topic = amcl.params.scan_topic
         if scan_topic.startswith("/"):
-            scan_topic = self.get_namespace().rstrip("/") + scan_topic
+            scan_topic = in_robot_namespace(scan_topic, self.get_namespace().rstrip("/"))
         lidar_topic = self.get_namespace().rstrip("/") + "/" + lidar_topic  # the robot's lidar's scans
         full_topic = self.resolve_topic_name(scan_topic)
         unfed = [full_topic != lidar_topic]  # warn at the first odometry if nothing publishes it

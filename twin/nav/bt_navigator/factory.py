@@ -6,6 +6,7 @@
 - `register_nav2_controls(factory)`, `declare_nav2_leaves(factory)`, `register_nav2_leaves(factory,
   services)`: the parts on their own.
 - `unloaded_behavior(bt_xml, servers)`: a behaviour leaf whose action behavior_server does not load.
+- `unimplemented_leaf(bt_xml)`: a Nav2 node the tree uses that the twin declares but does not run.
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ from pathlib import Path
 from twin.bt.factory import BehaviorTreeFactory
 from twin.bt.loader import TreeParser
 from twin.nav.bt_navigator.control_nodes import register_nav2_controls
-from twin.nav.bt_navigator.leaves import NavigationServices, register_nav2_leaves
-from twin.nav.bt_navigator.tree_nodes import declare_nav2_leaves
+from twin.nav.bt_navigator.leaves import IMPLEMENTED, NavigationServices, register_nav2_leaves
+from twin.nav.bt_navigator.tree_nodes import NAV2_DECORATORS, NAV2_LEAVES, declare_nav2_leaves
 
 __all__ = [
     "BEHAVIOR_LEAVES",
@@ -25,6 +26,7 @@ __all__ = [
     "nav2_factory",
     "register_nav2_controls",
     "register_nav2_leaves",
+    "unimplemented_leaf",
     "unloaded_behavior",
 ]
 
@@ -76,4 +78,24 @@ def unloaded_behavior(bt_xml: Path, servers: Mapping[str, object]) -> str | None
                 f"does not load (behavior_plugins: {', '.join(servers) or 'none'}), so Nav2 cannot create this "
                 f"tree; add {server!r} to behavior_plugins with its plugin type, or take the node out of the tree"
             )
+    return None
+
+
+def unimplemented_leaf(bt_xml: Path) -> str | None:
+    """Where the tree uses a Nav2 node the twin declares (its ports validate) but does not run, as one line.
+
+    Nav2 Iron's and Jazzy's default trees use `WouldAPlannerRecoveryHelp`, which Humble does not
+    have: the tree validates against the palette, and the navigator cannot create it.
+    """
+    parser = TreeParser(nav2_factory())
+    parser.load_file(Path(bt_xml))
+    nav2 = NAV2_LEAVES.keys() | NAV2_DECORATORS.keys()
+    for root, _ in parser.tree_roots.values():
+        for element in root.iter():
+            if element.type_name in nav2 and element.type_name not in IMPLEMENTED:
+                return (
+                    f"{element.location}: <{element.type_name}> is a Nav2 node the twin knows the ports of but "
+                    "does not run (the twin runs Nav2 Humble's nodes); use a tree without it, such as Nav2 "
+                    "Humble's navigate_to_pose_w_replanning_and_recovery.xml"
+                )
     return None

@@ -788,6 +788,10 @@ _PLAIN: dict[str, type] = {
 }
 
 
+IMPLEMENTED: frozenset[str] = frozenset(_NEEDS_SERVICES) | frozenset(_PLAIN)
+"""The Nav2 leaves and decorators the twin runs; the others of `tree_nodes` are declared only (trees validate)."""
+
+
 def register_nav2_leaves(factory: BehaviorTreeFactory, services: NavigationServices) -> None:
     """Register every implemented Nav2 leaf and decorator, bound to `services`, with Nav2's ports."""
     ports: dict[str, tuple[PortSpec, ...]] = {k: v[1] for k, v in NAV2_LEAVES.items()}

@@ -18,9 +18,10 @@ from numpy.typing import NDArray
 
 from twin.bt.log import StatusChangeBuffer
 from twin.bt.status import NodeStatus
+from twin.core.errors import TreeError
 from twin.nav.actions import ActionState
 from twin.nav.bt_navigator.action_servers import Nav2Servers
-from twin.nav.bt_navigator.factory import nav2_factory
+from twin.nav.bt_navigator.factory import nav2_factory, unimplemented_leaf
 from twin.node import node_logger
 
 __all__ = ["BtNavigator"]
@@ -41,6 +42,9 @@ class BtNavigator:
         self._log = node_logger("bt_navigator")  # its node's lines: `[robot1.bt_navigator]` in a fleet
         self.servers = servers
         self.bt_xml = bt_xml
+        problem = unimplemented_leaf(bt_xml)
+        if problem is not None:
+            raise TreeError(problem)
         factory = nav2_factory(servers)
         self.tree = factory.create_tree_from_file(bt_xml, clock=now)
         self.tree.log = self._log

@@ -15,7 +15,7 @@ from twin.bag import OccupancyGridEncoder
 from twin.bag.frames import current_frame_prefix, prefixed
 from twin.nav.costmap_2d.layered_costmap import Costmap, scan_observation
 from twin.nav.frames import Frames, LaserGeometry, compose
-from twin.node import PRIORITY_USER, Encoded, Node, QoSProfile
+from twin.node import PRIORITY_USER, Encoded, Node, QoSProfile, in_robot_namespace
 
 __all__ = ["CostmapNode", "costmap_translation", "source_topic"]
 
@@ -37,10 +37,12 @@ def source_topic(topic: str, costmap_namespace: str, robot_namespace: str) -> st
     `/local_costmap/scan`: Humble's layers have no `joinWithParentNamespace`, which came later). An
     absolute one is taken as it is; for a fleet robot (`robot_namespace` `/robot1`) it is read under
     the robot's namespace (`/scan` is `/robot1/scan`), as nav2_bringup's multi-robot params files
-    write each robot's topics, since the twin's robots share one params file.
+    write each robot's topics, since the twin's robots share one params file; one that names the
+    robot's namespace already (`/robot1/scan`, or `<robot_namespace>/scan` as the launch fills it in)
+    is taken as it is.
     """
     if topic.startswith("/"):
-        return f"{robot_namespace}{topic}"
+        return in_robot_namespace(topic, robot_namespace)
     return f"{costmap_namespace.rstrip('/')}/{topic}"
 
 
