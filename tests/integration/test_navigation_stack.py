@@ -206,6 +206,32 @@ def test_a_navigator_tree_with_a_leaf_the_twin_lacks_is_refused_with_exit_6(tmp_
     assert "TeleportRobot" in result.stderr and "Traceback" not in result.stderr  # type: ignore[attr-defined]
 
 
+def test_scenario_check_reads_a_navigator_tree_as_the_run_does(tmp_path: Path) -> None:
+    # check refused every navigation.bt_xml (its Nav2 leaves were declared only) while simulate ran it;
+    # Iron's and Jazzy's trees use WouldAPlannerRecoveryHelp, which the twin declares and does not run
+    packaged = REPO / "trees" / "navigate_to_pose_w_replanning_and_recovery.xml"
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(f"name: t\nnavigation: {{type: nav2, bt_xml: {packaged}}}\n")
+    assert run_twin("scenario", "check", str(scenario)).returncode == 0
+    jazzy = tmp_path / "jazzy.xml"
+    jazzy.write_text(
+        packaged.read_text().replace(
+            '<ClearEntireCostmap name="ClearGlobalCostmap-Context"',
+            '<WouldAPlannerRecoveryHelp error_code="{compute_path_error_code}"/>\n'
+            '<ClearEntireCostmap name="ClearGlobalCostmap-Context"',
+            1,
+        )
+    )
+    assert "WouldAPlannerRecoveryHelp" in jazzy.read_text()
+    scenario.write_text(f"name: t\nnavigation: {{type: nav2, bt_xml: {jazzy}}}\n")
+    checked = run_twin("scenario", "check", str(scenario))
+    ran = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"))
+    for result in (checked, ran):
+        assert result.returncode == 6, result.stderr
+        (line,) = result.stderr.strip().splitlines()
+        assert f"{jazzy}:" in line and "<WouldAPlannerRecoveryHelp> is a Nav2 node the twin knows the ports of" in line
+
+
 def _truth_and_estimates(bag: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t s, x, y, yaw) of /ground_truth/odom and of /odom, and (t s, position error m) of each /amcl_pose."""
     msgs = read(bag, "/ground_truth/odom", "/odom", "/amcl_pose")
