@@ -471,3 +471,22 @@ def test_every_nav2_humble_tree_runs_a_goal(tmp_path: Path, tree: Path) -> None:
     else:
         assert summary["mission_result"] == "SUCCESS"
         assert math.hypot(last.x - goal[0], last.y - goal[1]) < 0.25 + 0.05
+
+
+def test_a_map_the_params_yaml_filename_names_but_the_run_does_not_use_is_warned_of(tmp_path: Path) -> None:
+    humble = FIXTURES / "nav2" / "turtlebot3_navigation2_humble"
+    the_map = humble / "map" / "map.yaml"
+    params = tmp_path / "waffle.yaml"
+    params.write_text((humble / "param" / "humble" / "waffle.yaml").read_text().replace('"map.yaml"', f'"{the_map}"'))
+    scenario = tmp_path / "s.yaml"
+    base = f"name: t\nworld: {{sdf: {REPO / 'sdf' / 'worlds' / 'turtlebot3_world.sdf'}}}\n"
+    base += f"robot: {{initial_pose: {{x_m: -2.0, y_m: -0.5}}}}\nnavigation: {{type: nav2, params: {params}}}\n"
+    scenario.write_text(base)
+    made = run_twin("simulate", str(scenario), "--out", str(tmp_path / "a"), "--duration", "1")
+    assert made.returncode == 0, made.stderr
+    (line,) = [ln for ln in made.stderr.splitlines() if "yaml_filename" in ln]
+    assert f"{params}:" in line and f"names {the_map}, which the twin does not load" in line
+    assert f"set map: {the_map}" in line
+    scenario.write_text(base + f"map: {the_map}\n")
+    used = run_twin("simulate", str(scenario), "--out", str(tmp_path / "b"), "--duration", "1")
+    assert used.returncode == 0 and "yaml_filename" not in used.stderr, used.stderr

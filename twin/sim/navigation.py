@@ -207,6 +207,9 @@ class NavigationStack:
         if wants_nav2:
             for line in unsimulated_sources(params):
                 log.warning("%s", line)
+        unread = _unread_map_file(params, sc)
+        if unread is not None:
+            log.warning("%s", unread)
         if occupancy.origin_yaw_rad != 0.0:
             log.warning(
                 "%s: the map's origin yaw (%g rad) is published on /map but, as in Nav2, the costmaps and AMCL "
@@ -287,6 +290,28 @@ class NavigationStack:
 
 MAX_MAP_SPAN_M = 300.0
 """The largest side of a map made from the world (6000 cells at 5 cm); beyond it, a map file is the way."""
+
+
+def _unread_map_file(params: Nav2Params, sc: Scenario) -> str | None:
+    """A warning when the params' `map_server.yaml_filename` names a map file other than the one the run uses.
+
+    The run's map is the scenario's `map:` (made from the world when unset), as nav2_bringup's `map:=`
+    argument overrides yaml_filename. A name that is no file (TB3's placeholder `map.yaml`, Nav2's
+    `""`) is what the launch replaces, and is not said.
+    """
+    named = params.node("map_server").get("yaml_filename")
+    if not isinstance(named, str) or not named.strip() or not Path(named).is_file():
+        return None
+    if sc.map != "from_world" and Path(named).resolve() == Path(sc.map).resolve():
+        return None
+    used = "made from the world" if sc.map == "from_world" else f"{sc.map}"
+    node = next((k for k in params.raw if k.rsplit("/", 1)[-1] == "map_server"), "map_server")
+    where = params.origin.locate(node, "yaml_filename") if params.origin else f"{params.source}: {node}.yaml_filename"
+    return (
+        f"{where} names {named}, which the twin does not load: the map is the "
+        f"scenario's map: ({used}), as nav2_bringup's map:= argument overrides yaml_filename; set map: {named} "
+        "in the scenario to use it"
+    )
 
 
 def _map_bounds(sc: Scenario, scene: Scene, *, margin_m: float = 1.0) -> tuple[float, float, float, float]:
