@@ -201,8 +201,29 @@ def nav2_config(params: Nav2Params) -> Nav2Config:
     """Read the controller, planner, behaviour, smoother and navigator parameters of a Nav2 params file.
 
     Raises:
-        ConfigError: A value of the wrong type, or a controller plugin the twin does not implement.
+        ConfigError: A value of the wrong type, or a plugin the twin does not implement (its line named).
     """
+    try:
+        return _nav2_config(params)
+    except ConfigError as err:
+        raise _with_line(err, params) from None
+
+
+def _with_line(err: ConfigError, params: Nav2Params) -> ConfigError:
+    """`FILE: node.key: problem` as `FILE:LINE: node.key: problem` when the key is in the file (not an override)."""
+    text, prefix = str(err), f"{params.source}: "
+    if params.origin is None or not text.startswith(prefix):
+        return err
+    dotted, _, rest = text[len(prefix) :].partition(": ")
+    short, _, key = dotted.partition(".")
+    node = next((n for n in params.raw if n.rsplit("/", 1)[-1] == short), short)
+    line = params.origin.line(node, key) if key and rest else None
+    if line is None or (node, key) in params.origin.overridden:
+        return err
+    return ConfigError(f"{params.source}:{line}: {dotted}: {rest}")
+
+
+def _nav2_config(params: Nav2Params) -> Nav2Config:
     src = params.source
     cs = params.node("controller_server")
     where = f"{src}: controller_server"

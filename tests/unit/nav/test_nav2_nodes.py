@@ -166,3 +166,25 @@ def test_a_sensor_source_the_twin_does_not_simulate_is_named(tmp_path: Path) -> 
     path.write_text(text)
     (line,) = unsimulated_sources(load_nav2_params(path))
     assert line.startswith(f"{path}: ") and "a PointCloud2 source (/scan) gets no data" in line
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "line", "key", "problem"),
+    [
+        ('plugin: "nav2_navfn_planner/NavfnPlanner"', 'plugin: "nav2_smac_planner/SmacPlannerHybrid"', 308,
+         "planner_server.GridBased.plugin", "unknown planner plugin 'nav2_smac_planner/SmacPlannerHybrid'"),
+        ("RotateToGoal.lookahead_time: -1.0", "RotateToGoal.lookahead_time: 2.0", 164,
+         "controller_server.FollowPath.RotateToGoal.lookahead_time", "only -1.0 (the trajectory's end) is implemented"),
+    ],
+)  # fmt: skip
+def test_a_servers_parameter_the_twin_cannot_use_is_named_with_its_line(
+    tmp_path: Path, old: str, new: str, line: int, key: str, problem: str
+) -> None:
+    # Clearpath's and Smac users' files: the line was named for some refusals, not for these
+    text = default_params_path("burger").read_text()
+    assert text.splitlines()[line - 1].strip() == old
+    params = tmp_path / "params.yaml"
+    params.write_text(text.replace(old, new, 1))
+    with pytest.raises(ConfigError) as raised:
+        nav2_config(load_nav2_params(params))
+    assert str(raised.value).startswith(f"{params}:{line}: {key}: {problem}")
