@@ -490,3 +490,29 @@ def test_a_map_the_params_yaml_filename_names_but_the_run_does_not_use_is_warned
     scenario.write_text(base + f"map: {the_map}\n")
     used = run_twin("simulate", str(scenario), "--out", str(tmp_path / "b"), "--duration", "1")
     assert used.returncode == 0 and "yaml_filename" not in used.stderr, used.stderr
+
+
+def test_a_split_pair_of_params_files_is_named_for_what_each_lacks(tmp_path: Path) -> None:
+    # TurtleBot4's and Clearpath's bringups keep amcl and map_server in a localization file apart
+    import yaml
+
+    whole = yaml.safe_load(
+        (FIXTURES / "nav2" / "turtlebot3_navigation2_humble" / "param" / "humble" / "waffle.yaml").read_text()
+    )
+    localization, navigation = tmp_path / "localization.yaml", tmp_path / "nav2.yaml"
+    localization.write_text(yaml.safe_dump({k: v for k, v in whole.items() if k in ("amcl", "map_server")}))
+    navigation.write_text(yaml.safe_dump({k: v for k, v in whole.items() if k != "amcl"}))
+    scenario = tmp_path / "s.yaml"
+    base = f"name: t\nworld: {{sdf: {REPO / 'sdf' / 'worlds' / 'turtlebot3_world.sdf'}}}\n"
+    base += "robot: {initial_pose: {x_m: -2.0, y_m: -0.5}}\n"
+    scenario.write_text(base + f"navigation: {{type: nav2, params: {localization}}}\n")
+    refused = run_twin("scenario", "check", str(scenario))
+    assert refused.returncode == 2
+    (line,) = refused.stderr.strip().splitlines()
+    assert (
+        f"{localization}: holds no controller_server and no planner_server section (it holds amcl, map_server)" in line
+    )
+    scenario.write_text(base + f"navigation: {{type: nav2, params: {navigation}}}\n")
+    ran = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"), "--duration", "1")
+    assert ran.returncode == 0, ran.stderr
+    assert f"{navigation}: holds no amcl section: AMCL runs on Nav2's defaults" in ran.stderr

@@ -158,13 +158,15 @@ def test_params_file_without_a_controller_is_refused_as_nav2_refuses_it(
     text: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # Nav2 Humble's DWB throws "No critics defined for FollowPath" and controller_server does not configure;
-    # the twin used to run a controller with "No valid trajectories out of 0!" instead.
+    # the twin used to run a controller with "No valid trajectories out of 0!" instead. A file holding
+    # amcl alone is the localization half of a split pair (TurtleBot4's, Clearpath's): said so.
     params = _params(tmp_path, text=text)
     _refused_alike(
         _scenario(tmp_path, navigation={"params": str(params)}),
         capsys,
-        "controller_server.FollowPath.critics: not set",
+        "holds no controller_server and no planner_server section",
         "No critics defined for FollowPath",
+        "merge a split pair",
     )
 
 

@@ -407,6 +407,26 @@ class _Rates:
     rate_hz: float
 
 
+def _check_whole_file(params: Nav2Params) -> None:
+    """Refuse a params file without Nav2's navigation servers (one of a split pair), naming what it holds.
+
+    TurtleBot4's and Clearpath's bringups split Nav2's parameters into a localization file (amcl,
+    map_server) and a navigation one; the twin reads one file, as nav2_bringup's `params_file` is one.
+    """
+    have = {name.rsplit("/", 1)[-1] for name in params.raw}
+    missing = [n for n in ("controller_server", "planner_server") if n not in have]
+    if len(missing) < 2:  # (one of them alone runs on Nav2's defaults, or is refused for what it lacks)
+        return
+    holds = ", ".join(sorted(have)) or "no node"
+    msg = (
+        f"{params.source}: holds no {' and no '.join(missing)} section (it holds {holds}), so Nav2 Humble's "
+        'controller_server would not start ("No critics defined for FollowPath"): navigation.params takes '
+        "Nav2's whole params file, as nav2_bringup's params_file; merge a split pair (a localization file and "
+        "a navigation one) into one file"
+    )
+    raise ConfigError(msg)
+
+
 def check_nav2_inputs(
     params: Nav2Params,
     occupancy: _Grid | None = None,
@@ -431,6 +451,8 @@ def check_nav2_inputs(
             `navigation.set.node.key: problem; fix`.
     """
     source = params.origin or ParamSource(Path(params.source))
+    if nav2:
+        _check_whole_file(params)
     local_cells = _cells(params.local_costmap.width_m, params.local_costmap.height_m, params.local_costmap.resolution_m)
     known: dict[str, set[str]] = {node: set(keys) for node, keys in params.read_keys.items()}
     rates: list[_Rates] = []

@@ -210,6 +210,12 @@ class NavigationStack:
         unread = _unread_map_file(params, sc)
         if unread is not None:
             log.warning("%s", unread)
+        if wants_amcl and not any(name.rsplit("/", 1)[-1] == "amcl" for name in params.raw):
+            log.warning(
+                "%s: holds no amcl section: AMCL runs on Nav2's defaults, as Nav2's would with this file "
+                "(a split bringup keeps it in its localization file: merge that in)",
+                params.source,
+            )
         if occupancy.origin_yaw_rad != 0.0:
             log.warning(
                 "%s: the map's origin yaw (%g rad) is published on /map but, as in Nav2, the costmaps and AMCL "
