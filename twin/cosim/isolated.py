@@ -311,7 +311,10 @@ class _Forward(logging.Handler):
 
 def _child_main(spec: dict[str, Any], conn: multiprocessing.connection.Connection) -> None:
     """The child: load the FMU, answer each step request, exit on close or when the parent goes away."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and closes the child
+    # The parent handles Ctrl-C and SIGTERM (a process group's, as `timeout` or a shell's kill sends them)
+    # and closes the child; the child taking SIGTERM itself read as the FMU dying.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     fmu_log = logging.getLogger(f"twin.node.{spec['log_name']}")
     fmu_log.setLevel(spec["fmu_log_level"])
     fmu_log.propagate = False

@@ -3,6 +3,8 @@ segfault, an abort or a hang in the FMU raises one FmuError naming what happened
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from tests.unit.cosim.helpers import FAULTS, faulty
@@ -71,3 +73,36 @@ def test_an_fmu_error_status_in_the_child_is_reported_as_in_process() -> None:
             FmuError, match=r"instance 'left' failed at t = 0\.050000 s.*non-finite output \(wheel_speed"
         ):
             dt.advance(100)
+
+
+def test_sigterm_to_the_process_group_stops_the_run_not_blames_the_fmu(tmp_path: Path) -> None:
+    # `timeout` and a shell's kill signal the whole group: the FMU's child process took SIGTERM itself
+    # and the run said "... died with SIGTERM" (exit 4) instead of stopping as asked (143).
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from tests.conftest import REPO
+
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("name: t\ndrive: {type: fmu, fmu: auto, isolation: process}\n")
+    bag = tmp_path / "bag"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "twin", "simulate", str(scenario), "--out", str(bag), "--duration", "3600"],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + 120
+    while not any(bag.glob("*.mcap")) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    time.sleep(1.0)  # running, its FMU's child started
+    os.killpg(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert "died" not in err
