@@ -74,3 +74,53 @@ def test_the_pythonfmu_servo_drives_the_default_mission_through_a_mapping_file(s
     ]
     assert len(ratios) > 100
     assert sorted(ratios)[len(ratios) // 2] == pytest.approx(1.0, abs=0.02)
+
+
+def test_a_mapping_whose_wheel_speed_never_moves_is_warned_of(tmp_path: Path) -> None:
+    # wheel_speed bound to an output that stays 0 (this servo's `stuck`): the run drove nothing for its
+    # whole length and said so only through Nav2's failures
+    source = tmp_path / "ServoWheel.py"
+    text = SOURCE.read_text().replace(
+        "        self.n_out = 0.0\n", "        self.n_out = 0.0\n        self.stuck = 0.0\n", 1
+    )
+    text = text.replace(
+        '        self.register_variable(Real("n_out", causality=Fmi2Causality.output))\n',
+        '        self.register_variable(Real("n_out", causality=Fmi2Causality.output))\n'
+        '        self.register_variable(Real("stuck", causality=Fmi2Causality.output))\n',
+        1,
+    )
+    assert "stuck" in text
+    source.write_text(text)
+    built = subprocess.run(
+        [sys.executable, "-m", "pythonfmu", "build", "-f", str(source), "-d", str(tmp_path)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert built.returncode == 0, built.stderr
+    mapping = tmp_path / "stuck.yaml"
+    mapping.write_text(MAPPING.read_text().replace("wheel_speed: {name: n_out", "wheel_speed: {name: stuck", 1))
+    scenario = tmp_path / "stuck_scenario.yaml"
+    scenario.write_text(
+        f"name: stuck\ndrive: {{type: fmu, fmu_file: {tmp_path / 'ServoWheel.fmu'}, profile: velocity-servo, "
+        f"mapping: {mapping}, motor: null}}\n"
+    )
+    proc = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"), "--duration", "8")
+    assert proc.returncode == 0, proc.stderr
+    (line,) = [ln for ln in proc.stderr.splitlines() if "stayed at exactly 0 rad/s" in ln]
+    assert "wheel_speed output never moves" in line
+
+
+def test_a_load_torque_that_speeds_the_wheel_up_is_warned_of(servo_fmu: Path, tmp_path: Path) -> None:
+    # the roles swapped: the probe's load torque goes into the speed setpoint and speeds the wheel up
+    mapping = tmp_path / "swapped.yaml"
+    text = MAPPING.read_text().replace(
+        "speed_setpoint: {name: n_ref, unit: rpm}", "speed_setpoint: {name: tau_ext, unit: rpm}"
+    )
+    mapping.write_text(text.replace("load_torque: {name: tau_ext, unit: N.m}", "load_torque: {name: n_ref, unit: N.m}"))
+    scenario = tmp_path / "swapped_scenario.yaml"
+    scenario.write_text(
+        f"name: swapped\ndrive: {{type: fmu, fmu_file: {servo_fmu}, profile: velocity-servo, mapping: {mapping}, "
+        "motor: null}\n"
+    )
+    proc = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"), "--duration", "1")
+    (line,) = [ln for ln in proc.stderr.splitlines() if "a load torque of" in ln]
+    assert "on 'n_ref' sped up 'n_out'" in line and "wrong variable or sign" in line

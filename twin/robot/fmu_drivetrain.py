@@ -479,11 +479,24 @@ class FmuDrivetrain(Closing):
             stepper.inputs[1] = (probe_nm - load.offset) / load.factor
             w0 = speed.factor * stepper.outputs[0] + speed.offset
             stepper.step(0.0)
-            dw = abs(speed.factor * stepper.outputs[0] + speed.offset - w0)
+            change = speed.factor * stepper.outputs[0] + speed.offset - w0
         finally:
             stepper.close()
+        dw = abs(change)
         inertia = probe_nm * h / dw if dw > 0.0 else 1.0
-        _log.info("probed drive inertia at the wheel: %.3g kg m^2", inertia)
+        if change > 0.0:  # a load torque slows a wheel at rest (an ideal servo's does not move: fine)
+            _log.warning(
+                "%s: a load torque of %g N m on %r sped up %r in one step: the mapping's load_torque or "
+                "wheel_speed names the wrong variable or sign (the wheels would speed up against an obstacle); "
+                "the drive's inertia at the wheel is taken as %.3g kg m^2 (drive.wheel_inertia_kgm2 gives it)",
+                self._file.label,
+                probe_nm,
+                load.name,
+                speed.name,
+                inertia,
+            )
+        else:
+            _log.info("probed drive inertia at the wheel: %.3g kg m^2", inertia)
         return inertia
 
     def _speed(self, stepper: Stepper) -> float:

@@ -156,6 +156,8 @@ class DiffDriveNode(Node):
             self._check_commands(command_topic)
         self._contact_pub = self.create_publisher(ContactEncoder.msgtype, "contacts", 10)
         self._contact_enc = ContactEncoder("map")
+        if motor_joints and hasattr(drive, "command_radps"):
+            self._watch_wheels(drive)
         if motor_joints:
             motor_pub = self.create_publisher(MotorStateEncoder.msgtype, "motor_state", 10)
             encode = MotorStateEncoder(list(motor_joints)).encode
@@ -178,6 +180,31 @@ class DiffDriveNode(Node):
 
         # The executor steps the drivetrain `n_steps` physics steps between events.
         self.advance: Callable[[int], None] = drive.advance
+
+    def _watch_wheels(self, drive: Drivetrain) -> None:
+        """Until the wheels first turn: warn once when they stay at exactly 0 through 3 s of commands.
+
+        An FMU whose mapping binds wheel_speed to an output that never moves (or the command to an
+        input the model ignores) drove nothing, and the run said so only through Nav2's failures.
+        """
+        seconds = [0]
+
+        def watch() -> None:
+            speeds = drive.wheel_state().speed_radps
+            if speeds[0] or speeds[1]:  # they turn: nothing more to watch
+                timer.cancel()
+                return
+            asked = max(abs(w) for w in drive.command_radps)  # type: ignore[attr-defined]
+            seconds[0] = seconds[0] + 1 if asked > 0.1 else 0
+            if seconds[0] >= 3:
+                timer.cancel()
+                self.get_logger().warning(
+                    f"the wheels have stayed at exactly 0 rad/s through 3 s of commands (now {asked:.2f} rad/s): "
+                    "the drive FMU's wheel_speed output never moves, or the command reaches no input the model "
+                    "reads; check the mapping's roles with `twin fmu check`"
+                )
+
+        timer = self.create_timer(1.0, watch)
 
     def _check_commands(self, command_topic: str) -> None:
         """One second in, warn once if nothing publishes the drive's topic while something publishes `cmd_vel`."""
