@@ -1,7 +1,8 @@
 """`twin scenario check` refuses every FMU drive `twin simulate` refuses before its first step, with the same line.
 
 Both bind the drive contract, resolve the motor model and design the speed loop through one code path
-(`twin.robot.fmu_drive.plan_fmu_drive`); `scenario check` does it without instantiating the FMU.
+(`twin.robot.fmu_drive.plan_fmu_drive`); `scenario check` does it without instantiating a built-in FMU,
+and makes and steps one instance of a user's (`drive.fmu_file`), whose binary may not match its description.
 """
 
 from __future__ import annotations
@@ -105,3 +106,47 @@ def test_scenario_check_passes_a_drive_that_binds(
     scenario = tmp_path / "scenario.yaml"
     scenario.write_text(yaml.safe_dump({"name": "ok", "drive": drive}))
     assert main(["scenario", "check", str(scenario)]) == 0, capsys.readouterr().err
+
+
+def _rezipped(source: Path, target: Path, edit: Any) -> Path:
+    """The FMU at `source` with its modelDescription.xml text edited (the binary untouched)."""
+    import zipfile
+
+    with zipfile.ZipFile(source) as old, zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as new:
+        for item in old.infolist():
+            data = old.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = edit(data.decode()).encode()
+            new.writestr(item, data)
+    return target
+
+
+@pytest.mark.parametrize(
+    ("case", "edit", "phrase"),
+    [
+        ("guid", lambda md: md.replace('guid="{', 'guid="{0', 1), "instance 'left'"),
+        ("value_reference", lambda md: md.replace('name="n_out" valueReference="3"', 'name="n_out" valueReference="999"', 1),
+         "value reference 999 is role wheel_speed (n_out) in the model description"),
+    ],
+)  # fmt: skip
+def test_scenario_check_steps_a_users_fmu_once_and_refuses_what_only_its_binary_tells(
+    case: str, edit: Any, phrase: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A model description the binary does not match: `scenario check` read the description alone and
+    # said ok, then the run refused the FMU (exit 4)
+    fmu = _rezipped(acme(), tmp_path / f"{case}.fmu", edit)
+    motor = {
+        "resistance_ohm": "Rw", "inductance_h": 1.0e-6, "torque_constant_nm_per_a": "k_m", "back_emf_vs_per_rad": "k_m",
+        "rotor_inertia_kgm2": "J_total", "rotor_friction_nms_per_rad": "d_visc", "gear_ratio": 1.0,
+        "load_inertia_kgm2": 0.0,
+    }  # fmt: skip
+    mapping = str(REPO / "fmus" / "maps" / "acme_drive.yaml")
+    drive = {"type": "fmu", "profile": "voltage", "fmu_file": str(fmu), "mapping": mapping, "motor": motor}
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(yaml.safe_dump({"name": case, "drive": drive}))
+    code = main(["scenario", "check", str(scenario)])
+    captured = capsys.readouterr()
+    assert code == 4, captured.err
+    assert phrase in assert_one_line_error(captured.err, contains=fmu.name)
+    code = main(["simulate", str(scenario), "--duration", "0.1", "--out", str(tmp_path / "bag")])
+    assert code == 4, capsys.readouterr().err

@@ -29,7 +29,7 @@ from types import MappingProxyType
 
 from twin.core.config import load_config, suggest
 from twin.core.errors import FmuError
-from twin.cosim.description import FmuInfo, stepping_problem
+from twin.cosim.description import FmuInfo, VariableInfo, stepping_problem
 from twin.cosim.units import UNITS, Unit, find_unit
 
 __all__ = [
@@ -267,6 +267,8 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
             problem = _setting_problem(info, section, name)
             if problem is None and not math.isfinite(value):
                 problem = f"{value} is not a finite number"
+            if problem is None:
+                problem = _value_problem(info.variables[name], value)
             if problem is not None:
                 problems.append(f"{section}.{name}: {problem}")
     return ContractReport(profile=profile, roles=tuple(reports), problems=tuple(problems))
@@ -300,6 +302,21 @@ def _setting_problem(info: FmuInfo, section: str, name: str) -> str | None:
         return f"{name!r} is {_article(var.causality)}, not a parameter; {fix}"
     if calculated:
         return f"{name!r} is {_article(var.causality)} the FMU computes (it has no start value); it cannot be set"
+    return None
+
+
+_WHOLE_TYPES = ("Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
+
+
+def _value_problem(var: VariableInfo, value: float) -> str | None:
+    """Why a number cannot go into this variable as the FMU's setter would take it (None: it can)."""
+    kind = var.type
+    if kind in ("String", "Binary", "Clock"):
+        return f"{var.name!r} is a {kind}; the mapping sets numbers only, so leave it out"
+    if kind in _WHOLE_TYPES and value != int(value):
+        return f"{value} is not a whole number, which the {kind} {var.name!r} takes (it would be cut to {int(value)})"
+    if kind == "Boolean" and value not in (0, 1):  # YAML's true and false are 1 and 0
+        return f"{value} is not a Boolean for {var.name!r}; give true or false"
     return None
 
 

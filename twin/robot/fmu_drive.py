@@ -12,6 +12,7 @@ refuse a drive with the same line.
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -291,4 +292,68 @@ def check_fmu_drive(drive: FmuDrive, *, step_ns: int, robot_name: str = "") -> D
     if problem is not None:
         msg = f"{path}: {problem}"
         raise FmuError(msg)
-    return plan_fmu_drive(drive, info, step_ns=step_ns)
+    plan = plan_fmu_drive(drive, info, step_ns=step_ns)
+    if drive.fmu_file is not None:  # a user's FMU: one instance made and stepped once, as the run's first step
+        _try_instance(drive, path, plan)
+    return plan
+
+
+def _try_instance(drive: FmuDrive, path: Path, plan: DrivePlan) -> None:
+    """Instantiate the FMU as the run does (its start values set, in its own process with isolation) and step once.
+
+    What only the binary tells (a model description whose GUID or value references the binary does
+    not have, a Python FMU's missing module) is refused by `scenario check` as the run refuses it.
+
+    Raises:
+        FmuError: As the run's instantiation or first step would.
+    """
+    binding = plan.binding
+    inputs = [b.value_reference for b in binding.inputs]
+    outputs = [b.value_reference for b in binding.outputs.values()]
+    try:
+        _step_one_instance(drive, path, plan, inputs, outputs)
+    except FmuError as err:
+        found = re.search(r"value reference (\d+)", str(err))
+        roles = [
+            b for b in (*binding.inputs, *binding.outputs.values()) if found and b.value_reference == int(found[1])
+        ]
+        if not roles:
+            raise
+        msg = (
+            f"{err}; value reference {found[1] if found else ''} is role {roles[0].role} ({roles[0].name}) in "
+            "the model description, and the binary does not take it so: the FMU's modelDescription.xml and "
+            "binary disagree (rebuild or re-export the FMU)"
+        )
+        raise FmuError(msg) from None
+
+
+def _step_one_instance(drive: FmuDrive, path: Path, plan: DrivePlan, inputs: list[int], outputs: list[int]) -> None:
+    from twin.cosim.fmu import FmuFile
+    from twin.cosim.isolated import IsolatedGroup
+
+    binding = plan.binding
+    if drive.isolation == "process":
+        file = FmuFile(path)
+        group = IsolatedGroup(
+            path,
+            file.label,
+            ("left",),
+            step_s=plan.communication_step_s,
+            inputs=inputs,
+            outputs=outputs,
+            start=binding.start,
+            timeout_s=drive.step_timeout_s,
+            process_per_instance=file.info.instantiated_once,
+        )
+        try:
+            group.step()
+        finally:
+            group.close()
+        return
+    stepper = FmuFile(path).instantiate(
+        "left", step_s=plan.communication_step_s, inputs=inputs, outputs=outputs, start=binding.start
+    )
+    try:
+        stepper.step(0.0)
+    finally:
+        stepper.close()
