@@ -68,6 +68,17 @@ CASES: dict[str, tuple[Edit, int, str]] = {
     "fmi3_relabelled_2.0": (_description(_version("2.0")), 3, "declares FMI 3.0 variable elements (<Float64>)"),
     "no_model_variables": (_description(_no_variables), 2, "<ModelStructure> refers to variable index"),
     "no_model_description": (_no_description, 2, "no modelDescription.xml in the archive"),
+    # Reference-FMUs' Feedthrough edited by hand: FMPy said "8" and "int() argument must be ... 'NoneType'"
+    "fmi3_output_of_no_variable": (
+        _description(lambda t: t.replace('<Output valueReference="3" />', '<Output valueReference="999" />', 1)),
+        3,
+        "<ModelStructure> <Output> refers to value reference 999, which no variable of <ModelVariables> has",
+    ),
+    "variable_without_value_reference": (
+        _description(lambda t: t.replace(' valueReference="2"', "", 1)),
+        2,
+        "has no valueReference attribute; every variable needs one",
+    ),
     "zipped_folder": (_in_a_folder, 2, "only xm430/modelDescription.xml; zip the contents of xm430/"),
 }
 # What the messages said before: Python's and FMPy's words, meaningless to whoever made the FMU.

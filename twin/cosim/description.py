@@ -249,6 +249,21 @@ def _description_problem(path: Path) -> str | None:
             f'modelDescription.xml says fmiVersion="2.0" but declares FMI 3.0 variable elements (<{found}>); '
             "fix fmiVersion or the variables"
         )
+    for child in variables if variables is not None else ():
+        if isinstance(child.tag, str) and child.get("valueReference") is None:
+            return (
+                f"modelDescription.xml:{child.sourceline}: variable {child.get('name')!r} has no valueReference "
+                "attribute; every variable needs one"
+            )
+    if version.startswith("3.") and variables is not None:
+        references = {child.get("valueReference") for child in variables}
+        structure = root.find("ModelStructure")
+        for element in structure if structure is not None else ():
+            if isinstance(element.tag, str) and element.get("valueReference") not in references:
+                return (
+                    f"modelDescription.xml:{element.sourceline}: <ModelStructure> <{element.tag}> refers to value "
+                    f"reference {element.get('valueReference')}, which no variable of <ModelVariables> has"
+                )
     if version == "2.0":
         count = sum(1 for child in variables if child.tag == "ScalarVariable") if variables is not None else 0
         structure = root.find("ModelStructure")
