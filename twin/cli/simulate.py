@@ -148,6 +148,39 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
     parser.set_defaults(func=_simulate)
 
 
+@contextmanager
+def _crash_note(scenario: Scenario, bag_path: Path) -> Iterator[None]:
+    """While a user's FMU runs in this process, a fatal signal writes one line naming it before the process dies.
+
+    A segfault or abort inside an FMU (drive.isolation: none) ended the run with no word at all, the
+    bag unclosed. The line names the FMU, `drive.isolation: process` (which ends such a run with one
+    error line and a closed bag) and `twin bag recover` for the bag left open.
+    """
+    from twin.robot.fmu_drive import FmuDrive
+
+    fmus = sorted(
+        {
+            Path(sc.drive.fmu_file).name
+            for _, sc in scenario.robot_scenarios()
+            if isinstance(sc.drive, FmuDrive) and sc.drive.fmu_file is not None and sc.drive.isolation == "none"
+        }
+    )
+    if not fmus:
+        yield
+        return
+    from twin.cosim.build import crash_note
+
+    crash_note(
+        f"twin: error: the process died while the drive's FMU {', '.join(fmus)} ran in it (drive.isolation: "
+        "none); with drive.isolation: process a crash inside the FMU ends the run in one line and closes the "
+        f"bag; this bag reads after `twin bag recover {bag_path}`"
+    )
+    try:
+        yield
+    finally:
+        crash_note("")
+
+
 def _bag_path(scenario: Scenario, out: Path | None) -> Path:
     if out is not None:
         return out
@@ -497,8 +530,9 @@ def _run(
             raise
         raise named from err
     guard = Guard(simulation, debug=debug)
+    crash_note = _crash_note(scenario, bag_path)
     try:
-        with _graceful_signals(flag), simulation as sim:
+        with _graceful_signals(flag), crash_note, simulation as sim:
             watchdog = Watchdog(
                 lambda: sim.t_s, timeout_s=args.watchdog_s, on_stuck=guard.on_stuck, on_signal=guard.on_signal
             )

@@ -14,6 +14,7 @@ The cache is `$TWIN_CACHE_DIR`, else `$XDG_CACHE_HOME/twin`, else `~/.cache/twin
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import hashlib
 import logging
@@ -69,7 +70,7 @@ BUILTIN_PREFIX = "builtin:"
 CFLAGS: tuple[str, ...] = ("-O2", "-shared", "-fPIC", "-std=c11", "-Wall")
 _BUILDER_VERSION = "1"  # bump when the generated files change shape
 # The shim library's files (not part of any FMU, so they do not enter the FMUs' hashes).
-_SHIM_SOURCES = ("step_shim.c", "drive_loop.c")
+_SHIM_SOURCES = ("step_shim.c", "drive_loop.c", "crash_note.c")
 _SHIM_FILES = ("step_shim.h", *_SHIM_SOURCES)
 _SHIM_CFLAGS = ("-ffp-contract=off",)
 _TIME_VR = 4096  # MODEL_TIME_VR in fmus/common/model.h
@@ -263,6 +264,17 @@ def build_shim() -> Path:
     except NativeBuildError as err:
         msg = f"cannot build the step shim: {err}"
         raise FmuError(msg) from None
+
+
+def crash_note(line: str) -> None:
+    """Have a fatal signal (SIGSEGV, SIGABRT...) write `line` to stderr before the process dies of it ("" stops it).
+
+    The handler is `twin_crash_note` in fmus/common/crash_note.c, in the shim's library; it hands the
+    signal on to the handler that was there before, so the process still dies of it.
+    """
+    library = ctypes.CDLL(str(build_shim()))
+    library.twin_crash_note.argtypes = [ctypes.c_char_p]
+    library.twin_crash_note(line.encode())
 
 
 # --- inputs and hashing ------------------------------------------------------------------------

@@ -106,3 +106,35 @@ def test_sigterm_to_the_process_group_stops_the_run_not_blames_the_fmu(tmp_path:
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err
     assert "died" not in err
+
+
+@pytest.mark.parametrize(("mode", "signal_number"), [("segfault", 11), ("abort", 6)])
+def test_an_fmu_crashing_the_run_in_process_leaves_one_line_naming_it_and_the_fix(
+    tmp_path: Path, mode: str, signal_number: int
+) -> None:
+    # isolation: none, the FMU dereferences a bad pointer: the run died without a word, its bag unclosed
+    import os
+    import subprocess
+    import sys
+
+    from tests.conftest import REPO
+
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(
+        f"name: t\ndrive: {{type: fmu, fmu_file: {faulty()}, profile: velocity-servo, isolation: none, "
+        f"mapping: {{parameters: {{fault_mode: {FAULTS[mode]}, fault_time: 0.5}}}}}}\n"
+    )
+    bag = tmp_path / "bag"
+    proc = subprocess.run(
+        [sys.executable, "-m", "twin", "simulate", str(scenario), "--out", str(bag), "--duration", "5"],
+        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert proc.returncode == -signal_number, proc.stderr
+    (line,) = [ln for ln in proc.stderr.splitlines() if ln.startswith("twin: error:")]
+    assert f"the drive's FMU {faulty().name} ran in it" in line and "drive.isolation: process" in line
+    assert line.endswith(f"`twin bag recover {bag}` (signal {signal_number})")
+    recovered = subprocess.run(
+        [sys.executable, "-m", "twin", "bag", "recover", str(bag)],
+        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert recovered.returncode == 0, recovered.stderr  # as the line says
