@@ -89,6 +89,12 @@ def _node_of(frame: FrameType) -> str:
     if root:
         return f"{root} ticked again and again by its tree"
     name = frame.f_code.co_name
+    label = getattr(getattr(owner, "_file", None), "label", None)  # an FMU drive (its compiled loop's closure too)
+    if isinstance(label, str):
+        return (
+            f"the drive's FMU {label} (a step of it that does not return; drive.isolation: process with "
+            "drive.step_timeout_s ends such a run in one line)"
+        )
     if name.lower().endswith(("dostep", "do_step")) or "fmi" in frame.f_code.co_filename.lower():
         return f"FMU call {name}"
     return ""

@@ -138,3 +138,26 @@ def test_an_fmu_crashing_the_run_in_process_leaves_one_line_naming_it_and_the_fi
         cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip
     assert recovered.returncode == 0, recovered.stderr  # as the line says
+
+
+def test_an_fmu_hanging_in_process_is_named_by_the_watchdog(tmp_path: Path) -> None:
+    # the line named fmu_drivetrain.py, not the FMU nor the fix
+    import os
+    import subprocess
+    import sys
+
+    from tests.conftest import REPO
+
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(
+        f"name: t\ndrive: {{type: fmu, fmu_file: {faulty()}, profile: velocity-servo, isolation: none, "
+        f"mapping: {{parameters: {{fault_mode: {FAULTS['hang']}, fault_time: 0.5}}}}}}\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-m", "twin", "simulate", str(scenario), "--out", str(tmp_path / "bag"), "--duration", "5",
+         "--watchdog-s", "3"],
+        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 8, proc.stderr
+    (line,) = [ln for ln in proc.stderr.splitlines() if ln.startswith("twin: error:")]
+    assert "the drive's FMU" in line and faulty().name in line and "drive.isolation: process" in line
