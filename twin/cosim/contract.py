@@ -244,6 +244,11 @@ def check_contract(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Cont
                 problem = f"{var.name!r} is already bound to role {bound_to[var.name]}; a variable serves one role"
             else:
                 _, problem = _unit_for(info, unit_name, spec)
+                if problem is not None and bind_to.unit is None and var.unit is not None:  # the FMU's own unit
+                    problem += (
+                        f", the FMU's declared unit; if {var.name!r} is in {spec.unit} all the same, say so in the "
+                        f"mapping: {role}: {{name: {var.name}, unit: {spec.unit}}}"
+                    )
             if problem is None:
                 bound_to[var.name] = role
                 other = by_vr.setdefault(var.value_reference, (var.name, role))

@@ -111,3 +111,12 @@ def test_cli_check_reports_garbage_without_a_traceback(tmp_path: Path) -> None:
     assert result.returncode == 4
     assert "Traceback" not in result.stderr
     assert result.stderr.count("\n") == 1
+
+
+def test_a_declared_unit_of_another_dimension_says_how_the_mapping_overrides_it() -> None:
+    # crane-fmu's oscillators declare "dimensionless": the line did not say a mapping may name the unit
+    info = read_fmu_info(acme())
+    mapping = FmuMapping(roles=RoleMap(voltage="U_motor", load_torque="T_ext", wheel_speed="I_mA"))
+    problem = check_contract(info, mapping, Profile.VOLTAGE).roles[2].problem or ""
+    assert problem.startswith("unit 'mA' cannot be converted to rad/s, the FMU's declared unit;")
+    assert problem.endswith("say so in the mapping: wheel_speed: {name: I_mA, unit: rad/s}")
