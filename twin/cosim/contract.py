@@ -367,6 +367,10 @@ def bind(info: FmuInfo, mapping: FmuMapping, profile: Profile) -> Binding:
     return Binding(profile=profile, inputs=inputs, outputs=MappingProxyType(bound), start=mapping.start())
 
 
+def _other(profile: Profile) -> Profile:
+    return Profile.VOLTAGE if profile is Profile.VELOCITY_SERVO else Profile.VELOCITY_SERVO
+
+
 def infer_profile(info: FmuInfo, mapping: FmuMapping) -> tuple[Profile, str]:
     """The profile an FMU is built for, read from its variables (and the mapping's roles), and why.
 
@@ -383,6 +387,12 @@ def infer_profile(info: FmuInfo, mapping: FmuMapping) -> tuple[Profile, str]:
         return chosen, f"its {mapping.binding(command[chosen]).name!r} input satisfies only the {chosen.value} contract"
     if len(ok) == 2:
         return Profile.VOLTAGE, "it satisfies both contracts; voltage is the default (the twin closes the speed loop)"
+
+    given = set(mapping.roles.given())
+    named = [p for p in Profile if command[p] in given and command[_other(p)] not in given]
+    if len(named) == 1:  # the mapping names one profile's command role: that profile, whatever its problems
+        chosen = named[0]
+        return chosen, f"the mapping names its {command[chosen]} role; it satisfies neither contract (see below)"
 
     def absent(p: Profile) -> int:  # required roles whose variable the FMU does not have at all
         return sum(1 for r in reports[p].roles if r.required and r.variable not in info.variables)

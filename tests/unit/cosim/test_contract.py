@@ -120,3 +120,16 @@ def test_a_declared_unit_of_another_dimension_says_how_the_mapping_overrides_it(
     problem = check_contract(info, mapping, Profile.VOLTAGE).roles[2].problem or ""
     assert problem.startswith("unit 'mA' cannot be converted to rad/s, the FMU's declared unit;")
     assert problem.endswith("say so in the mapping: wheel_speed: {name: I_mA, unit: rad/s}")
+
+
+def test_a_mapping_naming_the_servo_setpoint_is_read_as_a_servo_even_with_a_typo() -> None:
+    # the typo made the FMU satisfy neither contract, and the check then inferred voltage and said
+    # "no variable 'voltage'", never naming the misspelt setpoint
+    from twin.cosim.contract import infer_profile
+
+    info = read_fmu_info(resolve_fmu("builtin:xm430_w210_servo"))
+    mapping = FmuMapping(roles=RoleMap(speed_setpoint="speed_setpont"))
+    profile, why = infer_profile(info, mapping)
+    assert profile is Profile.VELOCITY_SERVO and "the mapping names its speed_setpoint role" in why
+    problem = check_contract(info, mapping, profile).roles[0].problem or ""
+    assert "no variable 'speed_setpont'; did you mean 'speed_setpoint'?" in problem
