@@ -184,7 +184,9 @@ def test_validate_and_show_take_node_types_from_a_palette(tmp_path: Path) -> Non
     assert "unknown node type" not in without.stderr  # twin.nav declares every Humble leaf, IsBatteryLow too
     with_palette = twin("tree", "validate", tree, "--nodes", palette)
     assert with_palette.returncode == 0, with_palette.stderr
-    assert "declared without implementation here: DriveOnHeading, FollowPath, IsBatteryLow" in with_palette.stdout
+    assert "Nav2 nodes run by `twin simulate` (declared only here): DriveOnHeading, FollowPath, IsBatteryLow" in (
+        with_palette.stdout
+    )
     shown = twin("tree", "show", tree, "--nodes", palette)
     assert shown.returncode == 0, shown.stderr
     assert "DriveOnHeading" in shown.stdout and "IsBatteryLow" in shown.stdout
@@ -203,3 +205,19 @@ def test_a_palette_without_tree_nodes_model_is_one_clear_line(tmp_path: Path) ->
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "no <TreeNodesModel> here" in lines[0] and str(not_palette) in lines[0]
     assert "Traceback" not in result.stderr
+
+
+def test_validate_tells_the_nav2_nodes_a_run_has_from_those_it_cannot_create(tmp_path: Path) -> None:
+    # Iron's and Jazzy's trees: ComputePathThroughPoses' error_code_id was an unknown port, and the one
+    # "declared without implementation" list held FollowPath (which runs) beside WouldAPlannerRecoveryHelp
+    tree = tmp_path / "through.xml"
+    tree.write_text(
+        '<root BTCPP_format="4" main_tree_to_execute="MainTree"><BehaviorTree ID="MainTree"><Sequence>'
+        '<ComputePathThroughPoses goals="{goals}" path="{path}" error_code_id="{code}"/>'
+        '<WouldAPlannerRecoveryHelp error_code="{code}"/><FollowPath path="{path}"/>'
+        "</Sequence></BehaviorTree></root>"
+    )
+    done = twin("tree", "validate", tree)
+    assert done.returncode == 0, done.stderr
+    assert "Nav2 nodes run by `twin simulate` (declared only here): ComputePathThroughPoses, FollowPath" in done.stdout
+    assert "declared without implementation (a run cannot create them): WouldAPlannerRecoveryHelp" in done.stdout

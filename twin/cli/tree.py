@@ -214,7 +214,14 @@ def _validate(args: argparse.Namespace) -> int:
             trees = ", ".join(report.trees)
             print(f"{report.source}: ok (BTCPP_format {report.version}; trees {trees}; main {report.main_tree})")
             if report.declared_only:
-                print(f"  declared without implementation here: {', '.join(report.declared_only)}")
+                from twin.nav.bt_navigator.leaves import IMPLEMENTED
+
+                run = [n for n in report.declared_only if n in IMPLEMENTED]
+                never = [n for n in report.declared_only if n not in IMPLEMENTED]
+                if run:  # Nav2's nodes, bound to the navigation servers only in a run
+                    print(f"  Nav2 nodes run by `twin simulate` (declared only here): {', '.join(run)}")
+                if never:
+                    print(f"  declared without implementation (a run cannot create them): {', '.join(never)}")
         else:
             count = len(report.problems)
             print(f"{report.source}: {count} problem{'s' if count != 1 else ''}", file=sys.stderr)

@@ -65,7 +65,15 @@ NAV2_LEAVES: Final[dict[str, tuple[NodeKind, tuple[PortSpec, ...]]]] = {
             *_BASIC_ACTION_PORTS,
         ),
     ),
-    "Wait": (NodeKind.ACTION, (input_port("wait_duration", float, 1.0, "Wait time"), *_BASIC_ACTION_PORTS)),
+    "Wait": (
+        NodeKind.ACTION,
+        (
+            input_port("wait_duration", float, 1.0, "Wait time"),
+            output_port("error_code_id", description="The wait behavior error code"),
+            output_port("error_msg", description="The wait behavior error message"),
+            *_BASIC_ACTION_PORTS,
+        ),
+    ),
     "BackUp": (
         NodeKind.ACTION,
         (
@@ -107,6 +115,8 @@ NAV2_LEAVES: Final[dict[str, tuple[NodeKind, tuple[PortSpec, ...]]]] = {
             input_port("start", description="Start pose of the path instead of the robot's pose"),
             input_port("planner_id", str, "", "Mapped name to the planner plugin type to use"),
             output_port("path", description="Path created by ComputePathThroughPoses node"),
+            output_port("error_code_id", description="The compute path through poses error code"),
+            output_port("error_msg", description="The compute path through poses error message"),
             *_BASIC_ACTION_PORTS,
         ),
     ),
@@ -129,6 +139,8 @@ NAV2_LEAVES: Final[dict[str, tuple[NodeKind, tuple[PortSpec, ...]]]] = {
             input_port("dist_to_travel", float, 0.15, "Distance to travel"),
             input_port("speed", float, 0.025, "Speed at which to travel"),
             input_port("time_allowance", float, 10.0, "Allowed time for driving on heading"),
+            output_port("error_code_id", description="The drive on heading behavior error code"),
+            output_port("error_msg", description="The drive on heading behavior error message"),
             *_BASIC_ACTION_PORTS,
         ),
     ),
