@@ -242,6 +242,14 @@ SET_CASES: dict[str, tuple[dict[str, Any], tuple[str, ...]]] = {
         ),
     ),
     "typo_amcl": ({"amcl.sigma_hitt": 0.1}, ("navigation.set.amcl.sigma_hitt", "did you mean 'amcl.sigma_hit'?")),
+    # the node's namespace written twice: the line read "no parameter 'X' ...; did you mean 'X'?"
+    "node_twice": (
+        {"global_costmap.global_costmap.inflation_layer.inflate_around_unknown": False},
+        (
+            "the twin reads no parameter 'global_costmap.global_costmap.inflation_layer.inflate_around_unknown'; "
+            "did you mean 'global_costmap.inflation_layer.inflate_around_unknown'?",
+        ),
+    ),
     "typo_node": ({"amlc.sigma_hit": 0.1}, ("navigation.set.amlc.sigma_hit", "did you mean 'amcl'?")),
     "made_up": ({"controller_server.warp_drive": True}, ("navigation.set.controller_server.warp_drive", "remove it")),
     "bad_value": ({"amcl.sigma_hit": -0.1}, ("navigation.set.amcl.sigma_hit: must be above 0",)),

@@ -580,7 +580,7 @@ def _check_set_keys(params: Nav2Params, source: ParamSource, known: Mapping[str,
             continue
         close = difflib.get_close_matches(key, sorted(keys), n=1, cutoff=0.6)
         fix = f"did you mean '{short}.{close[0]}'?" if close else "remove it (the twin reads only what it implements)"
-        msg = f"{SET_KEY}.{written}: the twin reads no parameter {key!r} of {short}; {fix}"
+        msg = f"{SET_KEY}.{written}: the twin reads no parameter '{short}.{key}'; {fix}"
         raise ConfigError(msg)
 
 
