@@ -350,3 +350,11 @@ def test_map_numbers_as_yaml_1_2_writes_them(tmp_path: Path, capsys: pytest.Capt
     map_yaml.write_text(map_yaml.read_text().replace("resolution: 0.05", "resolution: 5e-2"))
     code, _, err = run(["scenario", "check", str(_scenario(tmp_path, map=str(map_yaml)))], capsys)
     assert code == 0, err
+
+
+def test_a_map_yaml_given_as_the_params_file_is_told_where_it_goes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    the_map = FIXTURE_MAP / "map.yaml"
+    line = _refused_alike(_scenario(tmp_path, navigation={"params": str(the_map)}), capsys, "is a map_server map YAML")
+    assert f"{the_map}: is a map_server map YAML" in line and "the scenario's map:" in line

@@ -328,6 +328,12 @@ def _read_file(path: Path, substitutions: Mapping[str, str]) -> dict[str, dict[s
     if not isinstance(doc, Mapping):
         msg = f"{path}: a Nav2 params file must map node names to 'ros__parameters', got {type(doc).__name__}"
         raise ConfigError(msg)
+    if {"image", "resolution", "origin"} <= set(doc):
+        msg = (
+            f"{path}: is a map_server map YAML (image, resolution, origin), not a Nav2 params file; "
+            "name it as the scenario's map:, and the params file as navigation.params"
+        )
+        raise ConfigError(msg)
     nodes: dict[str, dict[str, ParamValue]] = {}
     _collect_nodes(doc, "", nodes, str(path))
     return nodes
