@@ -214,10 +214,13 @@ def test_validate_tells_the_nav2_nodes_a_run_has_from_those_it_cannot_create(tmp
     tree.write_text(
         '<root BTCPP_format="4" main_tree_to_execute="MainTree"><BehaviorTree ID="MainTree"><Sequence>'
         '<ComputePathThroughPoses goals="{goals}" path="{path}" error_code_id="{code}"/>'
-        '<WouldAPlannerRecoveryHelp error_code="{code}"/><FollowPath path="{path}"/>'
+        '<WouldAPlannerRecoveryHelp error_code="{code}"/><FollowPath path="{path}"/><NavigateToPose goal="{g}"/>'
         "</Sequence></BehaviorTree></root>"
     )
     done = twin("tree", "validate", tree)
     assert done.returncode == 0, done.stderr
-    assert "Nav2 nodes run by `twin simulate` (declared only here): ComputePathThroughPoses, FollowPath" in done.stdout
-    assert "declared without implementation (a run cannot create them): WouldAPlannerRecoveryHelp" in done.stdout
+    assert (
+        "Nav2 nodes run by `twin simulate` (declared only here): ComputePathThroughPoses, FollowPath, "
+        "WouldAPlannerRecoveryHelp"
+    ) in done.stdout
+    assert "declared without implementation (a run cannot create them): NavigateToPose" in done.stdout

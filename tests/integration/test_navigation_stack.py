@@ -208,28 +208,55 @@ def test_a_navigator_tree_with_a_leaf_the_twin_lacks_is_refused_with_exit_6(tmp_
 
 def test_scenario_check_reads_a_navigator_tree_as_the_run_does(tmp_path: Path) -> None:
     # check refused every navigation.bt_xml (its Nav2 leaves were declared only) while simulate ran it;
-    # Iron's and Jazzy's trees use WouldAPlannerRecoveryHelp, which the twin declares and does not run
+    # a Nav2 node the twin declares and does not run (a NavigateToPose client inside the navigator's
+    # own tree) is refused by both alike
     packaged = REPO / "trees" / "navigate_to_pose_w_replanning_and_recovery.xml"
     scenario = tmp_path / "s.yaml"
     scenario.write_text(f"name: t\nnavigation: {{type: nav2, bt_xml: {packaged}}}\n")
     assert run_twin("scenario", "check", str(scenario)).returncode == 0
-    jazzy = tmp_path / "jazzy.xml"
-    jazzy.write_text(
+    nested = tmp_path / "nested.xml"
+    nested.write_text(
         packaged.read_text().replace(
             '<ClearEntireCostmap name="ClearGlobalCostmap-Context"',
-            '<WouldAPlannerRecoveryHelp error_code="{compute_path_error_code}"/>\n'
-            '<ClearEntireCostmap name="ClearGlobalCostmap-Context"',
+            '<NavigateToPose goal="{goal}"/>\n<ClearEntireCostmap name="ClearGlobalCostmap-Context"',
             1,
         )
     )
-    assert "WouldAPlannerRecoveryHelp" in jazzy.read_text()
-    scenario.write_text(f"name: t\nnavigation: {{type: nav2, bt_xml: {jazzy}}}\n")
+    assert "NavigateToPose" in nested.read_text()
+    scenario.write_text(f"name: t\nnavigation: {{type: nav2, bt_xml: {nested}}}\n")
     checked = run_twin("scenario", "check", str(scenario))
     ran = run_twin("simulate", str(scenario), "--out", str(tmp_path / "bag"))
     for result in (checked, ran):
         assert result.returncode == 6, result.stderr
         (line,) = result.stderr.strip().splitlines()
-        assert f"{jazzy}:" in line and "<WouldAPlannerRecoveryHelp> is a Nav2 node the twin knows the ports of" in line
+        assert f"{nested}:" in line and "<NavigateToPose> is a Nav2 node the twin knows the ports of" in line
+
+
+def test_jazzys_default_navigator_tree_completes_the_mission(tmp_path: Path) -> None:
+    # Iron's and Jazzy's trees ask WouldAPlannerRecoveryHelp and WouldAControllerRecoveryHelp about the
+    # leaves' error codes: the twin refused them
+    jazzy = tmp_path / "jazzy.xml"
+    text = (REPO / "trees" / "navigate_to_pose_w_replanning_and_recovery.xml").read_text()
+    text = text.replace(
+        'planner_id="GridBased"/>', 'planner_id="GridBased" error_code_id="{compute_path_error_code}"/>', 1
+    )
+    assert "error_code_id" in text
+    text = text.replace(
+        '<ClearEntireCostmap name="ClearGlobalCostmap-Context"',
+        '<Sequence><WouldAPlannerRecoveryHelp error_code="{compute_path_error_code}"/>'
+        '<ClearEntireCostmap name="ClearGlobalCostmap-Context"',
+        1,
+    )
+    text = text.replace(
+        'service_name="global_costmap/clear_entirely_global_costmap"/>',
+        'service_name="global_costmap/clear_entirely_global_costmap"/></Sequence>',
+        1,
+    )
+    jazzy.write_text(text)
+    assert run_twin("tree", "validate", str(jazzy)).returncode == 0
+    result, _ = simulate(tmp_path, "jazzy", f"navigation: {{type: nav2, bt_xml: {jazzy}}}\n")
+    assert result.returncode == 0, result.stderr  # type: ignore[attr-defined]
+    assert json.loads(result.stdout)["mission_result"] == "SUCCESS"  # type: ignore[attr-defined]
 
 
 def _truth_and_estimates(bag: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -42,6 +42,12 @@ Pose = tuple[float, float, float]
 _BRAKE_ACCEL_LIMIT = -10.0  # Nav2 IsStuck's brake_accel_limit, m/s^2
 
 
+# A NavFn failure's nav2_msgs error code, less the action's UNKNOWN (ComputePathToPose 200 + offset):
+# Iron's NavFn throws StartOutsideMapBounds, GoalOutsideMapBounds, and NoValidPathCouldBeFound for the
+# rest (a start on a lethal cell that is also the goal included).
+_PLAN_FAILURE_CODES = {"START_OUTSIDE_MAP": 3, "GOAL_OUTSIDE_MAP": 4, "START_IN_LETHAL": 8, "NO_VALID_PATH": 8}
+
+
 class Nav2Servers:
     """planner_server, controller_server, smoother_server, behavior_server and the costmaps' services.
 
@@ -117,9 +123,9 @@ class Nav2Servers:
         gid = self._next_id
         t_ns = self.now()
         if server == "compute_path_to_pose":
-            self._plan(goal, [request["goal"]], request.get("start"), t_ns)
+            self._plan(goal, [request["goal"]], request.get("start"), t_ns, base=200)
         elif server == "compute_path_through_poses":
-            self._plan(goal, list(request.get("goals") or []), request.get("start"), t_ns)
+            self._plan(goal, list(request.get("goals") or []), request.get("start"), t_ns, base=300)
         elif server == "smooth_path":
             path = np.asarray(request["path"], dtype=np.float64).reshape(-1, 3)
             self._finish(
@@ -227,10 +233,13 @@ class Nav2Servers:
 
     # -- the servers' answers -------------------------------------------------------------------
 
-    def _plan(self, goal: ActionGoal, targets: list[Any], start: Any, t_ns: int) -> None:
+    def _plan(self, goal: ActionGoal, targets: list[Any], start: Any, t_ns: int, *, base: int) -> None:
         result = self.planner_server.compute_path(targets, start, t_ns)
         if isinstance(result, str):
-            self._finish(goal, ActionState.FAILED, reason=result)
+            # nav2_msgs' codes (Iron on), `base` the action's UNKNOWN: 200 to a pose, 300 through poses
+            failure = self.planner_server.last_failure
+            offset = _PLAN_FAILURE_CODES.get(failure.name, 0) if failure is not None else (9 if base == 300 else 0)
+            self._finish(goal, ActionState.FAILED, reason=result, error_code=base + offset)
         else:
             self._finish(goal, ActionState.SUCCEEDED, path=result)
 

@@ -84,8 +84,8 @@ def unloaded_behavior(bt_xml: Path, servers: Mapping[str, object]) -> str | None
 def unimplemented_leaf(bt_xml: Path) -> str | None:
     """Where the tree uses a Nav2 node the twin declares (its ports validate) but does not run, as one line.
 
-    Nav2 Iron's and Jazzy's default trees use `WouldAPlannerRecoveryHelp`, which Humble does not
-    have: the tree validates against the palette, and the navigator cannot create it.
+    A NavigateToPose or NavigateThroughPoses client (the action the navigator itself serves) validates
+    against the palette, and the navigator cannot create it.
     """
     parser = TreeParser(nav2_factory())
     parser.load_file(Path(bt_xml))
@@ -95,7 +95,6 @@ def unimplemented_leaf(bt_xml: Path) -> str | None:
             if element.type_name in nav2 and element.type_name not in IMPLEMENTED:
                 return (
                     f"{element.location}: <{element.type_name}> is a Nav2 node the twin knows the ports of but "
-                    "does not run (the twin runs Nav2 Humble's nodes); use a tree without it, such as Nav2 "
-                    "Humble's navigate_to_pose_w_replanning_and_recovery.xml"
+                    "does not run; use a tree without it, such as Nav2's navigate_to_pose_w_replanning_and_recovery.xml"
                 )
     return None

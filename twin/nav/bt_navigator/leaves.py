@@ -120,6 +120,9 @@ def _path_length(path: Any) -> float:
 class _ServerAction(StatefulActionNode):
     server = ""
     settles = True  # a RUNNING goal's poll changes only when the servers' `generation` does
+    #: The action's UNKNOWN error code (nav2_msgs, Iron on), written to `error_code_id` when the
+    #: server gives none; None: the leaf has no such port.
+    unknown_code: int | None = None
 
     def __init__(self, name: str, config: NodeConfig, services: NavigationServices) -> None:
         super().__init__(name, config)
@@ -157,7 +160,11 @@ class _ServerAction(StatefulActionNode):
         self._goal_id = None
         if update.state is ActionState.SUCCEEDED:
             self.on_success(update.result)
+            if self.unknown_code is not None:
+                self.set_output("error_code_id", 0)  # NONE
             return SUCCESS
+        if self.unknown_code is not None:  # as Iron's leaves: the result's code, for WouldA...RecoveryHelp
+            self.set_output("error_code_id", int((update.result or {}).get("error_code", self.unknown_code)))
         return FAILURE
 
 
@@ -165,6 +172,7 @@ class ComputePathToPose(_ServerAction):
     """Plan to `goal` with `planner_id`; the result goes to `path`."""
 
     server = "compute_path_to_pose"
+    unknown_code = 200
 
     def request(self) -> dict[str, Any]:
         return {
@@ -181,6 +189,7 @@ class ComputePathThroughPoses(_ServerAction):
     """Plan through `goals`; the result goes to `path`."""
 
     server = "compute_path_through_poses"
+    unknown_code = 300
 
     def request(self) -> dict[str, Any]:
         return {
@@ -197,6 +206,7 @@ class FollowPath(_ServerAction):
     """Follow `path` with `controller_id`; a new path on the blackboard updates the running goal."""
 
     server = "follow_path"
+    unknown_code = 100
 
     def request(self) -> dict[str, Any]:
         self._sent_path = _input(self, "path")
@@ -486,6 +496,31 @@ class IsPathValid(_ServicesCondition):
     def tick(self) -> NodeStatus:
         path = _input(self, "path")
         return SUCCESS if path is not None and self.services.is_path_valid(np.asarray(path)) else FAILURE
+
+
+class _ErrorCodesPresent(ConditionNode):
+    """Iron's AreErrorCodesPresent: SUCCESS when the `error_code` input is one of `codes`."""
+
+    codes: frozenset[int] = frozenset()
+
+    def tick(self) -> NodeStatus:
+        code = _input(self, "error_code", None)
+        return SUCCESS if code is not None and int(code) in self.codes else FAILURE
+
+
+class WouldAPlannerRecoveryHelp(_ErrorCodesPresent):
+    """A planner failure a cleared costmap may mend: UNKNOWN, NO_VALID_PATH or TIMEOUT (to pose or through poses)."""
+
+    codes = frozenset({200, 208, 207, 300, 307, 308})
+
+
+class WouldAControllerRecoveryHelp(_ErrorCodesPresent):
+    """A controller failure a recovery may mend: UNKNOWN, PATIENCE_EXCEEDED, FAILED_TO_MAKE_PROGRESS, NO_VALID_CONTROL.
+
+    (The twin's controllers report the first three; NO_VALID_CONTROL is Jazzy's.)
+    """
+
+    codes = frozenset({100, 104, 105, 106})
 
 
 class InitialPoseReceived(ConditionNode):
@@ -785,6 +820,8 @@ _PLAIN: dict[str, type] = {
     "SingleTrigger": SingleTrigger,
     "GoalUpdatedController": GoalUpdatedController,
     "PathLongerOnApproach": PathLongerOnApproach,
+    "WouldAPlannerRecoveryHelp": WouldAPlannerRecoveryHelp,
+    "WouldAControllerRecoveryHelp": WouldAControllerRecoveryHelp,
 }
 
 

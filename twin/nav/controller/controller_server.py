@@ -297,7 +297,10 @@ class ControllerServer:
         task = self._tasks.get(name)
         if task is None:
             self._finish(
-                goal, ActionState.FAILED, reason=f"FollowPath: no controller {name!r} (have {sorted(self._tasks)})"
+                goal,
+                ActionState.FAILED,
+                reason=f"FollowPath: no controller {name!r} (have {sorted(self._tasks)})",
+                error_code=101,  # INVALID_CONTROLLER
             )
             return
         checker_id = str(goal.request.get("goal_checker_id") or "")
@@ -344,7 +347,7 @@ class ControllerServer:
             self._finish(goal, ActionState.SUCCEEDED)
         else:
             self._log.warning("FollowPath failed: %s", step.reason)
-            self._finish(goal, ActionState.FAILED, reason=step.reason)
+            self._finish(goal, ActionState.FAILED, reason=step.reason, error_code=_follow_code(step.reason))
         self._follow = None
         return (0.0, 0.0)
 
@@ -383,3 +386,12 @@ class ControllerServerNode(Node):
                 plan_pub.publish(Encoded((plan_encode, (t_ns, local), local)))
 
         self.create_rate_timer(server.controller_frequency_hz, on_timer, priority=PRIORITY_COMMAND)
+
+
+def _follow_code(reason: str) -> int:
+    """FollowPath's nav2_msgs error code (Iron on) for a failure the controller server reports."""
+    if reason.startswith("Failed to make progress"):
+        return 105  # FAILED_TO_MAKE_PROGRESS
+    if reason.startswith("Controller patience exceeded"):
+        return 104  # PATIENCE_EXCEEDED
+    return 100  # UNKNOWN

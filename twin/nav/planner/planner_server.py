@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from twin.bag import PathEncoder
 from twin.nav.costmap_2d.layered_costmap import Costmap
 from twin.nav.frames import Frames
-from twin.nav.planner.navfn import NavfnParams, NavfnPlanner, PlanFailure
+from twin.nav.planner.navfn import NavfnParams, NavfnPlanner, PlanFailure, PlanFailureReason
 from twin.node import Encoded, Node, node_logger
 
 __all__ = ["PlannerServer", "PlannerServerNode"]
@@ -43,9 +43,12 @@ class PlannerServer:
         self.planner = NavfnPlanner(params, native=native)
         #: Called with (t_ns, path) for every computed path (the node publishes `/plan`).
         self.on_plan: Callable[[int, F64], None] | None = None
+        #: Why the last `compute_path` found no path (None: it found one, or had no goal poses).
+        self.last_failure: PlanFailureReason | None = None
 
     def compute_path(self, targets: Sequence[Any], start: Any, t_ns: int) -> F64 | str:
         """Plan from `start` (None: the robot's map pose) through `targets`; the path, or why there is none."""
+        self.last_failure = None
         if not targets:
             return "no goal poses to plan through"
         here = self.frames.map_pose() if start is None else tuple(float(v) for v in start)
@@ -56,6 +59,7 @@ class PlannerServer:
             result = self.planner.make_plan(grid, here, end)  # type: ignore[arg-type]
             if isinstance(result, PlanFailure):
                 self._log.warning("GridBased: failed to create plan: %s", result.message)
+                self.last_failure = result.reason
                 return f"planner: {result.message}"
             pieces.append(result.poses if not pieces else result.poses[1:])
             here = end

@@ -150,3 +150,56 @@ def test_default_tree_recovers_in_nav2s_order_and_fails_after_six_retries() -> N
     assert services.calls[:16] == [*follow_twice, local, glob, *follow_twice, "spin", *follow_twice, "wait"]
     rounds = services.calls.count("compute_path_to_pose")
     assert rounds == 7  # the first try and six retries
+
+
+_RECOVERY_HELP = """<root BTCPP_format="4" main_tree_to_execute="Main"><BehaviorTree ID="Main"><Sequence>
+  <ComputePathToPose goal="{goal}" path="{path}" error_code_id="{plan_code}"/>
+  <Fallback>
+    <FollowPath path="{path}" error_code_id="{follow_code}"/>
+    <WouldAControllerRecoveryHelp error_code="{follow_code}"/>
+  </Fallback>
+</Sequence></BehaviorTree></root>"""
+
+
+@pytest.mark.parametrize(("follow_fails", "follow_code"), [(False, 0), (True, 100)])
+def test_the_leaves_write_iron_error_codes_that_would_a_recovery_help_reads(
+    tmp_path: Path, follow_fails: bool, follow_code: int
+) -> None:
+    # Iron's and Jazzy's trees: a leaf's error_code_id (NONE on success, its action's code on failure)
+    # read by WouldAControllerRecoveryHelp, which the twin did not run
+    tree_file = tmp_path / "tree.xml"
+    tree_file.write_text(_RECOVERY_HELP)
+    tree = nav2_factory(FakeServices(follow_fails=follow_fails, follow_polls=1)).create_tree_from_file(
+        tree_file, clock=ManualClock()
+    )
+    tree.root_blackboard.set("goal", (1.0, 0.0, 0.0))
+    status = NodeStatus.RUNNING
+    for _ in range(20):
+        status = tree.tick_once()
+        if status is not NodeStatus.RUNNING:
+            break
+    assert status is NodeStatus.SUCCESS  # followed, or failed with a code a recovery may mend (UNKNOWN)
+    assert tree.root_blackboard.get("plan_code") == 0 and tree.root_blackboard.get("follow_code") == follow_code
+
+
+@pytest.mark.parametrize(
+    ("code", "planner", "controller"),
+    [
+        (200, True, False),
+        (204, False, False),
+        (208, True, False),
+        (308, True, False),
+        (105, False, True),
+        (101, False, False),
+    ],
+)
+def test_would_a_recovery_help_takes_irons_codes(tmp_path: Path, code: int, planner: bool, controller: bool) -> None:
+    for node, helps in (("WouldAPlannerRecoveryHelp", planner), ("WouldAControllerRecoveryHelp", controller)):
+        tree_file = tmp_path / f"{node}.xml"
+        tree_file.write_text(
+            f'<root BTCPP_format="4" main_tree_to_execute="M"><BehaviorTree ID="M"><{node} error_code="{{c}}"/>'
+            "</BehaviorTree></root>"
+        )
+        tree = nav2_factory(FakeServices()).create_tree_from_file(tree_file, clock=ManualClock())
+        tree.root_blackboard.set("c", code)
+        assert (tree.tick_once() is NodeStatus.SUCCESS) == helps, (node, code)
