@@ -277,15 +277,21 @@ def _burger_remapped(tmp_path: Path, remapping: str) -> Path:
     return sdf
 
 
+def _simulated(tmp_path: Path, text: str, duration: str) -> tuple[str, Path]:
+    """Run a scenario of this text for `duration` s; its stderr and bag."""
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(text)
+    bag = tmp_path / "bag"
+    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", duration)
+    assert result.returncode == 0, result.stderr
+    return result.stderr, bag
+
+
 def test_a_diff_drive_remapped_away_from_cmd_vel_hears_nothing_as_in_gazebo_and_says_so(tmp_path: Path) -> None:
     # gazebo_ros_diff_drive listening on cmd_vel_raw: Nav2's /cmd_vel reaches nothing, and one line says so.
     sdf = _burger_remapped(tmp_path, "cmd_vel:=cmd_vel_raw")
-    scenario = tmp_path / "scenario.yaml"
-    scenario.write_text(f"name: raw\nrobot: {{model: {sdf}}}\n")
-    bag = tmp_path / "bag"
-    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "4")
-    assert result.returncode == 0, result.stderr
-    (line,) = [ln for ln in result.stderr.splitlines() if "nothing publishes" in ln]
+    stderr, bag = _simulated(tmp_path, f"name: raw\nrobot: {{model: {sdf}}}\n", "4")
+    (line,) = [ln for ln in stderr.splitlines() if "nothing publishes" in ln]
     assert "/cmd_vel_raw" in line and "/cmd_vel has publishers" in line
     with AnyReader([bag]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
@@ -301,11 +307,8 @@ def test_a_diff_drive_remapped_away_from_cmd_vel_hears_nothing_as_in_gazebo_and_
 
 def test_ground_truth_odometry_goes_on_the_diff_drives_remapped_odom_topic(tmp_path: Path) -> None:
     sdf = _burger_remapped(tmp_path, "odom:=wheel_odom")
-    scenario = tmp_path / "scenario.yaml"
-    scenario.write_text(f"name: wheel_odom\nrobot: {{model: {sdf}}}\nodometry: ground_truth\nmission: {{type: none}}\n")
-    bag = tmp_path / "bag"
-    result = run_twin("simulate", str(scenario), "--out", str(bag), "--duration", "1")
-    assert result.returncode == 0, result.stderr
+    text = f"name: wheel_odom\nrobot: {{model: {sdf}}}\nodometry: ground_truth\nmission: {{type: none}}\n"
+    _, bag = _simulated(tmp_path, text, "1")
     with AnyReader([bag]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
     assert counts["/wheel_odom"] == 30 and "/odom" not in counts  # its 30 Hz, on its topic
