@@ -7,7 +7,7 @@
  * handler that was there before (Python's faulthandler's, or the default) and raises the signal again,
  * so the process still dies of it with the same status.
  */
-#define _POSIX_C_SOURCE 200809L
+#define _XOPEN_SOURCE 700
 #include <signal.h>
 #include <string.h>
 #include <unistd.h>
@@ -20,6 +20,8 @@ static const int fatal[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT};
 #define N_FATAL (sizeof fatal / sizeof fatal[0])
 static struct sigaction previous[N_FATAL];
 static int installed;
+/* A stack of the handler's own: an FMU that overflows its stack leaves none for the handler. */
+static char alternate[64 * 1024];
 
 static void on_fatal(int sig) {
     char number[4] = {0};
@@ -56,11 +58,19 @@ int twin_crash_note(const char *line) {
         return 0;
     }
     if (installed) return 0;
+    stack_t current;
+    if (sigaltstack(NULL, &current) == 0 && (current.ss_flags & SS_DISABLE)) {
+        stack_t own;
+        memset(&own, 0, sizeof own);
+        own.ss_sp = alternate;
+        own.ss_size = sizeof alternate;
+        sigaltstack(&own, NULL); /* (faulthandler's, when Python has one, is kept) */
+    }
     struct sigaction action;
     memset(&action, 0, sizeof action);
     action.sa_handler = on_fatal;
     sigemptyset(&action.sa_mask);
-    action.sa_flags = SA_RESETHAND;
+    action.sa_flags = SA_RESETHAND | SA_ONSTACK;
     for (size_t i = 0; i < N_FATAL; i++) {
         if (sigaction(fatal[i], &action, &previous[i]) != 0) return -1;
     }

@@ -494,6 +494,21 @@ def _run(
     sinks: list[Sink],
     provenance: Mapping[str, str] | None,
 ) -> int:
+    """Build and run the simulation, a user FMU's fatal signal noted from its first instance on (`_crash_note`)."""
+    with _crash_note(scenario, bag_path):
+        return _run_noted(args, path, scenario, bag_path, flag=flag, sinks=sinks, provenance=provenance)
+
+
+def _run_noted(
+    args: argparse.Namespace,
+    path: Path,
+    scenario: Scenario,
+    bag_path: Path,
+    *,
+    flag: _StopFlag,
+    sinks: list[Sink],
+    provenance: Mapping[str, str] | None,
+) -> int:
     from twin.sim.check import in_scenario
     from twin.sim.simulation import Simulation
     from twin.sim.watchdog import Watchdog, WatchdogAbort
@@ -530,9 +545,8 @@ def _run(
             raise
         raise named from err
     guard = Guard(simulation, debug=debug)
-    crash_note = _crash_note(scenario, bag_path)
     try:
-        with _graceful_signals(flag), crash_note, simulation as sim:
+        with _graceful_signals(flag), simulation as sim:
             watchdog = Watchdog(
                 lambda: sim.t_s, timeout_s=args.watchdog_s, on_stuck=guard.on_stuck, on_signal=guard.on_signal
             )

@@ -272,7 +272,11 @@ def crash_note(line: str) -> None:
     The handler is `twin_crash_note` in fmus/common/crash_note.c, in the shim's library; it hands the
     signal on to the handler that was there before, so the process still dies of it.
     """
-    library = ctypes.CDLL(str(build_shim()))
+    try:  # best effort: without a C compiler the run goes on, as its stepping does (in Python)
+        library = ctypes.CDLL(str(build_shim()))
+    except (FmuError, OSError) as err:
+        _log.debug("no note on a fatal signal: %s", err)
+        return
     library.twin_crash_note.argtypes = [ctypes.c_char_p]
     library.twin_crash_note(line.encode())
 

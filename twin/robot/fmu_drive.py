@@ -332,28 +332,29 @@ def _step_one_instance(drive: FmuDrive, path: Path, plan: DrivePlan, inputs: lis
     from twin.cosim.isolated import IsolatedGroup
 
     binding = plan.binding
-    if drive.isolation == "process":
-        file = FmuFile(path)
-        group = IsolatedGroup(
-            path,
-            file.label,
-            ("left",),
-            step_s=plan.communication_step_s,
-            inputs=inputs,
-            outputs=outputs,
-            start=binding.start,
-            timeout_s=drive.step_timeout_s,
-            process_per_instance=file.info.instantiated_once,
+    with FmuFile(path) as file:  # (its extracted folder goes with it)
+        if drive.isolation == "process":
+            group = IsolatedGroup(
+                path,
+                file.label,
+                ("left",),
+                step_s=plan.communication_step_s,
+                inputs=inputs,
+                outputs=outputs,
+                start=binding.start,
+                timeout_s=drive.step_timeout_s,
+                process_per_instance=file.info.instantiated_once,
+            )
+            try:
+                group.step()
+            finally:
+                group.close()
+            return
+        api = "lowlevel" if drive.api == "native" else drive.api
+        stepper = file.instantiate(
+            "left", step_s=plan.communication_step_s, inputs=inputs, outputs=outputs, start=binding.start, api=api
         )
         try:
-            group.step()
+            stepper.step(0.0)
         finally:
-            group.close()
-        return
-    stepper = FmuFile(path).instantiate(
-        "left", step_s=plan.communication_step_s, inputs=inputs, outputs=outputs, start=binding.start
-    )
-    try:
-        stepper.step(0.0)
-    finally:
-        stepper.close()
+            stepper.close()

@@ -472,6 +472,16 @@ class RobotGroup:
         with launch_context(self.launch), frame_prefix(self.frame_prefix):
             return self._nodes()
 
+    def _drive_topic(self, topic: str, default: str) -> str:
+        """The diff drive plugin's topic in the robot's namespace.
+
+        A plugin `<ros><namespace>` naming the robot's own (`/robot1`, as a fleet's model may) is that
+        namespace, not one more under it.
+        """
+        relative = in_namespace(topic, default)
+        own = f"{self.namespace.strip('/')}/" if self.namespace else ""
+        return relative[len(own) :] if own and relative.startswith(own) else relative
+
     def _nodes(self) -> list[Node]:
         robot, sc, drive = self.robot, self.scenario, self.drive
         assert robot.drive is not None and drive is not None
@@ -543,7 +553,7 @@ class RobotGroup:
                 JointStateNode(names, rate, drive.wheel_state, encoders, with_effort=with_effort, topic=joints_topic)
             )
             if self.ekf is None:
-                odom_topic = in_namespace(robot.drive.odometry_topic, "odom")
+                odom_topic = self._drive_topic(robot.drive.odometry_topic, "odom")
                 nodes.append(GazeboOdometryNode(robot.base_frame, rate, chassis, topic=odom_topic))
 
         nodes.append(GroundTruthNode(robot.base_frame, sc.sensors.ground_truth.rate_hz, chassis))
@@ -557,7 +567,7 @@ class RobotGroup:
             self.tracker,
             motor_joints=names if fmu else (),
             motor_rate_hz=motor_rate,
-            command_topic=in_namespace(robot.drive.command_topic, "cmd_vel"),
+            command_topic=self._drive_topic(robot.drive.command_topic, "cmd_vel"),
         )
         nodes.append(self.drive_node)
         if self.ekf is not None:

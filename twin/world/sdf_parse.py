@@ -356,6 +356,7 @@ class SdfReader:
             if not model.merged:
                 taken.setdefault(model.name, model.node)
         frames = []
+        names = {node.get("name") or "" for node in raw.frames}
         for node in raw.frames:
             name = node.get("name") or ""
             sibling = taken.get(name)
@@ -368,7 +369,10 @@ class SdfReader:
                         "and frames must be unique: rename one"
                     )
                     raise WorldError(msg)
-                renamed = f"{name}_frame"
+                renamed, k = f"{name}_frame", 0
+                while renamed in taken or renamed in names:  # as libsdformat: a name no sibling has
+                    renamed, k = f"{name}_frame{k}", k + 1
+                names.add(renamed)
                 self.warn(
                     f"frame-renamed:{node.where}",
                     f"{node.where}: <frame name={name!r}> shares its name with a <{sibling.tag}> in {scope}; "

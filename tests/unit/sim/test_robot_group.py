@@ -92,3 +92,21 @@ def test_every_node_of_a_namespaced_robot_is_in_its_namespace(namespaced: list[N
     assert len(set(names)) == len(names)
     bare = [name.removeprefix("/robot1") for name in names]
     assert bare == [n for n in DEFAULT_NODES if n not in ("/rosout", "/clock")]  # the same group, pushed down
+
+
+@pytest.mark.parametrize(
+    ("namespace", "topic", "expected"),
+    [
+        ("", "cmd_vel", "cmd_vel"),
+        ("", "/tb3/cmd_vel", "tb3/cmd_vel"),
+        ("robot1", "cmd_vel", "cmd_vel"),
+        ("robot1", "robot1/cmd_vel", "cmd_vel"),  # the plugin's <ros><namespace>/robot1: the robot's own
+        ("robot1", "robot10/cmd_vel", "robot10/cmd_vel"),
+    ],
+)
+def test_a_drive_plugins_namespace_naming_the_robots_own_is_not_doubled(
+    namespace: str, topic: str, expected: str
+) -> None:
+    from types import SimpleNamespace
+
+    assert RobotGroup._drive_topic(SimpleNamespace(namespace=namespace), topic, "cmd_vel") == expected  # type: ignore[arg-type]

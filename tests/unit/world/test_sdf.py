@@ -611,6 +611,19 @@ def test_a_frame_named_like_a_model_is_renamed_before_sdf_1_7_as_libsdformat_doe
     assert any("read as 'ground_frame'" in w and f"{world}:3:" in w for w in loaded.warnings)
 
 
+def test_a_renamed_frame_takes_a_name_no_sibling_has(tmp_path: Path) -> None:
+    # `a` renamed `a_frame` beside a frame already named so: one of the two was lost
+    world = tmp_path / "w.world"
+    world.write_text(
+        "<sdf version='1.6'><world name='w'><model name='m'><link name='a'/>\n"
+        "<frame name='a'><pose>5 0 0 0 0 0</pose></frame>\n<frame name='a_frame'><pose>9 0 0 0 0 0</pose></frame>\n"
+        "</model></world></sdf>"
+    )
+    (model,) = load_world(world).models
+    frames = {f.name: float(np.asarray(f.T_world)[0, 3]) for f in model.frames}
+    assert frames == {"a_frame0": 5.0, "a_frame": 9.0}
+
+
 def test_a_frame_named_like_a_model_is_refused_from_sdf_1_7_in_one_line(tmp_path: Path) -> None:
     # was an AssertionError (exit 70); libsdformat refuses it (DUPLICATE_NAME)
     world = tmp_path / "w.world"
