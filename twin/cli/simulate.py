@@ -383,7 +383,8 @@ def _simulate_checked(args: argparse.Namespace) -> int:
         namespaces=[e.ns for e in scenario.robots],
         frame_prefix=scenario.tf.mode == "frame_prefix",
     )
-    with live as sinks, _ros2_bridge(scenario) as bridge:
+    # (the crash note from the user FMU's first instance on)
+    with live as sinks, _ros2_bridge(scenario) as bridge, _crash_note(scenario, bag_path):
         return _run(args, path, scenario, bag_path, flag=flag, sinks=sinks + bridge, provenance=provenance)
 
 
@@ -485,21 +486,6 @@ def _live_namespace(given: str | None, namespaces: Sequence[str]) -> str | None:
 
 
 def _run(
-    args: argparse.Namespace,
-    path: Path,
-    scenario: Scenario,
-    bag_path: Path,
-    *,
-    flag: _StopFlag,
-    sinks: list[Sink],
-    provenance: Mapping[str, str] | None,
-) -> int:
-    """Build and run the simulation, a user FMU's fatal signal noted from its first instance on (`_crash_note`)."""
-    with _crash_note(scenario, bag_path):
-        return _run_noted(args, path, scenario, bag_path, flag=flag, sinks=sinks, provenance=provenance)
-
-
-def _run_noted(
     args: argparse.Namespace,
     path: Path,
     scenario: Scenario,
