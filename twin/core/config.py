@@ -3,7 +3,8 @@
 `load_config(Spec, path, defaults=...)` reads a YAML file, lays it over a packaged defaults file
 (mappings merge key by key; a mapping whose `type:` changes, lists and scalars replace), and builds
 `Spec` from the result by its type hints. Supported field types: `bool`, `int`, `float`, `str`,
-`Path` (relative to the file that set it), `Literal[...]`, `Enum`, `X | None`, `tuple[X, ...]`,
+`Path` (relative to the file that set it), `NameOrPath` (a name, or a path relative to that file),
+`Literal[...]`, `Enum`, `X | None`, `tuple[X, ...]`,
 fixed tuples, `list[X]`, `Mapping[str, X]` / `dict[str, X]`, nested dataclasses, and unions of
 dataclasses told apart by a `type: Literal["name"]` field (the variant registry).
 
@@ -34,6 +35,7 @@ from twin.core.yaml_numbers import compose
 __all__ = [
     "ConfigNode",
     "FieldError",
+    "NameOrPath",
     "build",
     "load_config",
     "load_yaml",
@@ -50,6 +52,32 @@ ConfigNode = yaml.Node
 _CONSTRUCTOR = yaml.constructor.SafeConstructor()
 # A YAML file larger than this is no configuration (the largest shipped is a few kB).
 _MAX_TEXT_BYTES = 64 * 2**20
+
+
+class NameOrPath(str):
+    """A value that is a name looked up elsewhere (a model on the model path) or a path to a file or folder.
+
+    A path-like value (it has a `/`, starts with `.` or `~`, or ends in `.sdf`/`.world`) is relative to
+    the file that set it, as a `Path` is, when the file or folder is there; anything else stays as
+    written (a name, or a path the loader looks up and names in its error).
+    """
+
+    __slots__ = ()
+
+    @classmethod
+    def beside(cls, value: str, folder: Path) -> NameOrPath:
+        """`value`, made absolute against `folder` when it is a path-like value that names something there."""
+        if not _path_like(value) or value.startswith("model://"):
+            return cls(value)
+        path = Path(value).expanduser()
+        if path.is_absolute():
+            return cls(os.path.normpath(path))
+        beside = folder / path
+        return cls(os.path.normpath(beside)) if beside.exists() else cls(value)
+
+
+def _path_like(value: str) -> bool:
+    return "/" in value or "\\" in value or value.startswith((".", "~")) or value.endswith((".sdf", ".world"))
 
 
 class FieldError(ValueError):
@@ -266,6 +294,7 @@ def _fail(node: yaml.Node, key: str, problem: str) -> typing.NoReturn:
 # How a message names what a key takes, in the file's terms rather than the Python class's.
 _PLAIN_NAMES: dict[Any, str] = {str: "text", float: "a number", int: "a whole number", bool: "true or false"}
 _PLAIN_NAMES[Path] = "a path"
+_PLAIN_NAMES[NameOrPath] = "a name or a path"
 
 
 def _describe(tp: Any) -> str:
@@ -369,6 +398,10 @@ def _build_plain(tp: Any, node: yaml.Node, key: str) -> Any:
         if value is None or isinstance(value, bool | dict | list):
             _fail(node, key, f"expected text, got {value!r}")
         return str(value)
+    if tp is NameOrPath:
+        if value is None or isinstance(value, bool | dict | list) or not str(value):
+            _fail(node, key, f"expected a name or a path, got {value!r}")
+        return NameOrPath.beside(str(value), Path(node.start_mark.name).parent)
     if tp is Path:
         if not isinstance(value, str) or not value:
             _fail(node, key, f"expected a path, got {value!r}")

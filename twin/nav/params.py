@@ -71,7 +71,11 @@ def default_params_path(model: str) -> Path:
     """
     key = model.removeprefix("turtlebot3_")
     if key not in _MODELS:
-        msg = f"no packaged Nav2 params for robot model {model!r}; name one of {sorted(_MODELS)} or a params file"
+        msg = (
+            f"no packaged Nav2 params for robot model {model!r} (the twin ships TurtleBot3's: "
+            f"{', '.join(sorted(_MODELS))}); give navigation.params: a Nav2 params file for this robot, e.g. a copy "
+            f"of {_DATA / _MODELS['waffle']} with its frames, footprint and speeds"
+        )
         raise ConfigError(msg)
     return _DATA / _MODELS[key]
 

@@ -136,6 +136,7 @@ class DiffDriveNode(Node):
         motor_joints: Sequence[str] = (),
         motor_rate_hz: float = 30.0,
         command_topic: str = "cmd_vel",
+        limits: tuple[float, float, float, float] | None = None,
     ) -> None:
         super().__init__("diff_drive")
         self.drive = drive
@@ -150,6 +151,13 @@ class DiffDriveNode(Node):
                 set_cmd_vel(*msg[2])
             else:
                 set_cmd_vel(*twist_of(msg))
+
+        if limits is not None:  # gz-sim DiffDrive's speed limiter: a command beyond the range is clamped to it
+            v_low, v_high, w_low, w_high = limits
+
+            def on_cmd_vel(msg: Any) -> None:  # (NaN passes to the drive, which refuses it)
+                v, w = msg[2] if type(msg) is Encoded else twist_of(msg)
+                set_cmd_vel(min(max(v, v_low), v_high), min(max(w, w_low), w_high))
 
         self.create_subscription("geometry_msgs/msg/Twist", command_topic, on_cmd_vel, 10, raw=True)
         if command_topic != "cmd_vel":  # the SDF's plugin renames it: say so if the commands go to cmd_vel
@@ -554,13 +562,16 @@ class RobotStatePublisher(Node):
         joint_states_topic: str = "joint_states",
     ) -> None:
         super().__init__("robot_state_publisher")
-        static_encoder = TFEncoder([(p, c) for p, c, _ in static])
         poses = [pose for _, _, pose in static]
+        # A robot with no fixed joint (every link on a moving joint) and a localiser publishing map→odom
+        # has no fixed transform to send: nothing goes on /tf_static then.
+        static_encoder = TFEncoder([(p, c) for p, c, _ in static]) if static else None
         tf_static = self.create_publisher(TFEncoder.msgtype, "/tf_static", LATCHED)
         description = self.create_publisher(StringEncoder.msgtype, "robot_description", LATCHED)
 
         def publish_static(t_ns: int) -> None:
-            tf_static.publish(Encoded((static_encoder.encode, (t_ns, poses), None)))
+            if static_encoder is not None:
+                tf_static.publish(Encoded((static_encoder.encode, (t_ns, poses), None)))
             description.publish(Encoded((StringEncoder().encode, (urdf,), urdf)))
 
         self.create_one_shot(publish_static, priority=PRIORITY_STATE)

@@ -136,7 +136,7 @@ def robot_body(robot: RobotModelSpec) -> Body:
     Raises:
         WorldError: If a visual's mesh cannot be read.
     """
-    return body_of(robot.model.all_links(), robot.T_base_model)
+    return body_of(robot.links, robot.T_base_model)
 
 
 def namespaced(spec: CameraSpec, namespace: str) -> CameraSpec:

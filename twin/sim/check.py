@@ -267,7 +267,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
     from twin.sim.launch import check_node_plugins
     from twin.sim.navigation import check_map_extent, lidar_problem
     from twin.sim.rng import RngStreams
-    from twin.sim.robot_group import floor_problem, scenario_robot, spawn_monitor
+    from twin.sim.robot_group import driven_robot, floor_problem, spawn_monitor
     from twin.sim.simulation import obstacle_fields
     from twin.world import build_scene, load_world
 
@@ -284,7 +284,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         )
         for warning in world.warnings:  # as the run warns: a skipped include, an unsupported element
             logging.getLogger("twin.sim.simulation").warning("%s", warning)
-        models = [scenario_robot(sc, entry=f"robots[{i}]." if ns else "") for i, (ns, sc) in enumerate(robots)]
+        models = [driven_robot(sc, entry=f"robots[{i}]." if ns else "") for i, (ns, sc) in enumerate(robots)]
         exclude = tuple(dict.fromkeys(robot.name for robot in models))
         scene = build_scene(world, exclude_models=exclude, floor_height_m=scenario.world.floor_height_m)
     except TwinError as err:
@@ -390,7 +390,7 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec, *, namespace: st
     from twin.nav.param_checks import check_nav2_inputs
     from twin.nav.params import default_params_path, load_nav2_params
     from twin.nav.server_params import nav2_config
-    from twin.sim.navigation import DEFAULT_BT_XML, check_poses_on_map
+    from twin.sim.navigation import DEFAULT_BT_XML, check_poses_on_map, frame_problem
 
     occupancy = load_map(Path(scenario.map)) if scenario.map != "from_world" else None
     nav = scenario.navigation
@@ -405,6 +405,9 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec, *, namespace: st
         map_source = None if scenario.map == "from_world" else str(scenario.map)
         step_s = scenario.physics.step_s
         check_nav2_inputs(params, occupancy, map_source=map_source, amcl=amcl, nav2=nav2, physics_step_s=step_s)
+        problem = frame_problem(params, robot, amcl=amcl, nav2=nav2)
+        if problem is not None:
+            raise ConfigError(problem)
         if occupancy is not None and robot.lidar is not None and (amcl or nav2):
             check_poses_on_map(scenario, occupancy, amcl=amcl)  # (a map made from the world covers them)
         if nav2:

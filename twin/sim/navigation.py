@@ -173,6 +173,9 @@ class NavigationStack:
         assert robot.lidar is not None
         params_path = _params_path(sc, robot)
         params = load_nav2_params(params_path, overrides=dict(sc.navigation.set), namespace=namespace)
+        problem = frame_problem(params, robot, amcl=wants_amcl, nav2=wants_nav2)
+        if problem is not None:
+            raise ConfigError(problem)
         laser = LaserGeometry.from_spec(robot.lidar)
         occupancy = cls._map(sc, robot, scene)
         map_source = None if sc.map == "from_world" else str(sc.map)
@@ -427,6 +430,44 @@ def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
                     f"(x {x0:.2f}..{x1:.2f}, y {y0:.2f}..{y1:.2f}); give a pose on the map"
                 )
                 raise ConfigError(msg)
+
+
+def frame_problem(params: Nav2Params, robot: RobotModelSpec, *, amcl: bool, nav2: bool) -> str | None:
+    """A frame the params have Nav2 look up that the run's TF tree does not hold, or None.
+
+    The tree holds `map`, `odom` and the robot's own frames (its base frame and every link and
+    `<frame>`). Nav2's costmaps, navigator and AMCL wait for a transform to a frame nobody
+    publishes (the TurtleBot3 params' `base_link` on a robot whose base is `chassis`), so the
+    mission could never start; the twin says so instead of navigating anyway.
+    """
+    frames = {"map", "odom", robot.base_frame, *(f.name for f in robot.frames)}
+    checks: list[tuple[str, str, str]] = []  # (node, key, its value)
+    if nav2:
+        for costmap in (params.local_costmap, params.global_costmap):
+            checks.append((costmap.name, "robot_base_frame", costmap.robot_base_frame))
+            checks.append((costmap.name, "global_frame", costmap.global_frame))
+        for node in ("bt_navigator", "behavior_server"):
+            value = params.node(node).get("robot_base_frame")
+            if isinstance(value, str):
+                checks.append((node, "robot_base_frame", value))
+    if amcl:
+        checks += [
+            ("amcl", "base_frame_id", params.amcl.base_frame_id),
+            ("amcl", "odom_frame_id", params.amcl.odom_frame_id),
+        ]
+    for node, key, frame in checks:
+        # (a fleet's frame_prefix names `robot1/base_link`: its last part is the robot's frame)
+        if frame in frames or frame.rsplit("/", 1)[-1] in frames:
+            continue
+        full = next((k for k in params.raw if k.rsplit("/", 1)[-1] == node), node)  # as the file names it
+        where = params.origin.locate(full, key) if params.origin is not None else f"{params.source}: {full}.{key}"
+        known = ", ".join(sorted(frames - {"map", "odom"}))
+        return (
+            f"{where}: {frame!r} is no frame of the run's TF tree (map, odom and the frames of robot "
+            f"{robot.name}: {known}); "
+            f"Nav2 would wait for it forever: name one of them (the robot's base frame is {robot.base_frame!r})"
+        )
+    return None
 
 
 def lidar_problem(sc: Scenario, robot: RobotModelSpec) -> str | None:

@@ -36,6 +36,8 @@ def _plain(value: Any) -> Any:
         return str(value.absolute())  # a scenario run by a relative path: its files, from anywhere
     if isinstance(value, enum.Enum):
         return value.value
+    if isinstance(value, str):
+        return str(value)  # a `NameOrPath` as the text it is
     return value
 
 

@@ -27,7 +27,7 @@ import logging
 import math
 import zlib
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -72,7 +72,7 @@ from twin.sim.scenario import (
 )
 from twin.world import RobotModelSpec, load_robot, urdf_from_robot
 from twin.world.obstacles import ObstacleField, ObstacleMonitor
-from twin.world.robot_model import in_namespace
+from twin.world.robot_model import DiffDriveSpec, in_namespace
 from twin.world.scene import CollisionMonitor, RobotBody, Scene
 from twin.world.tf_static import static_frames
 
@@ -103,6 +103,37 @@ def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
         msg = f"sensors.lidar: sets {', '.join(overrides)} but robot {robot.name!r} has no lidar in its SDF"
         raise ConfigError(msg)
     return dataclasses.replace(robot, lidar=dataclasses.replace(robot.lidar, **overrides))
+
+
+def _command_limits(drive: DiffDriveSpec) -> tuple[float, float, float, float] | None:
+    """The drive plugin's (v_min, v_max, w_min, w_max) command range (None: it limits nothing)."""
+    v, w = drive.linear_velocity_limits_mps, drive.angular_velocity_limits_radps
+    if v is None and w is None:
+        return None
+    inf = math.inf
+    return (*(v if v is not None else (-inf, inf)), *(w if w is not None else (-inf, inf)))
+
+
+def _every_step_sensors(robot: RobotModelSpec, step_s: float) -> RobotModelSpec:
+    """The robot with its lidar and IMU at the physics rate where the SDF's `<update_rate>` is 0 or absent.
+
+    SDF's default update rate is 0, which Gazebo (Classic and gz-sim) takes as "every physics step".
+    """
+    every_hz = 1.0 / step_s
+    changes: dict[str, Any] = {}
+    sensors = (("lidar", robot.lidar, "sensors.lidar.rate_hz, e.g. 5 for TurtleBot3's LDS"), ("imu", robot.imu, ""))
+    for key, spec, override in sensors:
+        if spec is None or spec.rate_hz > 0.0:
+            continue
+        fix = (
+            f"give the sensor an <update_rate> (or set {override})" if override else "give the sensor an <update_rate>"
+        )
+        _log.warning(
+            "robot %s: %s %r has no <update_rate> (or 0): it updates at every physics step, %g Hz, as in Gazebo; %s",
+            robot.name, key, spec.name, every_hz, fix,
+        )  # fmt: skip
+        changes[key] = dataclasses.replace(spec, rate_hz=every_hz)
+    return dataclasses.replace(robot, **changes) if changes else robot
 
 
 def fmu_drive_section(sc: Scenario) -> FmuDrive:
@@ -150,9 +181,34 @@ def scenario_robot(scenario: Scenario, *, entry: str = "") -> RobotModelSpec:
         WorldError: The loader's error, led by the scenario key (`robot.model`, `robots[1].robot.model`).
     """
     try:
-        return load_robot(scenario.robot.model, model_path=scenario.world.model_path)
+        robot = load_robot(scenario.robot.model, model_path=scenario.world.model_path)
     except WorldError as err:
         raise err.with_context(before=f"{entry}robot.model: ") from None
+    for warning in robot.warnings:  # what the model says that the twin reads otherwise (a drive's own numbers...)
+        _log.warning("%srobot.model: %s", entry, warning)
+    return robot
+
+
+def driven_robot(scenario: Scenario, *, entry: str = "") -> RobotModelSpec:
+    """The scenario's robot as a run drives it, with a differential drive.
+
+    Its model (`scenario_robot`) with the scenario's lidar settings and every sensor whose
+    `<update_rate>` is 0 at the physics rate.
+
+    Raises:
+        WorldError: The model cannot be loaded, or has no differential drive the twin can run.
+        ConfigError: Lidar settings for a robot with no lidar.
+    """
+    robot = _lidar_spec(scenario_robot(scenario, entry=entry), scenario.sensors.lidar)
+    robot = _every_step_sensors(robot, scenario.physics.step_s)
+    if robot.drive is None:
+        msg = (
+            f"{entry}robot.model: {robot.source}: model {robot.name!r} has no differential drive the twin can run: "
+            "give it a diff-drive plugin naming its wheel joints (gazebo_ros_diff_drive's or gz-sim's DiffDrive, "
+            "<left_joint>/<right_joint>), or two revolute wheel joints whose names hold 'wheel' and 'left'/'right'"
+        )
+        raise WorldError(msg)
+    return robot
 
 
 _LOW_OBSTACLE_M = 0.2
@@ -244,11 +300,7 @@ class RobotGroup:
             WorldError: The robot model cannot be loaded.
             ConfigError: The model has no differential drive, or lidar overrides without a lidar.
         """
-        robot = _lidar_spec(scenario_robot(scenario, entry=entry), scenario.sensors.lidar)
-        if robot.drive is None:
-            msg = f"robot {robot.name!r} has no differential drive (wheel joints or a diff-drive plugin) in its SDF"
-            raise ConfigError(msg)
-        return cls(scenario, robot, namespace=namespace)
+        return cls(scenario, driven_robot(scenario, entry=entry), namespace=namespace)
 
     def spawn(self, scene: Scene) -> RobotBody:
         """Make the robot's collision body in the world's scene, checking its spawn pose is free.
@@ -451,8 +503,15 @@ class RobotGroup:
             mass_kg=robot.mass_kg,
             yaw_inertia_kgm2=_yaw_inertia(robot),
         )
+        drive_section = fmu_drive_section(sc)
+        if drive_section.fmu == "auto" and not robot.name.lower().startswith("turtlebot3"):
+            _log.warning(
+                "robot %s (%.3g kg) is no TurtleBot3: drive.fmu: auto gives it a TurtleBot3's wheel motors "
+                "(Dynamixel %s); give its own motor FMU (drive.fmu_file) or drive: {type: kinematic}",
+                robot.name, robot.mass_kg, "XL430-W250" if "burger" in robot.name.lower() else "XM430-W210",
+            )  # fmt: skip
         return FmuDrivetrain(
-            fmu_drive_section(sc),
+            drive_section,
             chassis,
             step_ns=self.step_ns,
             pose=pose,
@@ -460,7 +519,8 @@ class RobotGroup:
             free_distance=monitor.free_m,
             probe=monitor.check,
             bounding_radius_m=bounding_radius_m,
-            plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2,
+            plugin_wheel_acceleration_mps2=robot.drive.max_wheel_acceleration_mps2
+            or robot.drive.max_linear_acceleration_mps2,
             robot_name=robot.name,
             log_name=logger_name("fmu", self.namespace),
         )
@@ -568,6 +628,7 @@ class RobotGroup:
             motor_joints=names if fmu else (),
             motor_rate_hz=motor_rate,
             command_topic=self._drive_topic(robot.drive.command_topic, "cmd_vel"),
+            limits=_command_limits(robot.drive),
         )
         nodes.append(self.drive_node)
         if self.ekf is not None:

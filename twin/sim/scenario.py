@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
-from twin.core.config import FieldError
+from twin.core.config import FieldError, NameOrPath
 from twin.core.errors import TwinError
 from twin.core.native import compiler_candidates, find_compiler
 from twin.core.numbers import number_problem
@@ -88,7 +88,7 @@ class InitialPose:
 class RobotSection:
     """The robot: an SDF model by name (`model://NAME` on the model path) or a file, and its spawn pose."""
 
-    model: str
+    model: NameOrPath
     initial_pose: InitialPose = field(default_factory=InitialPose)
 
 

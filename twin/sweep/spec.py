@@ -39,7 +39,7 @@ from typing import Any, Literal
 import yaml
 
 from twin.core.code_identity import code_digest
-from twin.core.config import load_yaml, location, suggest
+from twin.core.config import NameOrPath, load_yaml, location, suggest
 from twin.core.errors import ConfigError
 from twin.core.numbers import number_problem
 
@@ -458,6 +458,8 @@ def _fix_paths(value: Any, tp: Any, base_dir: Path) -> Any:
     """Make the relative paths in a value of type `tp` absolute, relative to `base_dir`."""
     members = _members(tp)
     if isinstance(value, str):
+        if NameOrPath in members:  # a model's name stays; a path to one beside the file is made absolute
+            return str(NameOrPath.beside(value, base_dir))
         if Path in members:
             path = Path(value).expanduser()
             return os.path.normpath(path if path.is_absolute() else base_dir / path)

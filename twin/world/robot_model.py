@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Container, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -62,17 +62,9 @@ _CAMERA_TYPES = ("camera", "depth")
 # Gazebo's image formats the twin draws, and the sensor_msgs/Image encoding of each.
 _IMAGE_FORMATS = {"R8G8B8": "rgb8", "RGB_INT8": "rgb8", "L8": "mono8", "L_INT8": "mono8"}
 _MAX_IMAGE_SIDE = 8192
-_DIFF_DRIVE_PLUGINS = (
-    "libgazebo_ros_diff_drive.so",
-    "gz-sim-diff-drive-system",
-    "ignition-gazebo-diff-drive-system",
-    "libignition-gazebo-diff-drive-system.so",
-)
-_JOINT_STATE_PLUGINS = (
-    "libgazebo_ros_joint_state_publisher.so",
-    "gz-sim-joint-state-publisher-system",
-    "ignition-gazebo-joint-state-publisher-system",
-)
+# By `Plugin.kind` (any spelling Gazebo accepts: `libgz-sim8-diff-drive-system.so`, `ignition-gazebo-...`).
+_DIFF_DRIVE_PLUGINS = ("gazebo_ros_diff_drive", "gz-sim-diff-drive-system")
+_JOINT_STATE_PLUGINS = ("gazebo_ros_joint_state_publisher", "gz-sim-joint-state-publisher-system")
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -204,7 +196,13 @@ class DiffDriveSpec:
     max_wheel_acceleration_mps2: float | None = None
     """gazebo_ros_diff_drive's limit on the wheels' rim speed change (0 or None: unlimited)."""
     max_linear_acceleration_mps2: float | None = None
-    """gz-sim DiffDrive's limit on the body's linear acceleration."""
+    """gz-sim DiffDrive's limit on the body's linear acceleration (`max_linear_acceleration`, or its older
+    `max_acceleration`); the FMU drive takes it as its rim acceleration limit when the plugin gives no
+    `max_wheel_acceleration`."""
+    linear_velocity_limits_mps: tuple[float, float] | None = None
+    """gz-sim DiffDrive's commanded linear speed range (`min_`/`max_linear_velocity`, older `min_`/`max_velocity`)."""
+    angular_velocity_limits_radps: tuple[float, float] | None = None
+    """gz-sim DiffDrive's commanded turn rate range (`min_`/`max_angular_velocity`)."""
     max_wheel_torque_nm: float | None = None
     update_rate_hz: float | None = None
     command_topic: str = "cmd_vel"
@@ -273,6 +271,9 @@ class RobotModelSpec:
     warnings: tuple[str, ...] = ()
     cameras: tuple[CameraSpec, ...] = ()
     """Camera and depth sensors, in the SDF's order."""
+    links: tuple[Link, ...] = ()
+    """Every link of the model and its nested models, each `T_model` in the robot model's frame and
+    named as the robot's frames name it (a nested model's `hokuyo::link`)."""
 
     @property
     def mass_kg(self) -> float:
@@ -321,6 +322,15 @@ def _plugin_topic(element: XmlNode) -> str | None:
     for node in element.findall("plugin"):
         plugin = Plugin(name=node.get("name") or "", filename=node.get("filename") or "", element=node)
         remapped = _remapped(plugin)
+        ros = node.find("ros")
+        if ros is not None and plugin.kind.startswith("gazebo_ros_"):
+            # A gazebo_ros sensor plugin publishes `~/out` of its node (named as the plugin), in
+            # its `<ros><namespace>`: `~/out:=scan` in namespace `/dolly` is `/dolly/scan`.
+            target = remapped or f"{plugin.name or 'out'}/out"
+            namespace = (ros.text_at("namespace") or "").strip("/")
+            if target.startswith("~/"):
+                target = f"{plugin.name}/{target[2:]}"
+            return target if target.startswith("/") or not namespace else f"{namespace}/{target}"
         if remapped:
             return remapped
         for tag in ("topicName", "topic_name"):
@@ -548,12 +558,12 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
     Raises:
         WorldError: If the model has no links, or a plugin or sensor parameter is malformed.
     """
-    links = {link.name: link for link in model.all_links()}
+    links, all_joints, plugins = _flattened(model)
     if not links:
         msg = f"{model.source}: model {model.name!r} has no links; a robot needs at least one"
         raise WorldError(msg)
     warnings: list[str] = []
-    joints = {j.child: j for j in model.joints if j.parent != "world"}
+    joints = {j.child: j for j in all_joints if j.parent != "world"}
     # Every frame of the tree in the model frame: links at their parent joint's frame (URDF style),
     # explicit <frame>s at their own pose. Edges: joint child -> parent, frame -> attached_to.
     T_model: dict[str, Mat4] = {}
@@ -624,24 +634,25 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
             )
         )
 
-    lidar: LidarSpec | None = None
+    lidars: list[LidarSpec] = []
     imu: ImuSpec | None = None
     cameras: list[CameraSpec] = []
     for link in links.values():
         for sensor in link.sensors:
             if sensor.type in _CAMERA_TYPES:
                 cameras.append(_camera(sensor, link, T_base_model))
-            elif sensor.type in _LIDAR_TYPES and lidar is None:
-                lidar = _lidar(sensor, link, T_base_model)
+            elif sensor.type in _LIDAR_TYPES:
+                lidars.append(_lidar(sensor, link, T_base_model))
             elif sensor.type == "imu" and imu is None:
                 imu = _imu(sensor, link, T_base_model)
+    lidar = _the_lidar(lidars, warnings)
 
-    plugins = [p for m in model.all_models() for p in m.plugins]
-    drive = _drive(model, plugins, links=links, T_base_model=T_base_model, warnings=warnings, root=root)
+    drive = _drive(model, plugins, all_joints, links=links, T_base_model=T_base_model, warnings=warnings, root=root)
     joint_states = None
+    joint_names = {j.name for j in all_joints}
     for plugin in plugins:
-        if plugin.filename in _JOINT_STATE_PLUGINS:
-            names = plugin.params("joint_name")
+        if plugin.kind in _JOINT_STATE_PLUGINS:
+            names = tuple(_in_scope(plugin, name, joint_names) for name in plugin.params("joint_name"))
             rate = _float_param(plugin, "update_rate")
             topic = plugin.param("topic") or _remapped(plugin) or "joint_states"
             joint_states = JointStateSpec(joints=names, rate_hz=rate if rate else 30.0, topic=topic)
@@ -662,7 +673,77 @@ def robot_spec_from_model(model: Model, *, base_frame: str = "base_footprint") -
         source=model.source,
         warnings=tuple(warnings),
         cameras=tuple(cameras),
+        links=tuple(links.values()),
     )
+
+
+def _flattened(model: Model) -> tuple[dict[str, Link], list[Joint], list[Plugin]]:
+    """The links, joints and plugins of a model and its nested models, in the model's frame.
+
+    A nested model's (an `<include>`d lidar's) link is named by its scope below the model,
+    `hokuyo::link`, as the model's own joints name it; its pose and its joints' are turned from
+    the nested model's frame into the model's. A nested model's joints name their links and a
+    nested plugin its joints in that scope too (`create::left_wheel`), each plugin remembering
+    its scope (`Plugin.scope`).
+    """
+    prefix = f"{model.scoped_name}::"
+    to_model = inverse(np.asarray(model.T_world))
+
+    def scoped(owner: Model, name: str) -> str:
+        if owner is model or name == "world":
+            return name
+        full = f"{owner.scoped_name}::{name}"
+        return full.removeprefix(prefix)
+
+    links: dict[str, Link] = {}
+    joints: list[Joint] = list(model.joints)
+    plugins: list[Plugin] = list(model.plugins)
+    for owner in model.all_models():
+        for link in owner.links:
+            if owner is model:
+                links[link.name] = link
+            else:
+                T = frozen_matrix(to_model @ np.asarray(link.T_world))
+                links[scoped(owner, link.name)] = replace(link, name=scoped(owner, link.name), T_model=T)
+        if owner is model:
+            continue
+        for joint in owner.joints:
+            joints.append(
+                replace(
+                    joint,
+                    name=scoped(owner, joint.name),
+                    parent=scoped(owner, joint.parent),
+                    child=scoped(owner, joint.child),
+                    T_model=frozen_matrix(to_model @ np.asarray(joint.T_world)),
+                )
+            )
+        plugins += [replace(p, scope=scoped(owner, "")) for p in owner.plugins]
+    return links, joints, plugins
+
+
+def _in_scope(plugin: Plugin, name: str, known: Container[str]) -> str:
+    """A name a nested model's plugin gives (a joint), as the robot names it: in the plugin's scope when there."""
+    scoped = f"{plugin.scope}{name}"
+    return scoped if plugin.scope and scoped in known else name
+
+
+def _the_lidar(lidars: Sequence[LidarSpec], warnings: list[str]) -> LidarSpec | None:
+    """The lidar the twin simulates: the model's first ray sensor that scans (more than one beam).
+
+    A one-beam ray sensor is a range finder (a Create's cliff sensors), not a scan; it is left out,
+    as is every lidar after the first, each named in a warning.
+    """
+    scans = [lidar for lidar in lidars if lidar.samples > 1]
+    beams = [lidar for lidar in lidars if lidar.samples <= 1]
+    if beams:
+        names = ", ".join(repr(b.name) for b in beams)
+        warnings.append(f"one-beam ray sensor(s) {names} (range finders, not a scan) are not simulated")
+    if len(scans) > 1:
+        others = ", ".join(f"{o.name!r} ({o.scan_topic})" for o in scans[1:])
+        warnings.append(
+            f"the twin simulates one lidar per robot: {scans[0].name!r} on {scans[0].scan_topic}, not {others}"
+        )
+    return scans[0] if scans else None
 
 
 def _topological(frames: list[FrameSpec], root: str) -> list[FrameSpec]:
@@ -722,18 +803,22 @@ def _wheel_radius(link: Link | None) -> float | None:
 def _drive(
     model: Model,
     plugins: Sequence[Plugin],
+    all_joints: Sequence[Joint],
     *,
     links: dict[str, Link],
     T_base_model: Mat4,
     warnings: list[str],
     root: str,
 ) -> DiffDriveSpec | None:
-    plugin = next((p for p in plugins if p.filename in _DIFF_DRIVE_PLUGINS), None)
-    by_name = {j.name: j for j in model.joints}
+    plugin = next((p for p in plugins if p.kind in _DIFF_DRIVE_PLUGINS), None)
+    by_name = {j.name: j for j in all_joints}
     left_name = plugin.param("left_joint") if plugin is not None else None
     right_name = plugin.param("right_joint") if plugin is not None else None
+    if plugin is not None:
+        left_name = _in_scope(plugin, left_name, by_name) if left_name is not None else None
+        right_name = _in_scope(plugin, right_name, by_name) if right_name is not None else None
     if left_name is None or right_name is None:
-        wheels = [j for j in model.joints if j.type in (JointType.REVOLUTE, JointType.CONTINUOUS) and "wheel" in j.name]
+        wheels = [j for j in all_joints if j.type in (JointType.REVOLUTE, JointType.CONTINUOUS) and "wheel" in j.name]
         left_name = left_name or next((j.name for j in wheels if "left" in j.name), None)
         right_name = right_name or next((j.name for j in wheels if "right" in j.name), None)
     if left_name is None or right_name is None:
@@ -759,11 +844,18 @@ def _drive(
     if radius is None:
         radius = geom_radius
     elif geom_radius is not None and abs(geom_radius - radius) > 0.02 * radius:
-        warnings.append(f"diff drive wheel radius {radius} m differs from the wheel collision radius {geom_radius} m")
+        warnings.append(
+            f"diff drive wheel radius {radius} m differs from the wheel collision radius {geom_radius} m: the "
+            f"twin drives with {radius} m (Gazebo's physics rolls the collision's, {geom_radius / radius:.2f}x as far)"
+        )
     if separation is None:
         separation = geom_separation
     elif abs(geom_separation - separation) > 0.02 * separation:
-        warnings.append(f"diff drive wheel separation {separation} m differs from the joints' {geom_separation:.4f} m")
+        warnings.append(
+            f"diff drive wheel separation {separation} m differs from the joints' {geom_separation:.4f} m: the twin "
+            f"turns with {separation} m (Gazebo's physics turns on the joints', {separation / geom_separation:.2f}x "
+            "the commanded rate)"
+        )
     if radius is None or radius <= 0 or separation <= 0:
         msg = f"{model.source}: cannot tell the wheel radius and separation of model {model.name!r}"
         raise WorldError(msg)
@@ -775,7 +867,7 @@ def _drive(
             wheel_radius_m=radius,
             base_frame=root,
         )
-    if plugin.filename == "libgazebo_ros_diff_drive.so":
+    if plugin.kind == "gazebo_ros_diff_drive":
         command_topic, odometry_topic = _gazebo_ros_topic(plugin, "cmd_vel"), _gazebo_ros_topic(plugin, "odom")
         legacies = (("command_topic", "cmd_vel", command_topic), ("odometry_topic", "odom", odometry_topic))
         for legacy, own, topic in legacies:
@@ -794,7 +886,9 @@ def _drive(
         wheel_separation_m=separation,
         wheel_radius_m=radius,
         max_wheel_acceleration_mps2=_float_param(plugin, "max_wheel_acceleration"),
-        max_linear_acceleration_mps2=_float_param(plugin, "max_linear_acceleration"),
+        max_linear_acceleration_mps2=_first_param(plugin, "max_linear_acceleration", "max_acceleration"),
+        linear_velocity_limits_mps=_limits(plugin, "linear_velocity", "velocity"),
+        angular_velocity_limits_radps=_limits(plugin, "angular_velocity"),
         max_wheel_torque_nm=_float_param(plugin, "max_wheel_torque"),
         update_rate_hz=_float_param(plugin, "update_rate"),
         command_topic=command_topic,
@@ -806,6 +900,26 @@ def _drive(
         publish_wheel_tf=_bool_param(plugin, "publish_wheel_tf", False),
         plugin=plugin.filename,
     )
+
+
+def _first_param(plugin: Plugin, *tags: str) -> float | None:
+    """The first of the plugin's numeric parameters it gives (None: none of them)."""
+    for tag in tags:
+        value = _float_param(plugin, tag)
+        if value is not None:
+            return value
+    return None
+
+
+def _limits(plugin: Plugin, *names: str) -> tuple[float, float] | None:
+    """gz-sim DiffDrive's `min_NAME`/`max_NAME` range (either alone: the other is its negative), or None."""
+    high = _first_param(plugin, *(f"max_{n}" for n in names))
+    low = _first_param(plugin, *(f"min_{n}" for n in names))
+    if high is None and low is None:
+        return None
+    high = high if high is not None else -low  # type: ignore[operator]
+    low = low if low is not None else -high
+    return (low, high)
 
 
 def load_robot(

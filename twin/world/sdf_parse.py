@@ -180,30 +180,25 @@ _SUN_NAMES = {"sun"}
 
 # Plugins whose effect the twin reproduces itself (diff drive, joint states, sensors) or that only
 # matter to Gazebo's own machinery; any other plugin is warned about once.
-_UNDERSTOOD_PLUGINS = (
-    "libgazebo_ros_diff_drive.so",
-    "libgazebo_ros_joint_state_publisher.so",
-    "libgazebo_ros_ray_sensor.so",
-    "libgazebo_ros_imu_sensor.so",
-    "libgazebo_ros_camera.so",
-    "libgazebo_ros_init.so",
-    "libgazebo_ros_factory.so",
-    "libgazebo_ros_state.so",
-    "gz-sim-diff-drive-system",
-    "gz-sim-joint-state-publisher-system",
-    "gz-sim-physics-system",
-    "gz-sim-sensors-system",
-    "gz-sim-imu-system",
-    "gz-sim-scene-broadcaster-system",
-    "gz-sim-user-commands-system",
-    "gz-sim-contact-system",
-    "ignition-gazebo-diff-drive-system",
-    "ignition-gazebo-joint-state-publisher-system",
-    "ignition-gazebo-physics-system",
-    "ignition-gazebo-sensors-system",
-    "ignition-gazebo-imu-system",
-    "ignition-gazebo-scene-broadcaster-system",
-    "ignition-gazebo-user-commands-system",
+_UNDERSTOOD_PLUGINS = frozenset(  # by `plugin_kind`: any spelling of each library
+    {
+        "gazebo_ros_diff_drive",
+        "gazebo_ros_joint_state_publisher",
+        "gazebo_ros_ray_sensor",
+        "gazebo_ros_imu_sensor",
+        "gazebo_ros_camera",
+        "gazebo_ros_init",
+        "gazebo_ros_factory",
+        "gazebo_ros_state",
+        "gz-sim-diff-drive-system",
+        "gz-sim-joint-state-publisher-system",
+        "gz-sim-physics-system",
+        "gz-sim-sensors-system",
+        "gz-sim-imu-system",
+        "gz-sim-scene-broadcaster-system",
+        "gz-sim-user-commands-system",
+        "gz-sim-contact-system",
+    }
 )
 
 
@@ -401,7 +396,7 @@ class SdfReader:
         """Read a `<plugin>`, warned about when the twin does not run it."""
         filename = node.get("filename") or ""
         plugin = Plugin(name=node.get("name") or "", filename=filename, element=node, where=node.where)
-        if filename and filename not in _UNDERSTOOD_PLUGINS:
+        if filename and plugin.kind not in _UNDERSTOOD_PLUGINS:
             self.warn(
                 f"plugin:{filename}",
                 f"{node.where}: plugin {filename!r} is not run by the twin; kept as data",

@@ -9,6 +9,7 @@ Gazebo does (`house::table::link`).
 from __future__ import annotations
 
 import enum
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +42,7 @@ __all__ = [
     "Sphere",
     "Visual",
     "World",
+    "plugin_kind",
 ]
 
 
@@ -202,6 +204,13 @@ class Plugin:
     filename: str
     element: XmlNode
     where: str = ""
+    scope: str = ""
+    """The nested model it belongs to below the robot's model, `create::` (empty: the model's own)."""
+
+    @property
+    def kind(self) -> str:
+        """The plugin's library as one name whatever its spelling (`plugin_kind`)."""
+        return plugin_kind(self.filename)
 
     def param(self, tag: str) -> str | None:
         """Return the text of a direct child element, or None."""
@@ -210,6 +219,20 @@ class Plugin:
     def params(self, tag: str) -> tuple[str, ...]:
         """Return the texts of every direct child element with this tag."""
         return tuple(child.text for child in self.element.findall(tag))
+
+
+def plugin_kind(filename: str) -> str:
+    """A plugin's library as one name, whatever spelling Gazebo finds it by.
+
+    `libgz-sim8-diff-drive-system.so`, `ignition-gazebo-diff-drive-system` and
+    `gz-sim-diff-drive-system` are all `gz-sim-diff-drive-system`; `libgazebo_ros_diff_drive.so` is
+    `gazebo_ros_diff_drive`.
+    """
+    name = filename.strip().replace("\\", "/").rsplit("/", 1)[-1]
+    for suffix in (".so", ".dylib", ".dll"):
+        name = name.removesuffix(suffix)
+    name = name.removeprefix("lib")
+    return re.sub(r"^(?:ignition-gazebo|gz-sim)\d*-", "gz-sim-", name)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True, eq=False)

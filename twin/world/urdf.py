@@ -73,10 +73,10 @@ def urdf_from_robot(robot: RobotModelSpec) -> str:
     frames = [robot.base_frame, *(f.name for f in robot.frames)]
     T_base = {name: robot.T_base(name) for name in frames}
     # Which frame each SDF link's contents belong to: the link's own frame when it has one.
-    owner = {link.name: link.name for link in robot.model.all_links() if link.name in T_base}
+    owner = {link.name: link.name for link in robot.links if link.name in T_base}
     body: dict[str, list[str]] = {name: [] for name in frames}
     T_base_model = np.asarray(robot.T_base_model)
-    for link in robot.model.all_links():
+    for link in robot.links:
         host = owner.get(link.name, robot.base_frame)
         T_frame_link = inverse(T_base[host]) @ T_base_model @ np.asarray(link.T_model)
         if link.inertial is not None:
