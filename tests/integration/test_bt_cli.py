@@ -129,6 +129,21 @@ def test_log_scripts_unimplemented_nodes(tmp_path: Path) -> None:
     assert ["spin", "SUCCESS"] in [[c["path"], c["new"]] for c in log["changes"]]
 
 
+def test_log_warns_of_a_script_that_names_no_scripted_leaf(tmp_path: Path) -> None:
+    # `sequence` is a control node and `spim` names nothing: neither script can be played.
+    tree = tmp_path / "t.xml"
+    tree.write_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="M"><Sequence name="s"><Dock name="dock"/></Sequence></BehaviorTree></root>'
+    )
+    scripts = '{"dock": ["FAILURE"], "s": ["RUNNING"], "spim": ["RUNNING"]}'
+    result = twin("tree", "log", tree, "--scripts", scripts, "--json")
+    assert result.returncode == 0, result.stderr
+    warnings = [line for line in result.stderr.splitlines() if "names no scripted leaf" in line]
+    assert len(warnings) == 2 and "'s'" in warnings[0] and "'spim'" in warnings[1], result.stderr
+    assert "(scripted leaves: dock)" in warnings[0]
+    assert [t["status"] for t in json.loads(result.stdout)["ticks"]] == ["FAILURE"]
+
+
 def test_log_of_a_conformance_case_uses_its_sleeps_as_time() -> None:
     result = twin("tree", "log", CASES / "037_timeout_wall_time_halts_child.json")
     assert result.returncode == 0, result.stderr
@@ -195,6 +210,17 @@ def test_validate_and_show_take_node_types_from_a_palette(tmp_path: Path) -> Non
     typo = twin("tree", "validate", tree, "--nodes", palette)
     assert typo.returncode == 6
     assert f"{tree}:5: unknown port 'sped' of <DriveOnHeading>" in typo.stderr
+
+
+def test_nav2s_own_trees_validate_with_nav2s_own_palette() -> None:
+    # Humble's palette lags its code (no `is_recovery` of Spin, which Humble's odometry_calibration.xml
+    # and Spin itself have): a palette adds ports to the twin's Nav2 declarations, it takes none away.
+    humble = REPO.parent / "shared" / "fixtures" / "nav2" / "nav2_humble"
+    trees = sorted((humble / "behavior_trees").glob("*.xml"))
+    assert len(trees) == 12
+    for tree in trees:
+        result = twin("tree", "validate", tree, "--nodes", humble / "nav2_tree_nodes.xml")
+        assert result.returncode == 0, result.stderr
 
 
 def test_a_palette_without_tree_nodes_model_is_one_clear_line(tmp_path: Path) -> None:

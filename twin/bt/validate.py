@@ -265,8 +265,9 @@ def declare_node_models(factory: BehaviorTreeFactory, path: Path) -> list[str]:
     """Declare every node type of a `<TreeNodesModel>` file on the factory, without implementation.
 
     Such a file is a node palette: Groot's export, or Nav2's `nav2_tree_nodes.xml` listing every
-    Nav2 plugin with its ports. Types with an implementation keep their own ports; the palette
-    replaces bare declarations (the twin's own list of Nav2 leaves follows one Nav2 release).
+    Nav2 plugin with its ports. Types with an implementation keep their own ports; a bare
+    declaration (the twin's own list of Nav2 leaves follows one Nav2 release) takes the palette's
+    ports besides its own.
     Returns the IDs declared.
 
     Raises:
@@ -292,11 +293,15 @@ def declare_node_models(factory: BehaviorTreeFactory, path: Path) -> list[str]:
         if not node_id:
             fail(entry.location, f"<{entry.tag}> in <TreeNodesModel> needs an ID attribute")
         existing = factory.manifests.get(node_id)
+        ports = model_ports(entry, fail)
         if existing is not None:
             if existing.bound:
                 continue  # an implementation declares its own ports
-            factory.unregister(node_id)  # a declaration only (such as Nav2's leaves): the palette is newer
-        ports = model_ports(entry, fail)
+            # A declaration only (the twin's Nav2 leaves): the palette may be another release's, and
+            # palettes lag their code (Humble's lists no `is_recovery` of Spin, which Humble's Spin
+            # has), so the node takes the ports of both, the palette's where both name one.
+            ports = {**existing.ports, **ports}
+            factory.unregister(node_id)
         factory.declare_node_type(node_id, kind, ports.values(), description=f"declared in {path}")
         declared.append(node_id)
     return declared

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import random
 import sys
 from collections.abc import Sequence
@@ -126,7 +127,7 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         epilog=(
             "examples:\n"
             "  twin tree log trees/tree.xml\n"
-            '  twin tree log trees/nav_tree_queue.xml --seed 7 --scripts \'{"go_to_loc": ["RUNNING"]}\'\n'
+            '  twin tree log trees/search_naive.xml --scripts \'{"look_for_obj_in_location1": ["FAILURE"]}\'\n'
             "  twin tree log run.jsonl"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -435,9 +436,11 @@ def _run_xml(args: argparse.Namespace) -> StatusLog:
     except ConfigError as err:
         raise err.with_context(before="--location-file: ") from None
     factory = _factory(seed=args.seed, polls_to_arrive=args.polls_to_arrive)
-    _script_unknown_types(args.file, factory, _read_scripts(args.scripts))
+    scripts = _read_scripts(args.scripts)
+    _script_unknown_types(args.file, factory, scripts)
     clock = ManualClock()
     tree = factory.create_tree_from_file(args.file, main_tree=args.main_tree, clock=clock)
+    _warn_unused_scripts(tree, scripts)
     tree.root_blackboard.set(LOCATION_FILE_KEY, str(args.location_file))
     log = StatusLog()
     tree.add_listener(log)
@@ -448,6 +451,21 @@ def _run_xml(args: argparse.Namespace) -> StatusLog:
             break
         clock.advance(args.period_ms * NS_PER_S // 1000)
     return log
+
+
+def _warn_unused_scripts(tree: Any, scripts: dict[str, tuple[Step, ...]]) -> None:
+    """Warn of each --scripts path that names no scripted leaf (a node with an implementation runs it)."""
+    from twin.bt.conformance import ScriptedAction, ScriptedCondition
+
+    leaves = sorted(n.full_path for n in tree.nodes if isinstance(n, ScriptedAction | ScriptedCondition))
+    for path in scripts:
+        if path not in leaves:
+            scripted = ", ".join(leaves) if leaves else "none: every leaf of this tree has an implementation"
+            logging.getLogger("twin.cli.tree").warning(
+                "--scripts: %r names no scripted leaf, so its script is not played (scripted leaves: %s)",
+                path,
+                scripted,
+            )
 
 
 def _run_case(path: Path) -> StatusLog:
