@@ -85,6 +85,10 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
+        usage=(
+            "twin analyze [-h] [--debug] [-v] [-q] [--out DIR] [--json] [options] BAG\n"
+            "       twin analyze compare [-h] [--namespace NS [NS]] [compare options] A B"
+        ),
     )
     parser.add_argument("bag", metavar="BAG", help="bag folder or .mcap/.db3 file to analyse (or `compare`)")
     parser.add_argument("rest", nargs="*", metavar="B", help=argparse.SUPPRESS)

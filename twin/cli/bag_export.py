@@ -26,7 +26,7 @@ def add_export_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     """Add `twin bag export` to the `bag` group's subparsers."""
     parser = sub.add_parser(
         "export",
-        help="write topics as CSV or Parquet tables (one file per topic, ROS field names as columns)",
+        help="write topics as CSV or Parquet tables (one file per topic, ROS field names as columns), or images as PNG",
         description="Export a bag's topics as tables: one row per message, one column per field.",
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

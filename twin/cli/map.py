@@ -13,7 +13,7 @@ _EPILOG = """\
 examples:
   twin map save ../shared/fixtures/gazebo_classic/worlds/turtlebot3_world.world \\
       --model-path ../shared/fixtures/gazebo_classic/models --out /tmp/tb3_world/map.yaml
-  twin map save sdf/worlds/house.sdf --out maps/house/map.yaml --free -2.0 1.0
+  twin map save sdf/worlds/house.sdf --out maps/house/map.yaml --free 0.0 0.0   (where the default scenario spawns)
   twin map save sdf/worlds/house.sdf --out /tmp/house/map.yaml --height 0.182   (burger's lidar)
 
 The world's static geometry is cut at the lidar's height (default 0.132 m, the TurtleBot3 waffle's
@@ -80,6 +80,8 @@ _MAX_RESOLUTION_M = 10.0
 
 
 def _save(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
     from twin.core.numbers import number_problem
@@ -117,8 +119,16 @@ def _save(args: argparse.Namespace) -> int:
         resolution_m=args.resolution,
         free_xy_m=tuple(args.free) if args.free else None,
     )
-    image = save_map(occupancy, args.out, image_format=args.format)
     data = occupancy.data
+    edge = np.concatenate([data[0], data[-1], data[:, 0], data[:, -1]])
+    if args.free and (edge == 0).any():
+        logging.getLogger("twin.cli.map").warning(
+            "--free %g %g: that point's free space reaches the map's edge, so it lies outside the world's walls "
+            "and what they enclose stays unknown; give a point inside (or leave --free out: the largest enclosed "
+            "region)",
+            *args.free,
+        )
+    image = save_map(occupancy, args.out, image_format=args.format)
     print(
         f"{args.out}: {occupancy.width} x {occupancy.height} cells at {occupancy.resolution_m} m, origin "
         f"({occupancy.origin_x_m:.3f}, {occupancy.origin_y_m:.3f}); free {int((data == 0).sum())}, "

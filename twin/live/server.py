@@ -41,7 +41,7 @@ _log = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765  # foxglove_bridge's default
-_TIME_PERIOD_NS = 10_000_000  # broadcast the server time at most at 100 Hz, as /clock runs
+_TIME_PERIOD_NS = 10_000_000  # broadcast the server time at most 100 times a sim second
 _TF_STATIC_KEEP = 100  # /tf_static: every message counts (each carries its own frames), up to this many
 
 

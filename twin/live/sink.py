@@ -2,7 +2,7 @@
 
 The executor hands every recorded publication to each of its sinks in turn: the recorder first,
 then `LiveSink` (`Simulation(sinks=[LiveSink(...)])`). It needs no change to the loop: pacing
-happens here, as each message's sim time arrives (at least 100 times a sim second, from `/clock`),
+happens here, as each message's sim time arrives (hundreds of times a sim second: `/imu` alone is 200 Hz),
 so a run at `speed` 1 publishes in real time, and so does the recorder.
 """
 

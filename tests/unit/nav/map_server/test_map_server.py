@@ -220,3 +220,14 @@ def test_map_save_refuses_a_missing_include_unless_told_to_skip_it_and_says_what
     (warning,) = [line for line in done.stderr.splitlines() if "VendingMachine" in line]
     assert f"{world}:3:" in warning and "skipped" in warning
     assert (load_map(out).data == 100).any()  # the wall is mapped
+
+
+def test_map_save_warns_when_the_free_point_is_outside_the_walls(tmp_path: Path) -> None:
+    # (-2, 1) is outside the house's west wall: its free space is the ring around the house.
+    house = REPO / "sdf" / "worlds" / "house.sdf"
+    outside = run_twin("map", "save", str(house), "--out", str(tmp_path / "a" / "map.yaml"), "--free", "-2.0", "1.0")
+    assert outside.returncode == 0, outside.stderr
+    assert "--free -2 1: that point's free space reaches the map's edge" in outside.stderr
+    inside = run_twin("map", "save", str(house), "--out", str(tmp_path / "b" / "map.yaml"), "--free", "0", "0")
+    assert inside.returncode == 0 and "map's edge" not in inside.stderr, inside.stderr
+    assert (load_map(tmp_path / "b" / "map.yaml").data == 0).sum() > (load_map(tmp_path / "a" / "map.yaml").data == 0).sum()
