@@ -742,3 +742,14 @@ def test_a_speed_too_slow_for_a_clock_is_refused(
     err = capsys.readouterr().err
     assert "--speed must be at least 1e-06 (a million times slower than real time)" in err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_spawn_far_outside_the_world_is_warned_of(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # 100 m east of the house: nothing of it within the lidar's 3.5 m, a Nav2 mission finds no path.
+    path = write_scenario(tmp_path, {"robot.initial_pose.x_m": 100.0})
+    code, _, err = run(["scenario", "check", str(path)], capsys)
+    assert code == 0, err
+    assert "robot.initial_pose: (100, 0) is 93.7 m outside the world's models" in err
+    near = write_scenario(tmp_path, {"robot.initial_pose.x_m": 0.5})
+    code, _, err = run(["scenario", "check", str(near)], capsys)
+    assert code == 0 and "outside the world" not in err, err

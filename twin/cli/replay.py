@@ -12,7 +12,7 @@ examples:
   twin replay ../shared/fixtures/bags/tb3_waffle_gazebo_humble \\
       --world ../shared/fixtures/gazebo_classic/worlds/turtlebot3_world.world \\
       --model-path ../shared/fixtures/gazebo_classic/models --out /tmp/replay
-  twin replay BAG --world W --model-path M --drive fmu      the FMU drivetrain instead of ideal wheels
+  twin replay BAG --world W --model-path M --drive fmu      the robot's own motors instead of ideal wheels
   twin replay bags/fleet --world sdf/worlds/house.sdf --namespace robot2   one robot of a fleet
 
 Writes into --out (default: bags/<BAG name>_replay): scenario.yaml (the replay as a scenario
@@ -23,7 +23,8 @@ or among the project's models, else the model whose wheels (joint names, separat
 match the URDF's; a bag that matches none is refused: choose with --robot. A fleet's bag (robots
 under namespaces) needs --namespace NS: that robot's /NS/cmd_vel, /NS/ground_truth/odom (else
 /NS/odom) and /NS/robot_description are used; --topic and --pose-topic may be given without /NS. --drive fmu runs that
-robot's own motors as `twin simulate` does (fmu: auto, velocity-servo). Exit codes: 0 done (and
+robot's own motors as `twin simulate` does (fmu: auto, velocity-servo); without --drive, a bag a twin
+run made replays with the drive its provenance records, any other with ideal wheels. Exit codes: 0 done (and
 within --max-position-error), 1 over it, 2 scenario error (or no robot matches the bag), 3 world
 error, 4 FMU error, 5 bag error (e.g. no /cmd_vel to replay).
 """
@@ -54,7 +55,9 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         "--robot", metavar="MODEL", help="robot model (default: the model matching the bag's /robot_description)"
     )
     parser.add_argument(
-        "--drive", choices=("kinematic", "fmu"), default="kinematic", help="drivetrain (default: kinematic)"
+        "--drive",
+        choices=("kinematic", "fmu"),
+        help="drivetrain (default: a twin bag's own, from its provenance; else kinematic)",
     )
     parser.add_argument("--topic", default="/cmd_vel", help="command topic in the bag (default: /cmd_vel)")
     parser.add_argument(
@@ -111,6 +114,30 @@ def _robot_topics(
     return _in_namespace(topic, ns), pose_topic, ns
 
 
+def _drive(chosen: str | None, bag: Path, namespace: str | None) -> tuple[str, str]:
+    """The replay's drive section (flow YAML) and its name for the summary.
+
+    `--drive` when given; else the drive a twin run recorded in the bag's provenance (its own motor
+    FMU, as it ran), so a twin bag replays as it was made; else ideal wheels (a Gazebo bag).
+    """
+    if chosen is not None:
+        return chosen, "{type: kinematic}" if chosen == "kinematic" else _FMU_DRIVE
+    import yaml
+
+    from twin.bag.provenance import read_provenance
+
+    provenance = read_provenance(bag)
+    recorded = yaml.safe_load(provenance.get("scenario_yaml", "")) if provenance else None
+    section = recorded.get("drive") if isinstance(recorded, dict) else None
+    if isinstance(recorded, dict) and namespace is not None:
+        for entry in recorded.get("robots") or ():
+            if isinstance(entry, dict) and namespace in (entry.get("namespace"), entry.get("name")):
+                section = entry.get("drive", section)
+    if not isinstance(section, dict) or section.get("type") not in ("kinematic", "fmu"):
+        return "kinematic", "{type: kinematic}"
+    return f"{section['type']}, the bag's own", json.dumps(section)
+
+
 def _fleet_robot(bag: Path, namespace: str, model_path: list[Path]) -> Any:
     """The model of a fleet robot, from its `/<namespace>/robot_description`."""
     from twin.bag import read_messages
@@ -156,7 +183,7 @@ def _replay(args: argparse.Namespace) -> int:
 
         chosen = robot_from_bag(bag, args.model_path)
         robot, robot_reason = chosen.model, chosen.reason
-    drive = "{type: kinematic}" if args.drive == "kinematic" else _FMU_DRIVE
+    drive_name, drive = _drive(args.drive, bag, namespace)
     model_path = "[" + ", ".join(_yaml_path(p) for p in args.model_path) + "]"
     pose_topic = json.dumps(pose_topic_arg) if pose_topic_arg else "null"
     scenario_file = out / "scenario.yaml"
@@ -186,7 +213,7 @@ def _replay(args: argparse.Namespace) -> int:
     d.update(
         robot=robot,
         robot_reason=robot_reason,
-        drive=args.drive,
+        drive=drive_name,
         replay_bag=str(run_bag),
         scenario=str(scenario_file),
         sim_s=summary.sim_s,
@@ -198,7 +225,7 @@ def _replay(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(d, indent=2))
     else:
-        print(f"replayed {bag} with {robot} ({args.drive} drive): {summary.sim_s:.2f} s in {summary.wall_s:.2f} s")
+        print(f"replayed {bag} with {robot} ({drive_name} drive): {summary.sim_s:.2f} s in {summary.wall_s:.2f} s")
         print(f"robot: {robot} ({robot_reason})")
         print("\n".join(result.summary_lines()))
         print(f"output: {out} (scenario.yaml, bag/, comparison.json, overlay.png, compare_error.png)")

@@ -266,7 +266,33 @@ def spawn_monitor(
                     f"is for slabs of at most {100 * THIN_FLOOR_M:g} cm"
                 )
         raise ConfigError(msg)
+    far = far_from_world(scene, robot, pose)
+    if far is not None:
+        _log.warning("%s", far)
     return body, monitor
+
+
+def far_from_world(scene: Scene, robot: RobotModelSpec, pose: InitialPose) -> str | None:
+    """Why a spawn pose is likely a mistake: beyond the lidar's reach of every model of the world (None: it is not).
+
+    A robot out there sees nothing of the world, and a map made from the world reaches it only
+    across empty space: a Nav2 mission then fails with "no path" goal after goal.
+    """
+    bounds = scene.bounds
+    if bounds is None:
+        return None
+    (x0, y0, _), (x1, y1, _) = bounds
+    dx = max(x0 - pose.x_m, 0.0, pose.x_m - x1)
+    dy = max(y0 - pose.y_m, 0.0, pose.y_m - y1)
+    reach = robot.lidar.range_max_m if robot.lidar is not None else 3.5
+    gap = math.hypot(dx, dy)
+    if gap <= reach:
+        return None
+    return (
+        f"robot.initial_pose: ({pose.x_m:g}, {pose.y_m:g}) is {gap:.1f} m outside the world's models "
+        f"(x {x0:.2f} to {x1:.2f} m, y {y0:.2f} to {y1:.2f} m), beyond the lidar's {reach:g} m: the robot sees "
+        "nothing of the world there; did you mean a pose inside it?"
+    )
 
 
 class RobotGroup:

@@ -332,3 +332,17 @@ def test_commands_no_clock_puts_among_the_poses_are_one_line(gazebo_bag: Path, t
     bag = _stamped_copy(gazebo_bag, tmp_path / "lost", lambda t: 0, ["/odom"])
     with pytest.raises(BagError, match=r"no command on /cmd_vel falls within the poses on /odom .* clocks disagree"):
         load_commands(ReplayMission(bag=bag, pose_topic="/odom"))
+
+
+def test_a_twin_bag_replays_with_the_drive_its_provenance_records(twin_bag: Path, tmp_path: Path) -> None:
+    # The default mission's bag records its FMU drive: replayed with it, the run is the same run.
+    house = Path(__file__).resolve().parents[3] / "sdf" / "worlds" / "house.sdf"
+    proc = run_twin("replay", str(twin_bag), "--world", str(house), "--out", str(tmp_path / "out"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    assert result["drive"] == "fmu, the bag's own"
+    assert result["position_error_max_m"] < 1e-6
+    ideal = run_twin(
+        "replay", str(twin_bag), "--world", str(house), "--out", str(tmp_path / "k"), "--drive", "kinematic"
+    )
+    assert ideal.returncode == 0 and "(kinematic drive)" in ideal.stdout, ideal.stderr

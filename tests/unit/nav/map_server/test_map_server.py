@@ -230,4 +230,6 @@ def test_map_save_warns_when_the_free_point_is_outside_the_walls(tmp_path: Path)
     assert "--free -2 1: that point's free space reaches the map's edge" in outside.stderr
     inside = run_twin("map", "save", str(house), "--out", str(tmp_path / "b" / "map.yaml"), "--free", "0", "0")
     assert inside.returncode == 0 and "map's edge" not in inside.stderr, inside.stderr
-    assert (load_map(tmp_path / "b" / "map.yaml").data == 0).sum() > (load_map(tmp_path / "a" / "map.yaml").data == 0).sum()
+    assert (load_map(tmp_path / "b" / "map.yaml").data == 0).sum() > (
+        load_map(tmp_path / "a" / "map.yaml").data == 0
+    ).sum()
