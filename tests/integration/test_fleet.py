@@ -241,15 +241,15 @@ def test_a_fleet_scenario_with_an_unknown_per_robot_key_is_refused(tmp_path: Pat
         # a robot's own lidar settings are checked as the top level's are (not an internal error at the run)
         (
             "{name: b, robot: {initial_pose: {x_m: 1.5}}, sensors: {lidar: {samples: 0}}}",
-            ": robots[1].sensors.lidar.samples: must be between 1 and 100000, got 0",
+            ":5: robots[1].sensors.lidar.samples: must be between 1 and 100000, got 0",
         ),
         (
             "{name: b, robot: {initial_pose: {x_m: 1.5}}, sensors: {lidar: {angle_min_rad: 1.0, angle_max_rad: -1.0}}}",
-            ": robots[1].sensors.lidar.angle_min_rad: 1.0 is not below angle_max_rad -1.0",
+            ":5: robots[1].sensors.lidar.angle_min_rad: 1.0 is not below angle_max_rad -1.0",
         ),
         (
             "{name: b, robot: {initial_pose: {x_m: 1.5}}, sensors: {lidar: {range_min_m: 50}}}",
-            ": robots[1].sensors.lidar.range_min_m: the lidar's range would be 50 .. 3.5 m",
+            ":5: robots[1].sensors.lidar.range_min_m: the lidar's range would be 50 .. 3.5 m",
         ),
         # the tools take every topic under /a/ for robot a's
         ("{name: b, namespace: a/b}", ":5: robots[1].namespace: namespace 'a/b' is inside robots[0]'s namespace 'a'"),
@@ -287,7 +287,7 @@ def test_a_robots_own_tree_or_locations_file_refused_names_its_entry(
         result = run_twin(*command)
         assert result.returncode == code, result.stderr
         lines = result.stderr.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith(f"twin: error: {bad}: robots[1]: "), lines
+        assert len(lines) == 1 and lines[0].startswith(f"twin: error: {bad}:4: robots[1]: "), lines
         assert message in lines[0], lines
 
 
@@ -298,7 +298,7 @@ def test_robots_spawned_overlapping_are_refused(tmp_path: Path) -> None:
         result = run_twin(*command)
         assert result.returncode == 2
         assert result.stderr.strip().splitlines() == [
-            f"twin: error: {bad}: robots[1].robot.initial_pose: robots[0] (a) and robots[1] (b) are spawned "
+            f"twin: error: {bad}:4: robots[1].robot.initial_pose: robots[0] (a) and robots[1] (b) are spawned "
             "overlapping (0.200 m apart); move one robot's initial_pose"
         ]
     assert not (tmp_path / "bag").exists()
@@ -429,7 +429,7 @@ def test_a_robots_own_section_refused_by_its_model_or_drive_names_its_entry(
     for command in (("simulate", str(bad), "--out", str(tmp_path / "bag")), ("scenario", "check", str(bad))):
         result = run_twin(*command)
         assert result.returncode == code, result.stderr
-        assert result.stderr.strip().splitlines()[0].startswith(f"twin: error: {bad}: {message}"), result.stderr
+        assert result.stderr.strip().splitlines()[0].startswith(f"twin: error: {bad}:4: {message}"), result.stderr
 
 
 def test_scenario_check_lists_a_fleets_robots_each_with_its_own_spawn_model_and_mission() -> None:

@@ -753,3 +753,24 @@ def test_a_spawn_far_outside_the_world_is_warned_of(tmp_path: Path, capsys: pyte
     near = write_scenario(tmp_path, {"robot.initial_pose.x_m": 0.5})
     code, _, err = run(["scenario", "check", str(near)], capsys)
     assert code == 0 and "outside the world" not in err, err
+
+
+@pytest.mark.parametrize(
+    ("text", "where"),
+    [
+        ("name: x\nseed: -1\n", ":2: seed: must be a non-negative whole number"),
+        ("name: x\nsensors:\n  lidar: {rate_hz: -5}\n", ":3: sensors.lidar.rate_hz: must be a rate"),
+        ("name: x\nmission:\n  type: behavior_tree\n  tree: nonexist.xml\n", ":4: mission.tree: "),
+        ("name: x\nrobot:\n  model: nothere\n", ":3: robot.model: model 'nothere' not found"),
+        ("name: x\nnodes:\n  - {plugin: 'nomod:Cls'}\n", ":3: nodes[0].plugin: module 'nomod' not found"),
+    ],
+)
+def test_a_refused_scenario_value_names_its_line(
+    text: str, where: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write_scenario(tmp_path, {}, text)
+    for argv in (["scenario", "check", str(path)], ["simulate", str(path), "--out", str(tmp_path / "bag")]):
+        code, _, err = run(argv, capsys)
+        assert code != 0, err
+        line = assert_one_line_error(err)
+        assert line.startswith(f"twin: error: {path}{where}"), line  # the file once, then its line

@@ -495,6 +495,7 @@ def _run(
     sinks: list[Sink],
     provenance: Mapping[str, str] | None,
 ) -> int:
+    from twin.core.config import key_location
     from twin.sim.check import in_scenario
     from twin.sim.simulation import Simulation
     from twin.sim.watchdog import Watchdog, WatchdogAbort
@@ -521,8 +522,8 @@ def _run(
         # took between this run's look and its own (two runs on one --out: the other's bag stays)
         if not existed and bag_path.is_dir() and not isinstance(err, BagFolderTaken):
             shutil.rmtree(bag_path, ignore_errors=True)
-        if isinstance(err, WorldError) and _ROBOT_MODEL_KEY.match(str(err)):
-            raise err.with_context(before=f"{path}: ") from err  # the robot the scenario names
+        if isinstance(err, WorldError) and _ROBOT_MODEL_KEY.match(str(err)):  # the robot the scenario names
+            raise err.with_context(before=f"{key_location(path, str(err).split(': ', 1)[0])}: ") from err
         if not isinstance(err, ConfigError) and not (isinstance(err, TwinError) and str(err).startswith("robots[")):
             raise
         # A scenario value the loaded world or robot refuses: name the scenario file too.

@@ -18,6 +18,7 @@ import difflib
 import enum
 import functools
 import os
+import re
 import sys
 import types
 import typing
@@ -37,6 +38,7 @@ __all__ = [
     "FieldError",
     "NameOrPath",
     "build",
+    "key_location",
     "load_config",
     "load_yaml",
     "location",
@@ -115,6 +117,33 @@ def location(node: yaml.Node) -> str:
     """Return `file:line` of a node (1-based line)."""
     mark = node.start_mark
     return f"{mark.name}:{mark.line + 1}"
+
+
+_KEY_PART = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
+
+
+def key_location(path: Path, key: str) -> str:
+    """`FILE:LINE` of a dotted key (`robots[1].drive.fmu`) where the scenario file sets it, else `FILE`.
+
+    A key the file leaves to the defaults has no line of its own; a key inside a list entry the
+    file gives is found in it (the entry's own line for a key it inherits).
+    """
+    try:
+        node: yaml.Node | None = load_yaml(path)
+    except (TwinError, OSError):  # (the loader names an unreadable file itself)
+        return str(path)
+    line = None
+    for name, index in _KEY_PART.findall(key):
+        if isinstance(node, yaml.MappingNode) and name:
+            node = next((v for k, v in node.value if getattr(k, "value", None) == name), None)
+        elif isinstance(node, yaml.SequenceNode) and index:
+            node = node.value[int(index)] if int(index) < len(node.value) else None
+        else:
+            node = None
+        if node is None:
+            break
+        line = node.start_mark.line + 1
+    return f"{path}:{line}" if line is not None and node is not None else str(path)
 
 
 def read_text_file(path: Path, error: type[TwinError], *, what: str) -> str:

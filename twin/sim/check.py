@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twin.core.config import suggest
+from twin.core.config import key_location, suggest
 from twin.core.errors import ConfigError, FmuError, TreeError, TwinError
 from twin.core.numbers import number_problem
 from twin.sim.scenario import BehaviorTreeMission, Scenario, in_entry, names_a_key, runs_amcl, runs_nav2
@@ -56,7 +56,7 @@ def _values(value: Any, key: str) -> Iterator[tuple[str, Any]]:
 
 
 def _refuse(path: Path, key: str, problem: str) -> ConfigError:
-    return ConfigError(f"{path}: {key}: {problem}")
+    return ConfigError(f"{key_location(path, key)}: {key}: {problem}")
 
 
 def check_scenario(scenario: Scenario, path: Path) -> None:
@@ -322,8 +322,17 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
 
 
 def _named(err: TwinError, path: Path) -> TwinError:
-    """`err` with the scenario file in front, unless it names its file already."""
-    return err if str(err).startswith(str(path)) else err.with_context(before=f"{path}: ")
+    """`err` with the scenario file (and the key's line) in front, unless it names its file already."""
+    text = str(err)
+    if text.startswith((str(path), str(path.resolve()))):
+        return err
+    return err.with_context(before=f"{key_location(path, _leading_key(text))}: ")
+
+
+def _leading_key(text: str) -> str:
+    """The scenario key a message starts with (`robot.model: ...` gives `robot.model`), or ''."""
+    head = text.split(": ", 1)[0]
+    return head if head and " " not in head and "/" not in head else ""
 
 
 def in_scenario(err: TwinError, path: Path) -> TwinError:
@@ -333,13 +342,14 @@ def in_scenario(err: TwinError, path: Path) -> TwinError:
     error that names its own file (a mapping file, an FMU) is left as it is.
     """
     text = str(err)
+    where = key_location(path, _leading_key(text))
     if text.startswith("robots["):  # a fleet robot's (`twin.sim.scenario.in_entry`): the entry names it
-        return err.with_context(before=f"{path}: ")
+        return err.with_context(before=f"{where}: ")
     if not isinstance(err, ConfigError) or text.startswith(("/", str(path))):
         return err
     if not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text:
         return err
-    return err.with_context(before=f"{path}: ")
+    return err.with_context(before=f"{where}: ")
 
 
 def _check_drive(scenario: Scenario, path: Path, robot_name: str, *, entry: str = "") -> None:

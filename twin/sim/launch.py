@@ -17,7 +17,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from twin.core.config import suggest
+from twin.core.config import key_location, suggest
 from twin.core.errors import ConfigError, TwinError
 from twin.node import LaunchArguments, Node, launch_context
 from twin.sim.scenario import NodeSpec, Scenario
@@ -132,9 +132,9 @@ def check_node_plugins(scenario: Scenario) -> None:
     """
     source = scenario.source_path
     folder = source.parent if source is not None else None
-    prefix = f"{source}: " if source is not None else ""
     for i, spec in enumerate(scenario.nodes):
-        _resolve_class(spec, f"{prefix}nodes[{i}]", folder)
+        where = f"{key_location(source, f'nodes[{i}]')}: " if source is not None else ""
+        _resolve_class(spec, f"{where}nodes[{i}]", folder)
 
 
 def load_nodes(scenario: Scenario) -> list[Node]:
@@ -146,10 +146,9 @@ def load_nodes(scenario: Scenario) -> list[Node]:
     """
     source = scenario.source_path
     folder = source.parent if source is not None else None
-    prefix = f"{source}: " if source is not None else ""
     nodes: list[Node] = []
     for i, spec in enumerate(scenario.nodes):
-        where = f"{prefix}nodes[{i}]"
+        where = f"{key_location(source, f'nodes[{i}]')}: nodes[{i}]" if source is not None else f"nodes[{i}]"
         cls = _resolve_class(spec, where, folder)
         arguments = LaunchArguments(
             name=spec.name,

@@ -268,5 +268,5 @@ def test_an_unknown_built_in_fmu_names_the_key_and_the_nearest_built_in(tmp_path
         result = run_twin(*command)
         assert result.returncode == 2, result.stderr
         assert result.stderr.strip().splitlines() == [
-            f"twin: error: {path}: robots[1].drive.fmu: unknown built-in FMU 'xm430_w21'; did you mean 'xm430_w210'?"
+            f"twin: error: {path}:4: robots[1].drive.fmu: unknown built-in FMU 'xm430_w21'; did you mean 'xm430_w210'?"
         ]
