@@ -774,3 +774,15 @@ def test_a_refused_scenario_value_names_its_line(
         assert code != 0, err
         line = assert_one_line_error(err)
         assert line.startswith(f"twin: error: {path}{where}"), line  # the file once, then its line
+
+
+def test_scenario_check_prints_what_each_key_resolves_to(capsys: pytest.CaptureFixture[str]) -> None:
+    # The default scenario, resolved: the motor FMU `fmu: auto` picks, the tree and locations files,
+    # the Nav2 params and navigator tree the run reads, and whether AMCL runs.
+    code, out, err = run(["scenario", "check", str(SCENARIOS / "default.yaml")], capsys)
+    assert code == 0, err
+    lines = dict(line.split(None, 1) for line in out.splitlines()[1:])
+    assert lines["drive"] == "fmu builtin:xm430_w210_servo (auto), velocity-servo"
+    assert lines["mission"] == f"behavior_tree {TREES / 'tree.xml'}, {TREES / 'sim_house_locations.yaml'}"
+    assert lines["nav2"].startswith(f"params {REPO / 'twin' / 'data' / 'nav2' / 'waffle.yaml'}, tree ")
+    assert lines["nav2"].endswith("navigate_to_pose_w_replanning_and_recovery.xml, map from_world, localization AMCL")

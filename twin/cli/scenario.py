@@ -57,6 +57,42 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def _drive_text(scenario: Any) -> str:
+    """The drive as the run resolves it: `fmu: auto` names the robot's motor FMU."""
+    from twin.robot.fmu_drive import builtin_motor
+
+    drive = scenario.drive
+    if drive.type != "fmu":
+        return str(drive.type)
+    fmu = drive.fmu_file or drive.fmu
+    if fmu == "auto":
+        fmu = f"{builtin_motor(scenario.robot.model, drive.profile)} (auto)"
+    return f"fmu {fmu}, {drive.profile}"
+
+
+def _mission_text(scenario: Any) -> str:
+    """The mission with the files it reads."""
+    mission = scenario.mission
+    files = [getattr(mission, key, None) for key in ("tree", "locations", "bag")]
+    named = ", ".join(str(f) for f in files if f is not None)
+    return f"{mission.type} {named}" if named else str(mission.type)
+
+
+def _navigation_text(scenario: Any) -> str | None:
+    """The Nav2 params file and navigator tree a run reads (None: the run uses no Nav2)."""
+    from twin.nav.params import default_params_path
+    from twin.sim.navigation import DEFAULT_BT_XML
+    from twin.sim.scenario import runs_amcl, runs_nav2
+
+    if not (runs_nav2(scenario) or runs_amcl(scenario)):
+        return None
+    nav = scenario.navigation
+    params = nav.params if nav.params is not None else default_params_path(scenario.robot.model)
+    tree = f", tree {nav.bt_xml or DEFAULT_BT_XML}" if runs_nav2(scenario) else ""
+    localizer = "AMCL" if runs_amcl(scenario) else "none (map = odom)"
+    return f"params {params}{tree}, map {scenario.map}, localization {localizer}"
+
+
 def _check(args: argparse.Namespace) -> int:
     from twin.sim.check import check_inputs, check_scenario
     from twin.sim.scenario_file import load_scenario
@@ -79,8 +115,11 @@ def _check(args: argparse.Namespace) -> int:
             )
     else:
         print(f"  robot     {scenario.robot.model} at {dataclasses.astuple(scenario.robot.initial_pose)}")
-        print(f"  drive     {scenario.drive.type}")
-        print(f"  mission   {scenario.mission.type}")
+        print(f"  drive     {_drive_text(scenario)}")
+        print(f"  mission   {_mission_text(scenario)}")
+        navigation = _navigation_text(scenario)
+        if navigation:
+            print(f"  nav2      {navigation}")
     print(f"  recording {scenario.recording.storage} ({scenario.recording.distro}) in {scenario.recording.out_dir}")
     print(f"  seed      {scenario.seed}, at most {scenario.max_duration_s:g} s")
     return 0
