@@ -169,3 +169,13 @@ def test_sweep_numbers_are_bounded_before_any_cluster(
     _, err = capsys.readouterr()
     assert code == 2, err
     assert_one_line_error(err, contains=contains)
+
+
+def test_a_refused_sweep_file_leaves_no_out_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    sweep = write_inputs(tmp_path, ONE_RUN + "zip: true\nvary:\n  seed: [1, 2]\n  max_duration_s: [5]\n")
+    out = tmp_path / "new" / "out"
+    code = main(["sweep", str(sweep), "--out", str(out), "--workers", "1"])
+    _, err = capsys.readouterr()
+    assert code == 2, err
+    assert_one_line_error(err, contains="zip: true pairs the lists, but their lengths differ")
+    assert not (tmp_path / "new").exists()

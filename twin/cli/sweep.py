@@ -122,7 +122,7 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.scheduler is not None:
         check_scheduler(args.scheduler)  # an address Dask would hang on, or crash on, is told at once
     if args.out is not None:
-        check_out_dir(args.out)  # before any run: an unwritable --out would fail every run's results
+        check_out_dir(args.out, create=False)  # before any run: an unwritable --out would fail every run's results
     if not (args.verbose or args.debug):  # Dask's own shutdown notices are not the user's business
         logging.getLogger("distributed").setLevel(logging.CRITICAL)
     bar = _Bar(sys.stderr)
@@ -134,8 +134,7 @@ def _sweep(args: argparse.Namespace) -> int:
         with Cluster(workers=args.workers, scheduler=args.scheduler) as cluster:
             spec = load_sweep(args.sweep)
             out = args.out if args.out is not None else Path("bags") / f"{spec.name}_sweep"
-            if args.out is None:
-                check_out_dir(out, option="the default output folder")
+            check_out_dir(out, option="--out" if args.out is not None else "the default output folder")
             result = run_sweep(spec, out_dir=out, keep_bags=args.keep_bags, progress=bar, cluster=cluster)
     except KeyboardInterrupt as stop:
         bar.close()

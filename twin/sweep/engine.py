@@ -171,10 +171,27 @@ def run_sweep(
 
 def _with_inputs(row: dict[str, Any], run: RunSpec) -> dict[str, Any]:
     """The row led by what the run was given: its id, seed and varied values."""
-    out: dict[str, Any] = {"run_id": run.run_id, "seed": run.seed}
+    out: dict[str, Any] = {"run_id": run.run_id, "seed": _seed_of(run)}
     out.update(dict(run.values))
     out.update({k: v for k, v in row.items() if k not in out and k != "key"})
     return out
+
+
+def _seed_of(run: RunSpec) -> int | None:
+    """The seed the run ran with: the sweep's (`runs:`/`seeds:`), a varied `seed`, else its scenario's own."""
+    if run.seed is not None:
+        return run.seed
+    varied = dict(run.values).get("seed")
+    if varied is not None:
+        return int(varied)
+    import yaml
+
+    scenario = yaml.safe_load(run.scenario_yaml)
+    seed = scenario.get("seed", _DEFAULT_SEED) if isinstance(scenario, dict) else _DEFAULT_SEED
+    return seed if isinstance(seed, int) else None
+
+
+_DEFAULT_SEED = 0  # the packaged defaults' (twin/data/scenario_defaults.yaml)
 
 
 def _lost(run: RunSpec, err: BaseException | None) -> dict[str, Any]:

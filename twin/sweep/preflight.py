@@ -8,6 +8,7 @@ read a banner as a 3 EiB message. Both are told at once, in one line.
 from __future__ import annotations
 
 import contextlib
+import os
 import socket
 import struct
 import tempfile
@@ -24,8 +25,11 @@ _MAX_HANDSHAKE_BYTES = 64 * 2**20
 _DASK_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
 
 
-def check_out_dir(out: Path, *, option: str = "--out") -> None:
-    """Refuse an output folder that is not a folder or cannot be written (it is created if missing).
+def check_out_dir(out: Path, *, option: str = "--out", create: bool = True) -> None:
+    """Refuse an output folder that is not a folder or cannot be written (created if missing, with `create`).
+
+    Without `create` a missing folder is left uncreated (a sweep refused afterwards leaves nothing
+    behind); the nearest folder above it that exists must be writable.
 
     Raises:
         ConfigError: `--out PATH: why; give a writable folder`.
@@ -33,6 +37,12 @@ def check_out_dir(out: Path, *, option: str = "--out") -> None:
     if out.exists() and not out.is_dir():
         msg = f"{option} {out}: is not a folder; give a folder to write the runs and tables into"
         raise ConfigError(msg)
+    if not create and not out.exists():
+        above = next((p for p in out.absolute().parents if p.exists()), None)
+        if above is None or not above.is_dir() or not os.access(above, os.W_OK | os.X_OK):
+            msg = f"{option} {out}: cannot create it ({above} is not a writable folder); give a writable folder"
+            raise ConfigError(msg)
+        return
     try:
         out.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=out, prefix=".twin-write-test-"):

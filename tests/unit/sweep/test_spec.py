@@ -309,3 +309,18 @@ def test_the_code_digest_follows_the_sources(tmp_path: Path, monkeypatch: pytest
     code_identity.code_digest.cache_clear()
     assert digests[0] == digests[1]  # a file that is not a source does not count
     assert digests[2] != digests[0]  # a changed C source does
+
+
+def test_each_row_names_the_seed_its_run_ran_with(tmp_path: Path) -> None:
+    # Without runs:/seeds: a run takes its scenario's own seed (here 7, or the varied one).
+    from twin.sweep.engine import _with_inputs
+
+    base = tmp_path / "base.yaml"
+    base.write_text(f"{DEFAULT.read_text()}\nseed: 7\n")
+    (tmp_path / "sweep.yaml").write_text(f"scenario: {base}\nvary:\n  max_duration_s: [5, 6]\n")
+    own = expand_runs(load_sweep(tmp_path / "sweep.yaml"))
+    assert [_with_inputs({}, r)["seed"] for r in own] == [7, 7]
+    varied = expand_runs(load_sweep(_sweep(tmp_path, "vary:\n  seed: [3, 4]\n")))
+    assert [_with_inputs({}, r)["seed"] for r in varied] == [3, 4]
+    seeded = expand_runs(load_sweep(_sweep(tmp_path, "seeds: [11]\n")))
+    assert [_with_inputs({}, r)["seed"] for r in seeded] == [11]
