@@ -786,3 +786,14 @@ def test_scenario_check_prints_what_each_key_resolves_to(capsys: pytest.CaptureF
     assert lines["mission"] == f"behavior_tree {TREES / 'tree.xml'}, {TREES / 'sim_house_locations.yaml'}"
     assert lines["nav2"].startswith(f"params {REPO / 'twin' / 'data' / 'nav2' / 'waffle.yaml'}, tree ")
     assert lines["nav2"].endswith("navigate_to_pose_w_replanning_and_recovery.xml, map from_world, localization AMCL")
+
+
+def test_a_search_tree_without_the_camera_is_warned_of_by_check(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write_scenario(tmp_path, {"mission.type": "behavior_tree", "mission.tree": str(TREES / "search_naive.xml")})
+    code, _, err = run(["scenario", "check", str(path)], capsys)
+    assert code == 0, err
+    assert "look_for_obj_in_location1, look_for_obj_in_location2" in err and "enable sensors.camera" in err
+    code, _, err = run(["scenario", "check", str(SCENARIOS / "house_search_naive.yaml")], capsys)
+    assert code == 0 and "enable sensors.camera" not in err, err

@@ -138,6 +138,16 @@ class _ConsoleFormatter(logging.Formatter):
         return super().format(record)
 
 
+class _ConsoleHandler(logging.StreamHandler):  # type: ignore[type-arg]
+    """The console's log lines, each on a line of its own when a progress line is drawn."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        from twin.cli.progress import clear_progress_line
+
+        clear_progress_line()
+        super().emit(record)
+
+
 def _configure_logging(args: argparse.Namespace) -> None:
     level = logging.WARNING
     if getattr(args, "verbose", False):
@@ -146,7 +156,7 @@ def _configure_logging(args: argparse.Namespace) -> None:
         level = logging.DEBUG
     if getattr(args, "quiet", False):
         level = logging.ERROR
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _ConsoleHandler(sys.stderr)
     handler.setFormatter(_ConsoleFormatter("twin: %(levelname)s: %(message)s"))
     handler.setLevel(level)
     root = logging.getLogger()

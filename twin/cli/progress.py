@@ -6,7 +6,17 @@ import sys
 import time
 from typing import TextIO
 
-__all__ = ["Progress"]
+__all__ = ["Progress", "clear_progress_line"]
+
+# The progress lines drawn and not yet cleared: a log line printed while one is drawn clears it
+# first (`clear_progress_line`), so the message starts at the line's beginning, not after the bar.
+_drawn: list[Progress] = []
+
+
+def clear_progress_line() -> None:
+    """Clear every drawn progress line (each redraws at its next update)."""
+    for bar in list(_drawn):
+        bar.close()
 
 
 class Progress:
@@ -39,6 +49,8 @@ class Progress:
             head = f"sim {sim_s:7.1f} s"
         self._stream.write(f"\r{head}  RTF {rtf:6.0f}x  msgs {messages}\x1b[K")
         self._stream.flush()
+        if not self._drawn:
+            _drawn.append(self)
         self._drawn = True
 
     def close(self) -> None:
@@ -47,3 +59,5 @@ class Progress:
             self._stream.write("\r\x1b[K")
             self._stream.flush()
             self._drawn = False
+            self._last = 0.0  # (redrawn at the next update)
+            _drawn.remove(self)

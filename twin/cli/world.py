@@ -128,11 +128,15 @@ def _info(args: argparse.Namespace) -> int:
     model_path = model_path_folders(args.model_path)
     world = load_world(args.world, model_path=model_path, missing_includes="error" if args.strict else "warn")
     facts = summarize(world)
+    robot = _robot_facts(args.world, model_path) if _is_model(args.world) else None
+    if robot is not None:
+        facts["robot"] = robot
     if args.json:
         print(json.dumps(facts, indent=2))
         return 0
     out = sys.stdout
-    print(f"{facts['file']}: world {facts['name']!r} (SDF {facts['sdf_version']})", file=out)
+    kind = "model" if robot is not None else "world"
+    print(f"{facts['file']}: {kind} {facts['name']!r} (SDF {facts['sdf_version']})", file=out)
     print(f"  models      {len(facts['models'])} ({sum(m['static'] for m in facts['models'])} static)", file=out)
     width = max((len(m["name"]) for m in facts["models"]), default=0)
     for model in facts["models"]:
@@ -154,7 +158,48 @@ def _info(args: argparse.Namespace) -> int:
         )
     if facts["plugins"]:
         print(f"  plugins     {', '.join(facts['plugins'])}", file=out)
+    if robot is not None:
+        for key in ("base", "drive", "lidar", "imu", "mass"):
+            print(f"  {key:<11} {robot[key]}", file=out)
+        facts["warnings"] += robot["warnings"]
     print(f"  warnings    {len(facts['warnings'])}", file=out)
     for warning in facts["warnings"]:
         print(f"    {warning}", file=out)
     return 0
+
+
+def _is_model(path: Path) -> bool:
+    """Whether `path` is a model (a folder, or an SDF file holding a <model> and no <world>)."""
+    if path.is_dir():
+        return True
+    try:
+        head = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return False
+    return "<model" in head and "<world" not in head
+
+
+def _robot_facts(path: Path, model_path: Sequence[Path]) -> dict[str, Any] | None:
+    """What a run reads of a model as the robot (its drive, lidar and IMU), or None when it is none."""
+    from twin.core.errors import WorldError
+    from twin.world import load_robot
+
+    try:
+        robot = load_robot(path, model_path=model_path)
+    except WorldError:
+        return None  # the world's own summary says what loads
+    drive, lidar, imu = robot.drive, robot.lidar, robot.imu
+    return {
+        "base": robot.base_frame,
+        "drive": "none (no diff-drive plugin or wheel joints)"
+        if drive is None
+        else f"{drive.left_joint} / {drive.right_joint}, wheel radius {drive.wheel_radius_m:g} m, separation "
+        f"{drive.wheel_separation_m:g} m, listens on {drive.command_topic}",
+        "lidar": "none"
+        if lidar is None
+        else f"{lidar.name} on {lidar.scan_topic} ({lidar.frame_id}), {lidar.samples} beams, {lidar.rate_hz:g} Hz, "
+        f"{lidar.range_min_m:g} to {lidar.range_max_m:g} m",
+        "imu": "none" if imu is None else f"{imu.name} ({imu.frame_id}), {imu.rate_hz:g} Hz",
+        "mass": f"{robot.mass_kg:.3f} kg",
+        "warnings": list(robot.warnings),
+    }

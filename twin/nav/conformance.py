@@ -106,7 +106,9 @@ def load_case(path: Path) -> tuple[dict[str, Any], dict[str, NDArray[Any]]]:
         msg = f"{path}: no such case file"
         raise ConfigError(msg) from None
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
-        msg = f"{path}: not a recorded Nav2 case (an .npz with a `meta` entry): {err}"
+        # (numpy takes a file that is no .npz for a pickle and offers to unpickle it: never)
+        why = "it is not an .npz archive" if "pickle" in str(err) else str(err)
+        msg = f"{path}: not a recorded Nav2 case (an .npz with a `meta` entry): {why}"
         raise ConfigError(msg) from None
     if "meta" not in arrays:
         msg = f"{path}: no `meta` entry; a recorded Nav2 case holds its inputs and Nav2's answer there"

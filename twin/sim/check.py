@@ -299,7 +299,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
                 raise ConfigError(problem)
             check_map_extent(sc, robot, scene)
             if isinstance(sc.mission, BehaviorTreeMission):
-                _load_tree(sc.mission)
+                _load_tree(sc.mission, camera=sc.sensors.camera.enabled)
             _load_navigation(sc, robot, namespace=ns or "")
         except TwinError as err:  # a fleet's names its entry, as the run does
             raise _named(in_entry(err, f"robots[{index}]." if ns else ""), path) from None
@@ -374,7 +374,7 @@ def _check_drive(scenario: Scenario, path: Path, robot_name: str, *, entry: str 
         raise in_scenario(err, path) from None
 
 
-def _load_tree(mission: BehaviorTreeMission) -> None:
+def _load_tree(mission: BehaviorTreeMission, *, camera: bool = True) -> None:
     import random
 
     from twin.mission.bt_nodes import ScriptedNavigator, register_mission_nodes, unknown_literal_location
@@ -386,6 +386,13 @@ def _load_tree(mission: BehaviorTreeMission) -> None:
     register_vision_nodes(factory, slot=ImageSlot(), target_color=mission.target_color)
     factory.load_plugins()
     tree = factory.create_tree_from_file(mission.tree, main_tree=mission.main_tree, clock=lambda: 0)
+    looks = [node.full_path for node in tree.nodes if type(node).__name__ == "LookForObject"]
+    if looks and not camera:  # each fails at its first tick in the run (no image)
+        logging.getLogger("twin.sim.simulation").warning(
+            "%s: %s look for objects with the camera, which is off: each fails; enable sensors.camera",
+            mission.tree,
+            ", ".join(looks),
+        )
     if mission.locations is not None:
         problem = unknown_literal_location(tree, mission.locations)
         if problem is not None:

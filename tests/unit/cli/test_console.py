@@ -55,3 +55,26 @@ def test_results_parquet_without_pyarrow_is_said(
         assert _write_parquet(tmp_path / "results.parquet", ["a"], [{"a": 1}]) is None
     (line,) = [r.getMessage() for r in caplog.records]
     assert "results.parquet not written" in line and "pyarrow" in line and "results.csv" in line
+
+
+def test_a_log_line_printed_under_a_progress_line_starts_on_a_clean_line() -> None:
+    import io
+
+    from twin.cli import _ConsoleHandler
+    from twin.cli.progress import Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    terminal = Terminal()
+    bar = Progress(60.0, stream=terminal, min_interval_s=0.0)
+    bar.update(12.0, 500)
+    handler = _ConsoleHandler(terminal)
+    handler.setFormatter(_ConsoleFormatter("twin: %(levelname)s: %(message)s"))
+    handler.emit(logging.LogRecord("twin.sim.simulation", logging.WARNING, __file__, 1, "careful", (), None))
+    bar.update(13.0, 520)
+    text = terminal.getvalue()
+    drawn, warning = text.split("twin: WARNING: careful\n")
+    assert drawn.startswith("\rsim    12.0/60.0 s") and drawn.endswith("\r\x1b[K")  # cleared before the line
+    assert warning.startswith("\rsim    13.0/60.0 s")  # and drawn again under it

@@ -67,7 +67,7 @@ def test_a_case_that_differs_is_named_with_its_first_difference_and_exit_1(
 @pytest.mark.parametrize(
     ("content", "expected"),
     [
-        (b"not a zip file", "not a recorded Nav2 case"),
+        (b"not a zip file", "not a recorded Nav2 case (an .npz with a `meta` entry): it is not an .npz archive"),
         (None, "no `meta` entry"),
     ],
 )
@@ -82,6 +82,7 @@ def test_a_file_that_is_not_a_case_is_one_line_and_exit_2(
     assert main(["nav", "conformance", str(path)]) == 2
     err = capsys.readouterr().err
     assert expected in err and str(path) in err
+    assert "pickle" not in err  # numpy's offer to unpickle the file is not the user's business
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 

@@ -218,3 +218,28 @@ def test_a_model_without_any_drive_loads_and_says_nothing_of_one(tmp_path: Path)
     with pytest.raises(WorldError, match="no links"):
         path.write_text('<?xml version="1.0"?><sdf version="1.6"><model name="empty"/></sdf>')
         load_robot(path)
+
+
+def test_world_info_on_a_model_says_what_a_run_reads_of_it_as_the_robot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from twin.cli import main
+
+    path = _models(
+        tmp_path,
+        """\
+        <?xml version="1.0"?>
+        <sdf version="1.6">
+          <model name="robot">
+            <include><uri>model://base</uri></include>
+            <include><uri>model://scanner</uri><pose>0 0 0.3 0 0 0</pose></include>
+            <joint name="j" type="fixed"><parent>base::body</parent><child>scanner::link</child></joint>
+          </model>
+        </sdf>
+        """,
+    )
+    assert main(["world", "info", str(path), "--model-path", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{path}: model 'robot'")
+    assert "drive       base::left_joint / base::right_joint, wheel radius 0.05 m, separation 0.3 m" in out
+    assert "lidar       laser on bot/laser_scan (scanner::link), 180 beams, 10 Hz, 0.1 to 8 m" in out
