@@ -63,7 +63,8 @@ _CAMERA_TYPES = ("camera", "depth")
 _IMAGE_FORMATS = {"R8G8B8": "rgb8", "RGB_INT8": "rgb8", "L8": "mono8", "L_INT8": "mono8"}
 _MAX_IMAGE_SIDE = 8192
 # By `Plugin.kind` (any spelling Gazebo accepts: `libgz-sim8-diff-drive-system.so`, `ignition-gazebo-...`).
-_DIFF_DRIVE_PLUGINS = ("gazebo_ros_diff_drive", "gz-sim-diff-drive-system")
+_DIFF_DRIVE_PLUGINS = ("gazebo_ros_diff_drive", "gz-sim-diff-drive-system", "DiffDrivePlugin")  # (the last:
+# Gazebo Classic's own, on Gazebo transport: its joints, the wheels' geometry, and the twin's cmd_vel)
 _JOINT_STATE_PLUGINS = ("gazebo_ros_joint_state_publisher", "gz-sim-joint-state-publisher-system")
 
 

@@ -183,6 +183,7 @@ _SUN_NAMES = {"sun"}
 _UNDERSTOOD_PLUGINS = frozenset(  # by `plugin_kind`: any spelling of each library
     {
         "gazebo_ros_diff_drive",
+        "DiffDrivePlugin",
         "gazebo_ros_joint_state_publisher",
         "gazebo_ros_ray_sensor",
         "gazebo_ros_imu_sensor",

@@ -134,6 +134,7 @@ def test_a_nested_bases_wheels_and_diff_drive_drive_the_robot(tmp_path: Path) ->
         ("ignition-gazebo-joint-state-publisher-system", "gz-sim-joint-state-publisher-system"),
         ("libgazebo_ros_diff_drive.so", "gazebo_ros_diff_drive"),
         ("/opt/ros/humble/lib/libgazebo_ros_ray_sensor.so", "gazebo_ros_ray_sensor"),
+        ("libDiffDrivePlugin.so", "DiffDrivePlugin"),  # Gazebo Classic's own (the Pioneer 2DX's)
     ],
 )
 def test_a_plugin_is_known_by_any_spelling_gazebo_loads(filename: str, kind: str) -> None:
