@@ -70,6 +70,19 @@ _BASE_MODEL = f"""\
 """
 
 
+# A robot of the two: the scanner 0.3 m above the base's frame, fastened to its body.
+_BASE_AND_SCANNER = """\
+<?xml version="1.0"?>
+<sdf version="1.6">
+  <model name="robot">
+    <include><uri>model://base</uri></include>
+    <include><uri>model://scanner</uri><pose>0 0 0.3 0 0 0</pose></include>
+    <joint name="j" type="fixed"><parent>base::body</parent><child>scanner::link</child></joint>
+  </model>
+</sdf>
+"""
+
+
 def _models(tmp_path: Path, robot: str) -> Path:
     """Write the scanner and base models beside a robot model; returns the robot's model.sdf."""
     for name, text in (("scanner", _LIDAR_MODEL), ("base", _BASE_MODEL)):
@@ -185,16 +198,7 @@ def test_a_second_lidar_is_named_in_a_warning(tmp_path: Path) -> None:
 def test_a_sensor_plugins_ros_namespace_prefixes_its_topic(tmp_path: Path) -> None:
     path = _models(
         tmp_path,
-        """\
-        <?xml version="1.0"?>
-        <sdf version="1.6">
-          <model name="robot">
-            <include><uri>model://base</uri></include>
-            <include><uri>model://scanner</uri><pose>0 0 0.3 0 0 0</pose></include>
-            <joint name="j" type="fixed"><parent>base::body</parent><child>scanner::link</child></joint>
-          </model>
-        </sdf>
-        """,
+        _BASE_AND_SCANNER,
     )
     robot = load_robot(path, model_path=[tmp_path])
     assert robot.lidar is not None and robot.lidar.scan_topic == "bot/laser_scan"
@@ -228,16 +232,7 @@ def test_world_info_on_a_model_says_what_a_run_reads_of_it_as_the_robot(
 
     path = _models(
         tmp_path,
-        """\
-        <?xml version="1.0"?>
-        <sdf version="1.6">
-          <model name="robot">
-            <include><uri>model://base</uri></include>
-            <include><uri>model://scanner</uri><pose>0 0 0.3 0 0 0</pose></include>
-            <joint name="j" type="fixed"><parent>base::body</parent><child>scanner::link</child></joint>
-          </model>
-        </sdf>
-        """,
+        _BASE_AND_SCANNER,
     )
     assert main(["world", "info", str(path), "--model-path", str(tmp_path)]) == 0
     out = capsys.readouterr().out
