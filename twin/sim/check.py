@@ -267,7 +267,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
     from twin.sim.launch import check_node_plugins
     from twin.sim.navigation import check_map_extent, lidar_problem
     from twin.sim.rng import RngStreams
-    from twin.sim.robot_group import driven_robot, floor_problem, spawn_monitor
+    from twin.sim.robot_group import driven_robot, far_from_world, floor_problem, spawn_monitor
     from twin.sim.simulation import obstacle_fields
     from twin.world import build_scene, load_world
 
@@ -290,6 +290,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
     except TwinError as err:
         raise _named(err, path) from None
     bodies = []
+    far: list[str] = []
     for index, ((ns, sc), robot) in enumerate(zip(robots, models, strict=True)):
         try:
             body, _ = spawn_monitor(scene, robot, sc.robot.initial_pose, floor_height_m=scenario.world.floor_height_m)
@@ -304,6 +305,9 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         except TwinError as err:  # a fleet's names its entry, as the run does
             raise _named(in_entry(err, f"robots[{index}]." if ns else ""), path) from None
         _check_drive(sc, path, robot.name, entry=f"robots[{index}]." if ns else "")
+        problem = far_from_world(scene, robot, sc.robot.initial_pose)
+        if problem is not None:
+            far.append(f"robots[{index}].{problem}" if ns else problem)
     poses = [(ns, sc.robot.initial_pose) for ns, sc in robots]
     try:
         if len(robots) > 1:
@@ -319,6 +323,8 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         check_node_plugins(scenario)
     except TwinError as err:
         raise _named(err, path) from None
+    for problem in far:  # (last: a refused scenario keeps its one line)
+        logging.getLogger("twin.sim.simulation").warning("%s", problem)
 
 
 def _named(err: TwinError, path: Path) -> TwinError:

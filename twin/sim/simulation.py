@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from twin.bag import Recorder
 from twin.bag.frames import frame_prefix
+from twin.bag.provenance import PROVENANCE_TOPIC
 from twin.core.clock import NS_PER_S, s_to_ns
 from twin.core.closing import Closing
 from twin.core.errors import ConfigError, TwinError
@@ -39,7 +40,7 @@ from twin.sim.launch import load_nodes
 from twin.sim.obstacles import scenario_obstacles
 from twin.sim.provenance import fmu_record, run_provenance
 from twin.sim.rng import RngStreams
-from twin.sim.robot_group import RobotGroup, floor_problem
+from twin.sim.robot_group import RobotGroup, far_from_world, floor_problem
 from twin.sim.rosout import RosoutBridge
 from twin.sim.scenario import InitialPose, Scenario, in_entry
 from twin.world import RobotModelSpec, World, build_scene, load_world
@@ -212,6 +213,10 @@ class Simulation(Closing):
             for g in built:
                 g.close()
             raise
+        for i, g in enumerate(self.groups):  # (after the checks: a refused scenario keeps its one line)
+            far = far_from_world(scene, g.robot, g.scenario.robot.initial_pose)
+            if far is not None:
+                _log.warning("%s%s", f"robots[{i}]." if g.namespace else "", far)
         try:  # from here on, a failure must release the drives (FMU instances) the groups hold
             user_nodes = load_nodes(scenario)
             self._run_to_limit = duration_s is not None
@@ -274,11 +279,13 @@ class Simulation(Closing):
         recorder = self.recorder
         if recorder is None:
             return self.executor.message_count
-        return sum(
+        published = sum(
             t.count
             for t in self.executor.topics.values()
             if any(getattr(write, "__self__", None) is recorder for write, _ in t.sinks)
         )
+        # (a sqlite3 bag holds its provenance as one message more; an MCAP bag as a metadata record)
+        return published + (1 if PROVENANCE_TOPIC in recorder.topics else 0)
 
     def _spawn(self, index: int, group: RobotGroup, scene: Scene) -> RobotBody:
         """Spawn one group's robot; a fleet's error names its entry (`robots[1].robot.initial_pose: ...`)."""
