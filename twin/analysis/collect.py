@@ -283,9 +283,14 @@ class TopicHealth:
 
     @property
     def rate_hz(self) -> float | None:
-        """Mean rate, Hz (None below two messages)."""
+        """Mean rate, Hz (None below two messages, and for a burst: an aperiodic topic whose messages span under 1 s).
+
+        (A latched /rosout's start-up lines, 19 in 5 ms, made a "rate" of 1940 Hz.)
+        """
         n = self.count - 1
-        return n / self.sum_dt if n > 0 and self.sum_dt > 0 else None
+        if n <= 0 or self.sum_dt <= 0 or (not self.periodic and self.sum_dt < _BURST_S):
+            return None
+        return n / self.sum_dt
 
     @property
     def steady_rate_hz(self) -> float | None:
@@ -321,6 +326,10 @@ class TopicHealth:
             "stamp_offset_mean_s": self.skew_sum_s / self.skew_count if skew else None,
             "stamp_skew_spread_ms": (self.skew_max_s - self.skew_min_s) * 1e3 if skew else None,
         }
+
+
+_BURST_S = 1.0
+"""An aperiodic topic whose messages all come within this span has no rate to speak of, s."""
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

@@ -51,3 +51,10 @@ def test_a_tf_stream_going_backwards_is_counted_on_its_own(tmp_path: Path) -> No
             if i in (40, 41):  # a stream whose second stamp is older than its first
                 writer.write(conn, t + 2, _tf(t - 100_000_000 * (i - 39), "base_link", "wheel_left_link"))
     assert _health(bag, tmp_path / "r")["/tf"]["non_monotonic_stamps"] == 1
+
+
+def test_a_burst_of_messages_has_no_rate_and_a_steady_topic_keeps_its_own(gazebo_bag: Path, tmp_path: Path) -> None:
+    # The Humble bag's /rosout: its 19 start-up lines within 5 ms are no 1940 Hz topic.
+    health = _health(gazebo_bag, tmp_path / "r")
+    assert health["/rosout"]["count"] == 19 and health["/rosout"]["rate_hz"] is None
+    assert 4.5 < health["/scan"]["rate_hz"] < 5.5  # Gazebo's LDS-01 at 5 Hz
