@@ -178,3 +178,27 @@ def test_fmu_auto_on_a_robot_that_is_no_turtlebot3_says_whose_motors_it_gets(
     code, _, err = _run(["simulate", str(path), "--duration", "0.2", "--out", str(tmp_path / "bag")], capsys)
     assert code == 0, err
     assert "robot rover (3 kg) is no TurtleBot3: drive.fmu: auto gives it a TurtleBot3's wheel motors" in err
+
+
+def test_several_wheel_pairs_all_turn_on_joint_states_and_tf(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # gz-sim's DiffDrive with a repeated <left_joint>/<right_joint> drives two pairs (a Husky's).
+    model = _robot(tmp_path / "rover")
+    rear = _WHEEL.format(side="rear_left", y=0.12) + _WHEEL.format(side="rear_right", y=-0.12)
+    drive = (
+        '<plugin name="gz::sim::systems::DiffDrive" filename="gz-sim-diff-drive-system">'
+        "<left_joint>left_wheel_joint</left_joint><left_joint>rear_left_wheel_joint</left_joint>"
+        "<right_joint>right_wheel_joint</right_joint><right_joint>rear_right_wheel_joint</right_joint>"
+        "<wheel_separation>0.24</wheel_separation><wheel_radius>0.05</wheel_radius></plugin>"
+    )
+    model.write_text(model.read_text().replace("  </model>", f"{rear}\n    {drive}\n  </model>"))
+    mission = {"type": "cmd_vel_script", "segments": [{"duration_s": 2.0, "linear_mps": 0.1, "angular_radps": 0.5}]}
+    values = {"robot": {"model": "rover/model.sdf"}, "mission": mission, "drive": {"type": "kinematic"}}
+    code, _, err = _run(["simulate", str(_scenario(tmp_path, values)), "--out", str(tmp_path / "bag")], capsys)
+    assert code == 0, err
+    states = [m.msg for m in read_messages(tmp_path / "bag", ["/joint_states"])]
+    names = ["left_wheel_joint", "right_wheel_joint", "rear_left_wheel_joint", "rear_right_wheel_joint"]
+    assert list(states[-1].name) == names
+    left, right, rear_left, rear_right = states[-1].position
+    assert (rear_left, rear_right) == (left, right) and left != right  # turning: the sides differ
+    wheels = {t.child_frame_id for m in read_messages(tmp_path / "bag", ["/tf"]) for t in m.msg.transforms}
+    assert {"left_wheel", "right_wheel", "rear_left_wheel", "rear_right_wheel"} <= wheels

@@ -437,10 +437,13 @@ class JointStateNode(Node):
         *,
         with_effort: bool,
         topic: str = "joint_states",
+        sides: Sequence[int] | None = None,
     ) -> None:
         super().__init__("joint_states")
-        encode = JointStateEncoder(list(names), with_effort=with_effort).encode
+        encode: Callable[..., bytes] = JointStateEncoder(list(names), with_effort=with_effort).encode
         pub = self.create_publisher(JointStateEncoder.msgtype, topic, 10)
+        if sides is not None:  # several wheel pairs: each joint as its side's wheel of the first pair
+            encode = functools.partial(_spread, encode, tuple(sides))
 
         def on_timer(t_ns: int) -> None:
             ws = wheel_state()
@@ -458,6 +461,11 @@ class JointStateNode(Node):
                 pub.publish(Encoded((encode, (t_ns, positions, velocities), (t_ns, positions, velocities))))
 
         self.create_rate_timer(rate_hz, on_timer, priority=PRIORITY_STATE)
+
+
+def _spread(encode: Callable[..., bytes], sides: tuple[int, ...], t_ns: int, *pairs: Any) -> bytes:
+    """`encode` with each (left, right) pair of values spread over the joints by their `sides`."""
+    return encode(t_ns, *(tuple(pair[side] for side in sides) for pair in pairs))
 
 
 class GazeboOdometryNode(Node):
@@ -560,6 +568,7 @@ class RobotStatePublisher(Node):
         wheels: Sequence[tuple[str, str, str, Mat4, tuple[float, float, float]]],
         *,
         joint_states_topic: str = "joint_states",
+        more_wheels: Sequence[tuple[tuple[str, str, str, Mat4, tuple[float, float, float]], int]] = (),
     ) -> None:
         super().__init__("robot_state_publisher")
         poses = [pose for _, _, pose in static]
@@ -581,6 +590,9 @@ class RobotStatePublisher(Node):
         encode = TFEncoder([(w[1], w[2]) for w in wheels]).encode
         left, right = (_JointTransform(w[3], w[4]) for w in wheels)
         tf_pub = self.create_publisher(TFEncoder.msgtype, "/tf", 10)
+        if more_wheels:  # several wheel pairs: each further wheel turns as its side's of the first pair
+            encode = TFEncoder([(w[1], w[2]) for w in wheels] + [(w[1], w[2]) for w, _ in more_wheels]).encode
+            more = [(_JointTransform(w[3], w[4]), side) for w, side in more_wheels]
 
         def on_joint_states(msg: Any) -> None:
             if type(msg) is Encoded:
@@ -590,6 +602,11 @@ class RobotStatePublisher(Node):
                 if read is None:
                     return
                 t_ns, (pl, pr) = read
+            if more_wheels:
+                angles = (pl, pr)
+                poses = (left.at(pl), right.at(pr), *(joint.at(angles[side]) for joint, side in more))
+                tf_pub.publish(Encoded((encode, (t_ns, poses), None)))
+                return
             tf_pub.publish(Encoded((encode, (t_ns, (left.at(pl), right.at(pr))), None)))
 
         self.create_subscription(JointStateEncoder.msgtype, joint_states_topic, on_joint_states, 10, raw=True)

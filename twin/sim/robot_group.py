@@ -456,6 +456,17 @@ class RobotGroup:
         wheels = [(f.joint, f.parent, f.name, f.T_parent, f.axis) for f in self.robot.frames if f.joint in side]
         return sorted(wheels, key=lambda w: side[w[0]])
 
+    def _more_wheels(self) -> list[tuple[WheelFrame, int]]:
+        """The drive's further wheel pairs' joints (their frames) with their sides, in the plugin's order."""
+        drive = self.robot.drive
+        assert drive is not None
+        frames = {f.joint: f for f in self.robot.frames if f.joint}
+        return [
+            ((j, frames[j].parent, frames[j].name, frames[j].T_parent, frames[j].axis), side)
+            for j, side in drive.more_wheels
+            if j in frames
+        ]
+
     def _make_imu(self, rng: RngStreams) -> ImuModel | None:
         spec = self.robot.imu
         if not self.scenario.sensors.imu.enabled:
@@ -584,7 +595,12 @@ class RobotGroup:
         joints_topic = in_namespace(
             robot.joint_states.topic if robot.joint_states is not None else None, "joint_states"
         )
-        nodes.append(RobotStatePublisher(urdf_from_robot(robot), static, self.wheels, joint_states_topic=joints_topic))
+        more = self._more_wheels() if len(self.wheels) == 2 else []
+        nodes.append(
+            RobotStatePublisher(
+                urdf_from_robot(robot), static, self.wheels, joint_states_topic=joints_topic, more_wheels=more
+            )
+        )
 
         def truth() -> tuple[float, float, float]:
             c = chassis()
@@ -627,14 +643,17 @@ class RobotGroup:
             lidar = robot.lidar
             nodes.append(LidarNode(self.lidar, lidar.frame_id, lidar.rate_hz, chassis, topic=lidar.scan_topic))
 
-        names = [w[0] for w in self.wheels]
+        names = [w[0] for w in self.wheels] + [w[0] for w, _ in more]
+        sides = [0, 1] + [side for _, side in more] if more else None
         fmu = isinstance(drive, FmuDrivetrain) and len(self.wheels) == 2
         with_effort = fmu and isinstance(drive, FmuDrivetrain) and drive.has_effort
         if self.encoders is not None:
             rate = self.encoders.spec.rate_hz
             encoders = self.encoders if self.ekf is not None else None
             nodes.append(
-                JointStateNode(names, rate, drive.wheel_state, encoders, with_effort=with_effort, topic=joints_topic)
+                JointStateNode(
+                    names, rate, drive.wheel_state, encoders, with_effort=with_effort, topic=joints_topic, sides=sides
+                )
             )
             if self.ekf is None:
                 odom_topic = self._drive_topic(robot.drive.odometry_topic, "odom")
@@ -649,7 +668,7 @@ class RobotGroup:
         self.drive_node = DiffDriveNode(
             drive,
             self.tracker,
-            motor_joints=names if fmu else (),
+            motor_joints=names[:2] if fmu else (),  # the drive's two motors (FMUs)
             motor_rate_hz=motor_rate,
             command_topic=self._drive_topic(robot.drive.command_topic, "cmd_vel"),
             limits=_command_limits(robot.drive),

@@ -204,6 +204,9 @@ class DiffDriveSpec:
     """gz-sim DiffDrive's commanded linear speed range (`min_`/`max_linear_velocity`, older `min_`/`max_velocity`)."""
     angular_velocity_limits_radps: tuple[float, float] | None = None
     """gz-sim DiffDrive's commanded turn rate range (`min_`/`max_angular_velocity`)."""
+    more_wheels: tuple[tuple[str, int], ...] = ()
+    """The plugin's further wheel joints (a repeated `<left_joint>`/`<right_joint>`: several pairs), each
+    with its side (0 left, 1 right): they turn as the first pair's wheel of their side."""
     max_wheel_torque_nm: float | None = None
     update_rate_hz: float | None = None
     command_topic: str = "cmd_vel"
@@ -881,11 +884,18 @@ def _drive(
     else:  # gz-sim's DiffDrive: its Gazebo topics, as a ros_gz bridge of the same names carries them
         command_topic = plugin.param("topic") or "cmd_vel"
         odometry_topic = plugin.param("odom_topic") or "odom"
+    more = tuple(
+        (_in_scope(plugin, name, by_name), side)
+        for side, tag in enumerate(("left_joint", "right_joint"))
+        for name in plugin.params(tag)[1:]
+        if _in_scope(plugin, name, by_name) in by_name
+    )
     return DiffDriveSpec(
         left_joint=left.name,
         right_joint=right.name,
         wheel_separation_m=separation,
         wheel_radius_m=radius,
+        more_wheels=more,
         max_wheel_acceleration_mps2=_float_param(plugin, "max_wheel_acceleration"),
         max_linear_acceleration_mps2=_first_param(plugin, "max_linear_acceleration", "max_acceleration"),
         linear_velocity_limits_mps=_limits(plugin, "linear_velocity", "velocity"),
