@@ -40,6 +40,7 @@ __all__ = [
     "ParamSource",
     "StaticLayerParams",
     "default_params_path",
+    "is_packaged_params",
     "load_nav2_params",
 ]
 
@@ -78,6 +79,14 @@ def default_params_path(model: str) -> Path:
         )
         raise ConfigError(msg)
     return _DATA / _MODELS[key]
+
+
+def is_packaged_params(path: Path) -> bool:
+    """Whether `path` is one of the packaged TurtleBot3 params files (named by path rather than left null)."""
+    try:
+        return any(path.resolve() == (_DATA / name).resolve() for name in _MODELS.values())
+    except OSError:
+        return False
 
 
 # --- specs ---------------------------------------------------------------------------------------

@@ -36,7 +36,7 @@ from twin.nav.frames import Frames, LaserGeometry
 from twin.nav.map_server.map_io import OccupancyMap, load_map, map_from_scene
 from twin.nav.map_server.map_server_node import MapServerNode
 from twin.nav.param_checks import check_nav2_inputs
-from twin.nav.params import Nav2Params, default_params_path, load_nav2_params
+from twin.nav.params import Nav2Params, default_params_path, is_packaged_params, load_nav2_params
 from twin.nav.planner.planner_server import PlannerServerNode
 from twin.nav.server_params import Nav2Config, nav2_config
 from twin.nav.velocity_smoother.velocity_smoother import VelocitySmootherNode
@@ -206,7 +206,8 @@ class NavigationStack:
                 raise ConfigError(problem)
         warning = params.warning(config.used if config is not None else None)
         if warning:  # the packaged TB3 files hold keys Humble ignores: a fact, said with -v; a user's file: a warning
-            log.log(logging.WARNING if sc.navigation.params is not None else logging.INFO, "%s", warning)
+            packaged = sc.navigation.params is None or is_packaged_params(sc.navigation.params)
+            log.log(logging.INFO if packaged else logging.WARNING, "%s", warning)
         if wants_nav2:
             for line in unsimulated_sources(params):
                 log.warning("%s", line)
