@@ -14,6 +14,7 @@ import yaml
 
 from tests.robustness.helpers import assert_bag_reads_back, assert_one_line_error
 from twin.bag import open_bag, read_messages
+from twin.bag.provenance import read_provenance
 from twin.cli import main
 from twin.nav.params import default_params_path
 
@@ -117,9 +118,16 @@ def test_a_model_path_is_relative_to_the_scenario_not_the_working_folder(
     folder = tmp_path / "scenarios"
     folder.mkdir()
     path = _scenario(folder, {"robot": {"model": "../models/rover/model.sdf"}, "mission": _script()})
-    monkeypatch.chdir(tmp_path / "models")  # anywhere but the scenario's folder
+    (tmp_path / "elsewhere" / "deeper").mkdir(parents=True)
+    monkeypatch.chdir(tmp_path / "elsewhere" / "deeper")  # where ../models/... names nothing
     code, _, err = _run(["scenario", "check", str(path)], capsys)
     assert code == 0, err
+    # run by a relative path: the bag records the model's absolute path (rerun from anywhere)
+    relative = Path("..") / ".." / "scenarios" / "scenario.yaml"
+    code, _, err = _run(["simulate", str(relative), "--duration", "0.5", "--out", str(tmp_path / "bag")], capsys)
+    assert code == 0, err
+    recorded = yaml.safe_load(read_provenance(tmp_path / "bag")["scenario_yaml"])  # type: ignore[index]
+    assert recorded["robot"]["model"] == str(tmp_path / "models" / "rover" / "model.sdf")
 
 
 def test_nav2_params_naming_a_frame_the_robot_lacks_are_refused_by_check_and_run(
@@ -161,13 +169,20 @@ def test_a_gz_diff_drives_speed_limits_clamp_the_commands(tmp_path: Path, capsys
         "</plugin>"
     )
     model.write_text(model.read_text().replace("  </model>", f"    {drive}\n  </model>"))
-    mission = {"type": "cmd_vel_script", "segments": [{"duration_s": 3.0, "linear_mps": 1.0, "angular_radps": -2.0}]}
+    segments = [
+        {"duration_s": 3.0, "linear_mps": 1.0, "angular_radps": 2.0},
+        {"duration_s": 3.0, "linear_mps": -0.5, "angular_radps": -1.0},  # no min_ given: reversing is free
+    ]
+    mission = {"type": "cmd_vel_script", "segments": segments}
     values = {"robot": {"model": "rover/model.sdf"}, "mission": mission, "drive": {"type": "kinematic"}}
     code, _, err = _run(["simulate", str(_scenario(tmp_path, values)), "--out", str(tmp_path / "bag")], capsys)
     assert code == 0, err
     twists = [m.msg.twist.twist for m in read_messages(tmp_path / "bag") if m.topic == "/ground_truth/odom"]
     assert max(t.linear.x for t in twists) == pytest.approx(0.3)
-    assert min(t.angular.z for t in twists) == pytest.approx(-0.5)
+    assert max(t.angular.z for t in twists) == pytest.approx(0.5)
+    assert min(t.linear.x for t in twists) == pytest.approx(-0.5) and min(t.angular.z for t in twists) == pytest.approx(
+        -1.0
+    )
 
 
 def test_fmu_auto_on_a_robot_that_is_no_turtlebot3_says_whose_motors_it_gets(
@@ -180,7 +195,9 @@ def test_fmu_auto_on_a_robot_that_is_no_turtlebot3_says_whose_motors_it_gets(
     assert "robot rover (3 kg) is no TurtleBot3: drive.fmu: auto gives it a TurtleBot3's wheel motors" in err
 
 
-def test_several_wheel_pairs_all_turn_on_joint_states_and_tf(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_several_wheel_pairs_all_turn_on_joint_states_and_tf(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     # gz-sim's DiffDrive with a repeated <left_joint>/<right_joint> drives two pairs (a Husky's).
     model = _robot(tmp_path / "rover")
     rear = _WHEEL.format(side="rear_left", y=0.12) + _WHEEL.format(side="rear_right", y=-0.12)

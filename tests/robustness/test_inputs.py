@@ -797,3 +797,14 @@ def test_a_search_tree_without_the_camera_is_warned_of_by_check(
     assert "look_for_obj_in_location1, look_for_obj_in_location2" in err and "enable sensors.camera" in err
     code, _, err = run(["scenario", "check", str(SCENARIOS / "house_search_naive.yaml")], capsys)
     assert code == 0 and "enable sensors.camera" not in err, err
+
+
+def test_scenario_check_resolves_a_model_named_by_path_by_the_model_it_loads(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write_scenario(tmp_path, {"robot.model": str(REPO / "sdf" / "models" / "turtlebot3_burger")})
+    code, out, err = run(["scenario", "check", str(path)], capsys)
+    assert code == 0, err
+    assert (
+        "builtin:xl430_w250_servo (auto)" in out and f"params {REPO / 'twin' / 'data' / 'nav2' / 'burger.yaml'}" in out
+    )

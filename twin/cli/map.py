@@ -79,8 +79,19 @@ _MIN_RESOLUTION_M = 0.005
 _MAX_RESOLUTION_M = 10.0
 
 
-def _save(args: argparse.Namespace) -> int:
+def _reaches_edge(data: Any) -> bool:
+    """Whether a map's free space reaches its border (it is outside, or the world has no outer walls)."""
     import numpy as np
+
+    return bool((np.concatenate([data[0], data[-1], data[:, 0], data[:, -1]]) == 0).any())
+
+
+def _default_map(map_from_scene: Any, scene: Any, args: argparse.Namespace) -> Any:
+    """The map without --free (the largest enclosed region, in a world with outer walls)."""
+    return map_from_scene(scene, height_m=args.height, resolution_m=args.resolution).data
+
+
+def _save(args: argparse.Namespace) -> int:
 
     from twin.cli.world import model_path_folders
     from twin.core.errors import ConfigError
@@ -120,8 +131,7 @@ def _save(args: argparse.Namespace) -> int:
         free_xy_m=tuple(args.free) if args.free else None,
     )
     data = occupancy.data
-    edge = np.concatenate([data[0], data[-1], data[:, 0], data[:, -1]])
-    if args.free and (edge == 0).any():
+    if args.free and _reaches_edge(data) and not _reaches_edge(_default_map(map_from_scene, build_scene(world), args)):
         logging.getLogger("twin.cli.map").warning(
             "--free %g %g: that point's free space reaches the map's edge, so it lies outside the world's walls "
             "and what they enclose stays unknown; give a point inside (or leave --free out: the largest enclosed "

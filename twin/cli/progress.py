@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from typing import TextIO
@@ -60,4 +61,5 @@ class Progress:
             self._stream.flush()
             self._drawn = False
             self._last = 0.0  # (redrawn at the next update)
-            _drawn.remove(self)
+            with contextlib.suppress(ValueError):  # (a log line from another thread cleared it meanwhile)
+                _drawn.remove(self)

@@ -114,14 +114,18 @@ def _robot_topics(
     return _in_namespace(topic, ns), pose_topic, ns
 
 
-def _drive(chosen: str | None, bag: Path, namespace: str | None) -> tuple[str, str]:
-    """The replay's drive section (flow YAML) and its name for the summary.
+def _drive(chosen: str | None, bag: Path, namespace: str | None, *, robot_given: bool) -> tuple[str, str, str]:
+    """The replay's drive: its type, where it came from, and its section (flow YAML).
 
-    `--drive` when given; else the drive a twin run recorded in the bag's provenance (its own motor
-    FMU, as it ran), so a twin bag replays as it was made; else ideal wheels (a Gazebo bag).
+    `--drive` when given; else, unless `--robot` names another robot, the drive a twin run recorded
+    in the bag's provenance (its own motor FMU, as it ran), so a twin bag replays as it was made
+    (an FMU file the recorded drive names that is not on this machine: the robot's own motors);
+    else ideal wheels (a Gazebo bag).
     """
     if chosen is not None:
-        return chosen, "{type: kinematic}" if chosen == "kinematic" else _FMU_DRIVE
+        return chosen, "--drive", "{type: kinematic}" if chosen == "kinematic" else _FMU_DRIVE
+    if robot_given:
+        return "kinematic", "default", "{type: kinematic}"
     import yaml
 
     from twin.bag.provenance import read_provenance
@@ -134,8 +138,11 @@ def _drive(chosen: str | None, bag: Path, namespace: str | None) -> tuple[str, s
             if isinstance(entry, dict) and namespace in (entry.get("namespace"), entry.get("name")):
                 section = entry.get("drive", section)
     if not isinstance(section, dict) or section.get("type") not in ("kinematic", "fmu"):
-        return "kinematic", "{type: kinematic}"
-    return f"{section['type']}, the bag's own", json.dumps(section)
+        return "kinematic", "default", "{type: kinematic}"
+    fmu_file = section.get("fmu_file")
+    if section["type"] == "fmu" and fmu_file and not Path(str(fmu_file)).exists():
+        return "fmu", f"the bag's provenance; its FMU {fmu_file} is not here: the robot's own motors", _FMU_DRIVE
+    return str(section["type"]), "the bag's provenance", json.dumps(section)
 
 
 def _fleet_robot(bag: Path, namespace: str, model_path: list[Path]) -> Any:
@@ -183,7 +190,7 @@ def _replay(args: argparse.Namespace) -> int:
 
         chosen = robot_from_bag(bag, args.model_path)
         robot, robot_reason = chosen.model, chosen.reason
-    drive_name, drive = _drive(args.drive, bag, namespace)
+    drive_name, drive_from, drive = _drive(args.drive, bag, namespace, robot_given=bool(args.robot))
     model_path = "[" + ", ".join(_yaml_path(p) for p in args.model_path) + "]"
     pose_topic = json.dumps(pose_topic_arg) if pose_topic_arg else "null"
     scenario_file = out / "scenario.yaml"
@@ -214,6 +221,7 @@ def _replay(args: argparse.Namespace) -> int:
         robot=robot,
         robot_reason=robot_reason,
         drive=drive_name,
+        drive_from=drive_from,
         replay_bag=str(run_bag),
         scenario=str(scenario_file),
         sim_s=summary.sim_s,
@@ -225,7 +233,10 @@ def _replay(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(d, indent=2))
     else:
-        print(f"replayed {bag} with {robot} ({drive_name} drive): {summary.sim_s:.2f} s in {summary.wall_s:.2f} s")
+        source = "" if drive_from in ("--drive", "default") else f", from {drive_from}"
+        print(
+            f"replayed {bag} with {robot} ({drive_name} drive{source}): {summary.sim_s:.2f} s in {summary.wall_s:.2f} s"
+        )
         print(f"robot: {robot} ({robot_reason})")
         print("\n".join(result.summary_lines()))
         print(f"output: {out} (scenario.yaml, bag/, comparison.json, overlay.png, compare_error.png)")

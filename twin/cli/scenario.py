@@ -57,8 +57,8 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _drive_text(scenario: Any) -> str:
-    """The drive as the run resolves it: `fmu: auto` names the robot's motor FMU."""
+def _drive_text(scenario: Any, model_name: str) -> str:
+    """The drive as the run resolves it: `fmu: auto` names the motor FMU of the robot (its model's name)."""
     from twin.robot.fmu_drive import builtin_motor
 
     drive = scenario.drive
@@ -66,7 +66,7 @@ def _drive_text(scenario: Any) -> str:
         return str(drive.type)
     fmu = drive.fmu_file or drive.fmu
     if fmu == "auto":
-        fmu = f"{builtin_motor(scenario.robot.model, drive.profile)} (auto)"
+        fmu = f"{builtin_motor(model_name, drive.profile)} (auto)"
     return f"fmu {fmu}, {drive.profile}"
 
 
@@ -78,7 +78,7 @@ def _mission_text(scenario: Any) -> str:
     return f"{mission.type} {named}" if named else str(mission.type)
 
 
-def _navigation_text(scenario: Any) -> str | None:
+def _navigation_text(scenario: Any, model_name: str) -> str | None:
     """The Nav2 params file and navigator tree a run reads (None: the run uses no Nav2)."""
     from twin.nav.params import default_params_path
     from twin.sim.navigation import DEFAULT_BT_XML
@@ -87,7 +87,7 @@ def _navigation_text(scenario: Any) -> str | None:
     if not (runs_nav2(scenario) or runs_amcl(scenario)):
         return None
     nav = scenario.navigation
-    params = nav.params if nav.params is not None else default_params_path(scenario.robot.model)
+    params = nav.params if nav.params is not None else default_params_path(model_name)
     tree = f", tree {nav.bt_xml or DEFAULT_BT_XML}" if runs_nav2(scenario) else ""
     localizer = "AMCL" if runs_amcl(scenario) else "none (map = odom)"
     return f"params {params}{tree}, map {scenario.map}, localization {localizer}"
@@ -99,7 +99,7 @@ def _check(args: argparse.Namespace) -> int:
 
     scenario = load_scenario(args.file)
     check_scenario(scenario, args.file)
-    check_inputs(scenario, args.file)
+    names = check_inputs(scenario, args.file)
     if args.json:
         print(json.dumps(_plain(scenario), indent=2))
         return 0
@@ -115,9 +115,9 @@ def _check(args: argparse.Namespace) -> int:
             )
     else:
         print(f"  robot     {scenario.robot.model} at {dataclasses.astuple(scenario.robot.initial_pose)}")
-        print(f"  drive     {_drive_text(scenario)}")
+        print(f"  drive     {_drive_text(scenario, names[0])}")
         print(f"  mission   {_mission_text(scenario)}")
-        navigation = _navigation_text(scenario)
+        navigation = _navigation_text(scenario, names[0])
         if navigation:
             print(f"  nav2      {navigation}")
     print(f"  recording {scenario.recording.storage} ({scenario.recording.distro}) in {scenario.recording.out_dir}")

@@ -71,11 +71,15 @@ class NameOrPath(str):
         """`value`, made absolute against `folder` when it is a path-like value that names something there."""
         if not _path_like(value) or value.startswith("model://"):
             return cls(value)
-        path = Path(value).expanduser()
+        try:
+            path = Path(value).expanduser()
+        except RuntimeError:  # `~nosuchuser/...`: left as written, for the loader to name
+            return cls(value)
         if path.is_absolute():
             return cls(os.path.normpath(path))
         beside = folder / path
-        return cls(os.path.normpath(beside)) if beside.exists() else cls(value)
+        # absolute, as a `Path` is: a run's recorded scenario (`--from-bag`) finds it from any folder
+        return cls(os.path.abspath(beside)) if beside.exists() else cls(value)
 
 
 def _path_like(value: str) -> bool:
@@ -122,11 +126,12 @@ def location(node: yaml.Node) -> str:
 _KEY_PART = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
 
 
-def key_location(path: Path, key: str) -> str:
+def key_location(path: Path, key: str, *, value: object = None) -> str:
     """`FILE:LINE` of a dotted key (`robots[1].drive.fmu`) where the scenario file sets it, else `FILE`.
 
     A key the file leaves to the defaults has no line of its own; a key inside a list entry the
-    file gives is found in it (the entry's own line for a key it inherits).
+    file gives is found in it (the entry's own line for a key it inherits). With `value`, a line
+    whose text is another value (the run's came from a command-line option) is not named.
     """
     try:
         node: yaml.Node | None = load_yaml(path)
@@ -143,6 +148,8 @@ def key_location(path: Path, key: str) -> str:
         if node is None:
             break
         line = node.start_mark.line + 1
+    if value is not None and isinstance(node, yaml.ScalarNode) and node.value != str(value):
+        return str(path)  # the value came from elsewhere (a command-line option): not this line's
     return f"{path}:{line}" if line is not None and node is not None else str(path)
 
 

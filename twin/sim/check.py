@@ -55,8 +55,8 @@ def _values(value: Any, key: str) -> Iterator[tuple[str, Any]]:
         yield key, value
 
 
-def _refuse(path: Path, key: str, problem: str) -> ConfigError:
-    return ConfigError(f"{key_location(path, key)}: {key}: {problem}")
+def _refuse(path: Path, key: str, problem: str, *, value: object = None) -> ConfigError:
+    return ConfigError(f"{key_location(path, key, value=value)}: {key}: {problem}")
 
 
 def check_scenario(scenario: Scenario, path: Path) -> None:
@@ -74,7 +74,7 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
         if isinstance(value, int | float) and key not in _MAY_BE_INFINITE:
             problem = number_problem(value, key)  # what the loader checks, for values set in code (--seed)
             if problem is not None:
-                raise _refuse(path, key, problem)
+                raise _refuse(path, key, problem, value=value)
         if key.endswith("_hz") and isinstance(value, int | float) and not isinstance(value, bool):
             if not value >= _MIN_RATE_HZ:
                 raise _refuse(path, key, f"must be a rate of at least {_MIN_RATE_HZ:g} Hz, got {value}")
@@ -91,7 +91,7 @@ def check_scenario(scenario: Scenario, path: Path) -> None:
             if unsigned and not leaf.startswith(_SIGNED_PREFIXES) and "[" not in leaf:
                 raise _refuse(path, key, f"must not be negative, got {value}")
     if scenario.seed < 0:
-        raise _refuse(path, "seed", f"must be a non-negative whole number, got {scenario.seed}")
+        raise _refuse(path, "seed", f"must be a non-negative whole number, got {scenario.seed}", value=scenario.seed)
     if not scenario.max_duration_s > 0:
         raise _refuse(path, "max_duration_s", f"must be a positive number of seconds, got {scenario.max_duration_s}")
     _check_lidar(scenario, path, "")  # the top level's, named as written (a fleet lays it under each entry)
@@ -256,8 +256,12 @@ def _check_fmu_file(fmu_file: Path, path: Path) -> None:
         raise FmuError(msg)
 
 
-def check_inputs(scenario: Scenario, path: Path) -> None:
+def check_inputs(scenario: Scenario, path: Path) -> list[str]:
     """Load what the run would load (world, robot, tree) and raise its first error, naming `path`.
+
+    Returns:
+        The names of the robot models as loaded (one per robot, in `robot_scenarios` order): what
+        `fmu: auto` and the packaged Nav2 params go by.
 
     Raises:
         TwinError: The loader's error (WorldError, TreeError, ...) with the scenario file in front.
@@ -325,6 +329,7 @@ def check_inputs(scenario: Scenario, path: Path) -> None:
         raise _named(err, path) from None
     for problem in far:  # (last: a refused scenario keeps its one line)
         logging.getLogger("twin.sim.simulation").warning("%s", problem)
+    return [robot.name for robot in models]
 
 
 def _named(err: TwinError, path: Path) -> TwinError:

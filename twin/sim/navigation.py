@@ -437,7 +437,8 @@ def frame_problem(params: Nav2Params, robot: RobotModelSpec, *, amcl: bool, nav2
     """A frame the params have Nav2 look up that the run's TF tree does not hold, or None.
 
     The tree holds `map`, `odom` and the robot's own frames (its base frame and every link and
-    `<frame>`). Nav2's costmaps, navigator and AMCL wait for a transform to a frame nobody
+    `<frame>`). Of the frames the twin reads (each can be set in `navigation.set`), Nav2's
+    costmaps, navigator and AMCL wait for a transform to a frame nobody
     publishes (the TurtleBot3 params' `base_link` on a robot whose base is `chassis`), so the
     mission could never start; the twin says so instead of navigating anyway.
     """
@@ -447,10 +448,9 @@ def frame_problem(params: Nav2Params, robot: RobotModelSpec, *, amcl: bool, nav2
         for costmap in (params.local_costmap, params.global_costmap):
             checks.append((costmap.name, "robot_base_frame", costmap.robot_base_frame))
             checks.append((costmap.name, "global_frame", costmap.global_frame))
-        for node in ("bt_navigator", "behavior_server"):
-            value = params.node(node).get("robot_base_frame")
-            if isinstance(value, str):
-                checks.append((node, "robot_base_frame", value))
+        value = params.node("bt_navigator").get("robot_base_frame")  # (the behavior server's the twin does not read)
+        if isinstance(value, str):
+            checks.append(("bt_navigator", "robot_base_frame", value))
     if amcl:
         checks += [
             ("amcl", "base_frame_id", params.amcl.base_frame_id),

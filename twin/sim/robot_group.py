@@ -105,6 +105,24 @@ def _lidar_spec(robot: RobotModelSpec, section: LidarSection) -> RobotModelSpec:
     return dataclasses.replace(robot, lidar=dataclasses.replace(robot.lidar, **overrides))
 
 
+def _topics_in_own_namespace(robot: RobotModelSpec, namespace: str) -> RobotModelSpec:
+    """The robot with a sensor topic that names the robot's own namespace made relative to it.
+
+    `/dolly/laser_scan` of robot `dolly` is `laser_scan`: the group puts every topic in its namespace
+    once (as `RobotGroup._drive_topic` does the drive's).
+    """
+    own = f"{namespace.strip('/')}/" if namespace else ""
+    if not own:
+        return robot
+    changes: dict[str, Any] = {}
+    for key in ("lidar", "imu", "joint_states"):
+        spec = getattr(robot, key)
+        topic = getattr(spec, "topic", None)
+        if topic is not None and topic.strip("/").startswith(own):
+            changes[key] = dataclasses.replace(spec, topic=topic.strip("/")[len(own) :])
+    return dataclasses.replace(robot, **changes) if changes else robot
+
+
 def _command_limits(drive: DiffDriveSpec) -> tuple[float, float, float, float] | None:
     """The drive plugin's (v_min, v_max, w_min, w_max) command range (None: it limits nothing)."""
     v, w = drive.linear_velocity_limits_mps, drive.angular_velocity_limits_radps
@@ -324,7 +342,9 @@ class RobotGroup:
             WorldError: The robot model cannot be loaded.
             ConfigError: The model has no differential drive, or lidar overrides without a lidar.
         """
-        return cls(scenario, driven_robot(scenario, entry=entry), namespace=namespace)
+        return cls(
+            scenario, _topics_in_own_namespace(driven_robot(scenario, entry=entry), namespace), namespace=namespace
+        )
 
     def spawn(self, scene: Scene) -> RobotBody:
         """Make the robot's collision body in the world's scene, checking its spawn pose is free.

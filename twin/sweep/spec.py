@@ -139,7 +139,7 @@ def load_sweep(path: Path) -> SweepSpec:
         _fail(
             nodes["vary"], "vary", f"zip: true pairs the lists, but their lengths differ ({lengths}); make them equal"
         )
-    draws = _draws(raw.get("random") or {}, nodes.get("random"), base)
+    draws = _draws(raw.get("random") or {}, nodes.get("random"), base, base_dir)
     seeds = _seeds(raw, nodes)
     combos = len(vary[0][1]) if zip_flag and vary else math.prod(len(v) for _, v in vary)
     if combos * len(seeds) > MAX_RUNS:
@@ -268,7 +268,7 @@ def _seeds(raw: dict[str, Any], nodes: dict[str, yaml.Node]) -> tuple[int | None
     return (None,)  # one run per combination, with the scenario's own seed
 
 
-def _draws(raw: Any, node: yaml.Node | None, base: Mapping[str, Any]) -> tuple[Draw, ...]:
+def _draws(raw: Any, node: yaml.Node | None, base: Mapping[str, Any], base_dir: Path) -> tuple[Draw, ...]:
     if not raw:
         return ()
     assert node is not None
@@ -297,6 +297,8 @@ def _draws(raw: Any, node: yaml.Node | None, base: Mapping[str, Any]) -> tuple[D
             _fail(where, f"random.{key}.normal", f"expected [mean, std] with std >= 0, got {args!r}")
         for value in args if kind == "choice" else args[:1]:  # uniform and normal draw numbers, like their first
             _check_value(value, tp, where, f"random.{key}.{kind}", str(key))
+        if kind == "choice":  # paths among the choices are relative to the sweep file, as vary's are
+            args = [_fix_paths(value, tp, base_dir) for value in args]
         draws.append(Draw(key=str(key), distribution=kind, args=tuple(args)))
     return tuple(draws)
 

@@ -201,9 +201,10 @@ class DiffDriveSpec:
     `max_acceleration`); the FMU drive takes it as its rim acceleration limit when the plugin gives no
     `max_wheel_acceleration`."""
     linear_velocity_limits_mps: tuple[float, float] | None = None
-    """gz-sim DiffDrive's commanded linear speed range (`min_`/`max_linear_velocity`, older `min_`/`max_velocity`)."""
+    """gz-sim DiffDrive's commanded linear speed range (`min_`/`max_linear_velocity`; the older
+    `min_`/`max_velocity` limit the turn rate too); a bound it does not give is none."""
     angular_velocity_limits_radps: tuple[float, float] | None = None
-    """gz-sim DiffDrive's commanded turn rate range (`min_`/`max_angular_velocity`)."""
+    """gz-sim DiffDrive's commanded turn rate range (`min_`/`max_angular_velocity`, else `min_`/`max_velocity`)."""
     more_wheels: tuple[tuple[str, int], ...] = ()
     """The plugin's further wheel joints (a repeated `<left_joint>`/`<right_joint>`: several pairs), each
     with its side (0 left, 1 right): they turn as the first pair's wheel of their side."""
@@ -772,8 +773,11 @@ def _remapped(plugin: Plugin, source: str = "~/out") -> str | None:
     ros = plugin.element.find("ros")
     if ros is None:
         return None
-    for remap in ros.findall("remapping"):
-        text = remap.text.strip()
+    # `<remapping>~/out:=scan</remapping>`, or ROS 2's older `<argument>~/out:=scan</argument>` /
+    # `<argument>--ros-args -r ~/out:=scan</argument>`
+    rules = [remap.text.strip() for remap in ros.findall("remapping")]
+    rules += [token for argument in ros.findall("argument") for token in argument.text.split() if ":=" in token]
+    for text in rules:
         if ":=" in text and text.split(":=", 1)[0].strip() == source:
             return text.split(":=", 1)[1].strip()
     return None
@@ -899,7 +903,7 @@ def _drive(
         max_wheel_acceleration_mps2=_float_param(plugin, "max_wheel_acceleration"),
         max_linear_acceleration_mps2=_first_param(plugin, "max_linear_acceleration", "max_acceleration"),
         linear_velocity_limits_mps=_limits(plugin, "linear_velocity", "velocity"),
-        angular_velocity_limits_radps=_limits(plugin, "angular_velocity"),
+        angular_velocity_limits_radps=_limits(plugin, "angular_velocity", "velocity"),  # (the older names: both)
         max_wheel_torque_nm=_float_param(plugin, "max_wheel_torque"),
         update_rate_hz=_float_param(plugin, "update_rate"),
         command_topic=command_topic,
@@ -923,14 +927,15 @@ def _first_param(plugin: Plugin, *tags: str) -> float | None:
 
 
 def _limits(plugin: Plugin, *names: str) -> tuple[float, float] | None:
-    """gz-sim DiffDrive's `min_NAME`/`max_NAME` range (either alone: the other is its negative), or None."""
+    """gz-sim DiffDrive's `min_NAME`/`max_NAME` range (None: neither given).
+
+    As gz-math's SpeedLimiter: a bound not given stays unbounded (a `max_` alone leaves reversing free).
+    """
     high = _first_param(plugin, *(f"max_{n}" for n in names))
     low = _first_param(plugin, *(f"min_{n}" for n in names))
     if high is None and low is None:
         return None
-    high = high if high is not None else -low  # type: ignore[operator]
-    low = low if low is not None else -high
-    return (low, high)
+    return (low if low is not None else -math.inf, high if high is not None else math.inf)
 
 
 def load_robot(

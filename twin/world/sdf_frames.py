@@ -208,17 +208,19 @@ class ModelBuilder:
                 )
             )
         models: list[Model] = []
+        plugins = list(raw.plugins)
         for nested in raw.models:
             nested_scope = scope.nested(nested.name)
             nested_prefix = prefix if nested.merged else scoped
             model = self.build_model(
                 nested, nested_scope, T_world_model @ scope.T(nested.name, nested.node.where), nested_prefix, state
             )
-            if nested.merged:
+            if nested.merged:  # (its plugins too: a merged base's diff drive is the model's, as in Gazebo)
                 links.extend(model.links)
                 joints.extend(model.joints)
                 frames.extend(model.frames)
                 models.extend(model.models)
+                plugins.extend(model.plugins)
             else:
                 models.append(model)
         return Model(
@@ -230,7 +232,7 @@ class ModelBuilder:
             joints=tuple(joints),
             frames=tuple(frames),
             models=tuple(models),
-            plugins=tuple(raw.plugins),
+            plugins=tuple(plugins),
             source=raw.file,
             sdf_version=f"{raw.version[0]}.{raw.version[1]}",
         )

@@ -340,7 +340,7 @@ def test_a_twin_bag_replays_with_the_drive_its_provenance_records(twin_bag: Path
     proc = run_twin("replay", str(twin_bag), "--world", str(house), "--out", str(tmp_path / "out"), "--json")
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
-    assert result["drive"] == "fmu, the bag's own"
+    assert result["drive"] == "fmu" and result["drive_from"] == "the bag's provenance"
     assert result["position_error_max_m"] < 1e-6
     ideal = run_twin(
         "replay", str(twin_bag), "--world", str(house), "--out", str(tmp_path / "k"), "--drive", "kinematic"

@@ -59,6 +59,18 @@ def test_relative_paths_become_absolute_so_any_worker_reads_the_same_files(tmp_p
     scenario = yaml.safe_load(run.scenario_yaml)
     assert scenario["mission"]["tree"] == str(tmp_path / "t.xml")
     assert scenario["world"]["sdf"] == str(tmp_path / "w.sdf")
+    # a random choice's paths and a robot model named by a path beside the sweep file, the same way
+    (tmp_path / "m" / "rover").mkdir(parents=True)
+    (tmp_path / "m" / "rover" / "model.sdf").write_text("<sdf version='1.6'><model name='r'/></sdf>")
+    path.write_text(
+        "scenario: base/s.yaml\nrandom:\n  world.sdf: {choice: [w.sdf]}\n  robot.model: {choice: [m/rover/model.sdf]}\n"
+        "vary:\n  robot.initial_pose.x_m: [0.0]\n",
+        encoding="utf-8",
+    )
+    (run,) = expand_runs(load_sweep(path))
+    scenario = yaml.safe_load(run.scenario_yaml)
+    assert scenario["world"]["sdf"] == str(tmp_path / "w.sdf")
+    assert scenario["robot"]["model"] == str(tmp_path / "m" / "rover" / "model.sdf")
 
 
 def test_random_draws_are_seeded_within_bounds_and_repeat(tmp_path: Path) -> None:

@@ -239,3 +239,39 @@ def test_world_info_on_a_model_says_what_a_run_reads_of_it_as_the_robot(
     assert out.startswith(f"{path}: model 'robot'")
     assert "drive       base::left_joint / base::right_joint, wheel radius 0.05 m, separation 0.3 m" in out
     assert "lidar       laser on bot/laser_scan (scanner::link), 180 beams, 10 Hz, 0.1 to 8 m" in out
+
+
+def test_a_merged_bases_diff_drive_is_the_robots(tmp_path: Path) -> None:
+    # SDF 1.9's <include merge="true">: the base's links, joints and plugins become the robot's own.
+    path = _models(
+        tmp_path,
+        """\
+        <?xml version="1.0"?>
+        <sdf version="1.9">
+          <model name="robot"><include merge="true"><uri>model://base</uri></include></model>
+        </sdf>
+        """,
+    )
+    robot = load_robot(path, model_path=[tmp_path])
+    assert robot.drive is not None
+    assert (robot.drive.left_joint, robot.drive.right_joint) == ("left_joint", "right_joint")
+    assert robot.drive.wheel_separation_m == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize(
+    "ros",
+    [
+        "<remapping>~/out:=front_scan</remapping>",
+        "<argument>~/out:=front_scan</argument>",
+        "<argument>--ros-args -r ~/out:=front_scan</argument>",
+    ],
+)
+def test_a_sensor_plugins_remapping_is_read_in_each_ros2_spelling(tmp_path: Path, ros: str) -> None:
+    ray = (
+        '<sensor name="laser" type="ray"><update_rate>5</update_rate><ray><scan><horizontal><samples>90</samples>'
+        "<min_angle>-1</min_angle><max_angle>1</max_angle></horizontal></scan><range><min>0.1</min><max>3</max>"
+        f'</range></ray><plugin name="laser_plugin" filename="libgazebo_ros_ray_sensor.so"><ros>{ros}</ros></plugin>'
+        "</sensor>"
+    )
+    robot = load_robot(_one_link_robot(tmp_path, ray))
+    assert robot.lidar is not None and robot.lidar.scan_topic == "front_scan"

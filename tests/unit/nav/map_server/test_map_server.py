@@ -233,3 +233,13 @@ def test_map_save_warns_when_the_free_point_is_outside_the_walls(tmp_path: Path)
     assert (load_map(tmp_path / "b" / "map.yaml").data == 0).sum() > (
         load_map(tmp_path / "a" / "map.yaml").data == 0
     ).sum()
+    # a world without outer walls: every free point's space reaches the edge, nothing to warn of
+    world = tmp_path / "open.sdf"
+    boxes = "".join(
+        f"<model name='b{i}'><static>1</static><pose>{x} 0 0.5 0 0 0</pose><link name='l'><collision name='c'>"
+        "<geometry><box><size>0.5 0.5 1</size></box></geometry></collision></link></model>"
+        for i, x in enumerate((-1, 1))
+    )
+    world.write_text(f"<sdf version='1.6'><world name='w'>{boxes}</world></sdf>")
+    open_world = run_twin("map", "save", str(world), "--out", str(tmp_path / "c" / "map.yaml"), "--free", "0", "0")
+    assert open_world.returncode == 0 and "map's edge" not in open_world.stderr, open_world.stderr
