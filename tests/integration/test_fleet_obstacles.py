@@ -133,9 +133,10 @@ def test_an_obstacle_on_a_fleet_robots_spawn_pose_names_the_robot(tmp_path: Path
     for command in (("simulate", str(bad), "--out", str(tmp_path / "bag")), ("scenario", "check", str(bad))):
         result = run_twin(*command)
         assert result.returncode == 2
+        line = next(i for i, text in enumerate(bad.read_text().splitlines(), 1) if "name: box_b" in text)
         assert result.stderr.strip().splitlines() == [
-            f"twin: error: {bad}: obstacles[1]: box_b stands on robots[1] (robot2)'s spawn pose (0.8, 1.5) at t = 0; "
-            "move it, or the robot's initial_pose"
+            f"twin: error: {bad}:{line}: obstacles[1]: box_b stands on robots[1] (robot2)'s spawn pose (0.8, 1.5) "
+            "at t = 0; move it, or the robot's initial_pose"
         ]
 
 

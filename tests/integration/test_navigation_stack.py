@@ -142,7 +142,7 @@ def test_a_robot_without_a_lidar_sent_to_navigate_is_one_line_and_exit_2(tmp_pat
     for command in (("scenario", "check", str(fleet)), ("simulate", str(fleet), "--out", str(tmp_path / "fb"))):
         refused = run_twin(*command)
         assert refused.returncode == 2, refused.stderr
-        assert f"{fleet}: robots[1].robot.model: " in refused.stderr and "has no lidar" in refused.stderr
+        assert f"{fleet}:4: robots[1].robot.model: " in refused.stderr and "has no lidar" in refused.stderr
     # ... while a scripted drive needs no lidar: it builds no map, AMCL or Nav2 stack
     body = f"robot: {{model: {model}}}\nmission: {{type: cmd_vel_script, segments: [{{duration_s: 1, linear_mps: 0.1}}]}}\n"
     result, bag = simulate(tmp_path, "blind_script", body)
