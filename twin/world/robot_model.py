@@ -65,6 +65,7 @@ _MAX_IMAGE_SIDE = 8192
 # By `Plugin.kind` (any spelling Gazebo accepts: `libgz-sim8-diff-drive-system.so`, `ignition-gazebo-...`).
 _DIFF_DRIVE_PLUGINS = ("gazebo_ros_diff_drive", "gz-sim-diff-drive-system", "DiffDrivePlugin")  # (the last:
 # Gazebo Classic's own, on Gazebo transport: its joints, the wheels' geometry, and the twin's cmd_vel)
+_SKID_STEER = "SkidSteerDrivePlugin"
 _JOINT_STATE_PLUGINS = ("gazebo_ros_joint_state_publisher", "gz-sim-joint-state-publisher-system")
 
 
@@ -825,6 +826,15 @@ def _drive(
     if plugin is not None:
         left_name = _in_scope(plugin, left_name, by_name) if left_name is not None else None
         right_name = _in_scope(plugin, right_name, by_name) if right_name is not None else None
+    # Gazebo Classic's SkidSteerDrivePlugin (a Pioneer 3AT's): its front pair drives as a diff drive,
+    # the rear pair turns with it; radius and separation from the wheels, as the plugin takes them
+    skid = None if plugin is not None else next((p for p in plugins if p.kind == _SKID_STEER), None)
+    skid_rear: tuple[tuple[str, int], ...] = ()
+    if skid is not None:
+        names = [skid.param(tag) for tag in ("left_front", "right_front", "left_rear", "right_rear")]
+        if all(names) and all(_in_scope(skid, n, by_name) in by_name for n in names if n):
+            left_name, right_name, rear_left, rear_right = (_in_scope(skid, n, by_name) for n in names if n)
+            skid_rear = ((rear_left, 0), (rear_right, 1))
     if left_name is None or right_name is None:
         wheels = [j for j in all_joints if j.type in (JointType.REVOLUTE, JointType.CONTINUOUS) and "wheel" in j.name]
         left_name = left_name or next((j.name for j in wheels if "left" in j.name), None)
@@ -874,6 +884,8 @@ def _drive(
             wheel_separation_m=separation,
             wheel_radius_m=radius,
             base_frame=root,
+            more_wheels=skid_rear,
+            plugin=skid.filename if skid_rear and skid is not None else None,
         )
     if plugin.kind == "gazebo_ros_diff_drive":
         command_topic, odometry_topic = _gazebo_ros_topic(plugin, "cmd_vel"), _gazebo_ros_topic(plugin, "odom")

@@ -184,6 +184,7 @@ _UNDERSTOOD_PLUGINS = frozenset(  # by `plugin_kind`: any spelling of each libra
     {
         "gazebo_ros_diff_drive",
         "DiffDrivePlugin",
+        "SkidSteerDrivePlugin",
         "gazebo_ros_joint_state_publisher",
         "gazebo_ros_ray_sensor",
         "gazebo_ros_imu_sensor",

@@ -7,6 +7,7 @@ base model, gz-sim's versioned library names, a Create's one-beam cliff sensors)
 
 from __future__ import annotations
 
+import logging
 import textwrap
 from pathlib import Path
 
@@ -275,3 +276,29 @@ def test_a_sensor_plugins_remapping_is_read_in_each_ros2_spelling(tmp_path: Path
     )
     robot = load_robot(_one_link_robot(tmp_path, ray))
     assert robot.lidar is not None and robot.lidar.scan_topic == "front_scan"
+
+
+def test_a_classic_skid_steer_drives_its_front_pair_and_turns_its_rear_with_it(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # Gazebo Classic's SkidSteerDrivePlugin (a Pioneer 3AT's) names four joints and no geometry.
+    wheels = "".join(
+        _WHEEL.format(name=name, x=x, y=y)
+        for name, x, y in (("lf", 0.1, 0.15), ("rf", 0.1, -0.15), ("lr", -0.1, 0.15), ("rr", -0.1, -0.15))
+    )
+    plugin = (
+        '<plugin name="skid" filename="libSkidSteerDrivePlugin.so"><left_front>lf_joint</left_front>'
+        "<right_front>rf_joint</right_front><left_rear>lr_joint</left_rear><right_rear>rr_joint</right_rear></plugin>"
+    )
+    path = tmp_path / "skid.sdf"
+    path.write_text(
+        '<?xml version="1.0"?><sdf version="1.5"><model name="skid"><link name="body"><collision name="c">'
+        f"<geometry><box><size>0.3 0.3 0.1</size></box></geometry></collision></link>{wheels}{plugin}</model></sdf>"
+    )
+    with caplog.at_level(logging.WARNING):
+        robot = load_robot(path)
+    assert robot.drive is not None
+    assert (robot.drive.left_joint, robot.drive.right_joint) == ("lf_joint", "rf_joint")
+    assert robot.drive.more_wheels == (("lr_joint", 0), ("rr_joint", 1))
+    assert robot.drive.wheel_separation_m == pytest.approx(0.3) and robot.drive.wheel_radius_m == pytest.approx(0.05)
+    assert not [r for r in caplog.records if "not run by the twin" in r.getMessage()]  # it is run
