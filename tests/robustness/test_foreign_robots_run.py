@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from tests.conftest import REPO
 from tests.robustness.helpers import assert_bag_reads_back, assert_one_line_error
 from twin.bag import open_bag, read_messages
 from twin.bag.provenance import read_provenance
@@ -219,3 +220,16 @@ def test_several_wheel_pairs_all_turn_on_joint_states_and_tf(
     assert (rear_left, rear_right) == (left, right) and left != right  # turning: the sides differ
     wheels = {t.child_frame_id for m in read_messages(tmp_path / "bag", ["/tf"]) for t in m.msg.transforms}
     assert {"left_wheel", "right_wheel", "rear_left_wheel", "rear_right_wheel"} <= wheels
+
+
+def test_a_fleet_robots_frames_may_carry_its_own_prefix_and_no_other() -> None:
+    from twin.nav.params import load_nav2_params
+    from twin.sim.navigation import frame_problem
+    from twin.world import load_robot
+
+    waffle = load_robot(REPO / "sdf" / "models" / "turtlebot3_waffle")
+    for value, refused in (("base_link", False), ("robot1/base_link", False), ("robot2/base_link", True)):
+        params = load_nav2_params(WAFFLE_PARAMS, overrides={"local_costmap.robot_base_frame": value})
+        problem = frame_problem(params, waffle, amcl=True, nav2=True, namespace="robot1")
+        assert (problem is not None) == refused, (value, problem)
+    assert frame_problem(load_nav2_params(WAFFLE_PARAMS), waffle, amcl=True, nav2=True) is None

@@ -433,7 +433,7 @@ def _load_navigation(scenario: Scenario, robot: RobotModelSpec, *, namespace: st
         map_source = None if scenario.map == "from_world" else str(scenario.map)
         step_s = scenario.physics.step_s
         check_nav2_inputs(params, occupancy, map_source=map_source, amcl=amcl, nav2=nav2, physics_step_s=step_s)
-        problem = frame_problem(params, robot, amcl=amcl, nav2=nav2)
+        problem = frame_problem(params, robot, amcl=amcl, nav2=nav2, namespace=namespace)
         if problem is not None:
             raise ConfigError(problem)
         if occupancy is not None and robot.lidar is not None and (amcl or nav2):

@@ -173,7 +173,7 @@ class NavigationStack:
         assert robot.lidar is not None
         params_path = _params_path(sc, robot)
         params = load_nav2_params(params_path, overrides=dict(sc.navigation.set), namespace=namespace)
-        problem = frame_problem(params, robot, amcl=wants_amcl, nav2=wants_nav2)
+        problem = frame_problem(params, robot, amcl=wants_amcl, nav2=wants_nav2, namespace=namespace)
         if problem is not None:
             raise ConfigError(problem)
         laser = LaserGeometry.from_spec(robot.lidar)
@@ -433,7 +433,9 @@ def check_map_extent(sc: Scenario, robot: RobotModelSpec, scene: Scene) -> None:
                 raise ConfigError(msg)
 
 
-def frame_problem(params: Nav2Params, robot: RobotModelSpec, *, amcl: bool, nav2: bool) -> str | None:
+def frame_problem(
+    params: Nav2Params, robot: RobotModelSpec, *, amcl: bool, nav2: bool, namespace: str = ""
+) -> str | None:
     """A frame the params have Nav2 look up that the run's TF tree does not hold, or None.
 
     The tree holds `map`, `odom` and the robot's own frames (its base frame and every link and
@@ -456,9 +458,10 @@ def frame_problem(params: Nav2Params, robot: RobotModelSpec, *, amcl: bool, nav2
             ("amcl", "base_frame_id", params.amcl.base_frame_id),
             ("amcl", "odom_frame_id", params.amcl.odom_frame_id),
         ]
+    own = f"{namespace.strip('/')}/" if namespace else ""
     for node, key, frame in checks:
-        # (a fleet's frame_prefix names `robot1/base_link`: its last part is the robot's frame)
-        if frame in frames or frame.rsplit("/", 1)[-1] in frames:
+        # (a fleet robot's frame may be named with its prefix, `robot1/base_link`, as frame_prefix names it)
+        if frame in frames or (own and frame.startswith(own) and frame[len(own) :] in frames):
             continue
         full = next((k for k in params.raw if k.rsplit("/", 1)[-1] == node), node)  # as the file names it
         where = params.origin.locate(full, key) if params.origin is not None else f"{params.source}: {full}.{key}"
