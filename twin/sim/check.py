@@ -353,14 +353,12 @@ def in_scenario(err: TwinError, path: Path) -> TwinError:
     error that names its own file (a mapping file, an FMU) is left as it is.
     """
     text = str(err)
-    where = key_location(path, _leading_key(text))
-    if text.startswith("robots["):  # a fleet robot's (`twin.sim.scenario.in_entry`): the entry names it
-        return err.with_context(before=f"{where}: ")
-    if not isinstance(err, ConfigError) or text.startswith(("/", str(path))):
+    fleet = text.startswith("robots[")  # a fleet robot's (`twin.sim.scenario.in_entry`): the entry names it
+    if not fleet and (not isinstance(err, ConfigError) or text.startswith(("/", str(path)))):
         return err
-    if not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text:
+    if not fleet and (not text.split(" ", 1)[0].endswith(":") or ".yaml:" in text):
         return err
-    return err.with_context(before=f"{where}: ")
+    return err.with_context(before=f"{key_location(path, _leading_key(text))}: ")
 
 
 def _check_drive(scenario: Scenario, path: Path, robot_name: str, *, entry: str = "") -> None:

@@ -111,16 +111,21 @@ def _topics_in_own_namespace(robot: RobotModelSpec, namespace: str) -> RobotMode
     `/dolly/laser_scan` of robot `dolly` is `laser_scan`: the group puts every topic in its namespace
     once (as `RobotGroup._drive_topic` does the drive's).
     """
-    own = f"{namespace.strip('/')}/" if namespace else ""
-    if not own:
+    if not namespace:
         return robot
     changes: dict[str, Any] = {}
     for key in ("lidar", "imu", "joint_states"):
         spec = getattr(robot, key)
         topic = getattr(spec, "topic", None)
-        if topic is not None and topic.strip("/").startswith(own):
-            changes[key] = dataclasses.replace(spec, topic=topic.strip("/")[len(own) :])
+        if topic is not None and _outside_own(topic.strip("/"), namespace) != topic.strip("/"):
+            changes[key] = dataclasses.replace(spec, topic=_outside_own(topic.strip("/"), namespace))
     return dataclasses.replace(robot, **changes) if changes else robot
+
+
+def _outside_own(relative: str, namespace: str) -> str:
+    """A topic relative to the robot's namespace without that namespace in front (`robot1/scan` of robot1: `scan`)."""
+    own = f"{namespace.strip('/')}/" if namespace else ""
+    return relative[len(own) :] if own and relative.startswith(own) else relative
 
 
 def _command_limits(drive: DiffDriveSpec) -> tuple[float, float, float, float] | None:
@@ -593,9 +598,7 @@ class RobotGroup:
         A plugin `<ros><namespace>` naming the robot's own (`/robot1`, as a fleet's model may) is that
         namespace, not one more under it.
         """
-        relative = in_namespace(topic, default)
-        own = f"{self.namespace.strip('/')}/" if self.namespace else ""
-        return relative[len(own) :] if own and relative.startswith(own) else relative
+        return _outside_own(in_namespace(topic, default), self.namespace)
 
     def _nodes(self) -> list[Node]:
         robot, sc, drive = self.robot, self.scenario, self.drive
