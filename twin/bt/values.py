@@ -18,6 +18,7 @@ from __future__ import annotations
 import enum
 import math
 import re
+import sys
 from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
@@ -93,6 +94,21 @@ def from_chars_double(text: str) -> float:
     return float(match.group().split("(")[0])
 
 
+def stod_out_of_range(decimal: str, value: float) -> bool:
+    """Whether `std::stod` refuses this decimal literal (read by Python as `value`) as out of range.
+
+    glibc's strtod reports ERANGE, and `std::stod` throws, when a decimal overflows to infinity or
+    underflows: a non-zero literal whose value is below the smallest normal double (it becomes 0 or
+    a subnormal). An exact zero ("0e-500") is in range.
+    """
+    if math.isinf(value):
+        return True
+    if abs(value) >= sys.float_info.min:
+        return False
+    mantissa = decimal.lower().split("e")[0]
+    return any(ch in "123456789" for ch in mantissa)
+
+
 def _strtod(text: str) -> float:
     """`std::stod`: parse the longest valid prefix after blanks; nothing valid is an error."""
     match = _STRTOD.match(text)
@@ -106,7 +122,7 @@ def _strtod(text: str) -> float:
         value = float(special.split("(")[0])
     else:
         value = float(decimal)
-        if math.isinf(value):
+        if stod_out_of_range(decimal, value):
             msg = f"Can't convert string [{text}] to double (std::stod: out of range)"
             raise ConversionError(msg)
     return -value if sign == "-" else value
@@ -173,7 +189,7 @@ class PortType:
         py_type: the Python class of the values, when there is one.
     """
 
-    __slots__ = ("_parse", "hi", "item", "kind", "lo", "name", "py_type", "strongly_typed")
+    __slots__ = ("_parse", "_type_info_converter", "hi", "item", "kind", "lo", "name", "py_type", "strongly_typed")
 
     ANY: ClassVar[PortType]
     BT_ANY: ClassVar[PortType]
@@ -198,6 +214,7 @@ class PortType:
         lo: int = 0,
         hi: int = 0,
         item: PortType | None = None,
+        type_info_converter: bool = True,
     ) -> None:
         self.name = name
         self.kind = kind
@@ -207,6 +224,10 @@ class PortType:
         self.lo = lo
         self.hi = hi
         self.item = item
+        # Whether BT.CPP's TypeInfo of the type has a StringConverter. An enum's (NodeStatus) has
+        # none: a literal is not checked at load, a string cannot be written into an entry of the
+        # type, yet `getInput` still converts a string with `convertFromString<T>` (`convert`).
+        self._type_info_converter = type_info_converter and parse is not None
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, PortType) and other.name == self.name
@@ -219,8 +240,8 @@ class PortType:
 
     @property
     def has_converter(self) -> bool:
-        """True when a string can be converted to this type (BT.CPP: the type has a StringConverter)."""
-        return self._parse is not None
+        """True when the type's TypeInfo converts strings (BT.CPP: it has a StringConverter)."""
+        return self._type_info_converter
 
     def parse(self, text: str, enums: Mapping[str, int] | None = None) -> Any:
         """Convert a string to a value of this type (`convertFromString<T>` / `TypeInfo::parseString`).
@@ -232,9 +253,19 @@ class PortType:
         """
         if self.kind == "enum" and self.py_type is not None:
             return _parse_enum(self.py_type, text, enums)
-        if self._parse is None:
+        if not self._type_info_converter:
             return None
-        return self._parse(text)
+        return self.convert(text)
+
+    def convert(self, text: str) -> Any:
+        """`convertFromString<T>`, which `getInput` uses on a string, also for a type whose TypeInfo has no converter.
+
+        Returns `None` for types without one.
+
+        Raises:
+            ConversionError: If the string does not hold a value of this type.
+        """
+        return None if self._parse is None else self._parse(text)
 
     @classmethod
     def sequence_of(cls, item: PortType, *, container: str = "std::vector") -> PortType:
@@ -248,15 +279,29 @@ class PortType:
             name = f"std::shared_ptr<std::deque<{item.name}>>"
 
             def parse_deque(text: str) -> deque[Any]:
-                return deque(item.parse(part) for part in text.split(";")) if text else deque()
+                return deque(item.parse(part) for part in split_items(text))
 
             return cls(name, "sequence", py_type=deque, parse=parse_deque, item=item)
         name = f"std::vector<{item.name}>"
 
         def parse_list(text: str) -> list[Any]:
-            return [item.parse(part) for part in text.split(";")] if text else []
+            return [item.parse(part) for part in split_items(text)]
 
         return cls(name, "sequence", py_type=list, parse=parse_list, item=item)
+
+
+def split_items(text: str) -> list[str]:
+    """A `;`-separated list's items as BT.CPP's `splitString` gives them.
+
+    Empty items are kept ("a;;b": three), but a final `;` starts no new one ("a;b;": two, ";": one
+    empty item), and an empty string has none.
+    """
+    if not text:
+        return []
+    parts = text.split(";")
+    if text.endswith(";"):
+        parts.pop()
+    return parts
 
 
 def _int_type(name: str, lo: int, hi: int) -> PortType:
@@ -278,7 +323,9 @@ PortType.UINT64 = _int_type("unsigned long", 0, _UINT64_MAX)
 PortType.DOUBLE = PortType("double", "double", py_type=float, parse=_strtod)
 PortType.FLOAT = PortType("float", "double", py_type=float, parse=_strtod)
 PortType.BOOL = PortType("bool", "bool", py_type=bool, parse=_convert_bool)
-PortType.NODE_STATUS = PortType("BT::NodeStatus", "status", py_type=NodeStatus, parse=_convert_status)
+PortType.NODE_STATUS = PortType(
+    "BT::NodeStatus", "status", py_type=NodeStatus, parse=_convert_status, type_info_converter=False
+)
 
 _CUSTOM_TYPES: dict[type, PortType] = {}
 
@@ -358,6 +405,8 @@ def parse_string(text: str, ptype: PortType, enums: Mapping[str, int] | None = N
     if ptype.kind == "custom" and not ptype.has_converter:
         msg = f"You didn't implement the template specialization of convertFromString for this type: {ptype.name}"
         raise ConversionError(msg)
+    if ptype.kind == "status":
+        return ptype.convert(text)
     return ptype.parse(text, enums)
 
 
