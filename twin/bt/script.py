@@ -26,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Final
 
 from twin.bt.blackboard import Blackboard
-from twin.bt.values import ConversionError, PortType, cast_value, copy_into, value_to_string
+from twin.bt.values import ConversionError, PortType, cast_value, copy_into, stod_out_of_range, value_to_string
 from twin.core.errors import TreeError
 
 __all__ = ["Environment", "Script", "ScriptError", "ScriptSyntaxError", "parse_script", "script_truth"]
@@ -71,6 +71,12 @@ _ASSIGN_OPS: Final = frozenset((":=", "=", "+=", "-=", "*=", "/="))
 _COMPARE_OPS: Final = frozenset(("==", "!=", "<", ">", "<=", ">="))
 _ARITHMETIC_OPS: Final = frozenset(("+", "-", "*", "/"))
 _BIT_OPS: Final = frozenset(("&", "|", "^"))
+# The group of each operator that belongs to one (`~` and `!` are bit operators in BT.CPP's grammar).
+_GROUP_OF: Final = {
+    **dict.fromkeys(_ARITHMETIC_OPS, "math"),
+    **dict.fromkeys((*_BIT_OPS, "~", "!"), "bit"),
+    "..": "string",
+}
 _INT64_MAX: Final = 2**63 - 1
 
 _OP, _NAME, _NUMBER, _STRING, _BOOL, _END = range(6)
@@ -112,6 +118,9 @@ def _tokenize(text: str) -> list[_Token]:
             end = text.find(ch, i + 1)
             if end < 0:
                 raise ScriptSyntaxError(text, i + 1, "missing closing quote")
+            wide = next((k for k in range(i + 1, end) if ord(text[k]) > 127), None)
+            if wide is not None:  # BT.CPP's grammar reads a string literal as ASCII characters only
+                raise ScriptSyntaxError(text, wide + 1, f"non-ASCII character {text[wide]!r} in a string literal")
             tokens.append(_Token(_STRING, text[i : end + 1], i, text[i + 1 : end]))
             i = end + 1
             continue
@@ -177,6 +186,8 @@ def _number(text: str, i: int, tokens: list[_Token]) -> int:
         raise ScriptSyntaxError(text, j + 1, f"invalid suffix on {kind} literal")
     if not is_real and value > _INT64_MAX:
         raise ScriptSyntaxError(text, start + 1, "integer literal out of range")
+    if is_real and stod_out_of_range(text[start:j], value):  # BT.CPP reads it with std::stod, which throws
+        raise ScriptSyntaxError(text, start + 1, "double literal out of range")
     tokens.append(_Token(_NUMBER, text[start:j], start, value))
     return j
 
@@ -496,6 +507,10 @@ class _Parser:
         self.text = text
         self.tokens = _tokenize(text)
         self.index = 0
+        # The operator group (math, bit or string) of each expression being parsed, innermost last:
+        # BT.CPP's grammar lets one expression (a statement, a parenthesis or a conditional's middle)
+        # use the operators of one group only, across its comparisons and logical operators too.
+        self._groups: list[str | None] = []
 
     @property
     def tok(self) -> _Token:
@@ -528,6 +543,24 @@ class _Parser:
         return exprs
 
     def expression(self) -> _Expr:
+        self._groups.append(None)
+        try:
+            return self._expression()
+        finally:
+            self._groups.pop()
+
+    def take_grouped(self) -> _Token:
+        """Consume a math, bit or string operator; one of another group than the expression's is an error."""
+        tok = self.tok
+        group = _GROUP_OF[tok.text]
+        seen = self._groups[-1]
+        if seen is None:
+            self._groups[-1] = group
+        elif seen != group:
+            raise self.fail(f"operator {tok.text!r} cannot be mixed with the previous operators; add parentheses")
+        return self.advance()
+
+    def _expression(self) -> _Expr:
         lhs = self.conditional()
         if self.tok.kind == _OP and self.tok.text in _ASSIGN_OPS:
             op = self.advance().text
@@ -602,7 +635,7 @@ class _Parser:
         operands = [self.math_product(first)]
         ops: list[str] = []
         while self.is_op("+", "-"):
-            ops.append(self.advance().text)
+            ops.append(self.take_grouped().text)
             operands.append(self.math_product(None))
         return _fold_right(operands, ops)
 
@@ -610,20 +643,20 @@ class _Parser:
         operands = [first if first is not None else self.math_prefix()]
         ops: list[str] = []
         while self.is_op("*", "/"):
-            ops.append(self.advance().text)
+            ops.append(self.take_grouped().text)
             operands.append(self.math_prefix())
         return _fold_right(operands, ops)
 
     def math_prefix(self) -> _Expr:
         if self.is_op("-"):
-            self.advance()
+            self.take_grouped()
             return _Unary("-", self.math_prefix())
         return self.atom()
 
     def concat_chain(self, first: _Expr) -> _Expr:
         lhs = first
         while self.is_op(".."):
-            self.advance()
+            self.take_grouped()
             lhs = _Binary(lhs, "..", self.atom())
         self.no_mix(_BIT_OPS | _ARITHMETIC_OPS)
         return lhs
@@ -631,7 +664,7 @@ class _Parser:
     def bit_chain(self, first: _Expr | None) -> _Expr:
         lhs = self.bit_and(first)
         while self.is_op("|", "^"):
-            op = self.advance().text
+            op = self.take_grouped().text
             lhs = _Binary(lhs, op, self.bit_and(None))
         self.no_mix(_ARITHMETIC_OPS | {".."})
         return lhs
@@ -639,13 +672,13 @@ class _Parser:
     def bit_and(self, first: _Expr | None) -> _Expr:
         lhs = first if first is not None else self.bit_prefix()
         while self.is_op("&"):
-            self.advance()
+            self.take_grouped()
             lhs = _Binary(lhs, "&", self.bit_prefix())
         return lhs
 
     def bit_prefix(self) -> _Expr:
         if self.is_op("~", "!"):
-            op = self.advance().text
+            op = self.take_grouped().text
             return _Unary(op, self.bit_prefix())
         return self.atom()
 
