@@ -143,6 +143,19 @@ def _check_element(
     if not manifest.bound:
         declared_only.add(type_id)
     check_ports(element, manifest, factory.enums, report)
+    for name, value in element.attrs.items():
+        port = manifest.ports.get(name)
+        if port is None or port.type.kind != "status" or (value.startswith("{") and value.endswith("}")):
+            continue
+        try:
+            port.type.convert(value)
+        except ConversionError:
+            # BT.CPP has no load-time converter for an enum port: it fails only when the node reads it.
+            report(
+                element.location,
+                f"<{type_id}> {name}={value!r} is not a status; use one of {', '.join(s.name for s in NodeStatus)} "
+                "(BT.CPP loads it but fails when the node reads it)",
+            )
     for name, spec in manifest.ports.items():
         if spec.required and name not in element.attrs and not spec.default_str:
             what = f" ({spec.description})" if spec.description else ""

@@ -87,6 +87,12 @@ def test_the_shipped_trees_are_valid(factory: BehaviorTreeFactory, tree_file: st
             ' BTCPP_format="4"',
             "t.xml:3: <WhileDoElse> needs 2 or 3 children",
         ),
+        (  # a status port: BT.CPP has no load-time converter for it, and fails when the node reads it
+            '<Precondition if="true" else="success"><AlwaysSuccess/></Precondition>',
+            "",
+            ' BTCPP_format="4"',
+            "t.xml:3: <Precondition> else='success' is not a status; use one of IDLE, RUNNING, SUCCESS, FAILURE",
+        ),
     ],
 )
 def test_each_problem_is_one_line_with_file_and_line(factory, body: str, extra: str, fmt: str, expected: str) -> None:
@@ -154,3 +160,12 @@ def test_main_tree_picks_the_tree_of_a_file_of_several(factory: BehaviorTreeFact
     assert report.main_tree == "MainTree"
     wrong = validate_file(path, factory, main_tree="MainTre")
     assert wrong.problems == (f"{path}: --main-tree 'MainTre' names no tree in the file; did you mean 'MainTree'?",)
+
+
+def test_a_status_port_from_the_blackboard_or_spelled_right_is_valid(factory: BehaviorTreeFactory) -> None:
+    body = (
+        '<Sequence><Precondition if="true" else="SKIPPED"><AlwaysSuccess/></Precondition>'
+        '<Precondition if="true" else="{fallback}"><AlwaysSuccess/></Precondition></Sequence>'
+    )
+    report = validate_text(doc(body), factory, source="t.xml")
+    assert report.ok, report.problems
