@@ -194,6 +194,16 @@ class Tree(TickContext):
         self._now_ns = now
         self._timers_fired = self.timers.fire_due(now)
 
+    def _woken_again(self) -> bool:
+        """Whether the pass just made woke the tree (`tick_once`'s loop asks after every pass).
+
+        A timer of 0 ms started in the pass is already due: BT.CPP's timer thread fires it, and it
+        wakes the tree, before `tickOnce` looks for a wake-up (almost always: it is a race there), so
+        it fires here at the same moment. Longer timers wait for a later tick, as in `_begin_tick`.
+        """
+        self._timers_fired += self.timers.fire_due(self._now_ns)
+        return self._take_wake_up()
+
     def tick_once(self) -> NodeStatus:
         """Tick the root; tick it again at once while it is RUNNING and a wake-up was emitted.
 
@@ -240,7 +250,7 @@ class Tree(TickContext):
         status = root.execute_tick()
         woken = False
         reticks = 0
-        while status is RUNNING and self._take_wake_up():
+        while status is RUNNING and self._woken_again():
             woken = True
             if reticks == MAX_WAKE_UP_RETICKS:
                 self._note_reticks_capped()
