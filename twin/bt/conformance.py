@@ -10,7 +10,8 @@ events between ticks happen at the start of the next tick; the comparison theref
 `between_*` events in front of its own for wall-time cases, as the rules say.
 
 Comparison rules: the number of ticks and each root status exactly; transitions and leaf calls as
-ordered lists; an expected error only needs an error on that tick (nothing after it is compared);
+ordered lists; an expected error only needs an error on that tick (nothing after it is compared;
+an error on the first tick before anything ran is also met by refusing to load the tree);
 the blackboard must have the same keys, strings equal exactly, numbers and booleans numerically,
 `null` meaning an entry without a value.
 """
@@ -410,12 +411,26 @@ def _first_mismatch(expected: Sequence[Any], got: Sequence[Any]) -> str:
     return f"unexpected {json.dumps(list(got[len(expected) :]))}"
 
 
+def _error_before_anything_ran(expected_trace: Sequence[Mapping[str, Any]]) -> bool:
+    """Whether BT.CPP failed on the first tick before any node changed status or any leaf was called.
+
+    That is how a recording shows a tree BT.CPP refused to load (or one whose first node threw at
+    once); an engine that refuses to load such a tree behaves the same for its user.
+    """
+    if not expected_trace:
+        return False
+    first = expected_trace[0]
+    return first.get("error") is not None and not first.get("transitions") and not first.get("leaf_calls")
+
+
 def compare_run(case: ConformanceCase, run: CaseRun, *, mode: str = "once") -> list[str]:
     """The differences between a run and the case's expectations (empty when they agree)."""
     if mode not in case.expected:
         return [f"the case has no expectations for tick mode {mode!r}"]
     expected_trace, expected_board = case.expected[mode]
     if run.load_error is not None:
+        if _error_before_anything_ran(expected_trace):
+            return []  # refused earlier than BT.CPP, with nothing run before: the same for a user
         return [f"the tree did not load: {run.load_error}"]
     problems: list[str] = []
     if len(run.trace) != len(expected_trace) and not any(t.get("error") for t in expected_trace):

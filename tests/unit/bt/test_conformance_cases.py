@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
-from twin.bt.conformance import check_case, load_case
+from twin.bt.conformance import check_case, compare_run, load_case, run_case
 
 SHARED_CASES = sorted((Path(__file__).resolve().parents[4] / "shared" / "bt_conformance" / "cases").glob("*.json"))
 OWN_CASES = sorted((Path(__file__).resolve().parent / "cases").glob("*.json"))
@@ -44,3 +45,20 @@ def test_shared_case_matches_btcpp_in_exactly_once_mode(path: Path) -> None:
 def test_own_recorded_case_matches_btcpp(path: Path, mode: str) -> None:
     result = check_case(load_case(path), mode=mode)
     assert result.passed, result.first_difference
+
+
+def test_a_tree_the_engine_refuses_meets_an_error_only_if_nothing_ran_before_it(tmp_path: Path) -> None:
+    """BT.CPP's refusal to load shows as an error on tick 1 before anything ran; refusing to load meets it."""
+    raw = json.loads((Path(__file__).resolve().parent / "cases" / "u159_le_unknown_node.json").read_text())
+    refused = tmp_path / "refused.json"
+    refused.write_text(json.dumps(raw))
+    case = load_case(refused)
+    run = run_case(case, mode="once")
+    assert run.load_error is not None and "Frobnicate" in run.load_error
+    assert compare_run(case, run, mode="once") == []
+    # The same refusal where BT.CPP had already run a node on that tick is a difference.
+    raw["expected_trace"][0]["transitions"] = [["seq", "IDLE", "RUNNING"]]
+    ran = tmp_path / "ran.json"
+    ran.write_text(json.dumps(raw))
+    problems = compare_run(load_case(ran), run, mode="once")
+    assert problems and problems[0].startswith("the tree did not load")
