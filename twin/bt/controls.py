@@ -58,8 +58,11 @@ class _SequentialNode(ControlNode):
         self._wakes_up = asynch or self._MEMORY
 
     def halt(self) -> None:
-        """Halt the children; restart from the first child next time unless the node has memory."""
-        if not self._MEMORY:
+        """Halt the children; restart from the first child next time unless the node has memory.
+
+        BT.CPP 3.8's SequenceStar (a v3 file's) forgets its position when halted; 4.x keeps it.
+        """
+        if not self._MEMORY or self.btcpp3:
             self._current = 0
             self._skipped = 0
         super().halt()
@@ -243,7 +246,8 @@ class ParallelNode(ControlNode):
             raise TreeError("Number of children is less than threshold. Can never succeed.")
         if count < required_failure:
             raise TreeError("Number of children is less than threshold. Can never fail.")
-        self.set_status(RUNNING)
+        if not self.btcpp3:  # BT.CPP 3.8's Parallel is RUNNING only once its children were ticked
+            self.set_status(RUNNING)
         skipped = 0
         for index, child in enumerate(children):
             if index not in self._completed:

@@ -664,7 +664,8 @@ class TreeParser:
         builder = _Builder(self, stub)
         builder.create_subtree(tree_id, _Scope("", "", blackboard or Blackboard(), ()), None, None)
         nodes = builder.nodes
-        return Tree(root=nodes[0], nodes=nodes, subtrees=builder.subtrees, clock=clock)
+        _, document = self.tree_roots[tree_id]
+        return Tree(root=nodes[0], nodes=nodes, subtrees=builder.subtrees, clock=clock, btcpp3=document.version == 3)
 
 
 def parse_conditions(

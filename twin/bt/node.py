@@ -360,8 +360,13 @@ class TreeNode:
             self._tree.emit_wake_up_signal()
 
     def requires_wake_up(self) -> bool:
-        """True once the node belongs to a tree (BT.CPP: a wake-up signal is installed)."""
-        return self._tree is not None
+        """True once the node belongs to a tree ticked as BT.CPP 4.x (which installs a wake-up signal)."""
+        return self._tree is not None and not self._tree.btcpp3
+
+    @property
+    def btcpp3(self) -> bool:
+        """Whether the node's tree is ticked as BT.CPP 3.8 ticks a v3 file (`Tree.btcpp3`)."""
+        return self._tree is not None and self._tree.btcpp3
 
     def now_ns(self) -> int:
         """The simulation time of the current tick."""

@@ -92,6 +92,8 @@ class TickContext:
     def __init__(self, clock: Callable[[], int]) -> None:
         self.clock = clock
         self.timers = TimerQueue()
+        self.btcpp3 = False
+        """Ticked as BT.CPP 3.8 ticks (a v3 file): no node asks for a wake-up, none re-ticks the tree."""
         self._wake_up = False
         self._now_ns = clock()
         # A tick settles only if no node changed its status and no node that does not settle ran.

@@ -4,7 +4,8 @@
 and ticks it again at once while the root is RUNNING and some node emitted a wake-up signal (a
 `SequenceWithMemory`, `Repeat` or `RetryUntilSuccessful` after an instant child, a timer that
 fired), at most `MAX_WAKE_UP_RETICKS` times. `tick_exactly_once()` ticks the root once. A
-completed root is reset to IDLE.
+completed root is reset to IDLE. A tree from a v3 file (`btcpp3`) ticks as BT.CPP 3.8 does:
+`tick_once()` is its `tickRoot()`, one pass whatever wake-ups were emitted.
 
 Time comes from the clock the tree is given (a callable returning integer nanoseconds). Timers
 (`Delay`, `Timeout`, `Sleep`) are due at `start + delay` on that clock and fire at the start of the
@@ -94,6 +95,10 @@ class Tree(TickContext):
         nodes: every node, in creation order (uid order).
         subtrees: the main tree first, then each SubTree instance.
         clock: simulation time in integer nanoseconds.
+        btcpp3: tick as BT.CPP 3.8 (Nav2 Humble's) ticks a v3 file: `tick_once` is its `tickRoot()`,
+            one pass of the root whatever wake-ups were emitted, and no node asks for one (3.8's
+            SequenceStar, Repeat and RetryUntilSuccessful go on past an instant child in the same
+            tick, where 4.x returns RUNNING and wakes the tree).
     """
 
     def __init__(
@@ -103,8 +108,10 @@ class Tree(TickContext):
         nodes: Sequence[TreeNode],
         subtrees: Sequence[SubtreeInstance],
         clock: Callable[[], int],
+        btcpp3: bool = False,
     ) -> None:
         super().__init__(clock)
+        self.btcpp3 = btcpp3
         self.root = root
         self.nodes: tuple[TreeNode, ...] = tuple(nodes)
         self.subtrees: tuple[SubtreeInstance, ...] = tuple(subtrees)
@@ -201,6 +208,9 @@ class Tree(TickContext):
         wakes the tree, before `tickOnce` looks for a wake-up (almost always: it is a race there), so
         it fires here at the same moment. Longer timers wait for a later tick, as in `_begin_tick`.
         """
+        if self.btcpp3:  # 3.8's tickRoot() ticks once; a wake-up only ends the sleep before the next tick
+            self._take_wake_up()
+            return False
         self._timers_fired += self.timers.fire_due(self._now_ns)
         return self._take_wake_up()
 
