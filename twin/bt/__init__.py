@@ -1,4 +1,4 @@
-"""Layer 1: a behaviour-tree engine that loads BehaviorTree.CPP XML (v3 and v4) and ticks it as BT.CPP 4.x.
+"""Layer 1: a behaviour-tree engine that loads BehaviorTree.CPP XML and ticks it as BT.CPP does (v4 as 4.x, v3 as 3.8).
 
 Import what you use from here:
 

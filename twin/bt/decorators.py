@@ -154,7 +154,7 @@ class _CountingNode(DecoratorNode):
             status = child.execute_tick()
             if status is self._AGAIN:
                 self._count += 1
-                if self._REREAD:
+                if self._REREAD and not self.btcpp3:  # BT.CPP 3.8 reads num_attempts once per tick
                     ok, value = self.read_input(self._PORT)
                     if ok:
                         self._limit = int(value)

@@ -111,7 +111,7 @@ def _tokenize(text: str) -> list[_Token]:
         if ch == "\\" and text[i + 1 : i + 2] == "\n":
             i += 2
             continue
-        if ch.isdigit():
+        if "0" <= ch <= "9":  # ASCII digits only: '²' is no number in BT.CPP's grammar
             i = _number(text, i, tokens)
             continue
         if ch in "'\"":
@@ -151,6 +151,9 @@ def _tokenize(text: str) -> list[_Token]:
     return tokens
 
 
+_DIGITS: Final = frozenset("0123456789")
+
+
 def _number(text: str, i: int, tokens: list[_Token]) -> int:
     """Read an integer or real literal at `i`; return the index after it."""
     n = len(text)
@@ -163,22 +166,22 @@ def _number(text: str, i: int, tokens: list[_Token]) -> int:
         is_real = False
     else:
         j = i
-        while j < n and text[j].isdigit():
+        while j < n and text[j] in _DIGITS:
             j += 1
         is_real = False
-        if j < n and text[j] == "." and j + 1 < n and text[j + 1].isdigit():
+        if j < n and text[j] == "." and j + 1 < n and text[j + 1] in _DIGITS:
             is_real = True
             j += 1
-            while j < n and text[j].isdigit():
+            while j < n and text[j] in _DIGITS:
                 j += 1
         if j < n and text[j] in "eE":
             k = j + 1
             if k < n and text[k] in "+-":
                 k += 1
-            if k < n and text[k].isdigit():
+            if k < n and text[k] in _DIGITS:
                 is_real = True
                 j = k
-                while j < n and text[j].isdigit():
+                while j < n and text[j] in _DIGITS:
                     j += 1
         value = float(text[start:j]) if is_real else int(text[start:j])
     if j < n and (text[j] == "." or text[j] == "_" or text[j].isalpha()):

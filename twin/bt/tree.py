@@ -10,7 +10,9 @@ completed root is reset to IDLE. A tree from a v3 file (`btcpp3`) ticks as BT.CP
 Time comes from the clock the tree is given (a callable returning integer nanoseconds). Timers
 (`Delay`, `Timeout`, `Sleep`) are due at `start + delay` on that clock and fire at the start of the
 first tick at or after that time: what BT.CPP's timer thread does during the sleep between two
-ticks happens here, deterministically, before the root is ticked.
+ticks happens here, deterministically, before the root is ticked. A timer of 0 ms started during
+a `tick_once()` pass (v4) fires before the wake-up check of that pass, as BT.CPP's timer thread
+almost always does.
 
 Listeners get every stored status change: `listener(t_ns, node_path, uid, prev, new)`.
 """
@@ -215,10 +217,11 @@ class Tree(TickContext):
         return self._take_wake_up()
 
     def tick_once(self) -> NodeStatus:
-        """Tick the root; tick it again at once while it is RUNNING and a wake-up was emitted.
+        """Tick the root; tick it again at once while it is RUNNING and a wake-up was emitted (v4 files).
 
-        At most `MAX_WAKE_UP_RETICKS` re-ticks: then the root's status (RUNNING) is returned and the
-        next call goes on.
+        A tree from a v3 file (`btcpp3`) is ticked once, as BT.CPP 3.8's `tickRoot()` does. At most
+        `MAX_WAKE_UP_RETICKS` re-ticks: then the root's status (RUNNING) is returned and the next
+        call goes on.
 
         Raises:
             TickError: If a node fails; the tree keeps the state it had at that point.

@@ -18,7 +18,16 @@ from typing import NoReturn
 
 from twin.bt.factory import BehaviorTreeFactory
 from twin.bt.loader import BUILTIN_TAGS, TreeParser, XmlElement, check_ports, model_ports, parse_conditions, parse_xml
-from twin.bt.node import ConditionNode, ControlNode, DecoratorNode, NodeConfig, NodeManifest, SyncActionNode, TreeNode
+from twin.bt.node import (
+    ConditionNode,
+    ControlNode,
+    DecoratorNode,
+    NodeConfig,
+    NodeManifest,
+    SyncActionNode,
+    TreeNode,
+    remapped_key,
+)
 from twin.bt.script import ScriptSyntaxError, parse_script
 from twin.bt.status import NodeKind, NodeStatus
 from twin.bt.tree import ManualClock, Tree
@@ -145,7 +154,7 @@ def _check_element(
     check_ports(element, manifest, factory.enums, report)
     for name, value in element.attrs.items():
         port = manifest.ports.get(name)
-        if port is None or port.type.kind != "status" or (value.startswith("{") and value.endswith("}")):
+        if port is None or port.type.kind != "status" or remapped_key(name, value) is not None:
             continue
         try:
             port.type.convert(value)

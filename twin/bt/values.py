@@ -21,6 +21,7 @@ import re
 import sys
 from collections import deque
 from collections.abc import Callable, Mapping
+from fractions import Fraction
 from typing import Any, ClassVar
 
 from twin.bt.status import NodeStatus
@@ -87,26 +88,68 @@ def _convert_from_string_int(text: str, lo: int, hi: int) -> int:
 
 
 def from_chars_double(text: str) -> float:
+    """`std::from_chars` for a double (BT.CPP's string to number in `Any`): no range, no value.
+
+    It fails on a literal that overflows to infinity or underflows to zero; a subnormal result passes.
+    """
     match = _FROM_CHARS_DOUBLE.match(text)
     if match is None:
         msg = "Any failed string to number conversion"
         raise ConversionError(msg)
-    return float(match.group().split("(")[0])
+    literal = match.group()
+    value = float(literal.split("(")[0])
+    numeric = literal.lstrip("-")[:1] in "0123456789."  # not inf or nan, which it reads as such
+    if numeric and (math.isinf(value) or (value == 0.0 and _nonzero_mantissa(literal))):
+        msg = "Any failed string to number conversion"
+        raise ConversionError(msg)
+    return value
 
 
-def stod_out_of_range(decimal: str, value: float) -> bool:
-    """Whether `std::stod` refuses this decimal literal (read by Python as `value`) as out of range.
+def _nonzero_mantissa(literal: str) -> bool:
+    """Whether a decimal or hexadecimal literal's digits before its exponent are not all zero."""
+    text = literal.lower().lstrip("+-")
+    if text.startswith("0x"):
+        return any(ch not in "0." for ch in text[2:].partition("p")[0])
+    return any(ch in "123456789" for ch in text.partition("e")[0])
 
-    glibc's strtod reports ERANGE, and `std::stod` throws, when a decimal overflows to infinity or
-    underflows: a non-zero literal whose value is below the smallest normal double (it becomes 0 or
-    a subnormal). An exact zero ("0e-500") is in range.
+
+def _exact(literal: str) -> Fraction:
+    """The exact value of an unsigned decimal or hexadecimal (`0x1.8p-3`) literal."""
+    text = literal.lower()
+    if text.startswith("0x"):
+        body, _, exponent = text[2:].partition("p")
+        whole, _, fraction = body.partition(".")
+        return Fraction(int(whole + fraction or "0", 16), 16 ** len(fraction)) * Fraction(2) ** int(exponent or "0")
+    return Fraction(text)
+
+
+def stod_out_of_range(literal: str, value: float) -> bool:
+    """Whether `std::stod` refuses this unsigned decimal or hex literal (read as `value`) as out of range.
+
+    glibc's strtod reports ERANGE, and `std::stod` throws, when the literal overflows to infinity, or
+    when it is tiny and the result is not exact: tiny meaning its exact value, rounded to 53 bits
+    as if the exponent had no bound, is below the smallest normal double ("2.2250738585072012e-308"
+    is, though the result rounds up to the smallest normal; "2.22507385850720138e-308" is not). An
+    exact zero ("0e-500") and an exact subnormal ("0x1p-1074") are in range.
     """
     if math.isinf(value):
         return True
-    if abs(value) >= sys.float_info.min:
+    smallest = sys.float_info.min
+    if abs(value) > smallest:
         return False
-    mantissa = decimal.lower().split("e")[0]
-    return any(ch in "123456789" for ch in mantissa)
+    if value == 0.0:
+        return _nonzero_mantissa(literal)
+    exact = _exact(literal)
+    return _rounded_53(exact) < Fraction(smallest) and Fraction(abs(value)) != exact
+
+
+def _rounded_53(x: Fraction) -> Fraction:
+    """`x` (> 0) rounded to 53 significant bits, ties to even, with an unbounded exponent."""
+    e = x.numerator.bit_length() - x.denominator.bit_length()
+    if x < Fraction(2) ** e:
+        e -= 1  # now 2**e <= x < 2**(e + 1)
+    scale = Fraction(2) ** (52 - e)
+    return Fraction(round(x * scale)) / scale
 
 
 def _strtod(text: str) -> float:
@@ -116,13 +159,15 @@ def _strtod(text: str) -> float:
         msg = f"Can't convert string [{text}] to double (std::stod: invalid argument)"
         raise ConversionError(msg)
     sign, hexa, special, decimal = match.groups()
-    if hexa:
-        value = float.fromhex(hexa if "p" in hexa.lower() else hexa + "p0")
-    elif special:
+    if special:
         value = float(special.split("(")[0])
     else:
-        value = float(decimal)
-        if stod_out_of_range(decimal, value):
+        literal = hexa if not hexa or "p" in hexa.lower() else hexa + "p0"
+        try:
+            value = float.fromhex(literal) if hexa else float(decimal)
+        except OverflowError:  # float.fromhex refuses what strtod makes infinite (ERANGE)
+            value = math.inf
+        if stod_out_of_range(literal if hexa else decimal, value):
             msg = f"Can't convert string [{text}] to double (std::stod: out of range)"
             raise ConversionError(msg)
     return -value if sign == "-" else value

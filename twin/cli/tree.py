@@ -38,8 +38,9 @@ def register(subparsers: Any, common: argparse.ArgumentParser) -> None:
         "tree",
         help="validate, show and run behaviour-tree files; run BT.CPP conformance cases",
         description=(
-            "BehaviorTree.CPP XML files (v4, and v3 normalised on load), ticked as BT.CPP 4.x does on the "
-            "simulation clock. Node types: BT.CPP's built-ins, Nav2's control nodes, the mission nodes "
+            "BehaviorTree.CPP XML files (v4, and v3 normalised on load), ticked on the simulation clock as "
+            "BT.CPP 4.x ticks a v4 file and as BT.CPP 3.8 (Nav2 Humble's) ticks a v3 file. Node types: "
+            "BT.CPP's built-ins, Nav2's control nodes, the mission nodes "
             "(SetLocations, GetLocationFromQueue, GoToPose) and plugins of the entry-point group twin.bt_nodes; "
             "Nav2's action and condition nodes are known for validation."
         ),

@@ -165,7 +165,8 @@ def test_main_tree_picks_the_tree_of_a_file_of_several(factory: BehaviorTreeFact
 def test_a_status_port_from_the_blackboard_or_spelled_right_is_valid(factory: BehaviorTreeFactory) -> None:
     body = (
         '<Sequence><Precondition if="true" else="SKIPPED"><AlwaysSuccess/></Precondition>'
-        '<Precondition if="true" else="{fallback}"><AlwaysSuccess/></Precondition></Sequence>'
+        '<Precondition if="true" else="{fallback}"><AlwaysSuccess/></Precondition>'
+        '<Precondition if="true" else="="><AlwaysSuccess/></Precondition></Sequence>'
     )
     report = validate_text(doc(body), factory, source="t.xml")
     assert report.ok, report.problems
