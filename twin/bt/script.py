@@ -111,7 +111,7 @@ def _tokenize(text: str) -> list[_Token]:
         if ch == "\\" and text[i + 1 : i + 2] == "\n":
             i += 2
             continue
-        if "0" <= ch <= "9":  # ASCII digits only: '²' is no number in BT.CPP's grammar
+        if ch in _DIGITS:  # ASCII digits only: '²' is no number in BT.CPP's grammar
             i = _number(text, i, tokens)
             continue
         if ch in "'\"":

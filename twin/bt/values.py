@@ -162,12 +162,12 @@ def _strtod(text: str) -> float:
     if special:
         value = float(special.split("(")[0])
     else:
-        literal = hexa if not hexa or "p" in hexa.lower() else hexa + "p0"
+        literal = hexa or decimal
         try:
-            value = float.fromhex(literal) if hexa else float(decimal)
+            value = float.fromhex(literal) if hexa else float(literal)
         except OverflowError:  # float.fromhex refuses what strtod makes infinite (ERANGE)
             value = math.inf
-        if stod_out_of_range(literal if hexa else decimal, value):
+        if stod_out_of_range(literal, value):
             msg = f"Can't convert string [{text}] to double (std::stod: out of range)"
             raise ConversionError(msg)
     return -value if sign == "-" else value
