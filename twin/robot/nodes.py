@@ -97,6 +97,9 @@ class ContactTracker:
 
     def __init__(self, monitor: ContactMonitor) -> None:
         self.monitor = monitor
+        # A monitor's yes-or-no check (a fleet's: no contacts built), for the steps of an open episode.
+        check = monitor.check
+        self._touching: Callable[[float, float, float], object] = getattr(monitor, "touches", check)
         self.contact: tuple[Contact, ...] = ()
         self.in_contact = False  # a contact episode is open
         self.pending = False  # the node must track the open episode (after each physics advance)
@@ -112,6 +115,8 @@ class ContactTracker:
 
     def touches(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
         """Whether the robot at this pose touches the world (opens an episode when it starts)."""
+        if self.in_contact:  # the episode's contacts are known: whether it touches is all that is asked
+            return bool(self._touching(x_m, y_m, yaw_rad))
         contacts = self.monitor.check(x_m, y_m, yaw_rad)
         if contacts:
             if not self.in_contact:

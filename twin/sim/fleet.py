@@ -244,6 +244,8 @@ class FleetMonitor:
         # after step (`Chassis.update` asks about the refused step and the turn alone); the shapes
         # are rigid, so the same poses give the same contacts, whatever the robots farther away do.
         self._recent: dict[int, dict[tuple[_Pose, _Pose], tuple[Contact, ...]]] = {j: {} for j in self.others}
+        # The same for `touches` (whether there is any contact), asked far more often than `check`.
+        self._recent_touch: dict[int, dict[tuple[_Pose, _Pose], bool]] = {j: {} for j in self.others}
         # For `free_m`: the pose and odometer of its last full look, the smallest gap of the robots
         # farther than _NEAR_M then (inf: none), and the nearer ones (in index order).
         self._far: tuple[_Pose, int, float, tuple[int, ...]] | None = None
@@ -301,6 +303,39 @@ class FleetMonitor:
             found += pair
         found.sort(key=lambda c: -c.depth_m)
         return tuple(found)
+
+    def touches(self, x_m: float, y_m: float, yaw_rad: float) -> bool:
+        """Whether the robot at this pose touches the world or another robot: `check` as a yes or no.
+
+        The drive asks this at every step while a contact episode is open (the contacts themselves
+        matter only when one begins): the same shapes and FCL's same narrow phase, without
+        building the contacts, and stopping at the first pair of shapes that touches.
+        """
+        if self.inner.check(x_m, y_m, yaw_rad):
+            return True
+        fleet, body = self.fleet, self.fleet.body(self.index)
+        radius, radii = body.radius_m, fleet.radii
+        pose = (x_m, y_m, yaw_rad)
+        for j in self.others:
+            where = self._where(j)
+            if math.hypot(where[0] - x_m, where[1] - y_m) - radius - radii[j] > _MARGIN_M:
+                continue
+            key = (pose, where)
+            known = self._recent[j].get(key)
+            if known is not None:
+                if known:
+                    return True
+                continue
+            recent = self._recent_touch[j]
+            touching = recent.get(key)
+            if touching is None:
+                touching = body.touches(pose, fleet.body(j), where)
+                if len(recent) >= _RECENT_POSES:
+                    del recent[next(iter(recent))]  # the oldest
+                recent[key] = touching
+            if touching:
+                return True
+        return False
 
     def free_m(self, x_m: float, y_m: float, yaw_rad: float) -> float:
         """Return how far the robot may move from this pose touching neither the world nor another robot.

@@ -627,6 +627,8 @@ class RobotBody:
         self._part_at: list[tuple[float, float, float] | None] = [None] * len(self._objects)
         self._turned: tuple[float, F64, F64] | None = None  # a heading and the shapes turned by it
         self._circles_at: tuple[tuple[float, float, float], list[tuple[float, float, float]]] | None = None
+        # `touches`' request: `contacts_with`'s own (the same narrow phase decides), one contact enough.
+        self._touch_request = fcl.CollisionRequest(num_max_contacts=1, enable_contact=True)
 
     def _placements(self, x: float, y: float, yaw: float) -> tuple[F64, F64]:
         """Every shape's rotation and translation in the world with the base frame at this pose."""
@@ -757,6 +759,23 @@ class RobotBody:
             if result.min_distance <= 0.0:
                 break
         return max(0.0, float(result.min_distance))
+
+    def touches(
+        self, pose: tuple[float, float, float], other: RobotBody, other_pose: tuple[float, float, float]
+    ) -> bool:
+        """Whether this robot's shapes at `pose` touch another's at `other_pose`: `contacts_with` as a yes or no.
+
+        The same pairs and the same FCL request as `contacts_with` (its answer is non-empty exactly
+        when this is true), stopping at the first pair that collides and building no contacts.
+        """
+        request = self._touch_request
+        own, others = self._objects, other._objects
+        for _, i, j in self._near_pairs(pose, other, other_pose, _CIRCLE_PAD_M):
+            self._place_parts(pose, (i,))  # each shape placed once, when first needed
+            other._place_parts(other_pose, (j,))
+            if fcl.collide(own[i], others[j], request, fcl.CollisionResult()):
+                return True
+        return False
 
     def contacts_with(
         self,

@@ -12,6 +12,7 @@ import pytest
 
 from twin.core.errors import ConfigError
 from twin.robot.chassis import ChassisState
+from twin.robot.nodes import ContactTracker
 from twin.sim.fleet import Fleet, FleetMonitor, FleetView
 from twin.sim.robot_group import scenario_robot
 from twin.sim.scenario import default_scenario_path
@@ -141,6 +142,37 @@ def test_a_pose_asked_again_is_answered_as_a_fresh_check_and_follows_the_other_r
     assert monitor.check(*touching) == ()
     other.drive.pose = (0.13, 0.0, math.pi)  # and came back
     assert monitor.check(*touching) == FleetMonitor(_OpenWorld(), fleet, 0).check(*touching) != ()
+
+
+def test_whether_a_robot_touches_another_is_what_its_contacts_say_wherever_either_stands() -> None:
+    # `touches` (asked at every step of an open contact episode) against `check` from a fresh
+    # monitor, over poses touching, grazing and apart, asked twice each (the second from its cache),
+    # and after the other robot moves (a kept answer must not outlive where it stood).
+    me, other = _group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (0.13, 0.0, math.pi))
+    fleet = Fleet([me, other])
+    monitor = FleetMonitor(_OpenWorld(), fleet, 0)
+    rng = np.random.default_rng(11)
+    seen = {True: 0, False: 0}
+    for k in range(240):
+        if k % 40 == 0:
+            other.drive.pose = (float(rng.uniform(0.1, 0.3)), float(rng.uniform(-0.1, 0.1)), float(rng.uniform(-4, 4)))
+        pose = (float(rng.uniform(-0.1, 0.1)), float(rng.uniform(-0.1, 0.1)), float(rng.uniform(-4, 4)))
+        first = monitor.touches(*pose)  # asked first: nothing else placed the shapes there
+        expected = FleetMonitor(_OpenWorld(), fleet, 0).check(*pose) != ()
+        assert first == expected == monitor.touches(*pose), (pose, other.drive.pose)
+        seen[expected] += 1
+    assert seen[True] > 30 and seen[False] > 30  # both answers were compared
+
+
+def test_a_drive_in_an_open_contact_episode_keeps_the_contacts_it_began_with() -> None:
+    me, other = _group("robot1", (0.0, 0.0, 0.0)), _group("robot2", (0.13, 0.0, math.pi))
+    tracker = ContactTracker(FleetMonitor(_OpenWorld(), Fleet([me, other]), 0))
+    assert tracker.touches(0.0, 0.0, 0.0) and tracker.in_contact and tracker.pending
+    first = tracker.contact
+    assert first and all(c.model == "robot2" for c in first)
+    assert tracker.touches(0.005, 0.0, 0.1)  # pressed deeper, turned: still touching, the same episode
+    assert tracker.contact == first
+    assert not tracker.touches(-0.3, 0.0, 0.0)  # backed off: free
 
 
 class _Idle:

@@ -96,4 +96,10 @@ def test_distances_and_contacts_between_two_robots_are_fcls_over_every_shape(min
         crept_contacts = _contacts(a, crept, b, other)
         assert _reference_distance(a, pose, b, other) == fast_distance
         _same_contacts(crept_contacts, a, crept, b, other)
+        # The yes-or-no question a drive asks at each step of a contact: the same answer, with
+        # both bodies' shapes left at other poses by the queries before (it places what it asks).
+        a._place(*other)
+        b._place(*pose)
+        assert a.touches(crept, b, other) == bool(crept_contacts)
+        assert a.touches(pose, b, other) == bool(fast_contacts)
     assert touching > 30 and apart > 30 and touching - capped > 10  # every kind of answer was compared
