@@ -20,9 +20,19 @@ quoted on its own.)
     python benchmarks/bench_fleet.py [--scenario scenarios/turtlebot3_world.yaml] [--robots 1 2 4 8] [--sim-s 60]
                                      [--alone]
     python benchmarks/bench_fleet.py --camera [--robots 1 2 4] [--scenario scenarios/default.yaml] [--repeat 3]
+    python benchmarks/bench_fleet.py --instructions [--robots 1 4] [--alone] [--sim-s 60]
 
 `--repeat N` runs each size N times, the sizes alternated round after round, and keeps each size's
 run of least CPU (the others' figures are listed), as a shared machine's load only ever adds.
+
+`--instructions` counts instead of timing: each run goes under valgrind's cachegrind (no cache
+simulation), once for `--sim-s` and once for a moment (`_SETUP_SIM_S`), and the difference is the
+run's own instructions, with setup and start-up taken out. The count hardly depends on the
+machine's load (the same run counts the same to about 1 %: the recorder flushes and the watchdog
+wakes by wall time, which valgrind stretches), where CPU times here vary by 20 %, so ratios of a
+few percent are read from one pass; it does not see memory stalls, which a CPU time does. Each size
+and each robot alone then runs once (`--repeat` is ignored), about 50 times slower than natively:
+a 4-robot minute takes about three minutes; the two runs of each go in parallel on two cores.
 
 With `--alone` each robot of each fleet also runs by itself (its spawn, its mission, the world to
 itself), and a fleet's CPU is compared with the sum of its robots' alone (`cost_ratio_vs_alone`):
@@ -33,9 +43,13 @@ robots' missions costing differently.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import dataclasses
 import json
+import os
+import re
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -210,12 +224,49 @@ def run_one(path: Path, n: int, sim_s: float, *, camera: bool = False, alone: in
     return row
 
 
+# `--instructions`: the short run whose count is taken from the whole run's (setup, start-up, a moment).
+_SETUP_SIM_S = 0.05
+_I_REFS = re.compile(r"I\s+refs:\s+([\d,]+)")
+
+
 def _child(args: argparse.Namespace, n: int, *, camera: bool, alone: int | None = None) -> dict[str, Any]:
-    cmd = [sys.executable, __file__, "--scenario", str(args.scenario), "--sim-s", str(args.sim_s), "--one", str(n)]
+    if args.instructions:
+        return _counted_child(args, n, camera=camera, alone=alone)
+    return _run_child(args, n, args.sim_s, camera=camera, alone=alone)[0]
+
+
+def _run_child(
+    args: argparse.Namespace, n: int, sim_s: float, *, camera: bool, alone: int | None, counted: bool = False
+) -> tuple[dict[str, Any], int]:
+    """One run in a fresh process (under cachegrind when `counted`): its row, and its instructions (0: not counted)."""
+    cmd = [sys.executable, __file__, "--scenario", str(args.scenario), "--sim-s", str(sim_s), "--one", str(n)]
     cmd += ["--camera"] if camera else []
     cmd += [] if alone is None else ["--alone-index", str(alone)]
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-    row: dict[str, Any] = json.loads(out.strip().splitlines()[-1])
+    env = None
+    if counted:
+        cmd = ["valgrind", "--tool=cachegrind", "--cache-sim=no", "--cachegrind-out-file=/dev/null", *cmd]
+        # Python's own allocator confuses valgrind; a fixed hash seed keeps set and dict orders the same.
+        env = {**os.environ, "PYTHONMALLOC": "malloc", "PYTHONHASHSEED": "0"}
+    done = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
+    row: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
+    found = _I_REFS.findall(done.stderr) if counted else []
+    if counted and not found:
+        raise SystemExit(f"valgrind printed no instruction count: {done.stderr.strip()[-300:]}")
+    return row, int(found[-1].replace(",", "")) if found else 0
+
+
+def _counted_child(args: argparse.Namespace, n: int, *, camera: bool, alone: int | None) -> dict[str, Any]:
+    """A run's row with its own instructions: counted for `--sim-s` and for a moment, the two in parallel."""
+    with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
+        whole, setup = (
+            pool.submit(_run_child, args, n, s, camera=camera, alone=alone, counted=True)
+            for s in (args.sim_s, _SETUP_SIM_S)
+        )
+        row, total = whole.result()
+        _, before = setup.result()
+    robots = 1 if alone is not None else n
+    row["run_instructions"] = total - before
+    row["instructions_per_robot_s"] = round((total - before) / (robots * (args.sim_s - _SETUP_SIM_S)))
     return row
 
 
@@ -258,6 +309,11 @@ def main() -> None:
         help="also run each robot of each fleet by itself (same spawn, same mission) and compare the fleet's "
         "CPU with the sum of theirs: what sharing the world costs, apart from which missions the robots have",
     )
+    parser.add_argument(
+        "--instructions",
+        action="store_true",
+        help="count each run's instructions under valgrind instead of timing it (load-independent; slow)",
+    )
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)  # a child process: one fleet size
     parser.add_argument("--alone-index", type=int, help=argparse.SUPPRESS)  # ... or one robot of it alone
     args = parser.parse_args()
@@ -266,16 +322,27 @@ def main() -> None:
     if args.one is not None:
         print(json.dumps(run_one(args.scenario, args.one, args.sim_s, camera=args.camera, alone=args.alone_index)))
         return
+    if args.instructions:
+        if shutil.which("valgrind") is None:
+            parser.error("--instructions runs each child under valgrind, which is not installed (apt install valgrind)")
+        if args.sim_s <= _SETUP_SIM_S:
+            parser.error(f"--instructions needs --sim-s above {_SETUP_SIM_S} (the moment taken out), got {args.sim_s}")
+        args.repeat = 1  # a count is the same every time
     if args.robots is None:
         args.robots = [1, 2, 4] if args.camera else [1, 2, 4, 8]
     rows = _rows(args)
     base = rows[0]
     for row in rows:
         row["cost_ratio_vs_first"] = round(row["cpu_ms_per_robot_s"] / base["cpu_ms_per_robot_s"], 3)
+        if args.instructions:
+            row["instruction_ratio_vs_first"] = round(
+                row["instructions_per_robot_s"] / base["instructions_per_robot_s"], 3
+            )
         added = row["robots"] - base["robots"]
         row["mib_per_added_robot"] = round((row["peak_rss_mib"] - base["peak_rss_mib"]) / added, 1) if added else 0.0
     if args.alone:
         alone_cpu: dict[int, float] = {}  # robot index -> its least CPU by itself (the same in every fleet size)
+        alone_instructions: dict[int, int] = {}  # ... and its instructions (`--instructions`)
         for row in rows:
             if row["robots"] < 2:
                 continue
@@ -283,10 +350,21 @@ def main() -> None:
                 if i not in alone_cpu:
                     runs = [_child(args, row["robots"], camera=args.camera, alone=i) for _ in range(args.repeat)]
                     alone_cpu[i] = min(r["run_cpu_s"] for r in runs)
+                    alone_instructions[i] = runs[0].get("run_instructions", 0)
             summed = sum(alone_cpu[i] for i in range(row["robots"]))
             row["alone_cpu_s"] = round(summed, 3)
             row["cost_ratio_vs_alone"] = round(row["run_cpu_s"] / summed, 3)
+            if args.instructions:
+                counted = sum(alone_instructions[i] for i in range(row["robots"]))
+                row["alone_instructions"] = counted
+                row["instruction_ratio_vs_alone"] = round(row["run_instructions"] / counted, 3)
     out: dict[str, Any] = {"scenario": str(args.scenario), "sim_s": args.sim_s, "repeat": args.repeat}
+    if args.instructions:
+        out["instructions"] = {
+            "tool": "valgrind --tool=cachegrind --cache-sim=no",
+            "setup_sim_s": _SETUP_SIM_S,
+            "times": "valgrind's (about 50x slower): read the instruction fields",
+        }
     if args.camera:
         out["camera"] = {
             **{k: getattr(CAMERA, k) for k in ("width", "height", "rate_hz", "depth", "compressed", "noise")},
