@@ -98,8 +98,7 @@ class ContactTracker:
     def __init__(self, monitor: ContactMonitor) -> None:
         self.monitor = monitor
         # A monitor's yes-or-no check (a fleet's: no contacts built), for the steps of an open episode.
-        check = monitor.check
-        self._touching: Callable[[float, float, float], object] = getattr(monitor, "touches", check)
+        self._touching: Callable[[float, float, float], object] = getattr(monitor, "touches", monitor.check)
         self.contact: tuple[Contact, ...] = ()
         self.in_contact = False  # a contact episode is open
         self.pending = False  # the node must track the open episode (after each physics advance)
