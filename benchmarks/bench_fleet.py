@@ -266,7 +266,8 @@ def _counted_child(args: argparse.Namespace, n: int, *, camera: bool, alone: int
         _, before = setup.result()
     robots = 1 if alone is not None else n
     row["run_instructions"] = total - before
-    row["instructions_per_robot_s"] = round((total - before) / (robots * (args.sim_s - _SETUP_SIM_S)))
+    # (the run's own simulated time: a mission that ends before --sim-s ends the run there)
+    row["instructions_per_robot_s"] = round((total - before) / (robots * (row["sim_s"] - _SETUP_SIM_S)))
     return row
 
 
